@@ -1,0 +1,3 @@
+from roarmctl.cli import main
+
+main()

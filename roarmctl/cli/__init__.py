@@ -1,0 +1,104 @@
+"""The roarmctl command line: parse, call the library, render with rich, map errors to exit codes.
+
+Only this package prints or exits. Heavy imports (ompl, fcl, toppra, matplotlib) happen inside
+the commands that need them so that ``roarmctl --help`` answers at once.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import traceback
+
+import typer
+
+from roarmctl.cli import common
+from roarmctl.cli import execute_cmd, kin, plan_cmd, viz_cmd
+
+app = typer.Typer(
+    name="roarmctl",
+    help="Plan, check and execute pick-and-place trajectories for small robot arms (Waveshare RoArm-M3 Pro first).",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+@app.callback()
+def _root(
+    debug: bool = typer.Option(False, "--debug", help="Show full tracebacks on errors."),
+) -> None:
+    common.STATE.debug = debug
+
+
+@app.command("robots")
+def robots(json_out: bool = typer.Option(False, "--json", help="Print one JSON object.")) -> None:
+    """List the bundled robots (name, joints, source)."""
+    from roarmctl.robot.loader import bundled_robots, load_robot
+
+    rows = []
+    for name in bundled_robots():
+        r = load_robot(name)
+        rows.append({"name": name, "joints": r.joint_names, "dof": r.dof, "source": r.source, "description": r.description})
+    if json_out:
+        common.print_json({"robots": rows})
+        return
+    from rich.table import Table
+
+    table = Table(title="Bundled robots")
+    for col in ("name", "dof", "joints", "source"):
+        table.add_column(col)
+    for row in rows:
+        table.add_row(row["name"], str(row["dof"]), ", ".join(row["joints"]), row["source"])
+    common.console().print(table)
+
+
+kin.register(app)
+plan_cmd.register(app)
+execute_cmd.register(app)
+viz_cmd.register(app)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console entry point: run the app, turn library errors into one line and an exit code."""
+    from roarmctl.errors import RoarmError
+
+    code = 0
+    try:
+        app(args=argv, standalone_mode=False)
+    except RoarmError as exc:
+        if common.STATE.debug:
+            traceback.print_exc()
+        common.error(exc.message, exc.hint)
+        code = exc.exit_code
+    except KeyboardInterrupt:
+        common.error("interrupted")
+        code = 130
+    except SystemExit as exc:  # typer.Exit raised inside a command
+        code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    except Exception as exc:  # noqa: BLE001 - the last line of defence: a bug
+        import click
+
+        if isinstance(exc, click.exceptions.Exit):
+            code = exc.exit_code
+        elif isinstance(exc, click.ClickException):
+            exc.show()
+            code = 2
+        elif isinstance(exc, click.exceptions.Abort):
+            common.error("aborted")
+            code = 130
+        else:
+            fd, log = tempfile.mkstemp(prefix="roarmctl-traceback-", suffix=".txt")
+            with os.fdopen(fd, "w") as f:
+                traceback.print_exc(file=f)
+            if common.STATE.debug:
+                traceback.print_exc()
+            common.error(f"internal error: {type(exc).__name__}: {exc}", f"this is a bug; the traceback is in {log}")
+            code = 1
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if "ompl" in sys.modules:
+        # OMPL's nanobind bindings print leak warnings at interpreter exit; skip the teardown.
+        os._exit(code)
+    sys.exit(code)

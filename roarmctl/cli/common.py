@@ -1,0 +1,68 @@
+"""Shared CLI helpers: output consoles, JSON printing, error lines, argument parsing."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class _State:
+    debug: bool = False
+
+
+STATE = _State()
+
+
+def console(stderr: bool = False):
+    from rich.console import Console
+
+    return Console(stderr=stderr, highlight=False)
+
+
+def _plain(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist())
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    return obj
+
+
+def print_json(obj: Any) -> None:
+    """Exactly one JSON object on stdout, nothing else."""
+    sys.stdout.write(json.dumps(_plain(obj)) + "\n")
+
+
+def error(message: str, hint: str | None = None) -> None:
+    """One line on stderr: the cause, and the fix where there is one."""
+    text = f"error: {message}" + (f" ({hint})" if hint else "")
+    sys.stderr.write(text + "\n")
+
+
+def warn(message: str) -> None:
+    sys.stderr.write(f"warning: {message}\n")
+
+
+def parse_numbers(values: list[str], what: str, deg: bool = False) -> np.ndarray:
+    """Numbers from the command line; degrees are converted to radians when ``deg``."""
+    from roarmctl.errors import InputError
+
+    out = []
+    for v in values:
+        try:
+            out.append(float(v))
+        except ValueError:
+            raise InputError(f"{what}: '{v}' is not a number") from None
+    arr = np.array(out)
+    return np.radians(arr) if deg else arr

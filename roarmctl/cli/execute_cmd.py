@@ -1,0 +1,5 @@
+"""CLI commands of this area (being written)."""
+
+
+def register(app) -> None:
+    """Add this module's commands to ``app``."""

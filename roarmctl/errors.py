@@ -1,0 +1,70 @@
+"""One exception hierarchy for the whole library.
+
+Each class carries the process exit code the CLI maps it to (see README, "Exit codes") and a
+one-line message that names the cause and, where there is one, the fix. The library raises these;
+only ``roarmctl.cli`` turns them into output and exit codes.
+"""
+
+from __future__ import annotations
+
+
+class RoarmError(Exception):
+    """Base class. ``exit_code`` is what the CLI exits with; ``hint`` is an optional fix."""
+
+    exit_code: int = 1
+
+    def __init__(self, message: str, hint: str | None = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.hint = hint
+
+    def __str__(self) -> str:
+        return self.message if not self.hint else f"{self.message} ({self.hint})"
+
+
+class InputError(RoarmError):
+    """Invalid input or usage: missing file, schema error, unknown robot, out-of-range value (exit 2)."""
+
+    exit_code = 2
+
+
+class DescriptionError(InputError):
+    """A robot description (URDF, sidecar or DH table) is wrong or incomplete (exit 2)."""
+
+
+class PlanFileError(InputError):
+    """A plan file is malformed: unknown key, wrong type, impossible value, dangling reference (exit 2)."""
+
+
+class TrajectoryFileError(InputError):
+    """A trajectory file cannot be read or does not follow the format (exit 2)."""
+
+
+class InfeasibleError(RoarmError):
+    """The input is well-formed but cannot be done: unreachable, no path, timing failed (exit 3)."""
+
+    exit_code = 3
+
+
+class UnreachableError(InfeasibleError):
+    """IK found no solution. ``reason`` is one of 'out_of_reach', 'joint_limit', 'orientation'."""
+
+    def __init__(self, message: str, reason: str = "out_of_reach", hint: str | None = None) -> None:
+        super().__init__(message, hint)
+        self.reason = reason
+
+
+class PlanningError(InfeasibleError):
+    """No collision-free path within the time budget, start in collision, or timing failed (exit 3)."""
+
+
+class DeviceError(RoarmError):
+    """Port missing or busy, device silent, wrong firmware, link lost (exit 4)."""
+
+    exit_code = 4
+
+
+class Interrupted(RoarmError):
+    """The user pressed Ctrl-C; raised after the arm was told to hold (exit 130)."""
+
+    exit_code = 130

@@ -1,0 +1,148 @@
+"""Forward kinematics, the geometric Jacobian and manipulability for any tree of joints.
+
+Everything is batched: a configuration array of shape (N, dof) goes through one numpy pass per
+joint, so FK of many configurations costs little more than FK of one. Single configurations of
+shape (dof,) are accepted too and give unbatched results.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from roarmctl.robot.model import Robot
+
+
+def axis_rotation(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rotation matrices about a fixed unit ``axis`` (3,) by ``angle`` (N,) rad -> (N, 3, 3) (Rodrigues)."""
+    x, y, z = axis
+    c, s = np.cos(angle), np.sin(angle)
+    v = 1.0 - c
+    out = np.empty(angle.shape + (3, 3))
+    out[..., 0, 0] = c + x * x * v
+    out[..., 0, 1] = x * y * v - z * s
+    out[..., 0, 2] = x * z * v + y * s
+    out[..., 1, 0] = y * x * v + z * s
+    out[..., 1, 1] = c + y * y * v
+    out[..., 1, 2] = y * z * v - x * s
+    out[..., 2, 0] = z * x * v - y * s
+    out[..., 2, 1] = z * y * v + x * s
+    out[..., 2, 2] = c + z * z * v
+    return out
+
+
+@dataclass
+class ManipulabilityReport:
+    """Velocity-manipulability figures at one configuration.
+
+    ``manipulability`` is the product of the singular values of the full 6 x n Jacobian (equal to
+    sqrt(det(J J^T)) when n >= 6, and sqrt(det(J^T J)) for arms with fewer joints, where the former
+    is identically 0). ``translational`` is the same for the 3 x n linear part (m^k). The ellipsoid
+    radii (m/s per rad/s) and axes (columns, base frame) are those of the translational part (Yoshikawa).
+    """
+
+    jacobian: np.ndarray
+    manipulability: float
+    translational: float
+    singular_values: np.ndarray
+    ellipsoid_radii: np.ndarray
+    ellipsoid_axes: np.ndarray
+
+
+class Kinematics:
+    """Compiled kinematic tree of a ``Robot``: link frames, TCP pose, Jacobian."""
+
+    def __init__(self, robot: Robot) -> None:
+        self.robot = robot
+        self.link_names: list[str] = robot.link_names
+        index = {name: i for i, name in enumerate(self.link_names)}
+        self.link_index = index
+        self._parent = [index[j.parent] for j in robot.joints]
+        self._child = [index[j.child] for j in robot.joints]
+        self._qidx = [robot.joint_names.index(j.name) if j.kind != "fixed" else -1 for j in robot.joints]
+        self.tcp_index = index[robot.tcp_link]
+        # Joints between the root and the TCP, in chain order; their q indices form the arm.
+        chain: list[int] = []
+        link = self.tcp_index
+        while link != 0:
+            j = self._child.index(link)
+            chain.append(j)
+            link = self._parent[j]
+        self.tcp_chain_joints = list(reversed(chain))
+        self.tcp_chain_indices = [self._qidx[j] for j in self.tcp_chain_joints if self._qidx[j] >= 0]
+
+    # ------------------------------------------------------------------ FK
+    def link_frames(self, q) -> np.ndarray:
+        """Every link frame in the root frame: (N, n_links, 4, 4), or (n_links, 4, 4) for one q.
+
+        ``q`` is (N, dof) or (dof,); arm-only vectors are completed with the gripper closed.
+        """
+        q = self.robot.full_q(q)
+        single = q.ndim == 1
+        qb = np.atleast_2d(q)
+        n = qb.shape[0]
+        frames = np.empty((n, len(self.link_names), 4, 4))
+        frames[:, 0] = np.eye(4)
+        for j, joint in enumerate(self.robot.joints):
+            t = frames[:, self._parent[j]] @ joint.origin
+            qi = self._qidx[j]
+            if joint.kind == "revolute":
+                motion = np.zeros((n, 4, 4))
+                motion[:, :3, :3] = axis_rotation(joint.axis, qb[:, qi] + joint.offset)
+                motion[:, 3, 3] = 1.0
+                t = t @ motion
+            elif joint.kind == "prismatic":
+                motion = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+                motion[:, :3, 3] = np.outer(qb[:, qi] + joint.offset, joint.axis)
+                t = t @ motion
+            frames[:, self._child[j]] = t @ joint.post
+        return frames[0] if single else frames
+
+    def fk(self, q, link: str | None = None) -> np.ndarray:
+        """Pose of ``link`` (default: the TCP) in the root frame: (4, 4) or (N, 4, 4)."""
+        idx = self.tcp_index if link is None else self.link_index[link]
+        return self.link_frames(q)[..., idx, :, :]
+
+    # ------------------------------------------------------------ Jacobian
+    def jacobian(self, q) -> np.ndarray:
+        """Geometric Jacobian at the TCP in the root frame: (6, arm_dof) or (N, 6, arm_dof).
+
+        Rows are (vx, vy, vz, wx, wy, wz); columns follow ``robot.arm_indices``.
+        """
+        q = self.robot.full_q(q)
+        single = q.ndim == 1
+        qb = np.atleast_2d(q)
+        frames = self.link_frames(qb)
+        p_tcp = frames[:, self.tcp_index, :3, 3]
+        cols = []
+        for j in self.tcp_chain_joints:
+            joint = self.robot.joints[j]
+            if joint.kind == "fixed":
+                continue
+            before = frames[:, self._parent[j]] @ joint.origin
+            z = before[:, :3, :3] @ joint.axis
+            if joint.kind == "revolute":
+                col = np.concatenate([np.cross(z, p_tcp - before[:, :3, 3]), z], axis=1)
+            else:
+                col = np.concatenate([z, np.zeros_like(z)], axis=1)
+            cols.append(col)
+        jac = np.stack(cols, axis=2)
+        return jac[0] if single else jac
+
+    def manipulability(self, q) -> ManipulabilityReport:
+        """Manipulability figures at one configuration (see ``ManipulabilityReport``)."""
+        jac = self.jacobian(np.asarray(q, dtype=float))
+        sv = np.linalg.svd(jac, compute_uv=False)
+        u, svt, _ = np.linalg.svd(jac[:3], full_matrices=False)
+        k = min(3, jac.shape[1])
+        return ManipulabilityReport(
+            jacobian=jac,
+            manipulability=float(np.prod(sv[: min(6, jac.shape[1])])),
+            translational=float(np.prod(svt[:k])),
+            singular_values=sv,
+            ellipsoid_radii=svt[:k],
+            ellipsoid_axes=u[:, :k],
+        )

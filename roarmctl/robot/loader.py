@@ -1,0 +1,378 @@
+"""Load a robot by bundled name or path: URDF plus sidecar YAML, a bare URDF, or a DH table in YAML.
+
+Every mistake in a description raises ``DescriptionError`` naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from roarmctl.errors import DescriptionError, InputError
+from roarmctl.robot.model import CollisionShape, Gripper, Inertial, Joint, Robot, WireField, transform
+
+FORMAT = "roarmctl.robot/1"
+DEFAULT_VELOCITY = 1.0  # rad/s, used only where a description gives none
+DEFAULT_ACCELERATION = 2.0  # rad/s^2
+
+
+def bundled_dir() -> Path:
+    return Path(str(resources.files("roarmctl") / "robots"))
+
+
+def bundled_robots() -> list[str]:
+    """Names of the robots shipped with roarmctl."""
+    return sorted(p.stem for p in bundled_dir().glob("*.yaml"))
+
+
+_CACHE: dict[str, Robot] = {}
+
+
+def load_robot(spec: str) -> Robot:
+    """A bundled robot name (``roarm_m3_pro``) or a path to a ``.yaml`` or ``.urdf`` file."""
+    if spec in _CACHE:
+        return _CACHE[spec]
+    path = bundled_dir() / f"{spec}.yaml"
+    if not path.is_file():
+        path = Path(spec).expanduser()
+        if not path.is_file():
+            raise InputError(
+                f"unknown robot '{spec}'",
+                f"bundled robots: {', '.join(bundled_robots())}; or give a path to a .yaml or .urdf file",
+            )
+    if path.suffix.lower() == ".urdf":
+        robot = _from_urdf(path, {}, path)
+    else:
+        data = _read_yaml(path)
+        if "dh" in data:
+            robot = _from_dh(path, data)
+        elif "urdf" in data:
+            urdf = (path.parent / str(data["urdf"])).resolve()
+            if not urdf.is_file():
+                raise DescriptionError(f"{path}: urdf: file '{data['urdf']}' not found", "the path is relative to the YAML file")
+            robot = _from_urdf(urdf, data, path)
+        else:
+            raise DescriptionError(f"{path}: needs either a 'dh' table or a 'urdf' file reference")
+    _CACHE[spec] = robot
+    return robot
+
+
+# --------------------------------------------------------------------------- helpers
+def _read_yaml(path: Path) -> dict[str, Any]:
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f":{mark.line + 1}" if mark else ""
+        raise DescriptionError(f"{path}{where}: not valid YAML ({getattr(exc, 'problem', exc)})") from None
+    if not isinstance(data, dict):
+        raise DescriptionError(f"{path}: expected a mapping at the top level")
+    fmt = data.get("format", FORMAT)
+    if fmt != FORMAT:
+        raise DescriptionError(f"{path}: format: '{fmt}' is not supported (expected '{FORMAT}')")
+    return data
+
+
+def _num(value: Any, where: str, *, angle: bool = False, deg: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise DescriptionError(f"{where}: expected a number, got {value!r}")
+    return math.radians(value) if (angle and deg) else float(value)
+
+
+def _vec(value: Any, n: int, where: str) -> np.ndarray:
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        raise DescriptionError(f"{where}: expected a list of {n} numbers, got {value!r}")
+    return np.array([_num(v, f"{where}[{i}]") for i, v in enumerate(value)])
+
+
+def _per_joint(data: dict, key: str, names: list[str], default: np.ndarray, where: str) -> np.ndarray:
+    """A per-joint value given as a list (in joint order) or a {joint: value} mapping."""
+    value = data.get(key)
+    if value is None:
+        return default
+    if isinstance(value, list):
+        return _vec(value, len(names), f"{where}.{key}")
+    if isinstance(value, dict):
+        out = default.copy()
+        for name, v in value.items():
+            if name not in names:
+                raise DescriptionError(f"{where}.{key}: unknown joint '{name}' (joints: {', '.join(names)})")
+            out[names.index(name)] = _num(v, f"{where}.{key}.{name}")
+            if out[names.index(name)] <= 0:
+                raise DescriptionError(f"{where}.{key}.{name}: must be positive")
+        return out
+    raise DescriptionError(f"{where}.{key}: expected a list or a mapping joint -> value")
+
+
+def _common(data: dict, path: Path, names: list[str], velocity: np.ndarray, acceleration: np.ndarray) -> dict:
+    """Sidecar fields shared by the URDF and DH formats."""
+    where = str(path)
+    limits = data.get("limits", {}) or {}
+    if not isinstance(limits, dict):
+        raise DescriptionError(f"{where}: limits: expected a mapping with 'velocity' and 'acceleration'")
+    vel = _per_joint(limits, "velocity", names, velocity, f"{where}: limits")
+    acc = _per_joint(limits, "acceleration", names, acceleration, f"{where}: limits")
+    gripper = None
+    if data.get("gripper") is not None:
+        g = data["gripper"]
+        if not isinstance(g, dict) or "joint" not in g:
+            raise DescriptionError(f"{where}: gripper: expected {{joint, open, closed}}")
+        if g["joint"] not in names:
+            raise DescriptionError(f"{where}: gripper.joint: '{g['joint']}' is not an actuated joint")
+        gripper = Gripper(g["joint"], _num(g.get("open"), f"{where}: gripper.open"), _num(g.get("closed"), f"{where}: gripper.closed"))
+    poses = {}
+    for pname, values in (data.get("named_poses") or {}).items():
+        vals = list(values) if isinstance(values, list) else values
+        if isinstance(vals, list) and len(vals) == len(names) - (1 if gripper else 0) and gripper:
+            vals = vals + [gripper.closed]
+        poses[str(pname)] = _vec(vals, len(names), f"{where}: named_poses.{pname}")
+    wire = []
+    for i, w in enumerate(data.get("wire") or []):
+        loc = f"{where}: wire[{i}]"
+        if not isinstance(w, dict) or "joint" not in w or "field" not in w:
+            raise DescriptionError(f"{loc}: expected {{joint, field, sign, offset, clamp}}")
+        if w["joint"] not in names:
+            raise DescriptionError(f"{loc}.joint: '{w['joint']}' is not an actuated joint")
+        clamp = _vec(w.get("clamp", [-math.inf, math.inf]), 2, f"{loc}.clamp")
+        wire.append(WireField(w["joint"], str(w["field"]), _num(w.get("sign", 1), f"{loc}.sign"),
+                              _num(w.get("offset", 0), f"{loc}.offset"), float(clamp[0]), float(clamp[1])))
+    allowed = set()
+    for i, pair in enumerate(data.get("allowed_collisions") or []):
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise DescriptionError(f"{where}: allowed_collisions[{i}]: expected a pair of link names")
+        allowed.add(frozenset(str(p) for p in pair))
+    return dict(velocity_limits=vel, acceleration_limits=acc, gripper=gripper, named_poses=poses, wire=wire,
+                allowed_collisions=allowed, singularity_model=data.get("singularity_model"),
+                description=str(data.get("description", "")))
+
+
+# --------------------------------------------------------------------------- URDF
+def _floats(text: str | None, n: int, where: str) -> np.ndarray:
+    if text is None:
+        return np.zeros(n)
+    try:
+        vals = [float(v) for v in text.split()]
+    except ValueError:
+        raise DescriptionError(f"{where}: not a list of numbers: '{text}'") from None
+    if len(vals) != n:
+        raise DescriptionError(f"{where}: expected {n} numbers, got '{text}'")
+    return np.array(vals)
+
+
+def _origin(elem: ET.Element | None, where: str) -> np.ndarray:
+    if elem is None:
+        return np.eye(4)
+    return transform(_floats(elem.get("xyz"), 3, f"{where} origin xyz"), _floats(elem.get("rpy"), 3, f"{where} origin rpy"))
+
+
+def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
+    try:
+        root = ET.parse(urdf).getroot()
+    except ET.ParseError as exc:
+        raise DescriptionError(f"{urdf}: not valid XML ({exc})") from None
+    links = {l.get("name"): l for l in root.findall("link")}
+    joints_xml = root.findall("joint")
+    children = {j.find("child").get("link") for j in joints_xml}
+    roots = [name for name in links if name not in children]
+    if len(roots) != 1:
+        raise DescriptionError(f"{urdf}: expected one root link, found {roots}")
+    by_parent: dict[str, list[ET.Element]] = {}
+    for j in joints_xml:
+        by_parent.setdefault(j.find("parent").get("link"), []).append(j)
+    ordered: list[Joint] = []
+    stack = [roots[0]]
+    while stack:  # depth-first so parents precede children
+        link = stack.pop(0)
+        for j in by_parent.get(link, []):
+            name, kind = j.get("name"), j.get("type")
+            where = f"{urdf}: joint '{name}'"
+            if kind == "continuous":
+                kind = "revolute"
+            if kind not in ("revolute", "prismatic", "fixed"):
+                raise DescriptionError(f"{where}: type '{kind}' is not supported (revolute, continuous, prismatic, fixed)")
+            axis = _floats(j.find("axis").get("xyz") if j.find("axis") is not None else "1 0 0", 3, f"{where} axis")
+            if np.linalg.norm(axis) == 0 and kind != "fixed":
+                raise DescriptionError(f"{where}: axis is zero")
+            lim = j.find("limit")
+            lower = float(lim.get("lower", -math.pi)) if lim is not None else -math.pi
+            upper = float(lim.get("upper", math.pi)) if lim is not None else math.pi
+            if j.get("type") == "continuous":
+                lower, upper = -2 * math.pi, 2 * math.pi
+            ordered.append(Joint(name, kind, link, j.find("child").get("link"), _origin(j.find("origin"), where),
+                                 axis / (np.linalg.norm(axis) or 1.0), lower=lower, upper=upper))
+            stack.append(j.find("child").get("link"))
+    actuated = [j.name for j in ordered if j.kind != "fixed"]
+    names = list(side.get("joints", actuated))
+    for n in names:
+        if n not in actuated:
+            raise DescriptionError(f"{sidecar}: joints: '{n}' is not a movable joint of {urdf.name}")
+    urdf_vel = []
+    for n in names:
+        lim = next(j for j in joints_xml if j.get("name") == n).find("limit")
+        v = float(lim.get("velocity", 0)) if lim is not None else 0.0
+        urdf_vel.append(v if v > 0 else DEFAULT_VELOCITY)
+    by_name = {j.name: j for j in ordered}
+    inertials, shapes = {}, []
+    for lname, l in links.items():
+        inn = l.find("inertial")
+        if inn is not None and inn.find("mass") is not None:
+            o = _origin(inn.find("origin"), f"{urdf}: link '{lname}' inertial")
+            i = inn.find("inertia")
+            g = {k: float(i.get(k, 0)) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")} if i is not None else {}
+            tensor = np.array([[g.get("ixx", 0), g.get("ixy", 0), g.get("ixz", 0)],
+                               [g.get("ixy", 0), g.get("iyy", 0), g.get("iyz", 0)],
+                               [g.get("ixz", 0), g.get("iyz", 0), g.get("izz", 0)]])
+            r = o[:3, :3]
+            inertials[lname] = Inertial(float(inn.find("mass").get("value")), o[:3, 3], r @ tensor @ r.T)
+        for k, c in enumerate(l.findall("collision")):
+            shapes.extend(_urdf_shape(lname, c, f"{urdf}: link '{lname}' collision[{k}]", k))
+    tcp = side.get("tcp_link", ordered[-1].child)
+    if tcp not in links:
+        raise DescriptionError(f"{sidecar}: tcp_link: '{tcp}' is not a link of {urdf.name}")
+    common = _common(side, sidecar, names, np.array(urdf_vel), np.full(len(names), DEFAULT_ACCELERATION))
+    return Robot(
+        name=str(side.get("name", root.get("name", urdf.stem))),
+        source=str(side.get("source", urdf.name)),
+        root=roots[0],
+        joints=ordered,
+        joint_names=names,
+        tcp_link=tcp,
+        lower=np.array([by_name[n].lower for n in names]),
+        upper=np.array([by_name[n].upper for n in names]),
+        inertials=inertials,
+        collision=shapes,
+        **common,
+    )
+
+
+def _urdf_shape(link: str, c: ET.Element, where: str, k: int) -> list[CollisionShape]:
+    origin = _origin(c.find("origin"), where)
+    geom = c.find("geometry")
+    name = c.get("name", f"{link}_{k}")
+    if geom is None or len(geom) == 0:
+        raise DescriptionError(f"{where}: missing <geometry>")
+    g = geom[0]
+    if g.tag == "box":
+        return [CollisionShape(link, "box", origin, size=tuple(_floats(g.get("size"), 3, f"{where} box size")), name=name)]
+    if g.tag == "cylinder":
+        return [CollisionShape(link, "cylinder", origin, radius=float(g.get("radius")), length=float(g.get("length")), name=name)]
+    if g.tag == "sphere":
+        return [CollisionShape(link, "sphere", origin, radius=float(g.get("radius")), name=name)]
+    if g.tag == "capsule":  # not URDF 1.0, but common (Gazebo/SDF extension)
+        return [CollisionShape(link, "capsule", origin, radius=float(g.get("radius")), length=float(g.get("length")), name=name)]
+    return []  # meshes are not used for collision checking: describe links with primitives
+
+
+# --------------------------------------------------------------------------- DH
+def _from_dh(path: Path, data: dict) -> Robot:
+    where = str(path)
+    convention = data.get("convention")
+    if convention not in ("standard", "modified"):
+        raise DescriptionError(f"{where}: convention: must be 'standard' or 'modified' (Craig), got {convention!r}")
+    lscale = {"m": 1.0, "mm": 1e-3}.get(data.get("length_unit", "m"))
+    if lscale is None:
+        raise DescriptionError(f"{where}: length_unit: must be 'm' or 'mm'")
+    deg = {"rad": False, "deg": True}.get(data.get("angle_unit", "rad"))
+    if deg is None:
+        raise DescriptionError(f"{where}: angle_unit: must be 'rad' or 'deg'")
+    rows = data["dh"]
+    if not isinstance(rows, list) or not rows:
+        raise DescriptionError(f"{where}: dh: expected a non-empty list of rows")
+    joints: list[Joint] = []
+    names: list[str] = []
+    root = "base"
+    if data.get("base"):  # optional mounting transform: world -> DH frame 0
+        base = data["base"]
+        if not isinstance(base, dict):
+            raise DescriptionError(f"{where}: base: expected {{xyz, rpy}}")
+        xyz = _vec(base.get("xyz", [0, 0, 0]), 3, f"{where}: base.xyz") * lscale
+        rpy = _vec(base.get("rpy", [0, 0, 0]), 3, f"{where}: base.rpy")
+        joints.append(Joint("world_to_base", "fixed", "world", "base", transform(xyz, np.radians(rpy) if deg else rpy)))
+        root = "world"
+    prev = "base"
+    for i, row in enumerate(rows):
+        loc = f"{where}: dh[{i}]"
+        if not isinstance(row, dict):
+            raise DescriptionError(f"{loc}: expected a mapping with a, alpha, d, theta")
+        unknown = set(row) - {"name", "type", "a", "alpha", "d", "theta", "offset", "lower", "upper"}
+        if unknown:
+            raise DescriptionError(f"{loc}: unknown field(s) {sorted(unknown)}")
+        for key in ("a", "alpha", "d"):
+            if key not in row:
+                raise DescriptionError(f"{loc}.{key}: missing")
+        kind = row.get("type", "revolute")
+        if kind not in ("revolute", "prismatic"):
+            raise DescriptionError(f"{loc}.type: must be 'revolute' or 'prismatic'")
+        a = _num(row["a"], f"{loc}.a") * lscale
+        alpha = _num(row["alpha"], f"{loc}.alpha", angle=True, deg=deg)
+        d = _num(row["d"], f"{loc}.d") * lscale
+        theta = _num(row.get("theta", 0.0), f"{loc}.theta", angle=True, deg=deg)
+        offset = _num(row.get("offset", 0.0), f"{loc}.offset", angle=(kind == "revolute"), deg=deg)
+        if kind == "prismatic":
+            offset *= lscale
+        name = str(row.get("name", f"joint{i + 1}"))
+        for key in ("lower", "upper"):
+            if key not in row:
+                raise DescriptionError(f"{loc}.{key}: missing (joint limits are required)")
+        lo = _num(row["lower"], f"{loc}.lower", angle=kind == "revolute", deg=deg)
+        hi = _num(row["upper"], f"{loc}.upper", angle=kind == "revolute", deg=deg)
+        if kind == "prismatic":
+            lo, hi = lo * lscale, hi * lscale
+        if lo >= hi:
+            raise DescriptionError(f"{loc}: lower must be below upper")
+        child = f"link{i + 1}"
+        rx, tx, tz, rz = transform(rpy=(alpha, 0, 0)), transform((a, 0, 0)), transform((0, 0, d)), transform(rpy=(0, 0, theta))
+        if convention == "modified":  # T = Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i)
+            origin, post = (rx @ tx @ tz, np.eye(4)) if kind == "revolute" else (rx @ tx @ rz, np.eye(4))
+        else:  # standard: T = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)
+            origin, post = (np.eye(4), tz @ tx @ rx) if kind == "revolute" else (rz, tx @ rx)
+        total_offset = offset + (theta if kind == "revolute" else d)
+        joints.append(Joint(name, kind, prev, child, origin, np.array([0.0, 0.0, 1.0]), post, lo, hi, total_offset))
+        names.append(name)
+        prev = child
+    tcp = "link" + str(len(rows))
+    if data.get("tool"):
+        tool = data["tool"]
+        xyz = _vec(tool.get("xyz", [0, 0, 0]), 3, f"{where}: tool.xyz") * lscale
+        rpy = _vec(tool.get("rpy", [0, 0, 0]), 3, f"{where}: tool.rpy")
+        if deg:
+            rpy = np.radians(rpy)
+        joints.append(Joint("tool", "fixed", prev, "tool", transform(xyz, rpy)))
+        tcp = "tool"
+    inertials = {}
+    for i, item in enumerate(data.get("inertials") or []):
+        loc = f"{where}: inertials[{i}]"
+        if not isinstance(item, dict) or "mass" not in item:
+            raise DescriptionError(f"{loc}: expected {{link, mass, com, inertia}}")
+        link = str(item.get("link", f"link{i + 1}"))
+        inertia = item.get("inertia", [[0, 0, 0], [0, 0, 0], [0, 0, 0]])
+        if isinstance(inertia, list) and len(inertia) == 3 and not isinstance(inertia[0], list):
+            inertia = np.diag(_vec(inertia, 3, f"{loc}.inertia"))
+        else:
+            inertia = np.array([_vec(r, 3, f"{loc}.inertia") for r in inertia])
+        inertials[link] = Inertial(_num(item["mass"], f"{loc}.mass"), _vec(item.get("com", [0, 0, 0]), 3, f"{loc}.com") * lscale, inertia)
+    vel_default = np.full(len(names), DEFAULT_VELOCITY)
+    common = _common(data, path, names, vel_default, np.full(len(names), DEFAULT_ACCELERATION))
+    if deg:
+        for key in ("velocity_limits", "acceleration_limits"):
+            if (data.get("limits") or {}).get(key.split("_")[0]) is not None:
+                common[key] = np.radians(common[key])
+        common["named_poses"] = {k: np.radians(v) for k, v in common["named_poses"].items()}
+    return Robot(
+        name=str(data.get("name", path.stem)),
+        source=str(data.get("source", f"DH table ({convention})")),
+        root=root,
+        joints=joints,
+        joint_names=names,
+        tcp_link=tcp,
+        lower=np.array([j.lower for j in joints if j.kind != "fixed"]),
+        upper=np.array([j.upper for j in joints if j.kind != "fixed"]),
+        inertials=inertials,
+        **common,
+    )

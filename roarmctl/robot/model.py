@@ -1,0 +1,196 @@
+"""The robot description: plain dataclasses, no file formats and no maths beyond transforms.
+
+Units everywhere: metres, radians, seconds, kilograms. A configuration vector ``q`` holds every
+actuated joint in ``Robot.joint_names`` order; where the robot has a gripper, it is last.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+JointKind = Literal["revolute", "prismatic", "fixed"]
+ShapeKind = Literal["box", "cylinder", "sphere", "capsule"]
+
+
+def transform(xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """4x4 homogeneous transform from a translation (m) and URDF roll-pitch-yaw (rad).
+
+    URDF convention: R = Rz(yaw) @ Ry(pitch) @ Rx(roll).
+    """
+    r, p, y = (float(v) for v in rpy)
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    t = np.eye(4)
+    t[:3, :3] = [
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ]
+    t[:3, 3] = [float(v) for v in xyz]
+    return t
+
+
+def rpy_from_matrix(rot: np.ndarray) -> np.ndarray:
+    """URDF roll-pitch-yaw (rad, shape (3,)) of a 3x3 rotation; inverse of ``transform``'s rotation."""
+    pitch = np.arctan2(-rot[2, 0], np.hypot(rot[0, 0], rot[1, 0]))
+    if abs(np.cos(pitch)) < 1e-9:  # gimbal lock: put everything in yaw
+        return np.array([0.0, pitch, np.arctan2(-rot[0, 1], rot[1, 1])])
+    return np.array([np.arctan2(rot[2, 1], rot[2, 2]), pitch, np.arctan2(rot[1, 0], rot[0, 0])])
+
+
+@dataclass(frozen=True)
+class Joint:
+    """One joint: child frame = parent frame @ origin @ motion(q + offset) @ post.
+
+    ``origin`` and ``post`` are fixed 4x4 transforms (``post`` is identity for URDF joints and
+    carries d/a/alpha for standard DH). ``axis`` is a unit 3-vector in the frame after ``origin``.
+    """
+
+    name: str
+    kind: JointKind
+    parent: str
+    child: str
+    origin: np.ndarray
+    axis: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    post: np.ndarray = field(default_factory=lambda: np.eye(4))
+    lower: float = -np.pi
+    upper: float = np.pi
+    offset: float = 0.0
+
+
+@dataclass(frozen=True)
+class Inertial:
+    """Rigid-body data of a link: mass (kg), centre of mass (m, link frame), inertia about the COM (kg m^2, link axes)."""
+
+    mass: float
+    com: np.ndarray
+    inertia: np.ndarray
+
+
+@dataclass(frozen=True)
+class CollisionShape:
+    """A primitive attached to a link. ``origin`` places the shape in the link frame.
+
+    Sizes (m): box ``size`` = (x, y, z); cylinder and capsule ``radius``, ``length`` along the
+    shape's local z (capsule length excludes the end caps); sphere ``radius``.
+    """
+
+    link: str
+    kind: ShapeKind
+    origin: np.ndarray
+    size: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    radius: float = 0.0
+    length: float = 0.0
+    name: str = ""
+
+
+@dataclass(frozen=True)
+class WireField:
+    """How one joint appears on the device's wire: ``wire = offset + sign * q``, clamped to [lower, upper]."""
+
+    joint: str
+    field: str
+    sign: float = 1.0
+    offset: float = 0.0
+    lower: float = -np.inf
+    upper: float = np.inf
+
+    def to_wire(self, q: float) -> float:
+        """Joint value (rad) -> wire value (rad), clamped to the firmware's range."""
+        return float(np.clip(self.offset + self.sign * q, self.lower, self.upper))
+
+    def from_wire(self, w: float) -> float:
+        """Wire value (rad) -> joint value (rad)."""
+        return float((w - self.offset) / self.sign)
+
+
+@dataclass(frozen=True)
+class Gripper:
+    """Which actuated joint is the gripper, and its open and closed values (rad)."""
+
+    joint: str
+    open: float
+    closed: float
+
+
+@dataclass
+class Robot:
+    """A loaded robot description.
+
+    ``joints`` are in topological order (a parent link is always placed before its children).
+    ``joint_names`` lists the actuated joints in configuration-vector order (gripper last).
+    ``tcp_link`` is the frame the TCP pose, Jacobian and IK refer to.
+    """
+
+    name: str
+    source: str
+    root: str
+    joints: list[Joint]
+    joint_names: list[str]
+    tcp_link: str
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity_limits: np.ndarray
+    acceleration_limits: np.ndarray
+    inertials: dict[str, Inertial] = field(default_factory=dict)
+    collision: list[CollisionShape] = field(default_factory=list)
+    allowed_collisions: set[frozenset[str]] = field(default_factory=set)
+    named_poses: dict[str, np.ndarray] = field(default_factory=dict)
+    gripper: Gripper | None = None
+    wire: list[WireField] = field(default_factory=list)
+    singularity_model: str | None = None
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        from roarmctl.robot.kinematics import Kinematics
+
+        self.kin = Kinematics(self)
+
+    @property
+    def dof(self) -> int:
+        """Number of actuated joints (gripper included)."""
+        return len(self.joint_names)
+
+    @property
+    def arm_indices(self) -> list[int]:
+        """Indices in ``q`` of the joints that move the TCP (the arm proper, gripper excluded)."""
+        return self.kin.tcp_chain_indices
+
+    @property
+    def arm_dof(self) -> int:
+        return len(self.arm_indices)
+
+    @property
+    def link_names(self) -> list[str]:
+        return [self.root] + [j.child for j in self.joints]
+
+    def joint_index(self, name: str) -> int:
+        return self.joint_names.index(name)
+
+    def full_q(self, q) -> np.ndarray:
+        """Accept either an arm-only vector (arm_dof) or a full one (dof); return the full vector.
+
+        The gripper, when not given, takes its closed value.
+        """
+        q = np.asarray(q, dtype=float)
+        if q.shape[-1] == self.dof:
+            return q
+        if q.shape[-1] == self.arm_dof:
+            full = np.zeros(q.shape[:-1] + (self.dof,))
+            if self.gripper is not None:
+                full[..., self.joint_index(self.gripper.joint)] = self.gripper.closed
+            full[..., self.arm_indices] = q
+            return full
+        from roarmctl.errors import InputError
+
+        raise InputError(
+            f"{self.name} takes {self.arm_dof} arm joint values"
+            + (f" or {self.dof} with the gripper" if self.dof != self.arm_dof else "")
+            + f", got {q.shape[-1]}"
+        )
+
+    def within_limits(self, q, tol: float = 1e-9) -> bool:
+        q = self.full_q(q)
+        return bool(np.all(q >= self.lower - tol) and np.all(q <= self.upper + tol))
