@@ -1,0 +1,387 @@
+"""State-validity checking: joint limits, singularity margin, arm vs scene and arm vs itself (FCL).
+
+How a batch of states (N, arm_dof) is checked:
+
+1. joint limits and, when a margin is set, the smallest singular value of the translational
+   Jacobian, all vectorised in numpy;
+2. batched FK (``fastkin``) gives every collision shape's world pose;
+3. a vectorised pre-filter keeps only the (state, shape, item) and (state, shape, shape) pairs whose
+   bounding spheres *and* world-axis-aligned boxes overlap; everything else cannot collide;
+4. python-fcl answers the remaining pairs exactly (boxes, cylinders, spheres), state by state,
+   in order, stopping at the first collision of a state (and at the first invalid state in
+   ``first_invalid``).
+
+Rules: arm shapes are inflated by ``padding`` against the scene; self-collision uses the
+description's boxes as they are and skips ``robot.allowed_collisions``. base_link and link1 (the
+links that sit on the table) are never checked against items of role "table". A grasp target may
+touch the jaws (link5, gripper_link). An attached object moves with the TCP; it is checked against
+the scene and against every arm link except link5 and gripper_link, shrunk by
+``contact_tolerance`` so that resting on the table or touching a neighbour is not a collision.
+Static items are never checked against each other.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import fcl
+import numpy as np
+
+from roarmctl.errors import InputError
+from roarmctl.motion.fastkin import FastKinematics
+from roarmctl.motion.scene import Scene, SceneItem
+from roarmctl.robot.model import Robot
+
+JAW_LINKS = ("link5", "gripper_link")
+BASE_LINKS = ("base_link", "link1")
+_EPS = 1e-9
+
+
+def _geometry(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0):
+    """An FCL geometry, every surface moved outwards by ``grow`` (m; negative shrinks)."""
+    if kind == "box":
+        return fcl.Box(*[max(float(s) + 2 * grow, 1e-6) for s in size])
+    if kind == "cylinder":
+        return fcl.Cylinder(max(radius + grow, 1e-6), max(length + 2 * grow, 1e-6))
+    if kind == "sphere":
+        return fcl.Sphere(max(radius + grow, 1e-6))
+    if kind == "capsule":
+        return fcl.Capsule(max(radius + grow, 1e-6), max(length, 1e-6))
+    raise InputError(f"collision shape kind '{kind}' is not supported")
+
+
+def _half_extents(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0) -> np.ndarray:
+    """Half extents (3,) of the shape's local bounding box, grown by ``grow``."""
+    if kind == "box":
+        h = np.asarray(size, dtype=float) / 2
+    elif kind == "cylinder":
+        h = np.array([radius, radius, length / 2])
+    elif kind == "sphere":
+        h = np.full(3, radius)
+    else:  # capsule
+        h = np.array([radius, radius, length / 2 + radius])
+    return np.maximum(h + grow, 1e-6)
+
+
+@dataclass
+class _Moving:
+    """A shape that moves with a link: arm collision boxes and attached objects."""
+
+    name: str  # link name, or the object's name for attached objects
+    link: int  # index in the kinematic link list
+    rot: np.ndarray  # (3, 3) shape origin in the link frame
+    pos: np.ndarray  # (3,)
+    half: np.ndarray  # (3,) local half extents (padded for the scene test)
+    radius: float  # bounding-sphere radius (padded)
+    obj_scene: fcl.CollisionObject  # geometry used against the scene (padded / shrunk)
+    obj_self: fcl.CollisionObject  # geometry used against other moving shapes
+    attached: bool = False
+
+
+class CollisionChecker:
+    """Validity of arm configurations (N, arm_dof) for ``robot`` in ``scene``.
+
+    ``padding`` (m) inflates the arm against the scene. ``singularity_margin`` (m/rad), when
+    given, is the smallest allowed singular value of the 3 x arm_dof translational Jacobian.
+    ``contact_tolerance`` (m) shrinks attached objects so resting contact is not a collision.
+    The checker keeps its own copy of the scene (``self.scene``): ``detach`` moves items in it.
+    """
+
+    def __init__(self, robot: Robot, scene: Scene, *, padding: float = 0.005,
+                 singularity_margin: float | None = None, contact_tolerance: float = 0.001) -> None:
+        if padding < 0:
+            raise InputError(f"collision padding must be >= 0 m, got {padding}")
+        self.robot = robot
+        self.scene = scene.copy()
+        self.padding = float(padding)
+        self.singularity_margin = singularity_margin
+        self.contact_tolerance = float(contact_tolerance)
+        self.check_count = 0
+        self._fk = FastKinematics(robot)
+        self._arm = np.asarray(robot.arm_indices)
+        self._lower = robot.lower[self._arm]
+        self._upper = robot.upper[self._arm]
+        self._q_template = robot.full_q(np.zeros(robot.arm_dof))
+        self._gripper_index = robot.joint_index(robot.gripper.joint) if robot.gripper else None
+        kin = robot.kin
+        self._link_index = kin.link_index
+        self._tcp = kin.tcp_index
+        self._chain = [(kin._parent[j], robot.joints[j]) for j in kin.tcp_chain_joints if robot.joints[j].kind != "fixed"]
+        self._grasp_target: str | None = None
+        self._attached: dict[str, tuple[SceneItem, np.ndarray]] = {}  # name -> (item, pose in TCP frame)
+        self._arm_shapes: list[_Moving] = []
+        for shape in robot.collision:
+            self._arm_shapes.append(self._moving(shape.name or shape.link, kin.link_index[shape.link], shape.origin,
+                                                 shape.kind, shape.size, shape.radius, shape.length, self.padding, 0.0))
+        self._rebuild()
+
+    # ------------------------------------------------------------------ configuration
+    def _moving(self, name, link, origin, kind, size, radius, length, grow_scene, grow_self, attached=False) -> _Moving:
+        half = _half_extents(kind, size, radius, length, grow_scene)
+        return _Moving(name if not attached else name, link, origin[:3, :3].copy(), origin[:3, 3].copy(), half,
+                       float(np.linalg.norm(half)),
+                       fcl.CollisionObject(_geometry(kind, size, radius, length, grow_scene)),
+                       fcl.CollisionObject(_geometry(kind, size, radius, length, grow_self)), attached)
+
+    def set_gripper(self, value: float) -> None:
+        """Gripper joint value (rad) used for the jaw pose in every later check."""
+        if self._gripper_index is None:
+            raise InputError(f"{self.robot.name} has no gripper")
+        self._q_template[self._gripper_index] = float(value)
+
+    def set_grasp_target(self, name: str | None) -> None:
+        """Let scene object ``name`` touch the jaws (link5, gripper_link); None clears it."""
+        if name is not None and name not in self.scene:
+            raise InputError(f"grasp target '{name}' is not in the scene (items: {', '.join(self.scene.names())})")
+        self._grasp_target = name
+        self._rebuild()
+
+    def tcp_pose(self, q_arm) -> np.ndarray:
+        """TCP pose (4, 4) at arm configuration ``q_arm`` (arm_dof,) with the current gripper value."""
+        rot, pos = self._fk.frames(self._full(np.atleast_2d(np.asarray(q_arm, dtype=float))))
+        t = np.eye(4)
+        t[:3, :3], t[:3, 3] = rot[0, self._tcp], pos[0, self._tcp]
+        return t
+
+    def attach(self, name: str, q_arm) -> None:
+        """Attach scene object ``name`` rigidly to the TCP at its current relative pose at ``q_arm``."""
+        item = self.scene[name]
+        if item.role == "table":
+            raise InputError(f"cannot attach '{name}': it is the table")
+        rel = np.linalg.inv(self.tcp_pose(q_arm)) @ item.pose
+        self.scene.items.remove(item)
+        self._attached[name] = (item, rel)
+        self._rebuild()
+
+    def detach(self, name: str, q_arm) -> SceneItem:
+        """Put attached object ``name`` back into the scene at its pose for ``q_arm``; returns the item."""
+        if name not in self._attached:
+            raise InputError(f"'{name}' is not attached (attached: {', '.join(self._attached) or 'none'})")
+        item, rel = self._attached.pop(name)
+        item.pose = self.tcp_pose(q_arm) @ rel
+        self.scene.items.append(item)
+        self._rebuild()
+        return item
+
+    @property
+    def attached(self) -> list[str]:
+        return list(self._attached)
+
+    def _rebuild(self) -> None:
+        """Recompute the static tables (items, moving shapes, pair masks) after a scene change."""
+        self._items = list(self.scene.items)
+        self._item_objs = []
+        for it in self._items:
+            obj = fcl.CollisionObject(_geometry(it.shape, it.size, it.radius, it.length),
+                                      fcl.Transform(it.pose[:3, :3], it.pose[:3, 3]))
+            self._item_objs.append(obj)
+        m = len(self._items)
+        lo = np.array([it.aabb()[0] for it in self._items]).reshape(m, 3)
+        hi = np.array([it.aabb()[1] for it in self._items]).reshape(m, 3)
+        self._item_lo, self._item_hi = lo, hi
+        self._item_c, self._item_h = (lo + hi) / 2, (hi - lo) / 2
+
+        moving = list(self._arm_shapes)
+        tol = self.contact_tolerance
+        for name, (item, rel) in self._attached.items():
+            moving.append(self._moving(name, self._tcp, rel, item.shape, item.size, item.radius, item.length,
+                                       -tol, -tol, attached=True))
+        self._moving_shapes = moving
+        s = len(moving)
+        self._mv_link = np.array([mv.link for mv in moving])
+        self._mv_rot = np.array([mv.rot for mv in moving]).reshape(s, 3, 3)
+        self._mv_pos = np.array([mv.pos for mv in moving]).reshape(s, 3)
+        self._mv_half = np.array([mv.half for mv in moving]).reshape(s, 3)
+        self._mv_radius = np.array([mv.radius for mv in moving])
+        link_names = self._fk.robot.kin.link_names
+
+        # Shape vs item mask: which pairs are checked at all.
+        mask = np.ones((s, m), dtype=bool)
+        for a, mv in enumerate(moving):
+            lname = link_names[mv.link] if not mv.attached else None
+            for k, it in enumerate(self._items):
+                if it.role == "table" and lname in BASE_LINKS:
+                    mask[a, k] = False
+                if it.name == self._grasp_target and lname in JAW_LINKS:
+                    mask[a, k] = False
+        self._scene_mask = mask
+
+        # Moving-vs-moving pairs (self-collision and attached objects vs the arm).
+        allowed = self.robot.allowed_collisions
+        pairs = []
+        for a in range(s):
+            for b in range(a + 1, s):
+                ma, mb = moving[a], moving[b]
+                if ma.attached or mb.attached:
+                    other = mb if ma.attached else ma
+                    if other.attached or link_names[other.link] in JAW_LINKS:
+                        continue
+                    pairs.append((a, b))
+                    continue
+                la, lb = link_names[ma.link], link_names[mb.link]
+                if la == lb or frozenset((la, lb)) in allowed:
+                    continue
+                pairs.append((a, b))
+        self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
+        self._pair_r = self._mv_radius[self._pairs[:, 0]] + self._mv_radius[self._pairs[:, 1]] if len(pairs) else np.zeros(0)
+        # Self checks use unpadded geometry: the pre-filter radii above are padded, hence conservative.
+
+    # ------------------------------------------------------------------ checks
+    def _full(self, q: np.ndarray) -> np.ndarray:
+        full = np.broadcast_to(self._q_template, (q.shape[0], self._q_template.size)).copy()
+        full[:, self._arm] = q
+        return full
+
+    def _sigma_min(self, rot: np.ndarray, pos: np.ndarray, q_full: np.ndarray) -> np.ndarray:
+        """Smallest singular value (N,) of the translational Jacobian (3 x arm_dof), m/rad."""
+        p_tcp = pos[:, self._tcp]
+        cols = []
+        for parent, joint in self._chain:
+            r0 = rot[:, parent] @ joint.origin[:3, :3]
+            o = pos[:, parent] + rot[:, parent] @ joint.origin[:3, 3]
+            z = r0 @ joint.axis
+            cols.append(np.cross(z, p_tcp - o) if joint.kind == "revolute" else z)
+        jv = np.stack(cols, axis=2)  # (N, 3, n)
+        if jv.shape[2] < 3:
+            return np.linalg.svd(jv, compute_uv=False)[:, -1]
+        ev = np.linalg.eigvalsh(jv @ jv.transpose(0, 2, 1))
+        return np.sqrt(np.clip(ev[:, 0], 0.0, None))
+
+    def _shape_poses(self, rot: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World rotations (N, S, 3, 3) and centres (N, S, 3) of every moving shape."""
+        rl, pl = rot[:, self._mv_link], pos[:, self._mv_link]
+        return rl @ self._mv_rot, pl + np.einsum("nsij,sj->nsi", rl, self._mv_pos)
+
+    def _evaluate(self, q: np.ndarray, stop_at_first: bool) -> tuple[np.ndarray, list]:
+        """Validity (N,) of arm states ``q`` (N, arm_dof); with ``stop_at_first`` states after the first
+        invalid one are left marked valid and not checked. Also returns, per invalid state found by FCL,
+        the reason tuple (index, kind, a, b)."""
+        q = np.asarray(q, dtype=float)
+        n = q.shape[0]
+        self.check_count += n
+        valid = np.all((q >= self._lower - _EPS) & (q <= self._upper + _EPS), axis=1)
+        q_full = self._full(q)
+        rot, pos = self._fk.frames(q_full)
+        if self.singularity_margin is not None:
+            valid &= self._sigma_min(rot, pos, q_full) >= self.singularity_margin
+        limit = n
+        if stop_at_first and not valid.all():
+            limit = int(np.argmin(valid))
+        srot, scen = self._shape_poses(rot, pos)
+        # Pre-filter against items: bounding sphere vs item AABB, and shape AABB vs item AABB.
+        cand_scene = np.zeros((n, 0), dtype=bool)
+        if self._items:
+            d = scen[:, :, None, :] - np.clip(scen[:, :, None, :], self._item_lo, self._item_hi)
+            near = np.einsum("nsmi,nsmi->nsm", d, d) < self._mv_radius[None, :, None] ** 2
+            hw = np.einsum("nsij,sj->nsi", np.abs(srot), self._mv_half)  # world AABB half extents
+            overlap = np.all(np.abs(scen[:, :, None, :] - self._item_c) < hw[:, :, None, :] + self._item_h, axis=3)
+            cand_scene = near & overlap & self._scene_mask
+        cand_self = np.zeros((n, 0), dtype=bool)
+        if len(self._pairs):
+            diff = scen[:, self._pairs[:, 0]] - scen[:, self._pairs[:, 1]]
+            cand_self = np.einsum("npi,npi->np", diff, diff) < self._pair_r ** 2
+        has = np.zeros(n, dtype=bool)
+        if cand_scene.size:
+            has |= cand_scene.any(axis=(1, 2))
+        if cand_self.size:
+            has |= cand_self.any(axis=1)
+        has &= valid
+        reasons = []
+        moving = self._moving_shapes
+        for i in np.flatnonzero(has[:limit]):
+            hit = None
+            placed_scene: set[int] = set()
+            for a, k in zip(*np.nonzero(cand_scene[i])) if cand_scene.size else ():
+                obj = moving[a].obj_scene
+                obj.setRotation(srot[i, a])
+                obj.setTranslation(scen[i, a])
+                placed_scene.add(a)
+                if fcl.collide(obj, self._item_objs[k]):
+                    hit = ("scene", int(a), int(k))
+                    break
+            if hit is None and cand_self.size:
+                for p in np.flatnonzero(cand_self[i]):
+                    a, b = self._pairs[p]
+                    oa, ob = moving[a].obj_self, moving[b].obj_self
+                    oa.setRotation(srot[i, a]); oa.setTranslation(scen[i, a])
+                    ob.setRotation(srot[i, b]); ob.setTranslation(scen[i, b])
+                    if fcl.collide(oa, ob):
+                        hit = ("self", int(a), int(b))
+                        break
+            if hit is not None:
+                valid[i] = False
+                reasons.append((int(i),) + hit)
+                if stop_at_first:
+                    break
+        return valid, reasons
+
+    def validity_batch(self, Q) -> np.ndarray:
+        """Validity (N,) bool of arm configurations ``Q`` (N, arm_dof), rad."""
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        if Q.shape[0] == 0:
+            return np.zeros(0, dtype=bool)
+        return self._evaluate(Q, stop_at_first=False)[0]
+
+    def is_valid(self, q_arm) -> bool:
+        """True when arm configuration ``q_arm`` (arm_dof,) is within limits, margin and collision-free."""
+        return bool(self._evaluate(np.asarray(q_arm, dtype=float).reshape(1, -1), stop_at_first=False)[0][0])
+
+    def first_invalid(self, Q) -> int | None:
+        """Index of the first invalid row of ``Q`` (N, arm_dof), or None when all are valid."""
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        if Q.shape[0] == 0:
+            return None
+        valid, _ = self._evaluate(Q, stop_at_first=True)
+        return None if valid.all() else int(np.argmin(valid))
+
+    def segment_valid(self, q0, q1, resolution: float = 0.01) -> bool:
+        """True when every state on the straight joint-space segment q0 -> q1 is valid, checked at
+        steps of at most ``resolution`` rad (Euclidean norm over the arm joints), both ends included."""
+        return self.first_invalid(interpolate(q0, q1, resolution)) is None
+
+    def explain(self, q_arm) -> str:
+        """Why ``q_arm`` (arm_dof,) is invalid, in words; "valid" when it is not."""
+        q = np.asarray(q_arm, dtype=float).reshape(1, -1)
+        names = self.robot.joint_names
+        for j, idx in enumerate(self._arm):
+            if not (self._lower[j] - _EPS <= q[0, j] <= self._upper[j] + _EPS):
+                return (f"joint limit: {names[idx]} = {q[0, j]:.4f} rad is outside "
+                        f"[{self._lower[j]:.4f}, {self._upper[j]:.4f}]")
+        q_full = self._full(q)
+        rot, pos = self._fk.frames(q_full)
+        if self.singularity_margin is not None:
+            sig = float(self._sigma_min(rot, pos, q_full)[0])
+            if sig < self.singularity_margin:
+                return (f"closer to the base-axis singularity than the margin (smallest singular value of the "
+                        f"translational Jacobian {sig:.4f} < {self.singularity_margin:.4f} m/rad)")
+        # Exhaustive FCL pass without the pre-filter, so explain() never depends on it.
+        srot, scen = self._shape_poses(rot, pos)
+        link_names = self.robot.kin.link_names
+        moving = self._moving_shapes
+
+        def label(mv: _Moving) -> str:
+            return f"attached object '{mv.name}'" if mv.attached else link_names[mv.link]
+
+        for a, mv in enumerate(moving):
+            mv.obj_scene.setRotation(srot[0, a]); mv.obj_scene.setTranslation(scen[0, a])
+            for k, it in enumerate(self._items):
+                if self._scene_mask[a, k] and fcl.collide(mv.obj_scene, self._item_objs[k]):
+                    return f"{label(mv)} hits {it.role} '{it.name}'"
+        for a, b in self._pairs:
+            oa, ob = moving[a].obj_self, moving[b].obj_self
+            oa.setRotation(srot[0, a]); oa.setTranslation(scen[0, a])
+            ob.setRotation(srot[0, b]); ob.setTranslation(scen[0, b])
+            if fcl.collide(oa, ob):
+                if moving[a].attached or moving[b].attached:
+                    return f"{label(moving[a])} hits {label(moving[b])}"
+                return f"self-collision: {label(moving[a])} hits {label(moving[b])}"
+        return "valid"
+
+
+def interpolate(q0, q1, resolution: float) -> np.ndarray:
+    """States (K, n) on the straight segment q0 -> q1, both ends included, at most ``resolution``
+    apart (Euclidean norm, rad); K >= 2."""
+    q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
+    steps = max(1, int(np.ceil(np.linalg.norm(q1 - q0) / resolution)))
+    t = np.linspace(0.0, 1.0, steps + 1)[:, None]
+    return q0 + (q1 - q0) * t

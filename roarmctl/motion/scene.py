@@ -1,0 +1,160 @@
+"""The world the arm moves in: a table (or floor), obstacles and graspable objects.
+
+Every item is a primitive shape with a pose in the world frame (the robot's root frame; for the
+RoArm z = 0 is the desk surface under the base). Units: metres and radians.
+
+``Scene.to_dict()`` is the form that goes into the trajectory file (the visualizer reads it):
+``{"items": [{"name", "role", "shape", "size" | "radius" (+ "length"), "xyz", "rpy"}]}``.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from roarmctl.errors import InputError
+from roarmctl.robot.model import rpy_from_matrix, transform
+
+Role = Literal["table", "obstacle", "object"]
+Shape = Literal["box", "cylinder", "sphere"]
+ROLES = ("table", "obstacle", "object")
+SHAPES = ("box", "cylinder", "sphere")
+
+
+@dataclass
+class SceneItem:
+    """One primitive in the world.
+
+    ``pose`` (4, 4) places the shape's centre in the world frame. Box: ``size`` = full edge lengths
+    (x, y, z) in m. Cylinder: ``radius`` and ``length`` (m) along the local z axis. Sphere: ``radius``.
+    """
+
+    name: str
+    role: Role
+    shape: Shape
+    pose: np.ndarray = field(default_factory=lambda: np.eye(4))
+    size: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    radius: float = 0.0
+    length: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.role not in ROLES:
+            raise InputError(f"scene item '{self.name}': role '{self.role}' is not one of {', '.join(ROLES)}")
+        if self.shape not in SHAPES:
+            raise InputError(f"scene item '{self.name}': shape '{self.shape}' is not one of {', '.join(SHAPES)}")
+        self.pose = np.array(self.pose, dtype=float)
+        if self.pose.shape != (4, 4):
+            raise InputError(f"scene item '{self.name}': pose must be a 4x4 transform")
+        self.size = tuple(float(v) for v in self.size)  # type: ignore[assignment]
+        self.radius, self.length = float(self.radius), float(self.length)
+        dims = {"box": self.size, "cylinder": (self.radius, self.length), "sphere": (self.radius,)}[self.shape]
+        if len(dims) != (3 if self.shape == "box" else len(dims)) or min(dims) <= 0:
+            raise InputError(f"scene item '{self.name}': {self.shape} dimensions must be positive, got {dims}")
+
+    @classmethod
+    def box(cls, name: str, size, xyz, rpy=(0.0, 0.0, 0.0), role: Role = "obstacle") -> SceneItem:
+        """A box of full edge lengths ``size`` (m) centred at ``xyz`` (m) with URDF ``rpy`` (rad)."""
+        return cls(name, role, "box", transform(xyz, rpy), size=tuple(size))
+
+    @classmethod
+    def cylinder(cls, name: str, radius: float, length: float, xyz, rpy=(0.0, 0.0, 0.0), role: Role = "obstacle") -> SceneItem:
+        return cls(name, role, "cylinder", transform(xyz, rpy), radius=radius, length=length)
+
+    @classmethod
+    def sphere(cls, name: str, radius: float, xyz, role: Role = "obstacle") -> SceneItem:
+        return cls(name, role, "sphere", transform(xyz), radius=radius)
+
+    @property
+    def xyz(self) -> np.ndarray:
+        return self.pose[:3, 3].copy()
+
+    def half_extents_world(self) -> np.ndarray:
+        """Half edge lengths (3,) of the item's world-axis-aligned bounding box (m)."""
+        rot = self.pose[:3, :3]
+        if self.shape == "box":
+            return np.abs(rot) @ (np.asarray(self.size) / 2)
+        if self.shape == "sphere":
+            return np.full(3, self.radius)
+        axis = rot[:, 2]
+        return self.radius * np.sqrt(np.clip(1.0 - axis**2, 0.0, None)) + 0.5 * self.length * np.abs(axis)
+
+    def aabb(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) corners (3,) of the world-axis-aligned bounding box (m)."""
+        h = self.half_extents_world()
+        c = self.pose[:3, 3]
+        return c - h, c + h
+
+    def to_dict(self) -> dict:
+        d: dict = {"name": self.name, "role": self.role, "shape": self.shape}
+        if self.shape == "box":
+            d["size"] = [float(v) for v in self.size]
+        else:
+            d["radius"] = float(self.radius)
+            if self.shape == "cylinder":
+                d["length"] = float(self.length)
+        d["xyz"] = [float(v) for v in self.pose[:3, 3]]
+        d["rpy"] = [float(v) for v in rpy_from_matrix(self.pose[:3, :3])]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> SceneItem:
+        try:
+            pose = transform(d.get("xyz", (0, 0, 0)), d.get("rpy", (0, 0, 0)))
+            return cls(str(d["name"]), d["role"], d["shape"], pose, size=tuple(d.get("size", (0.0, 0.0, 0.0))),
+                       radius=float(d.get("radius", 0.0)), length=float(d.get("length", 0.0)))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"scene item {d!r}: {exc}") from None
+
+
+@dataclass
+class Scene:
+    """A list of scene items with unique names."""
+
+    items: list[SceneItem] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        names = [i.name for i in self.items]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise InputError(f"scene: duplicate item name(s) {', '.join(dup)}")
+
+    def __getitem__(self, name: str) -> SceneItem:
+        for item in self.items:
+            if item.name == name:
+                return item
+        raise InputError(f"scene has no item '{name}' (items: {', '.join(i.name for i in self.items) or 'none'})")
+
+    def __contains__(self, name: str) -> bool:
+        return any(i.name == name for i in self.items)
+
+    def names(self) -> list[str]:
+        return [i.name for i in self.items]
+
+    def copy(self) -> Scene:
+        return copy.deepcopy(self)
+
+    def to_dict(self) -> dict:
+        return {"items": [i.to_dict() for i in self.items]}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Scene:
+        if not isinstance(d, dict) or not isinstance(d.get("items", []), list):
+            raise InputError("scene: expected {'items': [...]}")
+        return cls([SceneItem.from_dict(i) for i in d.get("items", [])])
+
+
+def example_scene() -> Scene:
+    """The RoArm example used by tests and benchmarks: table, a cube, a wall between pick and place.
+
+    Table top at z = 0 (0.8 x 0.6 x 0.02 m box), a 40 mm cube at (0.25, -0.15), a 30 mm cylinder at
+    the place area's side, and a 0.04 x 0.10 x 0.15 m obstacle at (0.28, 0, 0.075).
+    """
+    return Scene([
+        SceneItem.box("table", (0.8, 0.6, 0.02), (0.15, 0.0, -0.01), role="table"),
+        SceneItem.box("wall", (0.04, 0.10, 0.15), (0.28, 0.0, 0.075)),
+        SceneItem.box("cube", (0.04, 0.04, 0.04), (0.25, -0.15, 0.02), role="object"),
+        SceneItem.cylinder("can", 0.015, 0.05, (0.18, 0.22, 0.025), role="object"),
+    ])
