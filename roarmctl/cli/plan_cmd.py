@@ -1,5 +1,76 @@
-"""CLI commands of this area (being written)."""
+"""``roarmctl plan``: plan file -> collision-free, singularity-aware, time-optimal trajectory file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from roarmctl.cli import common
 
 
-def register(app) -> None:
-    """Add this module's commands to ``app``."""
+def default_output(plan_path: Path) -> Path:
+    """``plans/pick_place.yaml`` -> ``plans/pick_place.traj.json``."""
+    return plan_path.with_name(plan_path.stem + ".traj.json")
+
+
+def run_planner(plan: Path, seed: Optional[int], quiet: bool):
+    """Plan with a rich progress display on stderr (none when ``quiet``); returns the PlanResult."""
+    from roarmctl.motion.pipeline import plan_file
+
+    if quiet:
+        return plan_file(plan, seed=seed)
+    from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with Progress(SpinnerColumn(), TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} tasks"),
+                  TimeElapsedColumn(), console=common.console(stderr=True), transient=True) as bar:
+        job = bar.add_task(f"planning {plan.name}", total=None)
+
+        def progress(stage: str, done: int, total: int) -> None:
+            bar.update(job, description=stage, completed=done, total=total)
+
+        return plan_file(plan, seed=seed, progress=progress)
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("plan")
+    def plan_cmd(
+        plan: Path = typer.Argument(..., help="Pick/place plan file (YAML)."),
+        output: Optional[Path] = typer.Option(None, "-o", "--output", help="Trajectory file to write (default: next to the plan, .traj.json)."),
+        seed: Optional[int] = typer.Option(None, "--seed", help="Random seed (overrides planner.seed; same seed -> same file)."),
+        json_out: bool = typer.Option(False, "--json", help="Print a JSON summary instead of the table."),
+    ) -> None:
+        """Plan every task of PLAN, time it with TOPP-RA, re-check it and write the trajectory file."""
+        result = run_planner(plan, seed, quiet=json_out)
+        out = output or default_output(plan)
+        result.trajectory.save(out)
+        traj = result.trajectory
+        summary = {
+            "ok": True,
+            "output": str(out),
+            "duration": traj.duration,
+            "segments": result.segments,
+            "planning_time": result.planning_time,
+            "timings": result.timings,
+            "points": len(traj.times),
+            "events": [{"time_from_start": e.time, "kind": e.kind, "label": e.label} for e in traj.events],
+            "warnings": result.warnings,
+        }
+        for w in result.warnings:
+            common.warn(w)
+        if json_out:
+            common.print_json(summary)
+            return
+        from rich.table import Table
+
+        table = Table(title=f"Planned {plan.name}", show_header=False)
+        table.add_column("what", style="bold")
+        table.add_column("value")
+        table.add_row("output", str(out))
+        table.add_row("motion duration", f"{traj.duration:.2f} s ({len(traj.times)} points at {traj.sample_rate:g} Hz)")
+        table.add_row("segments", str(result.segments))
+        table.add_row("events", ", ".join(f"{e.kind} @ {e.time:.2f} s" for e in traj.events) or "none")
+        split = ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in result.timings.items())
+        table.add_row("planning time", f"{result.planning_time * 1000:.0f} ms ({split})")
+        common.console().print(table)

@@ -1,0 +1,69 @@
+"""Straight-line TCP motions (approach, descent, lift) as joint-space waypoints.
+
+The TCP line is sampled every ``step`` metres and each sample is solved by IK on the branch
+closest to the previous sample, so the joint path follows the line without branch jumps.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from roarmctl.errors import PlanningError, UnreachableError
+from roarmctl.robot.model import Robot
+
+MAX_JOINT_STEP = 0.15  # rad between neighbouring samples; more means a branch switch or singularity
+
+
+def cartesian_line(
+    robot: Robot,
+    q_start: np.ndarray,
+    p_goal: np.ndarray,
+    *,
+    pitch: float,
+    roll: float | None = None,
+    step: float = 0.002,
+    label: str = "line",
+) -> np.ndarray:
+    """Joint waypoints (K, dof) whose TCP runs straight from FK(q_start) to ``p_goal`` (m).
+
+    ``q_start`` is a full configuration; the gripper value is kept. The first waypoint is
+    ``q_start`` itself; the tool pitch (and roll, when given) is held along the line.
+    """
+    from roarmctl.robot.ik import solve_ik
+
+    q_start = robot.full_q(q_start)
+    p0 = robot.kin.fk(q_start)[:3, 3]
+    p_goal = np.asarray(p_goal, dtype=float)
+    n = max(int(np.ceil(np.linalg.norm(p_goal - p0) / step)), 1)
+    out = [q_start]
+    prev = q_start
+    for k in range(1, n + 1):
+        p = p0 + (p_goal - p0) * (k / n)
+        try:
+            sols = solve_ik(robot, p, pitch=pitch, roll=roll, q_ref=prev, all_solutions=True)
+        except UnreachableError as exc:
+            raise PlanningError(f"{label}: the straight line leaves the reachable space at "
+                                f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m: {exc.message}") from None
+        arm = robot.arm_indices
+        best = min(sols, key=lambda s: float(np.max(np.abs(s[arm] - prev[arm]))))
+        jump = float(np.max(np.abs(best[arm] - prev[arm])))
+        if jump > MAX_JOINT_STEP:
+            raise PlanningError(f"{label}: the straight line passes a singularity near "
+                                f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m (a joint would jump {jump:.2f} rad)",
+                                "move the target or change the approach height or pitch")
+        best = best.copy()
+        best[[i for i in range(robot.dof) if i not in arm]] = q_start[[i for i in range(robot.dof) if i not in arm]]
+        out.append(best)
+        prev = best
+    return np.array(out)
+
+
+def line_deviation(robot: Robot, q: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> float:
+    """Largest distance (m) of the TCP at configurations ``q`` (N, dof) from the segment p0-p1."""
+    p = robot.kin.fk(robot.full_q(q))[:, :3, 3]
+    d = np.asarray(p1, dtype=float) - np.asarray(p0, dtype=float)
+    length2 = float(d @ d)
+    if length2 < 1e-18:
+        return float(np.max(np.linalg.norm(p - p0, axis=1)))
+    t = np.clip((p - p0) @ d / length2, 0.0, 1.0)
+    return float(np.max(np.linalg.norm(p - (p0 + t[:, None] * d), axis=1)))

@@ -1,0 +1,538 @@
+"""From a plan file to a checked, timed trajectory: the main job of ``roarmctl plan``.
+
+Stages: load plan and robot -> build the scene -> expand each task into motion segments (IK for
+every target, free motions with OMPL + FCL, straight TCP lines) -> time every segment with
+TOPP-RA -> re-check the sampled result (limits, collisions, singularity margin, TCP speed, line
+following) -> one ``Trajectory``. Nothing invalid is ever returned: a violation raises.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from roarmctl.errors import InfeasibleError, PlanningError, UnreachableError
+from roarmctl.motion.timing import TimedPath, time_parameterise
+from roarmctl.motion.trajectory import Event, Segment, Trajectory
+from roarmctl.plan.schema import ItemSpec, MoveTask, PickTask, Plan, PlaceTask, WaitTask, load_plan
+from roarmctl.robot.model import Robot
+
+SAMPLE_DT = 0.01  # s: 100 Hz output
+RECHECK_SUBSTEPS = 4  # collision re-check at 4x the output rate
+LINE_TOLERANCE = 0.001  # m: straight-line segments follow the line within this
+LIMIT_TOL = 1e-6
+
+ProgressFn = Callable[[str, int, int], None]
+
+
+@dataclass
+class PlanResult:
+    """The planned trajectory plus what it cost: ``timings`` in s per stage, ``warnings`` for the user."""
+
+    trajectory: Trajectory
+    timings: dict[str, float] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    segments: int = 0
+    checks: int = 0
+
+    @property
+    def planning_time(self) -> float:
+        return float(sum(self.timings.values()))
+
+
+@dataclass
+class _Step:
+    """One motion segment before timing."""
+
+    kind: str  # free | cartesian | gripper | wait
+    label: str
+    waypoints: np.ndarray | None = None  # (K, dof) full configurations (free: arm path filled later)
+    q_from: np.ndarray | None = None
+    q_to: np.ndarray | None = None
+    gripper_to: float | None = None
+    duration: float = 0.0
+    event: Event | None = None
+    line: tuple[np.ndarray, np.ndarray] | None = None
+    pitch: float = math.pi / 2
+    roll: float | None = None
+    grasp_target: str | None = None  # the object the jaws may touch during this step
+
+
+class _Timer:
+    def __init__(self) -> None:
+        self.t: dict[str, float] = {k: 0.0 for k in ("ik", "ompl", "simplify", "toppra", "recheck")}
+
+    def add(self, key: str, since: float) -> None:
+        self.t[key] = self.t.get(key, 0.0) + time.perf_counter() - since
+
+
+def plan_file(path: str | Path, seed: int | None = None, progress: ProgressFn | None = None) -> PlanResult:
+    """Load the plan at ``path`` and plan it (``seed`` overrides ``planner.seed``)."""
+    from roarmctl.robot.loader import load_robot
+
+    path = Path(path)
+    plan = load_plan(path)  # form first, so typos are reported before anything heavy
+    robot = load_robot(_robot_spec(plan))
+    plan = load_plan(path, named_poses=list(robot.named_poses))
+    if seed is not None:
+        plan.planner.seed = seed
+    return Planner(plan, robot, progress).run()
+
+
+def _robot_spec(plan: Plan) -> str:
+    candidate = (plan.path.parent / plan.robot)
+    return str(candidate) if candidate.suffix in (".yaml", ".yml", ".urdf") and candidate.is_file() else plan.robot
+
+
+class Planner:
+    """Plans one ``Plan`` for one ``Robot``; keeps the world state (held object, object poses) as it goes."""
+
+    def __init__(self, plan: Plan, robot: Robot, progress: ProgressFn | None = None) -> None:
+        from roarmctl.motion.collision import CollisionChecker
+        from roarmctl.motion.scene import Scene
+
+        if robot.gripper is None:
+            needs = [t for t in plan.tasks if isinstance(t, (PickTask, PlaceTask))]
+            if needs:
+                raise InfeasibleError(f"{plan.path}:{needs[0].line}: {robot.name} has no gripper, so it cannot pick or place")
+        self.plan, self.robot = plan, robot
+        self.progress = progress or (lambda stage, done, total: None)
+        self.timer = _Timer()
+        self.warnings: list[str] = []
+        self.arm = robot.arm_indices
+        self.gi = robot.joint_index(robot.gripper.joint) if robot.gripper else None
+        items = [_scene_item(s) for s in plan.scene + plan.objects]
+        self.scene = Scene(items)
+        self.checker = CollisionChecker(robot, self.scene, padding=plan.planner.padding,
+                                        singularity_margin=plan.planner.singularity_margin or None)
+        self.object_specs = {o.name: o for o in plan.objects}
+        self.object_pose = {o.name: o.pose.copy() for o in plan.objects}
+        self.held: str | None = None
+        self.held_offset = np.zeros(3)  # TCP position minus object centre at grasp (world frame)
+        self.vmax = robot.velocity_limits * plan.limits.velocity_scale
+        self.amax = robot.acceleration_limits * plan.limits.acceleration_scale
+        self.free_count = 0
+
+    # ------------------------------------------------------------------ run
+    def run(self) -> PlanResult:
+        q = self._start_configuration()
+        tasks = [t for _ in range(self.plan.cycles) for t in self.plan.tasks]
+        self._warn_collinear(tasks)
+        timed: list[tuple[_Step, TimedPath]] = []
+        for i, task in enumerate(tasks):
+            self.progress(f"task {i + 1}/{len(tasks)}: {task.kind}", i, len(tasks))
+            for step in self._expand(task, q, i):
+                tp = self._realise(step, q)
+                timed.append((step, tp))
+                q = tp.q[-1].copy()
+        self.progress("done", len(tasks), len(tasks))
+        traj = self._assemble(timed)
+        return PlanResult(traj, dict(self.timer.t), self.warnings, len(timed), int(getattr(self.checker, "check_count", 0)))
+
+    def _start_configuration(self) -> np.ndarray:
+        s = self.plan.start
+        if isinstance(s, str):
+            if s not in self.robot.named_poses:
+                raise InfeasibleError(f"{self.plan.path}: start: '{s}' is not a named pose of {self.robot.name}")
+            q = self.robot.full_q(self.robot.named_poses[s]).copy()
+        else:
+            q = self.robot.full_q(s).copy()
+        if not self.robot.within_limits(q):
+            raise InfeasibleError(f"{self.plan.path}: start: the configuration is outside the joint limits")
+        self._set_state(q[self.gi] if self.gi is not None else None)
+        if not self.checker.is_valid(q[self.arm]):
+            raise PlanningError(f"{self.plan.path}: start: the start configuration is invalid: {self.checker.explain(q[self.arm])}",
+                                "choose another start pose or move the obstacle")
+        return q
+
+    # ------------------------------------------------------------ expansion
+    def _where(self, task, index: int) -> str:
+        return f"task {index + 1} ({task.kind}, line {task.line})"
+
+    def _expand(self, task, q: np.ndarray, index: int) -> list[_Step]:
+        where = self._where(task, index)
+        if isinstance(task, WaitTask):
+            return [_Step("wait", f"{where}: wait {task.seconds:g} s", duration=task.seconds)]
+        if isinstance(task, MoveTask):
+            return [_Step("free", f"{where}: move", q_to=self._move_goal(task, q, where))]
+        if isinstance(task, PickTask):
+            return self._expand_pick(task, q, where)
+        return self._expand_place(task, q, where)
+
+    def _move_goal(self, task: MoveTask, q: np.ndarray, where: str) -> np.ndarray:
+        if task.pose is not None:
+            goal = self.robot.full_q(self.robot.named_poses[task.pose]).copy()
+        elif task.joints is not None:
+            try:
+                goal = self.robot.full_q(task.joints).copy()
+            except Exception as exc:  # wrong length
+                raise InfeasibleError(f"{where}: joints: {exc}") from None
+        else:
+            pitch = task.pitch if task.pitch is not None else math.pi / 2
+            goal = self._choose_ik([(task.xyz, pitch, None)], q, where)[0]
+        if self.gi is not None:
+            goal[self.gi] = q[self.gi]
+        if not self.robot.within_limits(goal):
+            raise InfeasibleError(f"{where}: the goal configuration is outside the joint limits")
+        return goal
+
+    def _expand_pick(self, task: PickTask, q: np.ndarray, where: str) -> list[_Step]:
+        if self.held is not None:
+            raise InfeasibleError(f"{where}: picks '{task.object}' while still holding '{self.held}'", "place it first")
+        spec = self.object_specs[task.object]
+        centre = self.object_pose[task.object][:3, 3]
+        grasp = centre + np.array([0.0, 0.0, task.grasp_offset])
+        above = grasp + np.array([0.0, 0.0, task.approach_height])
+        g_open = task.gripper_open if task.gripper_open is not None else self.robot.gripper.open
+        g_closed = task.gripper_closed if task.gripper_closed is not None else self.robot.gripper.closed
+        self._set_state(g_open, grasp_target=task.object)
+        q_grasp, q_above = self._choose_ik([(grasp, task.pitch, task.roll), (above, task.pitch, task.roll)], q, where, gripper=g_open)
+        self._set_state(q[self.gi])
+        steps = [_Step("free", f"{where}: transit above '{task.object}'", q_to=_with(q_above, self.gi, q[self.gi]))]
+        if abs(q[self.gi] - g_open) > 1e-9:
+            steps.append(_Step("gripper", f"{where}: open gripper", gripper_to=g_open))
+        steps += [
+            _Step("cartesian", f"{where}: descend to '{task.object}'", q_to=q_grasp, line=(above, grasp),
+                  pitch=task.pitch, roll=task.roll, grasp_target=task.object),
+            _Step("gripper", f"{where}: grasp '{task.object}'", gripper_to=g_closed, grasp_target=task.object,
+                  event=Event(0.0, "grasp", f"pick {task.object}", [float(v) for v in grasp])),
+            _Step("cartesian", f"{where}: lift '{task.object}'", q_to=q_above, line=(grasp, above),
+                  pitch=task.pitch, roll=task.roll, grasp_target=task.object),
+        ]
+        self._pending_pick = (task.object, grasp - centre, spec)
+        return steps
+
+    def _expand_place(self, task: PlaceTask, q: np.ndarray, where: str) -> list[_Step]:
+        if self.held is None:
+            raise InfeasibleError(f"{where}: places an object but nothing is held", "add a pick task before it")
+        name = self.held
+        if task.object is not None and task.object != name:
+            raise InfeasibleError(f"{where}: places '{task.object}' but the gripper holds '{name}'")
+        target = np.asarray(task.xyz, dtype=float) + self.held_offset
+        above = target + np.array([0.0, 0.0, task.approach_height])
+        g_open = task.gripper_open if task.gripper_open is not None else self.robot.gripper.open
+        q_place, q_above = self._choose_ik([(target, task.pitch, task.roll), (above, task.pitch, task.roll)], q, where)
+        return [
+            _Step("free", f"{where}: transit above the place for '{name}'", q_to=q_above),
+            _Step("cartesian", f"{where}: lower '{name}'", q_to=q_place, line=(above, target), pitch=task.pitch, roll=task.roll),
+            _Step("gripper", f"{where}: release '{name}'", gripper_to=g_open, grasp_target=name,
+                  event=Event(0.0, "release", f"place {name}", [float(v) for v in target])),
+            _Step("cartesian", f"{where}: retreat from '{name}'", q_to=_with(q_above, self.gi, g_open), line=(target, above),
+                  pitch=task.pitch, roll=task.roll, grasp_target=name),
+        ]
+
+    def _choose_ik(self, targets: list[tuple[np.ndarray, float, float | None]], q: np.ndarray, where: str,
+                   gripper: float | None = None) -> list[np.ndarray]:
+        """IK for a chain of targets on one branch: valid, margin-respecting, nearest to ``q``.
+
+        Returns one full configuration per target (gripper value of ``q`` unless ``gripper``).
+        """
+        from roarmctl.robot.ik import solve_ik
+
+        t0 = time.perf_counter()
+        g = q[self.gi] if gripper is None and self.gi is not None else gripper
+        first, pitch, roll = targets[0]
+        try:
+            candidates = solve_ik(self.robot, first, pitch=pitch, roll=roll, q_ref=q, all_solutions=True)
+        except UnreachableError as exc:
+            self.timer.add("ik", t0)
+            p = first
+            raise UnreachableError(f"{where}: target ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m is unreachable: {exc.message}",
+                                   exc.reason, exc.hint) from None
+        reasons: list[str] = []
+        best, best_cost = None, math.inf
+        for cand in candidates:
+            chain = [_with(cand, self.gi, g)]
+            ok = True
+            for p, pt, rl in targets[1:]:
+                try:
+                    nxt = solve_ik(self.robot, p, pitch=pt, roll=rl, q_ref=chain[-1], all_solutions=True)
+                except UnreachableError as exc:
+                    reasons.append(exc.message)
+                    ok = False
+                    break
+                chain.append(_with(min(nxt, key=lambda s: float(np.max(np.abs(s[self.arm] - chain[-1][self.arm])))), self.gi, g))
+            if not ok:
+                continue
+            bad = next((c for c in chain if not self.checker.is_valid(c[self.arm])), None)
+            if bad is not None:
+                reasons.append(self.checker.explain(bad[self.arm]))
+                continue
+            cost = float(np.sum(np.abs(chain[-1][self.arm] - q[self.arm])))
+            if cost < best_cost:
+                best, best_cost = chain, cost
+        self.timer.add("ik", t0)
+        if best is None:
+            p = first
+            why = reasons[0] if reasons else "no IK solution"
+            raise UnreachableError(f"{where}: no valid arm configuration reaches ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m: {why}",
+                                   "collision" if reasons else "out_of_reach", "move the target or change the approach height or pitch")
+        return best
+
+    def _warn_collinear(self, tasks: list) -> None:
+        """The seed report's failure: pick and place on opposite sides of the base (through its axis)."""
+        picks = [self.object_pose[t.object][:3, 3] for t in tasks if isinstance(t, PickTask)]
+        places = [np.asarray(t.xyz) for t in tasks if isinstance(t, PlaceTask)]
+        for a, b in zip(picks, places):
+            if np.hypot(*a[:2]) < 1e-6 or np.hypot(*b[:2]) < 1e-6:
+                continue
+            angle = abs(math.remainder(math.atan2(a[1], a[0]) - math.atan2(b[1], b[0]), 2 * math.pi))
+            if angle > math.radians(170):
+                self.warnings.append(
+                    f"pick ({a[0]:.2f}, {a[1]:.2f}) and place ({b[0]:.2f}, {b[1]:.2f}) are collinear with the base: a straight "
+                    "move would cross the base-axis singularity; the planner keeps the singularity margin and turns the base instead")
+
+    # ------------------------------------------------------------ realise
+    def _set_state(self, gripper: float | None, grasp_target: str | None = None) -> None:
+        if gripper is not None:
+            self.checker.set_gripper(float(gripper))
+        self.checker.set_grasp_target(grasp_target if grasp_target is not None else self.held)
+
+    def _realise(self, step: _Step, q: np.ndarray) -> TimedPath:
+        """Plan (if free), time and re-check one step starting at ``q``; update the world state."""
+        g = q[self.gi] if self.gi is not None else None
+        if step.kind == "wait":
+            return _dwell(q, step.duration)
+        if step.kind == "gripper":
+            return self._gripper_step(step, q)
+        self._set_state(g, grasp_target=step.grasp_target)
+        if step.kind == "cartesian":
+            return self._cartesian_step(step, q)
+        return self._free_step(step, q)
+
+    def _gripper_step(self, step: _Step, q: np.ndarray) -> TimedPath:
+        a, b = float(q[self.gi]), float(step.gripper_to)
+        dist = abs(b - a)
+        duration = max(self.plan.limits.gripper_time, 1.875 * dist / self.vmax[self.gi] * 1.01,
+                       math.sqrt(5.7735 * dist / self.amax[self.gi]) * 1.01)
+        tp = _smooth_move(q, self.gi, b, duration)
+        tcp = self.robot.kin.fk(q)[:3, 3]
+        t0 = time.perf_counter()
+        for value in np.linspace(a, b, 5):  # the jaw sweeps: check it along the way
+            self._set_state(value, grasp_target=step.grasp_target)
+            if not self.checker.is_valid(q[self.arm]):
+                self.timer.add("recheck", t0)
+                raise PlanningError(f"{step.label}: the moving jaw collides: {self.checker.explain(q[self.arm])}")
+        self.timer.add("recheck", t0)
+        if step.event is not None:
+            if step.event.kind == "grasp":
+                name, offset, _ = self._pending_pick
+                self._set_state(b, grasp_target=name)
+                self.checker.attach(name, q[self.arm])
+                self.held, self.held_offset, self._pending_pick = name, offset, None
+            elif step.event.kind == "release":
+                name = self.held
+                self.checker.detach(name, q[self.arm])
+                self.object_pose[name][:3, 3] = tcp - self.held_offset
+                self.held, self.held_offset = None, np.zeros(3)
+                self._set_state(b, grasp_target=name)
+        else:
+            self._set_state(b)
+        return tp
+
+    def _cartesian_step(self, step: _Step, q: np.ndarray) -> TimedPath:
+        from roarmctl.motion.cartesian import cartesian_line, line_deviation
+
+        p0, p1 = step.line
+        t0 = time.perf_counter()
+        wps = cartesian_line(self.robot, q, p1, pitch=step.pitch, roll=step.roll, label=step.label)
+        self.timer.add("ik", t0)
+        tp = self._time(wps, step.label)
+        t0 = time.perf_counter()
+        self._recheck(tp, step.label)
+        dev = line_deviation(self.robot, tp.q, self.robot.kin.fk(q)[:3, 3], p1)
+        self.timer.add("recheck", t0)
+        if dev > LINE_TOLERANCE:
+            raise PlanningError(f"{step.label}: the timed motion leaves the straight TCP line by {dev * 1000:.1f} mm")
+        return tp
+
+    def _free_step(self, step: _Step, q: np.ndarray) -> TimedPath:
+        from roarmctl.motion.ompl_planner import plan_joint_path_with_stats
+
+        goal = step.q_to.copy()
+        if self.gi is not None:
+            goal[self.gi] = q[self.gi]
+        cfg = self.plan.planner
+        resolution = 0.02
+        last_error: PlanningError | None = None
+        for attempt in range(3):
+            t0 = time.perf_counter()
+            path, stats = plan_joint_path_with_stats(
+                self.checker, q[self.arm], goal[self.arm], planner=cfg.name, time_budget=cfg.time_budget,
+                simplify_budget=cfg.simplify_budget, seed=cfg.seed + 1000 * self.free_count + attempt, resolution=resolution)
+            self.timer.t["ompl"] += getattr(stats, "solve_time", time.perf_counter() - t0)
+            self.timer.t["simplify"] += getattr(stats, "simplify_time", 0.0)
+            wps = np.repeat(q[None, :], len(path), axis=0)
+            wps[:, self.arm] = path
+            wps = _densify(wps, max_step=0.05 / (attempt + 1))
+            tp = self._time(wps, step.label)
+            try:
+                t0 = time.perf_counter()
+                self._recheck(tp, step.label)
+                self.timer.add("recheck", t0)
+                self.free_count += 1
+                return tp
+            except PlanningError as exc:
+                self.timer.add("recheck", t0)
+                last_error = exc
+                resolution /= 2
+        raise last_error
+
+    def _time(self, wps: np.ndarray, label: str) -> TimedPath:
+        t0 = time.perf_counter()
+        arm = self.arm
+        tcpv = None
+        if self.plan.limits.max_tcp_speed is not None:
+            base = wps[0].copy()
+
+            def tcpv(qa: np.ndarray, dqa: np.ndarray) -> np.ndarray:
+                full = np.repeat(base[None, :], len(qa), axis=0)
+                full[:, arm] = qa
+                jv = self.robot.kin.jacobian(full)[:, :3, :]
+                return np.einsum("nij,nj->ni", jv, dqa)
+
+        tp_arm = time_parameterise(wps[:, arm], self.vmax[arm], self.amax[arm], tcp_velocity_per_ds=tcpv,
+                                   max_tcp_speed=self.plan.limits.max_tcp_speed, sample_dt=SAMPLE_DT, label=label)
+        n = len(tp_arm.times)
+        q = np.repeat(wps[0][None, :], n, axis=0)
+        q[:, arm] = tp_arm.q
+        qd, qdd = np.zeros_like(q), np.zeros_like(q)
+        qd[:, arm], qdd[:, arm] = tp_arm.qd, tp_arm.qdd
+        self.timer.add("toppra", t0)
+        return TimedPath(tp_arm.times, q, qd, qdd)
+
+    def _recheck(self, tp: TimedPath, label: str) -> None:
+        """Independent check of the sampled motion: limits, TCP speed, collisions (4x finer), margin."""
+        r = self.robot
+        if np.any(tp.q < r.lower - LIMIT_TOL) or np.any(tp.q > r.upper + LIMIT_TOL):
+            raise PlanningError(f"{label}: the timed motion leaves the joint limits")
+        if np.any(np.abs(tp.qd) > self.vmax * (1 + 1e-6) + LIMIT_TOL):
+            raise PlanningError(f"{label}: the timed motion exceeds a joint velocity limit")
+        if np.any(np.abs(tp.qdd) > self.amax * (1 + 1e-6) + LIMIT_TOL):
+            raise PlanningError(f"{label}: the timed motion exceeds a joint acceleration limit")
+        if self.plan.limits.max_tcp_speed is not None:
+            speed = tcp_speed(r, tp.q, tp.qd)
+            if np.max(speed) > self.plan.limits.max_tcp_speed * (1 + 1e-6):
+                raise PlanningError(f"{label}: the TCP speed {np.max(speed):.3f} m/s exceeds max_tcp_speed")
+        fine = _interpolate(tp.q, RECHECK_SUBSTEPS)
+        bad = self.checker.first_invalid(fine[:, self.arm])
+        if bad is not None:
+            raise PlanningError(f"{label}: the timed motion is invalid at t = {bad / RECHECK_SUBSTEPS * SAMPLE_DT:.2f} s: "
+                                f"{self.checker.explain(fine[bad, self.arm])}")
+
+    # ------------------------------------------------------------ assemble
+    def _assemble(self, timed: list[tuple[_Step, TimedPath]]) -> Trajectory:
+        times, qs, qds, qdds = [], [], [], []
+        events, segments = [], []
+        t_off = 0.0
+        for k, (step, tp) in enumerate(timed):
+            skip = 1 if k > 0 else 0
+            times.append(tp.times[skip:] + t_off)
+            qs.append(tp.q[skip:])
+            qds.append(tp.qd[skip:])
+            qdds.append(tp.qdd[skip:])
+            end = t_off + tp.duration
+            segments.append(Segment(t_off, end, step.kind, step.label))
+            if step.event is not None:
+                events.append(Event(end, step.event.kind, step.event.label, step.event.position))
+            t_off = end
+        t = np.concatenate(times)
+        keep = np.concatenate([[True], np.diff(t) > 1e-9])
+        p = self.plan
+        traj = Trajectory(
+            robot=self.robot.name if not str(_robot_spec(p)).endswith((".yaml", ".yml", ".urdf")) else str(Path(_robot_spec(p)).resolve()),
+            joint_names=list(self.robot.joint_names),
+            times=t[keep],
+            positions=np.concatenate(qs)[keep],
+            velocities=np.concatenate(qds)[keep],
+            accelerations=np.concatenate(qdds)[keep],
+            events=events,
+            segments=segments,
+            limits={
+                "velocity": [float(v) for v in self.robot.velocity_limits],
+                "acceleration": [float(v) for v in self.robot.acceleration_limits],
+                "velocity_scale": p.limits.velocity_scale,
+                "acceleration_scale": p.limits.acceleration_scale,
+                "max_tcp_speed": p.limits.max_tcp_speed,
+            },
+            singularity_margin={"min_singular_value": p.planner.singularity_margin} if p.planner.singularity_margin else None,
+            scene=self._initial_scene_dict(),
+            plan={"path": str(p.path), "sha256": p.sha256, "planner": p.planner.name, "seed": p.planner.seed},
+            sample_rate=1.0 / SAMPLE_DT,
+        )
+        return traj
+
+    def _initial_scene_dict(self) -> dict:
+        from roarmctl.motion.scene import Scene
+
+        return Scene([_scene_item(s) for s in self.plan.scene + self.plan.objects]).to_dict()
+
+
+# ------------------------------------------------------------------ helpers
+def _scene_item(spec: ItemSpec):
+    from roarmctl.motion.scene import SceneItem
+
+    return SceneItem(name=spec.name, role=spec.role, shape=spec.shape, pose=spec.pose.copy(), size=tuple(spec.size),
+                     radius=spec.radius, length=spec.length)
+
+
+def _with(q: np.ndarray, index: int | None, value: float | None) -> np.ndarray:
+    out = np.array(q, dtype=float, copy=True)
+    if index is not None and value is not None:
+        out[index] = value
+    return out
+
+
+def _dwell(q: np.ndarray, duration: float) -> TimedPath:
+    n = max(int(round(duration / SAMPLE_DT)), 1)
+    times = np.linspace(0.0, duration, n + 1)
+    qq = np.repeat(q[None, :], len(times), axis=0)
+    return TimedPath(times, qq, np.zeros_like(qq), np.zeros_like(qq))
+
+
+def _smooth_move(q: np.ndarray, index: int, target: float, duration: float) -> TimedPath:
+    """One joint from q[index] to ``target`` along a quintic smooth step (rest to rest)."""
+    n = max(int(math.ceil(duration / SAMPLE_DT)), 1)
+    times = np.linspace(0.0, duration, n + 1)
+    tau = times / duration
+    s = 10 * tau**3 - 15 * tau**4 + 6 * tau**5
+    sd = (30 * tau**2 - 60 * tau**3 + 30 * tau**4) / duration
+    sdd = (60 * tau - 180 * tau**2 + 120 * tau**3) / duration**2
+    delta = target - q[index]
+    qq = np.repeat(q[None, :], len(times), axis=0)
+    qd, qdd = np.zeros_like(qq), np.zeros_like(qq)
+    qq[:, index] = q[index] + delta * s
+    qd[:, index] = delta * sd
+    qdd[:, index] = delta * sdd
+    return TimedPath(times, qq, qd, qdd)
+
+
+def _densify(wps: np.ndarray, max_step: float) -> np.ndarray:
+    """Insert points on each straight joint segment so no joint moves more than ``max_step`` rad between points."""
+    out = [wps[0]]
+    for a, b in zip(wps[:-1], wps[1:]):
+        n = max(int(math.ceil(np.max(np.abs(b - a)) / max_step)), 1)
+        for k in range(1, n + 1):
+            out.append(a + (b - a) * (k / n))
+    return np.array(out)
+
+
+def _interpolate(q: np.ndarray, substeps: int) -> np.ndarray:
+    """Linear interpolation with ``substeps`` points per sample interval (for fine re-checks)."""
+    if len(q) < 2:
+        return q
+    t = np.linspace(0, len(q) - 1, (len(q) - 1) * substeps + 1)
+    i = np.minimum(t.astype(int), len(q) - 2)
+    f = (t - i)[:, None]
+    return q[i] * (1 - f) + q[i + 1] * f
+
+
+def tcp_speed(robot: Robot, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """TCP speed (m/s) at samples ``q``, ``qd`` (N, dof) from the Jacobian."""
+    jv = robot.kin.jacobian(robot.full_q(q))[:, :3, :]
+    return np.linalg.norm(np.einsum("nij,nj->ni", jv, qd[:, robot.arm_indices]), axis=1)

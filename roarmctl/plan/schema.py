@@ -1,0 +1,382 @@
+"""The pick/place plan file: schema, validation and the ``Plan`` it becomes.
+
+Every mistake of form (unknown key, wrong type, impossible value, missing reference) raises
+``PlanFileError`` naming the file, the line and the field. The README documents every field.
+Lengths are metres; angles radians, or degrees when written as ``{deg: value}`` / ``{deg: [..]}``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from roarmctl.errors import PlanFileError
+from roarmctl.plan.yamlsrc import LocatedDict, LocatedList, load_located
+from roarmctl.robot.model import transform
+
+PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
+SHAPES = ("box", "cylinder", "sphere")
+
+
+@dataclass
+class ItemSpec:
+    """A scene obstacle, the table, or a graspable object, as written in the plan."""
+
+    name: str
+    role: str  # "table" | "obstacle" | "object"
+    shape: str
+    pose: np.ndarray  # (4, 4) world frame
+    size: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    radius: float = 0.0
+    length: float = 0.0
+    mass: float | None = None
+    line: int = 0
+
+    @property
+    def height(self) -> float:
+        """Extent along the item's local z (m)."""
+        return {"box": self.size[2], "cylinder": self.length, "sphere": 2 * self.radius}[self.shape]
+
+
+@dataclass
+class PickTask:
+    object: str
+    approach_height: float = 0.06
+    pitch: float = math.pi / 2
+    roll: float | None = None
+    gripper_open: float | None = None
+    gripper_closed: float | None = None
+    grasp_offset: float = 0.0
+    line: int = 0
+    kind: str = "pick"
+
+
+@dataclass
+class PlaceTask:
+    xyz: np.ndarray
+    object: str | None = None
+    approach_height: float = 0.06
+    pitch: float = math.pi / 2
+    roll: float | None = None
+    gripper_open: float | None = None
+    line: int = 0
+    kind: str = "place"
+
+
+@dataclass
+class MoveTask:
+    pose: str | None = None
+    joints: np.ndarray | None = None
+    xyz: np.ndarray | None = None
+    pitch: float | None = None
+    line: int = 0
+    kind: str = "move"
+
+
+@dataclass
+class WaitTask:
+    seconds: float
+    line: int = 0
+    kind: str = "wait"
+
+
+@dataclass
+class Limits:
+    velocity_scale: float = 0.5
+    acceleration_scale: float = 0.5
+    max_tcp_speed: float | None = None
+    gripper_time: float = 0.6
+
+
+@dataclass
+class PlannerConfig:
+    name: str = "RRTConnect"
+    time_budget: float = 1.0
+    simplify_budget: float = 0.2
+    seed: int = 0
+    singularity_margin: float = 0.02
+    padding: float = 0.005
+
+
+@dataclass
+class Plan:
+    path: Path
+    sha256: str
+    robot: str
+    start: str | np.ndarray
+    scene: list[ItemSpec]
+    objects: list[ItemSpec]
+    tasks: list[Any]
+    cycles: int = 1
+    limits: Limits = field(default_factory=Limits)
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+
+
+class _Ctx:
+    """Where we are in the file, for error messages."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def fail(self, line: int, field_path: str, message: str, hint: str | None = None):
+        raise PlanFileError(f"{self.path}:{line}: {field_path}: {message}", hint)
+
+    def mapping(self, value: Any, line: int, where: str, allowed: tuple[str, ...], required: tuple[str, ...] = ()) -> LocatedDict:
+        if not isinstance(value, dict):
+            self.fail(line, where, f"expected a mapping, got {_kind(value)}")
+        for key in value:
+            if key not in allowed:
+                close = _closest(str(key), allowed)
+                self.fail(value.line_of(key), f"{where}.{key}" if where else str(key), "unknown key",
+                          f"did you mean '{close}'?" if close else f"allowed: {', '.join(allowed)}")
+        for key in required:
+            if key not in value:
+                self.fail(value.line, where or "plan", f"'{key}' is missing")
+        return value
+
+    def number(self, value: Any, line: int, where: str, *, lo: float | None = None, hi: float | None = None,
+               angle: bool = False, strict_lo: bool = False) -> float:
+        if angle and isinstance(value, dict) and set(value) == {"deg"}:
+            value = value["deg"]
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                self.fail(line, where, f"expected a number of degrees, got {_kind(value)}")
+            value = math.radians(value)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            self.fail(line, where, f"expected a number, got {_kind(value)}" + (" (or {deg: value})" if angle else ""))
+        value = float(value)
+        if lo is not None and (value < lo or (strict_lo and value <= lo)):
+            self.fail(line, where, f"{value:g} is too small (must be {'>' if strict_lo else '>='} {lo:g})")
+        if hi is not None and value > hi:
+            self.fail(line, where, f"{value:g} is too large (must be <= {hi:g})")
+        return value
+
+    def vector(self, value: Any, line: int, where: str, n: int, *, angle: bool = False, positive: bool = False) -> np.ndarray:
+        if angle and isinstance(value, dict) and set(value) == {"deg"}:
+            return np.radians(self.vector(value["deg"], line, where, n, positive=positive))
+        if not isinstance(value, list) or len(value) != n:
+            self.fail(line, where, f"expected a list of {n} numbers, got {_kind(value)}")
+        return np.array([self.number(v, line, f"{where}[{i}]", lo=0.0 if positive else None, strict_lo=positive)
+                         for i, v in enumerate(value)])
+
+    def string(self, value: Any, line: int, where: str, choices: tuple[str, ...] | None = None) -> str:
+        if not isinstance(value, str) or not value:
+            self.fail(line, where, f"expected a name, got {_kind(value)}")
+        if choices and value not in choices:
+            close = _closest(value, choices)
+            self.fail(line, where, f"'{value}' is not one of {', '.join(choices)}", f"did you mean '{close}'?" if close else None)
+        return value
+
+
+def _kind(value: Any) -> str:
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return f"a list of {len(value)}"
+    if value is None:
+        return "nothing"
+    return f"{type(value).__name__} {value!r}"
+
+
+def _closest(word: str, options: tuple[str, ...] | list[str]) -> str | None:
+    import difflib
+
+    match = difflib.get_close_matches(word, list(options), n=1, cutoff=0.6)
+    return match[0] if match else None
+
+
+# ------------------------------------------------------------------ items
+def _item(ctx: _Ctx, raw: Any, line: int, where: str, role: str) -> ItemSpec:
+    keys = ("name", "shape", "size", "radius", "length", "xyz", "rpy", "mass")
+    d = ctx.mapping(raw, line, where, keys, required=("shape", "xyz") + (("name",) if role != "table" else ()))
+    shape = ctx.string(d["shape"], d.line_of("shape"), f"{where}.shape", SHAPES)
+    xyz = ctx.vector(d["xyz"], d.line_of("xyz"), f"{where}.xyz", 3)
+    rpy = ctx.vector(d.get("rpy", [0, 0, 0]), d.line_of("rpy"), f"{where}.rpy", 3, angle=True)
+    spec = ItemSpec(name=str(d.get("name", "table")), role=role, shape=shape, pose=transform(xyz, rpy), line=d.line)
+    if shape == "box":
+        if "size" not in d:
+            ctx.fail(d.line, where, "a box needs 'size: [x, y, z]' (m)")
+        spec.size = tuple(ctx.vector(d["size"], d.line_of("size"), f"{where}.size", 3, positive=True))
+    else:
+        if "radius" not in d:
+            ctx.fail(d.line, where, f"a {shape} needs 'radius' (m)")
+        spec.radius = ctx.number(d["radius"], d.line_of("radius"), f"{where}.radius", lo=0, strict_lo=True)
+        if shape == "cylinder":
+            if "length" not in d:
+                ctx.fail(d.line, where, "a cylinder needs 'length' (m, along its local z)")
+            spec.length = ctx.number(d["length"], d.line_of("length"), f"{where}.length", lo=0, strict_lo=True)
+    extra = {"box": ("radius", "length"), "sphere": ("size", "length"), "cylinder": ("size",)}[shape]
+    for key in extra:
+        if key in d:
+            ctx.fail(d.line_of(key), f"{where}.{key}", f"does not apply to a {shape}")
+    if "mass" in d:
+        if role != "object":
+            ctx.fail(d.line_of("mass"), f"{where}.mass", "only objects have a mass")
+        spec.mass = ctx.number(d["mass"], d.line_of("mass"), f"{where}.mass", lo=0)
+    return spec
+
+
+# ------------------------------------------------------------------ tasks
+def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpec], poses: list[str] | None) -> Any:
+    if not isinstance(raw, dict) or len(raw) != 1:
+        ctx.fail(line, where, "each task is one of 'pick: {...}', 'place: {...}', 'move: {...}', 'wait: seconds'")
+    (kind, body), = raw.items()
+    bline = raw.line_of(kind)
+    w = f"{where}.{kind}"
+    if kind == "wait":
+        secs = body.get("seconds") if isinstance(body, dict) else body
+        return WaitTask(ctx.number(secs, bline, w, lo=0.0), line=bline)
+    if kind == "pick":
+        d = ctx.mapping(body, bline, w, ("object", "approach_height", "pitch", "roll", "gripper_open", "gripper_closed", "grasp_offset"), ("object",))
+        name = ctx.string(d["object"], d.line_of("object"), f"{w}.object")
+        if name not in objects:
+            ctx.fail(d.line_of("object"), f"{w}.object", f"no object named '{name}'",
+                     f"objects: {', '.join(objects) or 'none'}")
+        t = PickTask(object=name, line=bline)
+        _common_grasp(ctx, d, w, t)
+        if "gripper_closed" in d:
+            t.gripper_closed = ctx.number(d["gripper_closed"], d.line_of("gripper_closed"), f"{w}.gripper_closed", angle=True)
+        if "grasp_offset" in d:
+            t.grasp_offset = ctx.number(d["grasp_offset"], d.line_of("grasp_offset"), f"{w}.grasp_offset")
+        return t
+    if kind == "place":
+        d = ctx.mapping(body, bline, w, ("object", "xyz", "approach_height", "pitch", "roll", "gripper_open"), ("xyz",))
+        t = PlaceTask(xyz=ctx.vector(d["xyz"], d.line_of("xyz"), f"{w}.xyz", 3), line=bline)
+        if "object" in d:
+            t.object = ctx.string(d["object"], d.line_of("object"), f"{w}.object")
+            if t.object not in objects:
+                ctx.fail(d.line_of("object"), f"{w}.object", f"no object named '{t.object}'", f"objects: {', '.join(objects) or 'none'}")
+        _common_grasp(ctx, d, w, t)
+        return t
+    if kind == "move":
+        d = ctx.mapping(body, bline, w, ("pose", "joints", "xyz", "pitch"))
+        given = [k for k in ("pose", "joints", "xyz") if k in d]
+        if len(given) != 1:
+            ctx.fail(bline, w, "give exactly one of 'pose' (a named pose), 'joints' (list) or 'xyz' (+ 'pitch')")
+        t = MoveTask(line=bline)
+        if "pose" in d:
+            t.pose = ctx.string(d["pose"], d.line_of("pose"), f"{w}.pose", tuple(poses) if poses is not None else None)
+        elif "joints" in d:
+            j = d["joints"]
+            deg = isinstance(j, dict) and set(j) == {"deg"}
+            vals = j["deg"] if deg else j
+            if not isinstance(vals, list):
+                ctx.fail(d.line_of("joints"), f"{w}.joints", "expected a list of joint values (rad) or {deg: [...]}")
+            t.joints = ctx.vector(j, d.line_of("joints"), f"{w}.joints", len(vals), angle=True)
+        else:
+            t.xyz = ctx.vector(d["xyz"], d.line_of("xyz"), f"{w}.xyz", 3)
+            if "pitch" in d:
+                t.pitch = ctx.number(d["pitch"], d.line_of("pitch"), f"{w}.pitch", angle=True)
+        return t
+    close = _closest(str(kind), ("pick", "place", "move", "wait"))
+    ctx.fail(bline, f"{where}", f"unknown task '{kind}'", f"did you mean '{close}'?" if close else "tasks: pick, place, move, wait")
+
+
+def _common_grasp(ctx: _Ctx, d: LocatedDict, w: str, t: Any) -> None:
+    if "approach_height" in d:
+        t.approach_height = ctx.number(d["approach_height"], d.line_of("approach_height"), f"{w}.approach_height", lo=0.0, hi=0.3)
+    if "pitch" in d:
+        t.pitch = ctx.number(d["pitch"], d.line_of("pitch"), f"{w}.pitch", angle=True, lo=-math.pi, hi=math.pi)
+    if "roll" in d:
+        t.roll = ctx.number(d["roll"], d.line_of("roll"), f"{w}.roll", angle=True, lo=-math.pi, hi=math.pi)
+    if "gripper_open" in d:
+        t.gripper_open = ctx.number(d["gripper_open"], d.line_of("gripper_open"), f"{w}.gripper_open", angle=True)
+
+
+# ------------------------------------------------------------------ top level
+TOP_KEYS = ("robot", "start", "scene", "objects", "tasks", "cycles", "limits", "planner")
+
+
+def load_plan(path: str | Path, named_poses: list[str] | None = None) -> Plan:
+    """Read and validate a plan file. ``named_poses``, when given, are the robot's pose names
+    (for checking ``start`` and ``move: {pose}``); the pipeline passes them after loading the robot.
+    """
+    path = Path(path)
+    raw = load_located(path)
+    ctx = _Ctx(path)
+    top = ctx.mapping(raw, getattr(raw, "line", 1), "", TOP_KEYS, required=("robot", "tasks"))
+    robot = ctx.string(top["robot"], top.line_of("robot"), "robot")
+
+    start: str | np.ndarray = "home"
+    if "start" in top:
+        s = top["start"]
+        if isinstance(s, str):
+            start = ctx.string(s, top.line_of("start"), "start", tuple(named_poses) if named_poses is not None else None)
+        else:
+            vals = s["deg"] if isinstance(s, dict) and "deg" in s else s
+            if not isinstance(vals, list):
+                ctx.fail(top.line_of("start"), "start", "expected a named pose or a list of joint values")
+            start = ctx.vector(s, top.line_of("start"), "start", len(vals), angle=True)
+
+    scene: list[ItemSpec] = []
+    if "scene" in top:
+        sc = ctx.mapping(top["scene"], top.line_of("scene"), "scene", ("table", "obstacles"))
+        if "table" in sc and sc["table"] is not None:
+            scene.append(_item(ctx, sc["table"], sc.line_of("table"), "scene.table", "table"))
+        obs = sc.get("obstacles") or []
+        if not isinstance(obs, list):
+            ctx.fail(sc.line_of("obstacles"), "scene.obstacles", "expected a list")
+        for i, o in enumerate(obs):
+            scene.append(_item(ctx, o, obs.line_of(i), f"scene.obstacles[{i}]", "obstacle"))
+
+    objects: list[ItemSpec] = []
+    objs = top.get("objects") or []
+    if not isinstance(objs, list):
+        ctx.fail(top.line_of("objects"), "objects", "expected a list")
+    for i, o in enumerate(objs):
+        objects.append(_item(ctx, o, objs.line_of(i), f"objects[{i}]", "object"))
+    names: dict[str, ItemSpec] = {}
+    for item in scene + objects:
+        if item.name in names:
+            ctx.fail(item.line, "name", f"'{item.name}' is used twice", "give every obstacle and object its own name")
+        names[item.name] = item
+    by_object = {o.name: o for o in objects}
+
+    tasks_raw = top["tasks"]
+    if not isinstance(tasks_raw, list) or not tasks_raw:
+        ctx.fail(top.line_of("tasks"), "tasks", "expected a non-empty list of tasks")
+    tasks = [_task(ctx, t, tasks_raw.line_of(i), f"tasks[{i}]", by_object, named_poses) for i, t in enumerate(tasks_raw)]
+
+    cycles = 1
+    if "cycles" in top:
+        c = top["cycles"]
+        if isinstance(c, bool) or not isinstance(c, int) or c < 1:
+            ctx.fail(top.line_of("cycles"), "cycles", f"expected a whole number >= 1, got {_kind(c)}")
+        cycles = c
+
+    limits = Limits()
+    if "limits" in top:
+        d = ctx.mapping(top["limits"], top.line_of("limits"), "limits", ("velocity_scale", "acceleration_scale", "max_tcp_speed", "gripper_time"))
+        for key in ("velocity_scale", "acceleration_scale"):
+            if key in d:
+                setattr(limits, key, ctx.number(d[key], d.line_of(key), f"limits.{key}", lo=0.0, hi=1.0, strict_lo=True))
+        if d.get("max_tcp_speed") is not None:
+            limits.max_tcp_speed = ctx.number(d["max_tcp_speed"], d.line_of("max_tcp_speed"), "limits.max_tcp_speed", lo=0.0, hi=5.0, strict_lo=True)
+        if "gripper_time" in d:
+            limits.gripper_time = ctx.number(d["gripper_time"], d.line_of("gripper_time"), "limits.gripper_time", lo=0.05, hi=10.0)
+
+    planner = PlannerConfig()
+    if "planner" in top:
+        d = ctx.mapping(top["planner"], top.line_of("planner"), "planner", ("name", "time_budget", "simplify_budget", "seed", "singularity_margin", "padding"))
+        if "name" in d:
+            planner.name = ctx.string(d["name"], d.line_of("name"), "planner.name", PLANNERS)
+        if "time_budget" in d:
+            planner.time_budget = ctx.number(d["time_budget"], d.line_of("time_budget"), "planner.time_budget", lo=0.0, hi=600.0, strict_lo=True)
+        if "simplify_budget" in d:
+            planner.simplify_budget = ctx.number(d["simplify_budget"], d.line_of("simplify_budget"), "planner.simplify_budget", lo=0.0, hi=60.0)
+        if "seed" in d:
+            if isinstance(d["seed"], bool) or not isinstance(d["seed"], int) or d["seed"] < 0:
+                ctx.fail(d.line_of("seed"), "planner.seed", f"expected a whole number >= 0, got {_kind(d['seed'])}")
+            planner.seed = d["seed"]
+        if "singularity_margin" in d:
+            planner.singularity_margin = ctx.number(d["singularity_margin"], d.line_of("singularity_margin"), "planner.singularity_margin", lo=0.0, hi=0.3)
+        if "padding" in d:
+            planner.padding = ctx.number(d["padding"], d.line_of("padding"), "planner.padding", lo=0.0, hi=0.05)
+
+    sha = hashlib.sha256(path.read_bytes()).hexdigest()
+    return Plan(path=path, sha256=sha, robot=robot, start=start, scene=scene, objects=objects, tasks=tasks,
+                cycles=cycles, limits=limits, planner=planner)

@@ -1,0 +1,97 @@
+"""The plan file: every mistake of form names the file, the line and the field, and exits 2."""
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from roarmctl.errors import PlanFileError
+from roarmctl.plan.schema import PickTask, PlaceTask, load_plan
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "plans" / "pick_place.yaml"
+
+
+def _variant(tmp_path: Path, old: str, new: str) -> Path:
+    text = EXAMPLE.read_text()
+    assert old in text, old
+    path = tmp_path / "plan.yaml"
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+def _line_of(path: Path, needle: str) -> int:
+    return next(i for i, line in enumerate(path.read_text().splitlines(), 1) if needle in line)
+
+
+def test_example_plan_reads_with_units_converted():
+    plan = load_plan(EXAMPLE)
+    pick, place = plan.tasks[0], plan.tasks[1]
+    assert isinstance(pick, PickTask) and isinstance(place, PlaceTask)
+    assert pick.pitch == pytest.approx(math.pi / 2)  # {deg: 90}
+    assert pick.object == "cube" and pick.gripper_closed == 0.6
+    assert np.allclose(place.xyz, [0.25, 0.15, 0.02])
+    cube = plan.objects[0]
+    assert cube.size == (0.04, 0.04, 0.04) and np.allclose(cube.pose[:3, 3], [0.25, -0.15, 0.02])
+    assert plan.scene[0].role == "table"
+    assert len(plan.sha256) == 64
+
+
+CASES = [
+    # (old text, new text, line marker, expected fragments)
+    ("approach_height: 0.06, pitch: {deg: 90}, gripper_open: 1.0, gripper_closed",
+     "aproach_height: 0.06, pitch: {deg: 90}, gripper_open: 1.0, gripper_closed",
+     "aproach_height", ["tasks[0].pick.aproach_height", "unknown key", "did you mean 'approach_height'"]),
+    ("{object: cube, approach", "{object: cub, approach", "object: cub,", ["tasks[0].pick.object", "no object named 'cub'"]),
+    ("velocity_scale: 0.6", "velocity_scale: 1.6", "velocity_scale", ["limits.velocity_scale", "too large"]),
+    ("name: RRTConnect", "name: RRTconnect", "RRTconnect", ["planner.name", "did you mean 'RRTConnect'"]),
+    ("size: [0.04, 0.04, 0.04]", "size: [0.04, 0.04]", "size: [0.04, 0.04]", ["objects[0].size", "list of 3 numbers"]),
+    ("xyz: [0.25, 0.15, 0.02]", "xyz: [0.25, 0.15, high]", "high", ["tasks[1].place.xyz[2]", "expected a number"]),
+    ("{pose: home}", "{pose: hom}", "pose: hom", ["tasks[2].move.pose", "did you mean 'home'"]),
+    ("  - move:  {pose: home}", "  - mvoe:  {pose: home}", "mvoe", ["unknown task 'mvoe'", "did you mean 'move'"]),
+    ("seed: 1", "seed: -1", "seed: -1", ["planner.seed", "whole number"]),
+    ("shape: box, size: [0.04", "shape: cube, size: [0.04", "shape: cube", ["objects[0].shape", "'cube' is not one of"]),
+]
+
+
+@pytest.mark.parametrize("old,new,marker,fragments", CASES)
+def test_schema_errors_name_file_line_and_field(tmp_path, old, new, marker, fragments):
+    path = _variant(tmp_path, old, new)
+    with pytest.raises(PlanFileError) as info:
+        load_plan(path, named_poses=["home", "ready", "observe"])
+    msg = str(info.value)
+    assert msg.startswith(f"{path}:{_line_of(path, marker)}:"), msg
+    for fragment in fragments:
+        assert fragment in msg, msg
+
+
+def test_yaml_syntax_error_has_a_line(tmp_path):
+    path = tmp_path / "broken.yaml"
+    path.write_text("robot: roarm_m3_pro\ntasks:\n  - pick: {object: cube\n")
+    with pytest.raises(PlanFileError) as info:
+        load_plan(path)
+    assert f"{path}:" in str(info.value) and "not valid YAML" in str(info.value)
+
+
+def test_missing_file_and_missing_tasks(tmp_path):
+    with pytest.raises(PlanFileError, match="no such file"):
+        load_plan(tmp_path / "nope.yaml")
+    path = tmp_path / "p.yaml"
+    path.write_text("robot: roarm_m3_pro\n")
+    with pytest.raises(PlanFileError, match="'tasks' is missing"):
+        load_plan(path)
+
+
+def test_cli_reports_one_line_and_exit_2_without_traceback(tmp_path):
+    path = _variant(tmp_path, "velocity_scale: 0.6", "velocity_scal: 0.6")
+    out = tmp_path / "out.traj.json"
+    proc = subprocess.run([sys.executable, "-m", "roarmctl", "plan", str(path), "-o", str(out)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "limits.velocity_scal" in lines[0]
+    assert "Traceback" not in proc.stderr
+    assert not out.exists()
