@@ -1,0 +1,248 @@
+"""The RoArm-M3 JSON-over-serial wire protocol (firmware 0.84): encoding, feedback parsing, units.
+
+Host -> arm: one compact JSON object per line ending in ``\\n``. Arm -> host: lines ending in
+``\\r\\n``; only ``"T":1051`` lines are feedback, everything else (boot text, echoes, warnings) is
+ignored. Facts and sources: shared/reference/roarm_m3/RESEARCH.md sections 2.1-2.10.
+
+This module is pure (no I/O, no serial import): the link, the streamer, ``--output`` and the
+simulator all share it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Any, Iterable
+
+import numpy as np
+
+BAUDRATE = 115200
+BYTES_PER_SECOND = BAUDRATE / 10.0  # 8N1: 10 bits per byte on the wire
+STEPS_PER_REV = 4096
+STEPS_PER_RAD = STEPS_PER_REV / (2.0 * math.pi)  # 651.9 servo steps per radian
+MIDDLE = 2047
+ACC_UNIT = 100.0  # the servo ACC register counts 100 steps/s^2
+SPD_MAX_REGISTER = 4096
+ACC_MAX_REGISTER = 254
+
+#: T:102 joint fields of the M3 firmware, in the firmware's joint order (1..6 for T:101).
+M3_FIELDS = ("base", "shoulder", "elbow", "wrist", "roll", "hand")
+#: The matching T:1051 feedback keys.
+M3_FEEDBACK_KEYS = ("b", "s", "e", "t", "r", "g")
+#: Strictly inside the firmware's clamps: base/roll +pi would map to servo step -1 (invalid), so
+#: keep one count inside; the others are the 0.84 firmware's own clamps (RESEARCH.md 2.2).
+SAFE_WIRE_RANGE = {
+    "base": (-math.pi + 1.5 / STEPS_PER_RAD, math.pi - 1.5 / STEPS_PER_RAD),
+    "shoulder": (-math.pi / 2, math.pi / 2),
+    "elbow": ((512 - 1024) / STEPS_PER_RAD, (3071 - 1024) / STEPS_PER_RAD),
+    "wrist": (-math.pi / 2, math.pi / 2),
+    "roll": (-math.pi + 1.5 / STEPS_PER_RAD, math.pi - 1.5 / STEPS_PER_RAD),
+    "hand": (700 / STEPS_PER_RAD, 3396 / STEPS_PER_RAD),
+}
+
+
+def encode(obj: dict[str, Any]) -> bytes:
+    """One command line: compact JSON (so the newer firmware's ``"T":0`` fast path matches) + ``\\n``."""
+    return (json.dumps(obj, separators=(",", ":"), allow_nan=False) + "\n").encode()
+
+
+def r4(x: float) -> float:
+    """Round to 4 decimals (0.1 mrad, well below one servo step of 1.5 mrad); no negative zero."""
+    v = round(float(x), 4)
+    return 0.0 if v == 0 else v
+
+
+def steps_per_s(rad_per_s: float) -> float:
+    return abs(rad_per_s) * STEPS_PER_RAD
+
+
+def spd_register(rad_per_s: float, minimum: int = 1) -> int:
+    """``spd`` for a joint speed (rad/s): steps/s rounded up; never 0 (0 means *maximum* speed)."""
+    return int(min(SPD_MAX_REGISTER, max(minimum, math.ceil(steps_per_s(rad_per_s) - 1e-9))))
+
+
+def acc_register(rad_per_s2: float, minimum: int = 1) -> int:
+    """``acc`` for a joint acceleration (rad/s^2) in units of 100 steps/s^2, rounded up; never 0."""
+    return int(min(ACC_MAX_REGISTER, max(minimum, math.ceil(abs(rad_per_s2) * STEPS_PER_RAD / ACC_UNIT - 1e-9))))
+
+
+def joints_command(wire: dict[str, float], spd: int, acc: int) -> dict[str, Any]:
+    """``T:102`` with all six joint fields (missing keys would read as 0 on the arm) and explicit spd/acc.
+
+    ``wire`` maps field name -> firmware radians. Values are clamped to ``SAFE_WIRE_RANGE`` and
+    rounded to 4 decimals.
+    """
+    missing = [f for f in M3_FIELDS if f not in wire]
+    if missing:
+        raise ValueError(f"T:102 needs every joint field; missing {missing}")
+    cmd: dict[str, Any] = {"T": 102}
+    for f in M3_FIELDS:
+        lo, hi = SAFE_WIRE_RANGE[f]
+        v = float(wire[f])
+        if not math.isfinite(v):
+            raise ValueError(f"T:102 {f}: value {v} is not finite")
+        cmd[f] = r4(min(max(v, lo), hi))
+    cmd["spd"] = int(spd)
+    cmd["acc"] = int(acc)
+    return cmd
+
+
+def feedback_request() -> dict[str, Any]:
+    return {"T": 105}
+
+
+def quiet_command() -> dict[str, Any]:
+    """InfoPrint 0: stop the echo and the unsolicited feedback stream."""
+    return {"T": 605, "cmd": 0}
+
+
+class WireMap:
+    """Joint vector <-> firmware fields for one robot, from its description's ``wire`` list.
+
+    ``q`` is (dof,) in ``robot.joint_names`` order (gripper last), radians, URDF convention.
+    """
+
+    def __init__(self, robot) -> None:
+        from roarmctl.errors import DescriptionError
+
+        self.robot = robot
+        by_field = {w.field: w for w in robot.wire}
+        missing = [f for f in M3_FIELDS if f not in by_field]
+        if missing:
+            raise DescriptionError(
+                f"robot '{robot.name}' has no RoArm wire mapping for {', '.join(missing)}",
+                "only robots with a 'wire' section for base/shoulder/elbow/wrist/roll/hand can be executed",
+            )
+        self.fields = [by_field[f] for f in M3_FIELDS]
+        self.index = [robot.joint_index(w.joint) for w in self.fields]
+
+    def to_wire(self, q) -> dict[str, float]:
+        q = np.asarray(q, dtype=float)
+        return {w.field: w.to_wire(float(q[i])) for w, i in zip(self.fields, self.index)}
+
+    def to_wire_array(self, q) -> np.ndarray:
+        """(N, dof) joint values -> (N, 6) firmware radians in ``M3_FIELDS`` order, clamped."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        out = np.empty((q.shape[0], 6))
+        for k, (w, i) in enumerate(zip(self.fields, self.index)):
+            out[:, k] = np.clip(w.offset + w.sign * q[:, i], w.lower, w.upper)
+        return out
+
+    def from_wire(self, values: dict[str, float] | Iterable[float]) -> np.ndarray:
+        """Firmware radians (dict by field, or 6 values in ``M3_FIELDS`` order) -> (dof,) joint vector."""
+        if isinstance(values, dict):
+            vals = [float(values[f]) for f in M3_FIELDS]
+        else:
+            vals = [float(v) for v in values]
+        q = np.zeros(self.robot.dof)
+        for w, i, v in zip(self.fields, self.index, vals):
+            q[i] = w.from_wire(v)
+        return q
+
+    def command(self, q, spd: int, acc: int) -> dict[str, Any]:
+        return joints_command(self.to_wire(q), spd, acc)
+
+
+# ----------------------------------------------------------------------------- feedback
+@dataclass
+class Feedback:
+    """One parsed ``T:1051`` line. ``joints``: firmware radians by field name (``M3_FIELDS``);
+    ``xyz``: firmware FK end point in mm (origin at the shoulder-axis height); ``firmware``: see
+    ``identify_firmware``."""
+
+    raw: dict[str, Any]
+    joints: dict[str, float]
+    xyz: tuple[float, float, float]
+    firmware: str
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def parse_json_line(line: bytes | str) -> dict[str, Any] | None:
+    """A complete line -> JSON object, or None for anything else (boot text, partial, garbage)."""
+    if isinstance(line, bytes):
+        try:
+            line = line.decode("utf-8")
+        except UnicodeDecodeError:
+            return None
+    line = line.strip()
+    if not (line.startswith("{") and line.endswith("}")):
+        return None
+    try:
+        obj = json.loads(line)
+    except (json.JSONDecodeError, RecursionError):
+        return None
+    return obj if isinstance(obj, dict) else None
+
+
+def identify_firmware(obj: dict[str, Any]) -> str:
+    """Tell firmware builds apart by their T:1051 fields (RESEARCH.md 2.6, 2.10).
+
+    ``"m3-0.84"`` (b s e t r g, tit), ``"m3-2026"`` (adds torswitch* and v), ``"m2"`` (b s e t
+    only, torB..), ``"unknown"`` otherwise.
+    """
+    keys = set(obj)
+    if all(k in keys for k in M3_FEEDBACK_KEYS):
+        if any(k.startswith("torswitch") for k in keys) or "v" in keys:
+            return "m3-2026"
+        return "m3-0.84"
+    if all(k in keys for k in ("b", "s", "e", "t")) and ("torB" in keys or "r" not in keys):
+        return "m2"
+    return "unknown"
+
+
+def _num(v: Any) -> float | None:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def parse_feedback(line: bytes | str | dict[str, Any]) -> Feedback | None:
+    """A ``"T":1051`` line -> Feedback; None for any other line or a frame with bad numbers.
+
+    For M2 frames the ``joints`` dict is empty (the caller refuses M2 by ``firmware``).
+    """
+    obj = line if isinstance(line, dict) else parse_json_line(line)
+    if obj is None or obj.get("T") != 1051:
+        return None
+    fw = identify_firmware(obj)
+    joints: dict[str, float] = {}
+    if fw.startswith("m3"):
+        for f, k in zip(M3_FIELDS, M3_FEEDBACK_KEYS):
+            v = _num(obj.get(k))
+            if v is None:
+                return None
+            joints[f] = v
+    xyz = tuple(_num(obj.get(k)) or 0.0 for k in ("x", "y", "z"))
+    extra = {k: v for k, v in obj.items() if k not in set(M3_FEEDBACK_KEYS) | {"T", "x", "y", "z"}}
+    return Feedback(raw=obj, joints=joints, xyz=xyz, firmware=fw, extra=extra)  # type: ignore[arg-type]
+
+
+class LineBuffer:
+    """Bytes in, complete lines out (split on ``\\n``, ``\\r`` stripped). Overlong junk is dropped."""
+
+    def __init__(self, max_line: int = 8192) -> None:
+        self._buf = bytearray()
+        self.max_line = max_line
+
+    def feed(self, data: bytes) -> list[bytes]:
+        self._buf.extend(data)
+        lines = []
+        while True:
+            i = self._buf.find(b"\n")
+            if i < 0:
+                break
+            lines.append(bytes(self._buf[:i]).rstrip(b"\r"))
+            del self._buf[: i + 1]
+        if len(self._buf) > self.max_line:
+            self._buf.clear()
+        return lines
+
+    def clear(self) -> None:
+        self._buf.clear()
+
+
+def wire_seconds(nbytes: int) -> float:
+    """Time (s) ``nbytes`` take on the 115200 8N1 link."""
+    return nbytes / BYTES_PER_SECOND

@@ -1,0 +1,443 @@
+"""Stream a timed trajectory to the arm: the command schedule, the real-time loop, hold and log.
+
+The schedule is pure (``build_schedule``): tick k at ``k / rate`` seconds sends one ``T:102``.
+The default strategy ``timed`` makes each servo's own trapezoid follow the plan: at tick k it
+commands the plan's position one interval (plus the link latency) ahead, with ``spd`` = the speed
+the fastest joint needs to get there exactly when the next command arrives, and ``acc = 0`` (no
+ramp: a ramp makes the servo plan a stop at every intermediate goal and fall behind). Measured
+alternatives and their tracking errors are in bench/bench_stream.py and the module README note.
+
+The loop (``Streamer``) runs on an absolute monotonic schedule (``due = t0 + t_k``: no drift),
+polls feedback between commands within the link's byte budget, aborts when the TCP tracking error
+exceeds a bound or feedback stops, and on Ctrl-C, a lost link or an abort sends a hold ``T:102``
+at the last measured pose (never torque off), closes the port and writes the execution log.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from roarmctl.device import protocol
+from roarmctl.device.protocol import WireMap, acc_register, spd_register, wire_seconds
+from roarmctl.errors import DeviceError, InfeasibleError, InputError, Interrupted
+
+MAX_LINK_RATE = 90.0  # T:102 lines/s the 115200 link can carry at all (about 10.4 ms each)
+DEFAULT_RATE = 50.0
+FEEDBACK_RATE = 25.0  # T:105 polls per second during motion (each answer is ~200 B back)
+HOLD_SPD = 600  # the firmware's own ARM_SERVO_INIT_SPEED, steps/s
+MOVE_TO_START_SPD = 300  # steps/s (about 0.46 rad/s)
+
+
+# ----------------------------------------------------------------------------- sampling
+def sample(traj, t) -> np.ndarray:
+    """Positions at times ``t`` (scalar or (M,), s, clamped to [0, T]) by cubic Hermite interpolation
+    of the samples and their velocities: (dof,) or (M, dof)."""
+    ts = traj.times
+    tt = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), ts[0], ts[-1])
+    if len(ts) == 1:
+        out = np.repeat(traj.positions[:1], len(tt), axis=0)
+    else:
+        i = np.clip(np.searchsorted(ts, tt, side="right") - 1, 0, len(ts) - 2)
+        h = (ts[i + 1] - ts[i])[:, None]
+        u = ((tt - ts[i])[:, None]) / h
+        p0, p1 = traj.positions[i], traj.positions[i + 1]
+        v0, v1 = traj.velocities[i] * h, traj.velocities[i + 1] * h
+        u2, u3 = u * u, u * u * u
+        out = (2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * v0 + (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * v1
+    return out[0] if np.ndim(t) == 0 else out
+
+
+# ----------------------------------------------------------------------------- strategies
+@dataclass(frozen=True)
+class Strategy:
+    """How a tick's command is chosen.
+
+    ``lookahead``: how many intervals ahead of the send time the target lies (0 or 1);
+    ``spd``: ``"max"`` (0: the servo's top speed) or ``"velocity"`` (what the fastest joint needs
+    to reach the target when the next command arrives, times ``margin``);
+    ``acc``: ``"none"`` (0: no ramp) or ``"trajectory"`` (from the plan's accelerations).
+    """
+
+    name: str
+    lookahead: int = 1
+    spd: str = "velocity"
+    acc: str = "none"
+    margin: float = 1.05
+    description: str = ""
+
+
+STRATEGIES = {
+    "timed": Strategy("timed", 1, "velocity", "none",
+                      description="target one interval ahead, spd = needed speed of the fastest joint, no ramp"),
+    "timed-acc": Strategy("timed-acc", 1, "velocity", "trajectory",
+                          description="as timed, but acc from the plan's acceleration"),
+    "dense": Strategy("dense", 0, "max", "none", description="target = plan now, spd 0 / acc 0 (full speed)"),
+    "dense-ahead": Strategy("dense-ahead", 1, "max", "none",
+                            description="target one interval ahead, spd 0 / acc 0 (full speed)"),
+}
+
+
+def default_latency(rate: float) -> float:
+    """Time (s) from handing a T:102 line to the driver until the servos get it: its ~120 bytes on
+    the wire plus half a firmware loop."""
+    return wire_seconds(120) + 0.002
+
+
+@dataclass
+class Tick:
+    """One scheduled command: ``t`` s after the start (execution time), the command, and the
+    planned joint vector it targets (dof,)."""
+
+    t: float
+    cmd: dict[str, Any]
+    target: np.ndarray
+
+
+def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: float = 1.0,
+                   strategy: str | Strategy = "timed", latency: float | None = None) -> list[Tick]:
+    """Every command the streamer will send for ``traj``, with its time (s from the start).
+
+    ``speed_scale`` < 1 slows the whole motion down (times divided by it, speeds multiplied).
+    """
+    strat = STRATEGIES[strategy] if isinstance(strategy, str) else strategy
+    if not 0 < rate <= MAX_LINK_RATE:
+        raise InputError(f"--rate: {rate:g} Hz is outside (0, {MAX_LINK_RATE:g}]",
+                         f"115200 baud carries at most about {MAX_LINK_RATE:g} T:102 lines/s; 20-50 Hz is sensible")
+    if not 0 < speed_scale <= 1.0:
+        raise InputError(f"--speed-scale: {speed_scale:g} is outside (0, 1]", "use 0.5 for half speed")
+    wm = WireMap(robot)
+    dt = 1.0 / rate
+    lat = default_latency(rate) if latency is None else latency
+    t_end = traj.duration / speed_scale
+    n = int(math.ceil(t_end * rate - 1e-9)) + 1
+    ts = np.minimum(np.arange(n) * dt, t_end)
+    ahead = strat.lookahead * dt
+    # plan times (un-scaled) of where each interval starts and ends, shifted by the link latency
+    t_from = np.minimum(ts + lat, t_end) * speed_scale
+    t_to = np.minimum(ts + ahead + lat, t_end) * speed_scale
+    q_to = sample(traj, t_to)
+    q_from = sample(traj, t_from)
+    w_to, w_from = wm.to_wire_array(q_to), wm.to_wire_array(q_from)
+    ticks = []
+    prev_speed = 0.0
+    for k in range(n):
+        if strat.spd == "max":
+            spd = 0
+        else:
+            span = max(t_to[k] - t_from[k], 0.0) / speed_scale
+            need = float(np.max(np.abs(w_to[k] - w_from[k]))) / span if span > 1e-9 else 0.0
+            spd = spd_register(need * strat.margin, minimum=50)
+        if strat.acc == "none":
+            acc = 0
+        else:
+            i0 = np.searchsorted(traj.times, t_from[k])
+            i1 = max(i0 + 1, np.searchsorted(traj.times, t_to[k], side="right"))
+            a = float(np.max(np.abs(traj.accelerations[max(i0 - 1, 0):i1]))) * speed_scale ** 2
+            dv = abs(spd / protocol.STEPS_PER_RAD - prev_speed) / dt
+            acc = acc_register(max(a, dv) * 1.5, minimum=5)
+            prev_speed = spd / protocol.STEPS_PER_RAD
+        ticks.append(Tick(float(ts[k]), wm.command(q_to[k], spd, acc), q_to[k]))
+    return ticks
+
+
+# ----------------------------------------------------------------------------- the loop
+@dataclass
+class StreamConfig:
+    rate: float = DEFAULT_RATE
+    speed_scale: float = 1.0
+    strategy: str = "timed"
+    max_error: float = 0.03  # m of TCP position error before aborting
+    start_tolerance: float = 0.05  # rad per arm joint between the measured pose and the first point
+    gripper_tolerance: float = 0.35  # rad, the gripper's own
+    move_to_start: bool = False
+    stale_after: float = 1.0  # s without feedback during motion -> link lost
+    settle: float = 0.6  # s to wait for the arm to arrive after the last command
+    lead: float = 0.05  # s between the start decision and the first command
+
+
+@dataclass
+class Status:
+    """What the display shows after each tick."""
+
+    k: int
+    n: int
+    t: float
+    duration: float
+    lateness: float
+    commanded: np.ndarray
+    measured: np.ndarray | None
+    error: float | None  # m, TCP tracking error of the newest feedback
+
+
+@dataclass
+class Result:
+    outcome: str  # "completed" | "interrupted" | "aborted" | "link_lost"
+    message: str
+    n_sent: int
+    lateness: np.ndarray  # (n,) s
+    tracking: np.ndarray  # (m,) m, TCP error of each feedback during motion
+    final_error: float | None
+    t0: float
+    log: dict[str, Any] = field(default_factory=dict)
+
+    def summary(self) -> dict[str, Any]:
+        lat = self.lateness * 1e3
+        trk = self.tracking * 1e3
+        pct = lambda a, p: float(np.percentile(a, p)) if len(a) else None  # noqa: E731
+        return {
+            "outcome": self.outcome, "message": self.message, "commands": self.n_sent,
+            "lateness_ms": {"p50": pct(lat, 50), "p99": pct(lat, 99), "max": float(lat.max()) if len(lat) else None},
+            "tracking_mm": {"rms": float(np.sqrt(np.mean(trk ** 2))) if len(trk) else None,
+                            "max": float(trk.max()) if len(trk) else None, "samples": int(len(trk))},
+            "final_error_mm": None if self.final_error is None else self.final_error * 1e3,
+        }
+
+
+class Streamer:
+    """Run one trajectory over an open, handshaken ``Link``.
+
+    ``clock``/``sleep`` are injectable (tests); ``on_status(Status)`` is called after each tick
+    (the live display); ``hook(k)`` is called before tick k is sent (tests raise KeyboardInterrupt
+    from it); ``confirm(message) -> bool`` is asked before any motion.
+    """
+
+    def __init__(self, link, robot, traj, config: StreamConfig | None = None, *,
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+                 on_status: Callable[[Status], None] | None = None, hook: Callable[[int], None] | None = None,
+                 confirm: Callable[[str], bool] | None = None) -> None:
+        self.link = link
+        self.robot = robot
+        self.traj = traj
+        self.cfg = config or StreamConfig()
+        self.clock = clock
+        self.sleep = sleep
+        self.on_status = on_status
+        self.hook = hook
+        self.confirm = confirm
+        self.wm = WireMap(robot)
+        self.schedule = build_schedule(traj, robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale,
+                                       strategy=self.cfg.strategy)
+        self.measured: np.ndarray | None = None
+        self.measured_t: float | None = None
+        self.last_cmd: dict[str, Any] | None = None
+        self._fk_cache: dict[float, np.ndarray] = {}
+        self.t0 = math.nan
+        self.sent_lateness: list[tuple[int, float]] = []
+        self.tracking: list[tuple[float, float]] = []
+        self.notes: list[str] = []
+
+    # ------------------------------------------------------------------ helpers
+    def _tcp(self, q: np.ndarray) -> np.ndarray:
+        return self.robot.kin.fk(self.robot.full_q(q))[:3, 3]
+
+    def _q_of(self, fb) -> np.ndarray:
+        return self.wm.from_wire(fb.joints)
+
+    def _absorb(self, received) -> float | None:
+        """Take in new lines; return the TCP error (m) of the newest feedback, if any."""
+        err = None
+        for r in received:
+            if r.feedback is None or not r.feedback.joints:
+                continue
+            q = self._q_of(r.feedback)
+            self.measured, self.measured_t = q, r.t
+            if not math.isnan(self.t0):
+                # the firmware read the servos about one reply-length earlier than we got the line
+                t_meas = r.t - wire_seconds(len(r.line) + 2) - 0.004 - self.t0
+                if 0.0 <= t_meas <= self.schedule[-1].t:
+                    plan = sample(self.traj, t_meas * self.cfg.speed_scale)
+                    err = float(np.linalg.norm(self._tcp(q) - self._tcp(plan)))
+                    self.tracking.append((t_meas, err))
+        return err
+
+    def _take(self, fb) -> None:
+        """A feedback outside the streaming loop: update the measured pose only."""
+        if fb.joints:
+            self.measured, self.measured_t = self._q_of(fb), self.clock()
+
+    def _check_start(self) -> None:
+        fb = self.link.request_feedback(0.5) or self.link.request_feedback(0.5)
+        if fb is None:
+            raise DeviceError("device silent: no feedback before the start", "check the arm's power and cable")
+        self._take(fb)
+        q0 = self.traj.positions[0]
+        diff = self._start_diff(self.measured, q0)
+        if diff is None:
+            return
+        if not self.cfg.move_to_start:
+            raise InfeasibleError(f"the arm is not at the trajectory's start: {diff}",
+                                  "move it there first, or pass --move-to-start to go there slowly")
+        self._move_to_start(q0)
+
+    def _start_diff(self, q: np.ndarray, q0: np.ndarray) -> str | None:
+        g = self.robot.joint_index(self.robot.gripper.joint) if self.robot.gripper else None
+        worst = []
+        for i, name in enumerate(self.robot.joint_names):
+            tol = self.cfg.gripper_tolerance if i == g else self.cfg.start_tolerance
+            if abs(q[i] - q0[i]) > tol:
+                worst.append(f"{name} is {math.degrees(q[i]):.1f} deg, the start is {math.degrees(q0[i]):.1f} deg")
+        return "; ".join(worst[:3]) if worst else None
+
+    def _move_to_start(self, q0: np.ndarray) -> None:
+        w_now = self.wm.to_wire_array(self.measured)[0]
+        w0 = self.wm.to_wire_array(q0)[0]
+        far = float(np.max(np.abs(w0 - w_now))) * protocol.STEPS_PER_RAD
+        self.link.send(self.wm.command(q0, MOVE_TO_START_SPD, 10))
+        deadline = self.clock() + far / MOVE_TO_START_SPD + 3.0
+        while self.clock() < deadline:
+            self.sleep(0.1)
+            fb = self.link.request_feedback(0.3)
+            if fb is not None:
+                self._take(fb)
+                if self._start_diff(self.measured, q0) is None:
+                    self.notes.append("moved to the start first")
+                    return
+        raise DeviceError("the arm did not reach the trajectory's start within the time allowed",
+                          "check for obstacles or a stalled servo, then try again")
+
+    # ------------------------------------------------------------------ run
+    def run(self) -> Result:
+        """Check the start, confirm, stream, settle. Raises Interrupted/DeviceError/InfeasibleError
+        after holding; the Result (also on failure, as ``exc.result``) carries the log."""
+        self._check_start()
+        if self.confirm is not None and not self.confirm(
+                f"Execute {self.traj.duration / self.cfg.speed_scale:.2f} s of motion on {self.link.port}?"):
+            raise Interrupted("not confirmed; the arm did not move")
+        outcome, message, exc_out = "completed", "", None
+        try:
+            self._stream()
+            self._settle()
+        except KeyboardInterrupt:
+            outcome, message = "interrupted", "interrupted by Ctrl-C; the arm holds where it was"
+            exc_out = Interrupted(message)
+        except _Abort as exc:
+            outcome, message = "aborted", str(exc)
+            exc_out = DeviceError(message, "the arm holds where it was; check for a collision or a stalled joint")
+        except DeviceError as exc:
+            outcome, message = "link_lost", exc.message
+            exc_out = DeviceError(exc.message, exc.hint)
+        if outcome != "completed":
+            self._hold()
+        result = self._result(outcome, message)
+        if exc_out is not None:
+            exc_out.result = result  # type: ignore[attr-defined]
+            raise exc_out
+        return result
+
+    def _stream(self) -> None:
+        link, sched = self.link, self.schedule
+        poll_every = max(1, int(round(self.cfg.rate / FEEDBACK_RATE)))
+        link.poll()
+        self.t0 = self.clock() + self.cfg.lead
+        last_fb_t = self.clock()
+        n = len(sched)
+        err = None
+        for k, tick in enumerate(sched):
+            if self.hook is not None:
+                self.hook(k)
+            due = self.t0 + tick.t
+            wait = due - self.clock()
+            if wait > 0:
+                self.sleep(wait)
+            t_sent = link.send(tick.cmd)
+            self.last_cmd = tick.cmd
+            self.sent_lateness.append((k, t_sent - due))
+            if k % poll_every == 0:
+                link.send(protocol.feedback_request())
+            new = link.poll()
+            e = self._absorb(new)
+            if any(r.feedback is not None for r in new):
+                last_fb_t = self.clock()
+            elif self.clock() - last_fb_t > self.cfg.stale_after:
+                raise DeviceError(f"link lost: no feedback for {self.cfg.stale_after:.1f} s during motion",
+                                  "check the USB cable and the arm's power; the arm may have rebooted")
+            if e is not None:
+                err = e
+                if e > self.cfg.max_error:
+                    raise _Abort(f"tracking error {e * 1e3:.1f} mm exceeds {self.cfg.max_error * 1e3:.0f} mm "
+                                 f"at t = {tick.t:.2f} s; aborted")
+            if self.on_status is not None:
+                self.on_status(Status(k, n, tick.t, sched[-1].t, t_sent - due, tick.target, self.measured, err))
+
+    def _settle(self) -> None:
+        end = self.clock() + self.cfg.settle
+        while self.clock() < end:
+            fb = self.link.request_feedback(0.1)
+            if fb is not None:
+                self._take(fb)
+            self.sleep(0.05)
+
+    def _hold(self) -> None:
+        """Hold: T:102 at the last measured arm pose, gripper at its last command. Never torque off."""
+        try:
+            try:
+                fb = self.link.request_feedback(0.15)
+                if fb is not None:
+                    self._take(fb)
+            except DeviceError:
+                pass
+            if self.measured is None:
+                return
+            wire = self.wm.to_wire(self.measured)
+            if self.last_cmd is not None and self.robot.gripper is not None:
+                hand = next(w.field for w in self.wm.fields if w.joint == self.robot.gripper.joint)
+                wire[hand] = self.last_cmd[hand]
+            self.link.send(protocol.joints_command(wire, HOLD_SPD, 0))
+            self.notes.append("hold sent at the last measured pose")
+        except DeviceError:
+            self.notes.append("hold could not be sent: the link is gone")
+
+    def _result(self, outcome: str, message: str) -> Result:
+        lat = np.array([x for _, x in self.sent_lateness])
+        trk = np.array([e for _, e in self.tracking])
+        final = None
+        if self.measured is not None and outcome == "completed":
+            final = float(np.linalg.norm(self._tcp(self.measured) - self._tcp(self.traj.positions[-1])))
+        res = Result(outcome, message, len(self.sent_lateness), lat, trk, final, self.t0)
+        res.log = self.log(res)
+        return res
+
+    def log(self, res: Result) -> dict[str, Any]:
+        """The execution log: every command sent and every line received, times in s after t0."""
+        t0 = res.t0 if not math.isnan(res.t0) else (self.link.sent[0][0] if self.link.sent else 0.0)
+        lateness = {k: x for k, x in self.sent_lateness}
+        sched_idx = {id(tk.cmd): k for k, tk in enumerate(self.schedule)}
+        sent = []
+        for t, cmd in self.link.sent:
+            entry: dict[str, Any] = {"t": round(t - t0, 6), "cmd": cmd}
+            k = sched_idx.get(id(cmd))
+            if k is not None:
+                entry["tick"] = k
+                entry["lateness"] = round(lateness.get(k, math.nan), 6)
+            sent.append(entry)
+        received = []
+        for r in self.link.received:
+            e: dict[str, Any] = {"t": round(r.t - t0, 6), "line": r.line}
+            if r.feedback is not None:
+                e["feedback"] = r.feedback.raw
+            received.append(e)
+        return {
+            "format": "roarmctl.execlog/1",
+            "port": self.link.port, "firmware": self.link.firmware, "robot": self.robot.name,
+            "strategy": self.cfg.strategy, "rate": self.cfg.rate, "speed_scale": self.cfg.speed_scale,
+            "t0_monotonic": t0, "duration": self.schedule[-1].t,
+            "summary": res.summary(), "notes": self.notes,
+            "tracking": [{"t": round(t, 6), "error_m": round(e, 6)} for t, e in self.tracking],
+            "sent": sent, "received": received,
+        }
+
+
+class _Abort(Exception):
+    """Tracking error beyond the bound (internal; becomes DeviceError after the hold)."""
+
+
+def write_log(path: str | Path, log: dict[str, Any]) -> Path:
+    from roarmctl.fileio import atomic_write_json
+
+    return atomic_write_json(path, log, indent=None)
