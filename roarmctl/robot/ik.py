@@ -1,0 +1,733 @@
+"""Inverse kinematics: closed form for the RoArm-M3 and the UR10, damped least squares for the rest.
+
+Entry point: ``solve_ik(robot, position, pitch=..., roll=..., rpy=..., q_ref=..., all_solutions=...)``.
+It returns full configuration vectors (``robot.dof``, gripper included), every one within the
+joint limits and checked by forward kinematics before it is returned; or it raises
+``UnreachableError`` whose ``reason`` is ``"out_of_reach"``, ``"joint_limit"`` or ``"orientation"``.
+
+Which solver runs:
+
+* ``singularity_model == "roarm5"`` (the RoArm-M3 Pro): planar closed form about the base axis,
+  target = TCP position + tool pitch (+ roll), or position + full orientation (``rpy``).
+* ``singularity_model == "ur6"`` with ``rpy``: the 8-solution analytic IK of the seed-003 UR10
+  (modified DH); position only falls back to damped least squares.
+* anything else: damped least squares with seeded random restarts (position only or full pose).
+
+Closed forms are exact for the ideal geometry; a few Newton steps on the true FK then remove what the
+description's rounding leaves (Waveshare's URDF writes pi/2 as 1.5708, which tilts axes by 3.7 urad
+and moves the TCP by about 1 um), so every returned solution meets ``POS_TOL`` on the real model.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from roarmctl.errors import InputError, UnreachableError
+from roarmctl.robot.model import Robot, transform
+
+WRIST_SINGULAR = 1e-6  # |sin theta5| below this is the UR wrist singularity (theta4, theta6 coupled)
+LIMIT_SLACK = 1e-3  # rad: closed-form candidates this far outside a limit are polished, then re-checked
+POS_TOL = 1e-6  # m: every returned solution reaches the target position this closely (FK-checked)
+ORI_TOL = 1e-5  # rad: orientation check; covers the few-urad axis tilt of the rounded RoArm URDF
+PITCH_GRID = 721  # pitch samples over [-pi, pi] when the RoArm pitch is left free (0.5 deg)
+
+
+# ----------------------------------------------------------------------------------- public
+def solve_ik(
+    robot: Robot,
+    position: Sequence[float],
+    *,
+    pitch: float | None = None,
+    roll: float | None = None,
+    rpy: Sequence[float] | None = None,
+    q_ref: Sequence[float] | None = None,
+    all_solutions: bool = False,
+) -> list[np.ndarray]:
+    """Joint configurations that put the TCP at ``position`` (m, root frame).
+
+    Args:
+        position: target TCP position (3,), metres, in the robot's root (world) frame.
+        pitch: RoArm only. Angle (rad) of the TCP approach axis (+x of ``hand_tcp``) below the
+            horizontal, measured in the vertical plane through the base axis and the target, positive
+            downward: ``0`` points straight away from the base axis (the ``home`` pose),
+            ``+pi/2`` points straight down (top-down grasp), ``-pi/2`` straight up, ``pi`` back
+            toward the base axis. When the target is on the base axis, "away" is the direction of
+            the reference base angle (``q_ref`` or 0). Left out: searched (see below).
+        roll: RoArm only. The wrist-roll joint value (rad), i.e. the turn of the tool about its
+            approach axis relative to the arm's plane. Default: ``q_ref``'s roll, else 0. Note that
+            the base-flipped branch (base + pi, arm leaning back) has the same approach axis but
+            its tool turned by pi about it for the same roll value.
+        rpy: full target orientation of the TCP as URDF roll-pitch-yaw (rad), R = Rz Ry Rx. Excludes
+            ``pitch`` and ``roll``. A 5-joint RoArm can only reach orientations whose approach axis
+            lies in the vertical plane through the base axis and the target.
+        q_ref: reference configuration (arm-only or full, rad). Solutions are sorted by distance to
+            it, its gripper value is kept, and it seeds the numerical solver.
+        all_solutions: return every solution found (every branch within limits: up to 4 for the
+            RoArm, up to 8 for the UR10, all distinct ones found by the restarts otherwise) instead
+            of only the best (closest to ``q_ref``, else to the ``home`` pose, else to zero).
+
+    Returns:
+        A non-empty list of full configuration vectors (``robot.dof``,), rad, within the limits,
+        each verified by FK (position error <= ``POS_TOL``; orientation <= ``ORI_TOL`` when given).
+
+    Pitch left free (RoArm): for each branch the pitch is searched on a 0.5 deg grid; the solution
+    uses the preferred pitch (that of ``q_ref`` at the target, else pi/2, top-down) when the branch
+    can hold it, else the feasible pitch nearest to it, moved a few degrees inside the feasible
+    interval so that the result does not sit on a joint limit or the reach boundary.
+
+    Raises:
+        UnreachableError: with ``reason`` ``"out_of_reach"``, ``"joint_limit"`` or ``"orientation"``.
+        InputError: malformed arguments (wrong lengths, pitch and rpy together, ...).
+    """
+    p = _vec3(position, "position")
+    if rpy is not None and (pitch is not None or roll is not None):
+        raise InputError("give either rpy or pitch/roll, not both")
+    rot = None if rpy is None else transform(rpy=_vec3(rpy, "rpy"))[:3, :3]
+    qr = None if q_ref is None else robot.full_q(np.asarray(q_ref, dtype=float))
+    model = robot.singularity_model or ""
+    if model == "roarm5":
+        sols = _RoarmIK(robot).solve(p, pitch, roll, rot, qr)
+    else:
+        if pitch is not None or roll is not None:
+            raise InputError(f"pitch/roll apply to the RoArm only; give rpy for {robot.name}")
+        if model == "ur6" and rot is not None:
+            sols = _ur6_solve(robot, p, rot, qr)
+        else:
+            sols = _dls_solve(robot, p, rot, qr, all_solutions)
+    ref = qr if qr is not None else _default_ref(robot)
+    arm = robot.arm_indices
+    sols.sort(key=lambda q: float(np.linalg.norm(q[arm] - ref[arm])))
+    return sols if all_solutions else sols[:1]
+
+
+@dataclass
+class IKCheck:
+    """FK check of one solution: position error (m), orientation error (rad, or None)."""
+
+    position_error: float
+    orientation_error: float | None
+
+
+def check_solution(robot: Robot, q: np.ndarray, position, rpy=None) -> IKCheck:
+    """Position and orientation error of configuration ``q`` against a target, by FK."""
+    t = robot.kin.fk(robot.full_q(q))
+    perr = float(np.linalg.norm(t[:3, 3] - np.asarray(position, dtype=float)))
+    oerr = None
+    if rpy is not None:
+        oerr = _rot_angle(transform(rpy=rpy)[:3, :3].T @ t[:3, :3])
+    return IKCheck(perr, oerr)
+
+
+# ---------------------------------------------------------------------------------- helpers
+def _vec3(v, what: str) -> np.ndarray:
+    a = np.asarray(v, dtype=float).reshape(-1)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise InputError(f"{what}: expected 3 finite numbers, got {v!r}")
+    return a
+
+
+def _rot_angle(m: np.ndarray) -> float:
+    """Rotation angle (rad) of a 3x3 rotation matrix, accurate near 0."""
+    s = 0.5 * np.linalg.norm([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
+    c = 0.5 * (np.trace(m) - 1.0)
+    return float(math.atan2(s, c))
+
+
+def _rot_vec(m: np.ndarray) -> np.ndarray:
+    """Rotation vector (axis * angle) of a 3x3 rotation matrix."""
+    ang = _rot_angle(m)
+    w = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
+    if ang < 1e-9:
+        return 0.5 * w
+    if ang > math.pi - 1e-6:  # near pi: axis from the symmetric part
+        b = (m + np.eye(3)) / 2.0
+        k = int(np.argmax(np.diag(b)))
+        axis = b[:, k] / math.sqrt(max(b[k, k], 1e-300))
+        if np.dot(axis, w) < 0:
+            axis = -axis
+        return axis * ang
+    return w * (ang / (2.0 * math.sin(ang)))
+
+
+def _wrap(a):
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+def _default_ref(robot: Robot) -> np.ndarray:
+    home = robot.named_poses.get("home")
+    return robot.full_q(home) if home is not None else robot.full_q(np.zeros(robot.arm_dof))
+
+
+def _gripper_value(robot: Robot, qr: np.ndarray | None) -> float | None:
+    if robot.gripper is None:
+        return None
+    gi = robot.joint_index(robot.gripper.joint)
+    return float(qr[gi]) if qr is not None else robot.gripper.closed
+
+
+def _fit_limits(robot: Robot, q: np.ndarray, ref: np.ndarray | None, tol: float = 1e-7) -> np.ndarray | None:
+    """Shift revolute joints by multiples of 2 pi into their limits (nearest to ``ref``); None if impossible."""
+    out = q.copy()
+    lo, hi = robot.lower, robot.upper
+    for i in robot.arm_indices:
+        best = None
+        for k in range(-2, 3):
+            v = q[i] + 2 * np.pi * k
+            if lo[i] - tol <= v <= hi[i] + tol:
+                d = abs(v - (ref[i] if ref is not None else 0.0))
+                if best is None or d < best[0]:
+                    best = (d, v)
+        if best is None:
+            return None
+        out[i] = min(max(best[1], lo[i]), hi[i])
+    return out
+
+
+def _newton(residual: Callable[[np.ndarray], np.ndarray], q: np.ndarray, idx: list[int],
+            iters: int = 12, tol: float = 1e-13, h: float = 1e-7) -> np.ndarray:
+    """Gauss-Newton on the joints ``idx`` of ``q`` with a forward-difference Jacobian."""
+    q = q.copy()
+    r = residual(q)
+    for _ in range(iters):
+        if np.linalg.norm(r) < tol:
+            break
+        jac = np.empty((r.size, len(idx)))
+        for k, i in enumerate(idx):
+            qp = q.copy()
+            qp[i] += h
+            jac[:, k] = (residual(qp) - r) / h
+        step = np.linalg.lstsq(jac, -r, rcond=None)[0]
+        if np.linalg.norm(step) > 0.2:  # a polish, not a search: never wander to another branch
+            break
+        q[idx] += step
+        r = residual(q)
+    return q
+
+
+def _dedupe(sols: list[np.ndarray], idx: list[int], tol: float = 1e-5) -> list[np.ndarray]:
+    out: list[np.ndarray] = []
+    for q in sols:
+        if all(np.max(np.abs(_wrap(q[idx] - o[idx]))) > tol for o in out):
+            out.append(q)
+    return out
+
+
+# ----------------------------------------------------------------------------- RoArm-M3 (planar)
+class _RoarmIK:
+    """Closed-form IK of the RoArm-M3: base yaw, then a planar 3R arm (shoulder, elbow, wrist pitch).
+
+    Geometry is read from the robot's own frames at q = 0 (Waveshare's URDF): in the arm's plane,
+    with "up" the base axis and "forward" the base's +x, the shoulder axis sits at height z_s, the
+    upper arm is (0.236815 along, 0.030002 across), the forearm 0.144586 along, the TCP
+    (0.169081 along, 0.015147 across) from the wrist-pitch axis, and the approach axis points "along".
+    A segment's direction is written as its angle from vertical, positive toward forward.
+    """
+
+    def __init__(self, robot: Robot) -> None:
+        self.robot = robot
+        self.arm = robot.arm_indices
+        if len(self.arm) != 5:
+            raise InputError(f"{robot.name}: the roarm5 IK needs 5 arm joints, found {len(self.arm)}")
+        f0 = robot.kin.link_frames(robot.full_q(np.zeros(len(self.arm))))
+        moving = [robot.joints[j] for j in robot.kin.tcp_chain_joints if robot.joints[j].kind != "fixed"]
+        idx = robot.kin.link_index
+        sh, el, wr = (f0[idx[m.child], :3, 3] for m in moving[1:4])
+        tcp = f0[robot.kin.tcp_index]
+        self.z_s = float(sh[2])
+        self.base_xy = sh[:2].copy()
+
+        def polar(v):  # (across=x, along=z) -> (length, angle from vertical)
+            return math.hypot(v[0], v[2]), math.atan2(v[0], v[2])
+
+        self.l2, self.t2 = polar(el - sh)
+        self.l3, self.t3 = polar(wr - el)
+        self.l4, self.t4 = polar(tcp[:3, 3] - wr)
+        a0 = tcp[:3, 0]
+        self.a0 = math.atan2(a0[0], a0[2])  # approach-axis angle from vertical at q = 0 (0 here)
+        self.reach = self.l2 + self.l3 + self.l4
+
+    # -- the planar sub-problem, vectorised over pitch (phi) -------------------------------------
+    def _planar(self, r: float, z: float, phi: np.ndarray, elbow_sign: float):
+        """Shoulder, elbow, wrist (arrays) for TCP at (r, z) in the plane and approach angle phi.
+
+        ``r`` is signed (negative: behind the base axis), ``z`` is height above the shoulder axis.
+        Returns (s, e, w, ok) where ok marks the reachable samples.
+        """
+        tdir = phi - self.a0 + self.t4  # direction of the wrist->TCP segment
+        wr = r - self.l4 * np.sin(tdir)
+        wz = z - self.l4 * np.cos(tdir)
+        d2 = wr * wr + wz * wz
+        c = (d2 - self.l2 ** 2 - self.l3 ** 2) / (2 * self.l2 * self.l3)
+        ok = np.abs(c) <= 1.0 + 1e-12
+        delta = elbow_sign * np.arccos(np.clip(c, -1.0, 1.0))  # forearm dir minus upper-arm dir
+        gamma = np.arctan2(wr, wz)
+        alpha2 = gamma - np.arctan2(self.l3 * np.sin(delta), self.l2 + self.l3 * np.cos(delta))
+        s = alpha2 - self.t2
+        e = alpha2 + delta - self.t3 - s
+        w = phi - self.a0 - s - e
+        return s, e, w, ok
+
+    def _branch_q(self, base: float, s, e, w, roll: float, grip: float | None) -> np.ndarray:
+        n = np.size(s)
+        q = np.zeros((n, self.robot.dof))
+        q[:, self.arm[0]] = base
+        q[:, self.arm[1]] = s
+        q[:, self.arm[2]] = e
+        q[:, self.arm[3]] = w
+        q[:, self.arm[4]] = roll
+        if grip is not None:
+            q[:, self.robot.joint_index(self.robot.gripper.joint)] = grip
+        return q
+
+    def _in_limits(self, q: np.ndarray) -> np.ndarray:
+        lo, hi = self.robot.lower, self.robot.upper
+        qa = q.copy()
+        for i in self.arm[1:4]:  # pitch joints: bring angles to (-pi, pi] before the test
+            qa[:, i] = _wrap(qa[:, i])
+        # elbow range can exceed pi (0..2.95): allow the +2pi representative too
+        ok = np.ones(len(q), dtype=bool)
+        tol = LIMIT_SLACK  # the ideal-geometry closed form is off by ~urad; the polish settles it
+        for i in self.arm:
+            v = qa[:, i]
+            okk = np.zeros(len(q), dtype=bool)
+            for k in (-1, 0, 1):
+                okk |= (v + 2 * np.pi * k >= lo[i] - tol) & (v + 2 * np.pi * k <= hi[i] + tol)
+            ok &= okk
+        return ok
+
+    def _violation(self, qs: np.ndarray) -> tuple[float, str] | None:
+        """(total excess in rad, description) of the sample that violates the limits least."""
+        lo, hi = self.robot.lower, self.robot.upper
+        best = None
+        for q in qs:
+            total, first = 0.0, ""
+            for i in self.arm[:4]:
+                v = float(q[i])
+                cands = [v + 2 * np.pi * k for k in (-1, 0, 1)]
+                v = min(cands, key=lambda x: max(lo[i] - x, x - hi[i], 0.0))
+                ex = max(lo[i] - v, v - hi[i], 0.0)
+                if ex > 0 and not first:
+                    first = (f"{self.robot.joint_names[i]} would be at {math.degrees(v):.1f} deg, outside "
+                             f"[{math.degrees(lo[i]):.1f}, {math.degrees(hi[i]):.1f}] deg")
+                total += ex
+            if first and (best is None or total < best[0]):
+                best = (total, first)
+        return best
+
+    def solve(self, p: np.ndarray, pitch: float | None, roll: float | None,
+              rot: np.ndarray | None, qr: np.ndarray | None) -> list[np.ndarray]:
+        robot = self.robot
+        rel = p.copy()
+        rel[:2] -= self.base_xy
+        rho = float(np.hypot(rel[0], rel[1]))
+        z = float(p[2] - self.z_s)
+        dist = math.hypot(rho, z)
+        where = f"target ({p[0]:.4g}, {p[1]:.4g}, {p[2]:.4g}) m"
+        if dist > self.reach + 1e-12:
+            raise UnreachableError(
+                f"{where} is {dist:.3f} m from the shoulder axis; the arm reaches {self.reach:.3f} m",
+                "out_of_reach", "move the target closer to the arm")
+        ref_base = float(qr[self.arm[0]]) if qr is not None else 0.0
+        on_axis = rho < 1e-9
+        az = ref_base if on_axis else math.atan2(rel[1], rel[0])
+        u_h = np.array([math.cos(az), math.sin(az), 0.0])  # outward horizontal direction
+        grip = _gripper_value(robot, qr)
+
+        want_roll = None
+        if rot is not None:
+            a = rot[:, 0]
+            lateral = float(np.dot(a, np.cross([0.0, 0.0, 1.0], u_h)))
+            if on_axis and math.hypot(a[0], a[1]) > 1e-9:
+                az = math.atan2(a[1], a[0])  # target on the axis: the approach axis picks the plane
+                u_h = np.array([math.cos(az), math.sin(az), 0.0])
+                lateral = 0.0
+            if abs(lateral) > ORI_TOL:
+                raise UnreachableError(
+                    f"orientation not achievable by a 5-joint arm: the approach axis (tool +x) must lie in the "
+                    f"vertical plane through the base axis and the target; the requested one leaves it by "
+                    f"{math.degrees(math.asin(min(1.0, abs(lateral)))):.2f} deg",
+                    "orientation", "give --pitch (and --roll) instead of --rpy, or turn the target about the vertical")
+            pitch = math.atan2(-a[2], float(np.dot(a, u_h)))
+        elif roll is not None:
+            want_roll = float(roll)
+        if want_roll is None:
+            want_roll = float(qr[self.arm[4]]) if qr is not None else 0.0
+
+        branches = [(az, rho, 1.0), (az + math.pi, -rho, -1.0)]
+        if pitch is not None:
+            phis = np.array([float(pitch)])
+        else:
+            phis = np.linspace(-math.pi, math.pi, PITCH_GRID)
+            pref = math.pi / 2
+            if qr is not None:
+                a_ref = robot.kin.fk(qr)[:3, 0]
+                pref = math.atan2(-a_ref[2], float(np.dot(a_ref, u_h)))
+
+        cands: list[np.ndarray] = []
+        any_reach = False
+        violated: tuple[float, str] | None = None  # the least-violating reachable branch's complaint
+        for base, r_signed, sign in branches:
+            # world approach a = cos(pitch) u_h - sin(pitch) z; in this branch's plane coordinates
+            # (forward = sign * u_h) its angle from vertical is atan2(sign cos(pitch), -sin(pitch)).
+            phi = np.arctan2(sign * np.cos(phis), -np.sin(phis))
+            for elbow in (1.0, -1.0):
+                s, e, w, ok = self._planar(r_signed, z, phi, elbow)
+                qs = self._branch_q(_wrap(base), s, e, w, want_roll, grip)
+                any_reach |= bool(ok.any())
+                if ok.any():
+                    worst = self._violation(qs[ok])
+                    if worst is not None and (violated is None or worst[0] < violated[0]):
+                        violated = worst
+                ok &= self._in_limits(qs)
+                if not ok.any():
+                    continue
+                if pitch is None:
+                    k = _pick_index(phis, ok, pref)
+                    qs = qs[k:k + 1]
+                else:
+                    qs = qs[ok]
+                cands.extend(qs)
+
+        if not cands:
+            if not any_reach:
+                if pitch is not None:
+                    phi0 = math.atan2(math.cos(pitch), -math.sin(pitch))
+                    tdir = phi0 - self.a0 + self.t4
+                    dw = math.hypot(rho - self.l4 * math.sin(tdir), z - self.l4 * math.cos(tdir))
+                    far = dw > self.l2 + self.l3
+                    raise UnreachableError(
+                        f"{where} cannot be reached with pitch {math.degrees(pitch):.1f} deg: the wrist axis would be "
+                        f"{dw:.3f} m from the shoulder axis, {'beyond' if far else 'inside'} the "
+                        f"{(self.l2 + self.l3) if far else abs(self.l2 - self.l3):.3f} m the upper arm and forearm "
+                        f"{'reach' if far else 'can fold to'}",
+                        "out_of_reach", "try another pitch or leave the pitch free")
+                raise UnreachableError(f"{where} is out of reach at every tool pitch", "out_of_reach")
+            what = f"with pitch {math.degrees(pitch):.1f} deg " if pitch is not None else "at any pitch "
+            raise UnreachableError(
+                f"{where} is within reach but not {what}within the joint limits: "
+                + (violated[1] if violated else "every branch violates a limit"),
+                "joint_limit", "try another pitch, or move the target")
+
+        # Polish on the true FK and verify.
+        out: list[np.ndarray] = []
+        for q in cands:
+            if rot is not None:  # the roll that turns the tool onto the target about its approach axis
+                m = robot.kin.fk(q)[:3, :3].T @ rot
+                q = q.copy()
+                q[self.arm[4]] = math.atan2(m[2, 1], m[1, 1])
+            q = self._polish(q, p, rot, u_h, pitch if pitch is not None else None)
+            q2 = _fit_limits(robot, q, qr)
+            if q2 is None:
+                continue
+            t = robot.kin.fk(q2)
+            if np.linalg.norm(t[:3, 3] - p) > POS_TOL:
+                continue
+            if rot is not None and _rot_angle(rot.T @ t[:3, :3]) > ORI_TOL:
+                continue
+            if pitch is not None and rot is None and abs(_wrap(_pitch_of(t, u_h) - pitch)) > ORI_TOL:
+                continue
+            out.append(q2)
+        out = _dedupe(out, self.arm)
+        if not out:
+            raise UnreachableError(f"{where}: no branch survived the FK check (numerically at the edge of a limit)",
+                                   "joint_limit", "move the target slightly inward")
+        return out
+
+    def _polish(self, q: np.ndarray, p: np.ndarray, rot: np.ndarray | None, u_h: np.ndarray,
+                pitch: float | None) -> np.ndarray:
+        kin = self.robot.kin
+        if rot is not None:
+            def res(qq):
+                t = kin.fk(qq)
+                m = rot.T @ t[:3, :3]
+                return np.concatenate([t[:3, 3] - p, [_wrap(_pitch_of(t, u_h) - _pitch_of_r(rot, u_h)),
+                                                      math.atan2(m[2, 1] - m[1, 2], m[1, 1] + m[2, 2])]])
+            return _newton(res, q, self.arm)
+        target_pitch = pitch if pitch is not None else None
+        if target_pitch is None:  # free pitch: keep the pitch the closed form chose
+            target_pitch = _pitch_of(kin.fk(q), u_h)
+
+        def res(qq):
+            t = kin.fk(qq)
+            return np.concatenate([t[:3, 3] - p, [_wrap(_pitch_of(t, u_h) - target_pitch)]])
+        return _newton(res, q, self.arm[:4])
+
+
+def _pitch_of(t: np.ndarray, u_h: np.ndarray) -> float:
+    return _pitch_of_r(t[:3, :3], u_h)
+
+
+def _pitch_of_r(rot: np.ndarray, u_h: np.ndarray) -> float:
+    a = rot[:, 0]
+    return math.atan2(-a[2], float(np.dot(a, u_h)))
+
+
+def _pick_index(phis: np.ndarray, ok: np.ndarray, pref: float, margin: float = math.radians(3)) -> int:
+    """Index of the sample to use: ``pref`` if feasible, else the nearest feasible one moved inside."""
+    d = np.abs(_wrap(phis - pref))
+    k = int(np.argmin(np.where(ok, d, np.inf)))
+    if d[k] < (phis[1] - phis[0]):
+        return k
+    # walk inward from the interval edge by the margin (or to the interval's middle if narrower)
+    step = int(round(margin / (phis[1] - phis[0])))
+    lo = k
+    while lo - 1 >= 0 and ok[lo - 1]:
+        lo -= 1
+    hi = k
+    while hi + 1 < len(ok) and ok[hi + 1]:
+        hi += 1
+    mid = (lo + hi) // 2
+    if k == lo:
+        return min(k + step, mid) if hi - lo > 0 else k
+    return max(k - step, mid)
+
+
+# ----------------------------------------------------------------------------- UR10 (modified DH)
+def _ur6_params(robot: Robot):
+    """(T_base, d1, a2, a3, d4, d5, d6, offsets, T_tool) from a modified-DH UR-type description."""
+    chain = [robot.joints[j] for j in robot.kin.tcp_chain_joints]
+    moving = [j for j in chain if j.kind != "fixed"]
+    if len(moving) != 6 or any(j.kind != "revolute" for j in moving):
+        raise InputError(f"{robot.name}: the ur6 IK needs 6 revolute joints")
+    first = chain.index(moving[0])
+    last = chain.index(moving[-1])
+    t_base = np.eye(4)
+    for j in chain[:first]:
+        t_base = t_base @ j.origin
+    t_tool = np.eye(4)
+    for j in chain[last + 1:]:
+        t_tool = t_tool @ j.origin
+    a = [float(j.origin[0, 3]) for j in moving]
+    d = [float(np.dot(j.origin[:3, 2], j.origin[:3, 3])) for j in moving]
+    # frame 1's origin sits at d1 above frame 0 (no rotation): fold it into the base
+    return t_base, d[0], a[2], a[3], d[3], d[4], d[5], np.array([j.offset for j in moving]), t_tool
+
+
+def _ur6_solve(robot: Robot, p: np.ndarray, rot: np.ndarray, qr: np.ndarray | None) -> list[np.ndarray]:
+    """Every analytic IK solution (up to 8) of the seed-003 UR10 (modified DH, SEEDS_DIGEST 1.2).
+
+    Derivation for these frames (0T6 from 1.3): the flange z-axis z6 = (r13, r23, r33), so the wrist
+    point p5 = p - d6 z6 satisfies p5x s1 - p5y c1 = d4 (joints 2-4 move in a plane at offset d4),
+    giving theta1 = psi + asin(d4/rho) or psi + pi - asin(d4/rho). Row 2 of 1T6 is
+    (c6 s5, -s6 s5, -c5, ...), so c5 = r13 s1 - r23 c1 (theta5 = +-acos) and, for s5 != 0,
+    theta6 = atan2(-(r22 c1 - r12 s1)/s5, (r21 c1 - r11 s1)/s5). Row 3 gives c234 = r31 s6 + r32 c6
+    and s234 = r33 s5 + c5 (r31 c6 - r32 s6). The planar 2R then has
+    F2 = p5x c1 + p5y s1 + d5 s234 = a2 c2 + a3 c23 and F3 = p5z - d1 - d5 c234 = a2 s2 + a3 s23.
+    At s5 = 0 (wrist singular) theta6 is free: we keep q_ref's (or 0).
+    """
+    t_base, d1, a2, a3, d4, d5, d6, offs, t_tool = _ur6_params(robot)
+    target = np.eye(4)
+    target[:3, :3], target[:3, 3] = rot, p
+    t = np.linalg.inv(t_base) @ target @ np.linalg.inv(t_tool)
+    r, pp = t[:3, :3], t[:3, 3]
+    p5 = pp - d6 * r[:, 2]
+    rho = math.hypot(p5[0], p5[1])
+    where = f"target ({p[0]:.4g}, {p[1]:.4g}, {p[2]:.4g}) m"
+    if rho < abs(d4) - 1e-9:
+        raise UnreachableError(f"{where}: the wrist point is {rho:.4f} m from the base axis, closer than the "
+                               f"shoulder offset d4 = {d4:.4f} m", "out_of_reach")
+    psi = math.atan2(p5[1], p5[0])
+    asn = math.asin(max(-1.0, min(1.0, d4 / rho))) if rho > 0 else 0.0
+    ref = qr[robot.arm_indices] + 0.0 if qr is not None else np.zeros(6)
+    raw: list[np.ndarray] = []
+    planar_fail = 0
+    for th1 in (psi + asn, psi + math.pi - asn):
+        c1, s1 = math.cos(th1), math.sin(th1)
+        c5 = max(-1.0, min(1.0, r[0, 2] * s1 - r[1, 2] * c1))
+        for th5 in (math.acos(c5), -math.acos(c5)):
+            s5 = math.sin(th5)
+            w2, v3 = p5[0] * c1 + p5[1] * s1, p5[2] - d1
+            if abs(s5) > WRIST_SINGULAR:
+                th6 = math.atan2(-(r[1, 1] * c1 - r[0, 1] * s1) / s5, (r[1, 0] * c1 - r[0, 0] * s1) / s5)
+                c6, s6 = math.cos(th6), math.sin(th6)
+                c234 = r[2, 0] * s6 + r[2, 1] * c6
+                s234 = r[2, 2] * s5 + c5 * (r[2, 0] * c6 - r[2, 1] * s6)
+                th234 = math.atan2(s234, c234)
+            else:  # wrist singular: only theta234 +- theta6 is fixed; pick theta234 (see _ur6_wrist)
+                th5 = 0.0 if c5 > 0 else math.pi
+                gam = math.atan2(r[2, 0], r[2, 1])  # c5 = 1: theta234 + theta6; c5 = -1: theta6 - theta234
+                th234 = _ur6_wrist(w2, v3, a2, a3, d5, (gam - (ref[5] + offs[5])) if c5 > 0 else (ref[5] + offs[5] - gam))
+                th6 = gam - th234 if c5 > 0 else gam + th234
+                s234, c234 = math.sin(th234), math.cos(th234)
+            f2 = w2 + d5 * s234
+            f3 = v3 - d5 * c234
+            c3 = (f2 * f2 + f3 * f3 - a2 * a2 - a3 * a3) / (2 * a2 * a3)
+            if abs(c3) > 1 + 1e-9:
+                planar_fail += 1
+                continue
+            c3 = max(-1.0, min(1.0, c3))
+            for th3 in (math.acos(c3), -math.acos(c3)):
+                th2 = math.atan2(f3, f2) - math.atan2(a3 * math.sin(th3), a2 + a3 * math.cos(th3))
+                th4 = th234 - th2 - th3
+                raw.append(np.array([th1, th2, th3, th4, th5, th6]) - offs)
+    if not raw:
+        raise UnreachableError(f"{where} is out of reach: the elbow cannot span the distance to the wrist point",
+                               "out_of_reach")
+    arm = robot.arm_indices
+    grip = _gripper_value(robot, qr)
+
+    def res(qq):
+        tt = robot.kin.fk(qq)
+        return np.concatenate([tt[:3, 3] - p, _rot_vec(rot.T @ tt[:3, :3])])
+
+    out, limit_fail = [], 0
+    for qa in raw:
+        q = robot.full_q(_wrap(qa))
+        if grip is not None:
+            q[robot.joint_index(robot.gripper.joint)] = grip
+        q = _newton(res, q, arm, iters=4)
+        q2 = _fit_limits(robot, q, qr)
+        if q2 is None:
+            limit_fail += 1
+            continue
+        tt = robot.kin.fk(q2)
+        if np.linalg.norm(tt[:3, 3] - p) <= POS_TOL and _rot_angle(rot.T @ tt[:3, :3]) <= ORI_TOL:
+            out.append(q2)
+    out = _dedupe(out, arm)
+    if not out:
+        if limit_fail:
+            raise UnreachableError(f"{where}: every analytic solution violates a joint limit", "joint_limit")
+        raise UnreachableError(f"{where}: no analytic solution passed the FK check", "out_of_reach")
+    return out
+
+
+def _ur6_wrist(w: float, v: float, a2: float, a3: float, d5: float, pref: float) -> float:
+    """theta234 at a wrist singularity: nearest to ``pref`` such that the elbow can span the wrist.
+
+    With F2 = w + d5 sin(t), F3 = v - d5 cos(t): F2^2 + F3^2 = w^2 + v^2 + d5^2 + 2 d5 (w sin t - v cos t)
+    must lie in [(a2 - a3)^2, (a2 + a3)^2]. At the reach boundary (seed case B) one t remains, an
+    extremum of that sinusoid, so the extrema join the sampled candidates.
+    """
+    xi = math.atan2(-v, w)  # w sin t - v cos t = R sin(t + xi)... written as R cos(t - (pi/2 - xi))
+    ts = np.concatenate([np.linspace(-math.pi, math.pi, 3601), [math.pi / 2 - xi, -math.pi / 2 - xi]])
+    f = w * w + v * v + d5 * d5 + 2 * d5 * (w * np.sin(ts) - v * np.cos(ts))
+    tol = 1e-9 * (a2 + a3) ** 2
+    ok = (f <= (a2 + a3) ** 2 + tol) & (f >= (a2 - a3) ** 2 - tol)
+    if not ok.any():
+        return pref
+    if ok[:-2].any() and np.isclose(_wrap(ts[np.argmin(np.where(ok, np.abs(_wrap(ts - pref)), np.inf))] - pref), 0, atol=1e-3):
+        return float(pref)
+    return float(ts[np.argmin(np.where(ok, np.abs(_wrap(ts - pref)), np.inf))])
+
+
+# ----------------------------------------------------------------------------- damped least squares
+def _chain_reach(robot: Robot) -> tuple[np.ndarray, float]:
+    """A point on the first joint's axis (root frame) and an upper bound of the TCP's distance to it (m)."""
+    kin = robot.kin
+    q0 = robot.full_q(np.clip(np.zeros(robot.arm_dof), robot.lower[robot.arm_indices], robot.upper[robot.arm_indices]))
+    frames = kin.link_frames(q0)
+    chain = kin.tcp_chain_joints
+    movable = [j for j in chain if robot.joints[j].kind != "fixed"]
+    first = movable[0]
+    j0 = robot.joints[first]
+    start = (frames[kin._parent[first]] @ j0.origin)[:3, 3]
+    pts = [start] + [frames[kin._child[j]][:3, 3] for j in chain[chain.index(first):]]
+    reach = float(sum(np.linalg.norm(b - a) for a, b in zip(pts[:-1], pts[1:])))
+    for j in movable:
+        jt = robot.joints[j]
+        if jt.kind == "prismatic":
+            i = robot.joint_index(jt.name)
+            reach += max(abs(robot.lower[i]), abs(robot.upper[i]))
+    return start, reach
+
+
+def _dls_solve(robot: Robot, p: np.ndarray, rot: np.ndarray | None, qr: np.ndarray | None,
+               all_solutions: bool, restarts: int | None = None, seed: int = 0) -> list[np.ndarray]:
+    """Damped least squares from ``q_ref`` (or home) and then seeded random starts within the limits."""
+    where = f"target ({p[0]:.4g}, {p[1]:.4g}, {p[2]:.4g}) m"
+    start, reach = _chain_reach(robot)
+    dist = float(np.linalg.norm(p - start))
+    if dist > reach + 1e-12:
+        raise UnreachableError(f"{where} is {dist:.3f} m from the first joint; the arm reaches {reach:.3f} m",
+                               "out_of_reach", "move the target closer to the arm")
+    arm = robot.arm_indices
+    lo, hi = robot.lower[arm], robot.upper[arm]
+    rng = np.random.default_rng(seed)
+    n_starts = restarts if restarts is not None else (48 if all_solutions else 24)
+    starts = [qr if qr is not None else _default_ref(robot)]
+    grip = _gripper_value(robot, qr)
+    for _ in range(n_starts):
+        starts.append(robot.full_q(rng.uniform(lo, hi)))
+    sols: list[np.ndarray] = []
+    best_free = np.inf
+    stale = 0  # restarts in a row that found nothing new
+    for q0 in starts:
+        q = robot.full_q(np.array(q0, dtype=float))
+        if grip is not None:
+            q[robot.joint_index(robot.gripper.joint)] = grip
+        q, err = _dls_run(robot, q, p, rot, lo, hi)
+        before = len(sols)
+        if err[0] <= POS_TOL * 1e-3 and (rot is None or err[1] <= ORI_TOL * 1e-3):
+            sols.append(q)
+            sols = _dedupe(sols, arm, tol=1e-4)
+            if not all_solutions:
+                break
+        stale = 0 if len(sols) > before else stale + 1
+        if sols and stale >= 16:
+            break
+    if sols:
+        return sols
+    # Why not? Try again without limits (joint_limit), then position only (orientation).
+    for q0 in starts[:8]:
+        q, err = _dls_run(robot, robot.full_q(np.array(q0, dtype=float)), p, rot, None, None)
+        if err[0] <= POS_TOL and (rot is None or err[1] <= ORI_TOL):
+            raise UnreachableError(f"{where} is only reachable outside the joint limits", "joint_limit",
+                                   "move the target or widen the limits in the description")
+        best_free = min(best_free, err[0])
+    if rot is not None:
+        for q0 in starts[:8]:
+            q, err = _dls_run(robot, robot.full_q(np.array(q0, dtype=float)), p, None, lo, hi)
+            if err[0] <= POS_TOL:
+                raise UnreachableError(f"{where}: the position is reachable but not with the requested orientation",
+                                       "orientation", "relax the orientation or give the position only")
+    raise UnreachableError(f"{where} is out of reach (closest approach {best_free * 1000:.1f} mm)",
+                           "out_of_reach", "move the target closer to the arm")
+
+
+def _dls_run(robot: Robot, q: np.ndarray, p: np.ndarray, rot: np.ndarray | None,
+             lo: np.ndarray | None, hi: np.ndarray | None, iters: int = 150) -> tuple[np.ndarray, tuple[float, float]]:
+    arm = robot.arm_indices
+    kin = robot.kin
+    ep = eo = np.inf
+    history: list[float] = []
+    for _ in range(iters):
+        t = kin.fk(q)
+        e = p - t[:3, 3]
+        ep = float(np.linalg.norm(e))
+        jac = kin.jacobian(q)
+        if rot is not None:
+            w = _rot_vec(rot @ t[:3, :3].T)
+            eo = float(np.linalg.norm(w))
+            e = np.concatenate([e, w])
+        else:
+            eo = 0.0
+            jac = jac[:3]
+        if ep < 1e-12 and eo < 1e-12:
+            break
+        norm = float(np.linalg.norm(e))
+        history.append(norm)
+        if len(history) > 25 and norm > 0.9 * history[-25]:
+            break  # stalled (at a limit or a local minimum): let the next restart try
+        lam = 1e-2 if norm > 1e-3 else 1e-6
+        jjt = jac @ jac.T + (lam * lam) * np.eye(jac.shape[0])
+        dq = jac.T @ np.linalg.solve(jjt, e)
+        m = float(np.max(np.abs(dq)))
+        if m > 0.5:
+            dq *= 0.5 / m
+        q = q.copy()
+        q[arm] += dq
+        if lo is not None:
+            # joints with a full turn of range wrap instead of sticking at +-pi (else the second
+            # elbow branch of a 2R arm is only found from a thin band of starts)
+            wrap = (hi - lo) >= 2 * np.pi - 1e-3
+            qa = q[arm]
+            qa[wrap] = (qa[wrap] - lo[wrap]) % (2 * np.pi) + lo[wrap]
+            q[arm] = np.clip(qa, lo, hi)
+    t = kin.fk(q)
+    ep = float(np.linalg.norm(p - t[:3, 3]))
+    eo = _rot_angle(rot.T @ t[:3, :3]) if rot is not None else 0.0
+    return q, (ep, eo)

@@ -1,0 +1,304 @@
+"""IK round trips: random reachable targets from FK, solved back, every solution checked by FK."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from roarmctl.errors import InputError, UnreachableError
+from roarmctl.robot.ik import _dls_solve, solve_ik
+from roarmctl.robot.loader import load_robot
+from roarmctl.robot.model import rpy_from_matrix, transform
+
+ROARM = load_robot("roarm_m3_pro")
+UR10 = load_robot("ur10")
+
+
+def _pitch(t: np.ndarray) -> float:
+    """Pitch of the approach axis below the horizontal, in the plane through the base axis and the TCP."""
+    a, p = t[:3, 0], t[:3, 3]
+    u = p[:2] / np.hypot(p[0], p[1])
+    return math.atan2(-a[2], a[0] * u[0] + a[1] * u[1])
+
+
+def _wrapdiff(a, b):
+    return np.abs(np.angle(np.exp(1j * (np.asarray(a) - np.asarray(b)))))
+
+
+def _check_all(robot, sols, p, rot=None, pitch=None):
+    assert sols, "no solutions"
+    for q in sols:
+        assert q.shape == (robot.dof,)
+        assert robot.within_limits(q)
+        t = robot.kin.fk(q)
+        assert np.linalg.norm(t[:3, 3] - p) <= 1e-6
+        if rot is not None:
+            assert np.linalg.norm(t[:3, :3] - rot) <= 3e-5
+        if pitch is not None:
+            assert _wrapdiff(_pitch(t), pitch) <= 1e-5
+
+
+# ------------------------------------------------------------------------------------ RoArm
+def _random_roarm(rng, n):
+    lo, hi = ROARM.lower[:5], ROARM.upper[:5]
+    return rng.uniform(lo, hi, size=(n, 5))
+
+
+def test_roarm_round_trip_pitch_roll():
+    rng = np.random.default_rng(7)
+    for qa in _random_roarm(rng, 300):
+        t = ROARM.kin.fk(qa)
+        p, pitch = t[:3, 3], _pitch(t)
+        sols = solve_ik(ROARM, p, pitch=pitch, roll=qa[4], all_solutions=True)
+        _check_all(ROARM, sols, p, pitch=pitch)
+        assert any(np.max(np.abs(q[:5] - qa)) < 1e-6 for q in sols), (qa, sols)
+        assert all(abs(q[4] - qa[4]) < 1e-9 for q in sols)  # roll is the wrist-roll joint value
+        assert all(q[5] == ROARM.gripper.closed for q in sols)
+
+
+def test_roarm_round_trip_full_orientation():
+    rng = np.random.default_rng(11)
+    for qa in _random_roarm(rng, 150):
+        t = ROARM.kin.fk(qa)
+        sols = solve_ik(ROARM, t[:3, 3], rpy=rpy_from_matrix(t[:3, :3]), all_solutions=True)
+        _check_all(ROARM, sols, t[:3, 3], rot=t[:3, :3])
+        assert any(np.max(np.abs(q[:5] - qa)) < 1e-6 for q in sols)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.floats(0.0, 1.0), min_size=5, max_size=5))
+def test_roarm_round_trip_hypothesis(u):
+    qa = ROARM.lower[:5] + np.array(u) * (ROARM.upper[:5] - ROARM.lower[:5])
+    t = ROARM.kin.fk(qa)
+    if np.hypot(*t[:2, 3]) < 1e-3:
+        return  # on the base axis the pitch's reference direction is the base angle; tested separately
+    sols = solve_ik(ROARM, t[:3, 3], pitch=_pitch(t), roll=qa[4], all_solutions=True, q_ref=qa)
+    _check_all(ROARM, sols, t[:3, 3], pitch=_pitch(t))
+    assert np.max(np.abs(sols[0][:5] - qa)) < 1e-6  # sorted by distance to q_ref: the original first
+
+
+def test_roarm_position_only_searches_pitch():
+    rng = np.random.default_rng(3)
+    for qa in _random_roarm(rng, 60):
+        p = ROARM.kin.fk(qa)[:3, 3]
+        sols = solve_ik(ROARM, p, all_solutions=True)
+        _check_all(ROARM, sols, p)
+
+
+def test_roarm_top_down_branches():
+    # 25 cm in front, 5 cm above the desk, pointing straight down: the forward branch exists
+    p = np.array([0.25, 0.0, 0.05])
+    sols = solve_ik(ROARM, p, pitch=math.pi / 2, all_solutions=True)
+    _check_all(ROARM, sols, p, pitch=math.pi / 2)
+    for q in sols:
+        a = ROARM.kin.fk(q)[:3, 0]
+        assert a[2] == pytest.approx(-1.0, abs=1e-5)  # approach axis straight down
+    best = solve_ik(ROARM, p, pitch=math.pi / 2)
+    assert len(best) == 1
+
+
+def test_roarm_home_pitch_zero():
+    home = ROARM.named_poses["home"]
+    t = ROARM.kin.fk(home)
+    sols = solve_ik(ROARM, t[:3, 3], pitch=0.0, q_ref=home, all_solutions=True)
+    assert np.max(np.abs(sols[0] - home)) < 1e-6
+
+
+def test_roarm_flipped_branch_leans_back():
+    # Elbow folded, wrist bent: the same TCP position and approach axis are also reached with the
+    # base turned by pi and the shoulder leaning back (found by sampling; about 1 target in 4).
+    qa = np.array([-0.47, 0.38, 2.94, 1.41, 0.0])
+    t = ROARM.kin.fk(qa)
+    sols = solve_ik(ROARM, t[:3, 3], pitch=_pitch(t), all_solutions=True)
+    bases = {round(float(np.angle(np.exp(1j * q[0]))), 3) for q in sols}
+    assert len(bases) == 2, sols
+    flipped = [q for q in sols if abs(np.angle(np.exp(1j * (q[0] - qa[0] - np.pi)))) < 1e-6]
+    assert flipped and flipped[0][1] < 0  # leaning back
+    _check_all(ROARM, sols, t[:3, 3], pitch=_pitch(t))
+
+
+def test_roarm_gripper_from_q_ref():
+    qa = np.array([0.1, 0.2, 1.0, 0.4, 0.3, 1.2])
+    t = ROARM.kin.fk(qa)
+    sols = solve_ik(ROARM, t[:3, 3], pitch=_pitch(t), q_ref=qa)
+    assert sols[0][5] == 1.2 and sols[0][4] == pytest.approx(0.3)
+
+
+def test_roarm_out_of_reach_message():
+    with pytest.raises(UnreachableError) as ei:
+        solve_ik(ROARM, [0.7, 0.1, 0.2], pitch=0.0)
+    assert ei.value.reason == "out_of_reach"
+    assert "from the shoulder axis; the arm reaches 0.55" in ei.value.message
+
+
+def test_roarm_out_of_reach_for_this_pitch():
+    home = ROARM.kin.fk(ROARM.named_poses["home"])[:3, 3]
+    with pytest.raises(UnreachableError) as ei:
+        solve_ik(ROARM, home, pitch=math.pi / 2)  # straight down at full horizontal stretch
+    assert ei.value.reason == "out_of_reach" and "beyond" in ei.value.message
+    with pytest.raises(UnreachableError) as ei:
+        solve_ik(ROARM, [0.1, 0.0, 0.55], pitch=0.0)  # high above the shoulder, tool horizontal
+    assert ei.value.reason == "out_of_reach"
+
+
+def test_roarm_joint_limit():
+    # 8 cm in front, 5 cm above the desk, tool horizontal: reachable in the plane, but the wrist
+    # would have to bend beyond +-90 deg (top-down works there, see test_roarm_top_down_branches)
+    with pytest.raises(UnreachableError) as ei:
+        solve_ik(ROARM, [0.08, 0.0, 0.05], pitch=0.0)
+    assert ei.value.reason == "joint_limit"
+    assert "outside" in ei.value.message and "deg" in ei.value.message
+    assert solve_ik(ROARM, [0.08, 0.0, 0.05], pitch=math.pi / 2)
+
+
+def test_roarm_orientation_not_achievable():
+    # approach axis horizontal but sideways (along +y) for a target straight ahead: not in the arm's plane
+    with pytest.raises(UnreachableError) as ei:
+        solve_ik(ROARM, [0.3, 0.0, 0.2], rpy=[0.0, 0.0, math.pi / 2])
+    assert ei.value.reason == "orientation"
+    assert "5-joint" in ei.value.message
+
+
+def test_pitch_and_rpy_together_rejected():
+    with pytest.raises(InputError):
+        solve_ik(ROARM, [0.3, 0.0, 0.2], pitch=0.0, rpy=[0, 0, 0])
+
+
+# ------------------------------------------------------------------------------------ UR10
+CASE_C = np.radians([30, 45, 26, 50, 60, 80])
+CASE_C_SET = np.radians([  # SEEDS_DIGEST 1.8-C (2-decimal rounding)
+    [30.00, 45.00, 26.00, 50.00, 60.00, -280.00],
+    [30.00, 70.08, -26.00, 76.92, 60.00, -280.00],
+    [30.00, 28.77, 72.95, -160.72, -60.00, -100.00],
+    [30.00, 98.77, -72.95, -84.82, -60.00, -100.00],
+    [175.03, 82.09, 66.85, -65.00, 131.71, -58.85],
+    [175.03, 146.30, -66.85, 4.48, 131.71, -58.85],
+    [175.03, 106.62, 36.99, -239.67, -131.71, -238.85],
+    [175.03, 142.27, -36.99, -201.35, -131.71, -238.85],
+])
+
+
+def _ur_solve(q):
+    t = UR10.kin.fk(q)
+    return t, solve_ik(UR10, t[:3, 3], rpy=rpy_from_matrix(t[:3, :3]), all_solutions=True)
+
+
+def test_ur10_case_c_eight_solutions():
+    t, sols = _ur_solve(CASE_C)
+    assert len(sols) == 8
+    _check_all(UR10, sols, t[:3, 3], rot=t[:3, :3])
+    for expected in CASE_C_SET:
+        assert any(np.max(_wrapdiff(q, expected)) < math.radians(0.006) for q in sols), np.degrees(expected)
+
+
+def test_ur10_case_b_unique():
+    q = np.radians([45, 90, 0, -90, 0, 60])
+    t, sols = _ur_solve(q)
+    assert len(sols) == 1
+    assert np.max(_wrapdiff(sols[0], q)) < 1e-6
+
+
+def test_ur10_zero_pose_two_branches():
+    t, sols = _ur_solve(np.zeros(6))
+    _check_all(UR10, sols, t[:3, 3], rot=t[:3, :3])
+    assert any(np.max(_wrapdiff(q, np.radians([164.24, 180, 0, 180, -164.24, 0]))) < math.radians(0.01) for q in sols)
+
+
+def test_ur10_random_round_trip_matches_numerical_count():
+    rng = np.random.default_rng(5)
+    for i in range(120):
+        qa = rng.uniform(-np.pi, np.pi, 6)
+        t, sols = _ur_solve(qa)
+        _check_all(UR10, sols, t[:3, 3], rot=t[:3, :3])
+        assert any(np.max(_wrapdiff(q, qa)) < 1e-6 for q in sols)
+        assert len(sols) in (2, 4, 6, 8)
+    # where the closed form finds fewer than 8, many random DLS restarts find no more
+    qa = rng.uniform(-np.pi, np.pi, 6)
+    for _ in range(50):
+        t, sols = _ur_solve(qa)
+        if len(sols) < 8:
+            break
+        qa = rng.uniform(-np.pi, np.pi, 6)
+    found = _dls_solve(UR10, t[:3, 3], t[:3, :3], None, True, restarts=80)
+    distinct = []
+    for q in found:
+        if all(np.max(_wrapdiff(q, o)) > 1e-4 for o in distinct):
+            distinct.append(q)
+    assert len(distinct) <= len(sols)
+
+
+# ------------------------------------------------------------------------------------ DLS
+@pytest.mark.parametrize("name", ["planar_2r", "scara_2r"])
+def test_dls_two_link_both_elbows(name):
+    r = load_robot(name)
+    rng = np.random.default_rng(1)
+    for _ in range(15):
+        qa = rng.uniform(r.lower * 0.9, r.upper * 0.9)
+        if abs(math.sin(qa[1])) < 0.1:
+            continue
+        p = r.kin.fk(qa)[:3, 3]
+        sols = solve_ik(r, p, all_solutions=True, q_ref=qa)
+        _check_all(r, sols, p)
+        assert np.max(np.abs(sols[0] - qa)) < 1e-6
+        # the mirror-elbow solution, when within limits, is found too
+        mirror = [s for s in sols if np.sign(s[1]) != np.sign(qa[1])]
+        l1, l2 = (0.4, 0.3) if name == "scara_2r" else (1.0, 1.0)
+        q2m = -qa[1]
+        q1m = math.atan2(*(_planar_xy(r, p)[::-1])) - math.atan2(l2 * math.sin(q2m), l1 + l2 * math.cos(q2m))
+        if r.within_limits(np.array([np.angle(np.exp(1j * q1m)), q2m]), tol=-1e-3):
+            assert mirror
+
+
+def _planar_xy(r, p):
+    return (p[0], p[2]) if r.name == "planar_2r" else (p[0], p[1])
+
+
+def test_dls_ur10_full_pose_and_position_only():
+    qa = np.radians([10, 30, 40, -20, 50, 10])
+    t = UR10.kin.fk(qa)
+    sols = _dls_solve(UR10, t[:3, 3], t[:3, :3], None, False)
+    _check_all(UR10, sols, t[:3, 3], rot=t[:3, :3])
+    sols = solve_ik(UR10, t[:3, 3])  # position only -> DLS
+    _check_all(UR10, sols, t[:3, 3])
+
+
+def test_dls_deterministic():
+    r = load_robot("scara_2r")
+    p = r.kin.fk([0.3, 0.9])[:3, 3]
+    a = solve_ik(r, p, all_solutions=True)
+    b = solve_ik(r, p, all_solutions=True)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))
+
+
+def test_dls_out_of_reach_and_joint_limit():
+    r = load_robot("scara_2r")
+    with pytest.raises(UnreachableError) as ei:
+        solve_ik(r, [0.9, 0.0, 0.0])
+    assert ei.value.reason == "out_of_reach" and "reaches 0.700 m" in ei.value.message
+    # behind the base: the elbow would have to fold beyond 130 deg / the shoulder beyond 110 deg
+    with pytest.raises(UnreachableError) as ei:
+        solve_ik(r, [-0.5, 0.0, 0.0])
+    assert ei.value.reason == "joint_limit"
+
+
+def test_dls_orientation():
+    r = load_robot("scara_2r")
+    p = r.kin.fk([0.3, 0.9])[:3, 3]
+    with pytest.raises(UnreachableError) as ei:
+        solve_ik(r, p, rpy=[0.5, 0.0, 0.0])  # tilted tool: a planar arm cannot tilt
+    assert ei.value.reason == "orientation"
+
+
+def test_pitch_rejected_for_non_roarm():
+    with pytest.raises(InputError):
+        solve_ik(load_robot("scara_2r"), [0.5, 0, 0], pitch=0.3)
+
+
+def test_transform_helper_consistency():
+    # the rpy the tests feed back is the one FK reports
+    t = UR10.kin.fk(CASE_C)
+    assert np.allclose(transform(rpy=rpy_from_matrix(t[:3, :3]))[:3, :3], t[:3, :3], atol=1e-12)
