@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Optional
 
@@ -19,7 +20,7 @@ def run_planner(plan: Path, seed: Optional[int], quiet: bool):
     """Plan with a rich progress display on stderr (none when ``quiet``); returns the PlanResult."""
     from roarmctl.motion.pipeline import plan_file
 
-    if quiet:
+    if quiet or not sys.stderr.isatty():  # no live display in pipes and logs
         return plan_file(plan, seed=seed)
     from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 

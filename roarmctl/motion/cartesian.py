@@ -21,7 +21,7 @@ def cartesian_line(
     *,
     pitch: float,
     roll: float | None = None,
-    step: float = 0.002,
+    step: float = 0.005,
     label: str = "line",
 ) -> np.ndarray:
     """Joint waypoints (K, dof) whose TCP runs straight from FK(q_start) to ``p_goal`` (m).

@@ -77,11 +77,21 @@ def plan_file(path: str | Path, seed: int | None = None, progress: ProgressFn | 
 
     path = Path(path)
     plan = load_plan(path)  # form first, so typos are reported before anything heavy
+    load_planning_libraries()
     robot = load_robot(_robot_spec(plan))
     plan = load_plan(path, named_poses=list(robot.named_poses))
     if seed is not None:
         plan.planner.seed = seed
     return Planner(plan, robot, progress).run()
+
+
+def load_planning_libraries() -> None:
+    """Import toppra (about 0.5 s, mostly scipy), OMPL and FCL up front, so stage timings measure work, not imports."""
+    import fcl  # noqa: F401
+    import toppra  # noqa: F401
+    import toppra.algorithm  # noqa: F401
+    import toppra.constraint  # noqa: F401
+    from ompl import base, geometric  # noqa: F401
 
 
 def _robot_spec(plan: Plan) -> str:
@@ -291,7 +301,9 @@ class Planner:
     def _set_state(self, gripper: float | None, grasp_target: str | None = None) -> None:
         if gripper is not None:
             self.checker.set_gripper(float(gripper))
-        self.checker.set_grasp_target(grasp_target if grasp_target is not None else self.held)
+        # A held object is attached to the hand (the checker ignores its contact with the jaws);
+        # a grasp target is an object in the scene that the jaws may touch.
+        self.checker.set_grasp_target(grasp_target if grasp_target != self.held else None)
 
     def _realise(self, step: _Step, q: np.ndarray) -> TimedPath:
         """Plan (if free), time and re-check one step starting at ``q``; update the world state."""

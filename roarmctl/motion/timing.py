@@ -102,7 +102,7 @@ def time_parameterise(
         ]
         if tcp_ok:
             constraints.append(_tcp_speed_constraint(tcp_velocity_per_ds, max_tcp_speed * safety))
-        n_grid = int(np.clip(30 * len(wp), 100, 1500))
+        n_grid = int(np.clip(10 * len(wp), 100, 800))
         gridpoints = np.linspace(0.0, ss[-1], n_grid + 1)
         instance = algo.TOPPRA(constraints, path, gridpoints=gridpoints, parametrizer="ParametrizeConstAccel")
         traj = instance.compute_trajectory(0.0, 0.0)

@@ -89,8 +89,11 @@ def solve_ik(
     rot = None if rpy is None else transform(rpy=_vec3(rpy, "rpy"))[:3, :3]
     qr = None if q_ref is None else robot.full_q(np.asarray(q_ref, dtype=float))
     model = robot.singularity_model or ""
-    if model == "roarm5":
-        sols = _RoarmIK(robot).solve(p, pitch, roll, rot, qr)
+    if model == "roarm5" or robot.name == "roarm_m3_pro":
+        solver = getattr(robot, "_roarm_ik", None)
+        if solver is None:  # geometry read once per loaded robot
+            solver = robot._roarm_ik = _RoarmIK(robot)
+        sols = solver.solve(p, pitch, roll, rot, qr)
     else:
         if pitch is not None or roll is not None:
             raise InputError(f"pitch/roll apply to the RoArm only; give rpy for {robot.name}")

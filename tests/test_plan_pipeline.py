@@ -1,0 +1,228 @@
+"""`roarmctl plan` end to end, verified independently of the planner.
+
+Every bundled example plan is planned once (module fixture); the written trajectory files are
+then checked with means the planner does not use: python-fcl called directly on boxes built from
+the robot description and the generic (non-lean) FK at 5x the output rate, the plan's own target
+coordinates, finite differences of FK for the TCP speed, and the scaled limits.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import fcl
+import numpy as np
+import pytest
+
+from roarmctl.motion.trajectory import load_trajectory
+from roarmctl.plan.schema import PickTask, PlaceTask, load_plan
+from roarmctl.robot.loader import load_robot
+
+ROOT = Path(__file__).resolve().parents[1]
+PLANS = sorted((ROOT / "plans").glob("*.yaml"))
+
+
+def roarmctl(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "roarmctl", *args], capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def planned(tmp_path_factory) -> dict[str, tuple[Path, dict]]:
+    out = {}
+    tmp = tmp_path_factory.mktemp("plans")
+    for plan in PLANS:
+        target = tmp / f"{plan.stem}.traj.json"
+        proc = roarmctl("plan", str(plan), "-o", str(target), "--json")
+        assert proc.returncode == 0, proc.stderr
+        out[plan.stem] = (target, json.loads(proc.stdout))
+    return out
+
+
+def test_every_example_plan_is_planned(planned):
+    assert {p.stem for p in PLANS} >= {"pick_place", "obstacle", "multi_object"}
+    for name, (path, summary) in planned.items():
+        assert summary["ok"] and Path(summary["output"]) == path and path.is_file()
+        traj = load_trajectory(path)
+        assert summary["duration"] == pytest.approx(traj.duration)
+        assert traj.times[0] == 0.0 and np.all(np.diff(traj.times) > 0)
+        assert np.allclose(traj.velocities[[0, -1]], 0.0)
+
+
+def _box(size) -> fcl.CollisionObject:
+    return fcl.CollisionObject(fcl.Box(*size), fcl.Transform())
+
+
+def _scene_objects(scene: dict, roles: tuple[str, ...]) -> list[tuple[str, str, fcl.CollisionObject]]:
+    from roarmctl.robot.model import transform
+
+    out = []
+    for item in scene["items"]:
+        if item["role"] not in roles:
+            continue
+        if item["shape"] == "box":
+            geom = fcl.Box(*item["size"])
+        elif item["shape"] == "cylinder":
+            geom = fcl.Cylinder(item["radius"], item["length"])
+        else:
+            geom = fcl.Sphere(item["radius"])
+        t = transform(item["xyz"], item["rpy"])
+        out.append((item["name"], item["role"], fcl.CollisionObject(geom, fcl.Transform(t[:3, :3], t[:3, 3]))))
+    return out
+
+
+def _first_contact(robot, q: np.ndarray, scene: dict) -> tuple[float, str] | None:
+    """Arm links vs table and obstacles, python-fcl directly, generic FK, no padding."""
+    frames = robot.kin.link_frames(q)
+    statics = _scene_objects(scene, ("table", "obstacle"))
+    links = [(s, _box(s.size)) for s in robot.collision if s.kind == "box"]
+    assert len(links) == len(robot.collision)
+    for k in range(len(q)):
+        for shape, obj in links:
+            if shape.link in ("world", "base_link", "link1"):
+                continue  # stands on the table by construction
+            t = frames[k, robot.kin.link_index[shape.link]] @ shape.origin
+            obj.setTransform(fcl.Transform(t[:3, :3], t[:3, 3]))
+            for name, _, other in statics:
+                if fcl.collide(obj, other, fcl.CollisionRequest(), fcl.CollisionResult()):
+                    return k, f"{shape.name} hits {name}"
+    return None
+
+
+def _fine(q: np.ndarray, substeps: int) -> np.ndarray:
+    t = np.linspace(0, len(q) - 1, (len(q) - 1) * substeps + 1)
+    i = np.minimum(t.astype(int), len(q) - 2)
+    f = (t - i)[:, None]
+    return q[i] * (1 - f) + q[i + 1] * f
+
+
+@pytest.mark.parametrize("name", ["pick_place", "obstacle", "multi_object"])
+def test_samples_are_within_limits_and_collision_free(planned, name):
+    traj = load_trajectory(planned[name][0])
+    robot = load_robot(traj.robot)
+    assert np.all(traj.positions >= robot.lower - 1e-9) and np.all(traj.positions <= robot.upper + 1e-9)
+    vmax = np.array(traj.limits["velocity"]) * traj.limits["velocity_scale"]
+    amax = np.array(traj.limits["acceleration"]) * traj.limits["acceleration_scale"]
+    assert np.allclose(vmax, robot.velocity_limits * load_plan(ROOT / "plans" / f"{name}.yaml").limits.velocity_scale)
+    assert np.all(np.abs(traj.velocities) <= vmax + 1e-6)
+    assert np.all(np.abs(traj.accelerations) <= amax + 1e-6)
+    # finer than the planner's own 4x re-check, and with other code
+    hit = _first_contact(robot, _fine(traj.positions, 5), traj.scene)
+    assert hit is None, f"{name}: collision at fine sample {hit}"
+
+
+def test_the_obstacle_forces_a_detour(planned):
+    """In obstacle.yaml the wall stands between pick and place: the TCP must pass above or around it."""
+    traj = load_trajectory(planned["obstacle"][0])
+    robot = load_robot(traj.robot)
+    wall = next(i for i in traj.scene["items"] if i["name"] == "wall")
+    tcp = robot.kin.fk(traj.positions)[:, :3, 3]
+    crossing = np.abs(tcp[:, 1] - wall["xyz"][1]) < 0.01  # the TCP passes the wall's plane y = 0
+    assert crossing.any()
+    top = wall["xyz"][2] + wall["size"][2] / 2
+    radial = np.hypot(tcp[crossing, 0], tcp[crossing, 1])
+    front = wall["xyz"][0] - wall["size"][0] / 2
+    back = wall["xyz"][0] + wall["size"][0] / 2
+    assert np.all((tcp[crossing, 2] > top) | (radial < front) | (radial > back))
+
+
+@pytest.mark.parametrize("name", ["pick_place", "obstacle", "multi_object"])
+def test_tcp_is_at_the_targets_at_grasp_and_release(planned, name):
+    plan = load_plan(ROOT / "plans" / f"{name}.yaml")
+    traj = load_trajectory(planned[name][0])
+    robot = load_robot(traj.robot)
+    objects = {o.name: o.pose[:3, 3] for o in plan.objects}
+    expected = []
+    for task in plan.tasks * plan.cycles:
+        if isinstance(task, PickTask):
+            expected.append(("grasp", objects[task.object] + [0, 0, task.grasp_offset]))
+        elif isinstance(task, PlaceTask):
+            expected.append(("release", np.asarray(task.xyz)))
+    assert [e.kind for e in traj.events] == [k for k, _ in expected]
+    for event, (_, target) in zip(traj.events, expected):
+        k = int(np.argmin(np.abs(traj.times - event.time)))
+        tcp = robot.kin.fk(traj.positions[k])[:3, 3]
+        assert np.linalg.norm(tcp - target) < 0.002, (event, tcp, target)
+        # the gripper closes on grasp and opens on release
+    gi = robot.joint_index(robot.gripper.joint)
+    for event in traj.events:
+        k = int(np.argmin(np.abs(traj.times - event.time)))
+        before = traj.positions[max(k - 30, 0), gi]
+        if event.kind == "grasp":
+            assert traj.positions[k, gi] < before
+        else:
+            assert traj.positions[k, gi] > before
+
+
+def test_cartesian_segments_follow_the_line_within_1mm(planned):
+    for name in ("pick_place", "multi_object"):
+        traj = load_trajectory(planned[name][0])
+        robot = load_robot(traj.robot)
+        lines = [s for s in traj.segments if s.kind == "cartesian"]
+        assert len(lines) >= 4
+        for seg in lines:
+            sel = (traj.times >= seg.start - 1e-9) & (traj.times <= seg.end + 1e-9)
+            p = robot.kin.fk(traj.positions[sel])[:, :3, 3]
+            a, b = p[0], p[-1]
+            d = (b - a) / np.linalg.norm(b - a)
+            off = (p - a) - np.outer((p - a) @ d, d)
+            assert np.max(np.linalg.norm(off, axis=1)) < 0.001, seg.label
+            assert abs(d[2]) > 0.99  # approach and lift are vertical in these plans
+
+
+def test_max_tcp_speed_holds_on_the_samples(planned):
+    traj = load_trajectory(planned["obstacle"][0])
+    robot = load_robot(traj.robot)
+    limit = traj.limits["max_tcp_speed"]
+    assert limit == 0.25
+    p = robot.kin.fk(traj.positions)[:, :3, 3]
+    fd_speed = np.linalg.norm(np.diff(p, axis=0), axis=1) / np.diff(traj.times)
+    assert fd_speed.max() <= limit * 1.01
+    assert fd_speed.max() > 0.5 * limit  # the motion does use the allowance
+
+
+def test_same_seed_same_file_and_seed_option(tmp_path):
+    plan = ROOT / "plans" / "pick_place.yaml"
+    a, b = tmp_path / "a.traj.json", tmp_path / "b.traj.json"
+    assert roarmctl("plan", str(plan), "-o", str(a), "--json", "--seed", "5").returncode == 0
+    assert roarmctl("plan", str(plan), "-o", str(b), "--json", "--seed", "5").returncode == 0
+    assert a.read_bytes() == b.read_bytes()
+    data = json.loads(a.read_text())
+    assert data["plan"]["seed"] == 5 and data["plan"]["sha256"]
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "plan.yaml"
+    path.write_text(text)
+    return path
+
+
+BASE = (ROOT / "plans" / "pick_place.yaml").read_text()
+
+
+def test_unreachable_target_exits_3_naming_the_task(tmp_path):
+    path = _write(tmp_path, BASE.replace("xyz: [0.25, 0.15, 0.02], approach", "xyz: [0.75, 0.15, 0.02], approach"))
+    out = tmp_path / "o.traj.json"
+    proc = roarmctl("plan", str(path), "-o", str(out))
+    assert proc.returncode == 3, proc.stderr
+    assert "task 2 (place" in proc.stderr and "(0.750, 0.150, 0.020)" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_start_in_collision_exits_3(tmp_path):
+    wall = "  obstacles:\n    - {name: slab, shape: box, size: [0.1, 0.1, 0.05], xyz: [0.2, 0.0, 0.36]}\n"
+    path = _write(tmp_path, BASE.replace("objects:", wall + "\nobjects:", 1))
+    proc = roarmctl("plan", str(path), "-o", str(tmp_path / "o.traj.json"))
+    assert proc.returncode == 3, proc.stderr
+    assert "start" in proc.stderr and "slab" in proc.stderr
+
+
+def test_no_path_within_budget_exits_3(tmp_path):
+    # a box over the place target with no opening: the place pose itself is inside it
+    cage = "  obstacles:\n    - {name: cage, shape: box, size: [0.12, 0.12, 0.2], xyz: [0.25, 0.15, 0.1]}\n"
+    path = _write(tmp_path, BASE.replace("objects:", cage + "\nobjects:", 1))
+    proc = roarmctl("plan", str(path), "-o", str(tmp_path / "o.traj.json"))
+    assert proc.returncode == 3, proc.stderr
+    assert "task 2" in proc.stderr and "cage" in proc.stderr
