@@ -6,7 +6,7 @@ stdout, nothing else); without ``--json`` a readable table is printed.
 
 from __future__ import annotations
 
-from typing import Optional
+from typing import Optional, Tuple
 
 import numpy as np
 import typer
@@ -113,3 +113,129 @@ def jacobian(
         ("ellipsoid axes (rows)", _fmt(m.ellipsoid_axes.T, 4)),
         ("singularity", str(out["singularity"])),
     ])
+
+
+def _split_numbers(text: str | None, what: str, deg: bool) -> np.ndarray | None:
+    """'0 0.5 1.2' or '0,0.5,1.2' -> array (rad when ``deg``); None stays None."""
+    if text is None:
+        return None
+    parts = [p for p in text.replace(",", " ").split() if p]
+    return common.parse_numbers(parts, what, deg)
+
+
+@kin_app.command("ik")
+def ik(
+    robot: str = typer.Argument(..., help="Bundled robot name or path to a description."),
+    xyz: Tuple[float, float, float] = typer.Option(..., "--xyz", help="Target TCP position X Y Z in metres (root frame)."),
+    pitch: Optional[float] = typer.Option(
+        None, "--pitch",
+        help="RoArm: approach axis (tool +x) below the horizontal, in the vertical plane through the base axis and "
+             "the target: 0 points away from the base (home pose), 90 deg straight down. Left out: searched."),
+    roll: Optional[float] = typer.Option(
+        None, "--roll", help="RoArm: wrist-roll joint value (turn of the tool about its approach axis); default 0 or --ref's."),
+    rpy: Optional[Tuple[float, float, float]] = typer.Option(
+        None, "--rpy", help="Full target orientation, URDF roll pitch yaw (R = Rz Ry Rx). Not with --pitch/--roll."),
+    ref: Optional[str] = typer.Option(
+        None, "--ref", help="Reference configuration ('0 0 1.57 0 0' or comma-separated): solutions are sorted by "
+                            "distance to it and its gripper value is kept."),
+    all_solutions: bool = typer.Option(False, "--all", help="Print every solution (every branch) instead of the best one."),
+    deg: bool = DEG,
+    json_out: bool = JSON,
+) -> None:
+    """Inverse kinematics: joint vectors (gripper last) that put the TCP at --xyz, each checked by FK.
+
+    Unreachable targets exit with code 3 and say why: out_of_reach, joint_limit or orientation.
+    """
+    from roarmctl.errors import RoarmError, UnreachableError
+    from roarmctl.robot.ik import ORI_TOL, POS_TOL, check_solution, solve_ik
+    from roarmctl.robot.loader import load_robot
+
+    r = load_robot(robot)
+    conv = (lambda v: float(np.radians(v))) if deg else float
+    rpy_rad = None if rpy is None else np.array([conv(v) for v in rpy])
+    q_ref = _split_numbers(ref, "--ref", deg)
+    try:
+        sols = solve_ik(r, np.array(xyz, dtype=float), pitch=None if pitch is None else conv(pitch),
+                        roll=None if roll is None else conv(roll), rpy=rpy_rad, q_ref=q_ref, all_solutions=all_solutions)
+    except UnreachableError as exc:
+        raise UnreachableError(f"unreachable ({exc.reason}): {exc.message}", exc.reason, exc.hint) from None
+    checks = [check_solution(r, q, xyz, rpy_rad) for q in sols]
+    for q, c in zip(sols, checks):  # the library checked already; a failure here is a bug, not an input error
+        if c.position_error > POS_TOL or (c.orientation_error is not None and c.orientation_error > ORI_TOL):
+            raise RoarmError(f"internal error: IK solution {np.round(q, 6).tolist()} misses the target by "
+                             f"{c.position_error:.2e} m; please report this")
+    out = {
+        "robot": r.name,
+        "joint_names": r.joint_names,
+        "target": {"position": list(xyz), "pitch": pitch, "roll": roll, "rpy": None if rpy is None else list(rpy)},
+        "solutions": [_angles_out(q, deg) for q in sols],
+        "position_errors": [c.position_error for c in checks],
+        "orientation_errors": [c.orientation_error for c in checks],
+    }
+    if json_out:
+        common.print_json(out)
+        return
+    from rich.table import Table
+
+    unit = "deg" if deg else "rad"
+    t = Table(title=f"IK of {r.name}: TCP at ({xyz[0]:.4f}, {xyz[1]:.4f}, {xyz[2]:.4f}) m, {len(sols)} solution(s), {unit}",
+              caption=", ".join(f"q{i + 1} = {name}" for i, name in enumerate(r.joint_names)))
+    t.add_column("#")
+    for i in range(r.dof):
+        t.add_column(f"q{i + 1}", justify="right")
+    t.add_column("FK error (m)", justify="right")
+    for k, (q, c) in enumerate(zip(out["solutions"], checks), 1):
+        t.add_row(str(k), *[f"{v:.4f}" for v in q], f"{c.position_error:.1e}")
+    common.console().print(t)
+
+
+@kin_app.command("dynamics")
+def dynamics(
+    robot: str = typer.Argument(..., help="Bundled robot name or path to a description (with inertials)."),
+    q: str = typer.Option(..., "--q", help="Joint positions, space- or comma-separated ('0 0.5 1.2 0 0'); arm joints, the gripper may follow."),
+    qd: Optional[str] = typer.Option(None, "--qd", help="Joint velocities (rad/s, or deg/s with --deg); default 0."),
+    qdd: Optional[str] = typer.Option(None, "--qdd", help="Joint accelerations (rad/s^2, or deg/s^2 with --deg); default 0."),
+    deg: bool = DEG,
+    json_out: bool = JSON,
+) -> None:
+    """Inverse dynamics (recursive Newton-Euler, gravity 9.81 m/s^2 along -z): tau, mass matrix, gravity.
+
+    tau = M(q) qdd + C(q, qd) qd + G(q), in N m (N for prismatic joints) for every actuated joint. --deg
+    changes the units of --q/--qd/--qdd only; torques and the mass matrix stay SI (per radian).
+    """
+    from roarmctl.robot.dynamics import coriolis_vector, gravity_vector, inverse_dynamics, mass_matrix
+    from roarmctl.robot.loader import load_robot
+
+    r = load_robot(robot)
+    qv = _split_numbers(q, "--q", deg)
+    n = qv.size
+    qdv = _split_numbers(qd, "--qd", deg) if qd is not None else np.zeros(n)
+    qddv = _split_numbers(qdd, "--qdd", deg) if qdd is not None else np.zeros(n)
+    tau = inverse_dynamics(r, qv, qdv, qddv)
+    full = r.full_q(qv)
+    out = {
+        "robot": r.name,
+        "joint_names": r.joint_names,
+        "q": _angles_out(full, deg),
+        "tau": tau,
+        "mass_matrix": mass_matrix(r, full),
+        "gravity": gravity_vector(r, full),
+        "coriolis": coriolis_vector(r, full, qdv if qdv.size == r.dof else _pad(r, qdv)),
+    }
+    if json_out:
+        common.print_json(out)
+        return
+    _table(f"Inverse dynamics of {r.name} (SI units)", [
+        ("joints", ", ".join(r.joint_names)),
+        (f"q ({'deg' if deg else 'rad'})", _fmt(out["q"], 4)),
+        ("tau (N m)", _fmt(tau, 6)),
+        ("gravity G(q) (N m)", _fmt(out["gravity"], 6)),
+        ("coriolis C(q,qd) qd (N m)", _fmt(out["coriolis"], 6)),
+        ("mass matrix M(q)", _fmt(out["mass_matrix"], 6)),
+    ])
+
+
+def _pad(r, v: np.ndarray) -> np.ndarray:
+    out = np.zeros(r.dof)
+    out[r.arm_indices] = v
+    return out

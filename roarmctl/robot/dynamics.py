@@ -35,7 +35,8 @@ def _complete(robot: Robot, v, what: str, is_position: bool) -> np.ndarray:
         out = np.zeros(robot.dof)
         out[robot.arm_indices] = a
         return out
-    raise InputError(f"{what}: {robot.name} takes {robot.arm_dof} or {robot.dof} values, got {a.size}")
+    counts = f"{robot.arm_dof} or {robot.dof}" if robot.arm_dof != robot.dof else f"{robot.dof}"
+    raise InputError(f"{what}: {robot.name} takes {counts} values, got {a.size}")
 
 
 def _require_inertials(robot: Robot) -> None:
