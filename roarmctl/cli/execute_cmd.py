@@ -1,5 +1,295 @@
-"""CLI commands of this area (being written)."""
+"""``roarmctl execute`` (stream a trajectory to the arm, the simulator, or a file), ``sim-device``
+(the firmware simulator on a pseudo-terminal) and ``ports`` (serial ports, likely arm marked)."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from roarmctl.cli import common
+
+STRATEGY_HELP = "Streaming strategy: timed (default), timed-shared, timed-acc, dense, dense-ahead (see bench/bench_stream.py)."
 
 
-def register(app) -> None:
-    """Add this module's commands to ``app``."""
+def register(app: typer.Typer) -> None:
+    app.command("execute")(execute)
+    app.command("sim-device")(sim_device)
+    app.command("ports")(ports)
+
+
+def default_log_path(traj: Path) -> Path:
+    name = traj.name
+    stem = name[: -len(".traj.json")] if name.endswith(".traj.json") else traj.stem
+    return traj.with_name(f"{stem}.exec.json")
+
+
+# --------------------------------------------------------------------------- execute
+def execute(
+    traj_path: Path = typer.Argument(..., metavar="TRAJ", help="Trajectory file (*.traj.json) from 'roarmctl plan'."),
+    port: Optional[str] = typer.Option(None, "--port", "-p", help="Serial port of the arm (/dev/ttyUSB0, COM3, or a pyserial URL)."),
+    sim: bool = typer.Option(False, "--sim", help="Run against the built-in firmware simulator (over a real pseudo-terminal)."),
+    output: Optional[Path] = typer.Option(None, "--output", "-o", help="Write the commands that would be sent (JSON lines) instead; no device."),
+    rate: float = typer.Option(50.0, "--rate", help="Commands per second (at most 90 at 115200 baud)."),
+    speed_scale: float = typer.Option(1.0, "--speed-scale", help="Slow the motion down: 0.5 = half speed (0 < S <= 1)."),
+    strategy: str = typer.Option("timed", "--strategy", help=STRATEGY_HELP),
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask for confirmation before moving the arm."),
+    move_to_start: bool = typer.Option(False, "--move-to-start", help="If the arm is not at the first point, go there slowly first."),
+    max_error: float = typer.Option(30.0, "--max-error", help="Abort (and hold) when the TCP tracking error exceeds this (mm)."),
+    log: Optional[Path] = typer.Option(None, "--log", help="Execution log (JSON); default: next to TRAJ as NAME.exec.json."),
+    json_out: bool = typer.Option(False, "--json", help="Print one JSON summary object on stdout, nothing else."),
+) -> None:
+    """Stream a trajectory to the RoArm (--port), the simulator (--sim), or a file (--output).
+
+    Before moving it checks the arm answers like an M3, that it stands at the trajectory's first
+    point, and asks for confirmation (real arms only) unless --yes. Ctrl-C makes the arm hold where
+    it is (torque stays on) and exits 130; a lost link exits 4. Every command and every feedback
+    line is written to the execution log.
+    """
+    from roarmctl.device.streamer import STRATEGIES, StreamConfig, build_schedule
+    from roarmctl.errors import InputError
+    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.robot.loader import load_robot
+
+    chosen = [n for n, v in (("--port", port), ("--sim", sim or None), ("--output", output)) if v]
+    if len(chosen) != 1:
+        raise InputError("give exactly one of --port PORT, --sim, --output FILE" + (f" (got {', '.join(chosen)})" if chosen else ""),
+                         "e.g. roarmctl execute pick_place.traj.json --port /dev/ttyUSB0")
+    if strategy not in STRATEGIES:
+        raise InputError(f"--strategy: unknown '{strategy}'", f"choose one of {', '.join(STRATEGIES)}")
+    if not max_error > 0:
+        raise InputError("--max-error: must be positive (mm)")
+    traj = load_trajectory(traj_path)
+    robot = load_robot(traj.robot)
+    if list(robot.joint_names) != list(traj.joint_names):
+        raise InputError(f"{traj_path}: joint_names do not match robot '{robot.name}'",
+                         f"expected {', '.join(robot.joint_names)}")
+    cfg = StreamConfig(rate=rate, speed_scale=speed_scale, strategy=strategy, max_error=max_error / 1e3,
+                       move_to_start=move_to_start)
+    if output is not None:
+        schedule = build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy)
+        _write_output(output, schedule)
+        info = {"output": str(output), "commands": sum(len(tk.commands) for tk in schedule), "ticks": len(schedule), "duration": schedule[-1].t, "rate": rate,
+                "strategy": strategy, "speed_scale": speed_scale}
+        if json_out:
+            common.print_json(info)
+        else:
+            common.console(stderr=True).print(f"wrote {info['commands']} commands ({schedule[-1].t:.2f} s at {rate:g} Hz) to {output}")
+        return
+    build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy)  # validate before opening
+    if port is not None and not yes and not sys.stdin.isatty():
+        raise InputError("refusing to ask for confirmation: stdin is not a terminal", "pass --yes to execute without asking")
+    _run(traj, traj_path, robot, cfg, port, sim, yes, log or default_log_path(traj_path), json_out)
+
+
+def _write_output(path: Path, schedule) -> None:
+    from roarmctl.device.protocol import encode
+    from roarmctl.fileio import atomic_write_bytes
+
+    lines = [b'{"t":' + repr(round(tk.t, 6)).encode() + b',"cmd":' + encode(cmd)[:-1] + b"}\n"
+             for tk in schedule for cmd in tk.commands]
+    atomic_write_bytes(path, b"".join(lines))
+
+
+def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path: Path, json_out: bool) -> None:
+    from roarmctl.device.link import Link
+    from roarmctl.device.streamer import Streamer, write_log
+    from roarmctl.errors import RoarmError
+
+    simulator = None
+    if sim:
+        from roarmctl.device.simulator import PtySimulator, SimConfig
+
+        sys.setswitchinterval(0.0005)  # the simulator thread shares the GIL with the real-time loop
+        simulator = PtySimulator(SimConfig()).start()
+        port = simulator.path
+    err = common.console(stderr=True)
+    live = _Display(err, len(robot.joint_names)) if (err.is_terminal and not json_out) else None
+
+    def confirm(message: str) -> bool:
+        if yes or sim:
+            return True
+        return typer.confirm(message, default=False, err=True)
+
+    link = Link(port)
+    streamer = None
+    result = None
+    try:
+        link.open()
+        link.handshake()
+        streamer = Streamer(link, robot, traj, cfg, on_status=live.update if live else None, confirm=confirm)
+        if live:
+            live.start()
+        try:
+            result = streamer.run()
+        finally:
+            if live:
+                live.stop()
+    except RoarmError as exc:
+        result = getattr(exc, "result", None)
+        raise
+    finally:
+        link.close()
+        if streamer is not None:
+            if result is None:
+                result = streamer.result("failed", "stopped before streaming")
+            write_log(log_path, result.log)
+        if simulator is not None:
+            if result is not None:
+                result.log["simulator"] = _sim_tracking(simulator, robot, traj, cfg, result)
+                write_log(log_path, result.log)
+            simulator.stop()
+    summary = result.summary() | {"log": str(log_path)}
+    if simulator is not None:
+        summary["simulator"] = result.log["simulator"]
+    if json_out:
+        common.print_json(summary)
+        return
+    out = common.console()
+    trk, lat = summary["tracking_mm"], summary["lateness_ms"]
+    out.print(f"[bold green]done[/]: {summary['commands']} commands in {traj.duration / cfg.speed_scale:.2f} s on {port}")
+    out.print(f"schedule lateness p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms, max {lat['max']:.2f} ms")
+    if trk["rms"] is not None:
+        out.print(f"TCP tracking error (feedback): RMS {trk['rms']:.1f} mm, max {trk['max']:.1f} mm over {trk['samples']} samples")
+    if simulator is not None and summary["simulator"]["rms_mm"] is not None:
+        s = summary["simulator"]
+        out.print(f"TCP tracking error (simulator, true): RMS {s['rms_mm']:.2f} mm, max {s['max_mm']:.2f} mm")
+    out.print(f"log: {log_path}")
+
+
+def _sim_tracking(simulator, robot, traj, cfg, result) -> dict:
+    """TCP error of the simulator's true servo positions against the plan, over the motion."""
+    import numpy as np
+
+    from roarmctl.device.streamer import sample
+
+    ts, q, torque = simulator.recording()
+    tt = ts - result.t0
+    m = (tt >= 0) & (tt <= traj.duration / cfg.speed_scale)
+    out = {"rms_mm": None, "max_mm": None, "samples": int(m.sum()), "torque_always_on": bool(torque.all())}
+    if m.any() and not math.isnan(result.t0):
+        plan = sample(traj, tt[m] * cfg.speed_scale)
+        e = np.linalg.norm(robot.kin.fk(q[m])[:, :3, 3] - robot.kin.fk(plan)[:, :3, 3], axis=1) * 1e3
+        out |= {"rms_mm": float(np.sqrt(np.mean(e ** 2))), "max_mm": float(e.max())}
+    return out
+
+
+class _Display:
+    """The live view on stderr: progress, time, lateness, tracking error, commanded vs measured joints."""
+
+    def __init__(self, console, dof: int) -> None:
+        self.console = console
+        self.dof = dof
+        self.live = None
+        self._n = 0
+
+    def start(self) -> None:
+        from rich.live import Live
+
+        self.live = Live(console=self.console, auto_refresh=False, transient=False)
+        self.live.start()
+
+    def stop(self) -> None:
+        if self.live is not None:
+            self.live.stop()
+
+    def update(self, st) -> None:
+        self._n += 1
+        if self.live is None or (self._n % 5 and st.k != st.n - 1):
+            return  # about 10 redraws/s at 50 Hz: drawing costs time the schedule needs
+        import numpy as np
+        from rich.progress_bar import ProgressBar
+        from rich.table import Table
+
+        grid = Table.grid(padding=(0, 2))
+        grid.add_row(ProgressBar(total=st.n, completed=st.k + 1, width=40),
+                     f"{st.t:6.2f} / {st.duration:.2f} s",
+                     f"late {st.lateness * 1e3:5.2f} ms",
+                     "err   -   " if st.error is None else f"err {st.error * 1e3:5.1f} mm")
+        joints = Table("", *[f"j{i + 1}" for i in range(self.dof)], box=None, pad_edge=False)
+        joints.add_row("cmd deg", *[f"{v:7.1f}" for v in np.degrees(st.commanded)])
+        if st.measured is not None:
+            joints.add_row("meas deg", *[f"{v:7.1f}" for v in np.degrees(st.measured)])
+        outer = Table.grid()
+        outer.add_row(grid)
+        outer.add_row(joints)
+        self.live.update(outer, refresh=True)
+
+
+# --------------------------------------------------------------------------- sim-device
+def sim_device(
+    firmware: str = typer.Option("m3-0.84", "--firmware", help="Which firmware to imitate: m3-0.84, m3-2026, m2."),
+    info_print: int = typer.Option(2, "--info-print", help="InfoPrint level at start (factory 2 = continuous feedback)."),
+    boot: bool = typer.Option(True, "--boot/--no-boot", help="Print the boot banner and do the boot move at start."),
+    link: Optional[Path] = typer.Option(None, "--link", help="Also make this symlink to the pseudo-terminal (e.g. /tmp/ttyROARM)."),
+    json_out: bool = typer.Option(False, "--json", help="Print {\"port\": PATH} as JSON."),
+) -> None:
+    """Start the firmware simulator on a pseudo-terminal, print its path, and serve until Ctrl-C.
+
+    Any program can open the path like the arm's /dev/ttyUSB0: roarmctl itself, Waveshare's
+    roarm_sdk, or a terminal (115200 baud, JSON lines).
+    """
+    from roarmctl.device.simulator import PtySimulator, SimConfig
+    from roarmctl.errors import InputError
+
+    if firmware not in ("m3-0.84", "m3-2026", "m2"):
+        raise InputError(f"--firmware: unknown '{firmware}'", "choose m3-0.84, m3-2026 or m2")
+    if info_print not in (0, 1, 2):
+        raise InputError("--info-print: must be 0, 1 or 2")
+    simulator = PtySimulator(SimConfig(firmware=firmware, info_print=info_print, boot=boot)).start()
+    path = simulator.path
+    if link is not None:
+        try:
+            if link.is_symlink():
+                link.unlink()
+            link.symlink_to(simulator.path)
+            path = str(link)
+        except OSError as exc:
+            simulator.stop()
+            raise InputError(f"--link: cannot create {link} ({exc.strerror})") from None
+    if json_out:
+        common.print_json({"port": path, "pty": simulator.path, "firmware": firmware})
+    else:
+        print(path)
+        common.console(stderr=True).print(f"simulating RoArm-M3 firmware {firmware} on {simulator.path}; Ctrl-C to stop")
+    sys.stdout.flush()
+    try:
+        while simulator._thread.is_alive():
+            simulator._thread.join(0.5)
+        if simulator.error is not None:
+            raise simulator.error
+    except KeyboardInterrupt:
+        pass
+    finally:
+        simulator.stop()
+        if link is not None and link.is_symlink():
+            link.unlink()
+
+
+# --------------------------------------------------------------------------- ports
+def ports(json_out: bool = typer.Option(False, "--json", help="Print one JSON object.")) -> None:
+    """List serial ports; the likely arm (CP210x 10C4:EA60, CH340 1A86:7523) is marked."""
+    from roarmctl.device.ports import list_ports
+
+    found = list_ports()
+    if json_out:
+        common.print_json({"ports": [p.as_dict() for p in found]})
+        return
+    if not found:
+        common.console(stderr=True).print("no serial ports found (is the arm plugged in? use its middle USB-C port)")
+        return
+    from rich.table import Table
+
+    t = Table(title="Serial ports")
+    for col in ("", "device", "VID:PID", "description", "stable path"):
+        t.add_column(col)
+    for p in found:
+        d = p.as_dict()
+        t.add_row("[bold green]arm?[/]" if p.likely_arm else "", p.device, d["vid_pid"] or "-",
+                  p.description + (f" [{p.bridge}]" if p.bridge else ""), p.by_id or "-")
+    common.console().print(t)
+    if any(p.likely_arm for p in found):
+        common.console().print("use: roarmctl execute TRAJ --port " + next(p.by_id or p.device for p in found if p.likely_arm))

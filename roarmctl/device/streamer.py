@@ -69,12 +69,16 @@ class Strategy:
     spd: str = "velocity"
     acc: str = "none"
     margin: float = 1.05
+    split_gripper: bool = False
     description: str = ""
 
 
 STRATEGIES = {
-    "timed": Strategy("timed", 1, "velocity", "none",
-                      description="target one interval ahead, spd = needed speed of the fastest joint, no ramp"),
+    "timed": Strategy("timed", 1, "velocity", "none", split_gripper=True,
+                      description="target one interval ahead, spd = needed speed of the fastest arm joint, no ramp; "
+                                  "the gripper gets its own T:101 when it needs more"),
+    "timed-shared": Strategy("timed-shared", 1, "velocity", "none",
+                             description="as timed, but one spd for all six joints (gripper included)"),
     "timed-acc": Strategy("timed-acc", 1, "velocity", "trajectory",
                           description="as timed, but acc from the plan's acceleration"),
     "dense": Strategy("dense", 0, "max", "none", description="target = plan now, spd 0 / acc 0 (full speed)"),
@@ -97,6 +101,11 @@ class Tick:
     t: float
     cmd: dict[str, Any]
     target: np.ndarray
+    extra: list[dict[str, Any]] = field(default_factory=list)  # sent right after ``cmd`` (T:101 gripper)
+
+    @property
+    def commands(self) -> list[dict[str, Any]]:
+        return [self.cmd, *self.extra]
 
 
 def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: float = 1.0,
@@ -126,13 +135,23 @@ def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: floa
     w_to, w_from = wm.to_wire_array(q_to), wm.to_wire_array(q_from)
     ticks = []
     prev_speed = 0.0
+    # the gripper gets its own T:101 when it needs more speed than the arm: one shared spd would
+    # otherwise make every arm joint rush ahead and wait (a staircase) while the gripper moves
+    g = [k for k, w in enumerate(wm.fields) if robot.gripper is not None and w.joint == robot.gripper.joint]
+    arm = [k for k in range(6) if k not in g]
     for k in range(n):
+        extra: list[dict[str, Any]] = []
         if strat.spd == "max":
             spd = 0
         else:
             span = max(t_to[k] - t_from[k], 0.0) / speed_scale
-            need = float(np.max(np.abs(w_to[k] - w_from[k]))) / span if span > 1e-9 else 0.0
+            rates = np.abs(w_to[k] - w_from[k]) / span if span > 1e-9 else np.zeros(6)
+            need = float(np.max(rates[arm if strat.split_gripper else slice(None)]))
             spd = spd_register(need * strat.margin, minimum=50)
+            if strat.split_gripper and g and rates[g[0]] * strat.margin > need:
+                lo, hi = protocol.SAFE_WIRE_RANGE["hand"]
+                extra.append({"T": 101, "joint": 6, "rad": protocol.r4(min(max(w_to[k][g[0]], lo), hi)),
+                              "spd": spd_register(rates[g[0]] * strat.margin, minimum=50), "acc": 0})
         if strat.acc == "none":
             acc = 0
         else:
@@ -142,7 +161,7 @@ def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: floa
             dv = abs(spd / protocol.STEPS_PER_RAD - prev_speed) / dt
             acc = acc_register(max(a, dv) * 1.5, minimum=5)
             prev_speed = spd / protocol.STEPS_PER_RAD
-        ticks.append(Tick(float(ts[k]), wm.command(q_to[k], spd, acc), q_to[k]))
+        ticks.append(Tick(float(ts[k]), wm.command(q_to[k], spd, acc), q_to[k], extra))
     return ticks
 
 
@@ -324,7 +343,7 @@ class Streamer:
             exc_out = DeviceError(exc.message, exc.hint)
         if outcome != "completed":
             self._hold()
-        result = self._result(outcome, message)
+        result = self.result(outcome, message)
         if exc_out is not None:
             exc_out.result = result  # type: ignore[attr-defined]
             raise exc_out
@@ -346,6 +365,8 @@ class Streamer:
             if wait > 0:
                 self.sleep(wait)
             t_sent = link.send(tick.cmd)
+            for extra in tick.extra:
+                link.send(extra)
             self.last_cmd = tick.cmd
             self.sent_lateness.append((k, t_sent - due))
             if k % poll_every == 0:
@@ -393,7 +414,7 @@ class Streamer:
         except DeviceError:
             self.notes.append("hold could not be sent: the link is gone")
 
-    def _result(self, outcome: str, message: str) -> Result:
+    def result(self, outcome: str, message: str) -> Result:
         lat = np.array([x for _, x in self.sent_lateness])
         trk = np.array([e for _, e in self.tracking])
         final = None

@@ -1,0 +1,100 @@
+"""The firmware model alone, with explicit times (deterministic, no threads)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from roarmctl.device.protocol import encode, parse_feedback
+from roarmctl.device.simulator import Firmware, SimConfig, firmware_fk, firmware_ik
+
+BYTE = 1 / 11520
+
+
+def fw(**kw) -> Firmware:
+    return Firmware(SimConfig(info_print=0, **kw), t0=0.0)
+
+
+def feedback(f: Firmware, t: float):
+    f.receive(b'{"T":105}\n', t)
+    f.advance(t + 0.1)
+    lines = [parse_feedback(x) for x in f.pop_output(t + 0.1).split(b"\r\n") if x]
+    return [x for x in lines if x][-1]
+
+
+def test_boot_pose_reads_one_count_off_and_fk_matches_firmware_constants():
+    f = fw()
+    fb = feedback(f, 0.0)
+    c = 2 * math.pi / 4096
+    assert fb.joints["base"] == pytest.approx(c, abs=1e-6)  # middle is 2047, not 2048
+    assert fb.joints["shoulder"] == pytest.approx(-c, abs=1e-6)
+    assert fb.joints["elbow"] == pytest.approx(math.pi / 2, abs=1e-6)
+    assert fb.joints["hand"] == pytest.approx(math.pi, abs=1e-6)
+    assert firmware_fk(0, 0, math.pi / 2, 0)[:3] == pytest.approx((346.16, 0, 223.13), abs=0.01)
+    for q in [(0.3, 0.4, 1.0, 0.5), (-1.0, 0.2, 2.0, -0.7)]:
+        assert firmware_ik(*firmware_fk(*q)) == pytest.approx(q, abs=1e-9)
+
+
+def test_reply_timing_follows_the_byte_rate():
+    f = fw()
+    f.receive(b'{"T":105}\n', 1.0)
+    f.advance(1.05)
+    (t_done, line), = f.out
+    t_in = 1.0 + 10 * BYTE
+    # executed at the first loop tick after the line is in, then len(line) bytes on the wire
+    assert t_in <= t_done - len(line) * BYTE <= t_in + f.cfg.loop_period + 1e-9
+    assert line.endswith(b"}\r\n")
+
+
+def test_trapezoid_with_speed_and_acceleration():
+    f = fw()
+    f.receive(encode({"T": 102, "base": 0.5, "shoulder": 0, "elbow": 1.5708, "wrist": 0, "roll": 0, "hand": math.pi,
+                      "spd": 500, "acc": 10}), 0.0)
+    d = 2047 - round(0.5 / (2 * math.pi) * 4096) - 2047  # -326 steps (base is inverted)
+    v, a = 500.0, 1000.0
+    expected = abs(d) / v + v / a  # cruise + ramps (time of a trapezoid)
+    t_start = 120 * BYTE
+    f.advance(t_start + expected - 0.05)
+    assert f.pos[0] != 2047 + d
+    f.advance(t_start + expected + 0.03)
+    assert f.pos[0] == 2047 + d
+
+
+def test_malformed_lines_dropped_and_missing_keys_read_as_zero():
+    f = fw()
+    f.receive(b'{"T":102,"base":1.0,\n', 0.0)  # broken: dropped silently
+    f.receive(b'garbage\n', 0.0)
+    f.receive(encode({"T": 102, "base": 0.2, "shoulder": 0.1, "elbow": 1.2, "hand": 3.0, "spd": 0, "acc": 0}), 0.0)
+    f.advance(1.0)
+    assert f.out == type(f.out)()  # no reply to anything
+    fb = feedback(f, 1.0)
+    assert fb.joints["base"] == pytest.approx(0.2, abs=2e-3)
+    assert fb.joints["wrist"] == pytest.approx(0.0, abs=2e-3)  # missing wrist drove it to 0
+    assert len(f.received) == 2
+
+
+def test_emergency_stop_drops_torque_and_blocks_for_10s_scaled():
+    f = fw(time_factor=0.1)
+    f.receive(b'{"T":0}\n', 0.0)
+    f.receive(b'{"T":105}\n', 0.01)
+    f.advance(0.5)
+    assert not f.torque and f.pop_output(0.5) == b""  # blocked
+    f.advance(1.2)
+    assert f.torque and b'"T":1051' in f.pop_output(1.2)
+    _, _, torque = f.recording()
+    assert not torque.all()
+
+
+def test_info_print_2_streams_feedback_bandwidth_bound():
+    f = Firmware(SimConfig(info_print=2), t0=0.0)
+    f.advance(1.0)
+    n = len(f.pop_output(1.0).split(b"\r\n")) - 1
+    assert 45 <= n <= 65  # ~190 B lines at 11520 B/s
+
+
+def test_t104_reaches_the_ik_target_and_blocks():
+    f = fw()
+    f.receive(b'{"T":104,"x":300,"y":50,"z":150,"t":0.2,"r":0,"g":3.14,"spd":0.25}\n', 0.0)
+    f.advance(5.0)
+    fb = feedback(f, 5.0)
+    assert fb.xyz == pytest.approx((300, 50, 150), abs=2.0)
