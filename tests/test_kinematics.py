@@ -1,0 +1,204 @@
+"""Forward kinematics against hand-derived values and the seeds' worked examples; Jacobian against FK."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from roarmctl.robot.loader import load_robot
+
+ROARM = load_robot("roarm_m3_pro")
+UR10 = load_robot("ur10")
+P2R = load_robot("planar_2r")
+SCARA = load_robot("scara_2r")
+ALL = [ROARM, UR10, P2R, SCARA]
+
+Z_SHOULDER = 0.0701 + 0.051959  # world -> base_link, base_link -> shoulder axis (URDF)
+
+
+def roarm_by_hand(q) -> np.ndarray:
+    """TCP position of the RoArm from the URDF numbers, as a planar arm turned by the base angle.
+
+    In the arm's plane, angles from vertical (positive forward): upper arm 0.236815 along and
+    0.030002 across, turned by the shoulder s; forearm 0.144586 along, turned by s + e; TCP 0.169081
+    along (0.053653 + 0.115428) and 0.015147 across from the wrist axis, turned by s + e + w.
+    """
+    b, s, e, w = q[:4]
+
+    def seg(along, across, ang):
+        return np.array([along * math.sin(ang) + across * math.cos(ang), along * math.cos(ang) - across * math.sin(ang)])
+
+    r, z = seg(0.236815, 0.030002, s) + seg(0.144586, 0.0, s + e) + seg(0.053653 + 0.115428, 0.015147, s + e + w)
+    return np.array([r * math.cos(b), r * math.sin(b), Z_SHOULDER + z])
+
+
+# ---------------------------------------------------------------------------------- RoArm
+def test_roarm_zero_pose_research_1_2():
+    """RESEARCH.md 1.2: all joints 0, the arm points straight up."""
+    f = ROARM.kin.link_frames(np.zeros(6))
+    at = lambda name: f[ROARM.kin.link_index[name], :3, 3]  # noqa: E731
+    assert np.allclose(at("link2"), [0, 0, 0.122059], atol=1e-6)
+    assert np.allclose(at("link3"), [0.030001, 0, 0.288774 + 0.0701], atol=1e-6)
+    assert np.allclose(at("link4"), [0.030001, 0, 0.433360 + 0.0701], atol=1e-6)
+    assert np.allclose(at("hand_tcp"), [0.045148, 0, 0.672541], atol=1e-6)
+    rot = f[ROARM.kin.tcp_index, :3, :3]
+    assert np.allclose(rot, [[0, 0, -1], [0, 1, 0], [1, 0, 0]], atol=1e-5)  # approach axis +x_tcp points up
+
+
+def test_roarm_named_poses_research_1_2():
+    home = ROARM.kin.fk(ROARM.named_poses["home"])
+    assert np.allclose(home[:3, 3], [0.343668, 0, 0.273628 + 0.0701], atol=2e-6)
+    assert np.allclose(home[:3, :3], np.eye(3), atol=1e-5)  # approach axis horizontal, along +x
+    assert np.allclose(ROARM.kin.fk(ROARM.named_poses["ready"])[:3, 3], [0.27137, 0, 0.14841 + 0.0701], atol=1e-5)
+    assert np.allclose(ROARM.kin.fk(ROARM.named_poses["observe"])[:3, 3], [0.15944, 0, 0.11969 + 0.0701], atol=1e-5)
+
+
+def test_roarm_fk_by_hand_random():
+    """The URDF writes pi/2 as 1.5708 (3.7 urad off), so the hand model agrees to a few micrometres."""
+    rng = np.random.default_rng(0)
+    for q in rng.uniform(ROARM.lower, ROARM.upper, size=(200, 6)):
+        assert np.linalg.norm(ROARM.kin.fk(q)[:3, 3] - roarm_by_hand(q)) < 5e-6
+
+
+def test_roarm_roll_and_gripper_do_not_move_tcp():
+    q = np.array([0.3, 0.4, 1.0, 0.5, 0.0, 0.0])
+    p0 = ROARM.kin.fk(q)[:3, 3]
+    for roll, grip in [(1.0, 0.0), (-2.0, 1.2)]:
+        q2 = q.copy()
+        q2[4], q2[5] = roll, grip
+        assert np.allclose(ROARM.kin.fk(q2)[:3, 3], p0, atol=1e-6)
+
+
+def firmware_fk_mm(q) -> np.ndarray:
+    """RESEARCH.md 2.7: RoArmM3_computePosbyJointRad, z measured from the shoulder axis (mm)."""
+    b, s, e, w = q[:4]
+    l2a, l2b, l3, l4a, l4b = 236.82, 30.00, 144.49, 171.67, 13.69
+    l2, t2 = math.hypot(l2a, l2b), math.atan2(l2b, l2a)
+    le, te = math.hypot(l4a, l4b), math.atan2(l4b, l4a)
+    r = l2 * math.sin(s + t2) + l3 * math.sin(e + s) + le * math.sin(e + s + w + te)
+    z = l2 * math.cos(s + t2) + l3 * math.cos(e + s) + le * math.cos(e + s + w + te)
+    return np.array([r * math.cos(b), r * math.sin(b), z])
+
+
+def test_roarm_fk_matches_firmware_within_3mm():
+    """Our URDF FK vs the firmware's own FK formula over the whole joint range: worst 3.02 mm.
+
+    The two do not define the same TCP: in the wrist frame the firmware's point is 171.67 mm along and
+    13.69 mm across (the "edge" gripper constants), the URDF's hand_tcp 169.081 mm along and
+    15.147 mm across, 2.97 mm apart; the forearm is 144.49 mm vs 144.586 mm (0.1 mm). The worst case
+    is where both add up, hence the bound of 3.05 mm (the issue asks for 3 mm "within the workspace").
+    Signs agree (identity mapping of RESEARCH.md 2.8), which is what this test guards.
+    """
+    assert math.hypot(171.67 - 169.081, 13.69 - 15.147) == pytest.approx(2.97, abs=0.01)
+    grids = [np.linspace(ROARM.lower[i], ROARM.upper[i], n) for i, n in ((1, 13), (2, 13), (3, 13))]
+    s, e, w = (g.ravel() for g in np.meshgrid(*grids, indexing="ij"))
+    b = np.linspace(-3.0, 3.0, s.size)
+    qs = np.zeros((s.size, 6))
+    qs[:, 0], qs[:, 1], qs[:, 2], qs[:, 3] = b, s, e, w
+    ours = ROARM.kin.fk(qs)[:, :3, 3] * 1000.0
+    ours[:, 2] -= Z_SHOULDER * 1000.0
+    worst = max(np.linalg.norm(o - firmware_fk_mm(q)) for o, q in zip(ours, qs))
+    assert 2.9 < worst <= 3.05
+    # the documented spot checks of RESEARCH.md 2.8 (mm, relative to the shoulder axis)
+    home = ROARM.kin.fk([0, 0, math.pi / 2, 0, 0])[:3, 3] * 1000 - [0, 0, Z_SHOULDER * 1000]
+    assert np.allclose(home, [343.67, 0, 221.67], atol=0.01)
+    assert np.allclose(firmware_fk_mm([0, 0, math.pi / 2, 0]), [346.16, 0, 223.13], atol=0.01)
+
+
+# ---------------------------------------------------------------------------------- 2R arms
+def test_planar_2r_by_hand():
+    rng = np.random.default_rng(1)
+    for q in rng.uniform(-math.pi, math.pi, size=(50, 2)):
+        c1, s1, c12, s12 = math.cos(q[0]), math.sin(q[0]), math.cos(q.sum()), math.sin(q.sum())
+        # vertical x-z plane: theta1 from +x toward +z (up)
+        assert np.allclose(P2R.kin.fk(q)[:3, 3], [c1 + c12, 0, s1 + s12], atol=1e-12)
+        assert np.allclose(P2R.kin.fk(q, "link1")[:3, 3], [c1, 0, s1], atol=1e-12)
+
+
+def test_scara_by_hand():
+    q = np.radians([30.0, -45.0])
+    assert np.allclose(SCARA.kin.fk(q)[:3, 3],
+                       [0.4 * math.cos(q[0]) + 0.3 * math.cos(q.sum()), 0.4 * math.sin(q[0]) + 0.3 * math.sin(q.sum()), 0],
+                       atol=1e-12)
+    assert np.allclose(SCARA.lower, np.radians([-110, -130])) and np.allclose(SCARA.upper, np.radians([110, 130]))
+
+
+# ---------------------------------------------------------------------------------- UR10
+UR10_CASES = {  # SEEDS_DIGEST 1.4, mm
+    (0, 0, 0, 0, 0, 0): ([[1, 0, 0], [0, 0, -1], [0, 1, 0]], [1184.5, -256.1, 243.7]),
+    (45, 90, 0, -90, 0, 60): ([[0.3535534, -0.6123724, 0.7071068], [0.3535534, -0.6123724, -0.7071068], [0.8660254, 0.5, 0]],
+                              [181.0900467, -181.0900467, 1428.2]),
+    (30, 45, 26, 50, 60, 80): ([[-0.8449696, 0.5171601, -0.1362786], [-0.3141952, -0.6862252, -0.6560307],
+                                [-0.4327907, -0.5115079, 0.7423287]], [519.9835444, 57.7255263, 1110.6969610]),
+    (60,) * 6: (None, [152.2666, -156.2666, 1038.1071]),
+    (45,) * 6: ([[-0.957107, 0.25, 0.146447], [-0.25, -0.457107, -0.853553], [-0.146447, -0.853553, 0.5]],
+                [377.9972, 54.0076, 1097.2735]),
+    (90,) * 6: ([[0, 1, 0], [1, 0, 0], [0, 0, -1]], [163.9, -455.9, 648.7]),
+}
+
+
+@pytest.mark.parametrize("qdeg", list(UR10_CASES))
+def test_ur10_worked_examples(qdeg):
+    rot, pos = UR10_CASES[qdeg]
+    t = UR10.kin.fk(np.radians(qdeg))
+    assert np.allclose(t[:3, 3] * 1000, pos, atol=0.1)  # 0.1 mm
+    if rot is not None:
+        assert np.allclose(t[:3, :3], rot, atol=1e-6)
+
+
+# ---------------------------------------------------------------------------------- batching
+@pytest.mark.parametrize("robot", ALL, ids=lambda r: r.name)
+def test_batched_fk_equals_loop(robot):
+    rng = np.random.default_rng(2)
+    qs = rng.uniform(np.maximum(robot.lower, -3), np.minimum(robot.upper, 3), size=(64, robot.dof))
+    batch = robot.kin.link_frames(qs)
+    loop = np.stack([robot.kin.link_frames(q) for q in qs])
+    assert batch.shape == (64, len(robot.link_names), 4, 4)
+    assert np.allclose(batch, loop, atol=1e-14)
+    assert np.allclose(robot.kin.jacobian(qs), np.stack([robot.kin.jacobian(q) for q in qs]), atol=1e-14)
+
+
+# ---------------------------------------------------------------------------------- Jacobian
+def numeric_jacobian(robot, q, h=1e-6):
+    q = robot.full_q(q)
+    cols = []
+    for i in robot.arm_indices:
+        dq = np.zeros(robot.dof)
+        dq[i] = h
+        tp, tm = robot.kin.fk(q + dq), robot.kin.fk(q - dq)
+        v = (tp[:3, 3] - tm[:3, 3]) / (2 * h)
+        wx = (tp[:3, :3] - tm[:3, :3]) / (2 * h) @ robot.kin.fk(q)[:3, :3].T
+        cols.append(np.concatenate([v, [wx[2, 1], wx[0, 2], wx[1, 0]]]))
+    return np.stack(cols, axis=1)
+
+
+@pytest.mark.parametrize("robot", ALL, ids=lambda r: r.name)
+def test_jacobian_matches_finite_differences(robot):
+    rng = np.random.default_rng(3)
+    for q in rng.uniform(np.maximum(robot.lower, -3), np.minimum(robot.upper, 3), size=(20, robot.dof)):
+        jac = robot.kin.jacobian(q)
+        assert jac.shape == (6, robot.arm_dof)
+        assert np.allclose(jac, numeric_jacobian(robot, q), atol=1e-8)
+
+
+def test_ur10_det_j_formula_seed_1_9():
+    a2, a3, d5 = 0.6129, 0.5716, 0.1157
+    rng = np.random.default_rng(4)
+    for q in list(rng.uniform(-math.pi, math.pi, size=(20, 6))) + [np.radians([30, 45, 26, 50, 60, 80])]:
+        c2, c23, s234 = math.cos(q[1]), math.cos(q[1] + q[2]), math.sin(q[1] + q[2] + q[3])
+        expected = a2 * a3 * (a2 * c2 + a3 * c23 - d5 * s234) * math.sin(q[2]) * math.sin(q[4])
+        assert np.linalg.det(UR10.kin.jacobian(q)) == pytest.approx(expected, abs=1e-12)
+    assert np.linalg.det(UR10.kin.jacobian(np.radians([30, 45, 26, 50, 60, 80]))) == pytest.approx(0.0692012, abs=1e-7)
+    assert np.linalg.det(UR10.kin.jacobian(np.radians([45] * 6))) == pytest.approx(6.1584011e7 * 1e-9, rel=1e-6)
+
+
+def test_scara_ellipsoid_at_stretched_singularity_seed_004():
+    m = SCARA.kin.manipulability([0.0, 0.0])
+    assert np.allclose(m.ellipsoid_radii, [0.761577, 0.0], atol=1e-6)
+    assert m.translational == pytest.approx(0.0, abs=1e-12)
+    assert np.allclose(np.abs(m.ellipsoid_axes[:, 0]), [0, 1, 0], atol=1e-9)  # the major axis is along y
+    # away from it, r1 r2 = |det J| = l1 l2 |sin theta2| (SEEDS_DIGEST 2.3)
+    m = SCARA.kin.manipulability([0.3, 1.1])
+    assert np.prod(m.ellipsoid_radii) == pytest.approx(0.4 * 0.3 * abs(math.sin(1.1)), rel=1e-9)
