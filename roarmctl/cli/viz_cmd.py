@@ -1,5 +1,125 @@
-"""CLI commands of this area (being written)."""
+"""``roarmctl visualize-path`` and ``roarmctl workspace``: PNG pictures of a plan and of a robot's reach.
+
+matplotlib is imported inside the commands (through ``roarmctl.viz.*_figure``), never at import of
+``roarmctl.cli``, so ``roarmctl --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from roarmctl.cli import common
+
+VIEW_NAMES = ("iso", "top", "front", "side")
+PLAN_SUFFIXES = (".yaml", ".yml")
+MAX_PIXELS = 12000  # per side; beyond this a PNG is a mistake, not a picture
 
 
-def register(app) -> None:
-    """Add this module's commands to ``app``."""
+def register(app: typer.Typer) -> None:
+    """Add ``visualize-path`` and ``workspace`` to ``app``."""
+    app.command("visualize-path")(visualize_path)
+    app.command("workspace")(workspace)
+
+
+def parse_size(text: str, dpi: float) -> tuple[float, float]:
+    """``WxH`` in inches (e.g. ``16x10``) -> (w, h); the PNG is w*dpi x h*dpi pixels."""
+    from roarmctl.errors import InputError
+
+    parts = text.lower().replace("×", "x").split("x")
+    try:
+        w, h = (float(p) for p in parts)
+    except ValueError:
+        raise InputError(f"--size: '{text}' is not WxH in inches", "for example --size 16x10") from None
+    if not (1.0 <= w <= 100.0 and 1.0 <= h <= 100.0):
+        raise InputError(f"--size: {text} is out of range", "each side between 1 and 100 inches")
+    if max(w, h) * dpi > MAX_PIXELS:
+        raise InputError(f"--size {text} at --dpi {dpi:g} gives more than {MAX_PIXELS} pixels per side", "lower --dpi or --size")
+    return w, h
+
+
+def _check_dpi(dpi: float) -> None:
+    from roarmctl.errors import InputError
+
+    if not (10 <= dpi <= 1200):
+        raise InputError(f"--dpi: {dpi:g} is out of range", "use 10 to 1200 (100 gives 1600x1000 px at the default size)")
+
+
+def default_output(source: Path, suffix: str = ".png") -> Path:
+    """``dir/name.traj.json`` or ``dir/name.yaml`` -> ``dir/name.png``."""
+    name = source.name
+    for ext in (".traj.json", ".json", ".yaml", ".yml"):
+        if name.lower().endswith(ext):
+            name = name[: -len(ext)]
+            break
+    return source.with_name((name or source.name) + suffix)
+
+
+def _load(path: Path):
+    """A trajectory from a ``*.traj.json``, or planned from a plan file (``.yaml``/``.yml``)."""
+    from roarmctl.errors import InputError
+
+    if path.suffix.lower() in PLAN_SUFFIXES:
+        try:
+            from roarmctl.motion.pipeline import plan_file
+        except ImportError:
+            raise InputError(f"{path}: planning from a plan file is not available in this build",
+                             "plan it with 'roarmctl plan' and pass the .traj.json") from None
+        return plan_file(path, seed=None).trajectory
+    from roarmctl.motion.trajectory import load_trajectory
+
+    return load_trajectory(path)
+
+
+def visualize_path(
+    source: Path = typer.Argument(..., help="Trajectory file (*.traj.json), or a plan file (.yaml) to plan first.",
+                                  show_default=False),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="PNG to write (default: next to SOURCE, same name, .png)."),
+    view: str = typer.Option("iso", "--view", help="3D view: iso, top, front or side."),
+    dpi: float = typer.Option(100.0, "--dpi", help="Pixels per inch of the PNG."),
+    size: str = typer.Option("16x10", "--size", help="Sheet size WxH in inches (pixels = size x dpi)."),
+) -> None:
+    """Draw a planned trajectory to a PNG: 3D scene and TCP path, joint curves, TCP speed, manipulability."""
+    from roarmctl.errors import InputError
+
+    if view not in VIEW_NAMES:
+        raise InputError(f"--view: '{view}' is not one of {', '.join(VIEW_NAMES)}")
+    _check_dpi(dpi)
+    figsize = parse_size(size, dpi)
+    traj = _load(source)
+    out = output if output is not None else default_output(source)
+    from roarmctl.viz.path_figure import visualize_trajectory
+
+    written = visualize_trajectory(traj, out, view=view, dpi=dpi, size=figsize, name=source.name)
+    w, h = round(figsize[0] * dpi), round(figsize[1] * dpi)
+    common.console().print(f"wrote {written} ({w} x {h} px)")
+
+
+def workspace(
+    robot: str = typer.Argument(..., help="Bundled robot name or path to a description."),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="PNG to write (default: ROBOT_workspace.png here)."),
+    samples: int = typer.Option(80000, "--samples", help="Random configurations to sample."),
+    seed: int = typer.Option(0, "--seed", help="Random seed (the same seed draws the same picture)."),
+    height: Optional[float] = typer.Option(None, "--height", help="Top map as a section at this z (m) instead of the footprint."),
+    measure: str = typer.Option("sigma", "--measure", help="Colour by 'sigma' (smallest singular value) or 'w' (product)."),
+    dpi: float = typer.Option(100.0, "--dpi", help="Pixels per inch of the PNG."),
+    size: str = typer.Option("13x6", "--size", help="Sheet size WxH in inches."),
+) -> None:
+    """Draw the reachable workspace (side and top maps of sampled TCP positions, coloured by manipulability)."""
+    from roarmctl.errors import InputError
+    from roarmctl.robot.loader import load_robot
+
+    if measure not in ("sigma", "w"):
+        raise InputError(f"--measure: '{measure}' is not 'sigma' or 'w'")
+    if not (1 <= samples <= 2_000_000):
+        raise InputError(f"--samples: {samples} is out of range", "use 1 to 2000000")
+    _check_dpi(dpi)
+    figsize = parse_size(size, dpi)
+    r = load_robot(robot)
+    out = output if output is not None else Path(f"{r.name}_workspace.png")
+    from roarmctl.viz.workspace_figure import visualize_workspace
+
+    written = visualize_workspace(r, out, samples=samples, seed=seed, measure=measure, height=height, dpi=dpi, size=figsize)
+    common.console().print(f"wrote {written} ({round(figsize[0] * dpi)} x {round(figsize[1] * dpi)} px)")

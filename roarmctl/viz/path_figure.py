@@ -1,0 +1,291 @@
+"""Draw a trajectory on one sheet: 3D scene and TCP path, joint curves, TCP speed, manipulability.
+
+Importing this module imports matplotlib (object-oriented API with the Agg canvas, no pyplot and no
+global backend switch), so only the ``visualize-path`` command imports it. The numbers come from
+``roarmctl.viz.data.path_data``; every drawn artist that carries data has a ``gid`` so tests can
+find it (``tcp_path``, ``arm:<kind>:<i>``, ``event:<kind>:<axes>``, ``vlim:<joint>``, ...).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
+
+from roarmctl.viz.data import PathData
+from roarmctl.viz.shapes import item_extent, item_faces
+
+VIEWS = {"iso": (26.0, -38.0), "top": (90.0, -90.0), "front": (0.0, 0.0), "side": (0.0, -90.0)}
+ROLE_STYLE = {
+    "table": dict(facecolor=(0.80, 0.72, 0.60, 0.35), edgecolor=(0.55, 0.45, 0.35, 0.5), linewidth=0.4),
+    "obstacle": dict(facecolor=(0.85, 0.20, 0.15, 0.22), edgecolor=(0.65, 0.10, 0.08, 0.8), linewidth=0.7),
+    "object": dict(facecolor=(0.15, 0.45, 0.85, 0.55), edgecolor=(0.05, 0.25, 0.60, 0.9), linewidth=0.7),
+}
+RC = {"grid.linewidth": 0.5, "grid.color": "0.88", "axes3d.grid": True}
+EVENT_COLOR = {"grasp": "#1b9e3a", "release": "#8e44ad"}
+EVENT_MARKER = {"grasp": "v", "release": "^"}
+ARM_COLOR = "0.35"
+PATH_CMAP = "viridis"
+LABEL_BOX = dict(boxstyle="round,pad=0.15", facecolor="white", edgecolor="none", alpha=0.75)
+
+
+def _bounds(data: PathData) -> np.ndarray:
+    """(2, 3) axis-aligned bounds of everything drawn in 3D, with a margin."""
+    pts = [data.tcp] + [k.links for k in data.key_poses] + [e.target[None] for e in data.events]
+    pts += [item_extent(item, i) for i, item in enumerate(data.scene_items + data.placed_items)]
+    allp = np.vstack(pts)
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    pad = 0.04 * max(float(np.max(hi - lo)), 1e-3)
+    return np.stack([lo - pad, hi + pad])
+
+
+def _segments(points: np.ndarray) -> np.ndarray:
+    return np.stack([points[:-1], points[1:]], axis=1)
+
+
+def draw_scene_3d(ax, data: PathData, view: str) -> None:
+    """The 3D panel: scene items, arm at key moments, TCP path coloured by speed, targets."""
+    ax.computed_zorder = False  # draw in our order: scene, arm, path, markers (path stays visible)
+    ax.set_proj_type("ortho")
+    for i, item in enumerate(data.scene_items):
+        role = item.get("role", "obstacle")
+        style = ROLE_STYLE.get(role, ROLE_STYLE["obstacle"])
+        poly = Poly3DCollection(item_faces(item, i), zorder={"table": 0, "obstacle": 2, "object": 3}.get(role, 2), **style)
+        poly.set_gid(f"scene:{item.get('name', i)}")
+        ax.add_collection3d(poly)
+        if role != "table":
+            lo, hi = item_extent(item, i)
+            ax.text((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2] + 0.012, str(item.get("name", "")),
+                    fontsize=7.5, ha="center", va="bottom", color=style["edgecolor"], zorder=9, bbox=LABEL_BOX)
+
+    for i, item in enumerate(data.placed_items):  # where carried objects end up: a dashed ghost
+        poly = Poly3DCollection(item_faces(item, i), zorder=3, facecolor=(0.15, 0.45, 0.85, 0.10),
+                                edgecolor=(0.05, 0.25, 0.60, 0.8), linewidth=0.8, linestyle="--")
+        poly.set_gid(f"placed:{item.get('name', i)}")
+        ax.add_collection3d(poly)
+
+    # Arm at key moments: links as light lines, joints as dots.
+    for k, pose in enumerate(data.key_poses):
+        segs = np.array([[pose.links[a], pose.links[b]] for a, b in data.arm_segments])
+        alpha = 0.55 if pose.kind in ("grasp", "release") else 0.38
+        coll = Line3DCollection(segs, colors=ARM_COLOR, linewidths=3.2, alpha=alpha, zorder=4, capstyle="round")
+        coll.set_gid(f"arm:{pose.kind}:{k}")
+        ax.add_collection3d(coll)
+        joints = np.unique(segs.reshape(-1, 3), axis=0)
+        ax.scatter(*joints.T, s=6, color=ARM_COLOR, alpha=alpha, depthshade=False, zorder=4)
+
+    # TCP path: one segment per sample interval, coloured by the mean speed, thick where Cartesian.
+    speed_mid = 0.5 * (data.tcp_speed[1:] + data.tcp_speed[:-1])
+    vmax = max(float(data.tcp_speed.max()), data.max_tcp_speed or 0.0, 1e-6)
+    norm = Normalize(0.0, vmax)
+    cmap = colormaps[PATH_CMAP]
+    widths = np.where(data.segment_kind == "cartesian", 4.0, 1.8)
+    path = Line3DCollection(_segments(data.tcp), colors=cmap(norm(speed_mid)), linewidths=widths, zorder=6, capstyle="round")
+    path.set_gid("tcp_path")
+    ax.add_collection3d(path)
+
+    ax.scatter(*data.tcp[0], s=130, marker="o", color="#2ca02c", edgecolor="k", linewidth=0.6, depthshade=False, zorder=8, label="start")
+    ax.scatter(*data.tcp[-1], s=40, marker="s", color="#d62728", edgecolor="k", linewidth=0.6, depthshade=False, zorder=8, label="end")
+    for e in data.events:
+        c = EVENT_COLOR.get(e.kind, "k")
+        m = ax.scatter(*e.target, s=110, marker=EVENT_MARKER.get(e.kind, "x"), color=c, edgecolor="k", linewidth=0.6,
+                       depthshade=False, zorder=8)
+        m.set_gid(f"target:{e.kind}")
+        ax.text(*(e.target + np.array([0.0, 0.0, 0.03])), e.label or e.kind, fontsize=8.5, color=c,
+                fontweight="bold", ha="center", va="bottom", zorder=9, bbox=LABEL_BOX)
+
+    lo, hi = _bounds(data)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_zlim(lo[2], hi[2])
+    ax.set_box_aspect(tuple(hi - lo), zoom=1.0)
+    elev, azim = VIEWS[view]
+    ax.view_init(elev=elev, azim=azim)
+    ax.set_xlabel("x (m)", labelpad=6)
+    ax.set_ylabel("y (m)", labelpad=6)
+    ax.set_zlabel("z (m)", labelpad=4)
+    ax.tick_params(labelsize=7, pad=1)
+    if view == "top":
+        ax.set_zticks([])
+        ax.set_zlabel("")
+    elif view == "front":
+        ax.set_xticks([])
+        ax.set_xlabel("")
+    elif view == "side":
+        ax.set_yticks([])
+        ax.set_ylabel("")
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.pane.set_alpha(0.0)
+    if view == "iso":  # z ticks on the left edge, away from the time plots; the label would not follow
+        ax.zaxis.set_ticks_position("lower")
+        ax.set_zlabel("")
+    ax.set_title("scene and TCP path (m)", fontsize=9, loc="center", pad=0)
+
+    handles = [
+        Line2D([], [], color=cmap(0.55), lw=4.0, label="Cartesian (straight) segment"),
+        Line2D([], [], color=cmap(0.55), lw=1.8, label="free motion"),
+        Line2D([], [], color=ARM_COLOR, lw=3.2, alpha=0.5, label="arm at start, grasp, release, end"),
+        Line2D([], [], ls="", marker="o", color="#2ca02c", mec="k", label="start"),
+        Line2D([], [], ls="", marker="s", color="#d62728", mec="k", label="end"),
+    ]
+    for kind in dict.fromkeys(e.kind for e in data.events):
+        handles.append(Line2D([], [], ls="", marker=EVENT_MARKER.get(kind, "x"), color=EVENT_COLOR.get(kind, "k"),
+                              mec="k", ms=8, label=f"{kind} target"))
+    ax.legend(handles=handles, loc="upper left", fontsize=7.5, framealpha=0.85, bbox_to_anchor=(0.0, 1.0))
+    return norm, cmap
+
+
+def _event_lines(ax, data: PathData, name: str, labels: bool = False) -> None:
+    for e in data.events:
+        line = ax.axvline(e.time, color=EVENT_COLOR.get(e.kind, "k"), lw=1.0, ls="-.", alpha=0.9, zorder=1)
+        line.set_gid(f"event:{e.kind}:{name}")
+        if labels:
+            ax.annotate(e.label or e.kind, (e.time, 1.0), xycoords=("data", "axes fraction"), xytext=(2, 2),
+                        textcoords="offset points", fontsize=7.5, color=EVENT_COLOR.get(e.kind, "k"), va="bottom")
+
+
+def _shade_cartesian(ax, data: PathData) -> None:
+    kinds = data.segment_kind
+    t = data.times
+    i = 0
+    while i < len(kinds):
+        if kinds[i] == "cartesian":
+            j = i
+            while j + 1 < len(kinds) and kinds[j + 1] == "cartesian":
+                j += 1
+            ax.axvspan(t[i], t[j + 1], color="0.5", alpha=0.10, lw=0, zorder=0)
+            i = j + 1
+        else:
+            i += 1
+
+
+def draw_time_plots(axes, data: PathData) -> None:
+    """Joint position/velocity/acceleration, TCP speed, manipulability against time (shared x)."""
+    ax_q, ax_v, ax_a, ax_s, ax_m = axes
+    colors = colormaps["tab10"]
+    t = data.times
+    for j, name in enumerate(data.joint_names):
+        c = colors(j % 10)
+        ax_q.plot(t, data.positions[:, j], color=c, lw=1.3, label=name, gid=f"q:{name}")
+        ax_v.plot(t, data.velocities[:, j], color=c, lw=1.3, gid=f"v:{name}")
+        ax_a.plot(t, data.accelerations[:, j], color=c, lw=1.1, gid=f"a:{name}")
+        for ax, lim, tag in ((ax_v, data.velocity_limit[j], "vlim"), (ax_a, data.acceleration_limit[j], "alim")):
+            for sign in (1, -1):
+                ax.axhline(sign * lim, color=c, lw=0.9, ls="--", alpha=0.75, gid=f"{tag}:{name}")
+    src = "" if data.limits_source == "trajectory" else " (robot's limits: the file has none)"
+    ax_q.set_ylabel("position\n(rad)")
+    ax_v.set_ylabel("velocity\n(rad/s)")
+    ax_a.set_ylabel("acceleration\n(rad/s²)")
+    ax_v.set_title(f"dashed: velocity limit × {data.velocity_scale:g}{src}", fontsize=8, loc="right", pad=2)
+    ax_a.set_title(f"dashed: acceleration limit × {data.acceleration_scale:g}", fontsize=8, loc="right", pad=2)
+    from matplotlib.patches import Patch
+
+    handles, _ = ax_q.get_legend_handles_labels()
+    handles.append(Patch(color="0.5", alpha=0.2, label="Cartesian segment (band)"))
+    ax_q.legend(handles=handles, loc="lower left", bbox_to_anchor=(0.0, 1.13), ncol=4, fontsize=7.5, frameon=False,
+                handlelength=1.5, columnspacing=1.0, borderaxespad=0.0)
+
+    ax_s.plot(t, data.tcp_speed, color="k", lw=1.3, gid="tcp_speed")
+    ax_s.set_ylabel("TCP speed\n(m/s)")
+    if data.max_tcp_speed is not None:
+        ax_s.axhline(data.max_tcp_speed, color="#d62728", lw=1.0, ls="--", gid="max_tcp_speed")
+        ax_s.set_title(f"dashed: max TCP speed {data.max_tcp_speed:g} m/s", fontsize=8, loc="right", pad=2)
+    ax_s.set_ylim(bottom=0.0)
+
+    ax_m.plot(t, data.sigma_min, color="#1f77b4", lw=1.4, gid="sigma_min", label="σ_min (left axis)")
+    ax_m.set_ylabel("σ_min of J_v\n(m/rad)", color="#1f77b4")
+    ax_m.set_ylim(bottom=0.0)
+    if data.min_singular_value is not None:
+        ax_m.axhline(data.min_singular_value, color="#d62728", lw=1.0, ls="--", gid="singularity_margin")
+        ax_m.axhspan(0.0, data.min_singular_value, color="#d62728", alpha=0.08, lw=0)
+        ax_m.set_title(f"dashed: singularity margin σ_min ≥ {data.min_singular_value:g} m/rad", fontsize=8, loc="right", pad=2)
+        ax_m.set_ylim(0.0, max(float(data.sigma_min.max()), data.min_singular_value) * 1.1)
+    tw = ax_m.twinx()
+    tw.plot(t, data.w, color="0.45", lw=1.0, ls=":", gid="w")
+    tw.set_ylabel("w = Πσ (m³)", color="0.4", fontsize=8)
+    tw.tick_params(labelsize=7, colors="0.4")
+    tw.set_ylim(bottom=0.0)
+    from matplotlib.ticker import FormatStrFormatter
+
+    tw.yaxis.set_major_formatter(FormatStrFormatter("%.3g"))
+    ax_m.set_xlabel("time (s)")
+
+    for k, (ax, name) in enumerate(zip(axes, ("q", "v", "a", "speed", "manip"))):
+        _shade_cartesian(ax, data)
+        _event_lines(ax, data, name, labels=(k == 0))
+        ax.grid(True, lw=0.4, alpha=0.5)
+        ax.tick_params(labelsize=7.5)
+        ax.yaxis.label.set_size(8.5)
+        ax.set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1.0)
+        if k < 4:
+            ax.tick_params(labelbottom=False)
+
+
+def render_path(data: PathData, *, view: str = "iso", size: tuple[float, float] = (16.0, 10.0),
+                title: str = "", subtitle: str = "") -> Figure:
+    """The whole sheet as a matplotlib ``Figure`` (not yet saved); ``size`` in inches."""
+    import matplotlib
+
+    with matplotlib.rc_context(RC):
+        fig = Figure(figsize=size)
+        FigureCanvasAgg(fig)
+        gs = fig.add_gridspec(1, 2, width_ratios=[1.2, 1.0], left=0.0, right=0.94, top=0.88, bottom=0.06, wspace=0.16)
+        ax3 = fig.add_subplot(gs[0, 0], projection="3d")
+        ax3.set_position((0.02, 0.08, 0.49, 0.84))
+        norm, cmap = draw_scene_3d(ax3, data, view)
+        _draw_right(fig, gs, data, norm, cmap, title, subtitle)
+    return fig
+
+
+def _draw_right(fig: Figure, gs, data: PathData, norm, cmap, title: str, subtitle: str) -> None:
+    """Time plots in the right column, the speed colour bar, title and subtitle."""
+    right = gs[0, 1].subgridspec(5, 1, hspace=0.32)
+    axes = [fig.add_subplot(right[0, 0])]
+    axes += [fig.add_subplot(right[i, 0], sharex=axes[0]) for i in range(1, 5)]
+    draw_time_plots(axes, data)
+    cax = fig.add_axes((0.06, 0.055, 0.42, 0.014))
+    from matplotlib.cm import ScalarMappable
+
+    cb = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=cax, orientation="horizontal")
+    cb.set_label("TCP speed (m/s)", fontsize=8.5)
+    cb.ax.tick_params(labelsize=7.5)
+    if data.max_tcp_speed is not None and data.max_tcp_speed <= norm.vmax:
+        cb.ax.axvline(data.max_tcp_speed, color="#d62728", lw=1.2, ls="--")
+    if title:
+        fig.suptitle(title, x=0.02, y=0.985, ha="left", fontsize=13, fontweight="bold")
+    if subtitle:
+        fig.text(0.02, 0.945, subtitle, ha="left", va="top", fontsize=9, color="0.25")
+
+
+def save_png(fig: Figure, path: str | Path, dpi: float) -> Path:
+    """Write ``fig`` as PNG atomically (temporary file, then rename)."""
+    from roarmctl.fileio import atomic_write_with
+
+    return atomic_write_with(path, lambda f: fig.savefig(f, format="png", dpi=dpi))
+
+
+def describe(data: PathData, name: str) -> tuple[str, str]:
+    """Title and subtitle lines of the sheet."""
+    n_grasp = sum(e.kind == "grasp" for e in data.events)
+    n_release = sum(e.kind == "release" for e in data.events)
+    title = f"{name} — {data.robot_name}"
+    bits = [f"{data.times[-1]:.2f} s", f"{len(data.times)} samples", f"{n_grasp} grasp, {n_release} release",
+            f"peak TCP speed {data.tcp_speed.max():.3f} m/s", f"lowest σ_min {data.sigma_min.min():.4f} m/rad"]
+    return title, " · ".join(bits)
+
+
+def visualize_trajectory(traj, out: str | Path, *, view: str = "iso", dpi: float = 100.0,
+                         size: tuple[float, float] = (16.0, 10.0), name: str | None = None) -> Path:
+    """Render ``traj`` (a ``Trajectory``) to the PNG ``out``; returns the path written."""
+    from roarmctl.viz.data import path_data, robot_for
+
+    data = path_data(traj, robot_for(traj))
+    title, subtitle = describe(data, name or "trajectory")
+    fig = render_path(data, view=view, size=size, title=title, subtitle=subtitle)
+    return save_png(fig, out, dpi)

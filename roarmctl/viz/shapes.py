@@ -1,0 +1,86 @@
+"""Scene items (box, cylinder, sphere) as polygon meshes in world coordinates, for 3D drawing.
+
+Only numpy: each function returns a list of faces, each face an (k, 3) array of vertices in m.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from roarmctl.errors import TrajectoryFileError
+from roarmctl.robot.model import transform
+
+SHAPES = ("box", "cylinder", "sphere")
+ROLES = ("table", "obstacle", "object")
+
+
+def _place(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    return points @ pose[:3, :3].T + pose[:3, 3]
+
+
+def box_faces(size, pose: np.ndarray) -> list[np.ndarray]:
+    """Six quads of a box of ``size`` (x, y, z) m centred at ``pose`` (4x4)."""
+    hx, hy, hz = (0.5 * float(s) for s in size)
+    c = np.array([[sx * hx, sy * hy, sz * hz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    c = _place(c, pose)
+    quads = [(0, 1, 3, 2), (4, 5, 7, 6), (0, 1, 5, 4), (2, 3, 7, 6), (0, 2, 6, 4), (1, 3, 7, 5)]
+    return [c[list(q)] for q in quads]
+
+
+def cylinder_faces(radius: float, length: float, pose: np.ndarray, n: int = 24) -> list[np.ndarray]:
+    """Side quads and two caps of a cylinder along its local z, centred at ``pose``."""
+    a = np.linspace(0.0, 2 * np.pi, n + 1)
+    ring = np.stack([radius * np.cos(a), radius * np.sin(a)], axis=1)
+    lo = _place(np.column_stack([ring, np.full(n + 1, -0.5 * length)]), pose)
+    hi = _place(np.column_stack([ring, np.full(n + 1, 0.5 * length)]), pose)
+    sides = [np.array([lo[i], lo[i + 1], hi[i + 1], hi[i]]) for i in range(n)]
+    return sides + [lo[:-1], hi[:-1]]
+
+
+def sphere_faces(radius: float, pose: np.ndarray, n: int = 12) -> list[np.ndarray]:
+    """Latitude-longitude quads of a sphere centred at ``pose``."""
+    th = np.linspace(0.0, np.pi, n + 1)
+    ph = np.linspace(0.0, 2 * np.pi, 2 * n + 1)
+    pts = radius * np.stack([np.outer(np.sin(th), np.cos(ph)), np.outer(np.sin(th), np.sin(ph)),
+                             np.outer(np.cos(th), np.ones_like(ph))], axis=-1)
+    pts = _place(pts.reshape(-1, 3), pose).reshape(n + 1, 2 * n + 1, 3)
+    return [np.array([pts[i, j], pts[i, j + 1], pts[i + 1, j + 1], pts[i + 1, j]]) for i in range(n) for j in range(2 * n)]
+
+
+def item_pose(item: dict, where: str) -> np.ndarray:
+    try:
+        xyz = [float(v) for v in item.get("xyz", (0, 0, 0))]
+        rpy = [float(v) for v in item.get("rpy", (0, 0, 0))]
+    except (TypeError, ValueError):
+        raise TrajectoryFileError(f"{where}: xyz/rpy must be lists of numbers") from None
+    if len(xyz) != 3 or len(rpy) != 3:
+        raise TrajectoryFileError(f"{where}: xyz and rpy need 3 numbers each")
+    return transform(xyz, rpy)
+
+
+def item_faces(item: dict, index: int = 0) -> list[np.ndarray]:
+    """Faces of one scene item (``{"shape", "size" | "radius" [, "length"], "xyz", "rpy"}``)."""
+    if not isinstance(item, dict):
+        raise TrajectoryFileError(f"scene.items[{index}]: expected an object")
+    where = f"scene.items[{index}] ('{item.get('name', '?')}')"
+    pose = item_pose(item, where)
+    shape = item.get("shape")
+    try:
+        if shape == "box":
+            size = [float(v) for v in item["size"]]
+            if len(size) != 3:
+                raise ValueError
+            return box_faces(size, pose)
+        if shape == "cylinder":
+            return cylinder_faces(float(item["radius"]), float(item["length"]), pose)
+        if shape == "sphere":
+            return sphere_faces(float(item["radius"]), pose)
+    except (KeyError, TypeError, ValueError):
+        raise TrajectoryFileError(f"{where}: '{shape}' needs size [x, y, z] (box), radius and length (cylinder) or radius (sphere)") from None
+    raise TrajectoryFileError(f"{where}: shape: expected one of {', '.join(SHAPES)}, got {shape!r}")
+
+
+def item_extent(item: dict, index: int = 0) -> np.ndarray:
+    """(2, 3) lower and upper corners of the item's axis-aligned bounding box, m."""
+    pts = np.vstack(item_faces(item, index))
+    return np.stack([pts.min(axis=0), pts.max(axis=0)])
