@@ -8,6 +8,7 @@ find it (``tcp_path``, ``arm:<kind>:<i>``, ``event:<kind>:<axes>``, ``vlim:<join
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
-from roarmctl.viz.data import PathData
+from roarmctl.viz.data import GRASP_RADIUS, PathData
 from roarmctl.viz.shapes import item_extent, item_faces
 
 VIEWS = {"iso": (26.0, -38.0), "top": (90.0, -90.0), "front": (0.0, 0.0), "side": (0.0, -90.0)}
@@ -30,9 +31,73 @@ ROLE_STYLE = {
 RC = {"grid.linewidth": 0.5, "grid.color": "0.88", "axes3d.grid": True}
 EVENT_COLOR = {"grasp": "#1b9e3a", "release": "#8e44ad"}
 EVENT_MARKER = {"grasp": "v", "release": "^"}
+PLACED_STYLE = dict(facecolor=(0.15, 0.45, 0.85, 0.10), edgecolor=(0.05, 0.25, 0.60, 0.8), linewidth=0.8, linestyle="--")
 ARM_COLOR = "0.35"
 PATH_CMAP = "viridis"
 LABEL_BOX = dict(boxstyle="round,pad=0.15", facecolor="white", edgecolor="none", alpha=0.75)
+
+
+@dataclass
+class Label:
+    """A text tag for a 3D point (m); placed in 2D by ``place_labels`` so tags do not overlap."""
+
+    anchor: np.ndarray
+    text: str
+    color: object
+    size: float
+    weight: str
+    priority: int = 1
+
+
+def place_labels(ax, labels: list[Label]) -> list[tuple[float, float]]:
+    """Put each label near its projected anchor without overlapping the ones already placed.
+
+    Works in points on the axes' 2D projection of the final view; candidate offsets go up first,
+    then sideways and down; a thin leader line joins a moved label to its anchor. Returns the
+    label positions (axes fraction) for tests.
+    """
+    from mpl_toolkits.mplot3d import proj3d
+
+    fig = ax.figure
+    to_pt = 72.0 / fig.dpi
+    proj = ax.get_proj()
+    placed: list[tuple[float, float, float, float]] = []  # x0, y0, x1, y1 in points
+    out = []
+    offsets = [(0, 12), (0, 26), (0, 40), (48, 12), (-48, 12), (48, 30), (-48, 30), (0, -22), (60, -10), (-60, -10), (0, 56)]
+    for lab in sorted(labels, key=lambda l: l.priority):
+        x2, y2, _ = proj3d.proj_transform(*lab.anchor, proj)
+        ax_pt = np.array(ax.transData.transform((x2, y2))) * to_pt
+        w, h = 0.62 * lab.size * max(len(lab.text), 1) + 4, 1.45 * lab.size + 2
+        for dx, dy in offsets:
+            cx, cy = ax_pt[0] + dx, ax_pt[1] + dy + h / 2
+            box = (cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2)
+            if not any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed):
+                break
+        placed.append(box)
+        pos = ax.transAxes.inverted().transform((cx / to_pt, cy / to_pt))
+        anchor = ax.transAxes.inverted().transform(ax_pt / to_pt)
+        if (dx, dy) != offsets[0]:
+            ax.plot(*np.transpose([anchor, pos]), transform=ax.transAxes, color=lab.color, lw=0.6, alpha=0.8, zorder=9)
+        ax.text2D(pos[0], pos[1], lab.text, transform=ax.transAxes, fontsize=lab.size, color=lab.color,
+                  fontweight=lab.weight, ha="center", va="center", zorder=10, bbox=LABEL_BOX, gid=f"label:{lab.text}")
+        out.append((float(pos[0]), float(pos[1])))
+    return out
+
+
+def _add_solid(ax, item: dict, index: int, zorder: int, gid: str, style: dict) -> None:
+    """One scene item as translucent faces; curved sides without edges (only the cap rims are outlined)."""
+    faces = item_faces(item, index)
+    if item.get("shape") == "box":
+        poly = Poly3DCollection(faces, zorder=zorder, **style)
+    else:
+        plain = dict(style, linewidth=0.0, edgecolor="none")
+        poly = Poly3DCollection(faces, zorder=zorder, **plain)
+        if item.get("shape") == "cylinder":
+            rims = [np.vstack([f, f[:1]]) for f in faces[-2:]]
+            ax.add_collection3d(Line3DCollection(rims, colors=[style["edgecolor"]], linewidths=style["linewidth"],
+                                                 linestyles=style.get("linestyle", "-"), zorder=zorder))
+    poly.set_gid(gid)
+    ax.add_collection3d(poly)
 
 
 def _bounds(data: PathData) -> np.ndarray:
@@ -53,22 +118,21 @@ def draw_scene_3d(ax, data: PathData, view: str) -> None:
     """The 3D panel: scene items, arm at key moments, TCP path coloured by speed, targets."""
     ax.computed_zorder = False  # draw in our order: scene, arm, path, markers (path stays visible)
     ax.set_proj_type("ortho")
+    labels: list[Label] = []
+    grasped = [e.target for e in data.events if e.kind == "grasp"]
     for i, item in enumerate(data.scene_items):
         role = item.get("role", "obstacle")
         style = ROLE_STYLE.get(role, ROLE_STYLE["obstacle"])
-        poly = Poly3DCollection(item_faces(item, i), zorder={"table": 0, "obstacle": 2, "object": 3}.get(role, 2), **style)
-        poly.set_gid(f"scene:{item.get('name', i)}")
-        ax.add_collection3d(poly)
-        if role != "table":
+        _add_solid(ax, item, i, {"table": 0, "obstacle": 2, "object": 3}.get(role, 2), f"scene:{item.get('name', i)}", style)
+        center = np.asarray(item.get("xyz", (0, 0, 0)), dtype=float)
+        named_by_event = role == "object" and any(np.linalg.norm(center - g) <= GRASP_RADIUS for g in grasped)
+        if role != "table" and not named_by_event:
             lo, hi = item_extent(item, i)
-            ax.text((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2] + 0.012, str(item.get("name", "")),
-                    fontsize=7.5, ha="center", va="bottom", color=style["edgecolor"], zorder=9, bbox=LABEL_BOX)
+            labels.append(Label(np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2]]), str(item.get("name", "")),
+                                style["edgecolor"], 7.5, "normal"))
 
     for i, item in enumerate(data.placed_items):  # where carried objects end up: a dashed ghost
-        poly = Poly3DCollection(item_faces(item, i), zorder=3, facecolor=(0.15, 0.45, 0.85, 0.10),
-                                edgecolor=(0.05, 0.25, 0.60, 0.8), linewidth=0.8, linestyle="--")
-        poly.set_gid(f"placed:{item.get('name', i)}")
-        ax.add_collection3d(poly)
+        _add_solid(ax, item, i, 3, f"placed:{item.get('name', i)}", PLACED_STYLE)
 
     # Arm at key moments: links as light lines, joints as dots.
     for k, pose in enumerate(data.key_poses):
@@ -97,8 +161,7 @@ def draw_scene_3d(ax, data: PathData, view: str) -> None:
         m = ax.scatter(*e.target, s=110, marker=EVENT_MARKER.get(e.kind, "x"), color=c, edgecolor="k", linewidth=0.6,
                        depthshade=False, zorder=8)
         m.set_gid(f"target:{e.kind}")
-        ax.text(*(e.target + np.array([0.0, 0.0, 0.03])), e.label or e.kind, fontsize=8.5, color=c,
-                fontweight="bold", ha="center", va="bottom", zorder=9, bbox=LABEL_BOX)
+        labels.append(Label(e.target, e.label or e.kind, c, 8.5, "bold", priority=0))
 
     lo, hi = _bounds(data)
     ax.set_xlim(lo[0], hi[0])
@@ -122,6 +185,7 @@ def draw_scene_3d(ax, data: PathData, view: str) -> None:
         ax.set_ylabel("")
     for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
         axis.pane.set_alpha(0.0)
+    place_labels(ax, labels)
     if view == "iso":  # z ticks on the left edge, away from the time plots; the label would not follow
         ax.zaxis.set_ticks_position("lower")
         ax.set_zlabel("")
