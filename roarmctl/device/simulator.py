@@ -126,7 +126,8 @@ class SimConfig:
     time_factor: float = 1.0  # scales the firmware's blocking delays (T:0's 10 s, T:111)
     boot: bool = False  # print the boot banner and do the boot move when started
     byte_rate: float = BYTES_PER_SECOND
-    silent: bool = False  # a device that never answers (wrong baud, dead firmware)
+    silent: bool = False  # a device that never says anything (wrong baud, dead firmware)
+    deaf: bool = False  # a device whose input is lost (it keeps streaming with InfoPrint 2)
     record_limit: int = 2_000_000
 
 
@@ -170,7 +171,7 @@ class Firmware:
     # ------------------------------------------------------------------ link
     def receive(self, data: bytes, t: float) -> None:
         """Bytes that reached the UART at ``t``; each byte takes 1/byte_rate on the wire."""
-        if self.cfg.silent:
+        if self.cfg.deaf:
             return
         dt = 1.0 / self.cfg.byte_rate
         start = max(t, self._rx_free)
@@ -184,6 +185,8 @@ class Firmware:
 
     def println(self, text: str, t: float) -> None:
         """``Serial.println``: queue ``text\\r\\n``; it leaves the wire at the byte rate."""
+        if self.cfg.silent:
+            return
         data = text.encode() + b"\r\n"
         done = max(t, self._tx_free) + len(data) / self.cfg.byte_rate
         self._tx_free = done

@@ -32,6 +32,9 @@ DEFAULT_RATE = 50.0
 FEEDBACK_RATE = 25.0  # T:105 polls per second during motion (each answer is ~200 B back)
 HOLD_SPD = 600  # the firmware's own ARM_SERVO_INIT_SPEED, steps/s
 MOVE_TO_START_SPD = 300  # steps/s (about 0.46 rad/s)
+T102_BYTES = 125  # longest T:102 line (all six fields at 4 decimals, spd, acc, newline)
+T101_BYTES = 55  # a gripper T:101 line
+LINK_BUDGET = 0.85  # share of the 11520 B/s host->arm direction the stream may use
 
 
 # ----------------------------------------------------------------------------- sampling
@@ -138,6 +141,7 @@ def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: floa
     # the gripper gets its own T:101 when it needs more speed than the arm: one shared spd would
     # otherwise make every arm joint rush ahead and wait (a staircase) while the gripper moves
     g = [k for k, w in enumerate(wm.fields) if robot.gripper is not None and w.joint == robot.gripper.joint]
+    split = strat.split_gripper and rate * (T102_BYTES + T101_BYTES + 11) <= LINK_BUDGET * protocol.BYTES_PER_SECOND
     arm = [k for k in range(6) if k not in g]
     for k in range(n):
         extra: list[dict[str, Any]] = []
@@ -146,9 +150,9 @@ def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: floa
         else:
             span = max(t_to[k] - t_from[k], 0.0) / speed_scale
             rates = np.abs(w_to[k] - w_from[k]) / span if span > 1e-9 else np.zeros(6)
-            need = float(np.max(rates[arm if strat.split_gripper else slice(None)]))
+            need = float(np.max(rates[arm if split else slice(None)]))
             spd = spd_register(need * strat.margin, minimum=50)
-            if strat.split_gripper and g and rates[g[0]] * strat.margin > need:
+            if split and g and rates[g[0]] * strat.margin > need:
                 lo, hi = protocol.SAFE_WIRE_RANGE["hand"]
                 extra.append({"T": 101, "joint": 6, "rad": protocol.r4(min(max(w_to[k][g[0]], lo), hi)),
                               "spd": spd_register(rates[g[0]] * strat.margin, minimum=50), "acc": 0})

@@ -1,0 +1,240 @@
+"""The real CLI against the firmware simulator over real pseudo-terminals.
+
+The simulator runs in this process (a thread behind a pty) so the test can read its recorded true
+servo positions; the CLI runs in-process or, where a signal or a pulled cable is needed, as a
+subprocess that opens the pty like /dev/ttyUSB0.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from devtraj import HOME, min_jerk, pick_place
+from roarmctl.cli import main
+from roarmctl.device.protocol import encode
+from roarmctl.device.simulator import PtySimulator, SimConfig
+from roarmctl.device.streamer import default_latency, sample
+from roarmctl.robot.loader import load_robot
+
+ROBOT = load_robot("roarm_m3_pro")
+
+
+def run_cli(args: list[str]) -> int:
+    try:
+        main(args)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    return 0
+
+
+def spawn(args: list[str]) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "roarmctl", *args], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+
+
+def tcp(q):
+    return ROBOT.kin.fk(ROBOT.full_q(np.atleast_2d(q)))[:, :3, 3]
+
+
+@pytest.fixture
+def traj_file(tmp_path) -> Path:
+    p = tmp_path / "pp.traj.json"
+    pick_place().save(p)
+    return p
+
+
+def test_sim_run_follows_the_plan_and_keeps_time(traj_file, capsys):
+    rc = run_cli(["execute", str(traj_file), "--sim", "--yes", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["outcome"] == "completed"
+    sim = out["simulator"]
+    print(f"\nTCP tracking error (true, simulator): RMS {sim['rms_mm']:.2f} mm, max {sim['max_mm']:.2f} mm; "
+          f"lateness p50 {out['lateness_ms']['p50']:.2f} ms p99 {out['lateness_ms']['p99']:.2f} ms")
+    assert sim["rms_mm"] < 5.0 and sim["max_mm"] < 15.0
+    assert sim["torque_always_on"]
+    assert out["lateness_ms"]["p50"] < 2.0 and out["lateness_ms"]["max"] < 20.0
+    log = json.loads(Path(out["log"]).read_text())
+    ticks = [s for s in log["sent"] if "tick" in s]
+    # absolute schedule: command k goes out at k/50 s (plus its lateness), no drift over 6.7 s
+    t = np.array([s["t"] for s in ticks])
+    k = np.array([s["tick"] for s in ticks])
+    assert np.all(np.abs(t - np.minimum(k / 50.0, log["duration"])) < 0.02)
+    assert any("feedback" in r for r in log["received"])
+
+
+def test_speed_scale_slows_down(tmp_path, capsys):
+    p = tmp_path / "short.traj.json"
+    min_jerk([HOME, [0.8, 0.3, 1.9, -0.5, 0.3, 0.5]], [1.0]).save(p)
+    rc = run_cli(["execute", str(p), "--sim", "--yes", "--json", "--speed-scale", "0.5", "--rate", "25",
+                  "--log", str(tmp_path / "slow.json")])
+    out = json.loads(capsys.readouterr().out)
+    log = json.loads((tmp_path / "slow.json").read_text())
+    assert rc == 0 and log["duration"] == pytest.approx(2.0)
+    ticks = [s for s in log["sent"] if "tick" in s]
+    assert len(ticks) == 51 and ticks[-1]["t"] == pytest.approx(2.0, abs=0.01)
+    assert out["simulator"]["rms_mm"] < 5.0
+
+
+def test_ctrl_c_mid_motion_holds_where_it_was(tmp_path):
+    traj = min_jerk([HOME, [1.2, 0.4, 1.9, -0.5, 0.3, 0.5]], [3.0])
+    p = tmp_path / "t.traj.json"
+    traj.save(p)
+    with PtySimulator(SimConfig()) as sim:
+        proc = spawn(["execute", str(p), "--port", sim.path, "--yes"])
+        log = tmp_path / "t.exec.json"
+        # wait until streaming has begun (the simulator has executed motion commands), then Ctrl-C
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and sum(c.get("T") == 102 for _, c in sim.firmware.received) < 40:
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGINT)
+        t_int = time.monotonic()
+        _, err = proc.communicate(timeout=10)
+        time.sleep(0.8)
+        ts, q, torque = sim.recording()
+    assert proc.returncode == 130, err
+    assert "interrupt" in err.lower()
+    assert torque.all()  # never torque off
+    data = json.loads(log.read_text())
+    assert data["summary"]["outcome"] == "interrupted"
+    hold = data["sent"][-1]["cmd"]
+    assert hold["T"] == 102 and hold["spd"] > 0
+    at_int = q[np.searchsorted(ts, t_int)]
+    later = q[ts > ts[-1] - 0.3]
+    assert np.ptp(later, axis=0).max() < 1e-6  # it stopped moving
+    # ... near where it was when interrupted, far from the trajectory's end
+    assert np.linalg.norm(tcp(later[-1]) - tcp(at_int)) < 0.03
+    assert np.linalg.norm(tcp(later[-1]) - tcp(traj.positions[-1])) > 0.05
+
+
+def test_link_lost_mid_motion_exits_4_with_log(tmp_path):
+    traj = min_jerk([HOME, [1.0, 0.3, 1.9, -0.5, 0.3, 0.5]], [3.0])
+    p = tmp_path / "t.traj.json"
+    traj.save(p)
+    sim = PtySimulator(SimConfig()).start()
+    proc = spawn(["execute", str(p), "--port", sim.path, "--yes", "--log", str(tmp_path / "lost.json")])
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and sum(c.get("T") == 102 for _, c in sim.firmware.received) < 30:
+        time.sleep(0.02)
+    sim.disconnect()
+    t_cut = time.monotonic()
+    _, err = proc.communicate(timeout=10)
+    assert proc.returncode == 4, err
+    assert "link lost" in err and time.monotonic() - t_cut < 3.0
+    data = json.loads((tmp_path / "lost.json").read_text())
+    assert data["summary"]["outcome"] == "link_lost" and len(data["sent"]) >= 30
+
+
+def test_silent_device_exits_4_within_seconds(traj_file, capsys):
+    with PtySimulator(SimConfig(silent=True)) as sim:
+        t = time.monotonic()
+        rc = run_cli(["execute", str(traj_file), "--port", sim.path, "--yes"])
+        elapsed = time.monotonic() - t
+    err = capsys.readouterr().err
+    assert rc == 4 and "device silent" in err and elapsed < 5.0
+
+
+def test_m2_firmware_is_refused(traj_file, capsys):
+    with PtySimulator(SimConfig(firmware="m2")) as sim:
+        rc = run_cli(["execute", str(traj_file), "--port", sim.path, "--yes"])
+        moved = [c for _, c in sim.firmware.received if c.get("T") in (101, 102, 104)]
+    assert rc == 4 and "M2" in capsys.readouterr().err and not moved
+
+
+def test_newer_firmware_build_is_accepted_and_reboot_banner_waited_out(tmp_path, capsys):
+    p = tmp_path / "s.traj.json"
+    min_jerk([HOME, [0.2, 0.1, 1.7, 0.0, 0.0, 0.0]], [0.5]).save(p)
+    with PtySimulator(SimConfig(firmware="m3-2026", boot=True, time_factor=0.5)) as sim:
+        rc = run_cli(["execute", str(p), "--port", sim.path, "--yes", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["outcome"] == "completed"
+    assert json.loads((tmp_path / "s.exec.json").read_text())["firmware"] == "m3-2026"
+
+
+def test_not_at_start_is_refused_then_move_to_start(tmp_path, capsys):
+    start = [0.5, 0.2, 1.8, -0.3, 0.0, 0.0]
+    p = tmp_path / "away.traj.json"
+    min_jerk([start, [0.6, 0.25, 1.8, -0.3, 0.0, 0.0]], [0.5]).save(p)
+    with PtySimulator(SimConfig()) as sim:
+        rc = run_cli(["execute", str(p), "--port", sim.path, "--yes"])
+        err = capsys.readouterr().err
+        assert rc == 3 and "not at the trajectory's start" in err and "--move-to-start" in err
+        assert not [c for _, c in sim.firmware.received if c.get("T") == 102]
+        rc = run_cli(["execute", str(p), "--port", sim.path, "--yes", "--move-to-start"])
+        assert rc == 0, capsys.readouterr().err
+
+
+def test_port_errors_are_one_clear_line(traj_file, capsys):
+    rc = run_cli(["execute", str(traj_file), "--port", "/dev/ttyNOPE0", "--yes"])
+    err = capsys.readouterr().err
+    assert rc == 4 and err.count("\n") == 1 and "no such serial port" in err
+    import serial
+
+    with PtySimulator(SimConfig()) as sim:
+        holder = serial.Serial()
+        holder.port, holder.exclusive = sim.path, True
+        holder.open()
+        try:
+            rc = run_cli(["execute", str(traj_file), "--port", sim.path, "--yes"])
+        finally:
+            holder.close()
+    err = capsys.readouterr().err
+    assert rc == 4 and "busy" in err
+
+
+def test_refuses_to_prompt_without_a_terminal(traj_file, capsys, monkeypatch):
+    monkeypatch.setattr(sys, "stdin", open(os.devnull))
+    rc = run_cli(["execute", str(traj_file), "--port", "/dev/ttyNOPE0"])
+    assert rc == 2 and "--yes" in capsys.readouterr().err
+
+
+def test_exactly_one_target(traj_file, capsys):
+    assert run_cli(["execute", str(traj_file)]) == 2
+    assert run_cli(["execute", str(traj_file), "--sim", "--output", "x.jsonl"]) == 2
+    assert run_cli(["execute", str(traj_file), "--output", "x.jsonl", "--rate", "200"]) == 2
+
+
+def test_output_file_exact_bytes_mapping_and_times(traj_file, tmp_path):
+    out = tmp_path / "cmds.jsonl"
+    assert run_cli(["execute", str(traj_file), "--output", str(out), "--rate", "50"]) == 0
+    raw = out.read_bytes()
+    lines = raw.split(b"\n")[:-1]
+    assert raw.endswith(b"\n")
+    traj = pick_place()
+    rows = [json.loads(x) for x in lines]
+    motion = [r for r in rows if r["cmd"]["T"] == 102]
+    assert len(motion) == math.ceil(traj.duration * 50 - 1e-9) + 1
+    lat = default_latency(50)
+    for k, (line, r) in enumerate(zip(lines, rows)):
+        cmd = r["cmd"]
+        # exact bytes: the command inside the line is exactly what goes on the wire
+        assert line == b'{"t":' + repr(r["t"]).encode() + b',"cmd":' + encode(cmd)[:-1] + b"}"
+    for k, r in enumerate(motion):
+        cmd = r["cmd"]
+        assert r["t"] == pytest.approx(min(k / 50, traj.duration), abs=1e-9)
+        q = sample(traj, min(r["t"] + 0.02 + lat, traj.duration))
+        got = [cmd[f] for f in ("base", "shoulder", "elbow", "wrist", "roll")]
+        assert got == pytest.approx(q[:5], abs=6e-5)
+        assert cmd["hand"] == pytest.approx(math.pi - q[5], abs=6e-5)  # hand = pi - q_gripper
+        assert cmd["spd"] >= 50 and cmd["acc"] == 0
+    assert motion[-1]["cmd"]["base"] == pytest.approx(traj.positions[-1][0], abs=6e-5)
+
+
+def test_stalled_arm_aborts_on_tracking_error_and_holds(traj_file, capsys):
+    # a device that streams feedback but never executes commands: the arm does not follow
+    with PtySimulator(SimConfig(deaf=True)) as sim:
+        rc = run_cli(["execute", str(traj_file), "--port", sim.path, "--yes", "--max-error", "20"])
+    err = capsys.readouterr().err
+    assert rc == 4 and "tracking error" in err and "exceeds 20 mm" in err
+    data = json.loads(traj_file.with_name("pp.exec.json").read_text())
+    assert data["summary"]["outcome"] == "aborted" and data["sent"][-1]["cmd"]["T"] == 102
