@@ -97,7 +97,11 @@ def _per_joint(data: dict, key: str, names: list[str], default: np.ndarray, wher
     if value is None:
         return default
     if isinstance(value, list):
-        return _vec(value, len(names), f"{where}.{key}")
+        out = _vec(value, len(names), f"{where}.{key}")
+        for name, v in zip(names, out):
+            if v <= 0:
+                raise DescriptionError(f"{where}.{key}.{name}: must be positive")
+        return out
     if isinstance(value, dict):
         out = default.copy()
         for name, v in value.items():
@@ -165,6 +169,16 @@ def _floats(text: str | None, n: int, where: str) -> np.ndarray:
     return np.array(vals)
 
 
+def _fattr(elem: ET.Element | None, key: str, default: float, where: str) -> float:
+    """A numeric XML attribute (``default`` when the element or attribute is absent)."""
+    if elem is None or elem.get(key) is None:
+        return default
+    try:
+        return float(elem.get(key))
+    except ValueError:
+        raise DescriptionError(f"{where} {key}: not a number: '{elem.get(key)}'") from None
+
+
 def _origin(elem: ET.Element | None, where: str) -> np.ndarray:
     if elem is None:
         return np.eye(4)
@@ -178,6 +192,10 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         raise DescriptionError(f"{urdf}: not valid XML ({exc})") from None
     links = {l.get("name"): l for l in root.findall("link")}
     joints_xml = root.findall("joint")
+    for j in joints_xml:
+        for tag in ("parent", "child"):
+            if j.find(tag) is None or j.find(tag).get("link") not in links:
+                raise DescriptionError(f"{urdf}: joint '{j.get('name')}': <{tag} link=...> missing or names no link")
     children = {j.find("child").get("link") for j in joints_xml}
     roots = [name for name in links if name not in children]
     if len(roots) != 1:
@@ -200,8 +218,8 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
             if np.linalg.norm(axis) == 0 and kind != "fixed":
                 raise DescriptionError(f"{where}: axis is zero")
             lim = j.find("limit")
-            lower = float(lim.get("lower", -math.pi)) if lim is not None else -math.pi
-            upper = float(lim.get("upper", math.pi)) if lim is not None else math.pi
+            lower = _fattr(lim, "lower", -math.pi, f"{where} limit")
+            upper = _fattr(lim, "upper", math.pi, f"{where} limit")
             if j.get("type") == "continuous":
                 lower, upper = -2 * math.pi, 2 * math.pi
             ordered.append(Joint(name, kind, link, j.find("child").get("link"), _origin(j.find("origin"), where),
@@ -215,7 +233,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     urdf_vel = []
     for n in names:
         lim = next(j for j in joints_xml if j.get("name") == n).find("limit")
-        v = float(lim.get("velocity", 0)) if lim is not None else 0.0
+        v = _fattr(lim, "velocity", 0.0, f"{urdf}: joint '{n}' limit")
         urdf_vel.append(v if v > 0 else DEFAULT_VELOCITY)
     by_name = {j.name: j for j in ordered}
     inertials, shapes = {}, []
@@ -224,12 +242,12 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         if inn is not None and inn.find("mass") is not None:
             o = _origin(inn.find("origin"), f"{urdf}: link '{lname}' inertial")
             i = inn.find("inertia")
-            g = {k: float(i.get(k, 0)) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")} if i is not None else {}
+            g = {k: _fattr(i, k, 0.0, f"{urdf}: link '{lname}' inertia") for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
             tensor = np.array([[g.get("ixx", 0), g.get("ixy", 0), g.get("ixz", 0)],
                                [g.get("ixy", 0), g.get("iyy", 0), g.get("iyz", 0)],
                                [g.get("ixz", 0), g.get("iyz", 0), g.get("izz", 0)]])
             r = o[:3, :3]
-            inertials[lname] = Inertial(float(inn.find("mass").get("value")), o[:3, 3], r @ tensor @ r.T)
+            inertials[lname] = Inertial(_fattr(inn.find("mass"), "value", 0.0, f"{urdf}: link '{lname}' mass"), o[:3, 3], r @ tensor @ r.T)
         for k, c in enumerate(l.findall("collision")):
             shapes.extend(_urdf_shape(lname, c, f"{urdf}: link '{lname}' collision[{k}]", k))
     tcp = side.get("tcp_link", ordered[-1].child)
@@ -339,6 +357,8 @@ def _from_dh(path: Path, data: dict) -> Robot:
     tcp = "link" + str(len(rows))
     if data.get("tool"):
         tool = data["tool"]
+        if not isinstance(tool, dict):
+            raise DescriptionError(f"{where}: tool: expected {{xyz, rpy}}")
         xyz = _vec(tool.get("xyz", [0, 0, 0]), 3, f"{where}: tool.xyz") * lscale
         rpy = _vec(tool.get("rpy", [0, 0, 0]), 3, f"{where}: tool.rpy")
         if deg:
@@ -351,6 +371,10 @@ def _from_dh(path: Path, data: dict) -> Robot:
         if not isinstance(item, dict) or "mass" not in item:
             raise DescriptionError(f"{loc}: expected {{link, mass, com, inertia}}")
         link = str(item.get("link", f"link{i + 1}"))
+        if link not in [j.child for j in joints if j.kind != "fixed"]:
+            raise DescriptionError(f"{loc}.link: '{link}' is not a moving link (links: link1 .. link{len(rows)})")
+        if _num(item["mass"], f"{loc}.mass") < 0:
+            raise DescriptionError(f"{loc}.mass: must not be negative")
         inertia = item.get("inertia", [[0, 0, 0], [0, 0, 0], [0, 0, 0]])
         if isinstance(inertia, list) and len(inertia) == 3 and not isinstance(inertia[0], list):
             inertia = np.diag(_vec(inertia, 3, f"{loc}.inertia"))
