@@ -306,3 +306,15 @@ def test_workspace_cli(tmp_path):
 def test_planar_arm_gets_one_map():
     fig = render_workspace(workspace_data(load_robot("planar_2r"), 3000, seed=0))
     assert len([a for a in fig.axes if a.images]) == 1
+
+
+def test_single_sample_trajectory_renders(tmp_path):
+    robot = load_robot("roarm_m3_pro")
+    q = robot.full_q(robot.named_poses["home"])[None]
+    from roarmctl.motion.trajectory import Trajectory
+
+    traj = Trajectory("roarm_m3_pro", list(robot.joint_names), np.array([0.0]), q, 0 * q, 0 * q)
+    data = path_data(traj, robot)
+    assert [k.kind for k in data.key_poses] == ["start", "end"]
+    out = visualize_trajectory(traj, tmp_path / "one.png", dpi=20, size=(16, 10))
+    assert imread(out).shape[:2] == (200, 320)

@@ -152,7 +152,8 @@ def draw_scene_3d(ax, data: PathData, view: str) -> None:
     widths = np.where(data.segment_kind == "cartesian", 4.0, 1.8)
     path = Line3DCollection(_segments(data.tcp), colors=cmap(norm(speed_mid)), linewidths=widths, zorder=6, capstyle="round")
     path.set_gid("tcp_path")
-    ax.add_collection3d(path)
+    if len(data.tcp) > 1:  # a single sample is only a start/end marker
+        ax.add_collection3d(path)
 
     ax.scatter(*data.tcp[0], s=130, marker="o", color="#2ca02c", edgecolor="k", linewidth=0.6, depthshade=False, zorder=8, label="start")
     ax.scatter(*data.tcp[-1], s=40, marker="s", color="#d62728", edgecolor="k", linewidth=0.6, depthshade=False, zorder=8, label="end")
