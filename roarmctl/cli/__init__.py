@@ -78,14 +78,17 @@ def main(argv: list[str] | None = None) -> None:
     except SystemExit as exc:  # typer.Exit raised inside a command
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
     except Exception as exc:  # noqa: BLE001 - the last line of defence: a bug
-        import click
+        try:
+            from click import ClickException
+        except ImportError:  # typer >= 0.2x vendors click as typer._click and no longer installs it
+            from typer._click.exceptions import ClickException
 
-        if isinstance(exc, click.exceptions.Exit):
+        if isinstance(exc, typer.Exit):
             code = exc.exit_code
-        elif isinstance(exc, click.ClickException):
+        elif isinstance(exc, ClickException):
             exc.show()
             code = 2
-        elif isinstance(exc, click.exceptions.Abort):
+        elif isinstance(exc, typer.Abort):
             common.error("aborted")
             code = 130
         else:

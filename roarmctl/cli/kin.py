@@ -17,6 +17,8 @@ kin_app = typer.Typer(help="Kinematics and dynamics: fk, ik, jacobian, dynamics.
 
 DEG = typer.Option(False, "--deg", help="Angles in and out in degrees (default radians).")
 JSON = typer.Option(False, "--json", help="Print one JSON object on stdout, nothing else.")
+# Joint values may be negative: let '-0.5' through as an argument instead of an unknown option.
+NUMBERS = {"ignore_unknown_options": True}
 
 
 def register(app: typer.Typer) -> None:
@@ -43,7 +45,7 @@ def _fmt(a, digits: int = 6) -> str:
     return np.array2string(np.asarray(a, dtype=float), precision=digits, suppress_small=True, max_line_width=120)
 
 
-@kin_app.command("fk")
+@kin_app.command("fk", context_settings=NUMBERS)
 def fk(
     robot: str = typer.Argument(..., help="Bundled robot name or path to a description."),
     q: list[str] = typer.Argument(..., help="Joint values (arm joints; the gripper may follow)."),
@@ -76,7 +78,7 @@ def fk(
     ])
 
 
-@kin_app.command("jacobian")
+@kin_app.command("jacobian", context_settings=NUMBERS)
 def jacobian(
     robot: str = typer.Argument(..., help="Bundled robot name or path to a description."),
     q: list[str] = typer.Argument(..., help="Joint values (arm joints; the gripper may follow)."),

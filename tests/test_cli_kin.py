@@ -1,0 +1,145 @@
+"""`roarmctl kin fk/ik/jacobian/dynamics` through the real entry point: JSON keys, values, units, exit codes."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from roarmctl.robot.loader import load_robot
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "roarmctl", *args], capture_output=True, text=True, timeout=60)
+
+
+def run_json(*args: str) -> dict:
+    proc = run(*args, "--json")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.count("\n") == 1  # one JSON object, nothing else
+    return json.loads(proc.stdout)
+
+
+def test_fk_json_keys_and_values():
+    out = run_json("kin", "fk", "roarm_m3_pro", "0", "0", str(math.pi / 2), "0", "0")
+    assert {"position", "rotation", "rpy"} <= set(out)
+    assert np.allclose(out["position"], [0.343668, 0, 0.343728], atol=2e-6)
+    assert np.allclose(out["rotation"], np.eye(3), atol=1e-5)
+    assert np.allclose(out["rpy"], 0, atol=1e-5)
+
+
+def test_fk_deg_round_trip():
+    rad = run_json("kin", "fk", "ur10", *[str(math.radians(v)) for v in (30, 45, 26, 50, 60, 80)])
+    deg = run_json("kin", "fk", "ur10", "30", "45", "26", "50", "60", "80", "--deg")
+    assert np.allclose(rad["position"], deg["position"], atol=1e-12)
+    assert np.allclose(np.radians(deg["rpy"]), rad["rpy"], atol=1e-12)
+    assert np.allclose(deg["q"], [30, 45, 26, 50, 60, 80])
+    assert np.allclose(np.array(deg["position"]) * 1000, [519.9835444, 57.7255263, 1110.6969610], atol=1e-4)
+
+
+def test_ik_json_solutions_verified_by_fk():
+    robot = load_robot("roarm_m3_pro")
+    out = run_json("kin", "ik", "roarm_m3_pro", "--xyz", "0.25", "-0.1", "0.05", "--pitch", str(math.pi / 2), "--all")
+    assert out["solutions"]
+    for q, err in zip(out["solutions"], out["position_errors"]):
+        assert len(q) == 6
+        t = robot.kin.fk(np.array(q))
+        assert np.linalg.norm(t[:3, 3] - [0.25, -0.1, 0.05]) <= 1e-6 and err <= 1e-6
+        assert t[2, 0] == pytest.approx(-1.0, abs=1e-5)  # pointing straight down
+
+
+def test_ik_deg_round_trip_through_fk():
+    out = run_json("kin", "ik", "roarm_m3_pro", "--xyz", "0.2", "0.1", "0.15", "--pitch", "60", "--roll", "30", "--deg")
+    q = out["solutions"][0]
+    assert q[4] == pytest.approx(30.0)  # roll comes back in degrees
+    fk = run_json("kin", "fk", "roarm_m3_pro", *map(str, q), "--deg")
+    assert np.allclose(fk["position"], [0.2, 0.1, 0.15], atol=1e-6)
+
+
+def test_ik_ur10_all_eight():
+    t = load_robot("ur10").kin.fk(np.radians([30, 45, 26, 50, 60, 80]))
+    from roarmctl.robot.model import rpy_from_matrix
+
+    rpy = rpy_from_matrix(t[:3, :3])
+    out = run_json("kin", "ik", "ur10", "--xyz", *(repr(float(v)) for v in t[:3, 3]), "--rpy", *(repr(float(v)) for v in rpy), "--all")
+    assert len(out["solutions"]) == 8
+    assert max(out["orientation_errors"]) < 1e-6
+
+
+def test_ik_ref_sorts_and_keeps_gripper():
+    out = run_json("kin", "ik", "roarm_m3_pro", "--xyz", "0.25", "0", "0.1", "--pitch", "1.2", "--ref", "0,0.3,1.5,0.8,0,1.1")
+    assert out["solutions"][0][5] == pytest.approx(1.1)
+
+
+@pytest.mark.parametrize("args, reason", [
+    (["roarm_m3_pro", "--xyz", "0.9", "0", "0.1"], "out_of_reach"),
+    (["roarm_m3_pro", "--xyz", "0.08", "0", "0.05", "--pitch", "0"], "joint_limit"),
+    (["roarm_m3_pro", "--xyz", "0.3", "0", "0.2", "--rpy", "0", "0", "90", "--deg"], "orientation"),
+    (["scara_2r", "--xyz", "0.9", "0", "0"], "out_of_reach"),
+])
+def test_ik_unreachable_exit_3_one_line(args, reason):
+    proc = run("kin", "ik", *args, "--json")
+    assert proc.returncode == 3
+    assert proc.stdout == ""
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and reason in lines[0] and "Traceback" not in proc.stderr
+
+
+def test_ik_bad_usage_exit_2():
+    assert run("kin", "ik", "roarm_m3_pro", "--xyz", "0.3", "0", "0.2", "--pitch", "1", "--rpy", "0", "0", "0").returncode == 2
+    assert run("kin", "ik", "scara_2r", "--xyz", "0.3", "0", "0", "--pitch", "1").returncode == 2
+    assert run("kin", "ik", "roarm_m3_pro", "--xyz", "0.3", "0").returncode == 2
+
+
+def test_ik_table_output():
+    proc = run("kin", "ik", "roarm_m3_pro", "--xyz", "0.25", "0", "0.05", "--pitch", "90", "--deg")
+    assert proc.returncode == 0 and "solution" in proc.stdout and "base_link_to_link1" in proc.stdout
+
+
+def test_jacobian_json_scara_singular():
+    out = run_json("kin", "jacobian", "scara_2r", "0", "0")
+    assert {"jacobian", "manipulability", "singular_values", "ellipsoid_radii", "singularity"} <= set(out)
+    assert np.array(out["jacobian"]).shape == (6, 2)
+    assert np.allclose(out["ellipsoid_radii"], [0.761577, 0], atol=1e-6)
+    assert out["singularity"] == "elbow_stretched"
+
+
+def test_jacobian_json_roarm():
+    out = run_json("kin", "jacobian", "roarm_m3_pro", "0", "0.2", "1.2", "0.3", "0", "--deg")
+    assert np.array(out["jacobian"]).shape == (6, 5)
+    assert out["singularity"] is None or isinstance(out["singularity"], str)
+
+
+def test_dynamics_json_matches_seed001():
+    out = run_json("kin", "dynamics", "planar_2r", "--q", f"{math.pi / 4} {math.pi / 3}", "--qd", "1,-0.5", "--qdd", "0 0")
+    assert {"tau", "mass_matrix", "gravity"} <= set(out)
+    assert np.allclose(out["mass_matrix"], [[4, 1.5], [1.5, 1]], atol=1e-12)
+    assert np.allclose(out["gravity"], [11.33442, -2.539015], atol=1e-5)
+    assert np.allclose(out["tau"], [11.33442 + 0.649519, -2.539015 + 0.866025], atol=1e-5)
+
+
+def test_dynamics_deg():
+    rad = run_json("kin", "dynamics", "planar_2r", "--q", f"{math.pi / 4},{math.pi / 3}", "--qdd", "1 2")
+    deg = run_json("kin", "dynamics", "planar_2r", "--q", "45 60", "--qdd", f"{math.degrees(1)} {math.degrees(2)}", "--deg")
+    assert np.allclose(rad["tau"], deg["tau"], atol=1e-9)  # torques stay N m
+    assert np.allclose(deg["q"], [45, 60])
+
+
+def test_dynamics_errors_exit_2():
+    proc = run("kin", "dynamics", "scara_2r", "--q", "0 0")
+    assert proc.returncode == 2 and "inertial" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert run("kin", "dynamics", "planar_2r", "--q", "0 x").returncode == 2
+    assert run("kin", "dynamics", "planar_2r", "--q", "0 0 0").returncode == 2
+
+
+def test_negative_joint_values_are_values_not_options():
+    out = run_json("kin", "fk", "roarm_m3_pro", "0", "-0.5", "1", "-0.2", "0")
+    assert np.allclose(out["q"][:5], [0, -0.5, 1, -0.2, 0])
+    out = run_json("kin", "jacobian", "planar_2r", "-1", "-0.5")
+    assert np.array(out["jacobian"]).shape == (6, 2)
+    out = run_json("kin", "dynamics", "planar_2r", "--q", "-0.5 1", "--qd", "-1,-1")
+    assert len(out["tau"]) == 2
