@@ -192,22 +192,24 @@ def _fit_limits(robot: Robot, q: np.ndarray, ref: np.ndarray | None, tol: float 
 
 def _newton(residual: Callable[[np.ndarray], np.ndarray], q: np.ndarray, idx: list[int],
             iters: int = 12, tol: float = 1e-13, h: float = 1e-7) -> np.ndarray:
-    """Gauss-Newton on the joints ``idx`` of ``q`` with a forward-difference Jacobian."""
+    """Gauss-Newton on the joints ``idx`` of ``q`` with a forward-difference Jacobian.
+
+    ``residual`` maps a batch of configurations (k, dof) to residuals (k, m), so that q and its
+    len(idx) perturbations cost one batched FK call per iteration.
+    """
     q = q.copy()
-    r = residual(q)
     for _ in range(iters):
+        batch = np.repeat(q[None], len(idx) + 1, axis=0)
+        batch[np.arange(1, len(idx) + 1), idx] += h
+        res = residual(batch)
+        r = res[0]
         if np.linalg.norm(r) < tol:
             break
-        jac = np.empty((r.size, len(idx)))
-        for k, i in enumerate(idx):
-            qp = q.copy()
-            qp[i] += h
-            jac[:, k] = (residual(qp) - r) / h
+        jac = (res[1:] - r).T / h
         step = np.linalg.lstsq(jac, -r, rcond=None)[0]
         if np.linalg.norm(step) > 0.2:  # a polish, not a search: never wander to another branch
             break
         q[idx] += step
-        r = residual(q)
     return q
 
 
@@ -444,20 +446,26 @@ class _RoarmIK:
                 pitch: float | None) -> np.ndarray:
         kin = self.robot.kin
         if rot is not None:
+            want = _pitch_of_r(rot, u_h)
+
             def res(qq):
                 t = kin.fk(qq)
-                m = rot.T @ t[:3, :3]
-                return np.concatenate([t[:3, 3] - p, [_wrap(_pitch_of(t, u_h) - _pitch_of_r(rot, u_h)),
-                                                      math.atan2(m[2, 1] - m[1, 2], m[1, 1] + m[2, 2])]])
+                m = rot.T @ t[:, :3, :3]
+                return np.column_stack([t[:, :3, 3] - p, _wrap(_pitches(t, u_h) - want),
+                                        np.arctan2(m[:, 2, 1] - m[:, 1, 2], m[:, 1, 1] + m[:, 2, 2])])
             return _newton(res, q, self.arm)
-        target_pitch = pitch if pitch is not None else None
-        if target_pitch is None:  # free pitch: keep the pitch the closed form chose
-            target_pitch = _pitch_of(kin.fk(q), u_h)
+        target_pitch = pitch if pitch is not None else _pitch_of(kin.fk(q), u_h)  # free: keep the chosen one
 
         def res(qq):
             t = kin.fk(qq)
-            return np.concatenate([t[:3, 3] - p, [_wrap(_pitch_of(t, u_h) - target_pitch)]])
+            return np.column_stack([t[:, :3, 3] - p, _wrap(_pitches(t, u_h) - target_pitch)])
         return _newton(res, q, self.arm[:4])
+
+
+def _pitches(t: np.ndarray, u_h: np.ndarray) -> np.ndarray:
+    """Pitch (rad) of the approach axis of a batch of TCP poses (k, 4, 4) against the outward direction."""
+    a = t[:, :3, 0]
+    return np.arctan2(-a[:, 2], a @ u_h)
 
 
 def _pitch_of(t: np.ndarray, u_h: np.ndarray) -> float:
@@ -573,9 +581,11 @@ def _ur6_solve(robot: Robot, p: np.ndarray, rot: np.ndarray, qr: np.ndarray | No
     arm = robot.arm_indices
     grip = _gripper_value(robot, qr)
 
-    def res(qq):
+    def res(qq):  # position error and the small-angle rotation error (vee of the skew part)
         tt = robot.kin.fk(qq)
-        return np.concatenate([tt[:3, 3] - p, _rot_vec(rot.T @ tt[:3, :3])])
+        m = rot.T @ tt[:, :3, :3]
+        w = 0.5 * np.stack([m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]], axis=1)
+        return np.column_stack([tt[:, :3, 3] - p, w])
 
     out, limit_fail = [], 0
     for qa in raw:
