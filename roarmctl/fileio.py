@@ -35,6 +35,7 @@ def atomic_write_with(path: str | os.PathLike, writer: Callable[[Any], Any]) -> 
             writer(f)
             f.flush()
             os.fsync(f.fileno())
+        os.chmod(tmp, _mode_for(target))  # mkstemp makes 0600; give the file the usual mode
         os.replace(tmp, target)
     except BaseException:
         try:
@@ -43,3 +44,13 @@ def atomic_write_with(path: str | os.PathLike, writer: Callable[[Any], Any]) -> 
             pass
         raise
     return target
+
+
+def _mode_for(target: Path) -> int:
+    """The existing file's mode, or 0666 less the process umask for a new file."""
+    try:
+        return target.stat().st_mode & 0o7777
+    except FileNotFoundError:
+        umask = os.umask(0)
+        os.umask(umask)
+        return 0o666 & ~umask

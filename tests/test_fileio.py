@@ -1,0 +1,31 @@
+"""Atomic writes: all or nothing, and the usual file mode."""
+
+import os
+
+import pytest
+
+from roarmctl.fileio import atomic_write_text, atomic_write_with
+
+
+def test_write_replaces_whole_file_with_umask_mode(tmp_path):
+    target = tmp_path / "out.json"
+    atomic_write_text(target, "first")
+    atomic_write_text(target, "second")
+    assert target.read_text() == "second"
+    umask = os.umask(0)
+    os.umask(umask)
+    assert target.stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+def test_interrupted_write_leaves_old_file_and_no_temporary(tmp_path):
+    target = tmp_path / "traj.json"
+    atomic_write_text(target, "old")
+
+    def writer(f):
+        f.write(b"half")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write_with(target, writer)
+    assert target.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["traj.json"]
