@@ -302,3 +302,19 @@ def test_transform_helper_consistency():
     # the rpy the tests feed back is the one FK reports
     t = UR10.kin.fk(CASE_C)
     assert np.allclose(transform(rpy=rpy_from_matrix(t[:3, :3]))[:3, :3], t[:3, :3], atol=1e-12)
+
+
+def test_roarm_roll_outside_range():
+    with pytest.raises(UnreachableError) as ei:
+        solve_ik(ROARM, [0.2, 0.0, 0.05], pitch=math.pi / 2, roll=math.pi)
+    assert ei.value.reason == "joint_limit" and "roll" in ei.value.message
+
+
+def test_roarm_target_on_base_axis_uses_reference_base():
+    # straight above the base: every base angle works; the reference's base angle is kept
+    p = ROARM.kin.fk([0.7, 0.0, 0.0, 0.0, 0.0])[:3, 3]
+    p[:2] = 0.0
+    ref = np.array([0.7, 0.1, 0.2, 0.1, 0.0])
+    sols = solve_ik(ROARM, p + [0, 0, -0.05], pitch=-math.pi / 2, q_ref=ref, all_solutions=True)
+    _check_all(ROARM, sols, p + [0, 0, -0.05])
+    assert any(abs(q[0] - 0.7) < 1e-6 for q in sols)

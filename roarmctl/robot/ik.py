@@ -206,7 +206,9 @@ def _newton(residual: Callable[[np.ndarray], np.ndarray], q: np.ndarray, idx: li
         if np.linalg.norm(r) < tol:
             break
         jac = (res[1:] - r).T / h
-        step = np.linalg.lstsq(jac, -r, rcond=None)[0]
+        # a whisker of damping: directions the target does not constrain (the base, when the TCP is
+        # on the base axis) stay put instead of absorbing urad-level model noise with huge steps
+        step = np.linalg.solve(jac.T @ jac + 1e-10 * np.eye(len(idx)), -jac.T @ r)
         if np.linalg.norm(step) > 0.2:  # a polish, not a search: never wander to another branch
             break
         q[idx] += step
@@ -304,24 +306,23 @@ class _RoarmIK:
             ok &= okk
         return ok
 
-    def _violation(self, qs: np.ndarray) -> tuple[float, str] | None:
-        """(total excess in rad, description) of the sample that violates the limits least."""
+    def _violation(self, qs: np.ndarray) -> str:
+        """Which joint limit the least-violating sample of ``qs`` (k, dof) breaks, in words."""
         lo, hi = self.robot.lower, self.robot.upper
-        best = None
-        for q in qs:
-            total, first = 0.0, ""
-            for i in self.arm[:4]:
-                v = float(q[i])
-                cands = [v + 2 * np.pi * k for k in (-1, 0, 1)]
-                v = min(cands, key=lambda x: max(lo[i] - x, x - hi[i], 0.0))
-                ex = max(lo[i] - v, v - hi[i], 0.0)
-                if ex > 0 and not first:
-                    first = (f"{self.robot.joint_names[i]} would be at {math.degrees(v):.1f} deg, outside "
-                             f"[{math.degrees(lo[i]):.1f}, {math.degrees(hi[i]):.1f}] deg")
-                total += ex
-            if first and (best is None or total < best[0]):
-                best = (total, first)
-        return best
+        idx = self.arm[:4]
+        shifts = np.array([-2 * np.pi, 0.0, 2 * np.pi])
+        v = qs[:, idx][:, :, None] + shifts  # (k, 4, 3): each angle's 2pi representatives
+        ex = np.maximum(np.maximum(lo[idx][None, :, None] - v, v - hi[idx][None, :, None]), 0.0)
+        best = np.argmin(ex, axis=2)  # the representative nearest to the range
+        ex_b = np.take_along_axis(ex, best[:, :, None], 2)[:, :, 0]
+        v_b = np.take_along_axis(v, best[:, :, None], 2)[:, :, 0]
+        if not len(qs) or not np.any(ex_b > 0):
+            return "every branch violates a limit"
+        k = int(np.argmin(np.where(np.any(ex_b > 0, axis=1), ex_b.sum(axis=1), np.inf)))
+        j = int(np.argmax(ex_b[k] > 0))
+        i = idx[j]
+        return (f"{self.robot.joint_names[i]} would be at {math.degrees(v_b[k, j]):.1f} deg, outside "
+                f"[{math.degrees(lo[i]):.1f}, {math.degrees(hi[i]):.1f}] deg")
 
     def solve(self, p: np.ndarray, pitch: float | None, roll: float | None,
               rot: np.ndarray | None, qr: np.ndarray | None) -> list[np.ndarray]:
@@ -359,6 +360,12 @@ class _RoarmIK:
             pitch = math.atan2(-a[2], float(np.dot(a, u_h)))
         elif roll is not None:
             want_roll = float(roll)
+            ri = self.arm[4]
+            if not robot.lower[ri] - 1e-9 <= want_roll <= robot.upper[ri] + 1e-9:
+                raise UnreachableError(
+                    f"roll {math.degrees(want_roll):.1f} deg is outside the wrist-roll range "
+                    f"[{math.degrees(robot.lower[ri]):.1f}, {math.degrees(robot.upper[ri]):.1f}] deg",
+                    "joint_limit", "turn the roll by 180 deg: the jaws are symmetric")
         if want_roll is None:
             want_roll = float(qr[self.arm[4]]) if qr is not None else 0.0
 
@@ -374,7 +381,7 @@ class _RoarmIK:
 
         cands: list[np.ndarray] = []
         any_reach = False
-        violated: tuple[float, str] | None = None  # the least-violating reachable branch's complaint
+        reachable: list[np.ndarray] = []  # reachable samples, to explain a joint-limit failure
         for base, r_signed, sign in branches:
             # world approach a = cos(pitch) u_h - sin(pitch) z; in this branch's plane coordinates
             # (forward = sign * u_h) its angle from vertical is atan2(sign cos(pitch), -sin(pitch)).
@@ -383,10 +390,7 @@ class _RoarmIK:
                 s, e, w, ok = self._planar(r_signed, z, phi, elbow)
                 qs = self._branch_q(_wrap(base), s, e, w, want_roll, grip)
                 any_reach |= bool(ok.any())
-                if ok.any():
-                    worst = self._violation(qs[ok])
-                    if worst is not None and (violated is None or worst[0] < violated[0]):
-                        violated = worst
+                reachable.append(qs[ok])
                 ok &= self._in_limits(qs)
                 if not ok.any():
                     continue
@@ -414,7 +418,7 @@ class _RoarmIK:
             what = f"with pitch {math.degrees(pitch):.1f} deg " if pitch is not None else "at any pitch "
             raise UnreachableError(
                 f"{where} is within reach but not {what}within the joint limits: "
-                + (violated[1] if violated else "every branch violates a limit"),
+                + self._violation(_first_nonempty(np.concatenate(reachable[:2]), np.concatenate(reachable[2:]))),
                 "joint_limit", "try another pitch, or move the target")
 
         # Polish on the true FK and verify.
@@ -460,6 +464,11 @@ class _RoarmIK:
             t = kin.fk(qq)
             return np.column_stack([t[:, :3, 3] - p, _wrap(_pitches(t, u_h) - target_pitch)])
         return _newton(res, q, self.arm[:4])
+
+
+def _first_nonempty(*arrays: np.ndarray) -> np.ndarray:
+    """The first array with rows (explain the forward branch before the base-flipped one)."""
+    return next((a for a in arrays if len(a)), arrays[-1])
 
 
 def _pitches(t: np.ndarray, u_h: np.ndarray) -> np.ndarray:
