@@ -26,6 +26,8 @@ SAMPLE_DT = 0.01  # s: 100 Hz output
 RECHECK_SUBSTEPS = 4  # collision re-check at 4x the output rate
 LINE_TOLERANCE = 0.001  # m: straight-line segments follow the line within this
 LIMIT_TOL = 1e-6
+# Sampling planners return a different detour per seed; keep the shortest of a few (deterministic).
+FREE_MOTION_TRIES = 3
 
 ProgressFn = Callable[[str, int, int], None]
 
@@ -364,35 +366,46 @@ class Planner:
         return tp
 
     def _free_step(self, step: _Step, q: np.ndarray) -> TimedPath:
+        """OMPL path, then the smoothest timed curve through it that stays valid.
+
+        A cubic spline through the few simplified vertices is smooth (no acceleration ringing)
+        but may cut corners; if the re-check finds it invalid, vertices are added along the
+        valid polyline and the spline pulled toward it, step by step.
+        """
         from roarmctl.motion.ompl_planner import plan_joint_path_with_stats
 
         goal = step.q_to.copy()
         if self.gi is not None:
             goal[self.gi] = q[self.gi]
         cfg = self.plan.planner
-        resolution = 0.02
-        last_error: PlanningError | None = None
-        for attempt in range(3):
-            t0 = time.perf_counter()
+        best = None
+        for attempt in range(FREE_MOTION_TRIES):
             path, stats = plan_joint_path_with_stats(
                 self.checker, q[self.arm], goal[self.arm], planner=cfg.name, time_budget=cfg.time_budget,
-                simplify_budget=cfg.simplify_budget, seed=cfg.seed + 1000 * self.free_count + attempt, resolution=resolution)
-            self.timer.t["ompl"] += getattr(stats, "solve_time", time.perf_counter() - t0)
-            self.timer.t["simplify"] += getattr(stats, "simplify_time", 0.0)
-            wps = np.repeat(q[None, :], len(path), axis=0)
-            wps[:, self.arm] = path
-            wps = _densify(wps, max_step=0.05 / (attempt + 1))
+                simplify_budget=cfg.simplify_budget, seed=cfg.seed + 1000 * self.free_count + attempt,
+                resolution=0.01, max_step=None)
+            self.timer.t["ompl"] += stats.solve_time
+            self.timer.t["simplify"] += stats.simplify_time
+            if best is None or stats.length < best[1].length:
+                best = (path, stats)
+            if stats.direct:  # the straight joint move is valid: nothing shorter exists
+                break
+        path = best[0]
+        self.free_count += 1
+        vertices = np.repeat(q[None, :], len(path), axis=0)
+        vertices[:, self.arm] = path
+        last_error: PlanningError | None = None
+        for max_step in (None, 0.4, 0.2, 0.1, 0.05, 0.025):
+            wps = vertices if max_step is None else _densify(vertices, max_step)
             tp = self._time(wps, step.label)
+            t0 = time.perf_counter()
             try:
-                t0 = time.perf_counter()
                 self._recheck(tp, step.label)
-                self.timer.add("recheck", t0)
-                self.free_count += 1
                 return tp
             except PlanningError as exc:
-                self.timer.add("recheck", t0)
                 last_error = exc
-                resolution /= 2
+            finally:
+                self.timer.add("recheck", t0)
         raise last_error
 
     def _time(self, wps: np.ndarray, label: str) -> TimedPath:
