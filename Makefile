@@ -20,11 +20,14 @@ test: $(STAMP)
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)
-	$(BIN)/python bench/run_all.py
+	for b in bench/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
 
+# Plan the bundled pick-and-place, draw it, and run it on the simulated arm (firmware simulator
+# on a pseudo-terminal). Outputs go to out/.
 demo: $(STAMP)
-	$(BIN)/roarmctl robots
-	$(BIN)/roarmctl kin fk roarm_m3_pro 0 0 1.5708 0 0 0
+	$(BIN)/roarmctl plan plans/pick_place.yaml -o out/pick_place.traj.json
+	$(BIN)/roarmctl visualize-path out/pick_place.traj.json -o out/pick_place.png
+	$(BIN)/roarmctl execute out/pick_place.traj.json --sim --yes
 
 clean:
 	rm -rf $(VENV) build *.egg-info
