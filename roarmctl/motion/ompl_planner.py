@@ -1,0 +1,243 @@
+"""Joint-space path planning with OMPL around a ``CollisionChecker``.
+
+``plan_joint_path(checker, q_start, q_goal)`` returns a collision-free path (K, arm_dof): the
+straight segment when it is valid (no OMPL call), else the planner's path, simplified and
+densified. Every segment between consecutive waypoints is valid when checked at ``resolution``
+(rad, Euclidean norm over the arm joints); the first and last rows are exactly q_start, q_goal.
+
+Determinism: OMPL's global seed is set before anything random is created, planners stop on a
+count of termination-condition evaluations (about one per iteration) rather than on the clock
+(the time budget is only a ceiling), and simplification runs a fixed number of rounds of
+iteration-bounded shortcutting. So the same seed gives the same path on any machine, unless the
+time ceiling is hit. PRM is the exception: OMPL grows its roadmap in one thread while another looks
+for a solution, so its result depends on thread timing.
+
+OMPL is imported inside the functions (heavy import; ``roarmctl --help`` must stay fast).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from roarmctl.errors import InputError, PlanningError
+from roarmctl.motion.collision import CollisionChecker, interpolate
+
+PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
+# Work budgets in single-state checks (deterministic, unlike the clock). Planners that stop at their
+# first solution get large chunks; the anytime ones (RRTstar, BITstar) refine until the chunk ends.
+SOLVE_CHUNK_CHECKS = {"RRTConnect": 200_000, "KPIECE1": 200_000, "PRM": 200_000, "RRTstar": 20_000, "BITstar": 20_000}
+SIMPLIFY_CHECKS = 20_000
+
+
+@dataclass
+class PlanStats:
+    """What one ``plan_joint_path`` call did. Times in s; ``checks`` counts single states checked."""
+
+    planner: str
+    direct: bool = False  # the straight segment was valid: OMPL was not called
+    solve_time: float = 0.0
+    simplify_time: float = 0.0
+    total_time: float = 0.0
+    checks: int = 0
+    iterations: int = 0
+    raw_waypoints: int = 0  # states in the planner's path before simplification
+    waypoints: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # simplified, before densifying
+    length: float = 0.0  # joint-space length of the returned path (rad)
+
+
+def _fmt(q: np.ndarray) -> str:
+    return "[" + ", ".join(f"{v:.3f}" for v in q) + "]"
+
+
+def _allocate(name: str, si):
+    from ompl import geometric as og
+
+    if name == "RRTConnect":
+        return og.RRTConnect(si)
+    if name == "RRTstar":
+        return og.RRTstar(si)
+    if name == "BITstar":
+        return og.BITstar(si)
+    if name == "PRM":
+        return og.PRM(si)
+    if name == "KPIECE1":
+        return og.KPIECE1(si)
+    raise AssertionError(name)
+
+
+def _densify(path: np.ndarray, max_step: float | None) -> np.ndarray:
+    """Insert states so no two consecutive rows are more than ``max_step`` apart (rad, L2)."""
+    if max_step is None or len(path) < 2:
+        return path
+    out = [path[:1]]
+    for a, b in zip(path[:-1], path[1:]):
+        out.append(interpolate(a, b, max_step)[1:])
+    return np.vstack(out)
+
+
+def _path_valid(checker: CollisionChecker, path: np.ndarray, resolution: float) -> int | None:
+    """Index of the first segment of ``path`` that is invalid at ``resolution``, or None."""
+    for i in range(len(path) - 1):
+        if checker.first_invalid(interpolate(path[i], path[i + 1], resolution)) is not None:
+            return i
+    return None
+
+
+def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, planner: str = "RRTConnect",
+                               time_budget: float = 1.0, simplify_budget: float = 0.2, seed: int = 0,
+                               resolution: float = 0.01, max_step: float | None = 0.1,
+                               try_direct: bool = True) -> tuple[np.ndarray, PlanStats]:
+    """Plan a collision-free joint-space path from ``q_start`` to ``q_goal`` (arm_dof,), rad.
+
+    Returns (path (K, arm_dof), PlanStats). ``time_budget`` (s) caps the planner, ``simplify_budget``
+    (s) caps simplification; ``resolution`` (rad) is the motion-checking step; ``max_step`` (rad)
+    the largest gap between returned waypoints (None: only the simplified waypoints).
+    Raises InputError for an unknown planner or bad vectors, PlanningError when start or goal is
+    invalid or no path was found within the budget.
+    """
+    if planner not in PLANNERS:
+        raise InputError(f"unknown planner '{planner}'", f"valid planners: {', '.join(PLANNERS)}")
+    robot = checker.robot
+    n = robot.arm_dof
+    q_start = np.asarray(q_start, dtype=float).reshape(-1)
+    q_goal = np.asarray(q_goal, dtype=float).reshape(-1)
+    for label, q in (("start", q_start), ("goal", q_goal)):
+        if q.shape != (n,):
+            raise InputError(f"{label} configuration must have {n} arm joint values, got {q.shape[0]}")
+    if not (resolution > 0 and time_budget > 0 and simplify_budget >= 0):
+        raise InputError("resolution and time_budget must be > 0 and simplify_budget >= 0")
+    stats = PlanStats(planner=planner)
+    t_total = time.perf_counter()
+    checks0 = checker.check_count
+    for label, q in (("start", q_start), ("goal", q_goal)):
+        if not checker.is_valid(q):
+            raise PlanningError(f"{label} configuration {_fmt(q)} is invalid: {checker.explain(q)}",
+                                "move the obstacle, or choose another pose")
+
+    if try_direct and checker.segment_valid(q_start, q_goal, resolution):
+        path = np.vstack([q_start, q_goal])
+        stats.direct = True
+        stats.waypoints = path.copy()
+        stats.raw_waypoints = 2
+    else:
+        path = _plan_ompl(checker, q_start, q_goal, planner, time_budget, simplify_budget, seed, resolution, stats)
+    path = _densify(path, max_step)
+    path[0], path[-1] = q_start, q_goal
+    stats.length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
+    stats.checks = checker.check_count - checks0
+    stats.total_time = time.perf_counter() - t_total
+    return path, stats
+
+
+def plan_joint_path(checker: CollisionChecker, q_start, q_goal, *, planner: str = "RRTConnect",
+                    time_budget: float = 1.0, simplify_budget: float = 0.2, seed: int = 0,
+                    resolution: float = 0.01, max_step: float | None = 0.1) -> np.ndarray:
+    """Like ``plan_joint_path_with_stats`` but returns only the path (K, arm_dof)."""
+    return plan_joint_path_with_stats(checker, q_start, q_goal, planner=planner, time_budget=time_budget,
+                                      simplify_budget=simplify_budget, seed=seed, resolution=resolution,
+                                      max_step=max_step)[0]
+
+
+def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarray, planner: str,
+               time_budget: float, simplify_budget: float, seed: int, resolution: float,
+               stats: PlanStats) -> np.ndarray:
+    from ompl import base as ob
+    from ompl import geometric as og
+    from ompl import util as ou
+
+    ou.setLogLevel(ou.LOG_NONE)
+    # Seed first: every RNG OMPL creates from here on (samplers, simplifier) draws from this seed.
+    ou.RNG.setSeed(int(seed) if seed > 0 else int(seed) + 2**31 - 1 if seed < 0 else 1)
+    n = q_start.size
+    space = ob.RealVectorStateSpace(n)
+    bounds = ob.RealVectorBounds(n)
+    lower, upper = checker._lower, checker._upper
+    for i in range(n):
+        bounds.setLow(i, float(lower[i]))
+        bounds.setHigh(i, float(upper[i]))
+    space.setBounds(bounds)
+    si = ob.SpaceInformation(space)
+
+    buf = np.empty(n)
+
+    def to_np(state) -> np.ndarray:
+        for i in range(n):
+            buf[i] = state[i]
+        return buf
+
+    def state_valid(state) -> bool:
+        return checker.is_valid(to_np(state))
+
+    class SegmentValidator(ob.MotionValidator):
+        """Checks a whole motion in one batched call (the pre-filter and FK run once per segment)."""
+
+        def checkMotion(self, s1, s2) -> bool:  # noqa: N802 (OMPL's name)
+            a = np.array([s1[i] for i in range(n)])
+            b = np.array([s2[i] for i in range(n)])
+            return checker.first_invalid(interpolate(a, b, resolution)[1:]) is None
+
+    si.setStateValidityChecker(state_valid)
+    validator = SegmentValidator(si)
+    si.setMotionValidator(validator)
+    si.setStateValidityCheckingResolution(min(1.0, resolution / max(space.getMaximumExtent(), 1e-9)))
+    si.setup()
+
+    start, goal = space.allocState(), space.allocState()
+    for i in range(n):
+        start[i], goal[i] = float(q_start[i]), float(q_goal[i])
+    pdef = ob.ProblemDefinition(si)
+    pdef.setStartAndGoalStates(start, goal, 1e-9)
+    objective = ob.PathLengthOptimizationObjective(si)
+    if planner == "PRM":  # stop at the first solution (the default threshold 0 means "never satisfied")
+        objective.setCostThreshold(ob.Cost(float("inf")))
+    pdef.setOptimizationObjective(objective)
+    algo = _allocate(planner, si)
+    algo.setProblemDefinition(pdef)
+    algo.setup()
+
+    deadline = time.perf_counter() + time_budget
+    chunk = SOLVE_CHUNK_CHECKS[planner]
+
+    def budget(n_checks: int, until: float):
+        """Termination after ``n_checks`` more state checks (deterministic) or at ``until`` (ceiling)."""
+        stop_at = checker.check_count + n_checks
+
+        def fn() -> bool:
+            stats.iterations += 1
+            return checker.check_count >= stop_at or time.perf_counter() > until
+
+        return ob.PlannerTerminationCondition(fn)
+
+    t0 = time.perf_counter()
+    while True:  # OMPL planners resume from their tree/graph on each solve() call
+        if planner == "PRM":
+            # PRM evaluates the termination condition in a second thread: a Python callable there
+            # would deadlock on the GIL, so it gets OMPL's own (C++) timed condition.
+            algo.solve(ob.timedPlannerTerminationCondition(max(deadline - time.perf_counter(), 1e-3)))
+        else:
+            algo.solve(budget(chunk, deadline))
+        if pdef.hasExactSolution() or time.perf_counter() > deadline:
+            break
+    stats.solve_time = time.perf_counter() - t0
+    if not pdef.hasExactSolution():
+        raise PlanningError(
+            f"no collision-free path from {_fmt(q_start)} to {_fmt(q_goal)} within {time_budget:g} s ({planner})",
+            "raise planner.time_budget or move the obstacle",
+        )
+    path = og.PathGeometric(pdef.getSolutionPath())
+    stats.raw_waypoints = path.getStateCount()
+
+    t0 = time.perf_counter()
+    simplifier = og.PathSimplifier(si)
+    simplifier.simplify(path, budget(SIMPLIFY_CHECKS, t0 + simplify_budget), True)
+    stats.simplify_time = time.perf_counter() - t0
+    out = np.array([[st[i] for i in range(n)] for st in path.getStates()])
+    out[0], out[-1] = q_start, q_goal
+    stats.waypoints = out.copy()
+    bad = _path_valid(checker, out, resolution)
+    if bad is not None:  # should not happen: every OMPL motion went through the same validator
+        raise PlanningError(f"internal: simplified path segment {bad} is invalid at {resolution} rad")
+    return out
