@@ -318,3 +318,18 @@ def test_roarm_target_on_base_axis_uses_reference_base():
     sols = solve_ik(ROARM, p + [0, 0, -0.05], pitch=-math.pi / 2, q_ref=ref, all_solutions=True)
     _check_all(ROARM, sols, p + [0, 0, -0.05])
     assert any(abs(q[0] - 0.7) < 1e-6 for q in sols)
+
+
+def test_roarm_free_pitch_prefers_top_down_then_reference():
+    p = np.array([0.22, 0.05, 0.04])
+    (q,) = solve_ik(ROARM, p)
+    assert _pitch(ROARM.kin.fk(q)) == pytest.approx(math.pi / 2, abs=1e-6)  # top-down when it can
+    ref = solve_ik(ROARM, p, pitch=1.0)[0]
+    (q,) = solve_ik(ROARM, p, q_ref=ref)
+    assert _pitch(ROARM.kin.fk(q)) == pytest.approx(1.0, abs=math.radians(0.5))  # else the reference's pitch
+
+
+def test_dls_wraps_to_small_angles():
+    t = UR10.kin.fk(np.radians([10, 30, 40, -20, 50, 10]))
+    (q,) = solve_ik(UR10, t[:3, 3])
+    assert np.all(np.abs(q) <= math.pi + 1e-9)

@@ -691,8 +691,9 @@ def _dls_solve(robot: Robot, p: np.ndarray, rot: np.ndarray | None, qr: np.ndarr
         stale = 0 if len(sols) > before else stale + 1
         if sols and stale >= 16:
             break
-    if sols:
-        return sols
+    if sols:  # each joint's 2 pi representative nearest the reference (or 0)
+        fitted = [_fit_limits(robot, q, qr) for q in sols]
+        return [f if f is not None else q for f, q in zip(fitted, sols)]
     # Why not? Try again without limits (joint_limit), then position only (orientation).
     for q0 in starts[:8]:
         q, err = _dls_run(robot, robot.full_q(np.array(q0, dtype=float)), p, rot, None, None)
@@ -747,7 +748,9 @@ def _dls_run(robot: Robot, q: np.ndarray, p: np.ndarray, rot: np.ndarray | None,
             # elbow branch of a 2R arm is only found from a thin band of starts)
             wrap = (hi - lo) >= 2 * np.pi - 1e-3
             qa = q[arm]
-            qa[wrap] = (qa[wrap] - lo[wrap]) % (2 * np.pi) + lo[wrap]
+            v = _wrap(qa[wrap])
+            v = np.where(v < lo[wrap], v + 2 * np.pi, np.where(v > hi[wrap], v - 2 * np.pi, v))
+            qa[wrap] = v
             q[arm] = np.clip(qa, lo, hi)
     t = kin.fk(q)
     ep = float(np.linalg.norm(p - t[:3, 3]))
