@@ -120,9 +120,8 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
     try:
         link.open()
         link.handshake()
-        streamer = Streamer(link, robot, traj, cfg, on_status=live.update if live else None, confirm=confirm)
-        if live:
-            live.start()
+        streamer = Streamer(link, robot, traj, cfg, on_status=live.update if live else None, confirm=confirm,
+                            on_start=live.start if live else None)
         try:
             result = streamer.run()
         finally:
@@ -198,8 +197,8 @@ class _Display:
 
     def update(self, st) -> None:
         self._n += 1
-        if self.live is None or (self._n % 5 and st.k != st.n - 1):
-            return  # about 10 redraws/s at 50 Hz: drawing costs time the schedule needs
+        if self.live is None or (self._n % 8 and st.k != st.n - 1):
+            return  # about 6 redraws/s at 50 Hz: drawing costs time the schedule needs
         import numpy as np
         from rich.progress_bar import ProgressBar
         from rich.table import Table

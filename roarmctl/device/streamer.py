@@ -226,14 +226,14 @@ class Streamer:
     """Run one trajectory over an open, handshaken ``Link``.
 
     ``clock``/``sleep`` are injectable (tests); ``on_status(Status)`` is called after each tick
-    (the live display); ``hook(k)`` is called before tick k is sent (tests raise KeyboardInterrupt
+    (the live display; ``on_start()`` before the first); ``hook(k)`` is called before tick k is sent (tests raise KeyboardInterrupt
     from it); ``confirm(message) -> bool`` is asked before any motion.
     """
 
     def __init__(self, link, robot, traj, config: StreamConfig | None = None, *,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                  on_status: Callable[[Status], None] | None = None, hook: Callable[[int], None] | None = None,
-                 confirm: Callable[[str], bool] | None = None) -> None:
+                 confirm: Callable[[str], bool] | None = None, on_start: Callable[[], None] | None = None) -> None:
         self.link = link
         self.robot = robot
         self.traj = traj
@@ -243,6 +243,7 @@ class Streamer:
         self.on_status = on_status
         self.hook = hook
         self.confirm = confirm
+        self.on_start = on_start  # after the confirmation, before the clock starts (start a display)
         self.wm = WireMap(robot)
         self.schedule = build_schedule(traj, robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale,
                                        strategy=self.cfg.strategy)
@@ -332,6 +333,8 @@ class Streamer:
         if self.confirm is not None and not self.confirm(
                 f"Execute {self.traj.duration / self.cfg.speed_scale:.2f} s of motion on {self.link.port}?"):
             raise Interrupted("not confirmed; the arm did not move")
+        if self.on_start is not None:
+            self.on_start()
         outcome, message, exc_out = "completed", "", None
         try:
             self._stream()

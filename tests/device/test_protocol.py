@@ -65,3 +65,20 @@ def test_line_buffer_handles_partial_lines_and_crlf():
     lines = lb.feed((FB[30:] + "\r\nboot text\r\n{\"T\":10").encode())
     assert lines == [FB.encode(), b"boot text"]
     assert lb.feed(b"51}\n") == [b'{"T":1051}']
+
+
+from hypothesis import given, settings, strategies as st
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.binary(max_size=300), st.lists(st.integers(1, 50), max_size=20))
+def test_garbage_never_raises_and_chunking_does_not_matter(junk, cuts):
+    data = junk + b"\n" + (FB + "\r\n").encode()
+    whole = P.LineBuffer().feed(data)
+    lb, got, i = P.LineBuffer(), [], 0
+    for c in cuts + [len(data)]:
+        got += lb.feed(data[i:i + c])
+        i += c
+    assert got == whole
+    parsed = [P.parse_feedback(x) for x in whole]  # never raises
+    assert parsed[-1] is not None and parsed[-1].firmware == "m3-0.84"
