@@ -1,0 +1,256 @@
+"""Collision checker: hand-built scenes whose answer is known geometrically, plus consistency checks."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from roarmctl.errors import InputError
+from roarmctl.motion.collision import CollisionChecker, interpolate
+from roarmctl.motion.fastkin import FastKinematics
+from roarmctl.motion.scene import Scene, SceneItem, example_scene
+from roarmctl.robot.loader import load_robot
+from roarmctl.robot.model import transform
+
+HOME = np.array([0.0, 0.0, 1.5708, 0.0, 0.0])
+FOLDED = np.array([0.0, 0.7, 2.655, 1.5, 0.0])  # jaw hub folded back into the upper arm
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot("roarm_m3_pro")
+
+
+def shape_pose(robot, q, shape_name: str) -> tuple[np.ndarray, object]:
+    """World pose (4, 4) of one of the robot's collision shapes, by the generic FK."""
+    shape = next(s for s in robot.collision if s.name == shape_name)
+    frames = robot.kin.link_frames(robot.full_q(q))
+    return frames[robot.kin.link_index[shape.link]] @ shape.origin, shape
+
+
+def probe(name: str, pose: np.ndarray, size=(0.02, 0.02, 0.02), role="obstacle") -> SceneItem:
+    return SceneItem(name, role, "box", pose, size=size)
+
+
+# ----------------------------------------------------------------------------- FK
+@pytest.mark.parametrize("name", ["roarm_m3_pro", "ur10", "planar_2r", "scara_2r"])
+def test_fast_fk_equals_generic_fk(name):
+    robot = load_robot(name)
+    q = np.random.default_rng(1).uniform(robot.lower, robot.upper, (64, robot.dof))
+    np.testing.assert_allclose(FastKinematics(robot).frames4(q), robot.kin.link_frames(q), atol=1e-9, rtol=0)
+
+
+# ----------------------------------------------------------------------------- scene vs arm
+def test_link_inside_box_is_invalid_and_moved_box_is_valid(robot):
+    pose, _ = shape_pose(robot, HOME, "link2_upper_arm")
+    inside = CollisionChecker(robot, Scene([probe("probe", transform(pose[:3, 3]))]))
+    assert not inside.is_valid(HOME)
+    assert inside.explain(HOME) == "link2 hits obstacle 'probe'"
+    away = CollisionChecker(robot, Scene([probe("probe", transform(pose[:3, 3] + [0.0, 0.5, 0.0]))]))
+    assert away.is_valid(HOME)
+    assert away.explain(HOME) == "valid"
+
+
+@pytest.mark.parametrize("gap, padding, valid", [(0.004, 0.0, True), (0.004, 0.003, True), (0.004, 0.005, False),
+                                                 (0.010, 0.009, True), (0.010, 0.011, False)])
+def test_padding_changes_the_answer_at_the_gap(robot, gap, padding, valid):
+    # A cube parallel to the upper-arm box, its face `gap` away from the box's local +y face.
+    pose, shape = shape_pose(robot, HOME, "link2_upper_arm")
+    normal = pose[:3, 1]
+    centre = pose[:3, 3] + normal * (shape.size[1] / 2 + gap + 0.01)
+    item_pose = pose.copy()
+    item_pose[:3, 3] = centre
+    checker = CollisionChecker(robot, Scene([probe("probe", item_pose)]), padding=padding)
+    assert checker.is_valid(HOME) is valid
+    assert checker.validity_batch(HOME[None])[0] == valid
+
+
+def test_base_on_table_is_not_a_collision_but_the_arm_on_the_table_is(robot):
+    table = SceneItem.box("table", (0.8, 0.6, 0.02), (0.15, 0.0, -0.01), role="table")
+    checker = CollisionChecker(robot, Scene([table]))
+    # The base's underside is 1 mm below z = 0 (URDF comment): it overlaps the table top, allowed.
+    base_pose, base = shape_pose(robot, HOME, "base_lower_block")
+    assert base_pose[2, 3] - base.size[2] / 2 < 0.0
+    assert checker.is_valid(HOME)
+    # The same table as an ordinary obstacle hits the base.
+    as_obstacle = CollisionChecker(robot, Scene([dataclasses.replace(table, role="obstacle")]))
+    assert "base_link hits obstacle 'table'" == as_obstacle.explain(HOME)
+    # Reaching down through the table top is a collision of a distal link.
+    down = np.array([0.0, 1.5, 1.4, 1.0, 0.0])
+    assert checker.tcp_pose(down)[2, 3] < 0
+    assert not checker.is_valid(down)
+    assert "hits table 'table'" in checker.explain(down)
+
+
+def test_joint_limits(robot):
+    checker = CollisionChecker(robot, Scene([]))
+    q = HOME.copy()
+    q[2] = robot.upper[2] + 0.01
+    assert not checker.is_valid(q)
+    assert checker.explain(q).startswith("joint limit: link2_to_link3")
+    q[2] = robot.upper[2]
+    assert checker.is_valid(q)
+
+
+def test_singularity_margin_uses_the_smallest_singular_value(robot):
+    rng = np.random.default_rng(2)
+    q = rng.uniform(robot.lower[:5], robot.upper[:5], (200, 5))
+    free = CollisionChecker(robot, Scene([]))
+    q = q[free.validity_batch(q)]
+    sigma = np.array([np.linalg.svd(robot.kin.jacobian(qi)[:3], compute_uv=False)[-1] for qi in q])
+    margin = float(np.median(sigma))
+    checker = CollisionChecker(robot, Scene([]), singularity_margin=margin)
+    np.testing.assert_array_equal(checker.validity_batch(q), sigma >= margin)
+    bad = q[np.argmin(sigma)]
+    assert "base-axis singularity" in checker.explain(bad)
+    # TCP on the base axis: the smallest singular value is ~0 (the base joint moves nothing).
+    upright = np.array([0.0, -1.4, 2.75, -0.9, 0.0])
+    assert np.hypot(*free.tcp_pose(upright)[:2, 3]) < 1e-4
+    assert not CollisionChecker(robot, Scene([]), singularity_margin=0.02).is_valid(upright)
+
+
+# ----------------------------------------------------------------------------- self-collision
+def test_folded_jaw_inside_link2_is_a_self_collision(robot):
+    jaw, jaw_shape = shape_pose(robot, FOLDED, "jaw_hub")
+    arm, arm_shape = shape_pose(robot, FOLDED, "link2_upper_arm")
+    local = np.linalg.inv(arm) @ np.r_[jaw[:3, 3], 1.0]
+    assert np.all(np.abs(local[:3]) < np.asarray(arm_shape.size) / 2)  # the jaw's centre is inside link2
+    checker = CollisionChecker(robot, Scene([]))
+    assert not checker.is_valid(FOLDED)
+    msg = checker.explain(FOLDED)
+    assert msg.startswith("self-collision: link2 hits ") and msg.split()[-1] in ("link5", "gripper_link")
+
+
+def test_allowed_pairs_are_skipped(robot):
+    import fcl
+
+    # At home, link1's shoulder bracket and link2's U-bracket overlap (an allowed pair).
+    pa, sa = shape_pose(robot, HOME, "link1_shoulder_bracket")
+    pb, sb = shape_pose(robot, HOME, "link2_u_bracket")
+    oa = fcl.CollisionObject(fcl.Box(*sa.size), fcl.Transform(pa[:3, :3], pa[:3, 3]))
+    ob = fcl.CollisionObject(fcl.Box(*sb.size), fcl.Transform(pb[:3, :3], pb[:3, 3]))
+    assert fcl.collide(oa, ob)
+    assert CollisionChecker(robot, Scene([])).is_valid(HOME)
+    strict = dataclasses.replace(robot, allowed_collisions=set())
+    checker = CollisionChecker(strict, Scene([]))
+    assert not checker.is_valid(HOME)
+    assert checker.explain(HOME).startswith("self-collision:")
+
+
+# ----------------------------------------------------------------------------- grasping
+def stick_scene(robot, q):
+    """A 14 cm stick held in the jaws at ``q``, pointing out along the approach axis (link5 z)."""
+    frames = robot.kin.link_frames(robot.full_q(q))
+    link5 = frames[robot.kin.link_index["link5"]]
+    tcp = frames[robot.kin.tcp_index]
+    pose = link5.copy()
+    pose[:3, 3] = tcp[:3, 3] + link5[:3, 2] * 0.06
+    return SceneItem("stick", "object", "box", pose, size=(0.012, 0.012, 0.14)), link5[:3, 2], tcp[:3, 3]
+
+
+def test_grasp_target_may_touch_the_jaws(robot):
+    q0 = np.array([0.0, 0.3, 1.2, 0.3, 0.0])
+    stick, _, _ = stick_scene(robot, q0)
+    checker = CollisionChecker(robot, Scene([stick]))
+    assert "hits object 'stick'" in checker.explain(q0)
+    checker.set_grasp_target("stick")
+    assert checker.is_valid(q0)
+    checker.set_grasp_target(None)
+    assert not checker.is_valid(q0)
+    with pytest.raises(InputError):
+        checker.set_grasp_target("nothing")
+
+
+def test_attached_object_hits_obstacle_then_detached_is_valid(robot):
+    q0 = np.array([0.0, 0.3, 1.2, 0.3, 0.0])
+    q1 = np.array([0.8, 0.3, 1.2, 0.3, 0.0])
+    stick, _, _ = stick_scene(robot, q0)
+    _, approach1, tcp1 = stick_scene(robot, q1)
+    block = SceneItem.box("block", (0.03, 0.03, 0.03), tcp1 + approach1 * 0.12)
+    checker = CollisionChecker(robot, Scene([stick, block]))
+    checker.set_grasp_target("stick")
+    assert checker.is_valid(q0) and checker.is_valid(q1)  # the stick stays at q0's place
+    checker.attach("stick", q0)
+    assert checker.attached == ["stick"]
+    assert checker.is_valid(q0)
+    assert not checker.is_valid(q1)
+    assert checker.explain(q1) == "attached object 'stick' hits obstacle 'block'"
+    assert checker.first_invalid(interpolate(q0, q1, 0.01)) is not None
+    item = checker.detach("stick", q1)
+    np.testing.assert_allclose(item.pose[:3, 3], tcp1 + approach1 * 0.06, atol=1e-9)
+    assert checker.is_valid(q1)  # static items are not checked against each other
+    assert checker.is_valid(q0)
+
+
+def test_attached_object_resting_on_the_table_is_not_a_collision(robot):
+    q0 = np.array([0.0, 0.1, 1.4, 1.4, 0.0])  # jaws pointing down, the stick hangs below them
+    stick, _, _ = stick_scene(robot, q0)
+    bottom = stick.aabb()[0][2]
+    # The table top exactly at the stick's lowest point: touching, which is allowed.
+    for lift, ok in ((0.0, True), (0.002, False)):
+        table = SceneItem.box("table", (0.8, 0.6, 0.02), (0.15, 0.0, bottom - 0.01 + lift), role="table")
+        checker = CollisionChecker(robot, Scene([table, stick]), padding=0.0)
+        checker.set_grasp_target("stick")
+        checker.attach("stick", q0)
+        assert checker.is_valid(q0) is ok, checker.explain(q0)
+
+
+# ----------------------------------------------------------------------------- consistency
+def test_batch_equals_loop_and_explain(robot):
+    checker = CollisionChecker(robot, example_scene(), singularity_margin=0.01)
+    rng = np.random.default_rng(3)
+    q = rng.uniform(robot.lower[:5] - 0.05, robot.upper[:5] + 0.05, (600, 5))
+    batch = checker.validity_batch(q)
+    loop = np.array([checker.is_valid(qi) for qi in q])
+    words = np.array([checker.explain(qi) == "valid" for qi in q])
+    np.testing.assert_array_equal(batch, loop)
+    np.testing.assert_array_equal(batch, words)
+    assert 0.2 < batch.mean() < 0.95  # both answers occur
+    for start in range(0, 600, 50):
+        chunk = q[start:start + 50]
+        first = checker.first_invalid(chunk)
+        expected = None if checker.validity_batch(chunk).all() else int(np.argmin(checker.validity_batch(chunk)))
+        assert first == expected
+
+
+def test_check_count_counts_states(robot):
+    checker = CollisionChecker(robot, example_scene())
+    checker.validity_batch(np.zeros((7, 5)))
+    checker.is_valid(HOME)
+    assert checker.check_count == 8
+
+
+def test_gripper_value_moves_the_jaw(robot):
+    # Open the gripper in a pose where the open jaw reaches a probe the closed one does not.
+    q = HOME
+    closed, shape = shape_pose(robot, q, "jaw_finger")
+    frames = robot.kin.link_frames(robot.full_q(q))
+    full = robot.full_q(q)
+    full[5] = robot.gripper.open
+    open_frames = robot.kin.link_frames(full)
+    open_pose = open_frames[robot.kin.link_index["gripper_link"]] @ shape.origin
+    assert np.linalg.norm(open_pose[:3, 3] - closed[:3, 3]) > 0.03
+    checker = CollisionChecker(robot, Scene([probe("probe", transform(open_pose[:3, 3]), size=(0.01, 0.01, 0.01))]))
+    assert checker.is_valid(q)
+    checker.set_gripper(robot.gripper.open)
+    assert checker.explain(q) == "gripper_link hits obstacle 'probe'"
+    del frames
+
+
+def test_scene_round_trip():
+    scene = example_scene()
+    scene.items.append(SceneItem.box("tilted", (0.1, 0.02, 0.03), (0.1, 0.2, 0.3), rpy=(0.3, -0.4, 1.2)))
+    again = Scene.from_dict(scene.to_dict())
+    assert again.to_dict() == scene.to_dict()
+    for a, b in zip(scene.items, again.items):
+        np.testing.assert_allclose(a.pose, b.pose, atol=1e-12)
+    d = scene.to_dict()["items"]
+    assert d[0] == {"name": "table", "role": "table", "shape": "box", "size": [0.8, 0.6, 0.02],
+                    "xyz": [0.15, 0.0, -0.01], "rpy": [0.0, 0.0, 0.0]}
+    assert set(d[3]) == {"name", "role", "shape", "radius", "length", "xyz", "rpy"}
+    with pytest.raises(InputError):
+        Scene([scene.items[0], scene.items[0]])
+    with pytest.raises(InputError):
+        SceneItem("x", "wall", "box", np.eye(4), size=(1, 1, 1))
