@@ -326,10 +326,22 @@ def test_roarm_free_pitch_prefers_top_down_then_reference():
     assert _pitch(ROARM.kin.fk(q)) == pytest.approx(math.pi / 2, abs=1e-6)  # top-down when it can
     ref = solve_ik(ROARM, p, pitch=1.0)[0]
     (q,) = solve_ik(ROARM, p, q_ref=ref)
-    assert _pitch(ROARM.kin.fk(q)) == pytest.approx(1.0, abs=math.radians(0.5))  # else the reference's pitch
+    assert _pitch(ROARM.kin.fk(q)) == pytest.approx(1.0, abs=1e-6)  # else the reference's pitch
+    assert np.max(np.abs(q - ref)) < 1e-6
 
 
 def test_dls_wraps_to_small_angles():
     t = UR10.kin.fk(np.radians([10, 30, 40, -20, 50, 10]))
     (q,) = solve_ik(UR10, t[:3, 3])
     assert np.all(np.abs(q) <= math.pi + 1e-9)
+
+
+def test_roarm_position_only_with_reference_returns_the_reference():
+    rng = np.random.default_rng(9)
+    for qa in _random_roarm(rng, 100):
+        qa = np.append(qa, 0.0)
+        p = ROARM.kin.fk(qa)[:3, 3]
+        if np.hypot(p[0], p[1]) < 1e-3:
+            continue
+        (q,) = solve_ik(ROARM, p, q_ref=qa)
+        assert np.max(np.abs(q - qa)) < 1e-6

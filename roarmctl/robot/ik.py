@@ -74,10 +74,11 @@ def solve_ik(
         A non-empty list of full configuration vectors (``robot.dof``,), rad, within the limits,
         each verified by FK (position error <= ``POS_TOL``; orientation <= ``ORI_TOL`` when given).
 
-    Pitch left free (RoArm): for each branch the pitch is searched on a 0.5 deg grid; the solution
-    uses the preferred pitch (that of ``q_ref`` at the target, else pi/2, top-down) when the branch
-    can hold it, else the feasible pitch nearest to it, moved a few degrees inside the feasible
-    interval so that the result does not sit on a joint limit or the reach boundary.
+    Pitch left free (RoArm): each branch uses the preferred pitch (that of ``q_ref`` at the target,
+    else pi/2, top-down) when it can hold it; otherwise the pitch is searched on a 0.5 deg grid and
+    the feasible sample nearest to the preferred one is taken, moved 3 deg inside the feasible
+    interval so that the result does not sit on a joint limit or the reach boundary. So with
+    ``q_ref`` = FK's own configuration, position-only IK gives ``q_ref`` back.
 
     Raises:
         UnreachableError: with ``reason`` ``"out_of_reach"``, ``"joint_limit"`` or ``"orientation"``.
@@ -379,7 +380,8 @@ class _RoarmIK:
                 a_ref = robot.kin.fk(qr)[:3, 0]
                 pref = math.atan2(-a_ref[2], float(np.dot(a_ref, u_h)))
 
-        cands: list[np.ndarray] = []
+        # per branch: alternatives (configuration, the pitch it was solved for), the first that passes wins
+        cands: list[list[tuple[np.ndarray, float]]] = []
         any_reach = False
         reachable: list[np.ndarray] = []  # reachable samples, to explain a joint-limit failure
         for base, r_signed, sign in branches:
@@ -392,14 +394,18 @@ class _RoarmIK:
                 any_reach |= bool(ok.any())
                 reachable.append(qs[ok])
                 ok &= self._in_limits(qs)
-                if not ok.any():
-                    continue
                 if pitch is None:
-                    k = _pick_index(phis, ok, pref)
-                    qs = qs[k:k + 1]
-                else:
-                    qs = qs[ok]
-                cands.extend(qs)
+                    # the preferred pitch itself when this branch can hold it, else a grid sample
+                    exact = self._planar(r_signed, z, np.arctan2(sign * np.cos([pref]), -np.sin([pref])), elbow)
+                    qe = self._branch_q(_wrap(base), *exact[:3], want_roll, grip)
+                    alts = [(qe[0], pref)] if exact[3][0] and self._in_limits(qe)[0] else []
+                    if ok.any():  # fallback, should the preferred pitch fail the final check
+                        k = _pick_index(phis, ok, pref)
+                        alts.append((qs[k], float(phis[k])))
+                    if alts:
+                        cands.append(alts)
+                elif ok.any():
+                    cands.extend([(qq, float(pitch))] for qq in qs[ok])
 
         if not cands:
             if not any_reach:
@@ -423,31 +429,40 @@ class _RoarmIK:
 
         # Polish on the true FK and verify.
         out: list[np.ndarray] = []
-        for q in cands:
-            if rot is not None:  # the roll that turns the tool onto the target about its approach axis
-                m = robot.kin.fk(q)[:3, :3].T @ rot
-                q = q.copy()
-                q[self.arm[4]] = math.atan2(m[2, 1], m[1, 1])
-            q = self._polish(q, p, rot, u_h, pitch if pitch is not None else None)
-            q2 = _fit_limits(robot, q, qr)
-            if q2 is None:
-                continue
-            t = robot.kin.fk(q2)
-            if np.linalg.norm(t[:3, 3] - p) > POS_TOL:
-                continue
-            if rot is not None and _rot_angle(rot.T @ t[:3, :3]) > ORI_TOL:
-                continue
-            if pitch is not None and rot is None and abs(_wrap(_pitch_of(t, u_h) - pitch)) > ORI_TOL:
-                continue
-            out.append(q2)
+        for alts in cands:
+            for q, q_pitch in alts:
+                q2 = self._finish(q, q_pitch, p, rot, u_h, qr, check_pitch=pitch is not None and rot is None)
+                if q2 is not None:
+                    out.append(q2)
+                    break
         out = _dedupe(out, self.arm)
         if not out:
             raise UnreachableError(f"{where}: no branch survived the FK check (numerically at the edge of a limit)",
                                    "joint_limit", "move the target slightly inward")
         return out
 
+    def _finish(self, q: np.ndarray, q_pitch: float, p: np.ndarray, rot: np.ndarray | None, u_h: np.ndarray,
+                qr: np.ndarray | None, check_pitch: bool) -> np.ndarray | None:
+        """Polish a closed-form candidate on the true FK, fit it into the limits and verify it (or None)."""
+        robot = self.robot
+        if rot is not None:  # the roll that turns the tool onto the target about its approach axis
+            m = robot.kin.fk(q)[:3, :3].T @ rot
+            q = q.copy()
+            q[self.arm[4]] = math.atan2(m[2, 1], m[1, 1])
+        q = _fit_limits(robot, self._polish(q, p, rot, u_h, q_pitch), qr)
+        if q is None:
+            return None
+        t = robot.kin.fk(q)
+        if np.linalg.norm(t[:3, 3] - p) > POS_TOL:
+            return None
+        if rot is not None and _rot_angle(rot.T @ t[:3, :3]) > ORI_TOL:
+            return None
+        if check_pitch and abs(_wrap(_pitch_of(t, u_h) - q_pitch)) > ORI_TOL:
+            return None
+        return q
+
     def _polish(self, q: np.ndarray, p: np.ndarray, rot: np.ndarray | None, u_h: np.ndarray,
-                pitch: float | None) -> np.ndarray:
+                pitch: float) -> np.ndarray:
         kin = self.robot.kin
         if rot is not None:
             want = _pitch_of_r(rot, u_h)
@@ -458,11 +473,9 @@ class _RoarmIK:
                 return np.column_stack([t[:, :3, 3] - p, _wrap(_pitches(t, u_h) - want),
                                         np.arctan2(m[:, 2, 1] - m[:, 1, 2], m[:, 1, 1] + m[:, 2, 2])])
             return _newton(res, q, self.arm)
-        target_pitch = pitch if pitch is not None else _pitch_of(kin.fk(q), u_h)  # free: keep the chosen one
-
         def res(qq):
             t = kin.fk(qq)
-            return np.column_stack([t[:, :3, 3] - p, _wrap(_pitches(t, u_h) - target_pitch)])
+            return np.column_stack([t[:, :3, 3] - p, _wrap(_pitches(t, u_h) - pitch)])
         return _newton(res, q, self.arm[:4])
 
 
