@@ -131,12 +131,15 @@ def ik(
     xyz: Tuple[float, float, float] = typer.Option(..., "--xyz", help="Target TCP position X Y Z in metres (root frame)."),
     pitch: Optional[float] = typer.Option(
         None, "--pitch",
-        help="RoArm: approach axis (tool +x) below the horizontal, in the vertical plane through the base axis and "
-             "the target: 0 points away from the base (home pose), 90 deg straight down. Left out: searched."),
+        help="RoArm: angle of the approach axis (tool +x) below the horizontal, in the vertical plane through the "
+             "base axis and the target (rad; deg with --deg): 0 points away from the base (home pose), pi/2 (90 deg) "
+             "straight down. Left out: searched, preferring --ref's pitch, else straight down."),
     roll: Optional[float] = typer.Option(
-        None, "--roll", help="RoArm: wrist-roll joint value (turn of the tool about its approach axis); default 0 or --ref's."),
+        None, "--roll", help="RoArm: wrist-roll joint value, the turn of the tool about its approach axis (rad; deg with "
+                             "--deg); default --ref's roll, else 0."),
     rpy: Optional[Tuple[float, float, float]] = typer.Option(
-        None, "--rpy", help="Full target orientation, URDF roll pitch yaw (R = Rz Ry Rx). Not with --pitch/--roll."),
+        None, "--rpy", help="Full target orientation as URDF roll pitch yaw, R = Rz Ry Rx (rad; deg with --deg). "
+                            "Not with --pitch/--roll."),
     ref: Optional[str] = typer.Option(
         None, "--ref", help="Reference configuration ('0 0 1.57 0 0' or comma-separated): solutions are sorted by "
                             "distance to it and its gripper value is kept."),
