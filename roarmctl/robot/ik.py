@@ -30,6 +30,7 @@ from roarmctl.errors import InputError, UnreachableError
 from roarmctl.robot.model import Robot, transform
 
 WRIST_SINGULAR = 1e-6  # |sin theta5| below this is the UR wrist singularity (theta4, theta6 coupled)
+STRETCH_SLACK = 1e-4  # cos(elbow) this far beyond 1 still counts as reachable (model noise; FK decides)
 LIMIT_SLACK = 1e-3  # rad: closed-form candidates this far outside a limit are polished, then re-checked
 POS_TOL = 1e-6  # m: every returned solution reaches the target position this closely (FK-checked)
 ORI_TOL = 1e-5  # rad: orientation check; covers the few-urad axis tilt of the rounded RoArm URDF
@@ -270,8 +271,11 @@ class _RoarmIK:
         wz = z - self.l4 * np.cos(tdir)
         d2 = wr * wr + wz * wz
         c = (d2 - self.l2 ** 2 - self.l3 ** 2) / (2 * self.l2 * self.l3)
-        ok = np.abs(c) <= 1.0 + 1e-12
-        delta = elbow_sign * np.arccos(np.clip(c, -1.0, 1.0))  # forearm dir minus upper-arm dir
+        # The ideal planar model is ~1 um off the real one, so a target the real arm reaches with the
+        # elbow (almost) stretched can read as slightly out of reach here: accept it, and start the
+        # polish a little bent toward the branch's side so Newton has a gradient to follow.
+        ok = np.abs(c) <= 1.0 + STRETCH_SLACK
+        delta = elbow_sign * np.maximum(np.arccos(np.clip(c, -1.0, 1.0)), np.where(c > 1.0 - 1e-6, 1e-3, 0.0))
         gamma = np.arctan2(wr, wz)
         alpha2 = gamma - np.arctan2(self.l3 * np.sin(delta), self.l2 + self.l3 * np.cos(delta))
         s = alpha2 - self.t2
