@@ -132,15 +132,17 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
         raise
     finally:
         link.close()
-        if streamer is not None:
-            if result is None:
-                result = streamer.result("failed", "stopped before streaming")
-            write_log(log_path, result.log)
+        if streamer is not None and result is None:
+            result = streamer.result("failed", "stopped before streaming")
         if simulator is not None:
             if result is not None:
                 result.log["simulator"] = _sim_tracking(simulator, robot, traj, cfg, result)
-                write_log(log_path, result.log)
             simulator.stop()
+        if result is not None:
+            try:
+                write_log(log_path, result.log)
+            except OSError as exc:
+                common.warn(f"could not write the execution log {log_path} ({exc.strerror}); pass --log FILE")
     summary = result.summary() | {"log": str(log_path)}
     if simulator is not None:
         summary["simulator"] = result.log["simulator"]

@@ -15,6 +15,9 @@ What it reproduces (RESEARCH.md section 2; [fw84] = RoArm-M3_example-250108):
   trapezoid with the command's ``spd`` (steps/s, 0 = ``max_speed``) and ``acc`` (100 steps/s^2,
   0 = no ramp), replanned from its current velocity whenever a new goal arrives, stopping at the
   goal (like Feetech STS servos);
+- ``firmware="m3-2026"`` (RoArm-M3_example_20260701, section 2.9): one queued command per loop
+  pass (queue of 50, ``{"error":"Queue full"}`` beyond), the ``"T":0`` byte match that flushes
+  the queue without dropping torque, elbow lower clamp 0 rad, T:210 cmd 0 goes to rest first;
 - feedback in the real ``T:1051`` format with x, y, z and tit from the firmware FK (section 2.7);
   ``firmware="m3-2026"`` adds torswitch*/v, ``firmware="m2"`` answers like an M2 (b s e t, torB..).
 
@@ -63,14 +66,14 @@ def steps(rad: float) -> int:
     return int(round(rad / TWO_PI * 4096))
 
 
-def command_to_goal(joint: int, rad: float) -> int:
+def command_to_goal(joint: int, rad: float, elbow_min_zero: bool = False) -> int:
     """Firmware joint command (rad) -> servo goal step, with the 0.84 clamps (RESEARCH.md 2.2)."""
     if joint == 0:  # base, inverted
         return MIDDLE - steps(min(max(rad, -math.pi), math.pi))
     if joint == 1:  # shoulder (driving servo 12; 13 mirrors it)
         return MIDDLE + steps(min(max(rad, -math.pi / 2), math.pi / 2))
-    if joint == 2:  # elbow, clamped in steps
-        return min(max(1024 + steps(rad), 512), 3071)
+    if joint == 2:  # elbow, clamped in steps ([fw26]: lower clamp 1024, i.e. 0 rad)
+        return min(max(1024 + steps(rad), 1024 if elbow_min_zero else 512), 3071)
     if joint == 3:  # wrist
         return MIDDLE + steps(min(max(rad, -math.pi / 2), math.pi / 2))
     if joint == 4:  # roll, inverted
@@ -152,6 +155,7 @@ class Firmware:
         self._rx_free = t0  # when the receiver finishes the last byte it got
         self._rx_line = bytearray()
         self._rx_lines: deque[tuple[float, bytes]] = deque()
+        self._queue: deque[bytes] = deque()  # [fw26] command queue
         self._tx_free = t0
         self.out: deque[tuple[float, bytes]] = deque()  # (time the last byte leaves, line)
         self._busy_until = t0
@@ -257,7 +261,9 @@ class Firmware:
             after, self._after_block = self._after_block, None
             if after:
                 after()
-        if t >= self._busy_until:
+        if self.cfg.firmware == "m3-2026":
+            self._loop_queued(t)
+        elif t >= self._busy_until:
             while self._rx_lines and self._rx_lines[0][0] <= t and t >= self._busy_until:
                 _, line = self._rx_lines.popleft()
                 self._execute(line, t)
@@ -265,6 +271,22 @@ class Firmware:
         if self.info_print == 2 and t >= self._busy_until and self._tx_free <= t:
             self.println(self._feedback_line(), t)
         self._record()
+
+    def _loop_queued(self, t: float) -> None:
+        """[fw26]: a serial task queues lines (50 deep, overflow dropped with an error line); a line
+        with the bytes ``"T":0`` flushes the queue at once; ``loop()`` runs one command per pass."""
+        while self._rx_lines and self._rx_lines[0][0] <= t:
+            _, line = self._rx_lines.popleft()
+            if b'"T":0' in line and b'"T":0' + line.split(b'"T":0', 1)[1][:1] in (b'"T":0,', b'"T":0}'):
+                self._queue.clear()
+                self.stop_flag = True
+                continue
+            if len(self._queue) >= 50:
+                self.println('{"error":"Queue full"}', t)
+                continue
+            self._queue.append(line[:255])
+        if t >= self._busy_until and self._queue:
+            self._execute(self._queue.popleft(), t)
 
     # ------------------------------------------------------------------ commands
     def _execute(self, line: bytes, t: float) -> None:
@@ -301,7 +323,13 @@ class Firmware:
         elif code == 605:
             self.info_print = int(num("cmd"))
         elif code == 210:
-            self._set_torque(bool(num("cmd")))
+            if self.cfg.firmware == "m3-2026" and not num("cmd"):  # rest pose first, then release
+                self._set_goals(range(6), list(INIT_RAD[:5]) + [self._rad(5)], 600, 20)
+                self._block(t, self._eta(), after=lambda: self._set_torque(False))
+            else:
+                self._set_torque(bool(num("cmd")))
+        elif code == 0 and self.cfg.firmware == "m3-2026":
+            self.stop_flag = True  # no torque change on the newer build
         elif code == 0:
             self.stop_flag = True
             self._set_torque(False)
@@ -318,8 +346,9 @@ class Firmware:
         return position_to_rad(j, self.pos[j])
 
     def _set_goals(self, joints, rads, spd: float, acc: float) -> None:
+        new_fw = self.cfg.firmware == "m3-2026"
         for j, r in zip(joints, rads):
-            self.goal[j] = command_to_goal(j, r)
+            self.goal[j] = command_to_goal(j, r, new_fw)
             self.spd[j] = max(0.0, min(spd, 65535.0))
             self.acc[j] = max(0.0, min(acc, 255.0))
 

@@ -98,3 +98,22 @@ def test_t104_reaches_the_ik_target_and_blocks():
     f.advance(5.0)
     fb = feedback(f, 5.0)
     assert fb.xyz == pytest.approx((300, 50, 150), abs=2.0)
+
+
+def test_newer_build_queues_one_command_per_loop_and_fast_stop_matches_compact_bytes():
+    f = Firmware(SimConfig(info_print=0, firmware="m3-2026"), t0=0.0)
+    burst = b"".join(encode({"T": 102, "base": 0.01 * i, "shoulder": 0, "elbow": 1.57, "wrist": 0, "roll": 0,
+                             "hand": 3.14, "spd": 0, "acc": 0}) for i in range(60))
+    f.receive(burst, 0.0)
+    f.advance(60 * 125 * BYTE + 0.01)
+    assert b"Queue full" not in f.pop_output(10.0)  # the wire is slower than the loop: no backlog
+    f2 = Firmware(SimConfig(info_print=0, firmware="m3-2026", loop_period=0.05), t0=0.0)  # a slow loop
+    f2.receive(burst, 0.0)
+    f2.advance(1.0)
+    assert b'{"error":"Queue full"}' in f2.pop_output(1.0)
+    f2.receive(b'{"T": 0}\n', 1.0)  # spaced JSON: not the fast path, just queued
+    f2.advance(1.01)
+    assert not f2.stop_flag
+    f2.receive(b'{"T":0}\n', 1.01)
+    f2.advance(1.06)  # the next pass of the slow loop
+    assert f2.stop_flag and not f2._queue and f2.torque  # flushed, torque stays on
