@@ -108,11 +108,15 @@ class Link:
         self.close()
 
     # ------------------------------------------------------------------ I/O
-    def send(self, cmd: dict[str, Any]) -> float:
-        """Write one command line; return the time it was handed to the driver."""
+    def send(self, cmd: dict[str, Any], fresh_line: bool = False) -> float:
+        """Write one command line; return the time it was handed to the driver.
+
+        ``fresh_line`` prefixes a newline: if an interrupted write left half a line in flight, the
+        firmware drops that fragment (malformed) instead of merging it with this command.
+        """
         import serial
 
-        data = encode(cmd)
+        data = (b"\n" if fresh_line else b"") + encode(cmd)
         t = self.clock()
         try:
             self.ser.write(data)

@@ -416,7 +416,7 @@ class Streamer:
             if self.last_cmd is not None and self.robot.gripper is not None:
                 hand = next(w.field for w in self.wm.fields if w.joint == self.robot.gripper.joint)
                 wire[hand] = self.last_cmd[hand]
-            self.link.send(protocol.joints_command(wire, HOLD_SPD, 0))
+            self.link.send(protocol.joints_command(wire, HOLD_SPD, 0), fresh_line=True)
             self.notes.append("hold sent at the last measured pose")
         except DeviceError:
             self.notes.append("hold could not be sent: the link is gone")

@@ -238,3 +238,32 @@ def test_stalled_arm_aborts_on_tracking_error_and_holds(traj_file, capsys):
     assert rc == 4 and "tracking error" in err and "exceeds 20 mm" in err
     data = json.loads(traj_file.with_name("pp.exec.json").read_text())
     assert data["summary"]["outcome"] == "aborted" and data["sent"][-1]["cmd"]["T"] == 102
+
+
+def test_ports_marks_the_likely_arm(monkeypatch, capsys):
+    from serial.tools import list_ports_common
+
+    def fake():
+        a = list_ports_common.ListPortInfo("/dev/ttyUSB0")
+        a.vid, a.pid, a.description = 0x10C4, 0xEA60, "CP2102 USB to UART Bridge Controller"
+        b = list_ports_common.ListPortInfo("/dev/ttyS0")
+        return [b, a]
+
+    monkeypatch.setattr("serial.tools.list_ports.comports", fake)
+    assert run_cli(["ports", "--json"]) == 0
+    ports = json.loads(capsys.readouterr().out)["ports"]
+    assert ports[0]["device"] == "/dev/ttyUSB0" and ports[0]["likely_arm"] and ports[0]["vid_pid"] == "10C4:EA60"
+    assert not ports[1]["likely_arm"]
+
+
+def test_sim_device_serves_until_ctrl_c():
+    proc = spawn(["sim-device", "--no-boot", "--json"])
+    port = json.loads(proc.stdout.readline())["port"]
+    import serial
+
+    with serial.Serial(port, 115200, timeout=0.5) as s:
+        s.write(b'{"T":605,"cmd":0}\n{"T":105}\n')
+        lines = [s.readline() for _ in range(3)]
+    assert any(b'"T":1051' in x and x.endswith(b"}\r\n") for x in lines)
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=5) == 0

@@ -68,8 +68,8 @@ def test_malformed_lines_dropped_and_missing_keys_read_as_zero():
     f.advance(1.0)
     assert f.out == type(f.out)()  # no reply to anything
     fb = feedback(f, 1.0)
-    assert fb.joints["base"] == pytest.approx(0.2, abs=2e-3)
-    assert fb.joints["wrist"] == pytest.approx(0.0, abs=2e-3)  # missing wrist drove it to 0
+    assert fb.joints["base"] == pytest.approx(0.2, abs=2 * 2 * math.pi / 4096)
+    assert fb.joints["wrist"] == pytest.approx(0.0, abs=2 * 2 * math.pi / 4096)  # missing wrist drove it to 0
     assert len(f.received) == 2
 
 
@@ -117,3 +117,12 @@ def test_newer_build_queues_one_command_per_loop_and_fast_stop_matches_compact_b
     f2.receive(b'{"T":0}\n', 1.01)
     f2.advance(1.06)  # the next pass of the slow loop
     assert f2.stop_flag and not f2._queue and f2.torque  # flushed, torque stays on
+
+
+def test_a_fresh_line_after_a_torn_write_still_executes():
+    f = fw()
+    f.receive(b'{"T":102,"base":0.9,"shoul', 0.0)  # Ctrl-C tore this write
+    f.receive(b"\n" + encode({"T": 102, "base": 0.3, "shoulder": 0, "elbow": 1.5708, "wrist": 0, "roll": 0,
+                             "hand": math.pi, "spd": 0, "acc": 0}), 0.001)
+    f.advance(0.5)
+    assert feedback(f, 0.5).joints["base"] == pytest.approx(0.3, abs=2 * 2 * math.pi / 4096)

@@ -42,11 +42,11 @@ class FakeLink:
         self.received: list[Received] = []
         self.write_latency = write_latency
 
-    def send(self, cmd: dict) -> float:
+    def send(self, cmd: dict, fresh_line: bool = False) -> float:
         t = self.clock()
         self.clock.now += self.write_latency  # a slow driver: the schedule must not drift
         self.sent.append((t, cmd))
-        self.fw.receive(encode(cmd), t)
+        self.fw.receive((b"\n" if fresh_line else b"") + encode(cmd), t)
         return t
 
     def poll(self) -> list[Received]:
