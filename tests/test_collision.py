@@ -254,3 +254,35 @@ def test_scene_round_trip():
         Scene([scene.items[0], scene.items[0]])
     with pytest.raises(InputError):
         SceneItem("x", "wall", "box", np.eye(4), size=(1, 1, 1))
+
+
+# ----------------------------------------------------------------------------- motion segments
+def test_segment_refinement_catches_what_the_coarse_grid_skips(robot):
+    a = HOME + [-0.25, 0, 0, 0, 0]
+    b = HOME + [0.25, 0, 0, 0, 0]
+    pose, _ = shape_pose(robot, HOME, "jaw_finger")  # where the jaw is half-way
+    checker = CollisionChecker(robot, Scene([probe("probe", transform(pose[:3, 3]), size=(0.01, 0.01, 0.01))]))
+    assert checker.is_valid(a) and checker.is_valid(b) and not checker.is_valid(HOME)
+    assert checker.segment_valid(a, b, resolution=0.5, refine=1)  # two states only: the probe is missed
+    assert not checker.segment_valid(a, b, resolution=0.5, refine=4)  # the half-way state is re-checked
+    assert not checker.segment_valid(a, b, resolution=0.01)
+
+
+def test_valid_segments_stay_valid_at_four_times_the_resolution(robot):
+    # Short segments from low TCP poses, near the table: where a coarse grid can skip a graze.
+    checker = CollisionChecker(robot, example_scene())
+    fresh = CollisionChecker(robot, example_scene())
+    rng = np.random.default_rng(5)
+    q = rng.uniform(robot.lower[:5], robot.upper[:5], (20000, 5))
+    q = q[checker.validity_batch(q)]
+    z = robot.kin.link_frames(robot.full_q(q))[:, robot.kin.tcp_index, 2, 3]
+    q = q[z < 0.06][:1000]
+    d = rng.normal(size=q.shape)
+    d *= 0.3 / np.linalg.norm(d, axis=1)[:, None]
+    missed = {1: 0, 4: 0}
+    for refine in missed:
+        for q0, q1 in zip(q, q + d):
+            if checker.segment_valid(q0, q1, 0.1, refine=refine):
+                missed[refine] += fresh.first_invalid(interpolate(q0, q1, 0.025)) is not None
+    assert missed[1] > 0  # without refinement the 4x finer re-check finds collisions ...
+    assert missed[4] == 0  # ... with it, none

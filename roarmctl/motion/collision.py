@@ -163,6 +163,22 @@ class CollisionChecker:
         self._rebuild()
         return item
 
+    def add_item(self, item: SceneItem) -> None:
+        """Add ``item`` to the checker's scene (names must stay unique)."""
+        if item.name in self.scene or item.name in self._attached:
+            raise InputError(f"scene already has an item named '{item.name}'")
+        self.scene.items.append(item)
+        self._rebuild()
+
+    def remove_item(self, name: str) -> SceneItem:
+        """Remove item ``name`` from the checker's scene and return it."""
+        item = self.scene[name]
+        self.scene.items.remove(item)
+        if self._grasp_target == name:
+            self._grasp_target = None
+        self._rebuild()
+        return item
+
     @property
     def attached(self) -> list[str]:
         return list(self._attached)
@@ -205,6 +221,10 @@ class CollisionChecker:
                 if it.name == self._grasp_target and lname in JAW_LINKS:
                     mask[a, k] = False
         self._scene_mask = mask
+        # Shapes that are checked against at least one item take part in the scene pre-filter.
+        self._active = np.flatnonzero(mask.any(axis=1)) if m else np.zeros(0, dtype=int)
+        self._active_mask = mask[self._active]
+        self._active_r2 = (self._mv_radius[self._active] ** 2)[:, None]
 
         # Moving-vs-moving pairs (self-collision and attached objects vs the arm).
         allowed = self.robot.allowed_collisions
@@ -223,8 +243,40 @@ class CollisionChecker:
                     continue
                 pairs.append((a, b))
         self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
-        self._pair_r = self._mv_radius[self._pairs[:, 0]] + self._mv_radius[self._pairs[:, 1]] if len(pairs) else np.zeros(0)
+        self.sweep_gain = self._sweep_gain()
+        self._pair_r2 = (self._mv_radius[self._pairs[:, 0]] + self._mv_radius[self._pairs[:, 1]]) ** 2 if len(pairs) else np.zeros(0)
         # Self checks use unpadded geometry: the pre-filter radii above are padded, hence conservative.
+
+    def _sweep_gain(self) -> float:
+        """Bound (m per rad) on how far any point of a moving shape moves for a joint step of
+        Euclidean norm 1: sqrt(sum_i rho_i^2), rho_i = the largest distance from arm joint i's axis
+        point to a point of a shape it moves, taken over 512 sampled configurations plus 10 %."""
+        rng = np.random.default_rng(0)
+        q = rng.uniform(self._lower, self._upper, (512, len(self._arm)))
+        rot, pos = self._fk.frames(self._full(q))
+        centres = pos[:, self._mv_link] + np.einsum("nsij,sj->nsi", rot[:, self._mv_link], self._mv_pos)
+        kin = self.robot.kin
+        rho = []
+        for parent, joint in self._chain:
+            origin = pos[:, parent] + rot[:, parent] @ joint.origin[:3, 3]
+            distal = [a for a, mv in enumerate(self._moving_shapes)
+                      if self._moves_with(kin, mv.link, joint)]
+            if not distal:
+                rho.append(0.0)
+                continue
+            d = np.linalg.norm(centres[:, distal] - origin[:, None, :], axis=2) + self._mv_radius[distal]
+            rho.append(float(d.max()))
+        return 1.1 * float(np.sqrt(np.sum(np.square(rho))))
+
+    @staticmethod
+    def _moves_with(kin, link: int, joint) -> bool:
+        """True when ``link`` is ``joint``'s child or a descendant of it."""
+        child = kin.link_index[joint.child]
+        while link != 0:
+            if link == child:
+                return True
+            link = kin._parent[kin._child.index(link)]
+        return False
 
     # ------------------------------------------------------------------ checks
     def _full(self, q: np.ndarray) -> np.ndarray:
@@ -252,10 +304,11 @@ class CollisionChecker:
         rl, pl = rot[:, self._mv_link], pos[:, self._mv_link]
         return rl @ self._mv_rot, pl + np.einsum("nsij,sj->nsi", rl, self._mv_pos)
 
-    def _evaluate(self, q: np.ndarray, stop_at_first: bool) -> tuple[np.ndarray, list]:
+    def _evaluate(self, q: np.ndarray, stop_at_first: bool, sweep: float = 0.0) -> tuple[np.ndarray, list, np.ndarray | None]:
         """Validity (N,) of arm states ``q`` (N, arm_dof); with ``stop_at_first`` states after the first
         invalid one are left marked valid and not checked. Also returns, per invalid state found by FCL,
-        the reason tuple (index, kind, a, b)."""
+        the reason tuple (index, kind, a, b), and, when ``sweep`` > 0 (m), which states are "near": some
+        bounding sphere grown by ``sweep`` touches an item box or another shape's grown sphere."""
         q = np.asarray(q, dtype=float)
         n = q.shape[0]
         self.check_count += n
@@ -267,44 +320,57 @@ class CollisionChecker:
         limit = n
         if stop_at_first and not valid.all():
             limit = int(np.argmin(valid))
-        srot, scen = self._shape_poses(rot, pos)
-        # Pre-filter against items: bounding sphere vs item AABB, and shape AABB vs item AABB.
-        cand_scene = np.zeros((n, 0), dtype=bool)
-        if self._items:
-            d = scen[:, :, None, :] - np.clip(scen[:, :, None, :], self._item_lo, self._item_hi)
-            near = np.einsum("nsmi,nsmi->nsm", d, d) < self._mv_radius[None, :, None] ** 2
-            hw = np.einsum("nsij,sj->nsi", np.abs(srot), self._mv_half)  # world AABB half extents
-            overlap = np.all(np.abs(scen[:, :, None, :] - self._item_c) < hw[:, :, None, :] + self._item_h, axis=3)
-            cand_scene = near & overlap & self._scene_mask
-        cand_self = np.zeros((n, 0), dtype=bool)
+        # Shape centres only; rotations are computed for the few pairs that reach FCL.
+        rl = rot[:, self._mv_link]
+        scen = pos[:, self._mv_link] + np.einsum("nsij,sj->nsi", rl, self._mv_pos)
+        # Pre-filter against items: bounding sphere vs item AABB (distance from the centre to the box).
+        near = np.zeros(n, dtype=bool)
+        cand_scene = None
+        if len(self._active):
+            e = np.abs(scen[:, self._active, None, :] - self._item_c) - self._item_h  # (N, S', M, 3)
+            np.maximum(e, 0.0, out=e)
+            d2 = np.einsum("nsmi,nsmi->nsm", e, e)
+            cand_scene = (d2 < self._active_r2) & self._active_mask
+            if sweep > 0:
+                grown = (np.sqrt(self._active_r2) + sweep) ** 2
+                near |= ((d2 < grown) & self._active_mask).any(axis=(1, 2))
+        cand_self = None
         if len(self._pairs):
             diff = scen[:, self._pairs[:, 0]] - scen[:, self._pairs[:, 1]]
-            cand_self = np.einsum("npi,npi->np", diff, diff) < self._pair_r ** 2
-        has = np.zeros(n, dtype=bool)
-        if cand_scene.size:
-            has |= cand_scene.any(axis=(1, 2))
-        if cand_self.size:
-            has |= cand_self.any(axis=1)
-        has &= valid
+            d2p = np.einsum("npi,npi->np", diff, diff)
+            cand_self = d2p < self._pair_r2
+            if sweep > 0:
+                near |= (d2p < (np.sqrt(self._pair_r2) + 2 * sweep) ** 2).any(axis=1)
+        has = valid.copy()
+        any_hit = np.zeros(n, dtype=bool)
+        if cand_scene is not None:
+            any_hit |= cand_scene.any(axis=(1, 2))
+        if cand_self is not None:
+            any_hit |= cand_self.any(axis=1)
+        has &= any_hit
         reasons = []
         moving = self._moving_shapes
+        active = self._active
+        mv_rot = self._mv_rot
+        mv_link = self._mv_link
+        item_objs = self._item_objs
         for i in np.flatnonzero(has[:limit]):
             hit = None
-            placed_scene: set[int] = set()
-            for a, k in zip(*np.nonzero(cand_scene[i])) if cand_scene.size else ():
-                obj = moving[a].obj_scene
-                obj.setRotation(srot[i, a])
-                obj.setTranslation(scen[i, a])
-                placed_scene.add(a)
-                if fcl.collide(obj, self._item_objs[k]):
-                    hit = ("scene", int(a), int(k))
-                    break
-            if hit is None and cand_self.size:
+            if cand_scene is not None:
+                for a_, k in zip(*np.nonzero(cand_scene[i])):
+                    a = active[a_]
+                    obj = moving[a].obj_scene
+                    obj.setRotation(rl[i, a] @ mv_rot[a])
+                    obj.setTranslation(scen[i, a])
+                    if fcl.collide(obj, item_objs[k]):
+                        hit = ("scene", int(a), int(k))
+                        break
+            if hit is None and cand_self is not None:
                 for p in np.flatnonzero(cand_self[i]):
                     a, b = self._pairs[p]
                     oa, ob = moving[a].obj_self, moving[b].obj_self
-                    oa.setRotation(srot[i, a]); oa.setTranslation(scen[i, a])
-                    ob.setRotation(srot[i, b]); ob.setTranslation(scen[i, b])
+                    oa.setRotation(rl[i, a] @ mv_rot[a]); oa.setTranslation(scen[i, a])
+                    ob.setRotation(rl[i, b] @ mv_rot[b]); ob.setTranslation(scen[i, b])
                     if fcl.collide(oa, ob):
                         hit = ("self", int(a), int(b))
                         break
@@ -313,7 +379,7 @@ class CollisionChecker:
                 reasons.append((int(i),) + hit)
                 if stop_at_first:
                     break
-        return valid, reasons
+        return valid, reasons, (near if sweep > 0 else None)
 
     def validity_batch(self, Q) -> np.ndarray:
         """Validity (N,) bool of arm configurations ``Q`` (N, arm_dof), rad."""
@@ -331,13 +397,31 @@ class CollisionChecker:
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         if Q.shape[0] == 0:
             return None
-        valid, _ = self._evaluate(Q, stop_at_first=True)
+        valid = self._evaluate(Q, stop_at_first=True)[0]
         return None if valid.all() else int(np.argmin(valid))
 
-    def segment_valid(self, q0, q1, resolution: float = 0.01) -> bool:
-        """True when every state on the straight joint-space segment q0 -> q1 is valid, checked at
-        steps of at most ``resolution`` rad (Euclidean norm over the arm joints), both ends included."""
-        return self.first_invalid(interpolate(q0, q1, resolution)) is None
+    def segment_valid(self, q0, q1, resolution: float = 0.01, refine: int = 4) -> bool:
+        """True when the straight joint-space segment q0 -> q1 (arm_dof,) is valid.
+
+        States are checked at steps of at most ``resolution`` rad (Euclidean norm over the arm
+        joints), both ends included. A step between two states is proven clear when no bounding
+        sphere, grown by how far any point of the arm can move in half a step (``sweep_gain``),
+        comes near anything; the other steps are re-checked at ``refine`` times finer resolution,
+        so that a finer re-check of the segment does not find what the coarse one missed.
+        """
+        q = interpolate(q0, q1, resolution)
+        step = float(np.linalg.norm(q[1] - q[0])) if len(q) > 1 else 0.0
+        valid, _, near = self._evaluate(q, stop_at_first=True, sweep=0.5 * step * self.sweep_gain)
+        if not valid.all():
+            return False
+        if refine <= 1 or near is None:
+            return True
+        steps = np.flatnonzero(near[:-1] | near[1:])
+        if len(steps) == 0:
+            return True
+        t = np.arange(1, refine)[None, :, None] / refine
+        sub = q[steps][:, None, :] + (q[steps + 1] - q[steps])[:, None, :] * t
+        return bool(self._evaluate(sub.reshape(-1, q.shape[1]), stop_at_first=True)[0].all())
 
     def explain(self, q_arm) -> str:
         """Why ``q_arm`` (arm_dof,) is invalid, in words; "valid" when it is not."""

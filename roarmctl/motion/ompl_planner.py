@@ -28,7 +28,7 @@ from roarmctl.motion.collision import CollisionChecker, interpolate
 PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
 # Work budgets in single-state checks (deterministic, unlike the clock). Planners that stop at their
 # first solution get large chunks; the anytime ones (RRTstar, BITstar) refine until the chunk ends.
-SOLVE_CHUNK_CHECKS = {"RRTConnect": 200_000, "KPIECE1": 200_000, "PRM": 200_000, "RRTstar": 20_000, "BITstar": 20_000}
+SOLVE_CHUNK_CHECKS = {"RRTConnect": 200_000, "KPIECE1": 200_000, "PRM": 200_000, "RRTstar": 20_000, "BITstar": 8_000}
 SIMPLIFY_CHECKS = 20_000
 
 
@@ -58,7 +58,13 @@ def _allocate(name: str, si):
     if name == "RRTConnect":
         return og.RRTConnect(si)
     if name == "RRTstar":
-        return og.RRTstar(si)
+        # OMPL's default range (a fifth of the space's extent, ~2 rad here) makes every rewiring
+        # motion long and the single tree slow to reach a goal beside an obstacle; measured on the
+        # example scene, 0.5 rad and a 10 % goal bias solve 5 of 5 seeds in under 1 s (default: 3 of 5 in 3 s).
+        planner = og.RRTstar(si)
+        planner.setRange(0.5)
+        planner.setGoalBias(0.1)
+        return planner
     if name == "BITstar":
         return og.BITstar(si)
     if name == "PRM":
@@ -81,7 +87,7 @@ def _densify(path: np.ndarray, max_step: float | None) -> np.ndarray:
 def _path_valid(checker: CollisionChecker, path: np.ndarray, resolution: float) -> int | None:
     """Index of the first segment of ``path`` that is invalid at ``resolution``, or None."""
     for i in range(len(path) - 1):
-        if checker.first_invalid(interpolate(path[i], path[i + 1], resolution)) is not None:
+        if not checker.segment_valid(path[i], path[i + 1], resolution):
             return i
     return None
 
@@ -177,7 +183,7 @@ def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarra
         def checkMotion(self, s1, s2) -> bool:  # noqa: N802 (OMPL's name)
             a = np.array([s1[i] for i in range(n)])
             b = np.array([s2[i] for i in range(n)])
-            return checker.first_invalid(interpolate(a, b, resolution)[1:]) is None
+            return bool(checker.segment_valid(a, b, resolution))
 
     si.setStateValidityChecker(state_valid)
     validator = SegmentValidator(si)

@@ -1,0 +1,121 @@
+"""OMPL joint-space planner: paths re-checked independently, determinism, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from roarmctl.errors import InputError, PlanningError
+from roarmctl.motion.collision import CollisionChecker, interpolate
+from roarmctl.motion.ompl_planner import PLANNERS, plan_joint_path, plan_joint_path_with_stats
+from roarmctl.motion.scene import SceneItem, example_scene
+from roarmctl.robot.loader import load_robot
+
+# TCP low beside the wall of the example scene, on either side of it.
+LEFT = np.array([-0.45, 0.9, 0.87, 1.5, 0.0])
+RIGHT = np.array([0.45, 0.9, 0.87, 1.5, 0.0])
+HOME = np.array([0.0, 0.0, 1.5708, 0.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot("roarm_m3_pro")
+
+
+def fresh_checker(robot):
+    return CollisionChecker(robot, example_scene())
+
+
+def assert_path_valid(robot, path, q_start, q_goal, resolution):
+    """Every state of the path at ``resolution / 4``, checked by a checker the planner never saw."""
+    np.testing.assert_array_equal(path[0], q_start)
+    np.testing.assert_array_equal(path[-1], q_goal)
+    checker = fresh_checker(robot)
+    dense = np.vstack([interpolate(a, b, resolution / 4) for a, b in zip(path[:-1], path[1:])])
+    valid = checker.validity_batch(dense)
+    assert valid.all(), checker.explain(dense[np.argmin(valid)])
+
+
+def test_wall_blocks_the_straight_line(robot):
+    checker = fresh_checker(robot)
+    assert checker.is_valid(LEFT) and checker.is_valid(RIGHT)
+    assert not checker.segment_valid(LEFT, RIGHT, 0.01)
+    mid = checker.first_invalid(interpolate(LEFT, RIGHT, 0.01))
+    assert "hits obstacle 'wall'" in checker.explain(interpolate(LEFT, RIGHT, 0.01)[mid])
+
+
+@pytest.mark.parametrize("planner", PLANNERS)
+def test_planner_goes_around_the_wall(robot, planner):
+    checker = fresh_checker(robot)
+    path, stats = plan_joint_path_with_stats(checker, LEFT, RIGHT, planner=planner, seed=7, time_budget=2.0)
+    assert not stats.direct
+    assert path.shape[1] == 5 and len(path) >= 3
+    assert np.max(np.linalg.norm(np.diff(path, axis=0), axis=1)) <= 0.1 + 1e-12  # densified (max_step)
+    assert_path_valid(robot, path, LEFT, RIGHT, 0.01)
+    assert stats.checks > 0 and stats.solve_time > 0
+
+
+@pytest.mark.parametrize("planner", [p for p in PLANNERS if p != "PRM"])
+def test_same_seed_same_path(robot, planner):
+    a = plan_joint_path(fresh_checker(robot), LEFT, RIGHT, planner=planner, seed=11, time_budget=5.0)
+    b = plan_joint_path(fresh_checker(robot), LEFT, RIGHT, planner=planner, seed=11, time_budget=5.0)
+    assert a.shape == b.shape
+    np.testing.assert_array_equal(a, b)
+
+
+def test_different_seeds_explore_differently(robot):
+    paths = [plan_joint_path_with_stats(fresh_checker(robot), LEFT, RIGHT, seed=s)[1].raw_waypoints for s in (1, 2, 3, 4)]
+    stats = [plan_joint_path_with_stats(fresh_checker(robot), LEFT, RIGHT, seed=s)[1].checks for s in (1, 2, 3, 4)]
+    assert len(set(stats)) > 1 or len(set(paths)) > 1
+
+
+def test_straight_line_fast_path(robot):
+    checker = fresh_checker(robot)
+    goal = HOME + np.array([0.3, 0.1, -0.2, 0.2, 0.5])
+    path, stats = plan_joint_path_with_stats(checker, HOME, goal, resolution=0.01)
+    assert stats.direct and stats.solve_time == 0.0
+    np.testing.assert_allclose(path, interpolate(HOME, goal, 0.1))
+    assert_path_valid(robot, path, HOME, goal, 0.01)
+    raw = plan_joint_path(checker, HOME, goal, max_step=None)
+    np.testing.assert_array_equal(raw, np.vstack([HOME, goal]))
+
+
+def test_unknown_planner_lists_the_valid_ones(robot):
+    with pytest.raises(InputError) as err:
+        plan_joint_path(fresh_checker(robot), HOME, HOME, planner="RRTsharp")
+    assert "RRTsharp" in str(err.value) and all(p in str(err.value) for p in PLANNERS)
+
+
+def test_start_in_collision_names_the_pair(robot):
+    scene = example_scene()
+    scene.items.append(SceneItem.box("crate", (0.05, 0.05, 0.05), fresh_checker(robot).tcp_pose(HOME)[:3, 3]))
+    checker = CollisionChecker(robot, scene)
+    with pytest.raises(PlanningError) as err:
+        plan_joint_path(checker, HOME, LEFT)
+    assert "start configuration" in str(err.value) and "hits obstacle 'crate'" in str(err.value)
+    assert err.value.exit_code == 3
+    with pytest.raises(PlanningError, match="goal configuration .* joint limit"):
+        plan_joint_path(fresh_checker(robot), LEFT, np.array([0.0, 0.0, 3.1, 0.0, 0.0]))
+
+
+def test_no_path_within_the_budget(robot):
+    with pytest.raises(PlanningError) as err:
+        plan_joint_path(fresh_checker(robot), LEFT, RIGHT, time_budget=1e-5)
+    assert "no collision-free path from" in str(err.value) and "within 1e-05 s" in str(err.value)
+    assert "time_budget" in err.value.hint
+
+
+def test_attached_object_is_planned_around(robot):
+    # Carry a stick from LEFT to RIGHT: the path must keep the stick off the wall too.
+    checker = CollisionChecker(robot, example_scene())
+    checker.remove_item("cube")  # LEFT would hold the stick in it
+    frames = robot.kin.link_frames(robot.full_q(LEFT))
+    link5 = frames[robot.kin.link_index["link5"]]
+    pose = link5.copy()
+    pose[:3, 3] = frames[robot.kin.tcp_index][:3, 3] + link5[:3, 2] * 0.02
+    checker.add_item(SceneItem("stick", "object", "box", pose, size=(0.01, 0.01, 0.05)))
+    checker.set_grasp_target("stick")
+    checker.attach("stick", LEFT)
+    path = plan_joint_path(checker, LEFT, RIGHT, seed=3)
+    dense = np.vstack([interpolate(a, b, 0.0025) for a, b in zip(path[:-1], path[1:])])
+    assert checker.validity_batch(dense).all()
