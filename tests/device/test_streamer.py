@@ -134,3 +134,11 @@ def test_start_far_from_first_point_is_refused():
     with pytest.raises(InfeasibleError, match="base_link_to_link1 is 0.1 deg, the start is 28.6 deg"):
         Streamer(link, ROBOT, t, StreamConfig(), clock=clock, sleep=clock.sleep).run()
     assert all(c["T"] == 105 for _, c in link.sent)
+
+
+def test_trajectory_outside_the_firmware_range_is_refused():
+    from roarmctl.errors import InputError
+
+    bad = min_jerk([HOME, [0.0, 0.0, -1.0, 0.0, 0.0, 0.0]], [1.0])  # elbow below the 0.84 clamp (-0.785)
+    with pytest.raises(InputError, match="link2_to_link3 .* outside the firmware's range for 'elbow'"):
+        build_schedule(bad, ROBOT)
