@@ -341,44 +341,55 @@ class CollisionChecker:
             cand_self = d2p < self._pair_r2
             if sweep > 0:
                 near |= (d2p < (np.sqrt(self._pair_r2) + 2 * sweep) ** 2).any(axis=1)
-        has = valid.copy()
-        any_hit = np.zeros(n, dtype=bool)
-        if cand_scene is not None:
-            any_hit |= cand_scene.any(axis=(1, 2))
-        if cand_self is not None:
-            any_hit |= cand_self.any(axis=1)
-        has &= any_hit
-        reasons = []
+        # Narrow phase, vectorised bookkeeping: all candidate pairs at once (state-major order),
+        # their shape rotations in one matmul, then one Python loop of FCL calls.
+        check = valid.copy()
+        check[limit:] = False
         moving = self._moving_shapes
-        active = self._active
-        mv_rot = self._mv_rot
-        mv_link = self._mv_link
-        item_objs = self._item_objs
-        for i in np.flatnonzero(has[:limit]):
-            hit = None
-            if cand_scene is not None:
-                for a_, k in zip(*np.nonzero(cand_scene[i])):
-                    a = active[a_]
-                    obj = moving[a].obj_scene
-                    obj.setRotation(rl[i, a] @ mv_rot[a])
-                    obj.setTranslation(scen[i, a])
-                    if fcl.collide(obj, item_objs[k]):
-                        hit = ("scene", int(a), int(k))
-                        break
-            if hit is None and cand_self is not None:
-                for p in np.flatnonzero(cand_self[i]):
-                    a, b = self._pairs[p]
+        first_hit = n
+        if cand_scene is not None:
+            si, sa, sk = np.nonzero(cand_scene & check[:, None, None])
+            if len(si):
+                sa = self._active[sa]
+                rots = rl[si, sa] @ self._mv_rot[sa]
+                cents = scen[si, sa]
+                objs = [moving[a].obj_scene for a in sa.tolist()]
+                items = self._item_objs
+                skip = -1
+                for c, (i, k) in enumerate(zip(si.tolist(), sk.tolist())):
+                    if i == skip:
+                        continue
+                    obj = objs[c]
+                    obj.setRotation(rots[c])
+                    obj.setTranslation(cents[c])
+                    if fcl.collide(obj, items[k]):
+                        valid[i] = False
+                        skip = i
+                        if stop_at_first:
+                            first_hit = i
+                            break
+        if cand_self is not None:
+            check &= valid
+            check[first_hit:] = False
+            pi, pp = np.nonzero(cand_self & check[:, None])
+            if len(pi):
+                pa, pb = self._pairs[pp, 0], self._pairs[pp, 1]
+                rot_a = rl[pi, pa] @ self._mv_rot[pa]
+                rot_b = rl[pi, pb] @ self._mv_rot[pb]
+                cen_a, cen_b = scen[pi, pa], scen[pi, pb]
+                skip = -1
+                for c, (i, a, b) in enumerate(zip(pi.tolist(), pa.tolist(), pb.tolist())):
+                    if i == skip:
+                        continue
                     oa, ob = moving[a].obj_self, moving[b].obj_self
-                    oa.setRotation(rl[i, a] @ mv_rot[a]); oa.setTranslation(scen[i, a])
-                    ob.setRotation(rl[i, b] @ mv_rot[b]); ob.setTranslation(scen[i, b])
+                    oa.setRotation(rot_a[c]); oa.setTranslation(cen_a[c])
+                    ob.setRotation(rot_b[c]); ob.setTranslation(cen_b[c])
                     if fcl.collide(oa, ob):
-                        hit = ("self", int(a), int(b))
-                        break
-            if hit is not None:
-                valid[i] = False
-                reasons.append((int(i),) + hit)
-                if stop_at_first:
-                    break
+                        valid[i] = False
+                        skip = i
+                        if stop_at_first:
+                            break
+        reasons: list = []
         return valid, reasons, (near if sweep > 0 else None)
 
     def validity_batch(self, Q) -> np.ndarray:

@@ -5,12 +5,18 @@ straight segment when it is valid (no OMPL call), else the planner's path, simpl
 densified. Every segment between consecutive waypoints is valid when checked at ``resolution``
 (rad, Euclidean norm over the arm joints); the first and last rows are exactly q_start, q_goal.
 
-Determinism: OMPL's global seed is set before anything random is created, planners stop on a
-count of termination-condition evaluations (about one per iteration) rather than on the clock
-(the time budget is only a ceiling), and simplification runs a fixed number of rounds of
-iteration-bounded shortcutting. So the same seed gives the same path on any machine, unless the
-time ceiling is hit. PRM is the exception: OMPL grows its roadmap in one thread while another looks
-for a solution, so its result depends on thread timing.
+Every motion the planner considers goes through ``CollisionChecker.segment_valid`` (a batched,
+refined check of the whole segment, installed as OMPL's MotionValidator). Simplification is ours,
+not OMPL's: OMPL's partialShortcutPath checks new segments state by state on its own grid, outside
+the motion validator, so instead a greedy vertex reduction and seeded random shortcuts run through
+``segment_valid`` too.
+
+Determinism: OMPL's global seed is set before anything random is created; planners stop on a
+count of state checks (``SOLVE_CHUNK_CHECKS``, the same on any machine) rather than on the clock,
+the time budget being only a ceiling; shortcutting makes a fixed number of attempts from a numpy
+generator seeded with the same seed. So the same seed gives the same path on any machine unless a
+ceiling is hit. PRM is the exception: OMPL grows its roadmap in one thread while another looks for
+a solution, so its result depends on thread timing.
 
 OMPL is imported inside the functions (heavy import; ``roarmctl --help`` must stay fast).
 """
@@ -29,7 +35,7 @@ PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
 # Work budgets in single-state checks (deterministic, unlike the clock). Planners that stop at their
 # first solution get large chunks; the anytime ones (RRTstar, BITstar) refine until the chunk ends.
 SOLVE_CHUNK_CHECKS = {"RRTConnect": 200_000, "KPIECE1": 200_000, "PRM": 200_000, "RRTstar": 20_000, "BITstar": 8_000}
-SIMPLIFY_CHECKS = 20_000
+SHORTCUT_ATTEMPTS = 40  # default of plan_joint_path(simplify_attempts=...)
 
 
 @dataclass
@@ -74,6 +80,51 @@ def _allocate(name: str, si):
     raise AssertionError(name)
 
 
+def _drop_vertices(checker: CollisionChecker, path: np.ndarray, resolution: float) -> np.ndarray:
+    """Greedy: from each kept vertex, jump to the farthest later vertex reachable in a straight line."""
+    keep = [0]
+    i = 0
+    while i < len(path) - 1:
+        j = len(path) - 1
+        while j > i + 1 and not checker.segment_valid(path[i], path[j], resolution):
+            j -= 1
+        keep.append(j)
+        i = j
+    return path[keep]
+
+
+def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: float,
+                      rng: np.random.Generator, attempts: int, until: float) -> np.ndarray:
+    """Classic random shortcutting through ``checker.segment_valid`` (so every new segment gets the
+    same refined check): join two random points of the path by a straight segment when it is
+    valid and shorter. A fixed number of attempts from a seeded generator; ``until`` is a ceiling."""
+    path = _drop_vertices(checker, path, resolution)
+    for _ in range(attempts):
+        if len(path) < 3 or time.perf_counter() > until:
+            break
+        seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        ta, tb = np.sort(rng.uniform(0.0, cum[-1], 2))
+        ia = min(int(np.searchsorted(cum, ta, side="right")) - 1, len(seg) - 1)
+        ib = min(int(np.searchsorted(cum, tb, side="right")) - 1, len(seg) - 1)
+        if ia == ib:
+            continue
+        pa = path[ia] + (path[ia + 1] - path[ia]) * ((ta - cum[ia]) / seg[ia])
+        pb = path[ib] + (path[ib + 1] - path[ib]) * ((tb - cum[ib]) / seg[ib])
+        if np.linalg.norm(pb - pa) >= (tb - ta) - 1e-6:
+            continue
+        # The pieces left of the two cut segments are re-checked too: a sub-segment is sampled on
+        # a different grid than the segment it came from.
+        if (checker.segment_valid(pa, pb, resolution) and checker.segment_valid(path[ia], pa, resolution)
+                and checker.segment_valid(pb, path[ib + 1], resolution)):
+            path = np.vstack([path[:ia + 1], pa, pb, path[ib + 1:]])
+    path = _drop_vertices(checker, path, resolution)
+    # Remove vertices that coincide (a shortcut ending on a vertex).
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9])
+    keep[-1] = True
+    return path[keep]
+
+
 def _densify(path: np.ndarray, max_step: float | None) -> np.ndarray:
     """Insert states so no two consecutive rows are more than ``max_step`` apart (rad, L2)."""
     if max_step is None or len(path) < 2:
@@ -95,7 +146,7 @@ def _path_valid(checker: CollisionChecker, path: np.ndarray, resolution: float) 
 def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, planner: str = "RRTConnect",
                                time_budget: float = 1.0, simplify_budget: float = 0.2, seed: int = 0,
                                resolution: float = 0.01, max_step: float | None = 0.1,
-                               try_direct: bool = True) -> tuple[np.ndarray, PlanStats]:
+                               try_direct: bool = True, simplify_attempts: int = SHORTCUT_ATTEMPTS) -> tuple[np.ndarray, PlanStats]:
     """Plan a collision-free joint-space path from ``q_start`` to ``q_goal`` (arm_dof,), rad.
 
     Returns (path (K, arm_dof), PlanStats). ``time_budget`` (s) caps the planner, ``simplify_budget``
@@ -129,7 +180,8 @@ def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, pl
         stats.waypoints = path.copy()
         stats.raw_waypoints = 2
     else:
-        path = _plan_ompl(checker, q_start, q_goal, planner, time_budget, simplify_budget, seed, resolution, stats)
+        path = _plan_ompl(checker, q_start, q_goal, planner, time_budget, simplify_budget, seed, resolution,
+                          simplify_attempts, stats)
     path = _densify(path, max_step)
     path[0], path[-1] = q_start, q_goal
     stats.length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
@@ -140,15 +192,16 @@ def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, pl
 
 def plan_joint_path(checker: CollisionChecker, q_start, q_goal, *, planner: str = "RRTConnect",
                     time_budget: float = 1.0, simplify_budget: float = 0.2, seed: int = 0,
-                    resolution: float = 0.01, max_step: float | None = 0.1) -> np.ndarray:
+                    resolution: float = 0.01, max_step: float | None = 0.1,
+                    simplify_attempts: int = SHORTCUT_ATTEMPTS) -> np.ndarray:
     """Like ``plan_joint_path_with_stats`` but returns only the path (K, arm_dof)."""
     return plan_joint_path_with_stats(checker, q_start, q_goal, planner=planner, time_budget=time_budget,
                                       simplify_budget=simplify_budget, seed=seed, resolution=resolution,
-                                      max_step=max_step)[0]
+                                      max_step=max_step, simplify_attempts=simplify_attempts)[0]
 
 
 def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarray, planner: str,
-               time_budget: float, simplify_budget: float, seed: int, resolution: float,
+               time_budget: float, simplify_budget: float, seed: int, resolution: float, simplify_attempts: int,
                stats: PlanStats) -> np.ndarray:
     from ompl import base as ob
     from ompl import geometric as og
@@ -237,13 +290,10 @@ def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarra
     stats.raw_waypoints = path.getStateCount()
 
     t0 = time.perf_counter()
-    simplifier = og.PathSimplifier(si)
-    simplifier.simplify(path, budget(SIMPLIFY_CHECKS, t0 + simplify_budget), True)
-    stats.simplify_time = time.perf_counter() - t0
     out = np.array([[st[i] for i in range(n)] for st in path.getStates()])
     out[0], out[-1] = q_start, q_goal
+    out = _random_shortcuts(checker, out, resolution, np.random.default_rng(seed), simplify_attempts,
+                            t0 + simplify_budget)
+    stats.simplify_time = time.perf_counter() - t0
     stats.waypoints = out.copy()
-    bad = _path_valid(checker, out, resolution)
-    if bad is not None:  # should not happen: every OMPL motion went through the same validator
-        raise PlanningError(f"internal: simplified path segment {bad} is invalid at {resolution} rad")
     return out
