@@ -7,6 +7,7 @@ no such port, port busy, permission denied, device silent, wrong firmware, link 
 from __future__ import annotations
 
 import errno
+import sys
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -84,6 +85,10 @@ class Link:
         if code == errno.ENOENT or "No such file" in text or "could not find port" in text.lower():
             return DeviceError(f"no such serial port: {self.port}",
                                "plug the arm in (middle USB-C port) and list ports with 'roarmctl ports'")
+        if sys.platform.startswith("win") and ("denied" in text or code == errno.EACCES):
+            # Windows reports a port held by another program as "Access is denied"
+            return DeviceError(f"serial port {self.port} is busy or not accessible",
+                               "close other programs using it (serial monitors, other roarmctl runs), then retry")
         if code == errno.EACCES or "Permission denied" in text:
             return DeviceError(f"permission denied opening {self.port}", DIALOUT_HINT)
         if code in (errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK) or "lock" in text.lower() or "busy" in text.lower():

@@ -267,3 +267,10 @@ def test_sim_device_serves_until_ctrl_c():
     assert any(b'"T":1051' in x and x.endswith(b"}\r\n") for x in lines)
     proc.send_signal(signal.SIGINT)
     assert proc.wait(timeout=5) == 0
+
+
+def test_permission_denied_names_the_dialout_fix():
+    from roarmctl.device.link import Link
+
+    err = Link("/dev/ttyUSB0")._open_error(__import__("serial").SerialException(13, "could not open port /dev/ttyUSB0: [Errno 13] Permission denied: '/dev/ttyUSB0'"))
+    assert err.exit_code == 4 and "permission denied" in err.message and "usermod -aG dialout" in err.hint
