@@ -119,3 +119,15 @@ def test_attached_object_is_planned_around(robot):
     path = plan_joint_path(checker, LEFT, RIGHT, seed=3)
     dense = np.vstack([interpolate(a, b, 0.0025) for a, b in zip(path[:-1], path[1:])])
     assert checker.validity_batch(dense).all()
+
+
+def test_simplify_path_shortens_and_stays_valid(robot):
+    from roarmctl.motion.ompl_planner import simplify_path
+
+    checker = fresh_checker(robot)
+    raw, stats = plan_joint_path_with_stats(checker, LEFT, RIGHT, seed=2, simplify_attempts=0, max_step=None)
+    short = simplify_path(checker, raw, seed=2, attempts=60)
+    length = lambda p: float(np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1)))  # noqa: E731
+    assert length(short) <= length(raw) + 1e-12
+    assert_path_valid(robot, short, LEFT, RIGHT, 0.01)
+    np.testing.assert_array_equal(simplify_path(checker, raw, seed=2, attempts=60), short)

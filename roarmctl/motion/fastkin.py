@@ -18,59 +18,72 @@ from roarmctl.robot.model import Robot
 
 
 class FastKinematics:
-    """Link rotations (N, L, 3, 3) and origins (N, L, 3) of a robot, for full configurations (N, dof)."""
+    """Link frames of a robot for full configurations ``q`` (N, dof), as (N, L, 4, 4) transforms.
+
+    A revolute joint about its local z axis contributes origin @ Rz(q), which is linear in
+    (cos q, sin q): origin @ Rz(q) = cos(q) A + sin(q) B + C with A, B, C fixed 4x4 matrices, so each
+    such joint costs two trig calls, three multiply-adds and one batched matmul. Links reached only
+    through fixed joints from the root are constant and computed once.
+    """
 
     def __init__(self, robot: Robot) -> None:
         self.robot = robot
         kin = robot.kin
         self.n_links = len(kin.link_names)
+        self._const = np.zeros((self.n_links, 4, 4))
+        self._const[0] = np.eye(4)
+        is_const = [True] + [False] * (self.n_links - 1)
         self._steps = []
         for j, joint in enumerate(robot.joints):
-            ro, to = joint.origin[:3, :3].copy(), joint.origin[:3, 3].copy()
-            post = None if np.allclose(joint.post, np.eye(4)) else (joint.post[:3, :3].copy(), joint.post[:3, 3].copy())
-            z_axis = joint.kind == "revolute" and np.allclose(joint.axis, (0.0, 0.0, 1.0))
-            self._steps.append((kin._parent[j], kin._child[j], kin._qidx[j], joint.kind, z_axis,
-                                ro, to, np.asarray(joint.axis, dtype=float), float(joint.offset), post))
-
-    def frames(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rotations (N, L, 3, 3) and positions (N, L, 3) of every link for full configurations ``q`` (N, dof)."""
-        n = q.shape[0]
-        rot = np.empty((n, self.n_links, 3, 3))
-        pos = np.empty((n, self.n_links, 3))
-        rot[:, 0] = np.eye(3)
-        pos[:, 0] = 0.0
-        for parent, child, qi, kind, z_axis, ro, to, axis, offset, post in self._steps:
-            rp = rot[:, parent]
-            a = rp @ ro  # (N, 3, 3): parent frame followed by the fixed origin
-            p = pos[:, parent] + rp @ to
-            if kind == "revolute":
-                ang = q[:, qi] + offset if offset else q[:, qi]
-                if z_axis:
-                    c, s = np.cos(ang)[:, None], np.sin(ang)[:, None]
-                    r = np.empty_like(a)
-                    a0, a1 = a[:, :, 0], a[:, :, 1]
-                    r[:, :, 0] = c * a0 + s * a1
-                    r[:, :, 1] = c * a1 - s * a0
-                    r[:, :, 2] = a[:, :, 2]
-                else:
-                    r = a @ axis_rotation(axis, ang)
-            elif kind == "prismatic":
-                r = a
-                p = p + (a @ axis) * (q[:, qi] + offset)[:, None]
+            parent, child, qi = kin._parent[j], kin._child[j], kin._qidx[j]
+            origin = joint.origin
+            post = None if np.allclose(joint.post, np.eye(4)) else joint.post.copy()
+            if joint.kind == "fixed" and is_const[parent]:
+                self._const[child] = self._const[parent] @ origin @ (post if post is not None else np.eye(4))
+                is_const[child] = True
+                continue
+            if joint.kind == "revolute" and np.allclose(joint.axis, (0.0, 0.0, 1.0)):
+                a = np.zeros((4, 4))
+                b = np.zeros((4, 4))
+                c = np.zeros((4, 4))
+                a[:3, 0], a[:3, 1] = origin[:3, 0], origin[:3, 1]  # cos q terms of the first two columns
+                b[:3, 0], b[:3, 1] = origin[:3, 1], -origin[:3, 0]  # sin q terms
+                c[:3, 2], c[:, 3] = origin[:3, 2], origin[:, 3]
+                self._steps.append(("rz", parent, child, qi, float(joint.offset), (a, b, c), post))
             else:
-                r = a
-            if post is not None:
-                p = p + r @ post[1]
-                r = r @ post[0]
-            rot[:, child] = r
-            pos[:, child] = p
-        return rot, pos
+                self._steps.append((joint.kind, parent, child, qi, float(joint.offset),
+                                    (origin.copy(), np.asarray(joint.axis, dtype=float)), post))
+        self._const_links = [i for i, c in enumerate(is_const) if c]
 
     def frames4(self, q: np.ndarray) -> np.ndarray:
-        """The same frames as 4x4 matrices (N, L, 4, 4), for comparison with ``robot.kin.link_frames``."""
-        rot, pos = self.frames(q)
-        out = np.zeros(rot.shape[:2] + (4, 4))
-        out[..., :3, :3] = rot
-        out[..., :3, 3] = pos
-        out[..., 3, 3] = 1.0
+        """Every link frame (N, L, 4, 4) in the root frame for full configurations ``q`` (N, dof)."""
+        n = q.shape[0]
+        out = np.empty((n, self.n_links, 4, 4))
+        out[:, self._const_links] = self._const[self._const_links]
+        for kind, parent, child, qi, offset, data, post in self._steps:
+            if kind == "rz":
+                a, b, c = data
+                ang = q[:, qi] + offset if offset else q[:, qi]
+                m = np.cos(ang)[:, None, None] * a
+                m += np.sin(ang)[:, None, None] * b
+                m += c
+            elif kind == "revolute":
+                origin, axis = data
+                m = np.zeros((n, 4, 4))
+                m[:, :3, :3] = axis_rotation(axis, q[:, qi] + offset)
+                m[:, 3, 3] = 1.0
+                m = origin @ m
+            elif kind == "prismatic":
+                origin, axis = data
+                m = np.broadcast_to(origin, (n, 4, 4)).copy()
+                m[:, :3, 3] += (q[:, qi] + offset)[:, None] * (origin[:3, :3] @ axis)
+            else:
+                m = data[0]
+            t = out[:, parent] @ m
+            out[:, child] = t @ post if post is not None else t
         return out
+
+    def frames(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rotations (N, L, 3, 3) and positions (N, L, 3) of every link (views into one array)."""
+        t = self.frames4(q)
+        return t[..., :3, :3], t[..., :3, 3]

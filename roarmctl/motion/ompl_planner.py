@@ -36,6 +36,7 @@ PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
 # first solution get large chunks; the anytime ones (RRTstar, BITstar) refine until the chunk ends.
 SOLVE_CHUNK_CHECKS = {"RRTConnect": 200_000, "KPIECE1": 200_000, "PRM": 200_000, "RRTstar": 20_000, "BITstar": 8_000}
 SHORTCUT_ATTEMPTS = 40  # default of plan_joint_path(simplify_attempts=...)
+SHORTCUT_PATIENCE = 12  # stop shortcutting after this many attempts in a row that changed nothing
 
 
 @dataclass
@@ -99,9 +100,11 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
     same refined check): join two random points of the path by a straight segment when it is
     valid and shorter. A fixed number of attempts from a seeded generator; ``until`` is a ceiling."""
     path = _drop_vertices(checker, path, resolution)
+    failures = 0
     for _ in range(attempts):
-        if len(path) < 3 or time.perf_counter() > until:
+        if len(path) < 3 or failures >= SHORTCUT_PATIENCE or time.perf_counter() > until:
             break
+        failures += 1
         seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
         cum = np.concatenate([[0.0], np.cumsum(seg)])
         ta, tb = np.sort(rng.uniform(0.0, cum[-1], 2))
@@ -118,11 +121,23 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
         if (checker.segment_valid(pa, pb, resolution) and checker.segment_valid(path[ia], pa, resolution)
                 and checker.segment_valid(pb, path[ib + 1], resolution)):
             path = np.vstack([path[:ia + 1], pa, pb, path[ib + 1:]])
+            failures = 0
     path = _drop_vertices(checker, path, resolution)
     # Remove vertices that coincide (a shortcut ending on a vertex).
     keep = np.concatenate([[True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9])
     keep[-1] = True
     return path[keep]
+
+
+def simplify_path(checker: CollisionChecker, path, *, seed: int = 0, resolution: float = 0.01,
+                  attempts: int = SHORTCUT_ATTEMPTS, time_budget: float = 0.2) -> np.ndarray:
+    """Shorten a valid joint path (K, arm_dof): greedy vertex removal plus ``attempts`` seeded random
+    shortcuts, every new segment checked with ``checker.segment_valid`` at ``resolution`` (rad).
+    The endpoints are kept exactly. E.g. plan several raw paths with ``simplify_attempts=0``, keep
+    the shortest, and simplify only that one."""
+    path = np.array(path, dtype=float)
+    return _random_shortcuts(checker, path, resolution, np.random.default_rng(seed), attempts,
+                             time.perf_counter() + time_budget)
 
 
 def _densify(path: np.ndarray, max_step: float | None) -> np.ndarray:
@@ -283,7 +298,7 @@ def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarra
     stats.solve_time = time.perf_counter() - t0
     if not pdef.hasExactSolution():
         raise PlanningError(
-            f"no collision-free path from {_fmt(q_start)} to {_fmt(q_goal)} within {time_budget:g} s ({planner})",
+            f"no collision-free path from {_fmt(q_start)} to {_fmt(q_goal)} within {float(time_budget)!r} s ({planner})",
             "raise planner.time_budget or move the obstacle",
         )
     path = og.PathGeometric(pdef.getSolutionPath())
