@@ -9,7 +9,7 @@ from __future__ import annotations
 import errno
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable
 
 from roarmctl.device import protocol

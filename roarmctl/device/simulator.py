@@ -43,7 +43,7 @@ from typing import Callable
 
 import numpy as np
 
-from roarmctl.device.protocol import BYTES_PER_SECOND, MIDDLE, STEPS_PER_RAD
+from roarmctl.device.protocol import BYTES_PER_SECOND, MIDDLE
 
 TWO_PI = 2.0 * math.pi
 # Firmware IK/FK constants (RoArm-M3_config.h), mm.
