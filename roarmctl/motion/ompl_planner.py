@@ -34,7 +34,7 @@ from roarmctl.motion.collision import CollisionChecker, interpolate
 PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
 # Work budgets in single-state checks (deterministic, unlike the clock). Planners that stop at their
 # first solution get large chunks; the anytime ones (RRTstar, BITstar) refine until the chunk ends.
-SOLVE_CHUNK_CHECKS = {"RRTConnect": 200_000, "KPIECE1": 200_000, "PRM": 200_000, "RRTstar": 20_000, "BITstar": 8_000}
+SOLVE_CHUNK_CHECKS = {"RRTConnect": 200_000, "KPIECE1": 200_000, "PRM": 200_000, "RRTstar": 5_000, "BITstar": 3_000}
 SHORTCUT_ATTEMPTS = 40  # default of plan_joint_path(simplify_attempts=...)
 SHORTCUT_PATIENCE = 12  # stop shortcutting after this many attempts in a row that changed nothing
 
