@@ -4,12 +4,18 @@ How a batch of states (N, arm_dof) is checked:
 
 1. joint limits and, when a margin is set, the smallest singular value of the translational
    Jacobian, all vectorised in numpy;
-2. batched FK (``fastkin``) gives every collision shape's world pose;
-3. a vectorised pre-filter keeps only the (state, shape, item) and (state, shape, shape) pairs whose
-   bounding spheres *and* world-axis-aligned boxes overlap; everything else cannot collide;
-4. python-fcl answers the remaining pairs exactly (boxes, cylinders, spheres), state by state,
-   in order, stopping at the first collision of a state (and at the first invalid state in
-   ``first_invalid``).
+2. batched FK (``fastkin``) gives every collision shape's centre;
+3. a vectorised pre-filter keeps the (state, shape, item) pairs whose bounding sphere reaches the
+   item's axis-aligned box, and the (state, shape, shape) pairs whose spheres overlap; of those,
+   only the pairs whose world-axis-aligned boxes overlap too; nothing else can collide;
+4. python-fcl answers the remaining pairs exactly (boxes, cylinders, spheres), in state order,
+   one loop of calls, skipping the rest of a state after its first collision (and every later
+   state in ``first_invalid``).
+
+Motion segments (``segment_valid``) are checked as one batch at ``resolution``; steps between
+two states where a sphere grown by the distance any arm point can travel in half a step
+(``sweep_gain``) comes near anything are re-checked at a finer resolution, so that a finer
+re-check of the segment (the pipeline's, or a test's) agrees with it.
 
 Rules: arm shapes are inflated by ``padding`` against the scene; self-collision uses the
 description's boxes as they are and skips ``robot.allowed_collisions``. base_link and link1 (the
@@ -308,11 +314,11 @@ class CollisionChecker:
         rl, pl = rot[:, self._mv_link], pos[:, self._mv_link]
         return rl @ self._mv_rot, pl + np.einsum("nsij,sj->nsi", rl, self._mv_pos)
 
-    def _evaluate(self, q: np.ndarray, stop_at_first: bool, sweep: float = 0.0) -> tuple[np.ndarray, list, np.ndarray | None]:
+    def _evaluate(self, q: np.ndarray, stop_at_first: bool, sweep: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
         """Validity (N,) of arm states ``q`` (N, arm_dof); with ``stop_at_first`` states after the first
-        invalid one are left marked valid and not checked. Also returns, per invalid state found by FCL,
-        the reason tuple (index, kind, a, b), and, when ``sweep`` > 0 (m), which states are "near": some
-        bounding sphere grown by ``sweep`` touches an item box or another shape's grown sphere."""
+        invalid one are left marked valid and not checked. Also returns, when ``sweep`` > 0 (m), which
+        states are "near" (N,): some bounding sphere grown by ``sweep`` touches an item's box or another
+        shape's grown sphere; else None."""
         q = np.asarray(q, dtype=float)
         n = q.shape[0]
         self.check_count += n
@@ -403,8 +409,7 @@ class CollisionChecker:
                         skip = i
                         if stop_at_first:
                             break
-        reasons: list = []
-        return valid, reasons, (near if sweep > 0 else None)
+        return valid, (near if sweep > 0 else None)
 
     def validity_batch(self, Q) -> np.ndarray:
         """Validity (N,) bool of arm configurations ``Q`` (N, arm_dof), rad."""
@@ -438,7 +443,7 @@ class CollisionChecker:
         if len(q) > 4 * COARSE_STRIDE and not self._evaluate(q[COARSE_STRIDE::COARSE_STRIDE], stop_at_first=True)[0].all():
             return False  # most invalid motions are caught by every 8th state, at an eighth of the cost
         step = float(np.linalg.norm(q[1] - q[0])) if len(q) > 1 else 0.0
-        valid, _, near = self._evaluate(q, stop_at_first=True, sweep=0.5 * step * self.sweep_gain)
+        valid, near = self._evaluate(q, stop_at_first=True, sweep=0.5 * step * self.sweep_gain)
         if not valid.all():
             return False
         if refine <= 1 or near is None:

@@ -150,14 +150,6 @@ def _densify(path: np.ndarray, max_step: float | None) -> np.ndarray:
     return np.vstack(out)
 
 
-def _path_valid(checker: CollisionChecker, path: np.ndarray, resolution: float) -> int | None:
-    """Index of the first segment of ``path`` that is invalid at ``resolution``, or None."""
-    for i in range(len(path) - 1):
-        if not checker.segment_valid(path[i], path[i + 1], resolution):
-            return i
-    return None
-
-
 def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, planner: str = "RRTConnect",
                                time_budget: float = 1.0, simplify_budget: float = 0.2, seed: int = 0,
                                resolution: float = 0.01, max_step: float | None = 0.1,
