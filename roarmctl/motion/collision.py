@@ -253,7 +253,10 @@ class CollisionChecker:
                     continue
                 pairs.append((a, b))
         self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
-        self.sweep_gain = self._sweep_gain()
+        key = tuple(self._attached)  # the gain depends only on the moving shapes
+        if getattr(self, "_sweep_key", None) != key:
+            self.sweep_gain = self._sweep_gain()
+            self._sweep_key = key
         self._pair_r2 = (self._mv_radius[self._pairs[:, 0]] + self._mv_radius[self._pairs[:, 1]]) ** 2 if len(pairs) else np.zeros(0)
         # Self checks use unpadded geometry: the pre-filter radii above are padded, hence conservative.
 
