@@ -253,7 +253,7 @@ class CollisionChecker:
                     continue
                 pairs.append((a, b))
         self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
-        key = tuple(self._attached)  # the gain depends only on the moving shapes
+        key = tuple((name, rel.tobytes()) for name, (_, rel) in self._attached.items())  # moving shapes only
         if getattr(self, "_sweep_key", None) != key:
             self.sweep_gain = self._sweep_gain()
             self._sweep_key = key
