@@ -286,3 +286,10 @@ def test_valid_segments_stay_valid_at_four_times_the_resolution(robot):
                 missed[refine] += fresh.first_invalid(interpolate(q0, q1, 0.025)) is not None
     assert missed[1] > 0  # without refinement the 4x finer re-check finds collisions ...
     assert missed[4] == 0  # ... with it, none
+
+
+def test_fast_fk_single_configuration_path(robot):
+    fk = FastKinematics(robot)
+    q = np.random.default_rng(4).uniform(robot.lower, robot.upper, (20, robot.dof))
+    for qi in q:
+        np.testing.assert_allclose(fk.frames4(qi[None])[0], robot.kin.link_frames(qi), atol=1e-9, rtol=0)

@@ -11,6 +11,8 @@ The result must equal ``robot.kin.link_frames`` to 1e-9 (tests/test_collision.py
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from roarmctl.robot.kinematics import axis_rotation
@@ -54,10 +56,14 @@ class FastKinematics:
                 self._steps.append((joint.kind, parent, child, qi, float(joint.offset),
                                     (origin.copy(), np.asarray(joint.axis, dtype=float)), post))
         self._const_links = [i for i, c in enumerate(is_const) if c]
+        # One configuration through 2-D arrays and Python floats: about 40 % less numpy overhead.
+        self._simple = all(kind in ("rz", "fixed") and post is None for kind, *_, post in self._steps)
 
     def frames4(self, q: np.ndarray) -> np.ndarray:
         """Every link frame (N, L, 4, 4) in the root frame for full configurations ``q`` (N, dof)."""
         n = q.shape[0]
+        if n == 1 and self._simple:
+            return self._frames_one(q[0])[None]
         out = np.empty((n, self.n_links, 4, 4))
         out[:, self._const_links] = self._const[self._const_links]
         for kind, parent, child, qi, offset, data, post in self._steps:
@@ -81,6 +87,19 @@ class FastKinematics:
                 m = data[0]
             t = out[:, parent] @ m
             out[:, child] = t @ post if post is not None else t
+        return out
+
+    def _frames_one(self, q: np.ndarray) -> np.ndarray:
+        out = np.empty((self.n_links, 4, 4))
+        out[self._const_links] = self._const[self._const_links]
+        for kind, parent, child, qi, offset, data, _ in self._steps:
+            if kind == "rz":
+                a, b, c = data
+                ang = float(q[qi]) + offset
+                m = math.cos(ang) * a + math.sin(ang) * b + c
+            else:
+                m = data[0]
+            np.matmul(out[parent], m, out=out[child])
         return out
 
     def frames(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
