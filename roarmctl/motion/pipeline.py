@@ -372,18 +372,20 @@ class Planner:
         but may cut corners; if the re-check finds it invalid, vertices are added along the
         valid polyline and the spline pulled toward it, step by step.
         """
-        from roarmctl.motion.ompl_planner import plan_joint_path_with_stats
+        from roarmctl.motion.ompl_planner import plan_joint_path_with_stats, simplify_path
 
         goal = step.q_to.copy()
         if self.gi is not None:
             goal[self.gi] = q[self.gi]
         cfg = self.plan.planner
+        seed = cfg.seed + 1000 * self.free_count
+        self.free_count += 1
         best = None
-        for attempt in range(FREE_MOTION_TRIES):
+        for attempt in range(FREE_MOTION_TRIES):  # raw plans, only greedily pruned
             path, stats = plan_joint_path_with_stats(
                 self.checker, q[self.arm], goal[self.arm], planner=cfg.name, time_budget=cfg.time_budget,
-                simplify_budget=cfg.simplify_budget, seed=cfg.seed + 1000 * self.free_count + attempt,
-                resolution=0.01, max_step=None)
+                simplify_budget=cfg.simplify_budget, seed=seed + attempt, resolution=0.01, max_step=None,
+                simplify_attempts=0)
             self.timer.t["ompl"] += stats.solve_time
             self.timer.t["simplify"] += stats.simplify_time
             if best is None or stats.length < best[1].length:
@@ -391,7 +393,10 @@ class Planner:
             if stats.direct:  # the straight joint move is valid: nothing shorter exists
                 break
         path = best[0]
-        self.free_count += 1
+        if not best[1].direct:  # shortcut only the one we keep
+            t0 = time.perf_counter()
+            path = simplify_path(self.checker, path, seed=seed, time_budget=cfg.simplify_budget)
+            self.timer.add("simplify", t0)
         vertices = np.repeat(q[None, :], len(path), axis=0)
         vertices[:, self.arm] = path
         last_error: PlanningError | None = None
