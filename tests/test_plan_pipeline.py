@@ -226,3 +226,20 @@ def test_no_path_within_budget_exits_3(tmp_path):
     proc = roarmctl("plan", str(path), "-o", str(tmp_path / "o.traj.json"))
     assert proc.returncode == 3, proc.stderr
     assert "task 2" in proc.stderr and "cage" in proc.stderr
+
+
+def test_pick_and_place_across_the_base_warns_and_keeps_the_margin(tmp_path):
+    """The seed report's failure: pick, base and place collinear. We warn and stay clear of the axis."""
+    text = BASE.replace("xyz: [0.25, 0.15, 0.02], approach", "xyz: [-0.22, 0.13, 0.02], approach")
+    text = text.replace("xyz: [0.15, 0.0, -0.01]", "xyz: [0.0, 0.0, -0.01]")
+    out = tmp_path / "across.traj.json"
+    proc = roarmctl("plan", str(_write(tmp_path, text)), "-o", str(out), "--json")
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert any("collinear with the base" in w for w in summary["warnings"])
+    traj = load_trajectory(out)
+    robot = load_robot(traj.robot)
+    sigma_min = np.linalg.svd(robot.kin.jacobian(traj.positions)[:, :3, :], compute_uv=False)[:, -1]
+    assert sigma_min.min() >= traj.singularity_margin["min_singular_value"]
+    tcp = robot.kin.fk(traj.positions)[:, :3, 3]
+    assert np.hypot(tcp[:, 0], tcp[:, 1]).min() > 0.05  # never over the base axis
