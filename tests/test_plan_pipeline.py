@@ -243,3 +243,18 @@ def test_pick_and_place_across_the_base_warns_and_keeps_the_margin(tmp_path):
     assert sigma_min.min() >= traj.singularity_margin["min_singular_value"]
     tcp = robot.kin.fk(traj.positions)[:, :3, 3]
     assert np.hypot(tcp[:, 0], tcp[:, 1]).min() > 0.05  # never over the base axis
+
+
+def test_ctrl_c_while_planning_exits_130_and_writes_nothing(tmp_path):
+    import signal
+    import time
+
+    out = tmp_path / "never.traj.json"
+    proc = subprocess.Popen([sys.executable, "-m", "roarmctl", "plan", str(ROOT / "plans" / "multi_object.yaml"), "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(0.6)  # inside the imports or the planning, well before the file is written
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["error: interrupted (nothing was written)"]
+    assert not out.exists() and list(tmp_path.iterdir()) == []

@@ -66,7 +66,13 @@ def main(argv: list[str] | None = None) -> None:
 
     code = 0
     try:
-        app(args=argv, standalone_mode=False)
+        # Without standalone mode typer *returns* the exit code of typer.Exit, and turns Ctrl-C
+        # (KeyboardInterrupt) into Exit(130) that is returned too: keep both.
+        returned = app(args=argv, standalone_mode=False)
+        if isinstance(returned, int) and not isinstance(returned, bool):
+            code = returned
+            if code == 130:
+                common.error("interrupted", "nothing was written")
     except RoarmError as exc:
         if common.STATE.debug:
             traceback.print_exc()
