@@ -11,6 +11,8 @@ import tempfile
 from pathlib import Path
 from typing import Any, Callable
 
+from roarmctl.errors import InputError
+
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; return the path."""
@@ -28,8 +30,11 @@ def atomic_write_json(path: str | os.PathLike, obj: Any, indent: int | None = 1)
 def atomic_write_with(path: str | os.PathLike, writer: Callable[[Any], Any]) -> Path:
     """Call ``writer(binary_file)`` on a temporary file next to ``path``, then rename it into place."""
     target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    except OSError as exc:
+        raise InputError(f"cannot write {target}: {exc.strerror or exc}", "choose a directory you can write to") from None
     try:
         with os.fdopen(fd, "wb") as f:
             writer(f)
@@ -37,11 +42,13 @@ def atomic_write_with(path: str | os.PathLike, writer: Callable[[Any], Any]) -> 
             os.fsync(f.fileno())
         os.chmod(tmp, _mode_for(target))  # mkstemp makes 0600; give the file the usual mode
         os.replace(tmp, target)
-    except BaseException:
+    except BaseException as exc:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if isinstance(exc, OSError):
+            raise InputError(f"cannot write {target}: {exc.strerror or exc}", "check the disk space and permissions") from None
         raise
     return target
 

@@ -29,3 +29,12 @@ def test_interrupted_write_leaves_old_file_and_no_temporary(tmp_path):
         atomic_write_with(target, writer)
     assert target.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["traj.json"]
+
+
+def test_unwritable_target_is_an_input_error(tmp_path):
+    from roarmctl.errors import InputError
+
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    with pytest.raises(InputError, match="cannot write"):
+        atomic_write_text(blocker / "sub" / "out.json", "data")  # a file where a directory should be
