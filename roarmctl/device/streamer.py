@@ -19,6 +19,7 @@ at the last measured pose (never torque off), closes the port and writes the exe
 
 from __future__ import annotations
 
+import gc
 import math
 import time
 from dataclasses import dataclass, field
@@ -356,6 +357,11 @@ class Streamer:
         if self.on_start is not None:
             self.on_start()
         outcome, message, exc_out = "completed", "", None
+        # A full cyclic garbage collection in a process with many modules loaded can stall the
+        # schedule by tens of milliseconds; collect now and pause the collector while streaming.
+        gc_was_enabled = gc.isenabled()
+        gc.collect()
+        gc.disable()
         try:
             self._stream()
             self._settle()
@@ -368,6 +374,9 @@ class Streamer:
         except DeviceError as exc:
             outcome, message = "link_lost", exc.message
             exc_out = DeviceError(exc.message, exc.hint)
+        finally:
+            if gc_was_enabled:
+                gc.enable()
         if outcome != "completed":
             self._hold()
         result = self.result(outcome, message)
