@@ -122,10 +122,10 @@ class Planner:
         self.scene = Scene(items)
         self.checker = CollisionChecker(robot, self.scene, padding=plan.planner.padding,
                                         singularity_margin=plan.planner.singularity_margin or None)
-        self.object_specs = {o.name: o for o in plan.objects}
         self.object_pose = {o.name: o.pose.copy() for o in plan.objects}
         self.held: str | None = None
         self.held_offset = np.zeros(3)  # TCP position minus object centre at grasp (world frame)
+        self._pending_pick: tuple[str, np.ndarray] | None = None  # set by a pick, taken by its grasp
         self.vmax = robot.velocity_limits * plan.limits.velocity_scale
         self.amax = robot.acceleration_limits * plan.limits.acceleration_scale
         self.free_count = 0
@@ -196,7 +196,6 @@ class Planner:
     def _expand_pick(self, task: PickTask, q: np.ndarray, where: str) -> list[_Step]:
         if self.held is not None:
             raise InfeasibleError(f"{where}: picks '{task.object}' while still holding '{self.held}'", "place it first")
-        spec = self.object_specs[task.object]
         centre = self.object_pose[task.object][:3, 3]
         grasp = centre + np.array([0.0, 0.0, task.grasp_offset])
         above = grasp + np.array([0.0, 0.0, task.approach_height])
@@ -216,7 +215,7 @@ class Planner:
             _Step("cartesian", f"{where}: lift '{task.object}'", q_to=q_above, line=(grasp, above),
                   pitch=task.pitch, roll=task.roll, grasp_target=task.object),
         ]
-        self._pending_pick = (task.object, grasp - centre, spec)
+        self._pending_pick = (task.object, grasp - centre)
         return steps
 
     def _expand_place(self, task: PlaceTask, q: np.ndarray, where: str) -> list[_Step]:
@@ -335,7 +334,7 @@ class Planner:
         self.timer.add("recheck", t0)
         if step.event is not None:
             if step.event.kind == "grasp":
-                name, offset, _ = self._pending_pick
+                name, offset = self._pending_pick
                 self._set_state(b, grasp_target=name)
                 self.checker.attach(name, q[self.arm])
                 self.held, self.held_offset, self._pending_pick = name, offset, None
