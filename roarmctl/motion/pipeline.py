@@ -137,8 +137,9 @@ class Planner:
         self._warn_collinear(tasks)
         timed: list[tuple[_Step, TimedPath]] = []
         for i, task in enumerate(tasks):
-            self.progress(f"task {i + 1}/{len(tasks)}: {task.kind}", i, len(tasks))
+            self.progress(f"task {i + 1}/{len(tasks)}: {task.kind} (IK)", i, len(tasks))
             for step in self._expand(task, q, i):
+                self.progress(step.label, i, len(tasks))
                 tp = self._realise(step, q)
                 timed.append((step, tp))
                 q = tp.q[-1].copy()
