@@ -293,3 +293,16 @@ def test_fast_fk_single_configuration_path(robot):
     q = np.random.default_rng(4).uniform(robot.lower, robot.upper, (20, robot.dof))
     for qi in q:
         np.testing.assert_allclose(fk.frames4(qi[None])[0], robot.kin.link_frames(qi), atol=1e-9, rtol=0)
+
+
+def test_margin_measure_equals_svd_of_the_generic_jacobian(robot):
+    """The checker's fast sigma_min (child-frame axes, row-wise cross) against numpy's SVD of the
+    translational part of robot.kin.jacobian over random states."""
+    rng = np.random.default_rng(1)
+    q = rng.uniform(robot.lower[:5], robot.upper[:5], size=(300, 5))
+    checker = CollisionChecker(robot, Scene([]), singularity_margin=0.02)
+    full = checker._full(q)
+    rot, pos = checker._fk.frames(full)
+    fast = checker._sigma_min(rot, pos, full)
+    ref = np.linalg.svd(robot.kin.jacobian(robot.full_q(q))[:, :3, :], compute_uv=False)[:, -1]
+    np.testing.assert_allclose(fast, ref, atol=1e-12)
