@@ -524,3 +524,14 @@ def interpolate(q0, q1, resolution: float) -> np.ndarray:
     steps = max(1, int(np.ceil(np.linalg.norm(q1 - q0) / resolution)))
     t = np.linspace(0.0, 1.0, steps + 1)[:, None]
     return q0 + (q1 - q0) * t
+
+
+def densify(path: np.ndarray, max_step: float | None) -> np.ndarray:
+    """Insert states on each straight piece of ``path`` (K, n) so no two consecutive rows are
+    more than ``max_step`` apart (rad, Euclidean); ``None`` returns the path as it is."""
+    if max_step is None or len(path) < 2:
+        return path
+    out = [path[:1]]
+    for a, b in zip(path[:-1], path[1:]):
+        out.append(interpolate(a, b, max_step)[1:])
+    return np.vstack(out)

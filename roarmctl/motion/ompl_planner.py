@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from roarmctl.errors import InputError, PlanningError
-from roarmctl.motion.collision import CollisionChecker, interpolate
+from roarmctl.motion.collision import CollisionChecker, densify
 
 PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
 # Work budgets in single-state checks (deterministic, unlike the clock). Planners that stop at their
@@ -140,16 +140,6 @@ def simplify_path(checker: CollisionChecker, path, *, seed: int = 0, resolution:
                              time.perf_counter() + time_budget)
 
 
-def _densify(path: np.ndarray, max_step: float | None) -> np.ndarray:
-    """Insert states so no two consecutive rows are more than ``max_step`` apart (rad, L2)."""
-    if max_step is None or len(path) < 2:
-        return path
-    out = [path[:1]]
-    for a, b in zip(path[:-1], path[1:]):
-        out.append(interpolate(a, b, max_step)[1:])
-    return np.vstack(out)
-
-
 def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, planner: str = "RRTConnect",
                                time_budget: float = 1.0, simplify_budget: float = 0.2, seed: int = 0,
                                resolution: float = 0.01, max_step: float | None = 0.1,
@@ -189,7 +179,7 @@ def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, pl
     else:
         path = _plan_ompl(checker, q_start, q_goal, planner, time_budget, simplify_budget, seed, resolution,
                           simplify_attempts, stats)
-    path = _densify(path, max_step)
+    path = densify(path, max_step)
     path[0], path[-1] = q_start, q_goal
     stats.length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
     stats.checks = checker.check_count - checks0

@@ -372,6 +372,7 @@ class Planner:
         but may cut corners; if the re-check finds it invalid, vertices are added along the
         valid polyline and the spline pulled toward it, step by step.
         """
+        from roarmctl.motion.collision import densify
         from roarmctl.motion.ompl_planner import plan_joint_path_with_stats, simplify_path
 
         goal = step.q_to.copy()
@@ -401,7 +402,7 @@ class Planner:
         vertices[:, self.arm] = path
         last_error: PlanningError | None = None
         for max_step in (None, 0.4, 0.2, 0.1, 0.05, 0.025):
-            wps = vertices if max_step is None else _densify(vertices, max_step)
+            wps = vertices if max_step is None else densify(vertices, max_step)
             tp = self._time(wps, step.label)
             t0 = time.perf_counter()
             try:
@@ -423,8 +424,7 @@ class Planner:
             def tcpv(qa: np.ndarray, dqa: np.ndarray) -> np.ndarray:
                 full = np.repeat(base[None, :], len(qa), axis=0)
                 full[:, arm] = qa
-                jv = self.robot.kin.jacobian(full)[:, :3, :]
-                return np.einsum("nij,nj->ni", jv, dqa)
+                return self.robot.kin.tcp_velocity(full, dqa)
 
         tp_arm = time_parameterise(wps[:, arm], self.vmax[arm], self.amax[arm], tcp_velocity_per_ds=tcpv,
                                    max_tcp_speed=self.plan.limits.max_tcp_speed, sample_dt=SAMPLE_DT, label=label)
@@ -446,7 +446,7 @@ class Planner:
         if np.any(np.abs(tp.qdd) > self.amax * (1 + 1e-6) + LIMIT_TOL):
             raise PlanningError(f"{label}: the timed motion exceeds a joint acceleration limit")
         if self.plan.limits.max_tcp_speed is not None:
-            speed = tcp_speed(r, tp.q, tp.qd)
+            speed = np.linalg.norm(r.kin.tcp_velocity(tp.q, tp.qd[:, self.arm]), axis=1)
             if np.max(speed) > self.plan.limits.max_tcp_speed * (1 + 1e-6):
                 raise PlanningError(f"{label}: the TCP speed {np.max(speed):.3f} m/s exceeds max_tcp_speed")
         fine = _interpolate(tp.q, RECHECK_SUBSTEPS)
@@ -542,16 +542,6 @@ def _smooth_move(q: np.ndarray, index: int, target: float, duration: float) -> T
     return TimedPath(times, qq, qd, qdd)
 
 
-def _densify(wps: np.ndarray, max_step: float) -> np.ndarray:
-    """Insert points on each straight joint segment so no joint moves more than ``max_step`` rad between points."""
-    out = [wps[0]]
-    for a, b in zip(wps[:-1], wps[1:]):
-        n = max(int(math.ceil(np.max(np.abs(b - a)) / max_step)), 1)
-        for k in range(1, n + 1):
-            out.append(a + (b - a) * (k / n))
-    return np.array(out)
-
-
 def _interpolate(q: np.ndarray, substeps: int) -> np.ndarray:
     """Linear interpolation with ``substeps`` points per sample interval (for fine re-checks)."""
     if len(q) < 2:
@@ -560,9 +550,3 @@ def _interpolate(q: np.ndarray, substeps: int) -> np.ndarray:
     i = np.minimum(t.astype(int), len(q) - 2)
     f = (t - i)[:, None]
     return q[i] * (1 - f) + q[i + 1] * f
-
-
-def tcp_speed(robot: Robot, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    """TCP speed (m/s) at samples ``q``, ``qd`` (N, dof) from the Jacobian."""
-    jv = robot.kin.jacobian(robot.full_q(q))[:, :3, :]
-    return np.linalg.norm(np.einsum("nij,nj->ni", jv, qd[:, robot.arm_indices]), axis=1)

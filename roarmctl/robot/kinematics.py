@@ -132,6 +132,12 @@ class Kinematics:
         jac = np.stack(cols, axis=2)
         return jac[0] if single else jac
 
+    def tcp_velocity(self, q, qd_arm) -> np.ndarray:
+        """Linear TCP velocity (N, 3) m/s = J_v(q) @ qd_arm, for q (N, dof or arm_dof) and
+        qd_arm (N, arm_dof) rad/s (or any path derivative, giving the TCP derivative per unit)."""
+        jv = self.jacobian(np.atleast_2d(q))[:, :3, :]
+        return np.einsum("nij,nj->ni", jv, np.atleast_2d(qd_arm))
+
     def manipulability(self, q) -> ManipulabilityReport:
         """Manipulability figures at one configuration (see ``ManipulabilityReport``)."""
         jac = self.jacobian(np.asarray(q, dtype=float))

@@ -182,7 +182,7 @@ def path_data(traj: Trajectory, robot: Robot) -> PathData:
     tcp = origins[:, robot.kin.tcp_index].copy()
     jac = robot.kin.jacobian(q)  # (N, 6, arm_dof)
     jv = jac[:, :3, :]
-    tcp_speed = np.linalg.norm(np.einsum("nij,nj->ni", jv, qd[:, robot.arm_indices]), axis=1)
+    tcp_speed = np.linalg.norm(robot.kin.tcp_velocity(q, qd[:, robot.arm_indices]), axis=1)
     sv = np.linalg.svd(jv, compute_uv=False)
     sigma_min = sv[:, -1].copy()
     w = np.prod(sv, axis=1)
