@@ -7,7 +7,7 @@ import pytest
 
 from roarmctl.errors import InputError, PlanningError
 from roarmctl.motion.collision import CollisionChecker, interpolate
-from roarmctl.motion.ompl_planner import PLANNERS, plan_joint_path, plan_joint_path_with_stats
+from roarmctl.motion.ompl_planner import PLANNERS, CeilingError, plan_joint_path, plan_joint_path_with_stats, simplify_path
 from roarmctl.motion.scene import SceneItem, example_scene
 from roarmctl.robot.loader import load_robot
 
@@ -98,11 +98,22 @@ def test_start_in_collision_names_the_pair(robot):
         plan_joint_path(fresh_checker(robot), LEFT, np.array([0.0, 0.0, 3.1, 0.0, 0.0]))
 
 
-def test_no_path_within_the_budget(robot):
+def test_no_path_within_the_work_budget(robot):
     with pytest.raises(PlanningError) as err:
+        plan_joint_path(fresh_checker(robot), LEFT, RIGHT, seed=0, max_checks=100)
+    assert "no collision-free path from" in str(err.value) and "within 100 state checks" in str(err.value)
+    assert "max_checks" in err.value.hint
+
+
+def test_wall_clock_ceiling_is_an_error_not_a_different_path(robot):
+    """A ceiling hit must never hand back whatever was found by then (that would depend on load)."""
+    with pytest.raises(CeilingError) as err:
         plan_joint_path(fresh_checker(robot), LEFT, RIGHT, time_budget=1e-5)
-    assert "no collision-free path from" in str(err.value) and "within 1e-05 s" in str(err.value)
-    assert "time_budget" in err.value.hint
+    assert "safety ceiling of 1e-05 s" in str(err.value) and "planner.time_budget" in err.value.hint
+    assert err.value.exit_code == 3
+    raw = plan_joint_path(fresh_checker(robot), LEFT, RIGHT, simplify_attempts=0, max_step=None)
+    with pytest.raises(CeilingError, match="shortcutting"):
+        simplify_path(fresh_checker(robot), raw, time_budget=0.0)
 
 
 def test_attached_object_is_planned_around(robot):

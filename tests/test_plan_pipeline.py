@@ -193,6 +193,25 @@ def test_same_seed_same_file_and_seed_option(tmp_path):
     assert data["plan"]["seed"] == 5 and data["plan"]["sha256"]
 
 
+def test_same_seed_same_bytes_with_every_core_busy(planned, tmp_path):
+    """Budgets count work, not seconds: a CPU hog on every core (and a niced planner) must not change
+    a single byte of the file planned on the idle machine (same plan, same seed)."""
+    import os
+
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(os.cpu_count() or 2)]
+    try:
+        out = tmp_path / "busy.traj.json"
+        proc = subprocess.run([sys.executable, "-m", "roarmctl", "plan", str(ROOT / "plans" / "obstacle.yaml"), "-o", str(out),
+                               "--json"], capture_output=True, text=True, timeout=300, preexec_fn=lambda: os.nice(5))
+    finally:
+        for h in hogs:
+            h.kill()
+            h.wait()
+    assert proc.returncode == 0, proc.stderr
+    idle_file, _ = planned["obstacle"]
+    assert out.read_bytes() == idle_file.read_bytes()
+
+
 def _write(tmp_path: Path, text: str) -> Path:
     path = tmp_path / "plan.yaml"
     path.write_text(text)

@@ -12,11 +12,12 @@ the motion validator, so instead a greedy vertex reduction and seeded random sho
 ``segment_valid`` too.
 
 Determinism: OMPL's global seed is set before anything random is created; planners stop on a
-count of state checks (``SOLVE_CHUNK_CHECKS``, the same on any machine) rather than on the clock,
-the time budget being only a ceiling; shortcutting makes a fixed number of attempts from a numpy
-generator seeded with the same seed. So the same seed gives the same path on any machine unless a
-ceiling is hit. PRM is the exception: OMPL grows its roadmap in one thread while another looks for
-a solution, so its result depends on thread timing.
+count of state checks (``SOLVE_CHUNK_CHECKS`` per solve call, at most ``max_checks`` in all: the
+same on any machine) rather than on the clock; shortcutting makes a fixed number of attempts from a
+numpy generator seeded with the same seed. The time budgets are safety ceilings only: hitting one
+raises ``CeilingError`` instead of returning a different path, so the same seed gives the same path
+on any machine or an error, never another result. PRM is the exception: OMPL grows its roadmap in
+one thread while another looks for a solution, so its result depends on thread timing.
 
 OMPL is imported inside the functions (heavy import; ``roarmctl --help`` must stay fast).
 """
@@ -35,8 +36,19 @@ PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
 # Work budgets in single-state checks (deterministic, unlike the clock). Planners that stop at their
 # first solution get large chunks; the anytime ones (RRTstar, BITstar) refine until the chunk ends.
 SOLVE_CHUNK_CHECKS = {"RRTConnect": 200_000, "KPIECE1": 200_000, "PRM": 200_000, "RRTstar": 5_000, "BITstar": 3_000}
+MAX_SOLVE_CHECKS = 2_000_000  # default work budget of one solve (state checks); ~1 min of checking
 SHORTCUT_ATTEMPTS = 40  # default of plan_joint_path(simplify_attempts=...)
 SHORTCUT_PATIENCE = 12  # stop shortcutting after this many attempts in a row that changed nothing
+
+
+class CeilingError(PlanningError):
+    """A wall-clock safety ceiling was hit (exit 3). Raised instead of returning whatever was found
+    by then, so that the result never depends on how busy the machine is."""
+
+
+def _ceiling_error(what: str, seconds: float, key: str) -> CeilingError:
+    return CeilingError(f"{what} stopped at its wall-clock safety ceiling of {float(seconds)!r} s ({key})",
+                        f"the machine is slow or busy: raise {key} (a ceiling only; the result does not depend on it)")
 
 
 @dataclass
@@ -95,14 +107,18 @@ def _drop_vertices(checker: CollisionChecker, path: np.ndarray, resolution: floa
 
 
 def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: float,
-                      rng: np.random.Generator, attempts: int, until: float) -> np.ndarray:
+                      rng: np.random.Generator, attempts: int, ceiling: float) -> np.ndarray:
     """Classic random shortcutting through ``checker.segment_valid`` (so every new segment gets the
     same refined check): join two random points of the path by a straight segment when it is
-    valid and shorter. A fixed number of attempts from a seeded generator; ``until`` is a ceiling."""
+    valid and shorter. A fixed number of attempts from a seeded generator; ``ceiling`` (s of wall
+    time) is a safety stop that raises ``CeilingError``."""
+    until = time.perf_counter() + ceiling
     path = _drop_vertices(checker, path, resolution)
     failures = 0
     for _ in range(attempts):
-        if len(path) < 3 or failures >= SHORTCUT_PATIENCE or time.perf_counter() > until:
+        if time.perf_counter() > until:
+            raise _ceiling_error("path shortcutting", ceiling, "planner.simplify_budget")
+        if len(path) < 3 or failures >= SHORTCUT_PATIENCE:
             break
         failures += 1
         seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
@@ -130,27 +146,30 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
 
 
 def simplify_path(checker: CollisionChecker, path, *, seed: int = 0, resolution: float = 0.01,
-                  attempts: int = SHORTCUT_ATTEMPTS, time_budget: float = 0.2) -> np.ndarray:
+                  attempts: int = SHORTCUT_ATTEMPTS, time_budget: float = 5.0) -> np.ndarray:
     """Shorten a valid joint path (K, arm_dof): greedy vertex removal plus ``attempts`` seeded random
     shortcuts, every new segment checked with ``checker.segment_valid`` at ``resolution`` (rad).
     The endpoints are kept exactly. E.g. plan several raw paths with ``simplify_attempts=0``, keep
-    the shortest, and simplify only that one."""
+    the shortest, and simplify only that one. ``time_budget`` (s) is a safety ceiling: past it,
+    ``CeilingError``; the result depends only on the path, ``seed`` and ``attempts``."""
     path = np.array(path, dtype=float)
-    return _random_shortcuts(checker, path, resolution, np.random.default_rng(seed), attempts,
-                             time.perf_counter() + time_budget)
+    return _random_shortcuts(checker, path, resolution, np.random.default_rng(seed), attempts, time_budget)
 
 
 def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, planner: str = "RRTConnect",
-                               time_budget: float = 1.0, simplify_budget: float = 0.2, seed: int = 0,
+                               time_budget: float = 10.0, simplify_budget: float = 5.0, seed: int = 0,
                                resolution: float = 0.01, max_step: float | None = 0.1,
-                               try_direct: bool = True, simplify_attempts: int = SHORTCUT_ATTEMPTS) -> tuple[np.ndarray, PlanStats]:
+                               try_direct: bool = True, simplify_attempts: int = SHORTCUT_ATTEMPTS,
+                               max_checks: int = MAX_SOLVE_CHECKS) -> tuple[np.ndarray, PlanStats]:
     """Plan a collision-free joint-space path from ``q_start`` to ``q_goal`` (arm_dof,), rad.
 
-    Returns (path (K, arm_dof), PlanStats). ``time_budget`` (s) caps the planner, ``simplify_budget``
-    (s) caps simplification; ``resolution`` (rad) is the motion-checking step; ``max_step`` (rad)
-    the largest gap between returned waypoints (None: only the simplified waypoints).
+    Returns (path (K, arm_dof), PlanStats). Work budgets decide the result: ``max_checks`` state
+    checks for the planner, ``simplify_attempts`` shortcuts. ``time_budget`` and ``simplify_budget``
+    (s of wall time) are safety ceilings that raise ``CeilingError``. ``resolution`` (rad) is the
+    motion-checking step; ``max_step`` (rad) the largest gap between returned waypoints (None: only
+    the simplified waypoints).
     Raises InputError for an unknown planner or bad vectors, PlanningError when start or goal is
-    invalid or no path was found within the budget.
+    invalid or no path was found within the work budget, CeilingError (a PlanningError) at a ceiling.
     """
     if planner not in PLANNERS:
         raise InputError(f"unknown planner '{planner}'", f"valid planners: {', '.join(PLANNERS)}")
@@ -161,8 +180,8 @@ def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, pl
     for label, q in (("start", q_start), ("goal", q_goal)):
         if q.shape != (n,):
             raise InputError(f"{label} configuration must have {n} arm joint values, got {q.shape[0]}")
-    if not (resolution > 0 and time_budget > 0 and simplify_budget >= 0):
-        raise InputError("resolution and time_budget must be > 0 and simplify_budget >= 0")
+    if not (resolution > 0 and time_budget > 0 and simplify_budget >= 0 and max_checks > 0):
+        raise InputError("resolution, time_budget and max_checks must be > 0 and simplify_budget >= 0")
     stats = PlanStats(planner=planner)
     t_total = time.perf_counter()
     checks0 = checker.check_count
@@ -178,7 +197,7 @@ def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, pl
         stats.raw_waypoints = 2
     else:
         path = _plan_ompl(checker, q_start, q_goal, planner, time_budget, simplify_budget, seed, resolution,
-                          simplify_attempts, stats)
+                          simplify_attempts, max_checks, stats)
     path = densify(path, max_step)
     path[0], path[-1] = q_start, q_goal
     stats.length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
@@ -188,18 +207,19 @@ def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, pl
 
 
 def plan_joint_path(checker: CollisionChecker, q_start, q_goal, *, planner: str = "RRTConnect",
-                    time_budget: float = 1.0, simplify_budget: float = 0.2, seed: int = 0,
+                    time_budget: float = 10.0, simplify_budget: float = 5.0, seed: int = 0,
                     resolution: float = 0.01, max_step: float | None = 0.1,
-                    simplify_attempts: int = SHORTCUT_ATTEMPTS) -> np.ndarray:
+                    simplify_attempts: int = SHORTCUT_ATTEMPTS, max_checks: int = MAX_SOLVE_CHECKS) -> np.ndarray:
     """Like ``plan_joint_path_with_stats`` but returns only the path (K, arm_dof)."""
     return plan_joint_path_with_stats(checker, q_start, q_goal, planner=planner, time_budget=time_budget,
                                       simplify_budget=simplify_budget, seed=seed, resolution=resolution,
-                                      max_step=max_step, simplify_attempts=simplify_attempts)[0]
+                                      max_step=max_step, simplify_attempts=simplify_attempts,
+                                      max_checks=max_checks)[0]
 
 
 def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarray, planner: str,
                time_budget: float, simplify_budget: float, seed: int, resolution: float, simplify_attempts: int,
-               stats: PlanStats) -> np.ndarray:
+               max_checks: int, stats: PlanStats) -> np.ndarray:
     from ompl import base as ob
     from ompl import geometric as og
     from ompl import util as ou
@@ -256,14 +276,20 @@ def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarra
 
     deadline = time.perf_counter() + time_budget
     chunk = SOLVE_CHUNK_CHECKS[planner]
+    first_check = checker.check_count
+    ceiling_hit = False
 
-    def budget(n_checks: int, until: float):
-        """Termination after ``n_checks`` more state checks (deterministic) or at ``until`` (ceiling)."""
+    def budget(n_checks: int):
+        """Termination after ``n_checks`` more state checks (deterministic), or at the ceiling."""
         stop_at = checker.check_count + n_checks
 
         def fn() -> bool:
+            nonlocal ceiling_hit
             stats.iterations += 1
-            return checker.check_count >= stop_at or time.perf_counter() > until
+            if time.perf_counter() > deadline:
+                ceiling_hit = True
+                return True
+            return checker.check_count >= stop_at
 
         return ob.PlannerTerminationCondition(fn)
 
@@ -273,15 +299,20 @@ def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarra
             # PRM evaluates the termination condition in a second thread: a Python callable there
             # would deadlock on the GIL, so it gets OMPL's own (C++) timed condition.
             algo.solve(ob.timedPlannerTerminationCondition(max(deadline - time.perf_counter(), 1e-3)))
+            ceiling_hit = not pdef.hasExactSolution() and time.perf_counter() > deadline
         else:
-            algo.solve(budget(chunk, deadline))
-        if pdef.hasExactSolution() or time.perf_counter() > deadline:
+            algo.solve(budget(min(chunk, max(max_checks - (checker.check_count - first_check), 1))))
+        if ceiling_hit:  # whatever was found by now depends on the clock: never return it
+            stats.solve_time = time.perf_counter() - t0
+            raise _ceiling_error(f"the {planner} search from {_fmt(q_start)} to {_fmt(q_goal)}", time_budget,
+                                 "planner.time_budget")
+        if pdef.hasExactSolution() or checker.check_count - first_check >= max_checks:
             break
     stats.solve_time = time.perf_counter() - t0
     if not pdef.hasExactSolution():
         raise PlanningError(
-            f"no collision-free path from {_fmt(q_start)} to {_fmt(q_goal)} within {float(time_budget)!r} s ({planner})",
-            "raise planner.time_budget or move the obstacle",
+            f"no collision-free path from {_fmt(q_start)} to {_fmt(q_goal)} within {max_checks} state checks ({planner})",
+            "raise planner.max_checks or move the obstacle",
         )
     path = og.PathGeometric(pdef.getSolutionPath())
     stats.raw_waypoints = path.getStateCount()
@@ -290,7 +321,7 @@ def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarra
     out = np.array([[st[i] for i in range(n)] for st in path.getStates()])
     out[0], out[-1] = q_start, q_goal
     out = _random_shortcuts(checker, out, resolution, np.random.default_rng(seed), simplify_attempts,
-                            t0 + simplify_budget)
+                            simplify_budget)
     stats.simplify_time = time.perf_counter() - t0
     stats.waypoints = out.copy()
     return out

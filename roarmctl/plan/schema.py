@@ -96,8 +96,9 @@ class Limits:
 @dataclass
 class PlannerConfig:
     name: str = "RRTConnect"
-    time_budget: float = 1.0
-    simplify_budget: float = 0.2
+    time_budget: float = 10.0  # s, wall-clock safety ceiling per planner call (never changes the result)
+    simplify_budget: float = 5.0  # s, wall-clock safety ceiling per shortcutting call
+    max_checks: int = 2_000_000  # work budget: state checks per planner call (this decides "no path")
     seed: int = 0
     singularity_margin: float = 0.02
     padding: float = 0.005
@@ -361,13 +362,18 @@ def load_plan(path: str | Path, named_poses: list[str] | None = None) -> Plan:
 
     planner = PlannerConfig()
     if "planner" in top:
-        d = ctx.mapping(top["planner"], top.line_of("planner"), "planner", ("name", "time_budget", "simplify_budget", "seed", "singularity_margin", "padding"))
+        d = ctx.mapping(top["planner"], top.line_of("planner"), "planner", ("name", "time_budget", "simplify_budget", "max_checks", "seed", "singularity_margin", "padding"))
         if "name" in d:
             planner.name = ctx.string(d["name"], d.line_of("name"), "planner.name", PLANNERS)
         if "time_budget" in d:
             planner.time_budget = ctx.number(d["time_budget"], d.line_of("time_budget"), "planner.time_budget", lo=0.0, hi=600.0, strict_lo=True)
         if "simplify_budget" in d:
             planner.simplify_budget = ctx.number(d["simplify_budget"], d.line_of("simplify_budget"), "planner.simplify_budget", lo=0.0, hi=60.0)
+        if "max_checks" in d:
+            v = d["max_checks"]
+            if isinstance(v, bool) or not isinstance(v, int) or not 1_000 <= v <= 1_000_000_000:
+                ctx.fail(d.line_of("max_checks"), "planner.max_checks", f"expected a whole number from 1000 to 1e9, got {_kind(v)}")
+            planner.max_checks = v
         if "seed" in d:
             if isinstance(d["seed"], bool) or not isinstance(d["seed"], int) or d["seed"] < 0:
                 ctx.fail(d.line_of("seed"), "planner.seed", f"expected a whole number >= 0, got {_kind(d['seed'])}")
