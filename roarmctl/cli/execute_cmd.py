@@ -51,7 +51,7 @@ def execute(
     """
     from roarmctl.device.streamer import STRATEGIES, StreamConfig, build_schedule
     from roarmctl.errors import InputError
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import validate_trajectory
     from roarmctl.robot.loader import load_robot
 
     chosen = [n for n, v in (("--port", port), ("--sim", sim or None), ("--output", output)) if v]
@@ -62,11 +62,8 @@ def execute(
         raise InputError(f"--strategy: unknown '{strategy}'", f"choose one of {', '.join(STRATEGIES)}")
     if not max_error > 0:
         raise InputError("--max-error: must be positive (mm)")
-    traj = load_trajectory(traj_path)
+    traj = validate_trajectory(traj_path)  # limits, speeds and steps: nothing unchecked reaches the port
     robot = load_robot(traj.robot)
-    if list(robot.joint_names) != list(traj.joint_names):
-        raise InputError(f"{traj_path}: joint_names do not match robot '{robot.name}'",
-                         f"expected {', '.join(robot.joint_names)}")
     cfg = StreamConfig(rate=rate, speed_scale=speed_scale, strategy=strategy, max_error=max_error / 1e3,
                        move_to_start=move_to_start)
     if output is not None:

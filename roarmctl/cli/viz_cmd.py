@@ -68,9 +68,9 @@ def _load(path: Path):
             raise InputError(f"{path}: planning from a plan file is not available in this build",
                              "plan it with 'roarmctl plan' and pass the .traj.json") from None
         return plan_file(path, seed=None).trajectory
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import validate_trajectory
 
-    return load_trajectory(path)
+    return validate_trajectory(path)
 
 
 def visualize_path(

@@ -24,14 +24,13 @@ The layout follows ROS 2 ``trajectory_msgs/JointTrajectory`` so it exports 1:1:
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from roarmctl.errors import TrajectoryFileError
+from roarmctl.errors import TrajectoryFileError  # noqa: F401  (re-exported)
 from roarmctl.fileio import atomic_write_json
 
 FORMAT = "roarmctl.trajectory/1"
@@ -109,70 +108,17 @@ class Trajectory:
 
 
 def load_trajectory(path: str | Path) -> Trajectory:
-    """Read and validate a ``*.traj.json`` file; any problem raises ``TrajectoryFileError`` (exit 2)."""
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise TrajectoryFileError(f"{path}: no such file", "run 'roarmctl plan' first or check the path") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise TrajectoryFileError(f"{path}: cannot read ({exc})") from None
-    except json.JSONDecodeError as exc:
-        raise TrajectoryFileError(f"{path}:{exc.lineno}: not valid JSON ({exc.msg})", "the file is damaged; plan it again") from None
-    return trajectory_from_dict(data, str(path))
+    """Read a ``*.traj.json`` file and check its form; any problem raises ``TrajectoryFileError`` (exit 2).
+
+    The checks against the robot (limits, speeds, steps) are ``roarmctl.motion.validate.validate_trajectory``.
+    """
+    from roarmctl.motion.validate import parse_document, read_document
+
+    return parse_document(read_document(path), str(path))
 
 
 def trajectory_from_dict(data: Any, where: str = "trajectory") -> Trajectory:
-    if not isinstance(data, dict):
-        raise TrajectoryFileError(f"{where}: expected a JSON object")
-    if data.get("format") != FORMAT:
-        raise TrajectoryFileError(f"{where}: format: expected '{FORMAT}', got {data.get('format')!r}")
-    for key in ("robot", "joint_names", "points"):
-        if key not in data:
-            raise TrajectoryFileError(f"{where}: '{key}' is missing")
-    names = data["joint_names"]
-    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
-        raise TrajectoryFileError(f"{where}: joint_names: expected a list of joint names")
-    pts = data["points"]
-    if not isinstance(pts, list) or len(pts) < 1:
-        raise TrajectoryFileError(f"{where}: points: expected a non-empty list")
-    dof = len(names)
-    arrays = {k: np.empty((len(pts), dof)) for k in ("positions", "velocities", "accelerations")}
-    times = np.empty(len(pts))
-    for i, p in enumerate(pts):
-        if not isinstance(p, dict):
-            raise TrajectoryFileError(f"{where}: points[{i}]: expected an object")
-        try:
-            times[i] = float(p["time_from_start"])
-            for k, arr in arrays.items():
-                vals = p.get(k, [0.0] * dof) if k != "positions" else p[k]
-                if len(vals) != dof:
-                    raise TrajectoryFileError(f"{where}: points[{i}].{k}: expected {dof} values, got {len(vals)}")
-                arr[i] = [float(v) for v in vals]
-        except KeyError as exc:
-            raise TrajectoryFileError(f"{where}: points[{i}]: '{exc.args[0]}' is missing") from None
-        except (TypeError, ValueError):
-            raise TrajectoryFileError(f"{where}: points[{i}]: values must be numbers") from None
-    if not np.all(np.isfinite(times)) or any(not np.all(np.isfinite(a)) for a in arrays.values()):
-        raise TrajectoryFileError(f"{where}: points: values must be finite numbers")
-    if len(times) > 1 and np.any(np.diff(times) <= 0):
-        bad = int(np.argmax(np.diff(times) <= 0)) + 1
-        raise TrajectoryFileError(f"{where}: points[{bad}].time_from_start: times must increase strictly")
-    try:
-        events = [Event(float(e["time_from_start"]), str(e["kind"]), str(e.get("label", "")), e.get("position")) for e in data.get("events", [])]
-        segments = [Segment(float(s["start"]), float(s["end"]), str(s["kind"]), str(s.get("label", ""))) for s in data.get("segments", [])]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise TrajectoryFileError(f"{where}: events/segments: malformed entry ({exc})") from None
-    return Trajectory(
-        robot=str(data["robot"]),
-        joint_names=list(names),
-        times=times,
-        events=events,
-        segments=segments,
-        limits=data.get("limits") or {},
-        singularity_margin=data.get("singularity_margin"),
-        scene=data.get("scene") or {"items": []},
-        plan=data.get("plan"),
-        sample_rate=float(data.get("sample_rate", 100.0)),
-        **arrays,
-    )
+    """A parsed trajectory document -> ``Trajectory`` (form only; see ``load_trajectory``)."""
+    from roarmctl.motion.validate import parse_document
+
+    return parse_document(data, where)

@@ -44,5 +44,5 @@ def pick_place(robot: str = "roarm_m3_pro") -> Trajectory:
     down2 = [-0.7, 0.55, 1.95, -0.9, 0.5, 0.3]
     rel = [-0.7, 0.55, 1.95, -0.9, 0.5, 1.2]
     wps = [HOME, above, down, grasp, up, over, down2, rel, HOME]
-    durs = [1.0, 0.6, 0.7, 0.6, 1.3, 0.6, 0.7, 1.2]
+    durs = [1.1, 0.65, 0.95, 0.7, 1.3, 0.65, 0.95, 1.1]  # each within the M3 Pro's velocity and acceleration limits
     return min_jerk(wps, durs, robot=robot)

@@ -1,0 +1,402 @@
+"""The one trajectory validator: every trajectory a command reads goes through ``validate_trajectory``.
+
+``execute`` (before the port is opened), ``visualize-path`` and ``export`` call it, so a file that
+would command a joint past its limits, jump between samples, or overload memory is refused with
+exit 2 and one line naming the point index, the joint, the value and the limit.
+
+Two stages:
+
+* ``parse_document(data, where)``: the ``roarmctl.trajectory/1`` form (types, finite numbers, sizes,
+  times from 0 strictly increasing, events/segments/scene/limits well-formed) -> ``Trajectory``.
+* ``check_against_robot(traj, robot, where)``: joint names, joint limits, velocity and acceleration
+  limits (``VEL_TOL``/``ACC_TOL``), sample spacing at the declared rate, and position steps that
+  agree with the velocities given the acceleration limit.
+
+Bounds that keep memory and time small (documented in the README, "Trajectory files"):
+``MAX_FILE_BYTES``, ``MAX_POINTS``, ``MAX_DURATION``, ``SAMPLE_RATE_RANGE``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from roarmctl.errors import TrajectoryFileError
+
+MAX_FILE_BYTES = 256 * 1024 * 1024  # a one-hour trajectory at 100 Hz is about 80 MB
+MAX_POINTS = 1_000_000
+MAX_DURATION = 3600.0  # s; streaming builds one command per tick, so the duration bounds memory
+SAMPLE_RATE_RANGE = (0.1, 10000.0)  # Hz
+MAX_EVENTS = 100_000
+MAX_SCENE_ITEMS = 10_000
+MAX_NAME = 255  # characters of a joint, event, segment or scene-item name
+MAX_SIZE = 100.0  # m, any scene item dimension
+MAX_COORD = 1000.0  # m, any scene or event coordinate
+POS_TOL = 1e-6  # rad (m for prismatic): the file rounds to 1e-9, the planner clips exactly
+VEL_TOL = 0.02  # relative, on the robot's velocity limits
+ACC_TOL = 0.05  # relative, on the robot's acceleration limits
+TIME_TOL = 1e-6  # s
+SEGMENT_KINDS = ("free", "cartesian", "gripper", "wait")
+ROLES = ("table", "obstacle", "object")
+SHAPES = ("box", "cylinder", "sphere")
+
+
+def _fail(where: str, field: str, message: str, hint: str | None = None):
+    raise TrajectoryFileError(f"{where}: {field}: {message}", hint)
+
+
+def _kind(v: Any) -> str:
+    if isinstance(v, dict):
+        return "an object"
+    if isinstance(v, list):
+        return f"a list of {len(v)}"
+    if v is None:
+        return "null"
+    text = repr(v)
+    return f"{type(v).__name__} {text[:40]}{'...' if len(text) > 40 else ''}"
+
+
+def _number(v: Any, where: str, field: str, *, lo: float | None = None, hi: float | None = None,
+            strict_lo: bool = False) -> float:
+    """A finite JSON number (not a bool, not a string) within [lo, hi]."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        _fail(where, field, f"expected a number, got {_kind(v)}")
+    try:
+        x = float(v)
+    except OverflowError:
+        _fail(where, field, "the number is too large")
+    if not math.isfinite(x):
+        _fail(where, field, f"expected a finite number, got {x}")
+    if lo is not None and (x < lo or (strict_lo and x <= lo)):
+        _fail(where, field, f"{x:g} must be {'>' if strict_lo else '>='} {lo:g}")
+    if hi is not None and x > hi:
+        _fail(where, field, f"{x:g} must be <= {hi:g}")
+    return x
+
+
+def _numbers(v: Any, n: int, where: str, field: str, *, lo: float | None = None, hi: float | None = None,
+             strict_lo: bool = False) -> list[float]:
+    if not isinstance(v, list) or len(v) != n:
+        _fail(where, field, f"expected a list of {n} numbers, got {_kind(v)}")
+    return [_number(x, where, f"{field}[{i}]", lo=lo, hi=hi, strict_lo=strict_lo) for i, x in enumerate(v)]
+
+
+def _name(v: Any, where: str, field: str, *, empty: bool = False) -> str:
+    if not isinstance(v, str) or (not v and not empty):
+        _fail(where, field, f"expected a name, got {_kind(v)}")
+    if len(v) > MAX_NAME:
+        _fail(where, field, f"longer than {MAX_NAME} characters")
+    return v
+
+
+def _mapping(v: Any, where: str, field: str) -> dict:
+    if not isinstance(v, dict):
+        _fail(where, field, f"expected an object, got {_kind(v)}")
+    return v
+
+
+# --------------------------------------------------------------------------- reading
+def read_document(path: str | Path) -> Any:
+    """The JSON of a trajectory file, read within ``MAX_FILE_BYTES`` and the parser's nesting limit."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise TrajectoryFileError(f"{path}: {size / 2**20:.0f} MiB is more than the {MAX_FILE_BYTES / 2**20:.0f} MiB "
+                                      "a trajectory file may have", "split the plan into shorter ones")
+        text = path.read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise TrajectoryFileError(f"{path}: no such file", "run 'roarmctl plan' first or check the path") from None
+    except IsADirectoryError:
+        raise TrajectoryFileError(f"{path}: is a directory, not a trajectory file") from None
+    except UnicodeDecodeError as exc:
+        raise TrajectoryFileError(f"{path}: not UTF-8 text (byte {exc.start})", "the file is damaged; plan it again") from None
+    except OSError as exc:
+        raise TrajectoryFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    try:
+        return json.loads(text, parse_constant=_reject_constant)
+    except json.JSONDecodeError as exc:
+        raise TrajectoryFileError(f"{path}:{exc.lineno}: not valid JSON ({exc.msg})", "the file is damaged; plan it again") from None
+    except RecursionError:
+        raise TrajectoryFileError(f"{path}: nested too deeply to be a trajectory file") from None
+    except _Constant as exc:
+        raise TrajectoryFileError(f"{path}: '{exc.args[0]}' is not a number JSON allows",
+                                  "every value must be finite") from None
+
+
+class _Constant(ValueError):
+    pass
+
+
+def _reject_constant(name: str) -> float:
+    raise _Constant(name)
+
+
+# --------------------------------------------------------------------------- the document
+def parse_document(data: Any, where: str = "trajectory"):
+    """A ``roarmctl.trajectory/1`` document (the parsed JSON) -> ``Trajectory``, checking its form.
+
+    Raises ``TrajectoryFileError`` (exit 2) naming the field; nothing here needs the robot.
+    """
+    from roarmctl.motion.trajectory import FORMAT, Event, Segment, Trajectory
+
+    if not isinstance(data, dict):
+        raise TrajectoryFileError(f"{where}: expected a JSON object, got {_kind(data)}")
+    if data.get("format") != FORMAT:
+        _fail(where, "format", f"expected '{FORMAT}', got {_kind(data.get('format'))}")
+    for key in ("robot", "joint_names", "points"):
+        if key not in data:
+            raise TrajectoryFileError(f"{where}: '{key}' is missing")
+    robot = data["robot"]
+    if not isinstance(robot, str) or not robot or len(robot) > 4096 or "\0" in robot:
+        _fail(where, "robot", f"expected a robot name or path, got {_kind(robot)}")
+    names = data["joint_names"]
+    if not isinstance(names, list) or not names or len(names) > 64:
+        _fail(where, "joint_names", f"expected a list of 1 to 64 joint names, got {_kind(names)}")
+    names = [_name(n, where, f"joint_names[{i}]") for i, n in enumerate(names)]
+    if len(set(names)) != len(names):
+        _fail(where, "joint_names", "a joint is named twice")
+    rate = _number(data.get("sample_rate", 100.0), where, "sample_rate", lo=SAMPLE_RATE_RANGE[0], hi=SAMPLE_RATE_RANGE[1])
+    pts = data["points"]
+    if not isinstance(pts, list) or not pts:
+        _fail(where, "points", f"expected a non-empty list, got {_kind(pts)}")
+    if len(pts) > MAX_POINTS:
+        _fail(where, "points", f"{len(pts)} points are more than {MAX_POINTS}", "split the plan into shorter ones")
+    dof = len(names)
+    n = len(pts)
+    times = np.empty(n)
+    arrays = {k: np.zeros((n, dof)) for k in ("positions", "velocities", "accelerations")}
+    for i, p in enumerate(pts):
+        if not isinstance(p, dict):
+            _fail(where, f"points[{i}]", f"expected an object, got {_kind(p)}")
+        if "time_from_start" not in p:
+            _fail(where, f"points[{i}]", "'time_from_start' is missing")
+        t = p["time_from_start"]
+        if isinstance(t, bool) or not isinstance(t, (int, float)):
+            _fail(where, f"points[{i}].time_from_start", f"expected a number, got {_kind(t)}")
+        times[i] = _number(t, where, f"points[{i}].time_from_start", lo=0.0, hi=MAX_DURATION)
+        for k, arr in arrays.items():
+            if k not in p:
+                if k == "positions":
+                    _fail(where, f"points[{i}]", "'positions' is missing")
+                continue
+            vals = p[k]
+            if not isinstance(vals, list) or len(vals) != dof:
+                _fail(where, f"points[{i}].{k}", f"expected {dof} numbers (one per joint), got {_kind(vals)}")
+            for j, x in enumerate(vals):
+                if type(x) is not float and type(x) is not int:  # bool and str are not numbers here
+                    _number(x, where, f"points[{i}].{k}[{j}] ({names[j]})")
+            try:
+                row = np.array(vals, dtype=float)
+            except OverflowError:
+                row = np.array([x if abs(x) < 1e308 else math.inf for x in vals], dtype=float)
+            if not np.all(np.isfinite(row)):
+                j = int(np.argmin(np.isfinite(row)))
+                _fail(where, f"points[{i}].{k}[{j}] ({names[j]})", f"expected a finite number, got {vals[j]!r:.40}")
+            arr[i] = row
+    if abs(times[0]) > TIME_TOL:
+        _fail(where, "points[0].time_from_start", f"{times[0]:g} s: the first point must be at 0 s")
+    if n > 1:
+        steps = np.diff(times)
+        if np.any(steps <= 0):
+            bad = int(np.argmax(steps <= 0)) + 1
+            _fail(where, f"points[{bad}].time_from_start", f"{times[bad]:g} s: times must increase strictly "
+                  f"(the point before is at {times[bad - 1]:g} s)")
+    duration = float(times[-1])
+
+    events = []
+    raw_events = data.get("events", [])
+    if raw_events is None:
+        raw_events = []
+    if not isinstance(raw_events, list) or len(raw_events) > MAX_EVENTS:
+        _fail(where, "events", f"expected a list of at most {MAX_EVENTS}, got {_kind(raw_events)}")
+    for i, e in enumerate(raw_events):
+        f = f"events[{i}]"
+        _mapping(e, where, f)
+        if "time_from_start" not in e or "kind" not in e:
+            _fail(where, f, "needs 'time_from_start' and 'kind'")
+        t = _number(e["time_from_start"], where, f"{f}.time_from_start", lo=-TIME_TOL, hi=duration + TIME_TOL)
+        pos = e.get("position")
+        if pos is not None:
+            pos = _numbers(pos, 3, where, f"{f}.position", lo=-MAX_COORD, hi=MAX_COORD)
+        events.append(Event(t, _name(e["kind"], where, f"{f}.kind"), _name(e.get("label", ""), where, f"{f}.label", empty=True), pos))
+
+    segments = []
+    raw_segments = data.get("segments", [])
+    if raw_segments is None:
+        raw_segments = []
+    if not isinstance(raw_segments, list) or len(raw_segments) > MAX_EVENTS:
+        _fail(where, "segments", f"expected a list of at most {MAX_EVENTS}, got {_kind(raw_segments)}")
+    for i, s in enumerate(raw_segments):
+        f = f"segments[{i}]"
+        _mapping(s, where, f)
+        if "start" not in s or "end" not in s or "kind" not in s:
+            _fail(where, f, "needs 'start', 'end' and 'kind'")
+        a = _number(s["start"], where, f"{f}.start", lo=-TIME_TOL, hi=duration + TIME_TOL)
+        b = _number(s["end"], where, f"{f}.end", lo=-TIME_TOL, hi=duration + TIME_TOL)
+        if b < a:
+            _fail(where, f"{f}.end", f"{b:g} s is before its start {a:g} s")
+        kind = _name(s["kind"], where, f"{f}.kind")
+        if kind not in SEGMENT_KINDS:
+            _fail(where, f"{f}.kind", f"'{kind}' is not one of {', '.join(SEGMENT_KINDS)}")
+        segments.append(Segment(a, b, kind, _name(s.get("label", ""), where, f"{f}.label", empty=True)))
+
+    limits = data.get("limits") or {}
+    _mapping(limits, where, "limits")
+    for key in ("velocity", "acceleration"):
+        if limits.get(key) is not None:
+            _numbers(limits[key], dof, where, f"limits.{key}", lo=0.0, hi=1e6, strict_lo=True)
+    for key in ("velocity_scale", "acceleration_scale"):
+        if limits.get(key) is not None:
+            _number(limits[key], where, f"limits.{key}", lo=0.0, hi=1.0, strict_lo=True)
+    if limits.get("max_tcp_speed") is not None:
+        _number(limits["max_tcp_speed"], where, "limits.max_tcp_speed", lo=0.0, hi=100.0, strict_lo=True)
+
+    margin = data.get("singularity_margin")
+    if margin is not None:
+        _mapping(margin, where, "singularity_margin")
+        if margin.get("min_singular_value") is not None:
+            _number(margin["min_singular_value"], where, "singularity_margin.min_singular_value", lo=0.0, hi=10.0)
+
+    scene = data.get("scene") or {"items": []}
+    _mapping(scene, where, "scene")
+    items = scene.get("items", [])
+    if items is None:
+        items = []
+    if not isinstance(items, list) or len(items) > MAX_SCENE_ITEMS:
+        _fail(where, "scene.items", f"expected a list of at most {MAX_SCENE_ITEMS} items, got {_kind(items)}")
+    seen = set()
+    for i, it in enumerate(items):
+        _scene_item(it, where, f"scene.items[{i}]", seen)
+
+    plan = data.get("plan")
+    if plan is not None:
+        _mapping(plan, where, "plan")
+    return Trajectory(robot=robot, joint_names=names, times=times, events=events, segments=segments,
+                      limits=dict(limits), singularity_margin=margin, scene={**scene, "items": items}, plan=plan,
+                      sample_rate=rate, **arrays)
+
+
+def _scene_item(it: Any, where: str, f: str, seen: set) -> None:
+    _mapping(it, where, f)
+    name = _name(it.get("name"), where, f"{f}.name")
+    if name in seen:
+        _fail(where, f"{f}.name", f"'{name}' is used twice")
+    seen.add(name)
+    role = it.get("role")
+    if role not in ROLES:
+        _fail(where, f"{f}.role", f"expected one of {', '.join(ROLES)}, got {_kind(role)}")
+    shape = it.get("shape")
+    if shape not in SHAPES:
+        _fail(where, f"{f}.shape", f"expected one of {', '.join(SHAPES)}, got {_kind(shape)}")
+    if shape == "box":
+        _numbers(it.get("size"), 3, where, f"{f}.size", lo=0.0, hi=MAX_SIZE, strict_lo=True)
+    else:
+        _number(it.get("radius"), where, f"{f}.radius", lo=0.0, hi=MAX_SIZE, strict_lo=True)
+        if shape == "cylinder":
+            _number(it.get("length"), where, f"{f}.length", lo=0.0, hi=MAX_SIZE, strict_lo=True)
+    _numbers(it.get("xyz", [0, 0, 0]), 3, where, f"{f}.xyz", lo=-MAX_COORD, hi=MAX_COORD)
+    _numbers(it.get("rpy", [0, 0, 0]), 3, where, f"{f}.rpy", lo=-100.0, hi=100.0)
+
+
+# --------------------------------------------------------------------------- against the robot
+def check_against_robot(traj, robot, where: str = "trajectory") -> None:
+    """Joint names, limits, speeds and sample steps of ``traj`` against ``robot``; raises TrajectoryFileError."""
+    if list(traj.joint_names) != list(robot.joint_names):
+        _fail(where, "joint_names", f"{', '.join(traj.joint_names)} do not match robot '{robot.name}'",
+              f"expected {', '.join(robot.joint_names)}")
+    names = robot.joint_names
+    q, v, a, t = traj.positions, traj.velocities, traj.accelerations, traj.times
+    lo, hi = np.asarray(robot.lower, dtype=float), np.asarray(robot.upper, dtype=float)
+    vmax, amax = np.asarray(robot.velocity_limits, dtype=float), np.asarray(robot.acceleration_limits, dtype=float)
+
+    def first(mask: np.ndarray) -> tuple[int, int] | None:
+        if not mask.any():
+            return None
+        i, j = np.argwhere(mask)[0]
+        return int(i), int(j)
+
+    bad = first((q < lo - POS_TOL) | (q > hi + POS_TOL))
+    if bad:
+        i, j = bad
+        _fail(where, f"points[{i}].positions ({names[j]})",
+              f"{q[i, j]:.4f} at t = {t[i]:.3f} s is outside the joint limits [{lo[j]:.4f}, {hi[j]:.4f}]",
+              "plan it again with the robot's joint limits")
+    vlim = vmax * (1 + VEL_TOL) + 1e-6
+    bad = first(np.abs(v) > vlim)
+    if bad:
+        i, j = bad
+        _fail(where, f"points[{i}].velocities ({names[j]})",
+              f"{v[i, j]:.4f} at t = {t[i]:.3f} s exceeds the velocity limit {vmax[j]:.4f}",
+              "plan it again; the robot's limits are in its description")
+    alim = amax * (1 + ACC_TOL) + 1e-6
+    bad = first(np.abs(a) > alim)
+    if bad:
+        i, j = bad
+        _fail(where, f"points[{i}].accelerations ({names[j]})",
+              f"{a[i, j]:.4f} at t = {t[i]:.3f} s exceeds the acceleration limit {amax[j]:.4f}",
+              "plan it again; the robot's limits are in its description")
+    if len(t) < 2:
+        return
+    dt = np.diff(t)
+    step_max = 1.0 / traj.sample_rate
+    k = np.flatnonzero(dt > step_max * (1 + 1e-6) + TIME_TOL)
+    if len(k):
+        i = int(k[0]) + 1
+        _fail(where, f"points[{i}].time_from_start",
+              f"{dt[i - 1]:g} s after the point before, more than one sample at the declared sample_rate "
+              f"{traj.sample_rate:g} Hz", "a trajectory must be sampled at least at its sample_rate")
+    dq = np.diff(q, axis=0)
+    # Position steps must agree with the velocities: with |acceleration| <= A over the step,
+    # |dq - v0 dt| and |dq - v1 dt| are at most A dt^2 / 2; the mean speed is at most the limit.
+    reach = 0.5 * alim * dt[:, None] ** 2 + 1e-6
+    worst = np.maximum(np.abs(dq - v[:-1] * dt[:, None]), np.abs(dq - v[1:] * dt[:, None])) - reach
+    mean = np.abs(dq) / dt[:, None] - vlim
+    bad = first((worst > 0) | (mean > 0))
+    if bad:
+        i, j = bad
+        _fail(where, f"points[{i + 1}].positions ({names[j]})",
+              f"a step of {dq[i, j]:+.4f} in {dt[i]:g} s from {q[i, j]:.4f} does not follow from the velocities "
+              f"{v[i, j]:.4f} -> {v[i + 1, j]:.4f} within the acceleration limit {amax[j]:.4f}",
+              "the file was edited or damaged; plan it again")
+
+
+def validate_trajectory(traj_or_doc: Any, robot: Any = None, where: str | None = None):
+    """The one validator: a ``Trajectory``, a parsed document (dict) or a path -> a checked ``Trajectory``.
+
+    ``robot``: a loaded ``Robot``, a robot name/path, or None for the trajectory's own ``robot``.
+    Raises ``TrajectoryFileError`` (an ``InputError``, exit 2) with the point index, joint, value and
+    limit of the first violation; ``DescriptionError``/``InputError`` if the robot cannot be loaded.
+    """
+    from roarmctl.motion.trajectory import Trajectory
+
+    if isinstance(traj_or_doc, (str, Path)):
+        where = where or str(traj_or_doc)
+        traj = parse_document(read_document(traj_or_doc), where)
+    elif isinstance(traj_or_doc, Trajectory):
+        where = where or "trajectory"
+        traj = parse_document(traj_or_doc.to_dict(), where)
+    else:
+        where = where or "trajectory"
+        traj = parse_document(traj_or_doc, where)
+    if robot is None or isinstance(robot, str):
+        from roarmctl.errors import InputError
+        from roarmctl.robot.loader import load_robot
+
+        spec = robot or traj.robot
+        try:
+            robot = load_robot(spec)
+        except InputError as exc:
+            if robot is not None:
+                raise
+            raise type(exc)(f"{where}: robot: the trajectory was planned for robot '{spec}', which is not installed "
+                            f"here ({exc.message})", exc.hint) from None
+        except (OSError, ValueError) as exc:  # a name the OS refuses as a path (too long, NUL)
+            raise TrajectoryFileError(f"{where}: robot: '{spec[:60]}' is neither a bundled robot nor a readable "
+                                      f"file ({exc})") from None
+    check_against_robot(traj, robot, where)
+    return traj
