@@ -49,6 +49,9 @@ def test_every_example_plan_is_planned(planned):
         assert summary["duration"] == pytest.approx(traj.duration)
         assert traj.times[0] == 0.0 and np.all(np.diff(traj.times) > 0)
         assert np.allclose(traj.velocities[[0, -1]], 0.0)
+        from roarmctl.motion.validate import validate_trajectory
+
+        validate_trajectory(path)  # what execute accepts: the planner's output passes the one validator
 
 
 def _box(size) -> fcl.CollisionObject:
