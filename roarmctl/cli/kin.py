@@ -19,6 +19,9 @@ DEG = typer.Option(False, "--deg", help="Angles in and out in degrees (default r
 JSON = typer.Option(False, "--json", help="Print one JSON object on stdout, nothing else.")
 # Joint values may be negative: let '-0.5' through as an argument instead of an unknown option.
 NUMBERS = {"ignore_unknown_options": True}
+FRAME = typer.Option("world", "--frame", help="Positions in this frame of the robot: world (m, the plan's), or one the "
+                                             "description names, e.g. firmware (RoArm: mm, origin at shoulder height, "
+                                             "the firmware's and roarm-sdk's x/y/z of its own end point).")
 
 
 def register(app: typer.Typer) -> None:
@@ -50,15 +53,22 @@ def fk(
     robot: str = typer.Argument(..., help="Bundled robot name or path to a description."),
     q: list[str] = typer.Argument(..., help="Joint values (arm joints; the gripper may follow)."),
     link: Optional[str] = typer.Option(None, "--link", help="Link to report (default: the TCP)."),
+    frame: str = FRAME,
     deg: bool = DEG,
     json_out: bool = JSON,
 ) -> None:
-    """Forward kinematics: position (m), rotation (3x3) and roll-pitch-yaw of the TCP or a link."""
+    """Forward kinematics: position (m), rotation (3x3) and roll-pitch-yaw of the TCP or a link.
+
+    With --frame firmware (RoArm) the position is the firmware's own end point in its frame (mm):
+    what T:1051 x/y/z and roarm-sdk's pose_get() report; tcp_position is hand_tcp in that frame.
+    """
     from roarmctl.errors import InputError
+    from roarmctl.robot.frames import device_point, get_frame, to_frame
     from roarmctl.robot.loader import load_robot
     from roarmctl.robot.model import rpy_from_matrix
 
     r = load_robot(robot)
+    fr = get_frame(r, frame)
     qv = r.full_q(common.parse_numbers(q, "joint value", deg))
     if link is not None and link not in r.kin.link_index:
         raise InputError(f"--link: '{link}' is not a link of {r.name}", f"links: {', '.join(r.link_names)}")
@@ -66,16 +76,25 @@ def fk(
     rpy = rpy_from_matrix(t[:3, :3])
     out = {"robot": r.name, "link": link or r.tcp_link, "q": _angles_out(qv, deg), "position": t[:3, 3],
            "rotation": t[:3, :3], "rpy": _angles_out(rpy, deg)}
+    if frame != "world":
+        point = t[:3, 3] if link is not None else device_point(r, fr, qv)
+        out |= {"frame": frame, "unit": fr.unit, "position": to_frame(fr, point), "tcp_position": to_frame(fr, t[:3, 3]),
+                "world_position": t[:3, 3]}
     if json_out:
         common.print_json(out)
         return
     unit = "deg" if deg else "rad"
-    _table(f"FK of {r.name} at {out['link']}", [
-        (f"q ({unit})", _fmt(out["q"], 4)),
-        ("position (m)", _fmt(t[:3, 3])),
+    rows = [(f"q ({unit})", _fmt(out["q"], 4))]
+    if frame != "world":
+        what = "end point" if link is None and fr.point_link else "position"
+        rows += [(f"{what}, {frame} frame ({fr.unit})", _fmt(out["position"], 3)),
+                 (f"{out['link']}, {frame} frame ({fr.unit})", _fmt(out["tcp_position"], 3))]
+    rows += [
+        ("position (m)" if frame == "world" else "position, world frame (m)", _fmt(t[:3, 3])),
         ("rotation", _fmt(t[:3, :3])),
         (f"rpy ({unit})", _fmt(out["rpy"], 4)),
-    ])
+    ]
+    _table(f"FK of {r.name} at {out['link']}", rows)
 
 
 @kin_app.command("jacobian", context_settings=NUMBERS)
@@ -128,7 +147,7 @@ def _split_numbers(text: str | None, what: str, deg: bool) -> np.ndarray | None:
 @kin_app.command("ik")
 def ik(
     robot: str = typer.Argument(..., help="Bundled robot name or path to a description."),
-    xyz: Tuple[float, float, float] = typer.Option(..., "--xyz", help="Target TCP position X Y Z in metres (root frame)."),
+    xyz: Tuple[float, float, float] = typer.Option(..., "--xyz", help="Target TCP position X Y Z in metres (root frame), or in --frame's unit."),
     pitch: Optional[float] = typer.Option(
         None, "--pitch",
         help="RoArm: angle of the approach axis (tool +x) below the horizontal, in the vertical plane through the "
@@ -144,27 +163,35 @@ def ik(
         None, "--ref", help="Reference configuration ('0 0 1.57 0 0' or comma-separated): solutions are sorted by "
                             "distance to it and its gripper value is kept."),
     all_solutions: bool = typer.Option(False, "--all", help="Print every solution (every branch) instead of the best one."),
+    frame: str = FRAME,
     deg: bool = DEG,
     json_out: bool = JSON,
 ) -> None:
     """Inverse kinematics: joint vectors (gripper last) that put the TCP at --xyz, each checked by FK.
 
+    Each solution's tool pitch is printed (RoArm), so a pitch found with --pitch left out can be
+    written into a plan. With --frame firmware, --xyz is the firmware's end point in mm (T:1051 x/y/z).
     Unreachable targets exit with code 3 and say why: out_of_reach, joint_limit or orientation.
     """
     from roarmctl.errors import RoarmError, UnreachableError
-    from roarmctl.robot.ik import ORI_TOL, POS_TOL, check_solution, solve_ik
+    from roarmctl.robot.frames import device_point, from_frame, get_frame
+    from roarmctl.robot.ik import ORI_TOL, POS_TOL, check_solution, solve_ik_frame, tool_pitch
     from roarmctl.robot.loader import load_robot
 
     r = load_robot(robot)
+    fr = get_frame(r, frame)
     conv = (lambda v: float(np.radians(v))) if deg else float
     rpy_rad = None if rpy is None else np.array([conv(v) for v in rpy])
     q_ref = _split_numbers(ref, "--ref", deg)
+    target = from_frame(fr, np.array(xyz, dtype=float))
     try:
-        sols = solve_ik(r, np.array(xyz, dtype=float), pitch=None if pitch is None else conv(pitch),
-                        roll=None if roll is None else conv(roll), rpy=rpy_rad, q_ref=q_ref, all_solutions=all_solutions)
+        sols = solve_ik_frame(r, fr, np.array(xyz, dtype=float), pitch=None if pitch is None else conv(pitch),
+                              roll=None if roll is None else conv(roll), rpy=rpy_rad, q_ref=q_ref, all_solutions=all_solutions)
     except UnreachableError as exc:
         raise UnreachableError(f"unreachable ({exc.reason}): {exc.message}", exc.reason, exc.hint) from None
-    checks = [check_solution(r, q, xyz, rpy_rad) for q in sols]
+    checks = [check_solution(r, q, r.kin.fk(q)[:3, 3] + target - device_point(r, fr, q), rpy_rad) for q in sols]
+    is_roarm = r.singularity_model == "roarm5" or r.name == "roarm_m3_pro"
+    pitches = [tool_pitch(r, q, target) for q in sols] if is_roarm else None
     for q, c in zip(sols, checks):  # the library checked already; a failure here is a bug, not an input error
         if c.position_error > POS_TOL or (c.orientation_error is not None and c.orientation_error > ORI_TOL):
             raise RoarmError(f"internal error: IK solution {np.round(q, 6).tolist()} misses the target by "
@@ -176,22 +203,33 @@ def ik(
         "solutions": [_angles_out(q, deg) for q in sols],
         "position_errors": [c.position_error for c in checks],
         "orientation_errors": [c.orientation_error for c in checks],
+        "frame": frame,
+        "world_target": target,
     }
+    if pitches is not None:
+        out["pitches"] = [float(_angles_out(p, deg)) for p in pitches]
     if json_out:
         common.print_json(out)
         return
     from rich.table import Table
 
     unit = "deg" if deg else "rad"
-    t = Table(title=f"IK of {r.name}: TCP at ({xyz[0]:.4f}, {xyz[1]:.4f}, {xyz[2]:.4f}) m, {len(sols)} solution(s), {unit}",
+    where = (f"({xyz[0]:.4f}, {xyz[1]:.4f}, {xyz[2]:.4f}) m" if frame == "world" else
+             f"({xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f}) {fr.unit} in the {frame} frame")
+    t = Table(title=f"IK of {r.name}: TCP at {where}, {len(sols)} solution(s), {unit}",
               caption=", ".join(f"q{i + 1} = {name}" for i, name in enumerate(r.joint_names)))
     t.add_column("#")
     for i in range(r.dof):
         t.add_column(f"q{i + 1}", justify="right")
+    if pitches is not None:
+        t.add_column(f"pitch ({unit})", justify="right")
     t.add_column("FK error (m)", justify="right")
     for k, (q, c) in enumerate(zip(out["solutions"], checks), 1):
-        t.add_row(str(k), *[f"{v:.4f}" for v in q], f"{c.position_error:.1e}")
+        extra = [f"{out['pitches'][k - 1]:.2f}"] if pitches is not None else []
+        t.add_row(str(k), *[f"{v:.4f}" for v in q], *extra, f"{c.position_error:.1e}")
     common.console().print(t)
+    if pitches is not None and pitch is None and rpy is None:
+        common.console(stderr=True).print(f"pitch chosen: {out['pitches'][0]:.2f} {unit} (pass --pitch to fix it)")
 
 
 @kin_app.command("dynamics")

@@ -7,9 +7,12 @@ What it reproduces (RESEARCH.md section 2; [fw84] = RoArm-M3_example-250108):
   last byte has arrived, and a reply reaches the host when its last byte has left;
 - the main loop: every ``loop_period`` it executes every complete line, reads the servos, and with
   InfoPrint 2 prints feedback whenever the transmitter is idle;
-- commands T:102, T:101, T:104 (firmware IK, blocking cosine interpolation), T:105, T:605, T:210,
+- commands T:102, T:101, T:121/T:122 (degrees; ``spd``/``acc`` through ``calculatePosByDeg``,
+  T:122 stores them as the shared ``moveSpd``/``moveAcc`` that T:1041 uses, T:102 zeroes them),
+  T:104 (firmware IK, blocking cosine interpolation), T:1041 (one IK step), T:105, T:605, T:210,
   T:0 (0.84: torque off, *blocks 10 s*, torque on; scaled by ``time_factor``), T:999, T:100,
-  T:111; everything else is accepted and ignored;
+  T:111; everything else (LED, EEPROM writes, Wi-Fi, missions, ...) is accepted and ignored, as
+  the firmware's ``jsonCmdReceiveHandler`` falls through its switch for codes it does not move on;
 - the servos: 4096 steps/rev, the firmware's clamps and rad<->step conversions incl. the 2047
   middle (so 0 rad reads back one count off), base/roll inverted; each servo runs its own
   trapezoid with the command's ``spd`` (steps/s, 0 = ``max_speed``) and ``acc`` (100 steps/s^2,
@@ -64,6 +67,13 @@ BANNER = ("RoArm-M3 booting", "version: 0.84", "servo status: OK", "moveInit", "
 def steps(rad: float) -> int:
     """``calculatePosByRad``: round(rad / 2pi * 4096)."""
     return int(round(rad / TWO_PI * 4096))
+
+
+def deg_register(value: float, u8: bool = False) -> float:
+    """T:121/T:122 ``spd``/``acc``: ``calculatePosByDeg`` (round(deg / 360 * 4096)) written to the
+    servo register; the acc register is one byte, so larger values wrap (RESEARCH 2.3: "max 22.5")."""
+    v = int(round(abs(value) / 360.0 * 4096))
+    return float(v & 0xFF) if u8 else float(min(v, 65535))
 
 
 def command_to_goal(joint: int, rad: float, elbow_min_zero: bool = False) -> int:
@@ -152,6 +162,10 @@ class Firmware:
         self.acc = np.full(n, 20.0)
         self.torque = True
         self.stop_flag = False
+        # The firmware's shared moveSpd/moveAcc arrays (init 0/20): T:1041 moves with them, T:122
+        # sets them (persistently), T:102 resets them to 0 after its own move.
+        self.move_spd = 0.0
+        self.move_acc = 20.0
         self._rx_free = t0  # when the receiver finishes the last byte it got
         self._rx_line = bytearray()
         self._rx_lines: deque[tuple[float, bytes]] = deque()
@@ -312,6 +326,15 @@ class Firmware:
             else:
                 rads = [num(k) for k in JOINTS]
             self._set_goals(range(6), rads, num("spd"), num("acc"))
+            self.move_spd, self.move_acc = 0.0, 0.0
+        elif code == 122 and self.cfg.firmware != "m2":
+            rads = [math.radians(num(k)) for k in ("b", "s", "e", "t", "r", "h")]
+            self.move_spd, self.move_acc = deg_register(num("spd")), deg_register(num("acc"), u8=True)
+            self._set_goals(range(6), rads, self.move_spd, self.move_acc)
+        elif code == 121:
+            j = int(num("joint")) - 1
+            if 0 <= j < 6:
+                self._set_goals([j], [math.radians(num("angle"))], deg_register(num("spd")), deg_register(num("acc"), u8=True))
         elif code == 101:
             j = int(num("joint")) - 1
             if 0 <= j < 6:
@@ -377,7 +400,7 @@ class Firmware:
             return
         target = [*sol, roll, g]
         if not interpolate:
-            self._set_goals(range(6), target, 0, 0)
+            self._set_goals(range(6), target, self.move_spd, self.move_acc)
             return
         start = [self._rad(j) for j in range(6)]
         dist = math.dist(firmware_fk(*start[:4])[:3], (x, y, z))

@@ -109,6 +109,54 @@ def solve_ik(
     return sols if all_solutions else sols[:1]
 
 
+def tool_pitch(robot: Robot, q: np.ndarray, position=None) -> float:
+    """RoArm tool pitch (rad) of configuration ``q``: the approach axis (TCP +x) below the horizontal,
+    in the vertical plane through the base axis and ``position`` (default: the TCP), as ``solve_ik``'s
+    ``pitch`` means it (pi/2 = straight down)."""
+    t = robot.kin.fk(robot.full_q(q))
+    p = t[:3, 3] if position is None else np.asarray(position, dtype=float)
+    base = robot.kin.fk(robot.full_q(q), robot.joints[robot.kin.tcp_chain_joints[0]].child)[:3, 3]
+    rel = p[:2] - base[:2]
+    if math.hypot(*rel) < 1e-9:
+        az = float(robot.full_q(q)[robot.arm_indices[0]])
+        u_h = np.array([math.cos(az), math.sin(az), 0.0])
+    else:
+        u_h = np.array([rel[0], rel[1], 0.0]) / math.hypot(*rel)
+    return _pitch_of(t, u_h)
+
+
+def solve_ik_frame(robot: Robot, frame, position, **kw) -> list[np.ndarray]:
+    """``solve_ik`` for a target given in a robot frame (``roarmctl.robot.frames.Frame``, its unit)
+    for the frame's device end point (e.g. the RoArm firmware's own TCP, 2-3 mm from ``hand_tcp``).
+
+    The end point's offset from the TCP depends on the base angle and the pitch only (it lies in the
+    arm's plane), so a few fixed-point steps with the pitch held settle it to below ``POS_TOL``.
+    """
+    from roarmctl.robot.frames import device_point, from_frame
+
+    target = from_frame(frame, position)
+    if frame.point_link is None:
+        return solve_ik(robot, target, **kw)
+    pitch = kw.pop("pitch", None)
+    all_solutions = kw.pop("all_solutions", False)
+    p_tcp = target.copy()
+    for _ in range(8):
+        sols = solve_ik(robot, p_tcp, pitch=pitch, all_solutions=False, **kw)
+        q = sols[0]
+        if pitch is None:
+            pitch = tool_pitch(robot, q, p_tcp)
+        err = target - device_point(robot, frame, q)
+        if float(np.linalg.norm(err)) <= POS_TOL * 0.5:
+            break
+        p_tcp = p_tcp + err
+    sols = solve_ik(robot, p_tcp, pitch=pitch, all_solutions=all_solutions, **kw)
+    # other branches (base turned by pi) carry the end point on the other side: keep those that hit it
+    hit = [q for q in sols if float(np.linalg.norm(device_point(robot, frame, q) - target)) <= 1e-5]
+    if not hit:
+        raise UnreachableError(f"no solution puts the {frame.name} end point at the target", "out_of_reach")
+    return hit
+
+
 @dataclass
 class IKCheck:
     """FK check of one solution: position error (m), orientation error (rad, or None)."""

@@ -59,6 +59,9 @@ def load_robot(spec: str) -> Robot:
             robot = _from_urdf(urdf, data, path)
         else:
             raise DescriptionError(f"{path}: needs either a 'dh' table or a 'urdf' file reference")
+    for f in robot.frames.values():
+        if f.point_link is not None and f.point_link not in robot.link_names:
+            raise DescriptionError(f"{path}: frames.{f.name}.point.link: '{f.point_link}' is not a link of {robot.name}")
     _CACHE[spec] = robot
     return robot
 
@@ -153,7 +156,32 @@ def _common(data: dict, path: Path, names: list[str], velocity: np.ndarray, acce
         allowed.add(frozenset(str(p) for p in pair))
     return dict(velocity_limits=vel, acceleration_limits=acc, gripper=gripper, named_poses=poses, wire=wire,
                 allowed_collisions=allowed, singularity_model=data.get("singularity_model"),
-                description=str(data.get("description", "")))
+                description=str(data.get("description", "")), frames=_frames(data, where))
+
+
+def _frames(data: dict, where: str) -> dict:
+    """``frames: {name: {origin: [x, y, z] m, unit: m|mm, point: {link, xyz}}}`` -> Frame objects."""
+    from roarmctl.robot.frames import UNITS, Frame
+
+    raw = data.get("frames") or {}
+    if not isinstance(raw, dict):
+        raise DescriptionError(f"{where}: frames: expected a mapping name -> {{origin, unit, point}}")
+    out = {}
+    for name, f in raw.items():
+        loc = f"{where}: frames.{name}"
+        if not isinstance(f, dict) or "origin" not in f:
+            raise DescriptionError(f"{loc}: expected {{origin: [x, y, z], unit, point}}")
+        unit = f.get("unit", "m")
+        if unit not in UNITS:
+            raise DescriptionError(f"{loc}.unit: must be one of {', '.join(UNITS)}")
+        link, xyz = None, None
+        if f.get("point") is not None:
+            pt = f["point"]
+            if not isinstance(pt, dict) or "link" not in pt or "xyz" not in pt:
+                raise DescriptionError(f"{loc}.point: expected {{link, xyz}}")
+            link, xyz = str(pt["link"]), _vec(pt["xyz"], 3, f"{loc}.point.xyz")
+        out[str(name)] = Frame(str(name), _vec(f["origin"], 3, f"{loc}.origin"), unit, link, xyz)
+    return out
 
 
 # --------------------------------------------------------------------------- URDF

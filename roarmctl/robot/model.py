@@ -142,6 +142,7 @@ class Robot:
     wire: list[WireField] = field(default_factory=list)
     singularity_model: str | None = None
     description: str = ""
+    frames: dict = field(default_factory=dict)  # name -> roarmctl.robot.frames.Frame
 
     def __post_init__(self) -> None:
         from roarmctl.robot.kinematics import Kinematics

@@ -50,3 +50,60 @@ def test_sdk_joint_commands_move_the_simulated_arm(arm):
     # the simulator saw the SDK's own (spaced) JSON and executed it
     codes = [c["T"] for _, c in sim.firmware.received]
     assert 102 in codes and 101 in codes and 605 in codes
+
+
+def _settle(client, want, index, tol, timeout=4.0):
+    """Poll the SDK's own feedback until ``value[index]`` is within ``tol`` of ``want`` (or time out)."""
+    end = time.monotonic() + timeout
+    got = None
+    while time.monotonic() < end:
+        got = client.feedback_get()
+        if isinstance(got, list) and all(abs(got[i] - w) <= tol for i, w in zip(index, want)):
+            return got
+        time.sleep(0.1)
+    return got
+
+
+def test_every_sdk_call_the_readme_lists(arm):
+    """The SDK calls named in the README, each against what the simulated servos did."""
+    client, sim = arm
+    fw = sim.firmware
+    client.echo_set(0)  # T:605
+    client.led_ctrl(led=128)  # T:114: accepted, nothing moves
+    client.dynamic_adaptation_set(mode=0, torques=[500] * 6)  # T:112: accepted, nothing moves
+    # joints_angle_ctrl: T:122 in degrees; the SDK turns speed (steps/s) into deg/s, the firmware back
+    client.joints_angle_ctrl(angles=[20, -10, 80, 15, -30, 40], speed=1200, acc=0)
+    time.sleep(0.1)
+    assert fw.spd[0] == 1200 and fw.move_spd == 1200  # persistent, as the firmware's moveSpd
+    got = _settle(client, [math.radians(v) for v in (20, -10, 80, 15, -30, 40)], range(4, 10), 2 * COUNT)
+    assert client.joints_angle_get() == pytest.approx([20, -10, 80, 15, -30, 40], abs=math.degrees(2 * COUNT))
+    # joint_angle_ctrl: T:121, one joint in degrees
+    client.joint_angle_ctrl(joint=1, angle=-25, speed=1500, acc=0)
+    got = _settle(client, [math.radians(-25)], [4], 2 * COUNT)
+    assert got[4] == pytest.approx(math.radians(-25), abs=2 * COUNT)
+    # gripper_angle_ctrl / gripper_radian_ctrl (T:121 / T:101 on joint 6), read back in the SDK's convention
+    client.gripper_angle_ctrl(angle=30, speed=1500, acc=0)
+    _settle(client, [math.radians(30)], [9], 2 * COUNT)
+    assert client.gripper_angle_get() == pytest.approx(30, abs=math.degrees(2 * COUNT))
+    client.gripper_radian_ctrl(radian=0.9, speed=1500, acc=0)
+    _settle(client, [0.9], [9], 2 * COUNT)
+    assert client.gripper_radian_get() == pytest.approx(0.9, abs=2 * COUNT)
+    # pose_ctrl: T:1041 (mm, deg); pose_get reads x y z tit + roll, gripper back
+    client.pose_ctrl(pose=[300, 40, 120, 10, 0, 20])
+    got = _settle(client, [300, 40, 120], [0, 1, 2], 1.5)
+    x, y, z, tit, roll, grip = client.pose_get()
+    assert (x, y, z) == pytest.approx((300, 40, 120), abs=1.5)
+    assert tit == pytest.approx(10, abs=0.3) and grip == pytest.approx(20, abs=0.3)
+    # torque_set: T:210 off, the arm goes limp (the SDK then waits for feedback), on again
+    client.torque_set(cmd=0)
+    time.sleep(0.1)
+    assert not fw.torque
+    client.torque_set(cmd=1)
+    time.sleep(0.1)
+    assert fw.torque
+    # move_init: a T:102 to the SDK's home pose at speed 100
+    client.move_init()
+    time.sleep(0.1)
+    assert fw.spd[2] == 100 and fw.move_spd == 0  # a T:102 zeroes the shared moveSpd
+    codes = {c["T"] for _, c in fw.received}
+    assert {605, 114, 112, 122, 121, 101, 1041, 105, 210, 102} <= codes

@@ -125,3 +125,53 @@ def test_a_fresh_line_after_a_torn_write_still_executes():
                              "hand": math.pi, "spd": 0, "acc": 0}), 0.001)
     f.advance(0.5)
     assert feedback(f, 0.5).joints["base"] == pytest.approx(0.3, abs=2 * 2 * math.pi / 4096)
+
+
+def test_t122_degrees_set_persistent_speed_that_t1041_uses_and_t102_clears():
+    f = fw()
+    # 90 deg/s -> calculatePosByDeg = 1024 steps/s; acc 10 -> 114 (100 steps/s^2 units)
+    f.receive(encode({"T": 122, "b": 30, "s": -10, "e": 80, "t": 20, "r": -45, "h": 150, "spd": 90, "acc": 10}), 0.0)
+    f.advance(0.02)
+    assert f.spd[0] == 1024 and f.acc[0] == 114
+    assert (f.move_spd, f.move_acc) == (1024, 114)
+    f.advance(3.0)
+    fb = feedback(f, 3.0)
+    c = 2 * 2 * math.pi / 4096
+    for key, deg in (("base", 30), ("shoulder", -10), ("elbow", 80), ("wrist", 20), ("roll", -45), ("hand", 150)):
+        assert fb.joints[key] == pytest.approx(math.radians(deg), abs=c)
+    # T:1041 moves with the stored moveSpd/moveAcc, not at full speed
+    f.receive(b'{"T":1041,"x":300,"y":50,"z":150,"t":0.2,"r":0,"g":3.14}\n', 3.1)
+    f.advance(3.2)
+    assert f.spd[0] == 1024 and f.acc[0] == 114
+    f.advance(6.0)
+    assert feedback(f, 6.0).xyz == pytest.approx((300, 50, 150), abs=2.0)
+    # a T:102 zeroes them: the next T:1041 runs at spd 0 (the servo maximum)
+    f.receive(encode({"T": 102, "base": 0, "shoulder": 0, "elbow": 1.5708, "wrist": 0, "roll": 0, "hand": 3.14,
+                      "spd": 500, "acc": 5}), 6.1)
+    f.advance(9.0)
+    assert (f.move_spd, f.move_acc) == (0, 0)
+    f.receive(b'{"T":1041,"x":300,"y":0,"z":200,"t":0,"r":0,"g":3.14}\n', 9.0)
+    f.advance(9.1)
+    assert f.spd[0] == 0 and f.acc[0] == 0
+
+
+def test_t121_moves_one_joint_in_degrees_and_acc_register_wraps_like_a_byte():
+    f = fw()
+    f.receive(b'{"T":121,"joint":4,"angle":-30,"spd":45,"acc":30}\n', 0.0)
+    f.advance(0.02)
+    assert f.spd[3] == 512
+    assert f.acc[3] == round(30 / 360 * 4096) % 256  # 341 -> 85: the u8 register overflows above 22.4
+    f.advance(2.0)
+    assert feedback(f, 2.0).joints["wrist"] == pytest.approx(math.radians(-30), abs=2 * 2 * math.pi / 4096)
+
+
+def test_codes_that_do_not_move_are_accepted_and_ignored():
+    f = fw()
+    before = f.goal.copy()
+    for line in (b'{"T":114,"led":255}', b'{"T":112,"mode":1,"b":60,"s":110,"e":50,"t":50,"r":50,"h":50}',
+                 b'{"T":502,"id":254}', b'{"T":222,"name":"boot","step":"{\\"T\\":1,\\"mode\\":0}"}', b'{"T":401,"cmd":3}',
+                 b'{"T":12345}'):
+        f.receive(line + b"\n", 0.0)
+    f.advance(0.5)
+    assert (f.goal == before).all() and f.torque
+    assert f.pop_output(0.5) == b""
