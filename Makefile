@@ -23,11 +23,15 @@ bench: $(STAMP)
 	for b in bench/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
 
 # Plan the bundled pick-and-place, draw it, and run it on the simulated arm (firmware simulator
-# on a pseudo-terminal). Outputs go to out/.
+# on a pseudo-terminal), then export the plan and the run for Foxglove / ROS 2. Outputs go to out/.
 demo: $(STAMP)
 	$(BIN)/roarmctl plan plans/pick_place.yaml -o out/pick_place.traj.json
 	$(BIN)/roarmctl visualize-path out/pick_place.traj.json -o out/pick_place.png
 	$(BIN)/roarmctl execute out/pick_place.traj.json --sim --yes
+	$(BIN)/roarmctl export out/pick_place.traj.json -o out/pick_place.mcap
+	$(BIN)/roarmctl export out/pick_place.exec.json -o out/pick_place.exec.mcap
+	$(BIN)/roarmctl export out/pick_place.traj.json -o out/pick_place_bag
+	$(BIN)/roarmctl export out/pick_place.exec.json -o out/pick_place_exec_bag
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -14,7 +14,7 @@ import traceback
 import typer
 
 from roarmctl.cli import common
-from roarmctl.cli import execute_cmd, kin, plan_cmd, viz_cmd
+from roarmctl.cli import execute_cmd, export_cmd, kin, plan_cmd, viz_cmd
 
 app = typer.Typer(
     name="roarmctl",
@@ -58,6 +58,7 @@ kin.register(app)
 plan_cmd.register(app)
 execute_cmd.register(app)
 viz_cmd.register(app)
+export_cmd.register(app)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -107,7 +108,8 @@ def main(argv: list[str] | None = None) -> None:
             code = 1
     sys.stdout.flush()
     sys.stderr.flush()
-    if "ompl" in sys.modules:
-        # OMPL's nanobind bindings print leak warnings at interpreter exit; skip the teardown.
+    if "ompl" in sys.modules and argv is None:
+        # OMPL's nanobind bindings print leak warnings at interpreter exit; skip the teardown
+        # (only as the console script: a caller passing argv, such as a test, keeps its process).
         os._exit(code)
     sys.exit(code)

@@ -84,6 +84,21 @@ class PathData:
 GRASP_RADIUS = 0.06  # m: an object whose centre is this close to a grasp target is the one carried
 
 
+def carried_item(items: list[dict], target: np.ndarray) -> dict | None:
+    """The scene object (``role: object``) whose centre is nearest ``target`` (3,) m, within ``GRASP_RADIUS``; else None."""
+    carried, best = None, GRASP_RADIUS
+    for item in items:
+        if not isinstance(item, dict) or item.get("role") != "object":
+            continue
+        try:
+            d = float(np.linalg.norm(np.asarray(item.get("xyz", (0, 0, 0)), dtype=float) - target))
+        except (TypeError, ValueError):
+            continue
+        if d <= best:
+            best, carried = d, item
+    return carried
+
+
 def placed_objects(items: list[dict], events: list[EventMark]) -> list[dict]:
     """Copies of the carried objects moved to their release targets (same offset to the TCP target).
 
@@ -93,17 +108,8 @@ def placed_objects(items: list[dict], events: list[EventMark]) -> list[dict]:
     out, carried = [], None
     for e in events:
         if e.kind == "grasp":
-            carried = None
-            best = GRASP_RADIUS
-            for item in items:
-                if not isinstance(item, dict) or item.get("role") != "object":
-                    continue
-                try:
-                    d = float(np.linalg.norm(np.asarray(item.get("xyz", (0, 0, 0)), dtype=float) - e.target))
-                except (TypeError, ValueError):
-                    continue
-                if d <= best:
-                    best, carried = d, (item, np.asarray(item["xyz"], dtype=float) - e.target)
+            item = carried_item(items, e.target)
+            carried = None if item is None else (item, np.asarray(item["xyz"], dtype=float) - e.target)
         elif e.kind == "release" and carried is not None:
             item, offset = carried
             out.append(dict(item, xyz=(e.target + offset).tolist(), name=f"{item.get('name', 'object')} (placed)"))

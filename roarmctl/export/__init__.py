@@ -1,0 +1,97 @@
+"""Export a trajectory or an execution log for other tools: MCAP, a ROS 2 bag folder, or CSV.
+
+``export(source, path)`` picks the format from ``path``: ``*.mcap`` -> one MCAP file of ROS 2
+messages (Foxglove opens it directly); ``*.csv`` -> a spreadsheet table; a name without an
+extension (or ending in ``/``) -> a ROS 2 bag folder (``metadata.yaml`` + sqlite3 ``.db3``).
+Anything else is an input error (exit 2).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from roarmctl.errors import InputError, TrajectoryFileError
+
+FORMATS = ("mcap", "bag", "csv")
+EXECLOG_FORMAT = "roarmctl.execlog/1"
+
+
+def format_for(path: str | os.PathLike) -> str:
+    """'mcap', 'csv' or 'bag' from the output path; an unknown extension raises InputError."""
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix == ".mcap":
+        return "mcap"
+    if suffix == ".csv":
+        return "csv"
+    if suffix == "" or str(path).endswith(os.sep) or p.is_dir():
+        return "bag"
+    raise InputError(f"-o {path}: unknown export format '{suffix}'",
+                     "use NAME.mcap (Foxglove), NAME.csv (spreadsheet) or a folder name without an extension (ROS 2 bag)")
+
+
+def load_source(path: str | os.PathLike) -> tuple[str, Any]:
+    """Read a ``*.traj.json`` (-> ('trajectory', Trajectory)) or an execution log (-> ('log', dict))."""
+    from roarmctl.motion.trajectory import FORMAT, load_trajectory
+
+    p = Path(path)
+    try:
+        data = json.loads(p.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{p}: no such file", "give a trajectory (.traj.json) or an execution log (.exec.json)") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise TrajectoryFileError(f"{p}: not a readable JSON file ({exc})", "give a trajectory or an execution log") from None
+    kind = data.get("format") if isinstance(data, dict) else None
+    if kind == EXECLOG_FORMAT:
+        for key in ("robot", "sent", "received"):
+            if key not in data:
+                raise TrajectoryFileError(f"{p}: '{key}' is missing from the execution log")
+        return "log", data
+    if kind == FORMAT:
+        return "trajectory", load_trajectory(p)
+    raise TrajectoryFileError(f"{p}: format {kind!r} is neither '{FORMAT}' nor '{EXECLOG_FORMAT}'",
+                              "give a file written by 'roarmctl plan' or 'roarmctl execute'")
+
+
+def streams_for(source: str | os.PathLike):
+    """The ``Streams`` of a trajectory or execution-log file (robot loaded by the name in the file)."""
+    from roarmctl.export.streams import log_streams, trajectory_streams
+    from roarmctl.viz.data import robot_for
+
+    kind, data = load_source(source)
+    if kind == "trajectory":
+        return trajectory_streams(data, robot_for(data))
+    from roarmctl.robot.loader import load_robot
+
+    return log_streams(data, load_robot(str(data["robot"])))
+
+
+def export(source: str | os.PathLike, path: str | os.PathLike, fmt: str | None = None) -> dict[str, Any]:
+    """Export the trajectory or execution log at ``source`` to ``path``; returns a summary
+    (``output``, ``format``, ``topics``: message count per topic, or ``rows`` for CSV)."""
+    fmt = fmt or format_for(path)
+    if fmt not in FORMATS:
+        raise InputError(f"--format: '{fmt}' is not one of {', '.join(FORMATS)}")
+    streams = streams_for(source)
+    return write(streams, path, fmt)
+
+
+def write(streams, path: str | os.PathLike, fmt: str) -> dict[str, Any]:
+    """Write already-built ``Streams`` in format ``fmt`` ('mcap', 'bag', 'csv'); see ``export``."""
+    if fmt == "csv":
+        from roarmctl.export.table import csv_text
+        from roarmctl.fileio import atomic_write_text
+
+        text = csv_text(streams)
+        out = atomic_write_text(path, text)
+        return {"output": str(out), "format": fmt, "rows": text.count("\n") - 1}
+    from roarmctl.export.ros import messages, write_bag
+
+    out = write_bag(streams, path, "mcap" if fmt == "mcap" else "sqlite3")
+    counts: dict[str, int] = {}
+    for topic, *_ in messages(streams):
+        counts[topic] = counts.get(topic, 0) + 1
+    return {"output": str(out), "format": fmt, "topics": counts}

@@ -1,0 +1,224 @@
+"""ROS 2 messages in an MCAP file or a ROS 2 bag folder, written with ``rosbags``.
+
+Topics (ROS 2 Jazzy message definitions, CDR-serialised, so Foxglove Studio, RViz via
+``ros2 bag play`` and any MCAP reader open them):
+
+=================================  =================================  ==========================================
+topic                              type                               when
+=================================  =================================  ==========================================
+``/joint_trajectory``              trajectory_msgs/msg/JointTrajectory  once, at t = 0 (plan only)
+``/joint_states``                  sensor_msgs/msg/JointState           every sample (plan: 100 Hz)
+``/joint_states/commanded``        sensor_msgs/msg/JointState           every joint command sent (log only)
+``/joint_states/measured``         sensor_msgs/msg/JointState           every feedback received (log only)
+``/tf``                            tf2_msgs/msg/TFMessage               every sample of the states drawn
+                                                                         (plan; log: measured): moving joints
+``/tf_static``                     tf2_msgs/msg/TFMessage               once: fixed joints (TCP frame included)
+``/scene``                         visualization_msgs/msg/MarkerArray   at t = 0, then at each sample while an
+                                                                         object is carried (plan only)
+=================================  =================================  ==========================================
+
+Message times: the log time and ``header.stamp`` are the sample time in s from the start of the
+trajectory (an execution log: from its first entry, so nothing is negative).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from roarmctl.errors import InputError
+from roarmctl.export.streams import Streams
+
+TYPESTORE = "ROS2_JAZZY"
+COLORS = {"table": (0.55, 0.45, 0.35, 1.0), "obstacle": (0.85, 0.3, 0.25, 0.8), "object": (0.2, 0.5, 0.9, 1.0)}
+
+
+def _typestore():
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(getattr(Stores, TYPESTORE))
+
+
+def quaternion(rot: np.ndarray) -> tuple[float, float, float, float]:
+    """Unit quaternion (x, y, z, w) of a 3x3 rotation matrix (w >= 0)."""
+    m = np.asarray(rot, dtype=float)
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    if tr > 0:
+        s = 2.0 * np.sqrt(tr + 1.0)
+        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s)
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = (0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s)
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = ((m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s)
+    else:
+        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = ((m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s)
+    q = np.asarray(q) / np.linalg.norm(q)
+    if q[3] < 0:
+        q = -q
+    return tuple(float(v) for v in q)  # type: ignore[return-value]
+
+
+class _Messages:
+    """Builders for the few message types the export writes (rosbags typestore classes)."""
+
+    def __init__(self) -> None:
+        self.ts = _typestore()
+        t = self.ts.types
+        self.Time, self.Duration = t["builtin_interfaces/msg/Time"], t["builtin_interfaces/msg/Duration"]
+        self.Header = t["std_msgs/msg/Header"]
+        self.JointState = t["sensor_msgs/msg/JointState"]
+        self.JointTrajectory, self.Point = t["trajectory_msgs/msg/JointTrajectory"], t["trajectory_msgs/msg/JointTrajectoryPoint"]
+        self.TFMessage, self.TransformStamped = t["tf2_msgs/msg/TFMessage"], t["geometry_msgs/msg/TransformStamped"]
+        self.Transform, self.Vector3 = t["geometry_msgs/msg/Transform"], t["geometry_msgs/msg/Vector3"]
+        self.Quaternion, self.Pose, self.PointMsg = t["geometry_msgs/msg/Quaternion"], t["geometry_msgs/msg/Pose"], t["geometry_msgs/msg/Point"]
+        self.Marker, self.MarkerArray = t["visualization_msgs/msg/Marker"], t["visualization_msgs/msg/MarkerArray"]
+        self.ColorRGBA, self.MeshFile = t["std_msgs/msg/ColorRGBA"], t["visualization_msgs/msg/MeshFile"]
+        self.CompressedImage = t["sensor_msgs/msg/CompressedImage"]
+
+    def stamp(self, ns: int):
+        return self.Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
+
+    def duration(self, seconds: float):
+        ns = int(round(seconds * 1e9))
+        return self.Duration(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
+
+    def header(self, ns: int, frame: str = ""):
+        return self.Header(stamp=self.stamp(ns), frame_id=frame)
+
+    def joint_state(self, ns: int, names: list[str], q: np.ndarray, qd: np.ndarray | None):
+        empty = np.zeros(0)
+        return self.JointState(header=self.header(ns), name=list(names), position=np.asarray(q, dtype=np.float64),
+                               velocity=empty if qd is None else np.asarray(qd, dtype=np.float64), effort=empty)
+
+    def trajectory(self, ns: int, frame: str, names: list[str], times, q, qd, qdd):
+        pts = [self.Point(positions=np.asarray(q[i], dtype=np.float64), velocities=np.asarray(qd[i], dtype=np.float64),
+                          accelerations=np.asarray(qdd[i], dtype=np.float64), effort=np.zeros(0),
+                          time_from_start=self.duration(float(times[i]))) for i in range(len(times))]
+        return self.JointTrajectory(header=self.header(ns, frame), joint_names=list(names), points=pts)
+
+    def transform(self, ns: int, parent: str, child: str, pose: np.ndarray):
+        x, y, z, w = quaternion(pose[:3, :3])
+        tr = self.Transform(translation=self.Vector3(x=float(pose[0, 3]), y=float(pose[1, 3]), z=float(pose[2, 3])),
+                            rotation=self.Quaternion(x=x, y=y, z=z, w=w))
+        return self.TransformStamped(header=self.header(ns, parent), child_frame_id=child, transform=tr)
+
+    def tf(self, transforms: list):
+        return self.TFMessage(transforms=transforms)
+
+    def marker(self, ns: int, frame: str, marker_id: int, item: dict[str, Any], pose: np.ndarray):
+        M = self.Marker
+        shape = item.get("shape")
+        if shape == "box":
+            kind, scale = M.CUBE, [float(v) for v in item["size"]]
+        elif shape == "cylinder":
+            d = 2.0 * float(item["radius"])
+            kind, scale = M.CYLINDER, [d, d, float(item["length"])]
+        else:
+            d = 2.0 * float(item.get("radius", 0.0))
+            kind, scale = M.SPHERE, [d, d, d]
+        x, y, z, w = quaternion(pose[:3, :3])
+        r, g, b, a = COLORS.get(str(item.get("role")), (0.6, 0.6, 0.6, 1.0))
+        return M(header=self.header(ns, frame), ns=str(item.get("role", "scene")), id=marker_id, type=kind, action=M.ADD,
+                 pose=self.Pose(position=self.PointMsg(x=float(pose[0, 3]), y=float(pose[1, 3]), z=float(pose[2, 3])),
+                                orientation=self.Quaternion(x=x, y=y, z=z, w=w)),
+                 scale=self.Vector3(x=scale[0], y=scale[1], z=scale[2]), color=self.ColorRGBA(r=r, g=g, b=b, a=a),
+                 lifetime=self.duration(0.0), frame_locked=False, points=[], colors=[], texture_resource="",
+                 texture=self.CompressedImage(header=self.header(0), format="", data=np.zeros(0, dtype=np.uint8)),
+                 uv_coordinates=[], text=str(item.get("name", "")), mesh_resource="",
+                 mesh_file=self.MeshFile(filename="", data=np.zeros(0, dtype=np.uint8)), mesh_use_embedded_materials=False)
+
+
+def messages(streams: Streams) -> Iterator[tuple[str, str, int, Any]]:
+    """Every message of the export as ``(topic, msgtype, log time ns, message)``, topic by topic."""
+    mk = _Messages()
+    robot, names = streams.robot, streams.joint_names
+    offset = -min(0.0, *(float(s.times[0]) for s in streams.joint_states.values() if len(s.times)))
+    ns_of = lambda t: int(round((float(t) + offset) * 1e9))  # noqa: E731
+    root = robot.root
+
+    traj = streams.trajectory
+    if traj is not None:
+        yield ("/joint_trajectory", "trajectory_msgs/msg/JointTrajectory", ns_of(0.0),
+               mk.trajectory(ns_of(0.0), root, names, traj.times, traj.positions, traj.velocities, traj.accelerations))
+    for suffix, st in streams.joint_states.items():
+        topic = "/joint_states" + (f"/{suffix}" if suffix else "")
+        for i, t in enumerate(st.times):
+            yield (topic, "sensor_msgs/msg/JointState", ns_of(t),
+                   mk.joint_state(ns_of(t), names, st.positions[i], None if st.velocities is None else st.velocities[i]))
+
+    kin = robot.kin
+    moving = [j for j, joint in enumerate(robot.joints) if joint.kind != "fixed"]
+    fixed = [j for j, joint in enumerate(robot.joints) if joint.kind == "fixed"]
+    link_names = kin.link_names
+    st = streams.joint_states[streams.frames_from]
+    if len(st.times):
+        frames = kin.link_frames(st.positions)  # (N, n_links, 4, 4)
+        rel = lambda f, j: np.linalg.inv(f[kin._parent[j]]) @ f[kin._child[j]]  # noqa: E731
+        if fixed:
+            t0 = ns_of(st.times[0])
+            yield ("/tf_static", "tf2_msgs/msg/TFMessage", t0,
+                   mk.tf([mk.transform(t0, link_names[kin._parent[j]], link_names[kin._child[j]], rel(frames[0], j)) for j in fixed]))
+        for i, t in enumerate(st.times):
+            n = ns_of(t)
+            yield ("/tf", "tf2_msgs/msg/TFMessage", n,
+                   mk.tf([mk.transform(n, link_names[kin._parent[j]], link_names[kin._child[j]], rel(frames[i], j)) for j in moving]))
+
+    if streams.items:
+        # publish the whole scene whenever something in it moved (every carried sample)
+        change_times = sorted({float(t) for tr in streams.items for t in tr.times})
+        for t in change_times:
+            n = ns_of(t)
+            markers = []
+            for k, tr in enumerate(streams.items):
+                idx = int(np.searchsorted(tr.times, t + 1e-12, side="right")) - 1
+                markers.append(mk.marker(n, root, k, tr.item, tr.poses[max(idx, 0)]))
+            yield ("/scene", "visualization_msgs/msg/MarkerArray", n, mk.MarkerArray(markers=markers))
+
+
+def write_bag(streams: Streams, path: str | os.PathLike, storage: str) -> Path:
+    """Write ``streams`` as a ROS 2 bag. ``storage``: 'mcap' -> the single MCAP file ``path``;
+    'sqlite3' -> the bag folder ``path`` (metadata.yaml + .db3). Atomic: built in a temporary folder
+    beside the target, then renamed into place; an existing target is replaced."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    target = Path(path)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        tmpdir = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    except OSError as exc:
+        raise InputError(f"cannot write {target}: {exc.strerror or exc}", "choose a directory you can write to") from None
+    try:
+        bag = tmpdir / target.stem
+        plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+        ts = _typestore()
+        with Writer(bag, version=8, storage_plugin=plugin) as writer:
+            conns: dict[str, Any] = {}
+            for topic, msgtype, ns, msg in messages(streams):
+                if topic not in conns:
+                    conns[topic] = writer.add_connection(topic, msgtype, typestore=ts)
+                writer.write(conns[topic], ns, ts.serialize_cdr(msg, msgtype))
+        if storage == "mcap":
+            if target.is_dir():
+                raise InputError(f"{target} is a folder", "give a file name ending in .mcap")
+            os.replace(bag / f"{bag.name}.mcap", target)
+        else:
+            if target.is_dir():
+                if not (target / "metadata.yaml").is_file():
+                    raise InputError(f"{target} is a folder that is not a ROS 2 bag", "choose a new folder name")
+                shutil.rmtree(target)
+            elif target.exists():
+                raise InputError(f"{target} exists and is not a folder", "choose another name for the bag folder")
+            os.replace(bag, target)
+    except OSError as exc:
+        raise InputError(f"cannot write {target}: {exc.strerror or exc}", "check the disk space and permissions") from None
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
+    return target

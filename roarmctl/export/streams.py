@@ -1,0 +1,153 @@
+"""What an export contains, independent of the file format: timed joint states, link poses and scene poses.
+
+``trajectory_streams(traj, robot)`` and ``log_streams(log, robot)`` turn a planned trajectory or an
+execution log into plain numpy arrays that the MCAP / ROS 2 bag writer (``roarmctl.export.ros``)
+and the CSV writer (``roarmctl.export.table``) both use. Units: s, rad, rad/s, m.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from roarmctl.errors import InputError
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.model import Robot
+
+
+@dataclass
+class JointStates:
+    """Timed joint states: ``times`` (N,) s, ``positions`` (N, dof) rad, ``velocities`` (N, dof) rad/s or None."""
+
+    times: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray | None = None
+
+
+@dataclass
+class ItemTrack:
+    """One scene item and where it is: ``poses`` (K, 4, 4) world poses valid from ``times`` (K,) s on.
+
+    Items that never move have one pose at time 0; a carried object gets one pose per sample while
+    it is held (it moves with the TCP) and keeps its release pose afterwards.
+    """
+
+    item: dict[str, Any]
+    times: np.ndarray
+    poses: np.ndarray
+
+
+@dataclass
+class Streams:
+    """Everything an export writes. ``joint_states`` maps a topic suffix ('' for the plan,
+    'commanded' / 'measured' for an execution log) to its states; ``frames_from`` names the one whose
+    link poses go to TF."""
+
+    robot: Robot
+    joint_names: list[str]
+    joint_states: dict[str, JointStates]
+    frames_from: str
+    trajectory: Trajectory | None = None
+    items: list[ItemTrack] = field(default_factory=list)
+
+
+def item_pose(item: dict[str, Any]) -> np.ndarray:
+    """World pose (4, 4) of a trajectory-file scene item (``xyz`` m, ``rpy`` rad)."""
+    from roarmctl.robot.model import transform
+
+    return transform(item.get("xyz", (0, 0, 0)), item.get("rpy", (0, 0, 0)))
+
+
+def item_tracks(traj: Trajectory, robot: Robot) -> list[ItemTrack]:
+    """Scene items with their poses over time; a grasped object follows the TCP until its release.
+
+    The object carried from a grasp is the one whose centre is nearest the grasp target (within
+    ``viz.data.GRASP_RADIUS``), as ``visualize-path`` decides; its pose relative to the TCP is fixed
+    at the grasp sample.
+    """
+    from roarmctl.viz.data import carried_item
+
+    items = [i for i in (traj.scene or {}).get("items", []) if isinstance(i, dict)]
+    times = np.asarray(traj.times, dtype=float)
+    current = {id(i): item_pose(i) for i in items}
+    tracks = {id(i): ([0.0], [current[id(i)]]) for i in items}
+    events = sorted(traj.events, key=lambda e: e.time)
+    tcp = robot.kin.fk(np.asarray(traj.positions, dtype=float))  # (N, 4, 4)
+    held: tuple[dict, np.ndarray, int] | None = None  # (item, pose in TCP frame, grasp index)
+
+    def index_at(t: float) -> int:
+        return int(np.clip(np.searchsorted(times, t - 1e-9), 0, len(times) - 1))
+
+    for e in events:
+        i = index_at(e.time)
+        if e.kind == "grasp":
+            target = np.asarray(e.position, dtype=float) if e.position is not None else tcp[i, :3, 3]
+            positioned = [dict(it, xyz=current[id(it)][:3, 3].tolist()) for it in items]
+            pick = carried_item(positioned, target)
+            if pick is not None:
+                item = items[positioned.index(pick)]
+                held = (item, np.linalg.inv(tcp[i]) @ current[id(item)], i)
+        elif e.kind == "release" and held is not None:
+            item, rel, i0 = held
+            ts, ps = tracks[id(item)]
+            for k in range(i0 + 1, i + 1):
+                ts.append(float(times[k]))
+                ps.append(tcp[k] @ rel)
+            current[id(item)] = ps[-1]
+            held = None
+    if held is not None:  # never released: carried to the end
+        item, rel, i0 = held
+        ts, ps = tracks[id(item)]
+        for k in range(i0 + 1, len(times)):
+            ts.append(float(times[k]))
+            ps.append(tcp[k] @ rel)
+    return [ItemTrack(i, np.array(tracks[id(i)][0]), np.array(tracks[id(i)][1])) for i in items]
+
+
+def trajectory_streams(traj: Trajectory, robot: Robot) -> Streams:
+    """A planned trajectory: its sampled joint states, TF from them, and the scene."""
+    states = JointStates(np.asarray(traj.times, dtype=float), np.asarray(traj.positions, dtype=float),
+                         np.asarray(traj.velocities, dtype=float))
+    return Streams(robot, list(traj.joint_names), {"": states}, "", traj, item_tracks(traj, robot))
+
+
+def log_streams(log: dict[str, Any], robot: Robot) -> Streams:
+    """An execution log (``roarmctl.execlog/1``): commanded joints (every T:102 / T:101 sent) and
+    measured joints (every T:1051 feedback received), converted from wire values with the robot's
+    wire map. Times are s after the log's start of motion (negative before it)."""
+    from roarmctl.device.protocol import M3_FIELDS, WireMap, parse_feedback
+
+    wm = WireMap(robot)
+    cmd_t, cmd_q = [], []
+    wire: dict[str, float] | None = None
+    for entry in log.get("sent", []):
+        cmd = entry.get("cmd") if isinstance(entry, dict) else None
+        if not isinstance(cmd, dict):
+            continue
+        if cmd.get("T") == 102 and all(isinstance(cmd.get(f), (int, float)) for f in M3_FIELDS):
+            wire = {f: float(cmd[f]) for f in M3_FIELDS}
+        elif cmd.get("T") == 101 and cmd.get("joint") == 6 and wire is not None and isinstance(cmd.get("rad"), (int, float)):
+            wire = dict(wire, hand=float(cmd["rad"]))
+        else:
+            continue
+        cmd_t.append(float(entry["t"]))
+        cmd_q.append(wm.from_wire(wire))
+    meas_t, meas_q = [], []
+    for entry in log.get("received", []):
+        fb = parse_feedback(entry["feedback"]) if isinstance(entry, dict) and isinstance(entry.get("feedback"), dict) else None
+        if fb is None or not fb.joints:
+            continue
+        meas_t.append(float(entry["t"]))
+        meas_q.append(wm.from_wire(fb.joints))
+    if not cmd_t and not meas_t:
+        raise InputError("the execution log holds no joint commands and no feedback", "export a log of a run that moved the arm")
+    dof = robot.dof
+    states = {
+        "commanded": JointStates(np.array(cmd_t), np.array(cmd_q).reshape(-1, dof)),
+        "measured": JointStates(np.array(meas_t), np.array(meas_q).reshape(-1, dof)),
+    }
+    return Streams(robot, list(robot.joint_names), states, "measured" if meas_t else "commanded")

@@ -1,0 +1,232 @@
+"""``roarmctl export``: the demo trajectory and its execution log as MCAP, a ROS 2 bag folder and CSV,
+read back with rosbags (and the MCAP container with the independent ``mcap`` reader)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from roarmctl.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+PLAN = ROOT / "plans" / "pick_place.yaml"
+PLACE_XYZ = (0.25, 0.15, 0.02)  # plans/pick_place.yaml: where the cube's centre goes
+CUBE_SIZE = (0.04, 0.04, 0.04)
+
+
+def run_cli(args: list[str]) -> int:
+    try:
+        main(args)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    return 0
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    """The `make demo` commands: plan the bundled pick-and-place and run it on the simulator."""
+    d = tmp_path_factory.mktemp("demo")
+    traj, log = d / "pick_place.traj.json", d / "pick_place.exec.json"
+    assert run_cli(["plan", str(PLAN), "-o", str(traj), "--json"]) == 0
+    assert run_cli(["execute", str(traj), "--sim", "--yes", "--json", "--log", str(log)]) == 0
+    return d, traj, log
+
+
+def read_bag(path: Path) -> dict[str, list]:
+    """topic -> [(log time ns, msgtype, message)] read with rosbags."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    out: dict[str, list] = {}
+    with Reader(path) as reader:
+        for conn, t, raw in reader.messages():
+            out.setdefault(conn.topic, []).append((t, conn.msgtype, ts.deserialize_cdr(raw, conn.msgtype)))
+    return out
+
+
+def quat_matrix(q) -> np.ndarray:
+    x, y, z, w = q.x, q.y, q.z, q.w
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def tf_matrix(tr) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3] = quat_matrix(tr.transform.rotation)
+    m[:3, 3] = [tr.transform.translation.x, tr.transform.translation.y, tr.transform.translation.z]
+    return m
+
+
+def chain_to(link: str, transforms: dict[str, tuple[str, np.ndarray]]) -> np.ndarray:
+    """Compose TF edges (child -> (parent, parent_T_child)) from the tree root to ``link``."""
+    m = np.eye(4)
+    while link in transforms:
+        parent, t = transforms[link]
+        m = t @ m
+        link = parent
+    return m
+
+
+def check_plan_bag(bag: dict[str, list], traj_path: Path) -> None:
+    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.robot.loader import load_robot
+
+    traj = load_trajectory(traj_path)
+    robot = load_robot(traj.robot)
+    n = len(traj.times)
+    types = {topic: {m[1] for m in msgs} for topic, msgs in bag.items()}
+    assert types == {
+        "/joint_trajectory": {"trajectory_msgs/msg/JointTrajectory"},
+        "/joint_states": {"sensor_msgs/msg/JointState"},
+        "/tf": {"tf2_msgs/msg/TFMessage"},
+        "/tf_static": {"tf2_msgs/msg/TFMessage"},
+        "/scene": {"visualization_msgs/msg/MarkerArray"},
+    }
+    # the JointTrajectory carries every point with the file's values
+    (_, _, jt), = bag["/joint_trajectory"]
+    assert jt.joint_names == traj.joint_names and len(jt.points) == n
+    for i in (0, n // 2, n - 1):
+        p = jt.points[i]
+        assert p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 == pytest.approx(traj.times[i], abs=1e-9)
+        assert np.allclose(p.positions, traj.positions[i]) and np.allclose(p.velocities, traj.velocities[i])
+        assert np.allclose(p.accelerations, traj.accelerations[i])
+    # one JointState per sample (100 Hz), stamped at the sample time
+    js = bag["/joint_states"]
+    assert len(js) == n
+    t = np.array([m[0] for m in js]) * 1e-9
+    assert np.allclose(t, traj.times, atol=1e-9) and np.all(np.diff(t) <= 0.01 + 1e-9)  # segments end exactly: some steps are shorter
+    assert np.allclose(np.array([m[2].position for m in js]), traj.positions)
+    assert all(m[2].header.stamp.sec + m[2].header.stamp.nanosec * 1e-9 == pytest.approx(m[0] * 1e-9, abs=1e-9) for m in js)
+    # TF: composing the published edges gives the TCP that FK gives (independent: quaternions here)
+    static = {tr.child_frame_id: (tr.header.frame_id, tf_matrix(tr)) for tr in bag["/tf_static"][0][2].transforms}
+    assert len(bag["/tf"]) == n
+    fk = robot.kin.fk(traj.positions)
+    for i in (0, n // 3, n - 1):
+        edges = dict(static)
+        edges.update({tr.child_frame_id: (tr.header.frame_id, tf_matrix(tr)) for tr in bag["/tf"][i][2].transforms})
+        assert set(edges) == set(robot.link_names[1:])
+        assert np.allclose(chain_to(robot.tcp_link, edges), fk[i], atol=1e-9)
+    # scene: table as planned; the cube rides with the hand and ends where the plan places it
+    scene = bag["/scene"]
+    first = {m.text: m for m in scene[0][2].markers}
+    assert set(first) == {"table", "cube"} and scene[0][0] == 0
+    table = first["table"]
+    assert (table.type, table.scale.x, table.scale.y, table.scale.z) == (1, 0.8, 0.6, 0.02)  # CUBE, plan's size
+    cube_end = {m.text: m for m in scene[-1][2].markers}["cube"]
+    assert (cube_end.scale.x, cube_end.scale.y, cube_end.scale.z) == CUBE_SIZE
+    end = cube_end.pose.position
+    assert math.dist((end.x, end.y, end.z), PLACE_XYZ) < 0.002
+    grasp, release = [e.time for e in traj.events]
+    moving = [m[0] * 1e-9 for m in scene[1:]]
+    assert min(moving) > grasp and max(moving) == pytest.approx(release, abs=0.011)
+    assert len(scene) == 1 + np.count_nonzero((traj.times > grasp + 1e-9) & (traj.times <= release + 0.01 - 1e-9))
+    # while carried, the cube keeps its offset to the TCP
+    mid = scene[len(scene) // 2]
+    k = int(np.argmin(np.abs(traj.times - mid[0] * 1e-9)))
+    c = {m.text: m for m in mid[2].markers}["cube"].pose.position
+    off = np.array([c.x, c.y, c.z]) - fk[k, :3, 3]
+    c1 = {m.text: m for m in scene[1][2].markers}["cube"].pose.position
+    k1 = int(np.argmin(np.abs(traj.times - scene[1][0] * 1e-9)))
+    assert np.allclose(off, np.array([c1.x, c1.y, c1.z]) - fk[k1, :3, 3], atol=0.01)
+
+
+def test_demo_trajectory_as_mcap_is_foxglove_ready(demo, capsys):
+    d, traj, _ = demo
+    out = d / "pick_place.mcap"
+    assert run_cli(["export", str(traj), "-o", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["ok"] and summary["format"] == "mcap"
+    check_plan_bag(read_bag(out), traj)
+    from mcap.reader import make_reader
+
+    with out.open("rb") as f:  # the container as Foxglove sees it: ros2 profile, ros2msg schemas, CDR
+        reader = make_reader(f)
+        assert reader.get_header().profile == "ros2"
+        s = reader.get_summary()
+        assert {sc.encoding for sc in s.schemas.values()} == {"ros2msg"}
+        assert {c.message_encoding for c in s.channels.values()} == {"cdr"}
+        counts = {s.channels[k].topic: v for k, v in s.statistics.channel_message_counts.items()}
+    assert counts == summary["topics"]
+
+
+def test_demo_trajectory_as_ros2_bag_folder(demo):
+    d, traj, _ = demo
+    out = d / "pick_place_bag"
+    assert run_cli(["export", str(traj), "-o", str(out)]) == 0
+    assert (out / "metadata.yaml").is_file() and (out / "pick_place_bag.db3").is_file()
+    check_plan_bag(read_bag(out), traj)
+    # exporting again replaces the bag (atomically) rather than failing
+    assert run_cli(["export", str(traj), "-o", str(out)]) == 0
+    assert len(read_bag(out)["/joint_states"]) == len(json.loads(traj.read_text())["points"])
+
+
+@pytest.mark.parametrize("suffix", [".mcap", "_bag"])
+def test_demo_execution_log_commanded_and_measured(demo, suffix):
+    d, _, log_path = demo
+    out = d / f"pick_place_exec{suffix}"
+    assert run_cli(["export", str(log_path), "-o", str(out)]) == 0
+    bag = read_bag(out)
+    log = json.loads(log_path.read_text())
+    assert set(bag) == {"/joint_states/commanded", "/joint_states/measured", "/tf", "/tf_static"}
+    sent = [s for s in log["sent"] if s["cmd"].get("T") in (101, 102)]
+    fb = [r for r in log["received"] if "feedback" in r]
+    cmd, meas = bag["/joint_states/commanded"], bag["/joint_states/measured"]
+    assert len(cmd) == len(sent) and len(meas) == len(fb) == len(bag["/tf"])
+    # wire -> joints by hand: identity for the five arm joints, hand = pi - gripper (firmware 0.84)
+    t102 = [(k, s) for k, s in enumerate(sent) if s["cmd"]["T"] == 102]
+    k, s = t102[len(t102) // 2]
+    assert np.allclose(cmd[k][2].position[:5], [s["cmd"][f] for f in ("base", "shoulder", "elbow", "wrist", "roll")])
+    assert cmd[k][2].position[5] == pytest.approx(math.pi - s["cmd"]["hand"])
+    r = fb[len(fb) // 2]["feedback"]
+    m = meas[len(fb) // 2][2]
+    assert np.allclose(m.position, [r["b"], r["s"], r["e"], r["t"], r["r"], math.pi - r["g"]])
+    # same order and spacing in time as the log (shifted so that nothing is negative)
+    t0 = min(min(x["t"] for x in sent), min(x["t"] for x in fb))
+    assert np.allclose(np.array([c[0] for c in cmd]) * 1e-9, np.array([x["t"] for x in sent]) - t0, atol=1e-6)
+
+
+def test_csv_of_trajectory_and_log(demo):
+    from roarmctl.motion.trajectory import load_trajectory
+
+    d, traj_path, log_path = demo
+    traj = load_trajectory(traj_path)
+    out = d / "pp.csv"
+    assert run_cli(["export", str(traj_path), "-o", str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert len(rows) == len(traj.times)
+    assert np.allclose([float(r["time_s"]) for r in rows], traj.times, atol=1e-6)
+    j0 = traj.joint_names[0]
+    assert np.allclose([float(r[f"{j0}_rad"]) for r in rows], traj.positions[:, 0], atol=1e-8)
+    tcp = np.array([[float(r[f"tcp_{a}_m"]) for a in "xyz"] for r in rows])
+    speed = np.array([float(r["tcp_speed_m_s"]) for r in rows])
+    # the speed column (J(q) qdot) against the finite difference of the TCP column (different method)
+    fd = np.linalg.norm(np.diff(tcp, axis=0), axis=1) / np.diff(traj.times)
+    assert np.allclose(0.5 * (speed[1:] + speed[:-1]), fd, atol=0.01)
+    assert tcp[0] == pytest.approx(tcp[-1], abs=1e-6)  # the demo starts and ends at home
+    out_log = d / "exec.csv"
+    assert run_cli(["export", str(log_path), "-o", str(out_log)]) == 0
+    rows = list(csv.DictReader(out_log.open()))
+    assert {r["source"] for r in rows} == {"commanded", "measured"}
+
+
+@pytest.mark.parametrize("name", ["x.txt", "x.png", "x.json"])
+def test_unknown_extension_is_exit_2_and_writes_nothing(demo, name, capsys):
+    d, traj, _ = demo
+    assert run_cli(["export", str(traj), "-o", str(d / name)]) == 2
+    assert "unknown export format" in capsys.readouterr().err
+    assert not (d / name).exists()
+
+
+def test_not_a_trajectory_is_exit_2(tmp_path, capsys):
+    p = tmp_path / "x.json"
+    p.write_text('{"format": "something"}')
+    assert run_cli(["export", str(p), "-o", str(tmp_path / "x.mcap")]) == 2
+    assert "neither" in capsys.readouterr().err
+    assert not (tmp_path / "x.mcap").exists()
