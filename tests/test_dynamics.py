@@ -144,3 +144,28 @@ def test_missing_inertials_named():
     with pytest.raises(DescriptionError) as ei:
         gravity_vector(load_robot("scara_2r"), [0, 0])
     assert "link1" in str(ei.value) and "inertial" in str(ei.value)
+
+
+def test_batched_rnea_equals_one_state_at_a_time():
+    r = load_robot("roarm_m3_pro")
+    rng = np.random.default_rng(4)
+    q = rng.uniform(np.maximum(r.lower, -3), np.minimum(r.upper, 3), size=(7, r.dof))
+    qd, qdd = rng.uniform(-2, 2, size=(7, r.dof)), rng.uniform(-5, 5, size=(7, r.dof))
+    batch = inverse_dynamics(r, q, qd, qdd)
+    assert batch.shape == (7, r.dof)
+    for k in range(7):
+        assert np.allclose(batch[k], inverse_dynamics(r, q[k], qd[k], qdd[k]), atol=1e-12)
+
+
+def test_payload_point_mass_adds_its_weight_times_lever_arm():
+    """A point mass m on the 2R tip at q = 0 adds m g (l1 + l2) at joint 1 and m g l2 at joint 2 (hand-derived)."""
+    from roarmctl.robot.model import Inertial
+
+    tip = P2R.kin.link_names[-1]
+    m = 0.7
+    body = {tip: Inertial(m, np.zeros(3), np.zeros((3, 3)))}
+    # the tip frame's origin: where FK puts it
+    extra = inverse_dynamics(P2R, [0, 0], [0, 0], [0, 0], payload=body) - gravity_vector(P2R, [0, 0])
+    reach = np.linalg.norm(P2R.kin.link_frames(np.zeros(2))[P2R.kin.link_index[tip], :2, 3])
+    l2 = reach - 1.0
+    assert np.allclose(extra, [m * G * reach, m * G * l2], atol=1e-9)

@@ -280,3 +280,78 @@ def test_ctrl_c_while_planning_exits_130_and_writes_nothing(tmp_path):
     assert proc.returncode == 130, err
     assert err.strip().splitlines() == ["error: interrupted (nothing was written)"]
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------ jerk, torque, payload (issue 11)
+def _payload_torques(robot, traj, plan_path: Path) -> np.ndarray:
+    """RNEA torques (N, dof) of every sample, with each held object as a rigid body on the TCP link from
+    grasp to release. The object's inertia is written out here (uniform solid), not taken from the planner."""
+    from roarmctl.robot.dynamics import inverse_dynamics
+    from roarmctl.robot.model import Inertial
+
+    plan = load_plan(plan_path)
+    tau = inverse_dynamics(robot, traj.positions, traj.velocities, traj.accelerations)
+    grasps = [e for e in traj.events if e.kind == "grasp"]
+    releases = [e for e in traj.events if e.kind == "release"]
+    picks = [t for t in plan.tasks if isinstance(t, PickTask)]
+    for g, r, task in zip(grasps, releases, picks):
+        obj = next(o for o in plan.objects if o.name == task.object)
+        if not obj.mass:
+            continue
+        k = int(np.searchsorted(traj.times, g.time))
+        tcp = robot.kin.fk(traj.positions[k])
+        centre_in_tcp = np.linalg.inv(tcp) @ np.append(obj.pose[:3, 3], 1.0)
+        if obj.shape == "cylinder":
+            side = obj.mass * (3 * obj.radius**2 + obj.length**2) / 12
+            inertia_obj = np.diag([side, side, obj.mass * obj.radius**2 / 2])
+        else:
+            x, y, z = obj.size
+            inertia_obj = obj.mass / 12 * np.diag([y * y + z * z, x * x + z * z, x * x + y * y])
+        rot = np.linalg.inv(tcp)[:3, :3] @ obj.pose[:3, :3]
+        body = {robot.tcp_link: Inertial(obj.mass, centre_in_tcp[:3], rot @ inertia_obj @ rot.T)}
+        sel = (traj.times > g.time + 1e-9) & (traj.times < r.time - 1e-9)
+        tau[sel] = inverse_dynamics(robot, traj.positions[sel], traj.velocities[sel], traj.accelerations[sel], payload=body)
+    return tau
+
+
+@pytest.mark.parametrize("name", ["pick_place", "payload", "obstacle"])
+def test_jerk_by_finite_differences_is_within_the_limits(planned, name):
+    traj = load_trajectory(planned[name][0])
+    robot = load_robot(traj.robot)
+    jerk = np.diff(traj.accelerations, axis=0) / np.diff(traj.times)[:, None]
+    assert np.all(np.abs(jerk) <= robot.jerk_limits * (1 + 1e-6) + 1e-6), np.max(np.abs(jerk) / robot.jerk_limits, axis=0)
+    # no acceleration jumps: the largest step between samples is what the jerk limit allows in 10 ms
+    assert np.max(np.abs(np.diff(traj.accelerations, axis=0))) <= np.max(robot.jerk_limits) * 0.01 + 1e-6
+
+
+@pytest.mark.parametrize("name", ["pick_place", "payload"])
+def test_torque_by_rnea_with_the_held_load_is_within_the_limits(planned, name):
+    traj = load_trajectory(planned[name][0])
+    robot = load_robot(traj.robot)
+    tau = _payload_torques(robot, traj, ROOT / "plans" / f"{name}.yaml")
+    assert np.all(np.abs(tau) <= robot.effort_limits + 1e-6), np.max(np.abs(tau) / robot.effort_limits, axis=0)
+
+
+def test_the_payload_example_lifts_0_2_kg_at_0_4_m_reach(planned):
+    traj = load_trajectory(planned["payload"][0])
+    robot = load_robot(traj.robot)
+    grasp = next(e for e in traj.events if e.kind == "grasp")
+    k = int(np.searchsorted(traj.times, grasp.time))
+    assert np.hypot(*robot.kin.fk(traj.positions[k])[:2, 3]) == pytest.approx(0.40, abs=0.005)
+    assert load_plan(ROOT / "plans" / "payload.yaml").objects[0].mass == pytest.approx(0.2)
+    # the load matters: holding it at the grasp needs clearly more shoulder torque than the bare arm
+    from roarmctl.robot.dynamics import gravity_vector
+
+    tau = _payload_torques(robot, traj, ROOT / "plans" / "payload.yaml")
+    shoulder = robot.joint_index("link1_to_link2")
+    assert abs(tau[k + 1, shoulder]) > 2 * abs(gravity_vector(robot, traj.positions[k + 1])[shoulder])
+
+
+def test_a_load_the_arm_cannot_hold_exits_3_naming_joint_torque_and_limit(tmp_path):
+    text = (ROOT / "plans" / "payload.yaml").read_text().replace("mass: 0.2}", "mass: 2.0}")
+    assert "mass: 2.0}" in text
+    plan = _write(tmp_path, text)
+    proc = roarmctl("plan", str(plan), "-o", str(tmp_path / "out.json"))
+    assert proc.returncode == 3, proc.stderr
+    assert "link1_to_link2 needs" in proc.stderr and "limit 2.94 N m" in proc.stderr and "2.00 kg" in proc.stderr
+    assert not (tmp_path / "out.json").exists()

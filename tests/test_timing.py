@@ -66,3 +66,61 @@ def test_duplicates_are_dropped_and_a_point_path_is_at_rest():
     assert len(dedupe(wp)) == 2
     tp = time_parameterise(np.array([[0.5, 0.5], [0.5, 0.5]]), np.ones(2), np.ones(2))
     assert tp.duration == 0.0 and np.allclose(tp.q, 0.5)
+
+
+def test_jerk_limited_move_is_the_double_s_profile():
+    """Trapezoid filtered by a box of width a/j: T = d/v + v/a + a/j, the classic double-S time (hand-derived)."""
+    d, v, a, j = 1.2, 0.8, 2.0, 20.0
+    tp = time_parameterise(np.array([[0.0], [d]]), np.array([v]), np.array([a]), np.array([j]))
+    vs, as_ = v * SAFETY, a * SAFETY
+    assert tp.duration == pytest.approx(d / vs + vs / as_ + as_ / j, rel=0.01)
+    jerk = np.diff(tp.qdd[:, 0]) / np.diff(tp.times)
+    assert np.max(np.abs(jerk)) <= j * (1 + 1e-9)
+    assert np.max(np.abs(jerk)) > 0.9 * j  # the limit is used, not a much gentler profile
+    assert np.allclose(tp.q[[0, -1], 0], [0.0, d]) and np.allclose(tp.qd[[0, -1]], 0) and np.allclose(tp.qdd[[0, -1]], 0)
+
+
+def test_jerk_limits_hold_on_a_curved_path_by_finite_differences():
+    rng = np.random.default_rng(3)
+    wp = np.cumsum(rng.uniform(-0.3, 0.3, size=(8, 5)), axis=0)
+    vmax, amax = np.array([1.0, 0.7, 0.9, 1.1, 1.3]), np.array([2.0, 1.5, 2.5, 3.0, 3.0])
+    jmax = 10 * amax
+    tp = time_parameterise(wp, vmax, amax, jmax, sample_dt=0.005)
+    assert np.all(np.abs(tp.qd) <= vmax + 1e-9) and np.all(np.abs(tp.qdd) <= amax + 1e-9)
+    fd_acc = np.diff(tp.qd, axis=0) / np.diff(tp.times)[:, None]  # acceleration from the velocities
+    assert np.max(np.abs(fd_acc - 0.5 * (tp.qdd[1:] + tp.qdd[:-1]))) < 0.05
+    jerk = np.diff(tp.qdd, axis=0) / np.diff(tp.times)[:, None]
+    assert np.all(np.abs(jerk) <= jmax * (1 + 1e-9))
+    free = time_parameterise(wp, vmax, amax, sample_dt=0.005)
+    assert np.max(np.abs(np.diff(free.qdd, axis=0)) / 0.005) > 5 * jmax.max()  # unfiltered TOPP-RA jumps
+    assert free.duration < tp.duration < free.duration + 1.0
+
+
+def test_torque_limit_slows_a_move_and_holds_by_rnea():
+    """planar 2R (seed 001 masses): lifting both links against gravity under a 35 N m shoulder limit."""
+    from roarmctl.motion.timing import TorqueModel
+    from roarmctl.robot.dynamics import inverse_dynamics
+
+    robot = load_robot("planar_2r")
+    inv = lambda q, qd, qdd: inverse_dynamics(robot, q, qd, qdd)  # noqa: E731
+    wp = np.array([[-1.2, 0.0], [0.3, 0.0]])
+    v, a = np.array([3.0, 3.0]), np.array([20.0, 20.0])
+    free = time_parameterise(wp, v, a)
+    peak = np.max(np.abs(inverse_dynamics(robot, free.q, free.qd, free.qdd)[:, 0]))
+    limit = np.array([35.0, 100.0])
+    assert peak > limit[0]  # the limit binds
+    tp = time_parameterise(wp, v, a, torque=TorqueModel(inv, limit, ["j1", "j2"]))
+    tau = inverse_dynamics(robot, tp.q, tp.qd, tp.qdd)
+    assert np.all(np.abs(tau) <= limit + 1e-9)
+    assert tp.duration > free.duration
+
+
+def test_a_load_that_cannot_be_held_is_infeasible():
+    from roarmctl.errors import InfeasibleError
+    from roarmctl.motion.timing import TorqueModel
+    from roarmctl.robot.dynamics import inverse_dynamics
+
+    robot = load_robot("planar_2r")  # holding it horizontal needs 29.43 N m at joint 1 (hand-derived)
+    model = TorqueModel(lambda q, qd, qdd: inverse_dynamics(robot, q, qd, qdd), np.array([20.0, 100.0]), ["j1", "j2"])
+    with pytest.raises(InfeasibleError, match=r"j1 needs 29.43 N m \(limit 20.00 N m\)"):
+        time_parameterise(np.array([[-1.5, 0.0], [0.0, 0.0]]), np.ones(2), np.ones(2), torque=model)

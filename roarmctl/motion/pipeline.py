@@ -128,6 +128,10 @@ class Planner:
         self._pending_pick: tuple[str, np.ndarray] | None = None  # set by a pick, taken by its grasp
         self.vmax = robot.velocity_limits * plan.limits.velocity_scale
         self.amax = robot.acceleration_limits * plan.limits.acceleration_scale
+        self.jmax = robot.jerk_limits  # not scaled: the scales slow the motion, the jerk bound keeps it smooth
+        self.effort = robot.effort_limits
+        self.payload: dict | None = None  # link -> Inertial of the held object, from grasp to release
+        self.payload_label = ""
         self.free_count = 0
 
     # ------------------------------------------------------------------ run
@@ -321,10 +325,9 @@ class Planner:
 
     def _gripper_step(self, step: _Step, q: np.ndarray) -> TimedPath:
         a, b = float(q[self.gi]), float(step.gripper_to)
-        dist = abs(b - a)
-        duration = max(self.plan.limits.gripper_time, 1.875 * dist / self.vmax[self.gi] * 1.01,
-                       math.sqrt(5.7735 * dist / self.amax[self.gi]) * 1.01)
-        tp = _smooth_move(q, self.gi, b, duration)
+        tp = self._gripper_motion(q, b, step.label)
+        if tp.duration < self.plan.limits.gripper_time:  # the jaws get at least gripper_time to settle
+            tp = _concat(tp, _dwell(tp.q[-1], self.plan.limits.gripper_time - tp.duration))
         tcp = self.robot.kin.fk(q)[:3, 3]
         t0 = time.perf_counter()
         for value in np.linspace(a, b, 5):  # the jaw sweeps: check it along the way
@@ -339,11 +342,13 @@ class Planner:
                 self._set_state(b, grasp_target=name)
                 self.checker.attach(name, q[self.arm])
                 self.held, self.held_offset, self._pending_pick = name, offset, None
+                self._attach_payload(name, q, step.label)
             elif step.event.kind == "release":
                 name = self.held
                 self.checker.detach(name, q[self.arm])
                 self.object_pose[name][:3, 3] = tcp - self.held_offset
                 self.held, self.held_offset = None, np.zeros(3)
+                self.payload, self.payload_label = None, ""
                 self._set_state(b, grasp_target=name)
         else:
             self._set_state(b)
@@ -426,15 +431,67 @@ class Planner:
                 full[:, arm] = qa
                 return self.robot.kin.tcp_velocity(full, dqa)
 
-        tp_arm = time_parameterise(wps[:, arm], self.vmax[arm], self.amax[arm], tcp_velocity_per_ds=tcpv,
-                                   max_tcp_speed=self.plan.limits.max_tcp_speed, sample_dt=SAMPLE_DT, label=label)
+        tp_arm = time_parameterise(wps[:, arm], self.vmax[arm], self.amax[arm], None if self.jmax is None else self.jmax[arm],
+                                   tcp_velocity_per_ds=tcpv, max_tcp_speed=self.plan.limits.max_tcp_speed,
+                                   torque=self._torque_model(wps[0], arm), sample_dt=SAMPLE_DT, label=label)
         n = len(tp_arm.times)
         q = np.repeat(wps[0][None, :], n, axis=0)
         q[:, arm] = tp_arm.q
         qd, qdd = np.zeros_like(q), np.zeros_like(q)
         qd[:, arm], qdd[:, arm] = tp_arm.qd, tp_arm.qdd
         self.timer.add("toppra", t0)
-        return TimedPath(tp_arm.times, q, qd, qdd)
+        return TimedPath(tp_arm.times, q, qd, qdd, tp_arm.jerk_filter)
+
+    def _gripper_motion(self, q: np.ndarray, target: float, label: str) -> TimedPath:
+        """The gripper alone from q[gi] to ``target``: time-optimal under its velocity, acceleration and jerk limits."""
+        gi = self.gi
+        t0 = time.perf_counter()
+        one = time_parameterise(np.array([[q[gi]], [target]]), self.vmax[gi:gi + 1], self.amax[gi:gi + 1],
+                                None if self.jmax is None else self.jmax[gi:gi + 1], sample_dt=SAMPLE_DT, label=label)
+        self.timer.add("toppra", t0)
+        qq = np.repeat(q[None, :], len(one.times), axis=0)
+        qd, qdd = np.zeros_like(qq), np.zeros_like(qq)
+        qq[:, gi], qd[:, gi], qdd[:, gi] = one.q[:, 0], one.qd[:, 0], one.qdd[:, 0]
+        return TimedPath(one.times, qq, qd, qdd, one.jerk_filter)
+
+    def _torque_model(self, base: np.ndarray, idx: list[int]):
+        """Torque limits of the joints ``idx`` for TOPP-RA (RNEA with the held payload); None without limits."""
+        from roarmctl.motion.timing import TorqueModel
+        from roarmctl.robot.dynamics import inverse_dynamics
+
+        if self.effort is None or not np.any(np.isfinite(self.effort[idx])) or not self.robot.inertials:
+            return None
+        robot, payload = self.robot, self.payload
+
+        def inv_dyn(qa: np.ndarray, qda: np.ndarray, qdda: np.ndarray) -> np.ndarray:
+            full = np.repeat(base[None, :], len(qa), axis=0)
+            full[:, idx] = qa
+            zd = np.zeros_like(full)
+            fd, fdd = zd.copy(), zd.copy()
+            fd[:, idx], fdd[:, idx] = qda, qdda
+            return inverse_dynamics(robot, full, fd, fdd, payload=payload)[:, idx]
+
+        return TorqueModel(inv_dyn, self.effort[idx], [robot.joint_names[i] for i in idx], self.payload_label)
+
+    def _attach_payload(self, name: str, q: np.ndarray, label: str) -> None:
+        """The held object's mass, COM and inertia become part of the TCP link (from grasp to release)."""
+        from roarmctl.motion.timing import check_holding
+        from roarmctl.robot.dynamics import solid_inertia
+        from roarmctl.robot.model import Inertial
+
+        spec = next(o for o in self.plan.objects if o.name == name)
+        if not spec.mass:
+            return
+        tcp = self.robot.kin.fk(q)
+        rel = np.linalg.inv(tcp) @ self.object_pose[name]  # object frame in the TCP link frame
+        com_obj = spec.com if spec.com is not None else np.zeros(3)
+        inertia = spec.inertia if spec.inertia is not None else solid_inertia(spec.shape, spec.mass, spec.size, spec.radius, spec.length)
+        rot = rel[:3, :3]
+        self.payload = {self.robot.tcp_link: Inertial(float(spec.mass), rot @ com_obj + rel[:3, 3], rot @ inertia @ rot.T)}
+        self.payload_label = f"'{name}' ({spec.mass:.2f} kg)"
+        model = self._torque_model(q, self.arm)
+        if model is not None:
+            check_holding(model, q[None, self.arm], label)
 
     def _recheck(self, tp: TimedPath, label: str) -> None:
         """Independent check of the sampled motion: limits, TCP speed, collisions (4x finer), margin."""
@@ -525,21 +582,10 @@ def _dwell(q: np.ndarray, duration: float) -> TimedPath:
     return TimedPath(times, qq, np.zeros_like(qq), np.zeros_like(qq))
 
 
-def _smooth_move(q: np.ndarray, index: int, target: float, duration: float) -> TimedPath:
-    """One joint from q[index] to ``target`` along a quintic smooth step (rest to rest)."""
-    n = max(int(math.ceil(duration / SAMPLE_DT)), 1)
-    times = np.linspace(0.0, duration, n + 1)
-    tau = times / duration
-    s = 10 * tau**3 - 15 * tau**4 + 6 * tau**5
-    sd = (30 * tau**2 - 60 * tau**3 + 30 * tau**4) / duration
-    sdd = (60 * tau - 180 * tau**2 + 120 * tau**3) / duration**2
-    delta = target - q[index]
-    qq = np.repeat(q[None, :], len(times), axis=0)
-    qd, qdd = np.zeros_like(qq), np.zeros_like(qq)
-    qq[:, index] = q[index] + delta * s
-    qd[:, index] = delta * sd
-    qdd[:, index] = delta * sdd
-    return TimedPath(times, qq, qd, qdd)
+def _concat(a: TimedPath, b: TimedPath) -> TimedPath:
+    """``b`` after ``a`` (``b`` starts where ``a`` ends; its first sample is dropped)."""
+    return TimedPath(np.concatenate([a.times, b.times[1:] + a.duration]), np.concatenate([a.q, b.q[1:]]),
+                     np.concatenate([a.qd, b.qd[1:]]), np.concatenate([a.qdd, b.qdd[1:]]), a.jerk_filter)
 
 
 def _interpolate(q: np.ndarray, substeps: int) -> np.ndarray:

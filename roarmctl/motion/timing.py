@@ -1,38 +1,75 @@
-"""Time-optimal parameterisation of a joint path with TOPP-RA.
+"""Time-optimal, jerk-limited parameterisation of a joint path: the one timing path of roarmctl.
 
-A geometric path (waypoints in joint space) becomes a timed trajectory that starts and ends at
-rest and respects joint velocity and acceleration limits and, optionally, a maximum TCP speed.
-The TCP-speed limit is a constraint inside TOPP-RA (a bound on the squared path speed at every
-grid point), not a slow-down applied afterwards.
+A geometric path (waypoints in joint space, joined by a clamped cubic spline) becomes a timed
+trajectory that starts and ends at rest and respects, at every output sample:
+
+* joint velocity and acceleration limits, optionally a maximum TCP speed and joint torque limits
+  (inverse dynamics by the library's RNEA): all as constraints inside TOPP-RA;
+* joint jerk limits: TOPP-RA's result is bang-bang in the path acceleration (jerk unbounded), so
+  the path position s(t) is passed through a moving-average (FIR) filter of width ``w``:
+  s_w(t) = (1/w) * integral of s over [t - w, t]. Then ds_w/dt = (s(t) - s(t - w)) / w and
+  d2s_w/dt2 = (sdot(t) - sdot(t - w)) / w, so the path acceleration becomes continuous with a
+  bounded rate, the path itself is unchanged (straight lines and collision-checked curves stay
+  as they are), the motion still starts and ends at rest, and it lasts ``w`` longer. This is
+  the FIR construction of Biagiotti and Melchiorri ("FIR filters for online trajectory planning
+  with time- and frequency-domain specifications", Control Engineering Practice 20(12), 2012)
+  applied to the path parameter. ``w`` grows until the sampled joint jerk is inside the limits.
+
+Everything is re-checked on the samples; where the filtered profile pokes over a limit, TOPP-RA
+runs again with limits tightened by ``SAFETY_STEPS``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
-from roarmctl.errors import PlanningError
+from roarmctl.errors import InfeasibleError, PlanningError
 
-# Limits handed to TOPP-RA are this fraction of the true ones, so that the sampled trajectory
-# (evaluated between grid points) stays inside the true limits; tightened step by step if not.
-SAFETY_STEPS = (0.98, 0.95, 0.9, 0.8)
+# Limits handed to TOPP-RA are this fraction of the true ones, so that the sampled (and filtered)
+# trajectory stays inside the true limits; tightened step by step if not.
+SAFETY_STEPS = (0.98, 0.95, 0.9, 0.8, 0.7, 0.6)
 SAFETY = SAFETY_STEPS[0]
+FINE_DT = 0.002  # s: grid on which the jerk is checked (finite differences of the acceleration)
+FILTER_GROWTH = 1.25  # each try widens the jerk filter by this factor
+FILTER_TRIES = 16
+
+InverseDynamics = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 
 @dataclass
 class TimedPath:
-    """Samples of a timed path: ``times`` (N,) s from 0, ``q``/``qd``/``qdd`` (N, n) in rad, rad/s, rad/s^2."""
+    """Samples of a timed path: ``times`` (N,) s from 0, ``q``/``qd``/``qdd`` (N, n) in rad, rad/s, rad/s^2.
+
+    ``jerk_filter`` is the width (s) of the moving-average filter that bounded the jerk (0: none).
+    """
 
     times: np.ndarray
     q: np.ndarray
     qd: np.ndarray
     qdd: np.ndarray
+    jerk_filter: float = 0.0
 
     @property
     def duration(self) -> float:
         return float(self.times[-1])
+
+
+@dataclass
+class TorqueModel:
+    """Joint torque limits for TOPP-RA.
+
+    ``inverse_dynamics(q, qd, qdd)`` maps (G, n) path-joint states to (G, n) torques (N m), batched;
+    ``limits`` (n,) N m (inf: none); ``names`` (n,) joint names for messages; ``load`` says what is
+    held, for messages (e.g. "'cube' (0.20 kg)").
+    """
+
+    inverse_dynamics: InverseDynamics
+    limits: np.ndarray
+    names: Sequence[str]
+    load: str = ""
 
 
 def dedupe(waypoints: np.ndarray, tol: float = 1e-9) -> np.ndarray:
@@ -64,22 +101,125 @@ def _tcp_speed_constraint(tcp_velocity_per_ds: Callable[[np.ndarray, np.ndarray]
     return TcpSpeedConstraint()
 
 
+def _torque_constraint(model: TorqueModel, limits: np.ndarray):
+    """toppra's joint-torque constraint, tau = a(s) sddot + b(s) sdot^2 + c(s), with batched RNEA.
+
+    Same canonical form as ``toppra.constraint.JointTorqueConstraint`` (which calls the dynamics
+    once per grid point and state); here three batched calls cover the whole grid.
+    """
+    from toppra.constraint import DiscretizationType
+    from toppra.constraint.linear_constraint import LinearConstraint
+
+    class TorqueConstraint(LinearConstraint):
+        def __init__(self) -> None:
+            super().__init__()
+            self.discretization_type = DiscretizationType.Collocation
+            self.identical = True  # F, g are the same at every grid point
+
+        def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
+            self.dof = path.dof
+            p, ps, pss = path(gridpoints), path(gridpoints, 1), path(gridpoints, 2)
+            zero = np.zeros_like(p)
+            c = model.inverse_dynamics(p, zero, zero)
+            a = model.inverse_dynamics(p, zero, ps) - c
+            b = model.inverse_dynamics(p, ps, pss) - c
+            n = path.dof
+            F = np.vstack([np.eye(n), -np.eye(n)])
+            g = np.concatenate([limits, limits])
+            return a, b, c, F, g, None, None
+
+    return TorqueConstraint()
+
+
+def check_holding(model: TorqueModel, q: np.ndarray, label: str) -> None:
+    """Raise InfeasibleError (exit 3) when gravity alone needs more torque than a limit at any of ``q`` (G, n)."""
+    q = np.atleast_2d(q)
+    zero = np.zeros_like(q)
+    tau = np.abs(model.inverse_dynamics(q, zero, zero))
+    ratio = tau / model.limits
+    k, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+    if ratio[k, j] > 1.0:
+        over = [f"{model.names[i]} needs {tau[k, i]:.2f} N m (limit {model.limits[i]:.2f} N m)"
+                for i in np.argsort(-ratio[k]) if ratio[k, i] > 1.0]
+        what = f"{model.load} even at rest" if model.load else "itself at rest"
+        raise InfeasibleError(f"{label}: the arm cannot hold {what}: {'; '.join(over)}",
+                              "use a lighter load, move it closer to the base, or check limits.effort in the robot description")
+
+
+class _Profile:
+    """TOPP-RA's result in time: piecewise-constant path acceleration between grid points."""
+
+    def __init__(self, grid: np.ndarray, sd: np.ndarray) -> None:
+        sd = np.maximum(sd, 0.0)
+        ds = np.diff(grid)
+        dt = 2.0 * ds / np.maximum(sd[:-1] + sd[1:], 1e-12)
+        self.t = np.concatenate([[0.0], np.cumsum(dt)])
+        self.s, self.sd = grid - grid[0], sd
+        self.sdd = (sd[1:] ** 2 - sd[:-1] ** 2) / (2.0 * ds)
+        self.T = float(self.t[-1])
+        self.s_end = float(self.s[-1])
+        # integral of s over [0, t_i]
+        self.S = np.concatenate([[0.0], np.cumsum(self.s[:-1] * dt + sd[:-1] * dt**2 / 2 + self.sdd * dt**3 / 6)])
+
+    def eval(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Integral of s, s, sdot, sddot at times ``t`` (any shape); at rest before 0 and after the end."""
+        t = np.asarray(t, dtype=float)
+        i = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.sdd) - 1)
+        tau = np.clip(t, 0.0, self.T) - self.t[i]
+        a, v, s0 = self.sdd[i], self.sd[i], self.s[i]
+        s = s0 + v * tau + a * tau**2 / 2
+        S = self.S[i] + s0 * tau + v * tau**2 / 2 + a * tau**3 / 6
+        before, after = t < 0, t > self.T
+        S = np.where(before, 0.0, np.where(after, S + self.s_end * (t - self.T), S))
+        sdot = np.where(before | after, 0.0, v + a * tau)
+        sddot = np.where(before | after, 0.0, a)
+        s = np.where(before, 0.0, s)
+        return S, s, sdot, sddot
+
+    def filtered(self, t: np.ndarray, w: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """s, sdot, sddot of the moving average of width ``w`` (s) at times ``t``; ``w`` = 0: unfiltered."""
+        if w <= 0:
+            _, s, v, a = self.eval(t)
+            return s, v, a
+        S1, s1, v1, a1 = self.eval(t)
+        S0, s0, v0, a0 = self.eval(t - w)
+        s = np.clip((S1 - S0) / w, 0.0, self.s_end)
+        return s, (s1 - s0) / w, (v1 - v0) / w
+
+
+def _sample(path, prof: _Profile, times: np.ndarray, w: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    s, sd, sdd = prof.filtered(times, w)
+    ps = path(s, 1)
+    return path(s), ps * sd[:, None], ps * sdd[:, None] + path(s, 2) * (sd**2)[:, None]
+
+
+def _jerk_ok(path, prof: _Profile, w: float, jmax: np.ndarray) -> bool:
+    t = np.arange(0.0, prof.T + w + FINE_DT, FINE_DT)
+    _, _, qdd = _sample(path, prof, t, w)
+    return bool(np.all(np.abs(np.diff(qdd, axis=0)) / FINE_DT <= jmax * (1 + 1e-9)))
+
+
 def time_parameterise(
     waypoints: np.ndarray,
     vmax: np.ndarray,
     amax: np.ndarray,
+    jmax: np.ndarray | None = None,
     *,
     tcp_velocity_per_ds: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
     max_tcp_speed: float | None = None,
+    torque: TorqueModel | None = None,
     sample_dt: float = 0.01,
     label: str = "segment",
 ) -> TimedPath:
-    """TOPP-RA through ``waypoints`` (K, n), at rest at both ends, sampled every ``sample_dt`` s.
+    """Time ``waypoints`` (K, n), at rest at both ends, sampled every ``sample_dt`` s.
 
-    ``vmax``/``amax`` (n,) are the (already scaled) joint limits. ``tcp_velocity_per_ds(q, dq_ds)``
+    ``vmax``/``amax`` (n,) are the (already scaled) joint limits, ``jmax`` (n,) rad/s^3 the jerk
+    limits (None: jerk unbounded, TOPP-RA's bang-bang profile). ``tcp_velocity_per_ds(q, dq_ds)``
     maps (G, n) path samples and their path derivatives to TCP velocity per unit path parameter
-    (G, 3); with ``max_tcp_speed`` (m/s) it bounds the TCP speed inside TOPP-RA.
-    Raises PlanningError when TOPP-RA finds no parameterisation.
+    (G, 3); with ``max_tcp_speed`` (m/s) it bounds the TCP speed inside TOPP-RA. ``torque`` adds
+    joint torque limits (and first checks that the arm can hold still anywhere on the path).
+    Raises InfeasibleError (exit 3) when the arm cannot hold the load, PlanningError (exit 3) when
+    TOPP-RA finds no parameterisation.
     """
     import toppra as ta
     import toppra.algorithm as algo
@@ -91,36 +231,59 @@ def time_parameterise(
     if len(wp) < 2:
         z = np.zeros((1, n))
         return TimedPath(np.zeros(1), wp[:1].copy(), z, z.copy())
+    vmax, amax = np.asarray(vmax, dtype=float), np.asarray(amax, dtype=float)
     chord = np.linalg.norm(np.diff(wp, axis=0), axis=1)
     ss = np.concatenate([[0.0], np.cumsum(chord)])
-    path = ta.SplineInterpolator(ss, wp, bc_type="clamped" if len(wp) > 2 else "not-a-knot")
+    path = ta.SplineInterpolator(ss, wp, bc_type="not-a-knot")
+    n_grid = int(np.clip(10 * len(wp), 100, 800))
+    gridpoints = np.linspace(0.0, ss[-1], n_grid + 1)
+    if torque is not None:
+        check_holding(torque, path(gridpoints), label)
     tcp_ok = max_tcp_speed is not None and tcp_velocity_per_ds is not None
     for safety in SAFETY_STEPS:
         constraints = [
-            constraint.JointVelocityConstraint(np.asarray(vmax, dtype=float) * safety),
-            constraint.JointAccelerationConstraint(np.asarray(amax, dtype=float) * safety),
+            constraint.JointVelocityConstraint(vmax * safety),
+            constraint.JointAccelerationConstraint(amax * safety),
         ]
         if tcp_ok:
             constraints.append(_tcp_speed_constraint(tcp_velocity_per_ds, max_tcp_speed * safety))
-        n_grid = int(np.clip(10 * len(wp), 100, 800))
-        gridpoints = np.linspace(0.0, ss[-1], n_grid + 1)
+        if torque is not None and np.any(np.isfinite(torque.limits)):
+            constraints.append(_torque_constraint(torque, np.where(np.isfinite(torque.limits), torque.limits * safety, 1e9)))
         instance = algo.TOPPRA(constraints, path, gridpoints=gridpoints, parametrizer="ParametrizeConstAccel")
-        traj = instance.compute_trajectory(0.0, 0.0)
-        if traj is None:  # toppra returns None instead of raising
+        instance.compute_parameterization(0.0, 0.0)
+        data = instance.problem_data
+        if data.sd_vec is None or data.return_code.name != "Ok":
             raise PlanningError(f"{label}: TOPP-RA found no time parameterisation under the limits",
                                 "the path may pass through a point where the limits allow no motion; re-plan with another seed")
-        duration = float(traj.duration)
-        count = max(int(np.ceil(duration / sample_dt)), 1)
+        prof = _Profile(np.asarray(data.gridpoints, dtype=float), np.asarray(data.sd_vec, dtype=float))
+        w = 0.0
+        if jmax is not None:
+            jm = np.asarray(jmax, dtype=float)
+            w = max(float(np.max(amax * safety / jm)), 2 * FINE_DT)
+            lo = 0.0
+            for _ in range(FILTER_TRIES):
+                if _jerk_ok(path, prof, w, jm):
+                    break
+                lo, w = w, w * FILTER_GROWTH
+            else:
+                continue
+            for _ in range(3 if lo > 0 else 0):  # narrow it down (each step halves the excess width)
+                mid = 0.5 * (lo + w)
+                lo, w = (lo, mid) if _jerk_ok(path, prof, mid, jm) else (mid, w)
+        duration = prof.T + w
+        count = max(int(np.ceil(duration / sample_dt - 1e-9)), 1)
         times = np.unique(np.minimum(np.arange(count + 1) * sample_dt, duration))
-        q, qd, qdd = traj(times), traj(times, 1), traj(times, 2)
+        q, qd, qdd = _sample(path, prof, times, w)
         q[0], q[-1] = wp[0], wp[-1]  # exact ends, at rest
-        qd[0] = qd[-1] = 0.0
-        # The constraints hold at grid points; between them the spline's curvature can push a
-        # sample slightly over. Check the samples and tighten until they are inside.
+        qd[0] = qd[-1] = qdd[0] = qdd[-1] = 0.0
+        # The constraints hold at grid points; between them (and after filtering) a sample can be
+        # slightly over. Check the samples and tighten until they are inside.
         ok = np.all(np.abs(qd) <= vmax) and np.all(np.abs(qdd) <= amax)
         if ok and tcp_ok:
             ok = bool(np.max(np.linalg.norm(tcp_velocity_per_ds(q, qd), axis=1)) <= max_tcp_speed)
+        if ok and torque is not None:
+            ok = bool(np.all(np.abs(torque.inverse_dynamics(q, qd, qdd)) <= torque.limits))
         if ok:
-            return TimedPath(times, q, qd, qdd)
+            return TimedPath(times, q, qd, qdd, w)
     raise PlanningError(f"{label}: the timed samples exceed the limits even with a {1 - SAFETY_STEPS[-1]:.0%} margin",
                         "re-plan with another seed")

@@ -34,7 +34,9 @@ class ItemSpec:
     size: tuple[float, float, float] = (0.0, 0.0, 0.0)
     radius: float = 0.0
     length: float = 0.0
-    mass: float | None = None
+    mass: float | None = None  # kg; carried by the hand from grasp to release
+    com: np.ndarray | None = None  # (3,) m, object frame, from the shape's centre; None: the centre
+    inertia: np.ndarray | None = None  # (3, 3) kg m^2 about the COM, object axes; None: uniform solid
     line: int = 0
 
     @property
@@ -192,7 +194,7 @@ def _closest(word: str, options: tuple[str, ...] | list[str]) -> str | None:
 
 # ------------------------------------------------------------------ items
 def _item(ctx: _Ctx, raw: Any, line: int, where: str, role: str) -> ItemSpec:
-    keys = ("name", "shape", "size", "radius", "length", "xyz", "rpy", "mass")
+    keys = ("name", "shape", "size", "radius", "length", "xyz", "rpy", "mass", "com", "inertia")
     d = ctx.mapping(raw, line, where, keys, required=("shape", "xyz") + (("name",) if role != "table" else ()))
     shape = ctx.string(d["shape"], d.line_of("shape"), f"{where}.shape", SHAPES)
     xyz = ctx.vector(d["xyz"], d.line_of("xyz"), f"{where}.xyz", 3)
@@ -218,6 +220,15 @@ def _item(ctx: _Ctx, raw: Any, line: int, where: str, role: str) -> ItemSpec:
         if role != "object":
             ctx.fail(d.line_of("mass"), f"{where}.mass", "only objects have a mass")
         spec.mass = ctx.number(d["mass"], d.line_of("mass"), f"{where}.mass", lo=0)
+    for key in ("com", "inertia"):
+        if key in d and "mass" not in d:
+            ctx.fail(d.line_of(key), f"{where}.{key}", "needs a 'mass' (kg) beside it")
+    if "com" in d:
+        spec.com = ctx.vector(d["com"], d.line_of("com"), f"{where}.com", 3)
+    if "inertia" in d:  # [ixx, iyy, izz] about the COM, object axes
+        spec.inertia = np.diag(ctx.vector(d["inertia"], d.line_of("inertia"), f"{where}.inertia", 3))
+        if np.any(np.diag(spec.inertia) < 0):
+            ctx.fail(d.line_of("inertia"), f"{where}.inertia", "moments of inertia must not be negative")
     return spec
 
 

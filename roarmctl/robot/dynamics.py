@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from roarmctl.errors import DescriptionError, InputError
-from roarmctl.robot.model import Robot
+from roarmctl.robot.model import Inertial, Robot
 
 GRAVITY = 9.81  # m/s^2, along -z of the root frame
 
@@ -51,82 +51,132 @@ def _require_inertials(robot: Robot) -> None:
         )
 
 
-def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY) -> np.ndarray:
-    """Joint torques/forces (robot.dof,) that produce accelerations ``qdd`` at state (``q``, ``qd``).
+def combine_inertials(a: Inertial, b: Inertial) -> Inertial:
+    """Two rigid bodies fixed in the same link frame as one (parallel-axis theorem); units as ``Inertial``."""
+    m = a.mass + b.mass
+    if m <= 0:
+        return Inertial(0.0, np.zeros(3), np.zeros((3, 3)))
+    com = (a.mass * np.asarray(a.com) + b.mass * np.asarray(b.com)) / m
+
+    def shifted(x: Inertial) -> np.ndarray:
+        d = np.asarray(x.com) - com
+        return np.asarray(x.inertia) + x.mass * (np.dot(d, d) * np.eye(3) - np.outer(d, d))
+
+    return Inertial(float(m), com, shifted(a) + shifted(b))
+
+
+def _batch(robot: Robot, v, what: str, is_position: bool) -> np.ndarray:
+    """(N, dof) from (dof,), (arm_dof,), (N, dof) or (N, arm_dof)."""
+    a = np.asarray(v, dtype=float)
+    if a.ndim <= 1:
+        return _complete(robot, a, what, is_position)[None, :]
+    if a.shape[1] == robot.dof:
+        return a
+    return np.stack([_complete(robot, row, what, is_position) for row in a]) if a.shape[1] != robot.arm_dof else (
+        robot.full_q(a) if is_position else _scatter_arm(robot, a))
+
+
+def _scatter_arm(robot: Robot, a: np.ndarray) -> np.ndarray:
+    out = np.zeros((a.shape[0], robot.dof))
+    out[:, robot.arm_indices] = a
+    return out
+
+
+def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payload: dict[str, Inertial] | None = None) -> np.ndarray:
+    """Joint torques/forces that produce accelerations ``qdd`` at state (``q``, ``qd``).
 
     Args:
-        q, qd, qdd: (dof,) or (arm_dof,) in rad, rad/s, rad/s^2 (m, m/s, m/s^2 for prismatic joints).
+        q, qd, qdd: (dof,) or (arm_dof,) in rad, rad/s, rad/s^2 (m, m/s, m/s^2 for prismatic joints),
+            or batches (N, dof) / (N, arm_dof) of states: then the result is (N, dof).
         gravity: magnitude (m/s^2) along -z of the root frame; 0 leaves gravity out.
+        payload: extra rigid bodies fixed to links (link name -> Inertial in that link's frame), such as
+            a held object; they add to the link's own inertial.
+    Returns:
+        (dof,) torques for one state, (N, dof) for a batch (N m for revolute joints, N for prismatic).
     """
     _require_inertials(robot)
-    q = _complete(robot, q, "q", True)
-    qd = _complete(robot, qd, "qd", False)
-    qdd = _complete(robot, qdd, "qdd", False)
+    single = np.asarray(q).ndim <= 1
+    q = _batch(robot, q, "q", True)
+    qd = _batch(robot, qd, "qd", False)
+    qdd = _batch(robot, qdd, "qdd", False)
+    n = q.shape[0]
+    if qd.shape[0] != n or qdd.shape[0] != n:
+        raise InputError(f"q, qd, qdd: batches of different lengths ({n}, {qd.shape[0]}, {qdd.shape[0]})")
     kin = robot.kin
     frames = kin.link_frames(q)
+    if frames.ndim == 3:
+        frames = frames[None]
     n_links = len(kin.link_names)
-    w = np.zeros((n_links, 3))  # angular velocity of each link
-    dw = np.zeros((n_links, 3))  # angular acceleration
-    a = np.zeros((n_links, 3))  # linear acceleration of the link frame's origin
-    a[0] = (0.0, 0.0, gravity)  # gravity as an upward acceleration of the root
-    org = frames[:, :3, 3]
+    w = np.zeros((n, n_links, 3))  # angular velocity of each link
+    dw = np.zeros((n, n_links, 3))  # angular acceleration
+    a = np.zeros((n, n_links, 3))  # linear acceleration of the link frame's origin
+    a[:, 0] = (0.0, 0.0, gravity)  # gravity as an upward acceleration of the root
+    org = frames[:, :, :3, 3]
 
     def point_acc(link: int, r: np.ndarray) -> np.ndarray:
-        d = r - org[link]
-        return a[link] + np.cross(dw[link], d) + np.cross(w[link], np.cross(w[link], d))
+        d = r - org[:, link]
+        return a[:, link] + np.cross(dw[:, link], d) + np.cross(w[:, link], np.cross(w[:, link], d))
 
-    axes = np.zeros((len(robot.joints), 3))
-    pivots = np.zeros((len(robot.joints), 3))
+    n_joints = len(robot.joints)
+    axes = np.zeros((n, n_joints, 3))
+    pivots = np.zeros((n, n_joints, 3))
     for j, joint in enumerate(robot.joints):
         p, c, qi = kin._parent[j], kin._child[j], kin._qidx[j]
-        before = frames[p] @ joint.origin
-        z = before[:3, :3] @ joint.axis
-        axes[j], pivots[j] = z, before[:3, 3]
+        before = frames[:, p] @ joint.origin
+        z = before[:, :3, :3] @ joint.axis
+        axes[:, j], pivots[:, j] = z, before[:, :3, 3]
         if joint.kind == "revolute":
-            w[c] = w[p] + qd[qi] * z
-            dw[c] = dw[p] + qdd[qi] * z + np.cross(w[p], qd[qi] * z)
+            wz = qd[:, qi, None] * z
+            w[:, c] = w[:, p] + wz
+            dw[:, c] = dw[:, p] + qdd[:, qi, None] * z + np.cross(w[:, p], wz)
             # the pivot lies on the axis: it moves with the parent and with the child alike
-            a_piv = point_acc(p, pivots[j])
-            d = org[c] - pivots[j]
-            a[c] = a_piv + np.cross(dw[c], d) + np.cross(w[c], np.cross(w[c], d))
+            a_piv = point_acc(p, pivots[:, j])
+            d = org[:, c] - pivots[:, j]
+            a[:, c] = a_piv + np.cross(dw[:, c], d) + np.cross(w[:, c], np.cross(w[:, c], d))
         elif joint.kind == "prismatic":
-            w[c], dw[c] = w[p], dw[p]
-            a[c] = point_acc(p, org[c]) + 2.0 * np.cross(w[p], qd[qi] * z) + qdd[qi] * z
+            w[:, c], dw[:, c] = w[:, p], dw[:, p]
+            a[:, c] = point_acc(p, org[:, c]) + 2.0 * np.cross(w[:, p], qd[:, qi, None] * z) + qdd[:, qi, None] * z
         else:
-            w[c], dw[c] = w[p], dw[p]
-            a[c] = point_acc(p, org[c])
+            w[:, c], dw[:, c] = w[:, p], dw[:, p]
+            a[:, c] = point_acc(p, org[:, c])
 
+    bodies = dict(robot.inertials)
+    for name, extra in (payload or {}).items():
+        if name not in kin.link_index:
+            raise InputError(f"payload: '{name}' is not a link of {robot.name}")
+        bodies[name] = combine_inertials(bodies[name], extra) if name in bodies else extra
     # Each link's own inertial force (at its COM) and moment about the COM.
-    force = np.zeros((n_links, 3))
-    moment = np.zeros((n_links, 3))  # about the link's pivot, filled below
+    force = np.zeros((n, n_links, 3))
+    moment = np.zeros((n, n_links, 3))
     com = org.copy()
-    for name, inertial in robot.inertials.items():
+    for name, inertial in bodies.items():
         k = kin.link_index.get(name)
         if k is None:
             continue
-        rot = frames[k, :3, :3]
-        com[k] = org[k] + rot @ inertial.com
-        inertia = rot @ inertial.inertia @ rot.T
-        force[k] = inertial.mass * point_acc(k, com[k])
-        moment[k] = inertia @ dw[k] + np.cross(w[k], inertia @ w[k])
+        rot = frames[:, k, :3, :3]
+        com[:, k] = org[:, k] + rot @ inertial.com
+        inertia = rot @ inertial.inertia @ np.swapaxes(rot, 1, 2)
+        iw = np.einsum("nij,nj->ni", inertia, w[:, k])
+        force[:, k] = inertial.mass * point_acc(k, com[:, k])
+        moment[:, k] = np.einsum("nij,nj->ni", inertia, dw[:, k]) + np.cross(w[:, k], iw)
 
     # Backward pass: subtree force and its moment about each joint's pivot.
     f_sub = force.copy()
-    n_sub = np.zeros((n_links, 3))  # moment of the subtree about the pivot of the joint above the link
-    tau = np.zeros(robot.dof)
-    for j in range(len(robot.joints) - 1, -1, -1):
+    n_sub = np.zeros((n, n_links, 3))  # moment of the subtree about the pivot of the joint above the link
+    tau = np.zeros((n, robot.dof))
+    for j in range(n_joints - 1, -1, -1):
         joint = robot.joints[j]
         c = kin._child[j]
-        n_sub[c] += moment[c] + np.cross(com[c] - pivots[j], force[c])
+        n_sub[:, c] += moment[:, c] + np.cross(com[:, c] - pivots[:, j], force[:, c])
         p = kin._parent[j]
         if kin._qidx[j] >= 0:
-            tau[kin._qidx[j]] = float(np.dot(axes[j], n_sub[c] if joint.kind == "revolute" else f_sub[c]))
+            tau[:, kin._qidx[j]] = np.einsum("ni,ni->n", axes[:, j], n_sub[:, c] if joint.kind == "revolute" else f_sub[:, c])
         # hand the subtree's wrench to the parent, as a moment about the parent's own pivot
         jp = kin._child.index(p) if p != 0 else None
-        pivot_p = pivots[jp] if jp is not None else np.zeros(3)
-        f_sub[p] += f_sub[c]
-        n_sub[p] += n_sub[c] + np.cross(pivots[j] - pivot_p, f_sub[c])
-    return tau
+        pivot_p = pivots[:, jp] if jp is not None else np.zeros(3)
+        f_sub[:, p] += f_sub[:, c]
+        n_sub[:, p] += n_sub[:, c] + np.cross(pivots[:, j] - pivot_p, f_sub[:, c])
+    return tau[0] if single else tau
 
 
 def mass_matrix(robot: Robot, q) -> np.ndarray:
@@ -147,3 +197,20 @@ def gravity_vector(robot: Robot, q, *, gravity: float = GRAVITY) -> np.ndarray:
 def coriolis_vector(robot: Robot, q, qd) -> np.ndarray:
     """Centrifugal and Coriolis torques C(q, qd) qd, (dof,) (N m)."""
     return inverse_dynamics(robot, q, qd, np.zeros(robot.dof), gravity=0.0)
+
+
+def solid_inertia(shape: str, mass: float, size=(0.0, 0.0, 0.0), radius: float = 0.0, length: float = 0.0) -> np.ndarray:
+    """(3, 3) inertia (kg m^2) of a uniform solid about its centre, in its own axes.
+
+    box ``size`` (x, y, z) m: m/12 (y^2 + z^2, x^2 + z^2, x^2 + y^2); cylinder along z:
+    m (3 r^2 + l^2)/12 about x and y, m r^2/2 about z; sphere: 2/5 m r^2.
+    """
+    if shape == "box":
+        x, y, z = (float(v) for v in size)
+        return mass / 12.0 * np.diag([y * y + z * z, x * x + z * z, x * x + y * y])
+    if shape == "cylinder":
+        side = mass * (3 * radius**2 + length**2) / 12.0
+        return np.diag([side, side, mass * radius**2 / 2.0])
+    if shape == "sphere":
+        return np.eye(3) * 0.4 * mass * radius**2
+    raise ValueError(f"unknown shape {shape!r}")

@@ -20,6 +20,8 @@ from roarmctl.robot.model import CollisionShape, Gripper, Inertial, Joint, Robot
 FORMAT = "roarmctl.robot/1"
 DEFAULT_VELOCITY = 1.0  # rad/s, used only where a description gives none
 DEFAULT_ACCELERATION = 2.0  # rad/s^2
+# Where a description gives no jerk limit: the acceleration may rise from zero to its limit in 0.1 s.
+DEFAULT_JERK_PER_ACCELERATION = 10.0  # 1/s
 
 
 def bundled_dir() -> Path:
@@ -117,7 +119,8 @@ def _per_joint(data: dict, key: str, names: list[str], default: np.ndarray, wher
     raise DescriptionError(f"{where}.{key}: expected a list or a mapping joint -> value")
 
 
-def _common(data: dict, path: Path, names: list[str], velocity: np.ndarray, acceleration: np.ndarray) -> dict:
+def _common(data: dict, path: Path, names: list[str], velocity: np.ndarray, acceleration: np.ndarray,
+            effort: np.ndarray | None = None) -> dict:
     """Sidecar fields shared by the URDF and DH formats."""
     where = str(path)
     limits = data.get("limits", {}) or {}
@@ -125,6 +128,9 @@ def _common(data: dict, path: Path, names: list[str], velocity: np.ndarray, acce
         raise DescriptionError(f"{where}: limits: expected a mapping with 'velocity' and 'acceleration'")
     vel = _per_joint(limits, "velocity", names, velocity, f"{where}: limits")
     acc = _per_joint(limits, "acceleration", names, acceleration, f"{where}: limits")
+    jerk = _per_joint(limits, "jerk", names, acc * DEFAULT_JERK_PER_ACCELERATION, f"{where}: limits")
+    # N m (N for prismatic joints); inf where neither the sidecar nor the URDF gives one
+    eff = _per_joint(limits, "effort", names, np.full(len(names), np.inf) if effort is None else effort, f"{where}: limits")
     gripper = None
     if data.get("gripper") is not None:
         g = data["gripper"]
@@ -154,7 +160,7 @@ def _common(data: dict, path: Path, names: list[str], velocity: np.ndarray, acce
         if not isinstance(pair, list) or len(pair) != 2:
             raise DescriptionError(f"{where}: allowed_collisions[{i}]: expected a pair of link names")
         allowed.add(frozenset(str(p) for p in pair))
-    return dict(velocity_limits=vel, acceleration_limits=acc, gripper=gripper, named_poses=poses, wire=wire,
+    return dict(velocity_limits=vel, acceleration_limits=acc, jerk_limits=jerk, effort_limits=eff, gripper=gripper, named_poses=poses, wire=wire,
                 allowed_collisions=allowed, singularity_model=data.get("singularity_model"),
                 description=str(data.get("description", "")), frames=_frames(data, where))
 
@@ -258,11 +264,13 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     for n in names:
         if n not in actuated:
             raise DescriptionError(f"{sidecar}: joints: '{n}' is not a movable joint of {urdf.name}")
-    urdf_vel = []
+    urdf_vel, urdf_eff = [], []
     for n in names:
         lim = next(j for j in joints_xml if j.get("name") == n).find("limit")
         v = _fattr(lim, "velocity", 0.0, f"{urdf}: joint '{n}' limit")
         urdf_vel.append(v if v > 0 else DEFAULT_VELOCITY)
+        e = _fattr(lim, "effort", 0.0, f"{urdf}: joint '{n}' limit")
+        urdf_eff.append(e if e > 0 else np.inf)  # URDF effort 0 means unset
     by_name = {j.name: j for j in ordered}
     inertials, shapes = {}, []
     for lname, l in links.items():
@@ -281,7 +289,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     tcp = side.get("tcp_link", ordered[-1].child)
     if tcp not in links:
         raise DescriptionError(f"{sidecar}: tcp_link: '{tcp}' is not a link of {urdf.name}")
-    common = _common(side, sidecar, names, np.array(urdf_vel), np.full(len(names), DEFAULT_ACCELERATION))
+    common = _common(side, sidecar, names, np.array(urdf_vel), np.full(len(names), DEFAULT_ACCELERATION), np.array(urdf_eff))
     return Robot(
         name=str(side.get("name", root.get("name", urdf.stem))),
         source=str(side.get("source", urdf.name)),
@@ -412,7 +420,7 @@ def _from_dh(path: Path, data: dict) -> Robot:
     vel_default = np.full(len(names), DEFAULT_VELOCITY)
     common = _common(data, path, names, vel_default, np.full(len(names), DEFAULT_ACCELERATION))
     if deg:
-        for key in ("velocity_limits", "acceleration_limits"):
+        for key in ("velocity_limits", "acceleration_limits", "jerk_limits"):
             if (data.get("limits") or {}).get(key.split("_")[0]) is not None:
                 common[key] = np.radians(common[key])
         common["named_poses"] = {k: np.radians(v) for k, v in common["named_poses"].items()}

@@ -134,6 +134,8 @@ class Robot:
     upper: np.ndarray
     velocity_limits: np.ndarray
     acceleration_limits: np.ndarray
+    jerk_limits: np.ndarray | None = None  # rad/s^3 (m/s^3), (dof,); None: no jerk bound
+    effort_limits: np.ndarray | None = None  # N m (N), (dof,); inf: unlimited; the torques timing may use
     inertials: dict[str, Inertial] = field(default_factory=dict)
     collision: list[CollisionShape] = field(default_factory=list)
     allowed_collisions: set[frozenset[str]] = field(default_factory=set)
