@@ -65,6 +65,42 @@ class DeviceError(RoarmError):
 
 
 class Interrupted(RoarmError):
-    """The user pressed Ctrl-C; raised after the arm was told to hold (exit 130)."""
+    """Ctrl-C, SIGTERM or SIGHUP stopped the run; raised after the arm was told to hold.
+
+    Exit code 128 + the signal number, as shells report it: 130 (SIGINT), 143 (SIGTERM), 129 (SIGHUP).
+    """
 
     exit_code = 130
+
+    def __init__(self, message: str, hint: str | None = None, signum: int = 2) -> None:
+        super().__init__(message, hint)
+        self.signum = signum
+        self.exit_code = 128 + signum
+
+
+class StopRequested(KeyboardInterrupt):
+    """A stop signal turned into an exception (by ``roarmctl.cli.signals``); ``signum`` says which.
+
+    A ``KeyboardInterrupt``, so every ``except KeyboardInterrupt``/``finally`` runs as for Ctrl-C.
+    """
+
+    def __init__(self, signum: int = 2) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+    @property
+    def what(self) -> str:
+        """'Ctrl-C', 'SIGTERM', 'SIGHUP' (for messages)."""
+        return signal_name(self.signum)
+
+
+def signal_name(signum: int) -> str:
+    """'Ctrl-C' for SIGINT, else the signal's name ('SIGTERM', 'SIGHUP')."""
+    import signal
+
+    if signum == signal.SIGINT:
+        return "Ctrl-C"
+    try:
+        return signal.Signals(signum).name
+    except ValueError:
+        return f"signal {signum}"

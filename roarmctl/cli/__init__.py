@@ -62,7 +62,32 @@ export_cmd.register(app)
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Console entry point: run the app, turn library errors into one line and an exit code."""
+    """Console entry point: run the app, turn library errors into one line and an exit code.
+
+    SIGINT, SIGTERM and SIGHUP stop a command cleanly (``roarmctl.cli.signals``): exit 130, 143, 129.
+    """
+    from roarmctl.cli import signals
+
+    # run as the program (no argv): once stopping, stay deaf to further signals until the exit
+    with signals.installed(keep_after_stop=argv is None) as guard:
+        code = _run(argv, guard)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if "ompl" in sys.modules and argv is None:
+        # OMPL's nanobind bindings print leak warnings at interpreter exit; skip the teardown
+        # (only as the console script: a caller passing argv, such as a test, keeps its process).
+        os._exit(code)
+    sys.exit(code)
+
+
+def _stop_line(signum: int) -> str:
+    from roarmctl.errors import signal_name
+
+    return "interrupted" if signum == 2 else f"terminated by {signal_name(signum)}"
+
+
+def _run(argv: list[str] | None, guard) -> int:
+    from roarmctl.cli.signals import exit_code
     from roarmctl.errors import RoarmError
 
     code = 0
@@ -70,21 +95,29 @@ def main(argv: list[str] | None = None) -> None:
         # Without standalone mode typer *returns* the exit code of typer.Exit, and turns Ctrl-C
         # (KeyboardInterrupt) into Exit(130) that is returned too: keep both.
         returned = app(args=argv, standalone_mode=False)
+        guard.live = False
         if isinstance(returned, int) and not isinstance(returned, bool):
             code = returned
             if code == 130:
-                common.error("interrupted", "nothing was written")
+                signum = guard.first or 2
+                common.error(_stop_line(signum), "nothing was written")
+                code = exit_code(signum)
     except RoarmError as exc:
+        guard.live = False
         if common.STATE.debug:
             traceback.print_exc()
         common.error(exc.message, exc.hint)
         code = exc.exit_code
-    except KeyboardInterrupt:
-        common.error("interrupted")
-        code = 130
+    except KeyboardInterrupt as exc:
+        guard.live = False
+        signum = getattr(exc, "signum", None) or guard.first or 2
+        common.error(_stop_line(signum))
+        code = exit_code(signum)
     except SystemExit as exc:  # typer.Exit raised inside a command
+        guard.live = False
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
     except Exception as exc:  # noqa: BLE001 - the last line of defence: a bug
+        guard.live = False
         try:
             from click import ClickException
         except ImportError:  # typer >= 0.2x vendors click as typer._click and no longer installs it
@@ -106,10 +139,8 @@ def main(argv: list[str] | None = None) -> None:
                 traceback.print_exc()
             common.error(f"internal error: {type(exc).__name__}: {exc}", f"this is a bug; the traceback is in {log}")
             code = 1
-    sys.stdout.flush()
-    sys.stderr.flush()
-    if "ompl" in sys.modules and argv is None:
-        # OMPL's nanobind bindings print leak warnings at interpreter exit; skip the teardown
-        # (only as the console script: a caller passing argv, such as a test, keeps its process).
-        os._exit(code)
-    sys.exit(code)
+    if code == 0 and guard.received and not guard.raised:
+        # a signal arrived while the command was finishing its cleanup: it finished, but say so
+        code = exit_code(guard.first)
+        common.error(_stop_line(guard.first), "the command had finished its work")
+    return code

@@ -92,9 +92,10 @@ def _write_output(path: Path, schedule) -> None:
 
 
 def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path: Path, json_out: bool) -> None:
+    from roarmctl.cli import signals
     from roarmctl.device.link import Link
     from roarmctl.device.streamer import Streamer, write_log
-    from roarmctl.errors import RoarmError
+    from roarmctl.errors import InputError, RoarmError
 
     simulator = None
     if sim:
@@ -112,34 +113,40 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
         return typer.confirm(message, default=False, err=True)
 
     link = Link(port)
-    streamer = None
+    # Built before the port opens (the schedule is pure), so that every way out has a log.
+    streamer = Streamer(link, robot, traj, cfg, on_status=live.update if live else None, confirm=confirm,
+                        on_start=live.start if live else None)
     result = None
     try:
         link.open()
         link.handshake()
-        streamer = Streamer(link, robot, traj, cfg, on_status=live.update if live else None, confirm=confirm,
-                            on_start=live.start if live else None)
         try:
             result = streamer.run()
         finally:
             if live:
                 live.stop()
     except RoarmError as exc:
-        result = getattr(exc, "result", None)
+        result = getattr(exc, "result", None) or streamer.result("failed", f"{exc.message}; no motion command was sent")
+        raise
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP while opening or in the handshake
+        from roarmctl.errors import signal_name
+
+        signum = getattr(exc, "signum", 2)
+        result = streamer.result("interrupted" if signum == 2 else "terminated",
+                                 f"stopped by {signal_name(signum)} before streaming (no motion command sent)")
         raise
     finally:
-        link.close()
-        if streamer is not None and result is None:
-            result = streamer.result("failed", "stopped before streaming")
-        if simulator is not None:
-            if result is not None:
+        with signals.shielded():  # a signal now must not cut the port's close or the log short
+            link.close()
+            if result is None:
+                result = streamer.result("failed", "stopped before streaming (no motion command sent)")
+            if simulator is not None:
                 result.log["simulator"] = _sim_tracking(simulator, robot, traj, cfg, result)
-            simulator.stop()
-        if result is not None:
+                simulator.stop()
             try:
                 write_log(log_path, result.log)
-            except OSError as exc:
-                common.warn(f"could not write the execution log {log_path} ({exc.strerror}); pass --log FILE")
+            except (OSError, InputError) as exc:
+                common.warn(f"could not write the execution log {log_path} ({getattr(exc, 'strerror', None) or exc}); pass --log FILE")
     summary = result.summary() | {"log": str(log_path)}
     if simulator is not None:
         summary["simulator"] = result.log["simulator"]
@@ -238,23 +245,24 @@ def sim_device(
     if info_print not in (0, 1, 2):
         raise InputError("--info-print: must be 0, 1 or 2")
     simulator = PtySimulator(SimConfig(firmware=firmware, info_print=info_print, boot=boot)).start()
-    path = simulator.path
-    if link is not None:
-        try:
-            if link.is_symlink():
-                link.unlink()
-            link.symlink_to(simulator.path)
-            path = str(link)
-        except OSError as exc:
-            simulator.stop()
-            raise InputError(f"--link: cannot create {link} ({exc.strerror})") from None
-    if json_out:
-        common.print_json({"port": path, "pty": simulator.path, "firmware": firmware})
-    else:
-        print(path)
-        common.console(stderr=True).print(f"simulating RoArm-M3 firmware {firmware} on {simulator.path}; Ctrl-C to stop")
-    sys.stdout.flush()
-    try:
+    made_link = False
+    try:  # Ctrl-C, SIGTERM and SIGHUP (roarmctl.cli.signals) end it the same way: exit 0, link removed
+        path = simulator.path
+        if link is not None:
+            try:
+                if link.is_symlink():
+                    link.unlink()
+                link.symlink_to(simulator.path)
+                made_link = True
+                path = str(link)
+            except OSError as exc:
+                raise InputError(f"--link: cannot create {link} ({exc.strerror})") from None
+        if json_out:
+            common.print_json({"port": path, "pty": simulator.path, "firmware": firmware})
+        else:
+            print(path)
+            common.console(stderr=True).print(f"simulating RoArm-M3 firmware {firmware} on {simulator.path}; Ctrl-C to stop")
+        sys.stdout.flush()
         while simulator._thread.is_alive():
             simulator._thread.join(0.5)
         if simulator.error is not None:
@@ -262,9 +270,12 @@ def sim_device(
     except KeyboardInterrupt:
         pass
     finally:
-        simulator.stop()
-        if link is not None and link.is_symlink():
-            link.unlink()
+        from roarmctl.cli import signals
+
+        with signals.shielded():
+            simulator.stop()
+            if made_link and link.is_symlink():
+                link.unlink()
 
 
 # --------------------------------------------------------------------------- ports

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import gc
 import math
+import signal
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +31,7 @@ import numpy as np
 
 from roarmctl.device import protocol
 from roarmctl.device.protocol import WireMap, acc_register, spd_register, wire_seconds
-from roarmctl.errors import DeviceError, InfeasibleError, InputError, Interrupted
+from roarmctl.errors import DeviceError, InfeasibleError, InputError, Interrupted, signal_name
 
 MAX_LINK_RATE = 90.0  # T:102 lines/s the 115200 link can carry at all (about 10.4 ms each)
 DEFAULT_RATE = 50.0
@@ -349,30 +350,38 @@ class Streamer:
     # ------------------------------------------------------------------ run
     def run(self) -> Result:
         """Check the start, confirm, stream, settle. Raises Interrupted/DeviceError/InfeasibleError
-        after holding; the Result (also on failure, as ``exc.result``) carries the log."""
-        self._check_start()
-        if self.confirm is not None and not self.confirm(
-                f"Execute {self.traj.duration / self.cfg.speed_scale:.2f} s of motion on {self.link.port}?"):
-            raise Interrupted("not confirmed; the arm did not move")
-        if self.on_start is not None:
-            self.on_start()
+        after holding; the Result (also on failure, as ``exc.result``) carries the log.
+
+        Any ``KeyboardInterrupt`` (Ctrl-C, or SIGTERM/SIGHUP as ``StopRequested``) from the start
+        check on, including a move to the start, makes the arm hold before ``Interrupted`` is raised.
+        """
         outcome, message, exc_out = "completed", "", None
-        # A full cyclic garbage collection in a process with many modules loaded can stall the
-        # schedule by tens of milliseconds; collect now and pause the collector while streaming.
         gc_was_enabled = gc.isenabled()
-        gc.collect()
-        gc.disable()
         try:
+            self._check_start()
+            if self.confirm is not None and not self.confirm(
+                    f"Execute {self.traj.duration / self.cfg.speed_scale:.2f} s of motion on {self.link.port}?"):
+                raise Interrupted("not confirmed; the arm did not move")
+            if self.on_start is not None:
+                self.on_start()
+            # A full cyclic garbage collection in a process with many modules loaded can stall the
+            # schedule by tens of milliseconds; collect now and pause the collector while streaming.
+            gc.collect()
+            gc.disable()
             self._stream()
             self._settle()
-        except KeyboardInterrupt:
-            outcome, message = "interrupted", "interrupted by Ctrl-C; the arm holds where it was"
-            exc_out = Interrupted(message)
+        except KeyboardInterrupt as exc:
+            signum = getattr(exc, "signum", signal.SIGINT)
+            what = signal_name(signum)
+            outcome = "interrupted" if signum == signal.SIGINT else "terminated"
+            message = f"{'interrupted by' if outcome == 'interrupted' else 'stopped by'} {what} {self._progress()}; " \
+                      "the arm holds where it was"
+            exc_out = Interrupted(message, signum=signum)
         except _Abort as exc:
             outcome, message = "aborted", str(exc)
             exc_out = DeviceError(message, "the arm holds where it was; check for a collision or a stalled joint")
         except DeviceError as exc:
-            outcome, message = "link_lost", exc.message
+            outcome, message = ("link_lost" if self.sent_lateness else "failed"), exc.message
             exc_out = DeviceError(exc.message, exc.hint)
         finally:
             if gc_was_enabled:
@@ -384,6 +393,14 @@ class Streamer:
             exc_out.result = result  # type: ignore[attr-defined]
             raise exc_out
         return result
+
+    def _progress(self) -> str:
+        """Where the run stopped, for the log's message: 'after 151 of 336 motion commands'."""
+        n = len(self.sent_lateness)
+        if n == 0:
+            return "before streaming (no motion command sent)" if "moved to the start first" not in self.notes \
+                else "before streaming"
+        return f"after {n} of {len(self.schedule)} motion commands"
 
     def _stream(self) -> None:
         link, sched = self.link, self.schedule
@@ -431,8 +448,22 @@ class Streamer:
             self.sleep(0.05)
 
     def _hold(self) -> None:
-        """Hold: T:102 at the last measured arm pose, gripper at its last command. Never torque off."""
+        """Hold: T:102 at the last measured arm pose, gripper at its last command. Never torque off.
+
+        A stop signal arriving during the hold (the first one raises ``KeyboardInterrupt``) does not
+        cut it short: the hold is sent again, and the run's outcome stays what it was.
+        """
         try:
+            self._hold_once()
+        except KeyboardInterrupt:
+            self.notes.append("a stop signal arrived during the hold; hold sent again")
+            self._hold_once()
+
+    def _hold_once(self) -> None:
+        try:
+            if getattr(self.link, "closed", False) or getattr(self.link, "ser", True) is None:
+                self.notes.append("hold not sent: the port was never opened")
+                return
             try:
                 fb = self.link.request_feedback(0.15)
                 if fb is not None:

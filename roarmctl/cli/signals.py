@@ -1,0 +1,102 @@
+"""SIGINT, SIGTERM and SIGHUP: one clean stop, whatever arrives and however often.
+
+``installed()`` (used by ``roarmctl.cli.main`` around every command) turns the *first* of these
+signals into ``StopRequested`` (a ``KeyboardInterrupt``), so every ``except KeyboardInterrupt`` /
+``finally`` in the library runs: the streamer holds the arm, ``fileio`` removes its temporary file,
+the execution log is written. Later signals are only recorded: a second Ctrl-C 10 ms after the first
+must not cut the hold or the log short, nor kill the process by the signal.
+
+``shielded()`` marks cleanup that must finish (closing the port, writing the log): a signal arriving
+inside is recorded and raised when the block ends, unless one was raised already.
+
+Exit codes follow the shells' convention 128 + signal number: 130 (SIGINT, Ctrl-C), 143 (SIGTERM),
+129 (SIGHUP).
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from contextlib import contextmanager
+from typing import Iterator
+
+from roarmctl.errors import StopRequested
+
+SIGNALS = tuple(s for s in (getattr(signal, "SIGINT", None), getattr(signal, "SIGTERM", None),
+                            getattr(signal, "SIGHUP", None)) if s is not None)
+
+
+class Guard:
+    """State of the installed handler: which signals arrived, whether one was raised, shielding depth."""
+
+    def __init__(self) -> None:
+        self.received: list[int] = []
+        self.raised = False
+        self.live = True  # False once the command has finished: record only
+        self.shield = 0
+
+    def handle(self, signum: int, frame) -> None:
+        self.received.append(signum)
+        if self.raised or not self.live or self.shield:
+            return
+        self.raised = True
+        raise StopRequested(signum)
+
+    @property
+    def first(self) -> int | None:
+        return self.received[0] if self.received else None
+
+
+_GUARD: Guard | None = None
+
+
+@contextmanager
+def installed(keep_after_stop: bool = False) -> Iterator[Guard]:
+    """Install the handlers for the duration of one command (main thread only; else a no-op guard).
+
+    ``keep_after_stop``: when a stop signal arrived, ignore these signals on the way out, so that one
+    more Ctrl-C while the process exits cannot kill it by the signal (its exit code stays 128 + N).
+    """
+    global _GUARD
+    guard = Guard()
+    if threading.current_thread() is not threading.main_thread():
+        yield guard
+        return
+    previous = {}
+    for s in SIGNALS:
+        try:
+            previous[s] = signal.signal(s, guard.handle)
+        except (OSError, ValueError):
+            pass
+    outer, _GUARD = _GUARD, guard
+    try:
+        yield guard
+    finally:
+        guard.live = False
+        _GUARD = outer
+        for s, h in previous.items():
+            # ignored at the OS level: the interpreter's own shutdown resets Python-level handlers
+            signal.signal(s, signal.SIG_IGN if (keep_after_stop and guard.received) else h)
+
+
+@contextmanager
+def shielded() -> Iterator[None]:
+    """Run a block that must complete (hold, port close, log write); re-raise a deferred signal after it."""
+    guard = _GUARD
+    if guard is None:
+        yield
+        return
+    guard.shield += 1
+    before = len(guard.received)
+    try:
+        yield
+    finally:
+        guard.shield -= 1
+    if not guard.shield and len(guard.received) > before and not guard.raised and guard.live:
+        guard.raised = True
+        raise StopRequested(guard.received[before])
+
+
+def exit_code(signum: int) -> int:
+    """128 + the signal number, as shells report a process stopped by that signal."""
+    return 128 + int(signum)
