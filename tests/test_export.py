@@ -230,3 +230,13 @@ def test_not_a_trajectory_is_exit_2(tmp_path, capsys):
     assert run_cli(["export", str(p), "-o", str(tmp_path / "x.mcap")]) == 2
     assert "neither" in capsys.readouterr().err
     assert not (tmp_path / "x.mcap").exists()
+
+
+def test_damaged_log_is_exit_2(demo, tmp_path, capsys):
+    _, _, log_path = demo
+    log = json.loads(log_path.read_text())
+    log["received"] = [{"feedback": {"T": 1051, "b": 0, "s": 0, "e": 1, "t": 0, "r": 0, "g": 3}}]  # no time
+    bad = tmp_path / "bad.exec.json"
+    bad.write_text(json.dumps(log))
+    assert run_cli(["export", str(bad), "-o", str(tmp_path / "bad.mcap")]) == 2
+    assert "malformed" in capsys.readouterr().err and not (tmp_path / "bad.mcap").exists()

@@ -8,7 +8,6 @@ Anything else is an input error (exit 2).
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Any
@@ -34,24 +33,21 @@ def format_for(path: str | os.PathLike) -> str:
 
 
 def load_source(path: str | os.PathLike) -> tuple[str, Any]:
-    """Read a ``*.traj.json`` (-> ('trajectory', Trajectory)) or an execution log (-> ('log', dict))."""
-    from roarmctl.motion.trajectory import FORMAT, load_trajectory
+    """Read a ``*.traj.json`` (-> ('trajectory', Trajectory), checked by the one trajectory validator)
+    or an execution log (-> ('log', dict))."""
+    from roarmctl.motion.trajectory import FORMAT
+    from roarmctl.motion.validate import read_document, validate_trajectory
 
     p = Path(path)
-    try:
-        data = json.loads(p.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{p}: no such file", "give a trajectory (.traj.json) or an execution log (.exec.json)") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise TrajectoryFileError(f"{p}: not a readable JSON file ({exc})", "give a trajectory or an execution log") from None
+    data = read_document(p)
     kind = data.get("format") if isinstance(data, dict) else None
     if kind == EXECLOG_FORMAT:
-        for key in ("robot", "sent", "received"):
-            if key not in data:
-                raise TrajectoryFileError(f"{p}: '{key}' is missing from the execution log")
+        for key, typ in (("robot", str), ("sent", list), ("received", list)):
+            if not isinstance(data.get(key), typ):
+                raise TrajectoryFileError(f"{p}: {key}: missing or malformed in the execution log", "export a log written by 'roarmctl execute'")
         return "log", data
     if kind == FORMAT:
-        return "trajectory", load_trajectory(p)
+        return "trajectory", validate_trajectory(data, where=str(p))
     raise TrajectoryFileError(f"{p}: format {kind!r} is neither '{FORMAT}' nor '{EXECLOG_FORMAT}'",
                               "give a file written by 'roarmctl plan' or 'roarmctl execute'")
 
@@ -59,13 +55,11 @@ def load_source(path: str | os.PathLike) -> tuple[str, Any]:
 def streams_for(source: str | os.PathLike):
     """The ``Streams`` of a trajectory or execution-log file (robot loaded by the name in the file)."""
     from roarmctl.export.streams import log_streams, trajectory_streams
-    from roarmctl.viz.data import robot_for
+    from roarmctl.robot.loader import load_robot
 
     kind, data = load_source(source)
     if kind == "trajectory":
-        return trajectory_streams(data, robot_for(data))
-    from roarmctl.robot.loader import load_robot
-
+        return trajectory_streams(data, load_robot(data.robot))
     return log_streams(data, load_robot(str(data["robot"])))
 
 

@@ -116,6 +116,17 @@ def trajectory_streams(traj: Trajectory, robot: Robot) -> Streams:
 
 
 def log_streams(log: dict[str, Any], robot: Robot) -> Streams:
+    """See ``_log_streams``; a malformed entry is an input error (exit 2), not a crash."""
+    from roarmctl.errors import TrajectoryFileError
+
+    try:
+        return _log_streams(log, robot)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise TrajectoryFileError(f"execution log: malformed entry ({type(exc).__name__}: {exc})",
+                                  "export a log written by 'roarmctl execute'") from None
+
+
+def _log_streams(log: dict[str, Any], robot: Robot) -> Streams:
     """An execution log (``roarmctl.execlog/1``): commanded joints (every T:102 / T:101 sent) and
     measured joints (every T:1051 feedback received), converted from wire values with the robot's
     wire map. Times are s after the log's start of motion (negative before it)."""
