@@ -44,13 +44,13 @@ CASES = [
     # (old text, new text, line marker, expected fragments)
     ("approach_height: 0.06, pitch: {deg: 90}, gripper_open: 1.0, gripper_closed",
      "aproach_height: 0.06, pitch: {deg: 90}, gripper_open: 1.0, gripper_closed",
-     "aproach_height", ["tasks[0].pick.aproach_height", "unknown key", "did you mean 'approach_height'"]),
-    ("{object: cube, approach", "{object: cub, approach", "object: cub,", ["tasks[0].pick.object", "no object named 'cub'"]),
+     "aproach_height", ["task 1: pick.aproach_height", "unknown key", "did you mean 'approach_height'"]),
+    ("{object: cube, approach", "{object: cub, approach", "object: cub,", ["task 1: pick.object", "no object named 'cub'"]),
     ("velocity_scale: 0.6", "velocity_scale: 1.6", "velocity_scale", ["limits.velocity_scale", "too large"]),
     ("name: RRTConnect", "name: RRTconnect", "RRTconnect", ["planner.name", "did you mean 'RRTConnect'"]),
     ("size: [0.04, 0.04, 0.04]", "size: [0.04, 0.04]", "size: [0.04, 0.04]", ["objects[0].size", "list of 3 numbers"]),
-    ("xyz: [0.25, 0.15, 0.02]", "xyz: [0.25, 0.15, high]", "high", ["tasks[1].place.xyz[2]", "expected a number"]),
-    ("{pose: home}", "{pose: hom}", "pose: hom", ["tasks[2].move.pose", "did you mean 'home'"]),
+    ("xyz: [0.25, 0.15, 0.02]", "xyz: [0.25, 0.15, high]", "high", ["task 2: place.xyz[2]", "expected a number"]),
+    ("{pose: home}", "{pose: hom}", "pose: hom", ["task 3: move.pose", "did you mean 'home'"]),
     ("  - move:  {pose: home}", "  - mvoe:  {pose: home}", "mvoe", ["unknown task 'mvoe'", "did you mean 'move'"]),
     ("seed: 1", "seed: -1", "seed: -1", ["planner.seed", "whole number"]),
     ("shape: box, size: [0.04", "shape: cube, size: [0.04", "shape: cube", ["objects[0].shape", "'cube' is not one of"]),
@@ -95,3 +95,29 @@ def test_cli_reports_one_line_and_exit_2_without_traceback(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("error: ") and "limits.velocity_scal" in lines[0]
     assert "Traceback" not in proc.stderr
     assert not out.exists()
+
+
+def test_yaml_merge_keys_and_x_anchors(tmp_path):
+    """`<<: *name` merges a mapping (keys written beside it win); top-level `x-` keys hold anchors."""
+    p = tmp_path / "merge.yaml"
+    p.write_text(
+        "robot: roarm_m3_pro\n"
+        "x-grip: &grip {approach_height: 0.05, pitch: {deg: 80}, gripper_open: 1.1}\n"
+        "objects:\n"
+        "  - {name: cube, shape: box, size: [0.04, 0.04, 0.04], xyz: [0.25, -0.15, 0.02]}\n"
+        "tasks:\n"
+        "  - pick: {<<: *grip, object: cube}\n"
+        "  - place: {<<: *grip, xyz: [0.25, 0.15, 0.02], approach_height: 0.07}\n")
+    pick, place = load_plan(p).tasks
+    assert pick.approach_height == 0.05 and pick.gripper_open == 1.1 and pick.pitch == pytest.approx(math.radians(80))
+    assert place.approach_height == 0.07 and place.gripper_open == 1.1  # the explicit key overrides the merge
+    p.write_text(p.read_text().replace("gripper_open: 1.1}", "gripper_opn: 1.1}"))
+    with pytest.raises(PlanFileError, match=r"merge.yaml:2: task 1: pick.gripper_opn: unknown key"):
+        load_plan(p)
+
+
+def test_plan_from_a_dict_names_the_task_from_1():
+    d = {"robot": "roarm_m3_pro", "tasks": [{"wait": 0.5}, {"move": {"pose": "home", "xyz": [0, 0, 0]}}]}
+    with pytest.raises(PlanFileError, match=r"^<plan dict>: task 2: move: give exactly one"):
+        load_plan(d)
+    assert load_plan({"robot": "roarm_m3_pro", "tasks": [{"wait": 0.5}]}).tasks[0].seconds == 0.5

@@ -73,15 +73,17 @@ class _Timer:
         self.t[key] = self.t.get(key, 0.0) + time.perf_counter() - since
 
 
-def plan_file(path: str | Path, seed: int | None = None, progress: ProgressFn | None = None) -> PlanResult:
-    """Load the plan at ``path`` and plan it (``seed`` overrides ``planner.seed``)."""
+def plan_file(path: str | Path | dict, seed: int | None = None, progress: ProgressFn | None = None,
+              base_dir: str | Path | None = None) -> PlanResult:
+    """Load the plan at ``path`` (or a plan dict of the same form) and plan it (``seed`` overrides
+    ``planner.seed``; ``base_dir`` resolves a dict's relative robot path)."""
     from roarmctl.robot.loader import load_robot
 
-    path = Path(path)
-    plan = load_plan(path)  # form first, so typos are reported before anything heavy
+    path = path if isinstance(path, dict) else Path(path)
+    plan = load_plan(path, base_dir=base_dir)  # form first, so typos are reported before anything heavy
     load_planning_libraries()
     robot = load_robot(_robot_spec(plan))
-    plan = load_plan(path, named_poses=list(robot.named_poses))
+    plan = load_plan(path, named_poses=list(robot.named_poses), base_dir=base_dir)
     if seed is not None:
         plan.planner.seed = seed
     return Planner(plan, robot, progress).run()

@@ -16,9 +16,10 @@ from typing import Any
 import numpy as np
 
 from roarmctl.errors import PlanFileError
-from roarmctl.plan.yamlsrc import LocatedDict, LocatedList, load_located
+from roarmctl.plan.yamlsrc import LocatedDict, LocatedList, load_located, locate
 from roarmctl.robot.model import transform
 
+DICT_NAME = "<plan dict>"  # stands for the file name in errors about a plan given as a dict
 PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
 SHAPES = ("box", "cylinder", "sphere")
 
@@ -127,7 +128,8 @@ class _Ctx:
         self.path = path
 
     def fail(self, line: int, field_path: str, message: str, hint: str | None = None):
-        raise PlanFileError(f"{self.path}:{line}: {field_path}: {message}", hint)
+        where = DICT_NAME if self.path.name == DICT_NAME else f"{self.path}:{line}"
+        raise PlanFileError(f"{where}: {field_path or 'plan'}: {message}", hint)
 
     def mapping(self, value: Any, line: int, where: str, allowed: tuple[str, ...], required: tuple[str, ...] = ()) -> LocatedDict:
         if not isinstance(value, dict):
@@ -238,7 +240,7 @@ def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpe
         ctx.fail(line, where, "each task is one of 'pick: {...}', 'place: {...}', 'move: {...}', 'wait: seconds'")
     (kind, body), = raw.items()
     bline = raw.line_of(kind)
-    w = f"{where}.{kind}"
+    w = f"{where}: {kind}"  # "task 2: place.xyz": tasks count from 1 in every message, as in planning errors
     if kind == "wait":
         secs = body.get("seconds") if isinstance(body, dict) else body
         return WaitTask(ctx.number(secs, bline, w, lo=0.0), line=bline)
@@ -303,14 +305,28 @@ def _common_grasp(ctx: _Ctx, d: LocatedDict, w: str, t: Any) -> None:
 TOP_KEYS = ("robot", "start", "scene", "objects", "tasks", "cycles", "limits", "planner")
 
 
-def load_plan(path: str | Path, named_poses: list[str] | None = None) -> Plan:
-    """Read and validate a plan file. ``named_poses``, when given, are the robot's pose names
-    (for checking ``start`` and ``move: {pose}``); the pipeline passes them after loading the robot.
+def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, base_dir: str | Path | None = None) -> Plan:
+    """Read and validate a plan: a YAML file path, or a dict of the same form (built in code).
+
+    ``named_poses``, when given, are the robot's pose names (for checking ``start`` and
+    ``move: {pose}``); the pipeline passes them after loading the robot. For a dict, errors name
+    ``<plan dict>`` instead of a file and line, and a relative ``robot`` path is taken from
+    ``base_dir`` (default: the current directory).
     """
-    path = Path(path)
-    raw = load_located(path)
+    if isinstance(source, dict):
+        import json
+
+        raw = locate(source)
+        path = Path(base_dir or ".") / DICT_NAME
+        canonical = json.dumps(raw, sort_keys=True, default=str).encode()
+    else:
+        path = Path(source)
+        raw = load_located(path)
+        canonical = None
     ctx = _Ctx(path)
-    top = ctx.mapping(raw, getattr(raw, "line", 1), "", TOP_KEYS, required=("robot", "tasks"))
+    # top-level keys starting with 'x-' are ignored: a place to define YAML anchors for '<<: *name'
+    extensions = tuple(k for k in raw if isinstance(k, str) and k.startswith("x-")) if isinstance(raw, dict) else ()
+    top = ctx.mapping(raw, getattr(raw, "line", 1), "", TOP_KEYS + extensions, required=("robot", "tasks"))
     robot = ctx.string(top["robot"], top.line_of("robot"), "robot")
 
     start: str | np.ndarray = "home"
@@ -351,7 +367,7 @@ def load_plan(path: str | Path, named_poses: list[str] | None = None) -> Plan:
     tasks_raw = top["tasks"]
     if not isinstance(tasks_raw, list) or not tasks_raw:
         ctx.fail(top.line_of("tasks"), "tasks", "expected a non-empty list of tasks")
-    tasks = [_task(ctx, t, tasks_raw.line_of(i), f"tasks[{i}]", by_object, named_poses) for i, t in enumerate(tasks_raw)]
+    tasks = [_task(ctx, t, tasks_raw.line_of(i), f"task {i + 1}", by_object, named_poses) for i, t in enumerate(tasks_raw)]
 
     cycles = 1
     if "cycles" in top:
@@ -394,6 +410,6 @@ def load_plan(path: str | Path, named_poses: list[str] | None = None) -> Plan:
         if "padding" in d:
             planner.padding = ctx.number(d["padding"], d.line_of("padding"), "planner.padding", lo=0.0, hi=0.05)
 
-    sha = hashlib.sha256(path.read_bytes()).hexdigest()
+    sha = hashlib.sha256(canonical if canonical is not None else path.read_bytes()).hexdigest()
     return Plan(path=path, sha256=sha, robot=robot, start=start, scene=scene, objects=objects, tasks=tasks,
                 cycles=cycles, limits=limits, planner=planner)
