@@ -76,7 +76,7 @@ def _load(path: Path):
 def visualize_path(
     source: Path = typer.Argument(..., help="Trajectory file (*.traj.json), or a plan file (.yaml) to plan first.",
                                   show_default=False),
-    output: Optional[Path] = typer.Option(None, "-o", "--output", help="PNG to write (default: next to SOURCE, same name, .png)."),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="Picture to write: .png, .svg or .pdf (default: next to SOURCE, same name, .png)."),
     view: str = typer.Option("iso", "--view", help="3D view: iso, top, front or side."),
     dpi: float = typer.Option(100.0, "--dpi", help="Pixels per inch of the PNG."),
     size: str = typer.Option("16x10", "--size", help="Sheet size WxH in inches (pixels = size x dpi)."),
@@ -88,10 +88,23 @@ def visualize_path(
         raise InputError(f"--view: '{view}' is not one of {', '.join(VIEW_NAMES)}")
     _check_dpi(dpi)
     figsize = parse_size(size, dpi)
-    traj = _load(source)
     out = output if output is not None else default_output(source)
+    from roarmctl.viz.formats import picture_format
+
+    picture_format(out)  # before any work: the extension decides png / svg / pdf
+    from roarmctl.errors import InfeasibleError
     from roarmctl.viz.path_figure import visualize_trajectory
 
+    try:
+        traj = _load(source)
+    except InfeasibleError as exc:
+        partial = getattr(exc, "partial", None)
+        if partial is None:
+            raise
+        # draw what was planned and mark the failing target, then fail with the planner's exit code
+        written = visualize_trajectory(partial.trajectory, out, view=view, dpi=dpi, size=figsize, name=source.name, failure=partial)
+        exc.hint = (f"{exc.hint}; " if exc.hint else "") + f"drawn up to the failure in {written}"
+        raise
     written = visualize_trajectory(traj, out, view=view, dpi=dpi, size=figsize, name=source.name)
     w, h = round(figsize[0] * dpi), round(figsize[1] * dpi)
     common.console().print(f"wrote {written} ({w} x {h} px)")
@@ -99,7 +112,7 @@ def visualize_path(
 
 def workspace(
     robot: str = typer.Argument(..., help="Bundled robot name or path to a description."),
-    output: Optional[Path] = typer.Option(None, "-o", "--output", help="PNG to write (default: ROBOT_workspace.png here)."),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="Picture to write: .png, .svg or .pdf (default: ROBOT_workspace.png here)."),
     samples: int = typer.Option(80000, "--samples", help="Random configurations to sample."),
     seed: int = typer.Option(0, "--seed", help="Random seed (the same seed draws the same picture)."),
     height: Optional[float] = typer.Option(None, "--height", help="Top map as a section at this z (m) instead of the footprint."),
@@ -119,6 +132,9 @@ def workspace(
     figsize = parse_size(size, dpi)
     r = load_robot(robot)
     out = output if output is not None else Path(f"{r.name}_workspace.png")
+    from roarmctl.viz.formats import picture_format
+
+    picture_format(out)
     from roarmctl.viz.workspace_figure import visualize_workspace
 
     written = visualize_workspace(r, out, samples=samples, seed=seed, measure=measure, height=height, dpi=dpi, size=figsize)

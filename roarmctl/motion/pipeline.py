@@ -48,6 +48,16 @@ class PlanResult:
 
 
 @dataclass
+class PartialPlan:
+    """Attached to an ``InfeasibleError`` from planning as ``exc.partial``: the ``trajectory`` planned
+    before the failing task, that task's TCP ``target`` (x, y, z m, None if it has none) and ``label``."""
+
+    trajectory: Trajectory
+    target: list[float] | None
+    label: str
+
+
+@dataclass
 class _Step:
     """One motion segment before timing."""
 
@@ -144,14 +154,39 @@ class Planner:
         timed: list[tuple[_Step, TimedPath]] = []
         for i, task in enumerate(tasks):
             self.progress(f"task {i + 1}/{len(tasks)}: {task.kind} (IK)", i, len(tasks))
-            for step in self._expand(task, q, i):
-                self.progress(step.label, i, len(tasks))
-                tp = self._realise(step, q)
-                timed.append((step, tp))
-                q = tp.q[-1].copy()
+            try:
+                for step in self._expand(task, q, i):
+                    self.progress(step.label, i, len(tasks))
+                    tp = self._realise(step, q)
+                    timed.append((step, tp))
+                    q = tp.q[-1].copy()
+            except InfeasibleError as exc:
+                exc.partial = self._partial(timed, q, task, i)  # what was planned, for visualize-path
+                raise
         self.progress("done", len(tasks), len(tasks))
         traj = self._assemble(timed)
         return PlanResult(traj, dict(self.timer.t), self.warnings, len(timed), int(getattr(self.checker, "check_count", 0)))
+
+    def _partial(self, timed: list[tuple[_Step, TimedPath]], q: np.ndarray, task, index: int) -> PartialPlan:
+        """The trajectory up to the failing task (just the start pose if it is the first) and its target."""
+        if not timed:
+            z = np.zeros((1, len(q)))
+            timed = [(_Step("wait", "start"), TimedPath(np.zeros(1), q[None, :].copy(), z, z.copy()))]
+        target = None
+        if isinstance(task, PickTask):
+            target = self.object_pose[task.object][:3, 3] + np.array([0.0, 0.0, task.grasp_offset])
+        elif isinstance(task, PlaceTask):
+            target = np.asarray(task.xyz, dtype=float)
+        elif isinstance(task, MoveTask) and task.xyz is not None:
+            target = np.asarray(task.xyz, dtype=float)
+        elif isinstance(task, MoveTask):
+            goal = self.robot.named_poses.get(task.pose) if task.pose is not None else task.joints
+            try:
+                target = self.robot.kin.fk(self.robot.full_q(goal))[:3, 3] if goal is not None else None
+            except Exception:  # noqa: BLE001 - a goal of the wrong length has no target to mark
+                target = None
+        return PartialPlan(self._assemble(timed), None if target is None else [float(v) for v in target],
+                           self._where(task, index))
 
     def _start_configuration(self) -> np.ndarray:
         s = self.plan.start

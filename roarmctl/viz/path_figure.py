@@ -29,8 +29,8 @@ ROLE_STYLE = {
     "object": dict(facecolor=(0.15, 0.45, 0.85, 0.55), edgecolor=(0.05, 0.25, 0.60, 0.9), linewidth=0.7),
 }
 RC = {"grid.linewidth": 0.5, "grid.color": "0.88", "axes3d.grid": True}
-EVENT_COLOR = {"grasp": "#1b9e3a", "release": "#8e44ad"}
-EVENT_MARKER = {"grasp": "v", "release": "^"}
+EVENT_COLOR = {"grasp": "#1b9e3a", "release": "#8e44ad", "failed": "#d62728"}
+EVENT_MARKER = {"grasp": "v", "release": "^", "failed": "X"}
 PLACED_STYLE = dict(facecolor=(0.15, 0.45, 0.85, 0.10), edgecolor=(0.05, 0.25, 0.60, 0.8), linewidth=0.8, linestyle="--")
 ARM_COLOR = "0.35"
 PATH_CMAP = "viridis"
@@ -329,10 +329,12 @@ def _draw_right(fig: Figure, gs, data: PathData, norm, cmap, title: str, subtitl
 
 
 def save_png(fig: Figure, path: str | Path, dpi: float) -> Path:
-    """Write ``fig`` as PNG atomically (temporary file, then rename)."""
+    """Write ``fig`` atomically (temporary file, then rename) as PNG, SVG or PDF, by ``path``'s extension."""
     from roarmctl.fileio import atomic_write_with
+    from roarmctl.viz.formats import picture_format
 
-    return atomic_write_with(path, lambda f: fig.savefig(f, format="png", dpi=dpi))
+    fmt = picture_format(path)
+    return atomic_write_with(path, lambda f: fig.savefig(f, format=fmt, dpi=dpi))
 
 
 def describe(data: PathData, name: str) -> tuple[str, str]:
@@ -346,11 +348,20 @@ def describe(data: PathData, name: str) -> tuple[str, str]:
 
 
 def visualize_trajectory(traj, out: str | Path, *, view: str = "iso", dpi: float = 100.0,
-                         size: tuple[float, float] = (16.0, 10.0), name: str | None = None) -> Path:
-    """Render ``traj`` (a ``Trajectory``) to the PNG ``out``; returns the path written."""
-    from roarmctl.viz.data import path_data, robot_for
+                         size: tuple[float, float] = (16.0, 10.0), name: str | None = None, failure=None) -> Path:
+    """Render ``traj`` (a ``Trajectory``) to ``out`` (.png, .svg or .pdf); returns the path written.
+
+    ``failure``: a ``motion.pipeline.PartialPlan`` when planning failed: ``traj`` is what was planned
+    before the failing task, whose target is marked with a red X and named in the title.
+    """
+    from roarmctl.viz.data import EventMark, path_data, robot_for
 
     data = path_data(traj, robot_for(traj))
     title, subtitle = describe(data, name or "trajectory")
+    if failure is not None:
+        if failure.target is not None:
+            data.events.append(EventMark(float(traj.duration), "failed", f"failed: {failure.label}",
+                                         np.asarray(failure.target, dtype=float), True))
+        title += f" — PLANNING FAILED at {failure.label}"
     fig = render_path(data, view=view, size=size, title=title, subtitle=subtitle)
     return save_png(fig, out, dpi)
