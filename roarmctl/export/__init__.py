@@ -32,12 +32,14 @@ def format_for(path: str | os.PathLike) -> str:
                      "use NAME.mcap (Foxglove), NAME.csv (spreadsheet) or a folder name without an extension (ROS 2 bag)")
 
 
-def load_source(path: str | os.PathLike) -> tuple[str, Any]:
+def load_source(path: str | os.PathLike | Any) -> tuple[str, Any]:
     """Read a ``*.traj.json`` (-> ('trajectory', Trajectory), checked by the one trajectory validator)
     or an execution log (-> ('log', dict))."""
-    from roarmctl.motion.trajectory import FORMAT
+    from roarmctl.motion.trajectory import FORMAT, Trajectory
     from roarmctl.motion.validate import read_document, validate_trajectory
 
+    if isinstance(path, Trajectory):  # in memory (the Python API)
+        return "trajectory", validate_trajectory(path)
     p = Path(path)
     data = read_document(p)
     kind = data.get("format") if isinstance(data, dict) else None
@@ -52,7 +54,7 @@ def load_source(path: str | os.PathLike) -> tuple[str, Any]:
                               "give a file written by 'roarmctl plan' or 'roarmctl execute'")
 
 
-def streams_for(source: str | os.PathLike):
+def streams_for(source: str | os.PathLike | Any):
     """The ``Streams`` of a trajectory or execution-log file (robot loaded by the name in the file)."""
     from roarmctl.export.streams import log_streams, trajectory_streams
     from roarmctl.robot.loader import load_robot
@@ -63,8 +65,8 @@ def streams_for(source: str | os.PathLike):
     return log_streams(data, load_robot(str(data["robot"])))
 
 
-def export(source: str | os.PathLike, path: str | os.PathLike, fmt: str | None = None) -> dict[str, Any]:
-    """Export the trajectory or execution log at ``source`` to ``path``; returns a summary
+def export(source: str | os.PathLike | Any, path: str | os.PathLike, fmt: str | None = None) -> dict[str, Any]:
+    """Export the trajectory or execution log at ``source`` (or a ``Trajectory``) to ``path``; returns a summary
     (``output``, ``format``, ``topics``: message count per topic, or ``rows`` for CSV)."""
     fmt = fmt or format_for(path)
     if fmt not in FORMATS:

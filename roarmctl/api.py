@@ -1,0 +1,197 @@
+"""The documented Python surface of roarmctl (see the README, "Python API").
+
+    import roarmctl.api as rc
+
+    robot = rc.load_robot("roarm_m3_pro")
+    result = rc.plan("plans/pick_place.yaml")          # or a dict of the same form
+    traj = result.trajectory
+    rc.save_trajectory(traj, "pick_place.traj.json")
+    q = rc.sample(traj, [0.0, 1.5])                    # (2, dof) joint positions, rad
+    msg = rc.to_joint_trajectory(traj)                 # a trajectory_msgs/JointTrajectory-shaped dict
+    summary = rc.execute(traj, sim=True)               # or port="/dev/ttyUSB0"
+    rc.draw(traj, "pick_place.png")                    # .png, .svg or .pdf
+    rc.export(traj, "pick_place.mcap")                 # .mcap, .csv or a bag folder name
+
+Everything raises ``roarmctl.errors.RoarmError`` subclasses on bad input or failure (each with an
+``exit_code`` and a one-line ``message``); nothing here prints or exits. Units: m, rad, s.
+Heavy libraries (OMPL, FCL, TOPP-RA, matplotlib, rosbags) are imported only by the functions that
+need them.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence, Union
+
+import numpy as np
+
+from roarmctl.errors import (  # noqa: F401 - re-exported for API users
+    DeviceError,
+    InfeasibleError,
+    InputError,
+    PlanFileError,
+    PlanningError,
+    RoarmError,
+    TrajectoryFileError,
+)
+from roarmctl.motion.trajectory import Event, Segment, Trajectory  # noqa: F401
+
+if TYPE_CHECKING:
+    from roarmctl.motion.pipeline import PlanResult
+    from roarmctl.robot.model import Robot
+
+PathLike = Union[str, "os.PathLike[str]"]
+TrajectoryLike = Union[Trajectory, PathLike]
+
+__all__ = [
+    "load_robot", "plan", "load_trajectory", "save_trajectory", "sample", "to_joint_trajectory",
+    "execute", "draw", "export", "Trajectory", "RoarmError",
+]
+
+
+def load_robot(spec: PathLike) -> "Robot":
+    """A bundled robot by name (``roarmctl robots`` lists them) or a description file (URDF sidecar
+    ``.yaml`` or DH table). The ``Robot`` offers ``robot.kin.fk(q)`` (4x4 TCP pose), ``robot.kin.jacobian(q)``
+    (6 x arm_dof), ``joint_names``, ``lower``/``upper`` limits (rad) and ``named_poses``."""
+    from roarmctl.robot.loader import load_robot as _load
+
+    return _load(str(spec))
+
+
+def plan(source: PathLike | Mapping[str, Any], *, seed: int | None = None, base_dir: PathLike | None = None,
+         progress: Callable[[str, int, int], None] | None = None) -> "PlanResult":
+    """Plan a pick/place plan: a YAML file path, or a dict of the same form (see the README, "The plan file").
+
+    ``seed`` overrides ``planner.seed`` (same seed, same trajectory); ``base_dir`` resolves a dict's
+    relative ``robot`` path; ``progress(stage, done, total)`` is called as tasks are planned.
+    Returns a ``PlanResult``: ``.trajectory`` (a ``Trajectory``), ``.timings`` (s per stage),
+    ``.warnings``, ``.segments``. Raises ``PlanFileError`` (exit 2) for a malformed plan and
+    ``InfeasibleError`` (exit 3) when it cannot be done; the latter carries ``.partial``, the
+    trajectory up to the failing task and its target.
+    """
+    from roarmctl.motion.pipeline import plan_file
+
+    if isinstance(source, Mapping):
+        return plan_file(dict(source), seed=seed, progress=progress, base_dir=base_dir)
+    return plan_file(Path(source), seed=seed, progress=progress)
+
+
+def load_trajectory(path: PathLike) -> Trajectory:
+    """Read a ``*.traj.json`` and check it against its robot (the validator ``execute`` uses): joint
+    names, limits, speeds and steps. Raises ``TrajectoryFileError`` (exit 2) naming the point and joint."""
+    from roarmctl.motion.validate import validate_trajectory
+
+    return validate_trajectory(Path(path))
+
+
+def save_trajectory(traj: Trajectory, path: PathLike) -> Path:
+    """Write ``traj`` as ``*.traj.json`` atomically; returns the path."""
+    return traj.save(path)
+
+
+def _trajectory(traj: TrajectoryLike) -> Trajectory:
+    return traj if isinstance(traj, Trajectory) else load_trajectory(traj)
+
+
+def sample(traj: Trajectory, t: float | Sequence[float] | np.ndarray) -> np.ndarray:
+    """Joint positions (rad) at time(s) ``t`` (s, clamped to [0, duration]): (dof,) for a scalar,
+    (M, dof) for M times. Cubic Hermite interpolation of the samples and their velocities, the
+    same interpolation the streamer uses to command the arm."""
+    from roarmctl.device.streamer import sample as _sample
+
+    return _sample(traj, t)
+
+
+def to_joint_trajectory(traj: Trajectory, frame_id: str = "") -> dict[str, Any]:
+    """``traj`` as a dict shaped like ROS 2 ``trajectory_msgs/msg/JointTrajectory``:
+    ``{"header": {"stamp": {"sec", "nanosec"}, "frame_id"}, "joint_names": [...], "points": [{"positions",
+    "velocities", "accelerations", "effort": [], "time_from_start": {"sec", "nanosec"}}, ...]}``.
+    Lists of floats, so ``json.dumps`` or a ROS 2 message constructor takes it as is."""
+    def duration(t: float) -> dict[str, int]:
+        ns = int(round(float(t) * 1e9))
+        return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
+
+    return {
+        "header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": frame_id},
+        "joint_names": list(traj.joint_names),
+        "points": [
+            {"positions": [float(v) for v in p], "velocities": [float(v) for v in v_],
+             "accelerations": [float(v) for v in a], "effort": [], "time_from_start": duration(t)}
+            for t, p, v_, a in zip(traj.times, traj.positions, traj.velocities, traj.accelerations)
+        ],
+    }
+
+
+def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False, rate: float = 50.0,
+            speed_scale: float = 1.0, move_to_start: bool = False, max_error: float = 0.03,
+            log: PathLike | None = None, confirm: Callable[[str], bool] | None = None) -> dict[str, Any]:
+    """Stream ``traj`` to the arm on ``port`` or to the built-in firmware simulator (``sim=True``,
+    over a real pseudo-terminal). Blocks until the motion is done (real time).
+
+    ``rate`` commands/s (at most 90), ``speed_scale`` in (0, 1], ``max_error`` TCP tracking bound (m)
+    beyond which the arm is told to hold and ``DeviceError`` (exit 4) is raised; ``confirm(message)``
+    is asked before a real arm moves (default: refuse, so pass ``lambda m: True`` deliberately).
+    Writes the execution log to ``log`` when given. Returns the summary: ``outcome``, ``commands``
+    (T:102/T:101 lines sent while streaming), ``lateness_ms``, ``tracking_mm``, ``final_error_mm``, ``log``.
+    """
+    from roarmctl.device.link import Link
+    from roarmctl.device.streamer import StreamConfig, Streamer, write_log
+    from roarmctl.errors import InputError as _InputError
+
+    t = _trajectory(traj)
+    if (port is None) == (not sim):
+        raise _InputError("execute: give exactly one of port=... or sim=True")
+    robot = load_robot(t.robot)
+    cfg = StreamConfig(rate=rate, speed_scale=speed_scale, max_error=max_error, move_to_start=move_to_start)
+    simulator = None
+    if sim:
+        from roarmctl.device.simulator import PtySimulator, SimConfig
+
+        simulator = PtySimulator(SimConfig()).start()
+        port = simulator.path
+        confirm = confirm or (lambda message: True)
+    link = Link(str(port))
+    streamer = Streamer(link, robot, t, cfg, confirm=confirm or (lambda message: False))
+    result = None
+    try:
+        link.open()
+        link.handshake()
+        result = streamer.run()
+    except RoarmError as exc:
+        result = getattr(exc, "result", None)
+        raise
+    finally:
+        link.close()
+        if simulator is not None:
+            simulator.stop()
+        if result is not None and log is not None:
+            write_log(log, result.log)
+    return result.summary() | {"log": None if log is None else str(log), "port": str(port)}
+
+
+def draw(traj: TrajectoryLike, output: PathLike, *, view: str = "iso", dpi: float = 100.0,
+         size: tuple[float, float] = (16.0, 10.0)) -> Path:
+    """Draw ``traj`` like ``roarmctl visualize-path``: the scene and TCP path, joint curves with
+    limits, TCP speed and distance from singularity. The format follows ``output``'s extension
+    (.png, .svg, .pdf; anything else raises ``InputError``). ``view``: iso, top, front or side;
+    ``size`` in inches. Returns the path written."""
+    from roarmctl.viz.formats import picture_format
+    from roarmctl.viz.path_figure import VIEWS, visualize_trajectory
+
+    picture_format(output)
+    if view not in VIEWS:
+        raise InputError(f"view: '{view}' is not one of {', '.join(VIEWS)}")
+    t = _trajectory(traj)
+    return visualize_trajectory(t, output, view=view, dpi=dpi, size=size, name=Path(str(output)).stem)
+
+
+def export(source: TrajectoryLike, output: PathLike) -> dict[str, Any]:
+    """Export a trajectory (or a trajectory / execution-log file) like ``roarmctl export``: ``.mcap``
+    (ROS 2 messages for Foxglove), ``.csv``, or a name without extension (a ROS 2 bag folder).
+    Returns ``{"output", "format", "topics": {topic: count}}`` (CSV: ``"rows"``)."""
+    from roarmctl.export import export as _export
+    from roarmctl.export import format_for
+
+    format_for(output)  # refuse an unknown extension before any work
+    return _export(source, output)
