@@ -112,6 +112,12 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
             return True
         return typer.confirm(message, default=False, err=True)
 
+    if not sim:
+        from roarmctl.device.ports import port_holders
+
+        for pid, name in port_holders(port):
+            common.warn(f"{port} is also open in process {pid} ({name}); it may swallow the arm's replies "
+                        "(stop it, e.g. 'sudo systemctl stop ModemManager')")
     link = Link(port)
     # Built before the port opens (the schedule is pure), so that every way out has a log.
     streamer = Streamer(link, robot, traj, cfg, on_status=live.update if live else None, confirm=confirm,

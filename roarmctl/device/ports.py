@@ -58,3 +58,52 @@ def list_ports() -> list[PortInfo]:
                               links.get(os.path.realpath(p.device)), bridge is not None, bridge))
     ports.sort(key=lambda p: (not p.likely_arm, p.device))
     return ports
+
+
+def port_holders(port: str) -> list[tuple[int, str]]:
+    """Other processes that have ``port`` open: [(pid, process name)], from Linux's ``/proc/*/fd``.
+
+    A port opened without a lock (ModemManager probes new ttyACM/ttyUSB devices like this) is not
+    refused by our exclusive open, yet it can swallow the arm's replies. Elsewhere, or for processes
+    we may not inspect, the list is empty. For a pseudo-terminal, a process that also holds the
+    master side (``/dev/ptmx``) is the device itself (a simulator), not a competitor.
+    """
+    import sys
+
+    if not sys.platform.startswith("linux") or not os.path.isdir("/proc"):
+        return []
+    try:
+        target = os.path.realpath(port)
+        os.stat(target)
+    except (OSError, ValueError):
+        return []
+    is_pty = target.startswith("/dev/pts/")
+    me = os.getpid()
+    found = []
+    try:
+        procs = [d for d in os.listdir("/proc") if d.isdigit() and int(d) != me]
+    except OSError:
+        return []
+    for pid in procs:
+        fd_dir = f"/proc/{pid}/fd"
+        try:
+            fds = os.listdir(fd_dir)
+        except OSError:
+            continue
+        holds = master = False
+        for fd in fds:
+            try:
+                link = os.readlink(f"{fd_dir}/{fd}")
+            except OSError:
+                continue
+            if link == target:
+                holds = True
+            elif link in ("/dev/ptmx", "/dev/pts/ptmx"):
+                master = True
+        if holds and not (is_pty and master):
+            try:
+                name = Path(f"/proc/{pid}/comm").read_text().strip()
+            except OSError:
+                name = "?"
+            found.append((int(pid), name))
+    return found
