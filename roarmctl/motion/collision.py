@@ -229,7 +229,7 @@ class CollisionChecker:
                                        -tol, -tol, attached=True))
         self._moving_shapes = moving
         s = len(moving)
-        self._mv_link = np.array([mv.link for mv in moving])
+        self._mv_link = np.array([mv.link for mv in moving], dtype=int)  # int even when empty (a DH robot has no shapes)
         self._mv_rot = np.array([mv.rot for mv in moving]).reshape(s, 3, 3)
         self._mv_pos = np.array([mv.pos for mv in moving]).reshape(s, 3)
         self._mv_half = np.array([mv.half for mv in moving]).reshape(s, 3)
