@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from roarmctl.errors import InfeasibleError, PlanningError, UnreachableError
+from roarmctl.errors import DescriptionError, InfeasibleError, InputError, PlanFileError, PlanningError, UnreachableError
 from roarmctl.motion.timing import TimedPath, time_parameterise
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
 from roarmctl.plan.schema import ItemSpec, MoveTask, PickTask, Plan, PlaceTask, WaitTask, load_plan
@@ -92,7 +92,12 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
     path = path if isinstance(path, dict) else Path(path)
     plan = load_plan(path, base_dir=base_dir)  # form first, so typos are reported before anything heavy
     load_planning_libraries()
-    robot = load_robot(_robot_spec(plan))
+    try:
+        robot = load_robot(_robot_spec(plan))
+    except DescriptionError:
+        raise
+    except InputError as exc:  # unknown robot: name the plan's line
+        raise PlanFileError(f"{plan.path}:{plan.lines.get('robot', 1)}: robot: {exc.message}", exc.hint) from None
     plan = load_plan(path, named_poses=list(robot.named_poses), base_dir=base_dir)
     if seed is not None:
         plan.planner.seed = seed
@@ -109,8 +114,16 @@ def load_planning_libraries() -> None:
 
 
 def _robot_spec(plan: Plan) -> str:
-    candidate = (plan.path.parent / plan.robot)
-    return str(candidate) if candidate.suffix in (".yaml", ".yml", ".urdf") and candidate.is_file() else plan.robot
+    """A bundled name as is; any other name is a path relative to the plan file's directory."""
+    from roarmctl.robot.loader import bundled_robots
+
+    if plan.robot in bundled_robots():
+        return plan.robot
+    candidate = plan.path.parent / Path(plan.robot).expanduser()
+    try:
+        return str(candidate) if candidate.is_file() else plan.robot
+    except (OSError, ValueError):  # a name the OS refuses as a path (too long)
+        return plan.robot
 
 
 class Planner:
@@ -195,7 +208,10 @@ class Planner:
                 raise InfeasibleError(f"{self.plan.path}: start: '{s}' is not a named pose of {self.robot.name}")
             q = self.robot.full_q(self.robot.named_poses[s]).copy()
         else:
-            q = self.robot.full_q(s).copy()
+            try:
+                q = self.robot.full_q(s).copy()
+            except InputError as exc:
+                raise PlanFileError(f"{self.plan.path}:{self.plan.lines.get('start', 1)}: start: {exc.message}") from None
         if not self.robot.within_limits(q):
             raise InfeasibleError(f"{self.plan.path}: start: the configuration is outside the joint limits")
         self._set_state(q[self.gi] if self.gi is not None else None)
@@ -551,6 +567,8 @@ class Planner:
 
     # ------------------------------------------------------------ assemble
     def _assemble(self, timed: list[tuple[_Step, TimedPath]]) -> Trajectory:
+        from roarmctl.robot.loader import bundled_robots
+
         times, qs, qds, qdds = [], [], [], []
         events, segments = [], []
         t_off = 0.0
@@ -569,7 +587,7 @@ class Planner:
         keep = np.concatenate([[True], np.diff(t) > 1e-9])
         p = self.plan
         traj = Trajectory(
-            robot=self.robot.name if not str(_robot_spec(p)).endswith((".yaml", ".yml", ".urdf")) else str(Path(_robot_spec(p)).resolve()),
+            robot=self.robot.name if p.robot in bundled_robots() else str(Path(_robot_spec(p)).resolve()),
             joint_names=list(self.robot.joint_names),
             times=t[keep],
             positions=np.concatenate(qs)[keep],

@@ -119,6 +119,7 @@ class Plan:
     cycles: int = 1
     limits: Limits = field(default_factory=Limits)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
+    lines: dict[str, int] = field(default_factory=dict)  # top-level key -> line, for later messages
 
 
 class _Ctx:
@@ -154,6 +155,7 @@ class _Ctx:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             self.fail(line, where, f"expected a number, got {_kind(value)}" + (" (or {deg: value})" if angle else ""))
         value = float(value)
+        lo, hi = _bounds(where, lo, hi)
         if lo is not None and (value < lo or (strict_lo and value <= lo)):
             self.fail(line, where, f"{value:g} is too small (must be {'>' if strict_lo else '>='} {lo:g})")
         if hi is not None and value > hi:
@@ -175,6 +177,43 @@ class _Ctx:
             close = _closest(value, choices)
             self.fail(line, where, f"'{value}' is not one of {', '.join(choices)}", f"did you mean '{close}'?" if close else None)
         return value
+
+
+#: Range of every number a plan may give, by field name (the last part of its path), intersected
+#: with the range the reader passes. Upper bounds keep memory and time small: a wait of 1e8 s would be
+#: 10^10 samples, a velocity scale of 1e-9 an endless motion. Units: m, rad, s, kg, m/s.
+FIELD_BOUNDS: dict[str, tuple[float, float]] = {
+    "wait": (0.0, 3600.0),
+    "xyz": (-10.0, 10.0),
+    "size": (0.0, 10.0),
+    "radius": (0.0, 10.0),
+    "length": (0.0, 10.0),
+    "mass": (0.0, 100.0),
+    "rpy": (-4 * math.pi, 4 * math.pi),
+    "pitch": (-4 * math.pi, 4 * math.pi),
+    "roll": (-4 * math.pi, 4 * math.pi),
+    "joints": (-100.0, 100.0),  # rad or m: the robot's own limits are checked when planning
+    "start": (-100.0, 100.0),
+    "gripper_open": (-4 * math.pi, 4 * math.pi),
+    "gripper_closed": (-4 * math.pi, 4 * math.pi),
+    "grasp_offset": (-0.5, 0.5),
+    "velocity_scale": (0.01, 1.0),
+    "acceleration_scale": (0.01, 1.0),
+    "max_tcp_speed": (0.001, 5.0),
+}
+DEFAULT_BOUND = 1e6  # any other number, unless its reader gives a tighter range
+MAX_TASKS = 1000  # tasks in the file, and tasks x cycles
+MAX_CYCLES = 1000
+MAX_ITEMS = 500  # obstacles, and objects
+MAX_DURATION = 3600.0  # s of motion the plan may need (the trajectory validator's limit too)
+
+
+def _bounds(where: str, lo: float | None, hi: float | None) -> tuple[float, float]:
+    import re
+
+    key = re.split(r"[.:]\s*", re.sub(r"\[\d+\]", "", where))[-1]
+    flo, fhi = FIELD_BOUNDS.get(key, (-DEFAULT_BOUND, DEFAULT_BOUND))
+    return (flo if lo is None else max(lo, flo)), (fhi if hi is None else min(hi, fhi))
 
 
 def _kind(value: Any) -> str:
@@ -242,7 +281,11 @@ def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpe
     bline = raw.line_of(kind)
     w = f"{where}: {kind}"  # "task 2: place.xyz": tasks count from 1 in every message, as in planning errors
     if kind == "wait":
-        secs = body.get("seconds") if isinstance(body, dict) else body
+        if isinstance(body, dict):
+            ctx.mapping(body, bline, w, ("seconds",), ("seconds",))
+            secs = body["seconds"]
+        else:
+            secs = body
         return WaitTask(ctx.number(secs, bline, w, lo=0.0), line=bline)
     if kind == "pick":
         d = ctx.mapping(body, bline, w, ("object", "approach_height", "pitch", "roll", "gripper_open", "gripper_closed", "grasp_offset"), ("object",))
@@ -348,6 +391,8 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
         obs = sc.get("obstacles") or []
         if not isinstance(obs, list):
             ctx.fail(sc.line_of("obstacles"), "scene.obstacles", "expected a list")
+        if len(obs) > MAX_ITEMS:
+            ctx.fail(sc.line_of("obstacles"), "scene.obstacles", f"{len(obs)} obstacles are more than {MAX_ITEMS}")
         for i, o in enumerate(obs):
             scene.append(_item(ctx, o, obs.line_of(i), f"scene.obstacles[{i}]", "obstacle"))
 
@@ -355,6 +400,8 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
     objs = top.get("objects") or []
     if not isinstance(objs, list):
         ctx.fail(top.line_of("objects"), "objects", "expected a list")
+    if len(objs) > MAX_ITEMS:
+        ctx.fail(top.line_of("objects"), "objects", f"{len(objs)} objects are more than {MAX_ITEMS}")
     for i, o in enumerate(objs):
         objects.append(_item(ctx, o, objs.line_of(i), f"objects[{i}]", "object"))
     names: dict[str, ItemSpec] = {}
@@ -367,6 +414,8 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
     tasks_raw = top["tasks"]
     if not isinstance(tasks_raw, list) or not tasks_raw:
         ctx.fail(top.line_of("tasks"), "tasks", "expected a non-empty list of tasks")
+    if len(tasks_raw) > MAX_TASKS:
+        ctx.fail(top.line_of("tasks"), "tasks", f"{len(tasks_raw)} tasks are more than {MAX_TASKS}", "split the plan")
     tasks = [_task(ctx, t, tasks_raw.line_of(i), f"task {i + 1}", by_object, named_poses) for i, t in enumerate(tasks_raw)]
 
     cycles = 1
@@ -374,6 +423,9 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
         c = top["cycles"]
         if isinstance(c, bool) or not isinstance(c, int) or c < 1:
             ctx.fail(top.line_of("cycles"), "cycles", f"expected a whole number >= 1, got {_kind(c)}")
+        if c > MAX_CYCLES or c * len(tasks) > MAX_TASKS:
+            ctx.fail(top.line_of("cycles"), "cycles", f"{c} cycles of {len(tasks)} task(s) are more than {MAX_TASKS} tasks",
+                     f"at most {min(MAX_CYCLES, MAX_TASKS // len(tasks))} cycles of this plan")
         cycles = c
 
     limits = Limits()
@@ -410,6 +462,24 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
         if "padding" in d:
             planner.padding = ctx.number(d["padding"], d.line_of("padding"), "planner.padding", lo=0.0, hi=0.05)
 
+    least = cycles * sum(_least_duration(t, limits) for t in tasks)
+    if least > MAX_DURATION:
+        ctx.fail(top.line_of("cycles" if cycles > 1 else "tasks"), "cycles" if cycles > 1 else "tasks",
+                 f"the plan needs at least {least:.0f} s of motion ({least * 100:.0f} samples at 100 Hz), "
+                 f"more than the {MAX_DURATION:.0f} s a trajectory may last", "split it, or shorten the waits")
+
     sha = hashlib.sha256(canonical if canonical is not None else path.read_bytes()).hexdigest()
     return Plan(path=path, sha256=sha, robot=robot, start=start, scene=scene, objects=objects, tasks=tasks,
-                cycles=cycles, limits=limits, planner=planner)
+                cycles=cycles, limits=limits, planner=planner, lines=dict(top.lines))
+
+
+def _least_duration(task: Any, limits: Limits) -> float:
+    """A lower bound (s) on the motion ``task`` becomes: its wait, its gripper action, and its
+    straight approach and retreat at ``max_tcp_speed``. Refusing a plan above the limit before
+    planning is then never wrong."""
+    if isinstance(task, WaitTask):
+        return task.seconds
+    if isinstance(task, (PickTask, PlaceTask)):
+        approach = 2 * task.approach_height / limits.max_tcp_speed if limits.max_tcp_speed else 0.0
+        return limits.gripper_time + approach
+    return 0.0

@@ -41,11 +41,11 @@ def load_robot(spec: str) -> Robot:
     if spec in _CACHE:
         return _CACHE[spec]
     path = bundled_dir() / f"{spec}.yaml"
-    if not path.is_file():
+    if not _is_file(path):
         path = Path(spec).expanduser()
-        if not path.is_file():
+        if not _is_file(path):
             raise InputError(
-                f"unknown robot '{spec}'",
+                f"unknown robot '{spec[:80]}'",
                 f"bundled robots: {', '.join(bundled_robots())}; or give a path to a .yaml or .urdf file",
             )
     if path.suffix.lower() == ".urdf":
@@ -69,6 +69,14 @@ def load_robot(spec: str) -> Robot:
 
 
 # --------------------------------------------------------------------------- helpers
+def _is_file(path: Path) -> bool:
+    """``is_file`` that answers False for names the OS refuses (too long, NUL byte)."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
+
 def _read_yaml(path: Path) -> dict[str, Any]:
     try:
         data = yaml.safe_load(path.read_text())
