@@ -124,3 +124,18 @@ def test_a_load_that_cannot_be_held_is_infeasible():
     model = TorqueModel(lambda q, qd, qdd: inverse_dynamics(robot, q, qd, qdd), np.array([20.0, 100.0]), ["j1", "j2"])
     with pytest.raises(InfeasibleError, match=r"j1 needs 29.43 N m \(limit 20.00 N m\)"):
         time_parameterise(np.array([[-1.5, 0.0], [0.0, 0.0]]), np.ones(2), np.ones(2), torque=model)
+
+
+def test_short_segment_between_long_ones_keeps_the_first_margin():
+    """A free-motion path of obstacle.yaml (seed 15): a 0.03 rad last segment after 0.37 rad ones.
+    On a uniform 100-point grid the sampled accelerations overshot the limits by 25 % and every
+    safety step failed (exit 3 for a feasible plan); a grid with points inside every segment must
+    time it at the first margin. The limits are checked on 20 kHz samples, not toppra's grid."""
+    wp = np.array([[-0.5404, 0.6570, 1.2097, 1.2749, 0.0000], [-0.3308, 0.4178, 1.1051, 1.2639, 0.1572],
+                   [-0.2086, 0.3867, 1.0915, 1.2625, 0.1776], [0.0274, 0.3742, 1.0860, 1.2619, 0.1859],
+                   [0.2953, 0.4083, 1.1009, 1.2635, 0.1634], [0.5286, 0.6354, 1.2002, 1.2739, 0.0142],
+                   [0.5404, 0.6570, 1.2097, 1.2749, 0.0000]])
+    vmax, amax = np.array([1.2, 0.9, 1.08, 1.32, 1.5]), np.array([3.0, 2.4, 3.0, 3.6, 3.6])
+    tp = time_parameterise(wp, vmax, amax, sample_dt=5e-5)
+    assert np.all(np.abs(tp.qd) <= vmax * (SAFETY + 0.01))
+    assert np.all(np.abs(tp.qdd) <= amax * (SAFETY + 0.01))

@@ -461,7 +461,11 @@ class Planner:
         last_error: PlanningError | None = None
         for max_step in (None, 0.4, 0.2, 0.1, 0.05, 0.025):
             wps = vertices if max_step is None else densify(vertices, max_step)
-            tp = self._time(wps, step.label)
+            try:  # a timing failure is retried too: denser vertices make a tamer spline
+                tp = self._time(wps, step.label)
+            except PlanningError as exc:
+                last_error = exc
+                continue
             t0 = time.perf_counter()
             try:
                 self._recheck(tp, step.label)
