@@ -9,7 +9,6 @@ import pytest
 
 from roarmctl.errors import InputError
 from roarmctl.motion.collision import CollisionChecker, interpolate
-from roarmctl.motion.fastkin import FastKinematics
 from roarmctl.motion.scene import Scene, SceneItem, example_scene
 from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import transform
@@ -32,14 +31,6 @@ def shape_pose(robot, q, shape_name: str) -> tuple[np.ndarray, object]:
 
 def probe(name: str, pose: np.ndarray, size=(0.02, 0.02, 0.02), role="obstacle") -> SceneItem:
     return SceneItem(name, role, "box", pose, size=size)
-
-
-# ----------------------------------------------------------------------------- FK
-@pytest.mark.parametrize("name", ["roarm_m3_pro", "ur10", "planar_2r", "scara_2r"])
-def test_fast_fk_equals_generic_fk(name):
-    robot = load_robot(name)
-    q = np.random.default_rng(1).uniform(robot.lower, robot.upper, (64, robot.dof))
-    np.testing.assert_allclose(FastKinematics(robot).frames4(q), robot.kin.link_frames(q), atol=1e-9, rtol=0)
 
 
 # ----------------------------------------------------------------------------- scene vs arm
@@ -286,13 +277,6 @@ def test_valid_segments_stay_valid_at_four_times_the_resolution(robot):
                 missed[refine] += fresh.first_invalid(interpolate(q0, q1, 0.025)) is not None
     assert missed[1] > 0  # without refinement the 4x finer re-check finds collisions ...
     assert missed[4] == 0  # ... with it, none
-
-
-def test_fast_fk_single_configuration_path(robot):
-    fk = FastKinematics(robot)
-    q = np.random.default_rng(4).uniform(robot.lower, robot.upper, (20, robot.dof))
-    for qi in q:
-        np.testing.assert_allclose(fk.frames4(qi[None])[0], robot.kin.link_frames(qi), atol=1e-9, rtol=0)
 
 
 def test_margin_measure_equals_svd_of_the_generic_jacobian(robot):

@@ -202,3 +202,33 @@ def test_scara_ellipsoid_at_stretched_singularity_seed_004():
     # away from it, r1 r2 = |det J| = l1 l2 |sin theta2| (SEEDS_DIGEST 2.3)
     m = SCARA.kin.manipulability([0.3, 1.1])
     assert np.prod(m.ellipsoid_radii) == pytest.approx(0.4 * 0.3 * abs(math.sin(1.1)), rel=1e-9)
+
+
+# ------------------------------------------------------------- the one FK vs a naive chain product
+def naive_link_frames(robot, q: np.ndarray) -> np.ndarray:
+    """Reference FK for one full q: each joint as origin @ motion(q) @ post, full 4x4 products,
+    rotations from scipy-free Rodrigues written out here (a different method from the library's
+    cos/sin-linear steps and constant-link folding)."""
+    names = robot.link_names
+    frames = {names[0]: np.eye(4)}
+    for joint in robot.joints:
+        motion = np.eye(4)
+        qi = robot.joint_names.index(joint.name) if joint.kind != "fixed" else None
+        if joint.kind == "revolute":
+            k = np.asarray(joint.axis, dtype=float)
+            kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+            ang = q[qi] + joint.offset
+            motion[:3, :3] = np.eye(3) + math.sin(ang) * kx + (1 - math.cos(ang)) * kx @ kx
+        elif joint.kind == "prismatic":
+            motion[:3, 3] = (q[qi] + joint.offset) * np.asarray(joint.axis, dtype=float)
+        frames[joint.child] = frames[joint.parent] @ joint.origin @ motion @ joint.post
+    return np.array([frames[n] for n in names])
+
+
+@pytest.mark.parametrize("robot", ALL, ids=lambda r: r.name)
+def test_fk_equals_a_naive_chain_product(robot):
+    q = np.random.default_rng(1).uniform(robot.lower, robot.upper, (32, robot.dof))
+    ref = np.array([naive_link_frames(robot, qi) for qi in q])
+    np.testing.assert_allclose(robot.kin.link_frames(q), ref, atol=1e-12, rtol=0)  # batched
+    for qi, ri in zip(q[:8], ref[:8]):
+        np.testing.assert_allclose(robot.kin.link_frames(qi), ri, atol=1e-12, rtol=0)  # one configuration

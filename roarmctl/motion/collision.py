@@ -4,7 +4,7 @@ How a batch of states (N, arm_dof) is checked:
 
 1. joint limits and, when a margin is set, the smallest singular value of the translational
    Jacobian, all vectorised in numpy;
-2. batched FK (``fastkin``) gives every collision shape's centre;
+2. batched FK (``robot.kin``) gives every collision shape's centre;
 3. a vectorised pre-filter keeps the (state, shape, item) pairs whose bounding sphere reaches the
    item's axis-aligned box, and the (state, shape, shape) pairs whose spheres overlap; of those,
    only the pairs whose world-axis-aligned boxes overlap too; nothing else can collide;
@@ -34,7 +34,6 @@ import fcl
 import numpy as np
 
 from roarmctl.errors import InputError
-from roarmctl.motion.fastkin import FastKinematics
 from roarmctl.motion.scene import Scene, SceneItem
 from roarmctl.robot.model import Robot
 
@@ -114,7 +113,7 @@ class CollisionChecker:
         self.singularity_margin = singularity_margin
         self.contact_tolerance = float(contact_tolerance)
         self.check_count = 0
-        self._fk = FastKinematics(robot)
+        self._fk = robot.kin  # the library's one FK
         self._arm = np.asarray(robot.arm_indices)
         self._lower = robot.lower[self._arm]
         self._upper = robot.upper[self._arm]
