@@ -126,16 +126,20 @@ def test_a_load_that_cannot_be_held_is_infeasible():
         time_parameterise(np.array([[-1.5, 0.0], [0.0, 0.0]]), np.ones(2), np.ones(2), torque=model)
 
 
-def test_short_segment_between_long_ones_keeps_the_first_margin():
-    """A free-motion path of obstacle.yaml (seed 15): a 0.03 rad last segment after 0.37 rad ones.
-    On a uniform 100-point grid the sampled accelerations overshot the limits by 25 % and every
-    safety step failed (exit 3 for a feasible plan); a grid with points inside every segment must
-    time it at the first margin. The limits are checked on 20 kHz samples, not toppra's grid."""
-    wp = np.array([[-0.5404, 0.6570, 1.2097, 1.2749, 0.0000], [-0.3308, 0.4178, 1.1051, 1.2639, 0.1572],
-                   [-0.2086, 0.3867, 1.0915, 1.2625, 0.1776], [0.0274, 0.3742, 1.0860, 1.2619, 0.1859],
-                   [0.2953, 0.4083, 1.1009, 1.2635, 0.1634], [0.5286, 0.6354, 1.2002, 1.2739, 0.0142],
-                   [0.5404, 0.6570, 1.2097, 1.2749, 0.0000]])
+def test_short_segment_between_long_ones_keeps_the_first_margin(monkeypatch):
+    """A 0.035 rad segment between 0.3-0.47 rad ones. On a uniform 100-point grid TOPP-RA had one
+    point inside it, the spline's curvature changed between grid points and the samples overshot the
+    limits at the first margin (29 of 60 such random paths; with every margin failing, a feasible plan
+    exited 3). With grid points inside every segment it must time at the first margin; the limits
+    are checked on 20 kHz samples, not on toppra's grid."""
+    import roarmctl.motion.timing as timing
+
+    monkeypatch.setattr(timing, "SAFETY_STEPS", (SAFETY,))
+    wp = np.array([[0.0, 0.0, 0.0, 0.0, 0.0], [-0.0423, 0.2052, 0.0336, -0.1717, 0.1159],
+                   [0.1765, 0.3642, -0.0845, -0.384, 0.0113], [0.181, 0.109, -0.1085, -0.5207, -0.069],
+                   [0.0473, 0.0313, -0.0073, -0.2645, -0.1006], [0.4008, -0.1408, 0.0836, -0.0307, -0.0763],
+                   [0.385, -0.1604, 0.0739, -0.0261, -0.0978], [0.2743, -0.2447, 0.3603, 0.0876, 0.0904],
+                   [0.2076, -0.258, 0.4403, 0.2399, -0.038]])
     vmax, amax = np.array([1.2, 0.9, 1.08, 1.32, 1.5]), np.array([3.0, 2.4, 3.0, 3.6, 3.6])
     tp = time_parameterise(wp, vmax, amax, sample_dt=5e-5)
-    assert np.all(np.abs(tp.qd) <= vmax * (SAFETY + 0.01))
-    assert np.all(np.abs(tp.qdd) <= amax * (SAFETY + 0.01))
+    assert np.all(np.abs(tp.qd) <= vmax) and np.all(np.abs(tp.qdd) <= amax)
