@@ -1,3 +1,3 @@
-from roarmctl.cli import main
+from roarmctl.launch import main
 
 main()
