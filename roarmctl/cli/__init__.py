@@ -20,14 +20,24 @@ app = typer.Typer(
     name="roarmctl",
     help="Plan, check and execute pick-and-place trajectories for small robot arms (Waveshare RoArm-M3 Pro first).",
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,  # --install-completion / --show-completion for bash, zsh, fish, PowerShell
     pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
 )
+
+
+def _version(value: bool) -> None:
+    if value:
+        from roarmctl import __version__
+
+        print(f"roarmctl {__version__}")
+        raise typer.Exit()
 
 
 @app.callback()
 def _root(
     debug: bool = typer.Option(False, "--debug", help="Show full tracebacks on errors."),
+    version: bool = typer.Option(False, "--version", "-V", help="Print the version and exit.", callback=_version, is_eager=True),
 ) -> None:
     common.STATE.debug = debug
 
@@ -86,7 +96,48 @@ def _stop_line(signum: int) -> str:
     return "interrupted" if signum == 2 else f"terminated by {signal_name(signum)}"
 
 
+def command():
+    """The click command behind ``app``, with boolean flags shown as flags in ``--help`` (typer
+    would print ``--json <bool>``, which reads as if it took a value)."""
+    cmd = typer.main.get_command(app)
+
+    def fix(c) -> None:
+        for param in getattr(c, "params", []):
+            if getattr(param, "is_flag", False) and param.metavar is None:
+                param.metavar = ""
+            elif param.param_type_name == "argument" and param.metavar is None:
+                param.metavar = param.name.upper()  # "plan PLAN", not "plan {plan}"
+        help_option = c.get_help_option
+
+        def get_help_option(ctx, _orig=help_option):
+            opt = _orig(ctx)
+            if opt is not None:
+                opt.metavar = ""
+            return opt
+
+        c.get_help_option = get_help_option
+        for sub in getattr(c, "commands", {}).values():
+            fix(sub)
+
+    fix(cmd)
+    return cmd
+
+
+def _json_requested(argv: list[str] | None) -> bool:
+    """Whether the command line asks for JSON output (then a failure is a JSON object on stdout too)."""
+    args = sys.argv[1:] if argv is None else argv
+    return "--json" in args[: args.index("--")] if "--" in args else "--json" in args
+
+
 def _run(argv: list[str] | None, guard) -> int:
+    code = _run_command(argv, guard)
+    if code != 0 and _json_requested(argv) and not common.STATE.json_printed:
+        message, hint = common.STATE.last_error or ("failed", None)
+        common.print_json({"ok": False, "error": message, "hint": hint, "exit_code": code})
+    return code
+
+
+def _run_command(argv: list[str] | None, guard) -> int:
     from roarmctl.cli.signals import exit_code
     from roarmctl.errors import RoarmError
 
@@ -94,7 +145,7 @@ def _run(argv: list[str] | None, guard) -> int:
     try:
         # Without standalone mode typer *returns* the exit code of typer.Exit, and turns Ctrl-C
         # (KeyboardInterrupt) into Exit(130) that is returned too: keep both.
-        returned = app(args=argv, standalone_mode=False)
+        returned = command()(args=argv, standalone_mode=False, prog_name="roarmctl")
         guard.live = False
         if isinstance(returned, int) and not isinstance(returned, bool):
             code = returned
@@ -127,6 +178,7 @@ def _run(argv: list[str] | None, guard) -> int:
             code = exc.exit_code
         elif isinstance(exc, ClickException):
             exc.show()
+            common.STATE.last_error = (exc.format_message(), "see 'roarmctl COMMAND --help'")
             code = 2
         elif isinstance(exc, typer.Abort):
             common.error("aborted")

@@ -14,6 +14,8 @@ import numpy as np
 @dataclass
 class _State:
     debug: bool = False
+    json_printed: bool = False  # a command printed its JSON object (no second one on failure)
+    last_error: tuple[str, str | None] | None = None  # (message, hint) of the last error line
 
 
 STATE = _State()
@@ -40,12 +42,17 @@ def _plain(obj: Any) -> Any:
 
 
 def print_json(obj: Any) -> None:
-    """Exactly one JSON object on stdout, nothing else."""
+    """Exactly one JSON object on stdout, nothing else; a command's result carries ``"ok": true``
+    (a failure prints ``{"ok": false, "error", "hint", "exit_code"}`` instead, from ``cli.main``)."""
+    if isinstance(obj, dict) and "ok" not in obj:
+        obj = {"ok": True, **obj}
     sys.stdout.write(json.dumps(_plain(obj)) + "\n")
+    STATE.json_printed = True
 
 
 def error(message: str, hint: str | None = None) -> None:
     """One line on stderr: the cause, and the fix where there is one."""
+    STATE.last_error = (message, hint)
     text = f"error: {message}" + (f" ({hint})" if hint else "")
     sys.stderr.write(text + "\n")
 

@@ -69,12 +69,16 @@ def execute(
     if output is not None:
         schedule = build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy)
         _write_output(output, schedule)
-        info = {"output": str(output), "commands": sum(len(tk.commands) for tk in schedule), "ticks": len(schedule), "duration": schedule[-1].t, "rate": rate,
-                "strategy": strategy, "speed_scale": speed_scale}
+        # "commands" means the same everywhere (--port, --sim, --output, the log's summary): the
+        # motion commands, one T:102 per tick; gripper T:101 lines sent beside them are counted apart
+        gripper = sum(len(tk.extra) for tk in schedule)
+        info = {"output": str(output), "commands": len(schedule), "gripper_commands": gripper, "lines": len(schedule) + gripper,
+                "duration": schedule[-1].t, "rate": rate, "strategy": strategy, "speed_scale": speed_scale}
         if json_out:
             common.print_json(info)
         else:
-            common.console(stderr=True).print(f"wrote {info['commands']} commands ({schedule[-1].t:.2f} s at {rate:g} Hz) to {output}")
+            extra = f" + {gripper} gripper commands" if gripper else ""
+            common.console(stderr=True).print(f"wrote {info['commands']} motion commands{extra} ({schedule[-1].t:.2f} s at {rate:g} Hz) to {output}")
         return
     build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy)  # validate before opening
     if port is not None and not yes and not sys.stdin.isatty():
@@ -161,7 +165,7 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
         return
     out = common.console()
     trk, lat = summary["tracking_mm"], summary["lateness_ms"]
-    out.print(f"[bold green]done[/]: {summary['commands']} commands in {traj.duration / cfg.speed_scale:.2f} s on {port}")
+    out.print(f"[bold green]done[/]: {summary['commands']} motion commands in {traj.duration / cfg.speed_scale:.2f} s on {port}")
     out.print(f"schedule lateness p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms, max {lat['max']:.2f} ms")
     if trk["rms"] is not None:
         out.print(f"TCP tracking error (feedback): RMS {trk['rms']:.1f} mm, max {trk['max']:.1f} mm over {trk['samples']} samples")

@@ -44,6 +44,29 @@ def _table(title: str, rows: list[tuple[str, str]]) -> None:
     common.console().print(t)
 
 
+def _columns_table(title: str, columns: list[str], rows: list[tuple[str, np.ndarray]], digits: int = 4,
+                   caption: str | None = None) -> None:
+    """One row per quantity, one column per joint (fits 80 columns for up to 6 joints)."""
+    from rich.table import Table
+
+    t = Table(title=title, caption=caption)
+    t.add_column("", style="bold")
+    for c in columns:
+        t.add_column(c, justify="right")
+    for label, values in rows:
+        t.add_row(label, *[_num(v, digits) for v in np.asarray(values, dtype=float).ravel()])
+    common.console().print(t)
+
+
+def _num(v: float, digits: int) -> str:
+    text = f"{v:.{digits}f}"
+    return "0" if float(text) == 0 else text  # no "-0.0000"
+
+
+def _joint_caption(r) -> str:
+    return ", ".join(f"q{i + 1} = {name}" for i, name in enumerate(r.joint_names))
+
+
 def _fmt(a, digits: int = 6) -> str:
     return np.array2string(np.asarray(a, dtype=float), precision=digits, suppress_small=True, max_line_width=120)
 
@@ -125,14 +148,21 @@ def jacobian(
     if json_out:
         common.print_json(out)
         return
-    _table(f"Jacobian of {r.name} at the TCP", [
-        ("jacobian (6 x n)", _fmt(m.jacobian, 4)),
-        ("manipulability", f"{m.manipulability:.6g}"),
-        ("translational manipulability", f"{m.translational:.6g}"),
-        ("singular values", _fmt(m.singular_values, 5)),
-        ("ellipsoid radii (m/s per rad/s)", _fmt(m.ellipsoid_radii, 5)),
-        ("ellipsoid axes (rows)", _fmt(m.ellipsoid_axes.T, 4)),
-        ("singularity", str(out["singularity"])),
+    arm = [f"q{i + 1}" for i in r.arm_indices]
+    k = len(m.ellipsoid_radii)
+    _columns_table(f"Jacobian of {r.name} at the TCP (base frame)", arm, [
+        ("vx (m/rad)", m.jacobian[0]), ("vy (m/rad)", m.jacobian[1]), ("vz (m/rad)", m.jacobian[2]),
+        ("wx (rad/rad)", m.jacobian[3]), ("wy (rad/rad)", m.jacobian[4]), ("wz (rad/rad)", m.jacobian[5]),
+    ], caption=_joint_caption(r) + " (m/rad: per rad of a revolute joint, m/m for a prismatic one)")
+    sing = out["singularity"]
+    sv = [f"{v:.4g}" for v in m.singular_values]
+    _table(f"Manipulability of {r.name}", [
+        (f"translational, 3x{len(arm)} Jv ((m/rad)^{k})", f"{m.translational:.6g}"),
+        (f"full, 6x{len(arm)} J (mixed units)", f"{m.manipulability:.6g}"),
+        ("singular values of J (mixed)", "\n".join(" ".join(sv[i:i + 3]) for i in range(0, len(sv), 3))),
+        ("ellipsoid radii (m/s per rad/s)", " ".join(f"{v:.5g}" for v in m.ellipsoid_radii)),
+        ("ellipsoid axes (base frame)", "\n".join(" ".join(f"{v:+.4f}" for v in a) for a in m.ellipsoid_axes.T)),
+        ("singularity", sing if sing is not None else "none (no known singular configuration)"),
     ])
 
 
@@ -216,17 +246,18 @@ def ik(
     unit = "deg" if deg else "rad"
     where = (f"({xyz[0]:.4f}, {xyz[1]:.4f}, {xyz[2]:.4f}) m" if frame == "world" else
              f"({xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f}) {fr.unit} in the {frame} frame")
-    t = Table(title=f"IK of {r.name}: TCP at {where}, {len(sols)} solution(s), {unit}",
-              caption=", ".join(f"q{i + 1} = {name}" for i, name in enumerate(r.joint_names)))
+    t = Table(title=f"IK of {r.name}: TCP at {where}, {len(sols)} solution(s), joints in {unit}",
+              caption=_joint_caption(r) + "; error: FK of the solution to the target")
     t.add_column("#")
     for i in range(r.dof):
         t.add_column(f"q{i + 1}", justify="right")
     if pitches is not None:
         t.add_column(f"pitch ({unit})", justify="right")
-    t.add_column("FK error (m)", justify="right")
+    t.add_column("error (m)", justify="right")
+    digits = 2 if deg else 4  # 0.01 deg or 0.0001 rad: a UR10 row of 6 joints fits 80 columns
     for k, (q, c) in enumerate(zip(out["solutions"], checks), 1):
         extra = [f"{out['pitches'][k - 1]:.2f}"] if pitches is not None else []
-        t.add_row(str(k), *[f"{v:.4f}" for v in q], *extra, f"{c.position_error:.1e}")
+        t.add_row(str(k), *[f"{v:.{digits}f}" for v in q], *extra, f"{c.position_error:.1e}")
     common.console().print(t)
     if pitches is not None and pitch is None and rpy is None:
         common.console(stderr=True).print(f"pitch chosen: {out['pitches'][0]:.2f} {unit} (pass --pitch to fix it)")
@@ -268,14 +299,16 @@ def dynamics(
     if json_out:
         common.print_json(out)
         return
-    _table(f"Inverse dynamics of {r.name} (SI units)", [
-        ("joints", ", ".join(r.joint_names)),
-        (f"q ({'deg' if deg else 'rad'})", _fmt(out["q"], 4)),
-        ("tau (N m)", _fmt(tau, 6)),
-        ("gravity G(q) (N m)", _fmt(out["gravity"], 6)),
-        ("coriolis C(q,qd) qd (N m)", _fmt(out["coriolis"], 6)),
-        ("mass matrix M(q)", _fmt(out["mass_matrix"], 6)),
-    ])
+    cols = [f"q{i + 1}" for i in range(r.dof)]
+    mm = out["mass_matrix"]
+    _columns_table(f"Inverse dynamics of {r.name}", cols, [
+        (f"q ({'deg' if deg else 'rad'})", out["q"]),
+        ("tau (N m)", tau),
+        ("gravity G (N m)", out["gravity"]),
+        ("C(q,qd) qd (N m)", out["coriolis"]),
+    ], caption=_joint_caption(r) + "; N m for a revolute joint, N for a prismatic one")
+    _columns_table(f"Mass matrix M(q) of {r.name} (kg m^2: N m per rad/s^2)", cols,
+                   [(f"row q{i + 1}", mm[i]) for i in range(r.dof)], digits=5)
 
 
 def _pad(r, v: np.ndarray) -> np.ndarray:
