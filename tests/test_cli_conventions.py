@@ -62,3 +62,106 @@ def test_failing_plan_is_drawn_with_the_failing_target_and_exits_3(far_plan, tmp
     svg = out.read_text()
     assert 'id="target:failed"' in svg and 'id="target:grasp"' in svg  # the pick was planned; the place target marked
     assert "PLANNING FAILED at task 2" in svg
+
+
+def test_version_and_short_help():
+    from roarmctl import __version__
+
+    for flag in ("--version", "-V"):
+        r = roarmctl(flag)
+        assert r.returncode == 0 and r.stdout.strip() == f"roarmctl {__version__}"
+    for args in (["-h"], ["plan", "-h"], ["kin", "ik", "-h"]):
+        r = roarmctl(*args)
+        assert r.returncode == 0 and "Usage: roarmctl" in r.stdout
+
+
+def test_flags_are_shown_as_flags_and_take_no_value():
+    for args in (["plan", "-h"], ["execute", "-h"], ["kin", "jacobian", "-h"], ["export", "-h"], ["-h"]):
+        out = roarmctl(*args).stdout
+        assert "<bool>" not in out and "--help" in out
+    assert "--json " in roarmctl("plan", "-h").stdout
+    r = roarmctl("robots", "--json", "true")
+    assert r.returncode == 2  # a flag: 'true' is an unexpected extra argument
+
+
+def test_shell_completion():
+    r = roarmctl("--show-completion", "bash")
+    assert r.returncode == 0 and "_roarmctl_completion" in r.stdout
+    r = roarmctl(env={"_ROARMCTL_COMPLETE": "complete_bash", "COMP_WORDS": "roarmctl ex", "COMP_CWORD": "1"})
+    assert r.returncode == 0 and r.stdout.split() == ["execute", "export"]
+
+
+@pytest.mark.parametrize("args, code, words", [
+    (["plan", "no-such-plan.yaml"], 2, "no such file"),
+    (["plan", "FAR"], 3, "unreachable"),
+    (["kin", "ik", "roarm_m3_pro", "--xyz", "2", "0", "0"], 3, "out_of_reach"),
+    (["kin", "fk", "ur10", "1"], 2, "6 arm joint values"),
+    (["kin", "dynamics", "ur10", "--q", "0 x"], 2, "not a number"),
+    (["kin", "jacobian", "nobot", "0"], 2, "nobot"),
+    (["execute", "TRAJ"], 2, "exactly one of"),
+    (["export", "TRAJ", "-o", "x.txt"], 2, "unknown export format"),
+    (["ports", "--bogus"], 2, "No such option"),
+])
+def test_json_commands_print_a_json_object_on_failure(args, code, words, traj, far_plan, tmp_path):
+    args = [str(traj) if a == "TRAJ" else str(far_plan) if a == "FAR" else a for a in args]
+    r = subprocess.run([sys.executable, "-m", "roarmctl", *args, "--json"], capture_output=True, text=True, timeout=180,
+                       cwd=tmp_path)
+    assert r.returncode == code
+    out = json.loads(r.stdout)  # exactly one JSON object on stdout
+    assert out["ok"] is False and out["exit_code"] == code and words in out["error"] and "hint" in out
+    assert r.stderr.startswith("error: ") or "Error" in r.stderr  # the line for the human stays on stderr
+
+
+def test_json_success_says_ok(traj):
+    assert json.loads(roarmctl("robots", "--json").stdout)["ok"] is True
+    assert json.loads(roarmctl("kin", "fk", "scara_2r", "0", "0", "--json").stdout)["ok"] is True
+
+
+def _lines(text: str) -> list[str]:
+    return [line for line in text.splitlines() if line.strip()]
+
+
+def test_tables_fit_80_columns_with_every_value():
+    q = ["0.1", "-1", "1", "0.2", "0.3", "0.1"]
+    for args in (["kin", "ik", "ur10", "--xyz", "0.5", "0.2", "0.4", "--rpy", "180", "0", "0", "--all", "--deg"],
+                 ["kin", "jacobian", "ur10", *q], ["kin", "dynamics", "ur10", "--q", " ".join(q)],
+                 ["kin", "fk", "ur10", *q], ["robots"]):
+        r = roarmctl(*args)
+        assert r.returncode == 0, r.stderr
+        assert max(len(line) for line in _lines(r.stdout)) <= 80 and "…" not in r.stdout, r.stdout
+    # every Jacobian entry is printed, row by row, as the JSON has it (4 decimals)
+    jac = json.loads(roarmctl("kin", "jacobian", "ur10", *q, "--json").stdout)["jacobian"]
+    text = roarmctl("kin", "jacobian", "ur10", *q).stdout
+    for name, row in zip(("vx", "vy", "vz", "wx", "wy", "wz"), jac):
+        line = next(line for line in text.splitlines() if f" {name} (" in line)
+        printed = [float(v) for v in line.split("│")[2:-1]]
+        assert printed == pytest.approx(row, abs=5e-5)
+    mm = json.loads(roarmctl("kin", "dynamics", "ur10", "--q", " ".join(q), "--json").stdout)["mass_matrix"]
+    text = roarmctl("kin", "dynamics", "ur10", "--q", " ".join(q)).stdout
+    for i, row in enumerate(mm):
+        line = next(line for line in text.splitlines() if f" row q{i + 1} " in line)
+        assert [float(v) for v in line.split("│")[2:-1]] == pytest.approx(row, abs=5e-6)
+
+
+def test_units_and_singularity_are_spelled_out():
+    text = roarmctl("kin", "jacobian", "scara_2r", "0", "0").stdout
+    assert "translational, 3x2 Jv ((m/rad)^2)" in text and "full, 6x2 J (mixed units)" in text
+    assert "elbow_stretched" in text and "(m/rad)" in text
+    text = roarmctl("kin", "jacobian", "ur10", "0.3", "-1", "1", "0.2", "0.3", "0.1").stdout
+    assert "None" not in text and "none (no known singular configuration)" in text
+
+
+def test_commands_mean_the_same_in_output_json_text_and_sim(tmp_path):
+    plan = tmp_path / "short.yaml"
+    plan.write_text("robot: roarm_m3_pro\ntasks:\n  - move: {joints: [0.4, 0.1, 1.4, 0.1, 0.0]}\n  - move: {pose: home}\n"
+                    "objects: []\n")
+    traj = tmp_path / "short.traj.json"
+    assert roarmctl("plan", str(plan), "-o", str(traj), "--json").returncode == 0
+    out = json.loads(roarmctl("execute", str(traj), "--output", str(tmp_path / "c.jsonl"), "--json").stdout)
+    lines = [json.loads(x)["cmd"] for x in (tmp_path / "c.jsonl").read_text().splitlines()]
+    assert out["commands"] == sum(c["T"] == 102 for c in lines) and out["lines"] == len(lines)
+    assert out["gripper_commands"] == sum(c["T"] == 101 for c in lines)
+    text = roarmctl("execute", str(traj), "--output", str(tmp_path / "c.jsonl")).stderr
+    assert f"wrote {out['commands']} motion commands" in text
+    sim = json.loads(roarmctl("execute", str(traj), "--sim", "--yes", "--json", "--log", str(tmp_path / "l.json")).stdout)
+    assert sim["commands"] == out["commands"]

@@ -1,0 +1,94 @@
+"""Every command line the README shows runs here, as written (in a scratch folder with the bundled
+plans), and does what the README says next to it."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text()
+
+
+def readme_commands() -> list[str]:
+    """Indented example lines starting with 'roarmctl ', and backticked ones without placeholders."""
+    cmds = [m.group(1).split("  #")[0].strip() for m in re.finditer(r"^ {4}(roarmctl .*)$", README, re.M)]
+    for span in re.findall(r"`(roarmctl [^`]*)`", README):
+        placeholder = re.search(r"\b[A-Z][A-Z_]+\b|\.\.\.|\||\[", span)
+        if not placeholder and span not in cmds:
+            cmds.append(span)
+    return [c for c in dict.fromkeys(cmds) if "--install-completion" not in c]  # never touch the shell rc files
+
+
+COMMANDS = readme_commands()
+
+
+def run(cmd: str, cwd: Path, tty: bool = False) -> subprocess.CompletedProcess:
+    args = [sys.executable, "-m", "roarmctl", *cmd.split()[1:]]
+    env = dict(os.environ, COLUMNS="80")
+    if not tty:
+        return subprocess.run(args, cwd=cwd, capture_output=True, text=True, timeout=300, env=env, stdin=subprocess.DEVNULL)
+    import pty
+
+    master, slave = pty.openpty()  # a terminal on stdin, as a user at a shell has
+    try:
+        return subprocess.run(args, cwd=cwd, capture_output=True, text=True, timeout=300, env=env, stdin=slave)
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("readme")
+    shutil.copytree(ROOT / "plans", d / "plans")
+    r = run("roarmctl plan plans/pick_place.yaml -o pick_place.traj.json", d)
+    assert r.returncode == 0, r.stderr
+    return d
+
+
+def test_the_readme_shows_the_main_commands():
+    verbs = {c.split()[1] for c in COMMANDS}
+    assert {"plan", "visualize-path", "execute", "kin", "export", "ports", "sim-device", "workspace", "robots"} <= verbs
+
+
+@pytest.mark.parametrize("cmd", COMMANDS)
+def test_readme_command(cmd, workdir):
+    if "--port /dev/ttyUSB0" in cmd:  # no arm here: a clean one-line device error (exit 4) after the checks
+        r = run(cmd, workdir, tty=True)
+        assert r.returncode == 4 and r.stderr.startswith("error: ") and r.stderr.count("\n") == 1, r.stderr
+        assert "/dev/ttyUSB0" in r.stderr
+        return
+    if cmd == "roarmctl sim-device":  # serves until Ctrl-C: its first line is the pty to open
+        proc = subprocess.Popen([sys.executable, "-m", "roarmctl", "sim-device"], cwd=workdir, text=True,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        try:
+            path = proc.stdout.readline().strip()
+            assert path.startswith("/dev/pts/") and os.path.exists(path)
+        finally:
+            proc.send_signal(signal.SIGINT)
+            proc.communicate(timeout=30)
+        assert proc.returncode == 0
+        return
+    if "pick_place.exec.json" in cmd and not (workdir / "pick_place.exec.json").exists():
+        assert run("roarmctl execute pick_place.traj.json --sim --yes", workdir).returncode == 0
+    r = run(cmd, workdir)
+    assert r.returncode == 0, f"{cmd}: {r.stderr}"
+    if cmd.startswith("roarmctl kin jacobian scara_2r 0 0 --json"):  # "singular: ellipsoid radii (0.7616, 0)"
+        out = json.loads(r.stdout)
+        assert out["ellipsoid_radii"] == pytest.approx([0.7616, 0.0], abs=1e-4) and out["singularity"] == "elbow_stretched"
+    if "--frame firmware" in cmd and cmd.startswith("roarmctl kin fk"):  # "end point (346.26, 0, 223.12) mm"
+        row = re.search(r"end point, firmware frame \(mm\)\s*│\s*\[([^\]]*)\]", r.stdout)
+        assert row, r.stdout
+        assert [float(v) for v in row.group(1).split()] == pytest.approx([346.26, 0.0, 223.12], abs=0.01)
+    if "-o " in cmd:
+        out = workdir / cmd.split("-o ")[1].split()[0]
+        assert out.exists()
