@@ -84,7 +84,8 @@ def test_ik_ref_sorts_and_keeps_gripper():
 def test_ik_unreachable_exit_3_one_line(args, reason):
     proc = run("kin", "ik", *args, "--json")
     assert proc.returncode == 3
-    assert proc.stdout == ""
+    out = json.loads(proc.stdout)  # --json: a failure is a JSON object too
+    assert out["ok"] is False and out["exit_code"] == 3 and reason in out["error"]
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and reason in lines[0] and "Traceback" not in proc.stderr
 
