@@ -15,6 +15,7 @@ import numpy as np
 import yaml
 
 from roarmctl.errors import DescriptionError, InputError
+from roarmctl.robot import validate as checks
 from roarmctl.robot.model import CollisionShape, Gripper, Inertial, Joint, Robot, WireField, transform
 
 FORMAT = "roarmctl.robot/1"
@@ -64,6 +65,7 @@ def load_robot(spec: str) -> Robot:
     for f in robot.frames.values():
         if f.point_link is not None and f.point_link not in robot.link_names:
             raise DescriptionError(f"{path}: frames.{f.name}.point.link: '{f.point_link}' is not a link of {robot.name}")
+    checks.check_robot(robot, str(path))
     _CACHE[spec] = robot
     return robot
 
@@ -78,17 +80,13 @@ def _is_file(path: Path) -> bool:
 
 
 def _read_yaml(path: Path) -> dict[str, Any]:
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f":{mark.line + 1}" if mark else ""
-        raise DescriptionError(f"{path}{where}: not valid YAML ({getattr(exc, 'problem', exc)})") from None
+    data = checks.read_yaml(path)  # bounded like a plan file: size, nesting, aliases, UTF-8
     if not isinstance(data, dict):
         raise DescriptionError(f"{path}: expected a mapping at the top level")
     fmt = data.get("format", FORMAT)
     if fmt != FORMAT:
         raise DescriptionError(f"{path}: format: '{fmt}' is not supported (expected '{FORMAT}')")
+    checks.check_document(data, str(path))
     return data
 
 
@@ -232,6 +230,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         root = ET.parse(urdf).getroot()
     except ET.ParseError as exc:
         raise DescriptionError(f"{urdf}: not valid XML ({exc})") from None
+    checks.check_urdf(root, str(urdf))  # a tree with finite numbers before it is walked
     links = {l.get("name"): l for l in root.findall("link")}
     joints_xml = root.findall("joint")
     for j in joints_xml:
