@@ -52,7 +52,7 @@ def read_yaml(path: Path) -> Any:
     try:
         return load_located(path)
     except PlanFileError as exc:
-        raise DescriptionError(exc.message.replace("not valid YAML", "not a valid robot description (YAML)"), exc.hint) from None
+        raise DescriptionError(exc.message, exc.hint) from None
 
 
 def _is_num(v: Any) -> bool:
