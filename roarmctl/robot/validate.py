@@ -226,9 +226,9 @@ def check_urdf(root, where: str) -> None:
         if inn is not None:
             mass = inn.find("mass")
             if mass is not None:
-                _attr_floats(mass, "value", 1, where, f"link '{name}' inertial mass", required=True)
+                _attr_floats(mass, "value", 1, where, f"link '{name}' mass value", required=True)
                 if float(mass.get("value")) <= 0:
-                    _fail(where, f"link '{name}' inertial mass", f"{mass.get('value')} must be positive")
+                    _fail(where, f"link '{name}' mass value", f"{mass.get('value')} must be positive")
             for tag, keys in (("origin", ("xyz", "rpy")), ("inertia", ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))):
                 e = inn.find(tag)
                 if e is not None:
