@@ -21,6 +21,7 @@ SHORT = {  # one free move and back: about 2 s of motion
     "robot": "roarm_m3_pro",
     "tasks": [{"move": {"joints": [0.4, 0.1, 1.4, 0.1, 0.0]}}, {"move": {"pose": "home"}}],
     "planner": {"seed": 3},
+    "limits": {"blend": False},  # stop between the two moves (blended they take about 1 s)
 }
 
 

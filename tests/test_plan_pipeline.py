@@ -358,3 +358,53 @@ def test_a_load_the_arm_cannot_hold_exits_3_naming_joint_torque_and_limit(tmp_pa
     assert proc.returncode == 3, proc.stderr
     assert "link1_to_link2 needs" in proc.stderr and "limit 2.94 N m" in proc.stderr and "2.00 kg" in proc.stderr
     assert not (tmp_path / "out.json").exists()
+
+
+# ------------------------------------------------------------------ blending (issue 11)
+def test_blended_joins_keep_moving_with_continuous_velocity(planned):
+    traj = load_trajectory(planned["pick_place"][0])
+    robot = load_robot(traj.robot)
+    assert len(traj.blends) >= 4  # pre-grasp, lift, pre-place, retreat
+    amax = np.array(traj.limits["acceleration"]) * traj.limits["acceleration_scale"]
+    # the file's velocities are the positions' derivative (central differences, independent of the planner)
+    fd = (traj.positions[2:] - traj.positions[:-2]) / (traj.times[2:] - traj.times[:-2])[:, None]
+    assert np.max(np.abs(fd - traj.velocities[1:-1])) < 0.02
+    for tb in traj.blends:
+        k = int(np.searchsorted(traj.times, tb))
+        window = slice(max(k - 3, 0), k + 4)
+        speed = np.max(np.abs(traj.velocities[window][:, robot.arm_indices]), axis=1)
+        assert speed.min() > 0.05, f"the arm stops at the join at {tb:.2f} s"
+        dv = np.abs(np.diff(traj.velocities[window], axis=0))
+        assert np.all(dv <= amax * np.diff(traj.times[window])[:, None] * (1 + 1e-6) + 1e-9)  # no velocity step
+
+
+def test_the_gripper_opens_during_the_transit(planned):
+    traj = load_trajectory(planned["pick_place"][0])
+    robot = load_robot(traj.robot)
+    gi = robot.joint_index(robot.gripper.joint)
+    transit = traj.segments[0]
+    assert transit.kind == "free" and not any("open gripper" in s.label for s in traj.segments)
+    sel = (traj.times > transit.start) & (traj.times < transit.end)
+    moving_arm = np.max(np.abs(traj.velocities[sel][:, robot.arm_indices]), axis=1) > 1e-3
+    moving_jaw = np.abs(traj.velocities[sel][:, gi]) > 1e-3
+    assert np.any(moving_arm & moving_jaw)
+    descent = traj.segments[1]
+    k = int(np.searchsorted(traj.times, descent.start))
+    assert traj.positions[k, gi] == pytest.approx(1.0)  # open before the straight approach starts
+
+
+def test_blend_false_keeps_the_stops_and_takes_longer(tmp_path, planned):
+    text = BASE.replace("limits: {velocity_scale: 0.6, acceleration_scale: 0.6, gripper_time: 0.5}",
+                        "limits: {velocity_scale: 0.6, acceleration_scale: 0.6, gripper_time: 0.5, blend: false}")
+    assert "blend: false" in text
+    out = tmp_path / "stops.traj.json"
+    proc = roarmctl("plan", str(_write(tmp_path, text)), "-o", str(out), "--json")
+    assert proc.returncode == 0, proc.stderr
+    stops = load_trajectory(out)
+    blended = load_trajectory(planned["pick_place"][0])
+    assert stops.blends == [] and any("open gripper" in s.label for s in stops.segments)
+    for seg in stops.segments:  # every segment starts and ends at rest
+        for t in (seg.start, seg.end):
+            k = int(np.argmin(np.abs(stops.times - t)))
+            assert np.max(np.abs(stops.velocities[k])) < 1e-6, seg.label
+    assert blended.duration < 0.85 * stops.duration

@@ -73,11 +73,39 @@ class _Step:
     pitch: float = math.pi / 2
     roll: float | None = None
     grasp_target: str | None = None  # the object the jaws may touch during this step
+    open_to: float | None = None  # free motion: the gripper opens to this during it (blended) or right after
+    open_label: str = ""
+
+
+@dataclass
+class _Part:
+    """A planned but untimed motion: ``wps`` (K, dof) full configurations, gripper at its value at the start."""
+
+    step: _Step
+    wps: np.ndarray
+
+
+@dataclass
+class _Piece:
+    """A timed stretch of the trajectory, from rest to rest: its segments, event and blended joins (times from its start)."""
+
+    tp: TimedPath
+    segments: list[Segment]
+    event: Event | None = None
+    blends: list[float] = field(default_factory=list)
+
+
+class _GripperDoesNotFit(Exception):
+    """The gripper cannot open within the free motion ``index`` of a chain (too short, or the jaws never clear)."""
+
+    def __init__(self, index: int) -> None:
+        super().__init__(index)
+        self.index = index
 
 
 class _Timer:
     def __init__(self) -> None:
-        self.t: dict[str, float] = {k: 0.0 for k in ("ik", "ompl", "simplify", "toppra", "recheck")}
+        self.t: dict[str, float] = {k: 0.0 for k in ("ik", "ompl", "simplify", "toppra", "recheck", "blend")}
 
     def add(self, key: str, since: float) -> None:
         self.t[key] = self.t.get(key, 0.0) + time.perf_counter() - since
@@ -164,27 +192,43 @@ class Planner:
         q = self._start_configuration()
         tasks = [t for _ in range(self.plan.cycles) for t in self.plan.tasks]
         self._warn_collinear(tasks)
-        timed: list[tuple[_Step, TimedPath]] = []
+        pieces: list[_Piece] = []
+        chain: list[_Part] = []  # free and straight motions not yet timed: timed as one when blending
         for i, task in enumerate(tasks):
             self.progress(f"task {i + 1}/{len(tasks)}: {task.kind} (IK)", i, len(tasks))
             try:
                 for step in self._expand(task, q, i):
                     self.progress(step.label, i, len(tasks))
+                    if step.kind in ("free", "cartesian"):
+                        part = self._geometry(step, q)
+                        chain.append(part)
+                        q = part.wps[-1].copy()
+                        if step.open_to is not None:
+                            q[self.gi] = step.open_to
+                        continue
+                    pieces += self._flush(chain)
+                    chain = []
                     tp = self._realise(step, q)
-                    timed.append((step, tp))
+                    pieces.append(_Piece(tp, [Segment(0.0, tp.duration, step.kind, step.label)],
+                                         None if step.event is None else Event(tp.duration, step.event.kind, step.event.label, step.event.position)))
                     q = tp.q[-1].copy()
             except InfeasibleError as exc:
-                exc.partial = self._partial(timed, q, task, i)  # what was planned, for visualize-path
+                exc.partial = self._partial(pieces, chain[0].wps[0] if chain else q, task, i)  # what was planned, for visualize-path
                 raise
+        try:
+            pieces += self._flush(chain)
+        except InfeasibleError as exc:
+            exc.partial = self._partial(pieces, chain[0].wps[0], tasks[-1], len(tasks) - 1)
+            raise
         self.progress("done", len(tasks), len(tasks))
-        traj = self._assemble(timed)
-        return PlanResult(traj, dict(self.timer.t), self.warnings, len(timed), int(getattr(self.checker, "check_count", 0)))
+        traj = self._assemble(pieces)
+        return PlanResult(traj, dict(self.timer.t), self.warnings, len(traj.segments), int(getattr(self.checker, "check_count", 0)))
 
-    def _partial(self, timed: list[tuple[_Step, TimedPath]], q: np.ndarray, task, index: int) -> PartialPlan:
-        """The trajectory up to the failing task (just the start pose if it is the first) and its target."""
-        if not timed:
+    def _partial(self, pieces: list[_Piece], q: np.ndarray, task, index: int) -> PartialPlan:
+        """The trajectory timed before the failure (just the pose ``q`` if nothing was) and the failing task's target."""
+        if not pieces:
             z = np.zeros((1, len(q)))
-            timed = [(_Step("wait", "start"), TimedPath(np.zeros(1), q[None, :].copy(), z, z.copy()))]
+            pieces = [_Piece(TimedPath(np.zeros(1), q[None, :].copy(), z, z.copy()), [Segment(0.0, 0.0, "wait", "start")])]
         target = None
         if isinstance(task, PickTask):
             target = self.object_pose[task.object][:3, 3] + np.array([0.0, 0.0, task.grasp_offset])
@@ -198,7 +242,7 @@ class Planner:
                 target = self.robot.kin.fk(self.robot.full_q(goal))[:3, 3] if goal is not None else None
             except Exception:  # noqa: BLE001 - a goal of the wrong length has no target to mark
                 target = None
-        return PartialPlan(self._assemble(timed), None if target is None else [float(v) for v in target],
+        return PartialPlan(self._assemble(pieces), None if target is None else [float(v) for v in target],
                            self._where(task, index))
 
     def _start_configuration(self) -> np.ndarray:
@@ -262,9 +306,8 @@ class Planner:
         self._set_state(g_open, grasp_target=task.object)
         q_grasp, q_above = self._choose_ik([(grasp, task.pitch, task.roll), (above, task.pitch, task.roll)], q, where, gripper=g_open)
         self._set_state(q[self.gi])
-        steps = [_Step("free", f"{where}: transit above '{task.object}'", q_to=_with(q_above, self.gi, q[self.gi]))]
-        if abs(q[self.gi] - g_open) > 1e-9:
-            steps.append(_Step("gripper", f"{where}: open gripper", gripper_to=g_open))
+        steps = [_Step("free", f"{where}: transit above '{task.object}'", q_to=_with(q_above, self.gi, q[self.gi]),
+                       open_to=g_open if abs(q[self.gi] - g_open) > 1e-9 else None, open_label=f"{where}: open gripper")]
         steps += [
             _Step("cartesian", f"{where}: descend to '{task.object}'", q_to=q_grasp, line=(above, grasp),
                   pitch=task.pitch, roll=task.roll, grasp_target=task.object),
@@ -365,16 +408,277 @@ class Planner:
         self.checker.set_grasp_target(grasp_target if grasp_target != self.held else None)
 
     def _realise(self, step: _Step, q: np.ndarray) -> TimedPath:
-        """Plan (if free), time and re-check one step starting at ``q``; update the world state."""
-        g = q[self.gi] if self.gi is not None else None
+        """Time and check a step at rest (wait, gripper) starting at ``q``; update the world state."""
         if step.kind == "wait":
             return _dwell(q, step.duration)
-        if step.kind == "gripper":
-            return self._gripper_step(step, q)
-        self._set_state(g, grasp_target=step.grasp_target)
+        return self._gripper_step(step, q)
+
+    def _geometry(self, step: _Step, q: np.ndarray) -> _Part:
+        """The untimed path of a free or straight motion from ``q`` (OMPL + FCL, or IK along the line)."""
+        from roarmctl.motion.cartesian import cartesian_line
+
+        self._set_state(q[self.gi] if self.gi is not None else None, grasp_target=step.grasp_target)
         if step.kind == "cartesian":
-            return self._cartesian_step(step, q)
-        return self._free_step(step, q)
+            t0 = time.perf_counter()
+            wps = cartesian_line(self.robot, q, step.line[1], pitch=step.pitch, roll=step.roll, label=step.label)
+            self.timer.add("ik", t0)
+            return _Part(step, wps)
+        return _Part(step, self._free_path(step, q))
+
+    # ------------------------------------------------------------ timing of chains
+    def _flush(self, parts: list[_Part]) -> list[_Piece]:
+        """Time a chain of motions: each from rest to rest, then, when ``limits.blend``, overlapped in time
+        at every join (see ``_blend``) and the gripper opened during its free motion."""
+        if not parts:
+            return []
+        singles = [self._time_chain([p]) for p in parts]
+        if not self.plan.limits.blend:
+            return self._at_rest(parts, singles)
+        piece, bounds = self._superposed(parts, singles, dynamic=True)
+        if len(parts) > 1:  # the blended curve of the longest overlaps, re-timed as one path
+            retimed = self._retimed(parts, singles)
+            if retimed is not None and retimed[0].tp.duration < piece.tp.duration:
+                piece, bounds = retimed
+        try:
+            self._gripper_column(piece.tp, parts, [b[0] for b in bounds], [b[1] for b in bounds])
+        except _GripperDoesNotFit as exc:  # too short to open the gripper on the way: stop after that motion
+            k = exc.index
+            return self._flush(parts[:k]) + self._at_rest([parts[k]], [singles[k]]) + self._flush(parts[k + 1:])
+        return [piece]
+
+    def _superposed(self, parts: list[_Part], singles: list[_Piece], dynamic: bool) -> tuple[_Piece, list[tuple[float, float]]]:
+        piece, bounds = singles[0], [(0.0, singles[0].tp.duration)]
+        for k in range(1, len(parts)):
+            piece, bounds = self._blend(piece, bounds, parts[:k], parts[k], singles[k], dynamic)
+        return piece, bounds
+
+    def _retimed(self, parts: list[_Part], singles: list[_Piece]) -> tuple[_Piece, list[tuple[float, float]]] | None:
+        """The chain's blended curve with the longest valid overlaps (geometry only), timed again as one path by
+        TOPP-RA under every limit and re-checked in full; None if that fails."""
+        geo, bounds = self._superposed(parts, singles, dynamic=False)
+        if not geo.blends:
+            return None
+        q = geo.tp.q
+        chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q[:, self.arm], axis=0), axis=1))])
+        keep = [0]
+        for i in range(1, len(q)):  # knots at least RETIME_KNOT apart along the curve
+            if chord[i] - chord[keep[-1]] >= RETIME_KNOT or i == len(q) - 1:
+                keep.append(i)
+        wps = q[keep]
+        s_knots = chord[keep]
+        t_bounds = [0.0] + [b[1] for b in bounds]
+        s_bounds = np.interp(t_bounds, geo.tp.times, chord)
+        s_bounds = np.interp(s_bounds, s_knots, s_knots)  # on the thinned curve's own parameter
+        label = f"{parts[0].step.label} .. {parts[-1].step.label}"
+        try:
+            tp = self._time(wps, label)
+            t_all = np.interp(s_bounds, tp.s, tp.times)
+            t_all[0], t_all[-1] = 0.0, tp.duration
+            t0 = time.perf_counter()
+            try:
+                self._check_chain(tp, parts, s_bounds, label)
+            finally:
+                self.timer.add("recheck", t0)
+        except PlanningError:
+            return None
+        segments = [Segment(float(a), float(b), p.step.kind, p.step.label) for p, a, b in zip(parts, t_all[:-1], t_all[1:])]
+        return _Piece(tp, segments, None, [float(t) for t in t_all[1:-1]]), list(zip(t_all[:-1].tolist(), t_all[1:].tolist()))
+
+    def _at_rest(self, parts: list[_Part], singles: list[_Piece]) -> list[_Piece]:
+        """The motions one after the other from rest to rest, the gripper opened at rest after its free motion."""
+        pieces = []
+        for part, piece in zip(parts, singles):
+            pieces.append(piece)
+            if part.step.open_to is not None:
+                q = piece.tp.q[-1].copy()
+                step = _Step("gripper", part.step.open_label or f"{part.step.label}: open gripper", gripper_to=part.step.open_to)
+                tp = self._gripper_step(step, q)
+                pieces.append(_Piece(tp, [Segment(0.0, tp.duration, "gripper", step.label)]))
+        return pieces
+
+    def _blend(self, a: _Piece, bounds: list[tuple[float, float]], a_parts: list[_Part], part: _Part, b: _Piece,
+               dynamic: bool = True) -> tuple[_Piece, list[tuple[float, float]]]:
+        """``b`` started before ``a`` ends: the two motions superposed over an overlap (velocity, acceleration and
+        jerk add; both are continuous, so the sum is too). The longest overlap (on the sample grid, at most the
+        shorter motion's duration) is taken whose samples keep every limit (velocity, acceleration, jerk by finite
+        differences, torque by RNEA, TCP speed) and are collision-free and outside the singularity margin; a
+        straight line keeps at least its last (or first) LINE_KEEP of its length exact, so the overlap only
+        rounds the corner near its pre-grasp end. ``bounds`` are each part's (start, end) in ``a``.
+        ``dynamic`` False checks the geometry only (joint limits, collisions): a curve to be timed again."""
+        dt = SAMPLE_DT
+        prev = a_parts[-1]
+        ta, tb = a.tp, b.tp
+        on_grid = np.flatnonzero(np.abs(ta.times / dt - np.round(ta.times / dt)) < 1e-6)
+        ia = int(on_grid[-1])
+        limit = min(ia - int(np.ceil(bounds[-1][0] / dt - 1e-9)), len(tb.times) - 2)  # overlap stays inside both motions
+        if prev.step.kind == "cartesian":  # the line must be exact until LINE_KEEP of it is done
+            limit = min(limit, ia - int(np.ceil(self._line_time(prev, ta, bounds[-1], 1.0 - LINE_KEEP) / dt - 1e-9)))
+        if part.step.kind == "cartesian":
+            limit = min(limit, int(self._line_time(part, tb, (0.0, tb.duration), 1.0 - LINE_KEEP) / dt))
+        t0 = time.perf_counter()
+        try:
+            for m in range(limit, 0, -BLEND_STEP):
+                cand = _superpose(ta, tb, ia, m)
+                if self._overlap_ok(cand, ia + 1 - m, ia, prev, part, dynamic):
+                    break
+            else:
+                m, cand = 0, _superpose(ta, tb, ia, 0)
+        finally:
+            self.timer.add("blend", t0)
+        start = (ia + 1 - m) * dt  # b's start in the combined timeline
+        # where one segment hands over to the next: a line is exact from (or until) there
+        if part.step.kind == "cartesian":
+            join = ta.duration if m else start
+        elif prev.step.kind == "cartesian":
+            join = start
+        else:
+            join = 0.5 * (start + max(ta.duration, start))
+        segments = a.segments[:-1] + [Segment(a.segments[-1].start, join, a.segments[-1].kind, a.segments[-1].label)]
+        segments += [Segment(max(start + sg.start, join), start + sg.end, sg.kind, sg.label) for sg in b.segments]
+        new_bounds = bounds[:-1] + [(bounds[-1][0], join), (join, start + tb.duration)]
+        return _Piece(cand, segments, None, a.blends + ([join] if m else [])), new_bounds
+
+    def _line_time(self, part: _Part, tp: TimedPath, span: tuple[float, float], fraction: float) -> float:
+        """Time (s, in ``tp``) when the TCP has covered ``fraction`` of the part's straight line."""
+        p0, p1 = self.robot.kin.fk(part.wps[0])[:3, 3], part.step.line[1]
+        sel = (tp.times >= span[0] - 1e-9) & (tp.times <= span[1] + 1e-9)
+        p = self.robot.kin.fk(tp.q[sel])[:, :3, 3]
+        d = p1 - p0
+        done = np.clip((p - p0) @ d / max(float(d @ d), 1e-18), 0.0, 1.0)
+        return float(np.interp(fraction, np.maximum.accumulate(done), tp.times[sel]))
+
+    def _overlap_ok(self, tp: TimedPath, lo: int, hi: int, prev: _Part, part: _Part, dynamic: bool = True) -> bool:
+        """Limits and validity of the samples lo..hi (the overlap) of a superposed motion, one sample either side."""
+        a, b = max(lo - 1, 0), min(hi + 2, len(tp.times))
+        q, qd, qdd = tp.q[a:b], tp.qd[a:b], tp.qdd[a:b]
+        if np.any(q < self.robot.lower - LIMIT_TOL) or np.any(q > self.robot.upper + LIMIT_TOL):
+            return False
+        if dynamic and (np.any(np.abs(qd) > self.vmax * (1 + 1e-6) + LIMIT_TOL) or np.any(np.abs(qdd) > self.amax * (1 + 1e-6) + LIMIT_TOL)):
+            return False
+        if not dynamic:
+            pass
+        elif self.jmax is not None:
+            jerk = np.diff(tp.qdd[max(a - 1, 0):min(b + 1, len(tp.times))], axis=0) / np.diff(tp.times[max(a - 1, 0):min(b + 1, len(tp.times))])[:, None]
+            if np.any(np.abs(jerk) > self.jmax * (1 + 1e-9)):
+                return False
+        if dynamic and self.plan.limits.max_tcp_speed is not None:
+            if np.max(np.linalg.norm(self.robot.kin.tcp_velocity(q, qd[:, self.arm]), axis=1)) > self.plan.limits.max_tcp_speed:
+                return False
+        model = self._torque_model(q[0], list(range(self.robot.dof))) if dynamic else None
+        if model is not None and np.any(np.abs(model.inverse_dynamics(q, qd, qdd)) > model.limits):
+            return False
+        fine = _interpolate(q, RECHECK_SUBSTEPS)
+        for p in (prev, part):  # each motion's own collision state: the stricter one decides
+            self._set_state(p.wps[0][self.gi] if self.gi is not None else None, grasp_target=p.step.grasp_target)
+            if self._first_invalid(fine) is not None:
+                return False
+        return True
+
+    def _time_chain(self, parts: list[_Part]) -> _Piece:
+        """Time one motion from rest to rest and re-check it (``parts`` holds that one motion).
+
+        A free motion starts as the spline through its few vertices; if a check fails, vertices are
+        added along its valid polyline and the spline pulled toward it, step by step.
+        """
+        from roarmctl.motion.collision import densify
+
+        (part,) = parts
+        label = part.step.label
+        last_error: PlanningError | None = None
+        for max_step in ((None, 0.4, 0.2, 0.1, 0.05, 0.025) if part.step.kind == "free" else (None,)):
+            wps = part.wps if max_step is None else densify(part.wps, max_step)
+            try:  # a timing failure is retried too: denser vertices make a tamer spline
+                tp = self._time(wps, label)
+            except PlanningError as exc:
+                last_error = exc
+                continue
+            t0 = time.perf_counter()
+            try:
+                self._check_chain(tp, parts, np.array([0.0, float(tp.s[-1])]), label)
+            except PlanningError as exc:
+                last_error = exc
+                continue
+            finally:
+                self.timer.add("recheck", t0)
+            return _Piece(tp, [Segment(0.0, tp.duration, part.step.kind, label)])
+        raise last_error
+
+    def _gripper_column(self, tp: TimedPath, parts: list[_Part], t_starts: list[float], t_ends: list[float]) -> None:
+        """Set the gripper over the chain: each part's own value; a part with ``open_to`` opens it during that part
+        (blending), starting at the first sample from which the moving jaws are clear of everything."""
+        gi = self.gi
+        if gi is None:
+            return
+        for k, part in enumerate(parts):
+            sel = tp.times >= t_starts[k] - 1e-12
+            tp.q[sel, gi], tp.qd[sel, gi], tp.qdd[sel, gi] = part.wps[0][gi], 0.0, 0.0
+        for k, part in enumerate(parts):
+            if part.step.open_to is None:
+                continue
+            g = self._gripper_motion(tp.q[0], part.step.open_to, part.step.open_label, start=float(part.wps[0][gi]))
+            moving = g.times < g.duration - 1e-12  # the samples on the grid (the last one is at rest)
+            n = int(np.count_nonzero(moving))
+            first = int(np.searchsorted(tp.times, t_starts[k] - 1e-12))
+            last_start = int(np.searchsorted(tp.times, t_ends[k] - g.duration + 1e-12, side="right")) - 1
+            for i0 in range(first, last_start + 1, 5):  # try every 50 ms from the start of the transit
+                q = tp.q.copy()
+                q[i0:, gi] = part.step.open_to
+                q[i0:i0 + n, gi] = g.q[moving, gi]
+                self._set_state(part.wps[0][gi], grasp_target=part.step.grasp_target)
+                span = q[i0:int(np.searchsorted(tp.times, t_ends[k] + 1e-12))]
+                if self._first_invalid(_interpolate(span, RECHECK_SUBSTEPS)) is None:
+                    tp.q[:, gi] = q[:, gi]
+                    tp.qd[i0:, gi], tp.qdd[i0:, gi] = 0.0, 0.0
+                    tp.qd[i0:i0 + n, gi], tp.qdd[i0:i0 + n, gi] = g.qd[moving, gi], g.qdd[moving, gi]
+                    break
+            else:
+                raise _GripperDoesNotFit(k)
+
+    def _first_invalid(self, qf: np.ndarray) -> int | None:
+        """First invalid configuration of ``qf`` (M, dof), the gripper as given per sample (grasp target as set)."""
+        if self.gi is None:
+            return self.checker.first_invalid(qf[:, self.arm])
+        g = qf[:, self.gi]
+        cuts = np.flatnonzero(np.abs(np.diff(g)) > 1e-12) + 1
+        for a, b in zip(np.concatenate([[0], cuts]), np.concatenate([cuts, [len(g)]])):
+            self.checker.set_gripper(float(g[a]))
+            bad = self.checker.first_invalid(qf[a:b, self.arm])
+            if bad is not None:
+                return int(a + bad)
+        return None
+
+    def _check_chain(self, tp: TimedPath, parts: list[_Part], s_bounds: np.ndarray, label: str) -> None:
+        """Independent check of the sampled motion: limits, TCP speed, collisions (4x finer) and singularity
+        margin with each part's own collision state, straight parts within LINE_TOLERANCE of their lines."""
+        from roarmctl.motion.cartesian import line_deviation
+
+        r = self.robot
+        if np.any(tp.q < r.lower - LIMIT_TOL) or np.any(tp.q > r.upper + LIMIT_TOL):
+            raise PlanningError(f"{label}: the timed motion leaves the joint limits")
+        if np.any(np.abs(tp.qd) > self.vmax * (1 + 1e-6) + LIMIT_TOL):
+            raise PlanningError(f"{label}: the timed motion exceeds a joint velocity limit")
+        if np.any(np.abs(tp.qdd) > self.amax * (1 + 1e-6) + LIMIT_TOL):
+            raise PlanningError(f"{label}: the timed motion exceeds a joint acceleration limit")
+        if self.plan.limits.max_tcp_speed is not None:
+            speed = np.linalg.norm(r.kin.tcp_velocity(tp.q, tp.qd[:, self.arm]), axis=1)
+            if np.max(speed) > self.plan.limits.max_tcp_speed * (1 + 1e-6):
+                raise PlanningError(f"{label}: the TCP speed {np.max(speed):.3f} m/s exceeds max_tcp_speed")
+        for k, part in enumerate(parts):
+            sel = np.flatnonzero((tp.s >= s_bounds[k] - 1e-12) & (tp.s <= s_bounds[k + 1] + 1e-12))
+            lo, hi = max(int(sel[0]) - 1, 0), min(int(sel[-1]) + 1, len(tp.times) - 1)  # and the samples either side
+            self._set_state(part.wps[0][self.gi] if self.gi is not None else None, grasp_target=part.step.grasp_target)
+            fine = _interpolate(tp.q[lo:hi + 1], RECHECK_SUBSTEPS)
+            bad = self._first_invalid(fine)
+            if bad is not None:
+                if self.gi is not None:
+                    self.checker.set_gripper(float(fine[bad, self.gi]))
+                raise PlanningError(f"{part.step.label}: the timed motion is invalid at t = {tp.times[lo] + bad / RECHECK_SUBSTEPS * SAMPLE_DT:.2f} s: "
+                                    f"{self.checker.explain(fine[bad, self.arm])}")
+            if part.step.kind == "cartesian":
+                p0, p1 = r.kin.fk(part.wps[0])[:3, 3], part.step.line[1]
+                dev = line_deviation(r, tp.q[sel], p0, p1)
+                if dev > LINE_TOLERANCE:
+                    raise PlanningError(f"{part.step.label}: the timed motion leaves the straight TCP line by {dev * 1000:.1f} mm")
 
     def _gripper_step(self, step: _Step, q: np.ndarray) -> TimedPath:
         a, b = float(q[self.gi]), float(step.gripper_to)
@@ -407,30 +711,8 @@ class Planner:
             self._set_state(b)
         return tp
 
-    def _cartesian_step(self, step: _Step, q: np.ndarray) -> TimedPath:
-        from roarmctl.motion.cartesian import cartesian_line, line_deviation
-
-        p0, p1 = step.line
-        t0 = time.perf_counter()
-        wps = cartesian_line(self.robot, q, p1, pitch=step.pitch, roll=step.roll, label=step.label)
-        self.timer.add("ik", t0)
-        tp = self._time(wps, step.label)
-        t0 = time.perf_counter()
-        self._recheck(tp, step.label)
-        dev = line_deviation(self.robot, tp.q, self.robot.kin.fk(q)[:3, 3], p1)
-        self.timer.add("recheck", t0)
-        if dev > LINE_TOLERANCE:
-            raise PlanningError(f"{step.label}: the timed motion leaves the straight TCP line by {dev * 1000:.1f} mm")
-        return tp
-
-    def _free_step(self, step: _Step, q: np.ndarray) -> TimedPath:
-        """OMPL path, then the smoothest timed curve through it that stays valid.
-
-        A cubic spline through the few simplified vertices is smooth (no acceleration ringing)
-        but may cut corners; if the re-check finds it invalid, vertices are added along the
-        valid polyline and the spline pulled toward it, step by step.
-        """
-        from roarmctl.motion.collision import densify
+    def _free_path(self, step: _Step, q: np.ndarray) -> np.ndarray:
+        """OMPL path from ``q`` to the step's goal: the few vertices (K, dof) of the shortest of a few plans, shortcut."""
         from roarmctl.motion.ompl_planner import plan_joint_path_with_stats, simplify_path
 
         goal = step.q_to.copy()
@@ -458,23 +740,7 @@ class Planner:
             self.timer.add("simplify", t0)
         vertices = np.repeat(q[None, :], len(path), axis=0)
         vertices[:, self.arm] = path
-        last_error: PlanningError | None = None
-        for max_step in (None, 0.4, 0.2, 0.1, 0.05, 0.025):
-            wps = vertices if max_step is None else densify(vertices, max_step)
-            try:  # a timing failure is retried too: denser vertices make a tamer spline
-                tp = self._time(wps, step.label)
-            except PlanningError as exc:
-                last_error = exc
-                continue
-            t0 = time.perf_counter()
-            try:
-                self._recheck(tp, step.label)
-                return tp
-            except PlanningError as exc:
-                last_error = exc
-            finally:
-                self.timer.add("recheck", t0)
-        raise last_error
+        return vertices
 
     def _time(self, wps: np.ndarray, label: str) -> TimedPath:
         t0 = time.perf_counter()
@@ -497,11 +763,15 @@ class Planner:
         qd, qdd = np.zeros_like(q), np.zeros_like(q)
         qd[:, arm], qdd[:, arm] = tp_arm.qd, tp_arm.qdd
         self.timer.add("toppra", t0)
-        return TimedPath(tp_arm.times, q, qd, qdd, tp_arm.jerk_filter)
+        return TimedPath(tp_arm.times, q, qd, qdd, tp_arm.jerk_filter, tp_arm.s)
 
-    def _gripper_motion(self, q: np.ndarray, target: float, label: str) -> TimedPath:
-        """The gripper alone from q[gi] to ``target``: time-optimal under its velocity, acceleration and jerk limits."""
+    def _gripper_motion(self, q: np.ndarray, target: float, label: str, start: float | None = None) -> TimedPath:
+        """The gripper alone from ``start`` (default q[gi]) to ``target``, the arm held at ``q``: time-optimal under
+        the gripper's velocity, acceleration and jerk limits."""
         gi = self.gi
+        q = q.copy()
+        if start is not None:
+            q[gi] = start
         t0 = time.perf_counter()
         one = time_parameterise(np.array([[q[gi]], [target]]), self.vmax[gi:gi + 1], self.amax[gi:gi + 1],
                                 None if self.jmax is None else self.jmax[gi:gi + 1], sample_dt=SAMPLE_DT, label=label)
@@ -550,43 +820,26 @@ class Planner:
         if model is not None:
             check_holding(model, q[None, self.arm], label)
 
-    def _recheck(self, tp: TimedPath, label: str) -> None:
-        """Independent check of the sampled motion: limits, TCP speed, collisions (4x finer), margin."""
-        r = self.robot
-        if np.any(tp.q < r.lower - LIMIT_TOL) or np.any(tp.q > r.upper + LIMIT_TOL):
-            raise PlanningError(f"{label}: the timed motion leaves the joint limits")
-        if np.any(np.abs(tp.qd) > self.vmax * (1 + 1e-6) + LIMIT_TOL):
-            raise PlanningError(f"{label}: the timed motion exceeds a joint velocity limit")
-        if np.any(np.abs(tp.qdd) > self.amax * (1 + 1e-6) + LIMIT_TOL):
-            raise PlanningError(f"{label}: the timed motion exceeds a joint acceleration limit")
-        if self.plan.limits.max_tcp_speed is not None:
-            speed = np.linalg.norm(r.kin.tcp_velocity(tp.q, tp.qd[:, self.arm]), axis=1)
-            if np.max(speed) > self.plan.limits.max_tcp_speed * (1 + 1e-6):
-                raise PlanningError(f"{label}: the TCP speed {np.max(speed):.3f} m/s exceeds max_tcp_speed")
-        fine = _interpolate(tp.q, RECHECK_SUBSTEPS)
-        bad = self.checker.first_invalid(fine[:, self.arm])
-        if bad is not None:
-            raise PlanningError(f"{label}: the timed motion is invalid at t = {bad / RECHECK_SUBSTEPS * SAMPLE_DT:.2f} s: "
-                                f"{self.checker.explain(fine[bad, self.arm])}")
-
     # ------------------------------------------------------------ assemble
-    def _assemble(self, timed: list[tuple[_Step, TimedPath]]) -> Trajectory:
+    def _assemble(self, pieces: list[_Piece]) -> Trajectory:
         from roarmctl.robot.loader import bundled_robots
 
         times, qs, qds, qdds = [], [], [], []
-        events, segments = [], []
+        events, segments, blends = [], [], []
         t_off = 0.0
-        for k, (step, tp) in enumerate(timed):
+        for k, piece in enumerate(pieces):
+            tp = piece.tp
             skip = 1 if k > 0 else 0
             times.append(tp.times[skip:] + t_off)
             qs.append(tp.q[skip:])
             qds.append(tp.qd[skip:])
             qdds.append(tp.qdd[skip:])
-            end = t_off + tp.duration
-            segments.append(Segment(t_off, end, step.kind, step.label))
-            if step.event is not None:
-                events.append(Event(end, step.event.kind, step.event.label, step.event.position))
-            t_off = end
+            segments += [Segment(t_off + sg.start, t_off + sg.end, sg.kind, sg.label) for sg in piece.segments]
+            if piece.event is not None:
+                e = piece.event
+                events.append(Event(t_off + e.time, e.kind, e.label, e.position))
+            blends += [t_off + b for b in piece.blends]
+            t_off += tp.duration
         t = np.concatenate(times)
         keep = np.concatenate([[True], np.diff(t) > 1e-9])
         p = self.plan
@@ -599,12 +852,16 @@ class Planner:
             accelerations=np.concatenate(qdds)[keep],
             events=events,
             segments=segments,
+            blends=blends,
             limits={
                 "velocity": [float(v) for v in self.robot.velocity_limits],
                 "acceleration": [float(v) for v in self.robot.acceleration_limits],
                 "velocity_scale": p.limits.velocity_scale,
                 "acceleration_scale": p.limits.acceleration_scale,
                 "max_tcp_speed": p.limits.max_tcp_speed,
+                "jerk": None if self.jmax is None else [float(v) for v in self.jmax],
+                "effort": None if self.effort is None else [float(v) if np.isfinite(v) else None for v in self.effort],
+                "blend": p.limits.blend,
             },
             singularity_margin={"min_singular_value": p.planner.singularity_margin} if p.planner.singularity_margin else None,
             scene=self._initial_scene_dict(),
@@ -625,6 +882,34 @@ def _scene_item(spec: ItemSpec):
 
     return SceneItem(name=spec.name, role=spec.role, shape=spec.shape, pose=spec.pose.copy(), size=tuple(spec.size),
                      radius=spec.radius, length=spec.length)
+
+
+RETIME_KNOT = 0.01  # rad between the knots of a blended curve timed again
+LINE_KEEP = 0.5  # a blend may round the corner over at most the first (last) half of a straight line
+BLEND_STEP = 2  # samples between the overlaps tried, longest first
+
+
+def _superpose(a: TimedPath, b: TimedPath, ia: int, m: int) -> TimedPath:
+    """``b`` started ``m`` samples before ``a``'s last on-grid sample ``ia`` ends it, both at rest at their ends.
+
+    Positions add as displacements from the common point (``b``'s start, where ``a`` comes to rest);
+    velocities and accelerations add. Samples stay on the SAMPLE_DT grid (``a``'s off-grid last sample
+    is dropped: ``a`` is at rest from then on) and end with ``b``'s last sample.
+    """
+    dt = SAMPLE_DT
+    start = ia + 1 - m
+    nb = len(b.times)
+    n = start + nb
+    times = np.arange(n) * dt
+    times[start:] = start * dt + b.times
+    q = np.repeat(a.q[-1][None, :], n, axis=0)
+    qd, qdd = np.zeros_like(q), np.zeros_like(q)
+    k = min(ia + 1, n)
+    q[:k], qd[:k], qdd[:k] = a.q[:k], a.qd[:k], a.qdd[:k]
+    q[start:] += b.q - b.q[0]
+    qd[start:] += b.qd
+    qdd[start:] += b.qdd
+    return TimedPath(times, q, qd, qdd, max(a.jerk_filter, b.jerk_filter))
 
 
 def _with(q: np.ndarray, index: int | None, value: float | None) -> np.ndarray:

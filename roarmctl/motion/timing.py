@@ -48,7 +48,9 @@ GRID_MIN, GRID_MAX, GRID_PER_SEGMENT = 100, 800, 4
 class TimedPath:
     """Samples of a timed path: ``times`` (N,) s from 0, ``q``/``qd``/``qdd`` (N, n) in rad, rad/s, rad/s^2.
 
-    ``jerk_filter`` is the width (s) of the moving-average filter that bounded the jerk (0: none).
+    ``jerk_filter`` is the width (s) of the moving-average filter that bounded the jerk (0: none);
+    ``s`` (N,) the path parameter at each sample (cumulative joint-space chord length of the
+    waypoints, rad), so callers can find when the motion passes a given waypoint.
     """
 
     times: np.ndarray
@@ -56,6 +58,7 @@ class TimedPath:
     qd: np.ndarray
     qdd: np.ndarray
     jerk_filter: float = 0.0
+    s: np.ndarray | None = None
 
     @property
     def duration(self) -> float:
@@ -116,6 +119,39 @@ def _tcp_speed_constraint(tcp_velocity_per_ds: Callable[[np.ndarray, np.ndarray]
             return None, None, None, None, None, None, xbound
 
     return TcpSpeedConstraint()
+
+
+GEOMETRIC_JERK_SHARE = 0.5  # of each jerk limit, for the path's own term q3(s) * sdot^3
+
+
+def _geometric_jerk_constraint(jmax: np.ndarray):
+    """Bound the path speed where the path itself turns fast: |q3(s)| * sdot^3 <= share * jerk limit.
+
+    Joint jerk is q1 s3 + 3 q2 s1 s2 + q3 s1^3 (qk, sk: k-th derivatives of the path and of s(t)):
+    filtering s(t) bounds the first two terms, but the last comes from the path's geometry (a cubic
+    spline's third derivative, constant between knots) and only a lower speed bounds it. As a bound
+    on x = sdot^2 it is a TOPP-RA constraint.
+    """
+    from toppra.constraint import DiscretizationType
+    from toppra.constraint.linear_constraint import LinearConstraint
+
+    class GeometricJerkConstraint(LinearConstraint):
+        def __init__(self) -> None:
+            super().__init__()
+            self.discretization_type = DiscretizationType.Collocation
+
+        def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
+            self.dof = path.dof
+            # q3 per grid interval (slope of q2), then the larger of the two intervals at each grid point
+            d3 = np.abs(np.diff(path(gridpoints, 2), axis=0)) / np.maximum(np.diff(gridpoints), 1e-12)[:, None]
+            at = np.maximum(np.vstack([d3[:1], d3]), np.vstack([d3, d3[-1:]]))
+            with np.errstate(divide="ignore", over="ignore"):
+                bound = np.min(np.where(at > 1e-9, (GEOMETRIC_JERK_SHARE * jmax / np.maximum(at, 1e-9)) ** (2 / 3), 1e12), axis=1)
+            xbound = np.empty((len(gridpoints), 2))
+            xbound[:, 0], xbound[:, 1] = 0.0, np.minimum(bound, 1e12)
+            return None, None, None, None, None, None, xbound
+
+    return GeometricJerkConstraint()
 
 
 def _torque_constraint(model: TorqueModel, limits: np.ndarray):
@@ -204,15 +240,16 @@ class _Profile:
         return s, (s1 - s0) / w, (v1 - v0) / w
 
 
-def _sample(path, prof: _Profile, times: np.ndarray, w: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _sample(path, prof: _Profile, times: np.ndarray, w: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """q, qd, qdd (N, n) and s (N,) at ``times``."""
     s, sd, sdd = prof.filtered(times, w)
     ps = path(s, 1)
-    return path(s), ps * sd[:, None], ps * sdd[:, None] + path(s, 2) * (sd**2)[:, None]
+    return path(s), ps * sd[:, None], ps * sdd[:, None] + path(s, 2) * (sd**2)[:, None], s
 
 
 def _jerk_ok(path, prof: _Profile, w: float, jmax: np.ndarray) -> bool:
     t = np.arange(0.0, prof.T + w + FINE_DT, FINE_DT)
-    _, _, qdd = _sample(path, prof, t, w)
+    qdd = _sample(path, prof, t, w)[2]
     return bool(np.all(np.abs(np.diff(qdd, axis=0)) / FINE_DT <= jmax * (1 + 1e-9)))
 
 
@@ -247,7 +284,7 @@ def time_parameterise(
     n = wp.shape[1]
     if len(wp) < 2:
         z = np.zeros((1, n))
-        return TimedPath(np.zeros(1), wp[:1].copy(), z, z.copy())
+        return TimedPath(np.zeros(1), wp[:1].copy(), z, z.copy(), 0.0, np.zeros(1))
     vmax, amax = np.asarray(vmax, dtype=float), np.asarray(amax, dtype=float)
     chord = np.linalg.norm(np.diff(wp, axis=0), axis=1)
     ss = np.concatenate([[0.0], np.cumsum(chord)])
@@ -263,6 +300,8 @@ def time_parameterise(
         ]
         if tcp_ok:
             constraints.append(_tcp_speed_constraint(tcp_velocity_per_ds, max_tcp_speed * safety))
+        if jmax is not None:
+            constraints.append(_geometric_jerk_constraint(np.asarray(jmax, dtype=float) * safety))
         if torque is not None and np.any(np.isfinite(torque.limits)):
             constraints.append(_torque_constraint(torque, np.where(np.isfinite(torque.limits), torque.limits * safety, 1e9)))
         instance = algo.TOPPRA(constraints, path, gridpoints=gridpoints, parametrizer="ParametrizeConstAccel")
@@ -289,7 +328,7 @@ def time_parameterise(
         duration = prof.T + w
         count = max(int(np.ceil(duration / sample_dt - 1e-9)), 1)
         times = np.unique(np.minimum(np.arange(count + 1) * sample_dt, duration))
-        q, qd, qdd = _sample(path, prof, times, w)
+        q, qd, qdd, s_samples = _sample(path, prof, times, w)
         q[0], q[-1] = wp[0], wp[-1]  # exact ends, at rest
         qd[0] = qd[-1] = qdd[0] = qdd[-1] = 0.0
         # The constraints hold at grid points; between them (and after filtering) a sample can be
@@ -300,6 +339,6 @@ def time_parameterise(
         if ok and torque is not None:
             ok = bool(np.all(np.abs(torque.inverse_dynamics(q, qd, qdd)) <= torque.limits))
         if ok:
-            return TimedPath(times, q, qd, qdd, w)
+            return TimedPath(times, q, qd, qdd, w, s_samples)
     raise PlanningError(f"{label}: the timed samples exceed the limits even with a {1 - SAFETY_STEPS[-1]:.0%} margin",
                         "re-plan with another seed")

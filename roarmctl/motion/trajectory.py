@@ -12,6 +12,7 @@ The layout follows ROS 2 ``trajectory_msgs/JointTrajectory`` so it exports 1:1:
                   "position": [x, y, z] (m, optional: the TCP target of the event)}],
       "segments": [{"start": s, "end": s, "kind": "free"|"cartesian"|"gripper"|"wait",
                     "label": str}],
+      "blends": [s, ...],                      # times where one segment flows into the next without stopping
       "limits": {"velocity": [rad/s], "acceleration": [rad/s^2], "velocity_scale": f,
                  "acceleration_scale": f, "max_tcp_speed": m/s or null},
       "singularity_margin": {...} or null,
@@ -69,6 +70,7 @@ class Trajectory:
     accelerations: np.ndarray
     events: list[Event] = field(default_factory=list)
     segments: list[Segment] = field(default_factory=list)
+    blends: list[float] = field(default_factory=list)  # s: blended joins (velocity continuous, no stop)
     limits: dict[str, Any] = field(default_factory=dict)
     singularity_margin: dict[str, Any] | None = None
     scene: dict[str, Any] = field(default_factory=lambda: {"items": []})
@@ -96,6 +98,7 @@ class Trajectory:
                 for e in self.events
             ],
             "segments": [{"start": round(s.start, 9), "end": round(s.end, 9), "kind": s.kind, "label": s.label} for s in self.segments],
+            "blends": [round(float(b), 9) for b in self.blends],
             "limits": self.limits,
             "singularity_margin": self.singularity_margin,
             "scene": self.scene,

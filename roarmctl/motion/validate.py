@@ -245,6 +245,11 @@ def parse_document(data: Any, where: str = "trajectory"):
             _fail(where, f"{f}.kind", f"'{kind}' is not one of {', '.join(SEGMENT_KINDS)}")
         segments.append(Segment(a, b, kind, _name(s.get("label", ""), where, f"{f}.label", empty=True)))
 
+    raw_blends = data.get("blends") or []
+    if not isinstance(raw_blends, list) or len(raw_blends) > MAX_EVENTS:
+        _fail(where, "blends", f"expected a list of at most {MAX_EVENTS} times, got {_kind(raw_blends)}")
+    blends = [_number(b, where, f"blends[{i}]", lo=-TIME_TOL, hi=duration + TIME_TOL) for i, b in enumerate(raw_blends)]
+
     limits = data.get("limits") or {}
     _mapping(limits, where, "limits")
     for key in ("velocity", "acceleration"):
@@ -276,7 +281,7 @@ def parse_document(data: Any, where: str = "trajectory"):
     plan = data.get("plan")
     if plan is not None:
         _mapping(plan, where, "plan")
-    return Trajectory(robot=robot, joint_names=names, times=times, events=events, segments=segments,
+    return Trajectory(robot=robot, joint_names=names, times=times, events=events, segments=segments, blends=blends,
                       limits=dict(limits), singularity_margin=margin, scene={**scene, "items": items}, plan=plan,
                       sample_rate=rate, **arrays)
 

@@ -94,6 +94,7 @@ class Limits:
     acceleration_scale: float = 0.5
     max_tcp_speed: float | None = None
     gripper_time: float = 0.6
+    blend: bool = True  # flow through pre-grasp points and open the gripper in transit; False: stop at every join
 
 
 @dataclass
@@ -430,12 +431,16 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
 
     limits = Limits()
     if "limits" in top:
-        d = ctx.mapping(top["limits"], top.line_of("limits"), "limits", ("velocity_scale", "acceleration_scale", "max_tcp_speed", "gripper_time"))
+        d = ctx.mapping(top["limits"], top.line_of("limits"), "limits", ("velocity_scale", "acceleration_scale", "max_tcp_speed", "gripper_time", "blend"))
         for key in ("velocity_scale", "acceleration_scale"):
             if key in d:
                 setattr(limits, key, ctx.number(d[key], d.line_of(key), f"limits.{key}", lo=0.0, hi=1.0, strict_lo=True))
         if d.get("max_tcp_speed") is not None:
             limits.max_tcp_speed = ctx.number(d["max_tcp_speed"], d.line_of("max_tcp_speed"), "limits.max_tcp_speed", lo=0.0, hi=5.0, strict_lo=True)
+        if "blend" in d:
+            if not isinstance(d["blend"], bool):
+                ctx.fail(d.line_of("blend"), "limits.blend", f"expected true or false, got {_kind(d['blend'])}")
+            limits.blend = d["blend"]
         if "gripper_time" in d:
             limits.gripper_time = ctx.number(d["gripper_time"], d.line_of("gripper_time"), "limits.gripper_time", lo=0.05, hi=10.0)
 

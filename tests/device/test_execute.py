@@ -73,6 +73,21 @@ def test_sim_run_follows_the_plan_and_keeps_time(traj_file, capsys):
     assert any("feedback" in r for r in log["received"])
 
 
+def test_sim_tracks_the_planned_blended_jerk_limited_pick_and_place(tmp_path, capsys):
+    """The bundled plan as planned (blended joins, jerk limits), streamed to the simulated arm."""
+    root = Path(__file__).resolve().parents[2]
+    out = tmp_path / "planned.traj.json"
+    assert run_cli(["plan", str(root / "plans" / "pick_place.yaml"), "-o", str(out), "--json"]) == 0
+    capsys.readouterr()
+    assert json.loads(out.read_text())["blends"]
+    rc = run_cli(["execute", str(out), "--sim", "--yes", "--json"])
+    res = json.loads(capsys.readouterr().out)
+    assert rc == 0 and res["outcome"] == "completed"
+    print(f"\nplanned pick-and-place on the simulator: TCP RMS {res['simulator']['rms_mm']:.2f} mm, "
+          f"max {res['simulator']['max_mm']:.2f} mm")
+    assert res["simulator"]["rms_mm"] < 5.0
+
+
 def test_speed_scale_slows_down(tmp_path, capsys):
     p = tmp_path / "short.traj.json"
     min_jerk([HOME, [0.8, 0.3, 1.9, -0.5, 0.3, 0.5]], [1.0]).save(p)
