@@ -61,7 +61,7 @@ def test_bundled_robots_load():
     assert [w.field for w in r.wire] == ["base", "shoulder", "elbow", "wrist", "roll", "hand"]
     assert r.wire[-1].to_wire(0.0) == pytest.approx(np.pi)  # hand = pi - q_gripper
     assert np.all(r.velocity_limits > 0) and np.all(r.acceleration_limits > 0)
-    assert sum(i.mass for i in r.inertials.values()) == pytest.approx(0.4493225, abs=1e-7)  # URDF masses, RESEARCH 1.1
+    assert sum(i.mass for i in r.inertials.values()) == pytest.approx(0.4493225, abs=1e-7)  # sum of the <mass> values in Waveshare's roarm_m3.xacro
     u = load_robot("ur10")
     assert u.dof == 6 and np.allclose(u.upper, 2 * np.pi)
 

@@ -1,4 +1,5 @@
-"""Recursive Newton-Euler against the closed-form Lagrange model of seed 001 and the seed-003 UR10 numbers."""
+"""Recursive Newton-Euler against the closed-form Lagrange model of the two-link arm and the UR10 numbers
+of the course report that robots/ur10.yaml comes from."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ P2R = load_robot("planar_2r")
 
 
 def lagrange_2r(q, qd, m1=1.0, m2=1.0, l1=1.0, l2=1.0, g=G):
-    """D, C, G of seed 001 (SEEDS_DIGEST.md section 4), written out by hand."""
+    """D, C, G of the textbook two-link arm (point masses at the link ends), written out by hand."""
     c1, c2, c12, s2 = math.cos(q[0]), math.cos(q[1]), math.cos(q[0] + q[1]), math.sin(q[1])
     d = np.array([[(m1 + m2) * l1**2 + m2 * l2**2 + 2 * m2 * l1 * l2 * c2, m2 * l2**2 + m2 * l1 * l2 * c2],
                   [m2 * l2**2 + m2 * l1 * l2 * c2, m2 * l2**2]])
@@ -107,7 +108,8 @@ def test_kinetic_energy_matches_mass_matrix():
 
 
 def test_ur10_seed003_metre_com_reproduction():
-    """SEEDS_DIGEST 1.13 (metre-COM model, d4 = 0.16389 there, 0.1639 here: 1e-3 relative slack)."""
+    """M(0) and G(0) as the UR10 course report computed them with its own Lagrange model (COMs of links 1-3
+    in metres; d4 = 0.16389 m there, 0.1639 m here: 1e-3 relative slack)."""
     u = load_robot("ur10")
     m0 = mass_matrix(u, np.zeros(6))
     for (i, j), v in {(0, 0): 19.8114, (1, 1): 18.9676, (1, 2): 6.37986, (2, 2): 2.84951, (0, 4): 0.0140356}.items():

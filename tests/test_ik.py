@@ -182,7 +182,7 @@ def test_pitch_and_rpy_together_rejected():
 
 # ------------------------------------------------------------------------------------ UR10
 CASE_C = np.radians([30, 45, 26, 50, 60, 80])
-CASE_C_SET = np.radians([  # SEEDS_DIGEST 1.8-C (2-decimal rounding)
+CASE_C_SET = np.radians([  # the course report's 8 solutions for this pose (2-decimal rounding)
     [30.00, 45.00, 26.00, 50.00, 60.00, -280.00],
     [30.00, 70.08, -26.00, 76.92, 60.00, -280.00],
     [30.00, 28.77, 72.95, -160.72, -60.00, -100.00],

@@ -251,7 +251,7 @@ def test_no_path_within_budget_exits_3(tmp_path):
 
 
 def test_pick_and_place_across_the_base_warns_and_keeps_the_margin(tmp_path):
-    """The seed report's failure: pick, base and place collinear. We warn and stay clear of the axis."""
+    """Pick, base and place collinear (the path passes over the singular base axis). We warn and stay clear of it."""
     text = BASE.replace("xyz: [0.25, 0.15, 0.02], approach", "xyz: [-0.22, 0.13, 0.02], approach")
     text = text.replace("xyz: [0.15, 0.0, -0.01]", "xyz: [0.0, 0.0, -0.01]")
     out = tmp_path / "across.traj.json"

@@ -97,7 +97,7 @@ def test_jerk_limits_hold_on_a_curved_path_by_finite_differences():
 
 
 def test_torque_limit_slows_a_move_and_holds_by_rnea():
-    """planar 2R (seed 001 masses): lifting both links against gravity under a 35 N m shoulder limit."""
+    """planar 2R (1 kg point masses at the link ends): lifting both links against gravity under a 35 N m shoulder limit."""
     from roarmctl.motion.timing import TorqueModel
     from roarmctl.robot.dynamics import inverse_dynamics
 

@@ -161,7 +161,8 @@ def test_manipulability_of_the_two_link_arm_matches_closed_form():
     data = path_data(traj, robot_for(traj))
     q2 = traj.positions[:, 1]
     c = np.cos(q2)
-    # seed 004's minor radius with l1 = l2 = 1 m, and w = l1 l2 |sin q2|
+    # the minor radius of the 2R velocity ellipsoid (Mousavi Mohammadi & Akbarzadeh 2016, SCARA paper)
+    # with l1 = l2 = 1 m, and w = l1 l2 |sin q2|
     r1 = np.sqrt(2) / 2 * np.sqrt(3 + 2 * c - np.sqrt(5 + 12 * c + 8 * c**2))
     assert np.allclose(data.sigma_min, r1, atol=1e-9)
     assert np.allclose(data.w, np.abs(np.sin(q2)), atol=1e-12)

@@ -2,7 +2,10 @@
 
 Host -> arm: one compact JSON object per line ending in ``\\n``. Arm -> host: lines ending in
 ``\\r\\n``; only ``"T":1051`` lines are feedback, everything else (boot text, echoes, warnings) is
-ignored. Facts and sources: shared/reference/roarm_m3/RESEARCH.md sections 2.1-2.10.
+ignored. Sources: Waveshare's RoArm-M3 example firmware 0.84 (RoArm-M3_example-250108: uart_ctrl.h
+reads a line up to ``\n`` and drops what ``deserializeJson`` rejects; json_cmd.h lists the T codes;
+RoArm-M3_module.h converts radians to servo steps and prints T:1051) and Waveshare's Python SDK
+(waveshareteam/waveshare_roarm_sdk, roarm_sdk/common.py: ``hand = pi - q_gripper`` for the M3).
 
 This module is pure (no I/O, no serial import): the link, the streamer, ``--output`` and the
 simulator all share it.
@@ -31,7 +34,8 @@ M3_FIELDS = ("base", "shoulder", "elbow", "wrist", "roll", "hand")
 #: The matching T:1051 feedback keys.
 M3_FEEDBACK_KEYS = ("b", "s", "e", "t", "r", "g")
 #: Strictly inside the firmware's clamps: base/roll +pi would map to servo step -1 (invalid), so
-#: keep one count inside; the others are the 0.84 firmware's own clamps (RESEARCH.md 2.2).
+#: keep one count inside; the others are the 0.84 firmware's own clamps (``RoArmM3_*JointCtrlRad`` in
+#: RoArm-M3_module.h: shoulder and wrist +-pi/2, elbow 512..3071 steps, hand 700..3396 steps).
 SAFE_WIRE_RANGE = {
     "base": (-math.pi + 1.5 / STEPS_PER_RAD, math.pi - 1.5 / STEPS_PER_RAD),
     "shoulder": (-math.pi / 2, math.pi / 2),
@@ -176,7 +180,8 @@ def parse_json_line(line: bytes | str) -> dict[str, Any] | None:
 
 
 def identify_firmware(obj: dict[str, Any]) -> str:
-    """Tell firmware builds apart by their T:1051 fields (RESEARCH.md 2.6, 2.10).
+    """Tell firmware builds apart by their T:1051 fields (``RoArmM3_infoFeedback`` in RoArm-M3_module.h;
+    the M2 keys from roarm_sdk/common.py).
 
     ``"m3-0.84"`` (b s e t r g, tit), ``"m3-2026"`` (adds torswitch* and v), ``"m2"`` (b s e t
     only, torB..), ``"unknown"`` otherwise.

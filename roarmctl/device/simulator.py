@@ -1,6 +1,8 @@
 """A model of the RoArm-M3 ESP32 firmware 0.84 as seen from its USB serial port.
 
-What it reproduces (RESEARCH.md section 2; [fw84] = RoArm-M3_example-250108):
+What it reproduces, read from Waveshare's RoArm-M3 example firmware ([fw84] = RoArm-M3_example-250108,
+"version 0.84": RoArm-M3_example.ino, RoArm-M3_module.h, RoArm-M3_config.h, json_cmd.h, uart_ctrl.h;
+[fw26] = the newer RoArm-M3_example_20260701 build, which also calls itself 0.84):
 - framing: JSON lines in (``\\n``), ``\\r\\n`` lines out; malformed lines are dropped silently;
   missing keys read as 0 (ArduinoJson null -> 0);
 - the link's byte rate (115200 8N1 = 11520 B/s) in both directions: a line is executed when its
@@ -18,10 +20,11 @@ What it reproduces (RESEARCH.md section 2; [fw84] = RoArm-M3_example-250108):
   trapezoid with the command's ``spd`` (steps/s, 0 = ``max_speed``) and ``acc`` (100 steps/s^2,
   0 = no ramp), replanned from its current velocity whenever a new goal arrives, stopping at the
   goal (like Feetech STS servos);
-- ``firmware="m3-2026"`` (RoArm-M3_example_20260701, section 2.9): one queued command per loop
+- ``firmware="m3-2026"`` ([fw26]): one queued command per loop
   pass (queue of 50, ``{"error":"Queue full"}`` beyond), the ``"T":0`` byte match that flushes
   the queue without dropping torque, elbow lower clamp 0 rad, T:210 cmd 0 goes to rest first;
-- feedback in the real ``T:1051`` format with x, y, z and tit from the firmware FK (section 2.7);
+- feedback in the real ``T:1051`` format with x, y, z and tit from the firmware FK (``RoArmM3_computePosbyJointRad``,
+  RoArm-M3_module.h, with the RoArm-M3_config.h link lengths);
   ``firmware="m3-2026"`` adds torswitch*/v, ``firmware="m2"`` answers like an M2 (b s e t, torB..).
 
 It records the true servo positions over time (``recording()``: times and joint radians in the
@@ -71,13 +74,13 @@ def steps(rad: float) -> int:
 
 def deg_register(value: float, u8: bool = False) -> float:
     """T:121/T:122 ``spd``/``acc``: ``calculatePosByDeg`` (round(deg / 360 * 4096)) written to the
-    servo register; the acc register is one byte, so larger values wrap (RESEARCH 2.3: "max 22.5")."""
+    servo register; the acc register is one byte, so larger values wrap (json_cmd.h says "max: 22.5")."""
     v = int(round(abs(value) / 360.0 * 4096))
     return float(v & 0xFF) if u8 else float(min(v, 65535))
 
 
 def command_to_goal(joint: int, rad: float, elbow_min_zero: bool = False) -> int:
-    """Firmware joint command (rad) -> servo goal step, with the 0.84 clamps (RESEARCH.md 2.2)."""
+    """Firmware joint command (rad) -> servo goal step, with the 0.84 clamps (``RoArmM3_*JointCtrlRad``, RoArm-M3_module.h)."""
     if joint == 0:  # base, inverted
         return MIDDLE - steps(min(max(rad, -math.pi), math.pi))
     if joint == 1:  # shoulder (driving servo 12; 13 mirrors it)
@@ -132,7 +135,7 @@ class SimConfig:
     """Knobs of the model. Times in s, speeds in steps/s."""
 
     firmware: str = "m3-0.84"  # or "m3-2026", "m2"
-    info_print: int = 2  # factory default: continuous feedback (RESEARCH.md 4)
+    info_print: int = 2  # factory default (InfoPrint = 2 in RoArm-M3_example.ino): continuous feedback
     loop_period: float = 0.004  # main loop: serial + 6 servo reads
     max_speed: float = 3072.0  # spd = 0: ST3235 no-load speed, steps/s
     max_accel: float = math.inf  # acc = 0: no ramp

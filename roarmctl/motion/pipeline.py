@@ -387,7 +387,8 @@ class Planner:
         return best
 
     def _warn_collinear(self, tasks: list) -> None:
-        """The seed report's failure: pick and place on opposite sides of the base (through its axis)."""
+        """Pick and place on opposite sides of the base: the straight way between them passes over the
+        base axis, where the arm is singular (a failure seen in practice on the RoArm)."""
         picks = [self.object_pose[t.object][:3, 3] for t in tasks if isinstance(t, PickTask)]
         places = [np.asarray(t.xyz) for t in tasks if isinstance(t, PlaceTask)]
         for a, b in zip(picks, places):

@@ -9,7 +9,7 @@ Which solver runs:
 
 * ``singularity_model == "roarm5"`` (the RoArm-M3 Pro): planar closed form about the base axis,
   target = TCP position + tool pitch (+ roll), or position + full orientation (``rpy``).
-* ``singularity_model == "ur6"`` with ``rpy``: the 8-solution analytic IK of the seed-003 UR10
+* ``singularity_model == "ur6"`` with ``rpy``: the 8-solution analytic IK of the UR10
   (modified DH); position only falls back to damped least squares.
 * anything else: damped least squares with seeded random restarts (position only or full pose).
 
@@ -593,7 +593,7 @@ def _ur6_params(robot: Robot):
 
 
 def _ur6_solve(robot: Robot, p: np.ndarray, rot: np.ndarray, qr: np.ndarray | None) -> list[np.ndarray]:
-    """Every analytic IK solution (up to 8) of the seed-003 UR10 (modified DH, SEEDS_DIGEST 1.2).
+    """Every analytic IK solution (up to 8) of the UR10 (modified DH table of robots/ur10.yaml).
 
     Derivation for these frames (0T6 from 1.3): the flange z-axis z6 = (r13, r23, r33), so the wrist
     point p5 = p - d6 z6 satisfies p5x s1 - p5y c1 = d4 (joints 2-4 move in a plane at offset d4),

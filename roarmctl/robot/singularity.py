@@ -32,7 +32,8 @@ def _roarm5(robot: Robot, q: np.ndarray) -> str | None:
 
 
 def _ur6(robot: Robot, q: np.ndarray) -> str | None:
-    # Seed 003, section 4-3 (SEEDS_DIGEST.md 1.10): det J = a2 a3 (a2 c2 + a3 c23 - d5 s234) s3 s5.
+    # UR10 in modified DH (robots/ur10.yaml): det J = a2 a3 (a2 c2 + a3 c23 - d5 s234) s3 s5, zero at the
+    # elbow (s3 = 0), wrist (s5 = 0) and shoulder (wrist centre on the base axis) singularities.
     a2, a3, d5 = 0.6129, 0.5716, 0.1157
     if abs(np.sin(q[2])) < SIN_TOL:
         return "elbow"
