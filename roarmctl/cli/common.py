@@ -6,9 +6,10 @@ import json
 import math
 import sys
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 
 @dataclass
@@ -28,6 +29,8 @@ def console(stderr: bool = False):
 
 
 def _plain(obj: Any) -> Any:
+    import numpy as np  # here, not at the top: `roarmctl --help` does not load numpy
+
     if isinstance(obj, np.ndarray):
         return _plain(obj.tolist())
     if isinstance(obj, (np.floating, float)):
@@ -71,5 +74,7 @@ def parse_numbers(values: list[str], what: str, deg: bool = False) -> np.ndarray
             out.append(float(v))
         except ValueError:
             raise InputError(f"{what}: '{v}' is not a number") from None
+    import numpy as np
+
     arr = np.array(out)
     return np.radians(arr) if deg else arr

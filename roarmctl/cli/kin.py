@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from typing import Optional, Tuple
 
-import numpy as np
 import typer
 
 from roarmctl.cli import common
@@ -29,6 +28,8 @@ def register(app: typer.Typer) -> None:
 
 
 def _angles_out(values, deg: bool):
+    import numpy as np
+
     arr = np.asarray(values, dtype=float)
     return np.degrees(arr) if deg else arr
 
@@ -68,6 +69,8 @@ def _joint_caption(r) -> str:
 
 
 def _fmt(a, digits: int = 6) -> str:
+    import numpy as np
+
     return np.array2string(np.asarray(a, dtype=float), precision=digits, suppress_small=True, max_line_width=120)
 
 
@@ -203,6 +206,8 @@ def ik(
     written into a plan. With --frame firmware, --xyz is the firmware's end point in mm (T:1051 x/y/z).
     Unreachable targets exit with code 3 and say why: out_of_reach, joint_limit or orientation.
     """
+    import numpy as np
+
     from roarmctl.errors import RoarmError, UnreachableError
     from roarmctl.robot.frames import device_point, from_frame, get_frame
     from roarmctl.robot.ik import ORI_TOL, POS_TOL, check_solution, solve_ik_frame, tool_pitch
@@ -277,6 +282,8 @@ def dynamics(
     tau = M(q) qdd + C(q, qd) qd + G(q), in N m (N for prismatic joints) for every actuated joint. --deg
     changes the units of --q/--qd/--qdd only; torques and the mass matrix stay SI (per radian).
     """
+    import numpy as np
+
     from roarmctl.robot.dynamics import coriolis_vector, gravity_vector, inverse_dynamics, mass_matrix
     from roarmctl.robot.loader import load_robot
 
@@ -312,6 +319,8 @@ def dynamics(
 
 
 def _pad(r, v: np.ndarray) -> np.ndarray:
+    import numpy as np
+
     out = np.zeros(r.dof)
     out[r.arm_indices] = v
     return out
