@@ -135,9 +135,9 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
 def load_planning_libraries() -> None:
     """Import toppra (about 0.5 s, mostly scipy), OMPL and FCL up front, so stage timings measure work, not imports."""
     import fcl  # noqa: F401
-    import toppra  # noqa: F401
-    import toppra.algorithm  # noqa: F401
-    import toppra.constraint  # noqa: F401
+    from roarmctl.motion.timing import import_toppra
+
+    import_toppra()
     from ompl import base, geometric  # noqa: F401
 
 

@@ -21,6 +21,7 @@ runs again with limits tightened by ``SAFETY_STEPS``.
 
 from __future__ import annotations
 
+import types
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -84,6 +85,53 @@ def dedupe(waypoints: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     """Drop consecutive duplicate waypoints (TOPP-RA needs a strictly increasing path parameter)."""
     keep = [0] + [i for i in range(1, len(waypoints)) if np.max(np.abs(waypoints[i] - waypoints[i - 1])) > tol]
     return waypoints[keep]
+
+
+class _Deferred(types.ModuleType):
+    """A module whose code runs on the first access of a name it does not have yet (its ``__spec__``,
+    ``__name__`` and the like exist from the start, so the import system's own checks do not load
+    it; the standard ``importlib.util.LazyLoader`` loads on those and so gains nothing here)."""
+
+    def __getattr__(self, name: str):
+        self.__class__ = types.ModuleType
+        self.__spec__.loader.exec_module(self)
+        return getattr(self, name)
+
+
+def import_toppra():
+    """``import toppra`` without paying for ``matplotlib.pyplot`` (returns the module).
+
+    toppra imports pyplot at module level, for plotting helpers that planning never calls; pyplot
+    is about half of toppra's 1.4 s import (figure, axes, 3-D projections, backends). If pyplot is
+    not loaded yet, it is registered first as a deferred module: the real module runs on first use,
+    so anything that does use it (toppra's ``plot`` methods, a user's script) gets the genuine
+    pyplot. The matplotlib package is deferred the same way when nothing has loaded it yet (its
+    first use, e.g. by ``visualize-path``, runs it). scipy.interpolate (toppra's splines) is needed
+    and imported normally.
+    """
+    import importlib.util
+    import sys
+
+    def defer(name: str) -> types.ModuleType | None:
+        spec = importlib.util.find_spec(name)
+        if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
+            return None
+        module = importlib.util.module_from_spec(spec)
+        module.__class__ = _Deferred
+        sys.modules[name] = module
+        return module
+
+    if "toppra" not in sys.modules and "matplotlib.pyplot" not in sys.modules:
+        if "matplotlib" not in sys.modules:
+            defer("matplotlib")
+        pyplot = defer("matplotlib.pyplot")
+        if pyplot is not None:
+            sys.modules["matplotlib"].__dict__["pyplot"] = pyplot  # no attribute access: stays deferred
+    import toppra
+    import toppra.algorithm  # noqa: F401
+    import toppra.constraint  # noqa: F401
+
+    return toppra
 
 
 def toppra_grid(ss: np.ndarray) -> np.ndarray:
@@ -275,9 +323,8 @@ def time_parameterise(
     Raises InfeasibleError (exit 3) when the arm cannot hold the load, PlanningError (exit 3) when
     TOPP-RA finds no parameterisation.
     """
-    import toppra as ta
-    import toppra.algorithm as algo
-    import toppra.constraint as constraint
+    ta = import_toppra()
+    algo, constraint = ta.algorithm, ta.constraint
 
     ta.setup_logging("CRITICAL")
     wp = dedupe(np.asarray(waypoints, dtype=float))
