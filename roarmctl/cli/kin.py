@@ -48,6 +48,7 @@ def _table(title: str, rows: list[tuple[str, str]]) -> None:
 def _columns_table(title: str, columns: list[str], rows: list[tuple[str, np.ndarray]], digits: int = 4,
                    caption: str | None = None) -> None:
     """One row per quantity, one column per joint (fits 80 columns for up to 6 joints)."""
+    import numpy as np
     from rich.table import Table
 
     t = Table(title=title, caption=caption)
