@@ -125,7 +125,7 @@ def test_event_markers_at_event_times_in_every_time_plot(pick_place, drawn):
     _, fig = drawn
     for e in pick_place.events:
         lines = artists(fig, f"event:{e.kind}:")
-        assert len(lines) == 5
+        assert len(lines) == 6  # position, velocity, acceleration, torque, TCP speed, manipulability
         assert all(line.get_xdata()[0] == pytest.approx(e.time) for line in lines)
         (target,) = artists(fig, f"target:{e.kind}")
         assert np.allclose(np.ravel(target._offsets3d), e.position)
@@ -319,3 +319,32 @@ def test_single_sample_trajectory_renders(tmp_path):
     assert [k.kind for k in data.key_poses] == ["start", "end"]
     out = visualize_trajectory(traj, tmp_path / "one.png", dpi=20, size=(16, 10))
     assert imread(out).shape[:2] == (200, 320)
+
+
+def test_torque_panel_with_limits_and_blended_joins_marked():
+    """The planned payload example: torque curves are RNEA with the held weight, limits dashed at +-effort,
+    and every blended join is a dotted line in each time plot and a marker on the 3D path."""
+    from roarmctl.motion.pipeline import plan_file
+    from roarmctl.robot.dynamics import inverse_dynamics
+    from roarmctl.robot.model import Inertial
+
+    traj = plan_file(ROOT / "plans" / "payload.yaml").trajectory
+    robot = robot_for(traj)
+    data = path_data(traj, robot)
+    fig = render_path(data, view="iso", size=(12, 8))
+    fig.canvas.draw()
+    shoulder = "link1_to_link2"
+    (line,) = artists(fig, f"tau:{shoulder}")
+    grasp = next(e for e in traj.events if e.kind == "grasp").time
+    k = int(np.searchsorted(traj.times, grasp)) + 5  # holding the weight
+    (p,) = traj.payloads
+    body = {p["link"]: Inertial(p["mass"], np.array(p["com"]), np.array(p["inertia"]))}
+    assert p["mass"] == pytest.approx(0.2)
+    expect = inverse_dynamics(robot, traj.positions[k], traj.velocities[k], traj.accelerations[k], payload=body)
+    assert line.get_ydata()[k] == pytest.approx(expect[robot.joint_index(shoulder)], abs=1e-9)
+    assert sorted(abs(a.get_ydata()[0]) for a in artists(fig, f"taulim:{shoulder}")) == pytest.approx([2.94, 2.94])
+    assert traj.blends
+    for name in ("q", "v", "a", "torque", "speed", "manip"):
+        xs = sorted(a.get_xdata()[0] for a in artists(fig, f"blend:{name}"))
+        assert xs == pytest.approx(sorted(traj.blends))
+    assert len(artists(fig, "blend3d")) == 1

@@ -51,6 +51,9 @@ def register(app: typer.Typer) -> None:
             "ok": True,
             "output": str(out),
             "duration": traj.duration,
+            "cycle_time": traj.duration,
+            "blends": list(traj.blends),
+            "peaks": result.peaks,
             "segments": result.segments,
             "planning_time": result.planning_time,
             "timings": result.timings,
@@ -74,4 +77,25 @@ def register(app: typer.Typer) -> None:
         table.add_row("events", ", ".join(f"{e.kind} @ {e.time:.2f} s" for e in traj.events) or "none")
         split = ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in result.timings.items())
         table.add_row("planning time", f"{result.planning_time * 1000:.0f} ms ({split})")
+        table.add_row("cycle time", f"{traj.duration:.2f} s, {len(traj.blends)} blended joins")
         common.console().print(table)
+        if result.peaks:
+            common.console().print(_peaks_table(result.peaks))
+
+
+def _peaks_table(peaks: dict):
+    """Per joint: peak jerk and peak torque, each with its fraction of the robot's limit."""
+    from rich.table import Table
+
+    def pct(f) -> str:
+        return "-" if f is None else f"{100 * f:.0f} %"
+
+    table = Table(title="Peaks per joint (fraction of the limit)")
+    table.add_column("joint")
+    for name in ("jerk rad/s³", "of limit", "torque N m", "of limit"):
+        table.add_column(name, justify="right")
+    torque = peaks["torque"] or [None] * len(peaks["joints"])
+    for i, name in enumerate(peaks["joints"]):
+        table.add_row(name, f"{peaks['jerk'][i]:.1f}", pct(peaks["jerk_fraction"][i]),
+                      "-" if torque[i] is None else f"{torque[i]:.3f}", pct(peaks["torque_fraction"][i]))
+    return table

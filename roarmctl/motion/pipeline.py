@@ -41,6 +41,7 @@ class PlanResult:
     warnings: list[str] = field(default_factory=list)
     segments: int = 0
     checks: int = 0
+    peaks: dict | None = None  # roarmctl.motion.report.motion_peaks: per-joint peaks and fractions of the limits
 
     @property
     def planning_time(self) -> float:
@@ -93,6 +94,8 @@ class _Piece:
     segments: list[Segment]
     event: Event | None = None
     blends: list[float] = field(default_factory=list)
+    attach: dict | None = None  # payload (link -> Inertial) held from this piece's end on
+    detach: bool = False  # the held payload is let go at this piece's end
 
 
 class _GripperDoesNotFit(Exception):
@@ -208,9 +211,12 @@ class Planner:
                         continue
                     pieces += self._flush(chain)
                     chain = []
+                    held = self.payload
                     tp = self._realise(step, q)
                     pieces.append(_Piece(tp, [Segment(0.0, tp.duration, step.kind, step.label)],
-                                         None if step.event is None else Event(tp.duration, step.event.kind, step.event.label, step.event.position)))
+                                         None if step.event is None else Event(tp.duration, step.event.kind, step.event.label, step.event.position),
+                                         attach=self.payload if self.payload is not held else None,
+                                         detach=held is not None and self.payload is None))
                     q = tp.q[-1].copy()
             except InfeasibleError as exc:
                 exc.partial = self._partial(pieces, chain[0].wps[0] if chain else q, task, i)  # what was planned, for visualize-path
@@ -222,7 +228,10 @@ class Planner:
             raise
         self.progress("done", len(tasks), len(tasks))
         traj = self._assemble(pieces)
-        return PlanResult(traj, dict(self.timer.t), self.warnings, len(traj.segments), int(getattr(self.checker, "check_count", 0)))
+        from roarmctl.motion.report import motion_peaks
+
+        return PlanResult(traj, dict(self.timer.t), self.warnings, len(traj.segments), int(getattr(self.checker, "check_count", 0)),
+                          motion_peaks(traj, self.robot))
 
     def _partial(self, pieces: list[_Piece], q: np.ndarray, task, index: int) -> PartialPlan:
         """The trajectory timed before the failure (just the pose ``q`` if nothing was) and the failing task's target."""
@@ -826,7 +835,8 @@ class Planner:
         from roarmctl.robot.loader import bundled_robots
 
         times, qs, qds, qdds = [], [], [], []
-        events, segments, blends = [], [], []
+        events, segments, blends, payloads = [], [], [], []
+        held: tuple[float, dict] | None = None
         t_off = 0.0
         for k, piece in enumerate(pieces):
             tp = piece.tp
@@ -841,6 +851,13 @@ class Planner:
                 events.append(Event(t_off + e.time, e.kind, e.label, e.position))
             blends += [t_off + b for b in piece.blends]
             t_off += tp.duration
+            if piece.detach and held is not None:
+                payloads.append(_payload_entry(held[0], t_off, held[1]))
+                held = None
+            if piece.attach is not None:
+                held = (t_off, piece.attach)
+        if held is not None:
+            payloads.append(_payload_entry(held[0], t_off, held[1]))
         t = np.concatenate(times)
         keep = np.concatenate([[True], np.diff(t) > 1e-9])
         p = self.plan
@@ -854,6 +871,7 @@ class Planner:
             events=events,
             segments=segments,
             blends=blends,
+            payloads=payloads,
             limits={
                 "velocity": [float(v) for v in self.robot.velocity_limits],
                 "acceleration": [float(v) for v in self.robot.acceleration_limits],
@@ -888,6 +906,14 @@ def _scene_item(spec: ItemSpec):
 RETIME_KNOT = 0.01  # rad between the knots of a blended curve timed again
 LINE_KEEP = 0.5  # a blend may round the corner over at most the first (last) half of a straight line
 BLEND_STEP = 2  # samples between the overlaps tried, longest first
+
+
+def _payload_entry(start: float, end: float, body: dict) -> dict:
+    """A trajectory-file ``payloads`` entry for a held object: {link: Inertial} from ``start`` to ``end`` (s)."""
+    (link, inertial), = body.items()
+    r = lambda a: [round(float(v), 9) for v in a]  # noqa: E731
+    return {"start": round(start, 9), "end": round(end, 9), "link": link, "mass": round(float(inertial.mass), 9),
+            "com": r(inertial.com), "inertia": [r(row) for row in np.asarray(inertial.inertia)]}
 
 
 def _superpose(a: TimedPath, b: TimedPath, ia: int, m: int) -> TimedPath:

@@ -13,6 +13,8 @@ The layout follows ROS 2 ``trajectory_msgs/JointTrajectory`` so it exports 1:1:
       "segments": [{"start": s, "end": s, "kind": "free"|"cartesian"|"gripper"|"wait",
                     "label": str}],
       "blends": [s, ...],                      # times where one segment flows into the next without stopping
+      "payloads": [{"start": s, "end": s, "link": str, "mass": kg, "com": [m] (link frame),
+                    "inertia": [[kg m^2]] (about the COM, link axes), "label": str}],  # held objects
       "limits": {"velocity": [rad/s], "acceleration": [rad/s^2], "velocity_scale": f,
                  "acceleration_scale": f, "max_tcp_speed": m/s or null},
       "singularity_margin": {...} or null,
@@ -71,6 +73,7 @@ class Trajectory:
     events: list[Event] = field(default_factory=list)
     segments: list[Segment] = field(default_factory=list)
     blends: list[float] = field(default_factory=list)  # s: blended joins (velocity continuous, no stop)
+    payloads: list[dict[str, Any]] = field(default_factory=list)  # held objects, grasp to release (see the module doc)
     limits: dict[str, Any] = field(default_factory=dict)
     singularity_margin: dict[str, Any] | None = None
     scene: dict[str, Any] = field(default_factory=lambda: {"items": []})
@@ -99,6 +102,7 @@ class Trajectory:
             ],
             "segments": [{"start": round(s.start, 9), "end": round(s.end, 9), "kind": s.kind, "label": s.label} for s in self.segments],
             "blends": [round(float(b), 9) for b in self.blends],
+            "payloads": self.payloads,
             "limits": self.limits,
             "singularity_margin": self.singularity_margin,
             "scene": self.scene,

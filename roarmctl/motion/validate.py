@@ -250,6 +250,25 @@ def parse_document(data: Any, where: str = "trajectory"):
         _fail(where, "blends", f"expected a list of at most {MAX_EVENTS} times, got {_kind(raw_blends)}")
     blends = [_number(b, where, f"blends[{i}]", lo=-TIME_TOL, hi=duration + TIME_TOL) for i, b in enumerate(raw_blends)]
 
+    payloads = data.get("payloads") or []
+    if not isinstance(payloads, list) or len(payloads) > MAX_EVENTS:
+        _fail(where, "payloads", f"expected a list of at most {MAX_EVENTS}, got {_kind(payloads)}")
+    for i, p in enumerate(payloads):
+        f = f"payloads[{i}]"
+        _mapping(p, where, f)
+        for key in ("start", "end", "link", "mass", "com", "inertia"):
+            if key not in p:
+                _fail(where, f, f"'{key}' is missing")
+        _number(p["start"], where, f"{f}.start", lo=-TIME_TOL, hi=duration + TIME_TOL)
+        _number(p["end"], where, f"{f}.end", lo=-TIME_TOL, hi=duration + TIME_TOL)
+        _name(p["link"], where, f"{f}.link")
+        _number(p["mass"], where, f"{f}.mass", lo=0.0, hi=1e4)
+        _numbers(p["com"], 3, where, f"{f}.com", lo=-MAX_COORD, hi=MAX_COORD)
+        if not isinstance(p["inertia"], list) or len(p["inertia"]) != 3:
+            _fail(where, f"{f}.inertia", f"expected a 3x3 matrix, got {_kind(p['inertia'])}")
+        for r, row in enumerate(p["inertia"]):
+            _numbers(row, 3, where, f"{f}.inertia[{r}]", lo=-1e4, hi=1e4)
+
     limits = data.get("limits") or {}
     _mapping(limits, where, "limits")
     for key in ("velocity", "acceleration"):
@@ -281,7 +300,7 @@ def parse_document(data: Any, where: str = "trajectory"):
     plan = data.get("plan")
     if plan is not None:
         _mapping(plan, where, "plan")
-    return Trajectory(robot=robot, joint_names=names, times=times, events=events, segments=segments, blends=blends,
+    return Trajectory(robot=robot, joint_names=names, times=times, events=events, segments=segments, blends=blends, payloads=[dict(p) for p in payloads],
                       limits=dict(limits), singularity_margin=margin, scene={**scene, "items": items}, plan=plan,
                       sample_rate=rate, **arrays)
 

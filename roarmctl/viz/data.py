@@ -74,6 +74,9 @@ class PathData:
     max_tcp_speed: float | None
     min_singular_value: float | None
     segment_kind: np.ndarray
+    torque: np.ndarray | None = None  # (N, dof) N m by RNEA, held objects included; None without inertial data
+    torque_limit: np.ndarray | None = None  # (dof,) N m, inf where none
+    blends: list[float] = field(default_factory=list)  # s: blended joins
     events: list[EventMark] = field(default_factory=list)
     key_poses: list[KeyPose] = field(default_factory=list)
     arm_segments: list[tuple[int, int]] = field(default_factory=list)
@@ -235,6 +238,9 @@ def path_data(traj: Trajectory, robot: Robot) -> PathData:
     key.append((len(times) - 1, "end", "end"))
     key_poses = [KeyPose(float(times[i]), label, kind, i, origins[i].copy()) for i, label, kind in key]
 
+    from roarmctl.motion.report import joint_torques
+
+    torque = joint_torques(traj, robot)
     items = (traj.scene or {}).get("items", []) if isinstance(traj.scene, dict) else []
     if not isinstance(items, list):
         raise TrajectoryFileError("scene.items: expected a list")
@@ -258,6 +264,9 @@ def path_data(traj: Trajectory, robot: Robot) -> PathData:
         max_tcp_speed=max_tcp_speed,
         min_singular_value=msv,
         segment_kind=seg_kind,
+        torque=torque,
+        torque_limit=None if robot.effort_limits is None else np.asarray(robot.effort_limits, dtype=float),
+        blends=[float(b) for b in traj.blends],
         events=events,
         key_poses=key_poses,
         arm_segments=arm_segments(robot),

@@ -155,6 +155,10 @@ def draw_scene_3d(ax, data: PathData, view: str) -> None:
     if len(data.tcp) > 1:  # a single sample is only a start/end marker
         ax.add_collection3d(path)
 
+    if data.blends:  # where one segment flows into the next without stopping
+        k = np.clip(np.searchsorted(data.times, data.blends), 0, len(data.times) - 1)
+        ax.scatter(*data.tcp[k].T, s=28, marker="D", color="#ff7f0e", edgecolor="k", linewidth=0.4, depthshade=False,
+                   zorder=8, gid="blend3d")
     ax.scatter(*data.tcp[0], s=130, marker="o", color="#2ca02c", edgecolor="k", linewidth=0.6, depthshade=False, zorder=8, label="start")
     ax.scatter(*data.tcp[-1], s=40, marker="s", color="#d62728", edgecolor="k", linewidth=0.6, depthshade=False, zorder=8, label="end")
     for e in data.events:
@@ -199,6 +203,8 @@ def draw_scene_3d(ax, data: PathData, view: str) -> None:
         Line2D([], [], ls="", marker="o", color="#2ca02c", mec="k", label="start"),
         Line2D([], [], ls="", marker="s", color="#d62728", mec="k", label="end"),
     ]
+    if data.blends:
+        handles.append(Line2D([], [], ls="", marker="D", color="#ff7f0e", mec="k", ms=5, label="blended join (no stop)"))
     for kind in dict.fromkeys(e.kind for e in data.events):
         handles.append(Line2D([], [], ls="", marker=EVENT_MARKER.get(kind, "x"), color=EVENT_COLOR.get(kind, "k"),
                               mec="k", ms=8, label=f"{kind} target"))
@@ -230,9 +236,38 @@ def _shade_cartesian(ax, data: PathData) -> None:
             i += 1
 
 
+def _blend_lines(ax, data: PathData, name: str) -> None:
+    for tb in data.blends:
+        ax.axvline(tb, color="#ff7f0e", lw=0.9, ls=":", alpha=0.9, zorder=1, gid=f"blend:{name}")
+
+
+def _draw_torque(ax, data: PathData) -> None:
+    """Joint torques by RNEA (held objects included) with each joint's limit dashed."""
+    colors = colormaps["tab10"]
+    ax.set_ylabel("torque\n(N m)")
+    if data.torque is None:
+        ax.text(0.5, 0.5, "no inertial data in the robot description", transform=ax.transAxes, ha="center", va="center",
+                fontsize=8, color="0.4")
+        return
+    top = 0.0
+    for j, name in enumerate(data.joint_names):
+        c = colors(j % 10)
+        ax.plot(data.times, data.torque[:, j], color=c, lw=1.1, gid=f"tau:{name}")
+        top = max(top, float(np.max(np.abs(data.torque[:, j]))))
+        lim = None if data.torque_limit is None else data.torque_limit[j]
+        if lim is not None and np.isfinite(lim):
+            for sign in (1, -1):
+                ax.axhline(sign * lim, color=c, lw=0.9, ls="--", alpha=0.75, gid=f"taulim:{name}")
+    finite = [] if data.torque_limit is None else [v for v in data.torque_limit if np.isfinite(v)]
+    if finite:  # show the largest torque and the limits near it, not every far-away limit
+        span = max(top * 1.25, min(v for v in finite if v >= top) if any(v >= top for v in finite) else top * 1.25)
+        ax.set_ylim(-span * 1.05, span * 1.05)
+    ax.set_title("dashed: joint torque limit; dotted orange: blended joins", fontsize=8, loc="right", pad=2)
+
+
 def draw_time_plots(axes, data: PathData) -> None:
-    """Joint position/velocity/acceleration, TCP speed, manipulability against time (shared x)."""
-    ax_q, ax_v, ax_a, ax_s, ax_m = axes
+    """Joint position/velocity/acceleration, joint torque, TCP speed, manipulability against time (shared x)."""
+    ax_q, ax_v, ax_a, ax_t, ax_s, ax_m = axes
     colors = colormaps["tab10"]
     t = data.times
     for j, name in enumerate(data.joint_names):
@@ -256,6 +291,7 @@ def draw_time_plots(axes, data: PathData) -> None:
     ax_q.legend(handles=handles, loc="lower left", bbox_to_anchor=(0.0, 1.13), ncol=4, fontsize=7.5, frameon=False,
                 handlelength=1.5, columnspacing=1.0, borderaxespad=0.0)
 
+    _draw_torque(ax_t, data)
     ax_s.plot(t, data.tcp_speed, color="k", lw=1.3, gid="tcp_speed")
     ax_s.set_ylabel("TCP speed\n(m/s)")
     if data.max_tcp_speed is not None:
@@ -281,14 +317,15 @@ def draw_time_plots(axes, data: PathData) -> None:
     tw.yaxis.set_major_formatter(FormatStrFormatter("%.3g"))
     ax_m.set_xlabel("time (s)")
 
-    for k, (ax, name) in enumerate(zip(axes, ("q", "v", "a", "speed", "manip"))):
+    for k, (ax, name) in enumerate(zip(axes, ("q", "v", "a", "torque", "speed", "manip"))):
         _shade_cartesian(ax, data)
         _event_lines(ax, data, name, labels=(k == 0))
+        _blend_lines(ax, data, name)
         ax.grid(True, lw=0.4, alpha=0.5)
         ax.tick_params(labelsize=7.5)
         ax.yaxis.label.set_size(8.5)
         ax.set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1.0)
-        if k < 4:
+        if k < len(axes) - 1:
             ax.tick_params(labelbottom=False)
 
 
@@ -310,9 +347,9 @@ def render_path(data: PathData, *, view: str = "iso", size: tuple[float, float] 
 
 def _draw_right(fig: Figure, gs, data: PathData, norm, cmap, title: str, subtitle: str) -> None:
     """Time plots in the right column, the speed colour bar, title and subtitle."""
-    right = gs[0, 1].subgridspec(5, 1, hspace=0.32)
+    right = gs[0, 1].subgridspec(6, 1, hspace=0.36)
     axes = [fig.add_subplot(right[0, 0])]
-    axes += [fig.add_subplot(right[i, 0], sharex=axes[0]) for i in range(1, 5)]
+    axes += [fig.add_subplot(right[i, 0], sharex=axes[0]) for i in range(1, 6)]
     draw_time_plots(axes, data)
     cax = fig.add_axes((0.06, 0.055, 0.42, 0.014))
     from matplotlib.cm import ScalarMappable
