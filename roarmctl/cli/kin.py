@@ -118,7 +118,7 @@ def fk(
                  (f"{out['link']}, {frame} frame ({fr.unit})", _fmt(out["tcp_position"], 3))]
     rows += [
         ("position (m)" if frame == "world" else "position, world frame (m)", _fmt(t[:3, 3])),
-        ("rotation", _fmt(t[:3, :3])),
+        ("rotation (3x3, unitless)", _fmt(t[:3, :3])),
         (f"rpy ({unit})", _fmt(out["rpy"], 4)),
     ]
     _table(f"FK of {r.name} at {out['link']}", rows)

@@ -81,7 +81,7 @@ def visualize_path(
     dpi: float = typer.Option(100.0, "--dpi", help="Pixels per inch of the PNG."),
     size: str = typer.Option("16x10", "--size", help="Sheet size WxH in inches (pixels = size x dpi)."),
 ) -> None:
-    """Draw a planned trajectory to a PNG: 3D scene and TCP path, joint curves, TCP speed, manipulability."""
+    """Draw a planned trajectory (PNG, SVG or PDF): 3D scene and TCP path, joint curves, TCP speed, manipulability."""
     from roarmctl.errors import InputError
 
     if view not in VIEW_NAMES:

@@ -84,10 +84,7 @@ def write(streams, path: str | os.PathLike, fmt: str) -> dict[str, Any]:
         text = csv_text(streams)
         out = atomic_write_text(path, text)
         return {"output": str(out), "format": fmt, "rows": text.count("\n") - 1}
-    from roarmctl.export.ros import messages, write_bag
+    from roarmctl.export.ros import write_bag
 
-    out = write_bag(streams, path, "mcap" if fmt == "mcap" else "sqlite3")
-    counts: dict[str, int] = {}
-    for topic, *_ in messages(streams):
-        counts[topic] = counts.get(topic, 0) + 1
+    out, counts = write_bag(streams, path, "mcap" if fmt == "mcap" else "sqlite3")
     return {"output": str(out), "format": fmt, "topics": counts}

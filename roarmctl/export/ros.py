@@ -183,10 +183,11 @@ def messages(streams: Streams) -> Iterator[tuple[str, str, int, Any]]:
             yield ("/scene", "visualization_msgs/msg/MarkerArray", n, mk.MarkerArray(markers=markers))
 
 
-def write_bag(streams: Streams, path: str | os.PathLike, storage: str) -> Path:
+def write_bag(streams: Streams, path: str | os.PathLike, storage: str) -> tuple[Path, dict[str, int]]:
     """Write ``streams`` as a ROS 2 bag. ``storage``: 'mcap' -> the single MCAP file ``path``;
     'sqlite3' -> the bag folder ``path`` (metadata.yaml + .db3). Atomic: built in a temporary folder
-    beside the target, then renamed into place; an existing target is replaced."""
+    beside the target, then renamed into place; an existing target is replaced. Returns the path and
+    the number of messages per topic."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     target = Path(path)
@@ -201,10 +202,12 @@ def write_bag(streams: Streams, path: str | os.PathLike, storage: str) -> Path:
         ts = _typestore()
         with Writer(bag, version=8, storage_plugin=plugin) as writer:
             conns: dict[str, Any] = {}
+            counts: dict[str, int] = {}
             for topic, msgtype, ns, msg in messages(streams):
                 if topic not in conns:
                     conns[topic] = writer.add_connection(topic, msgtype, typestore=ts)
                 writer.write(conns[topic], ns, ts.serialize_cdr(msg, msgtype))
+                counts[topic] = counts.get(topic, 0) + 1
         if storage == "mcap":
             if target.is_dir():
                 raise InputError(f"{target} is a folder", "give a file name ending in .mcap")
@@ -221,4 +224,4 @@ def write_bag(streams: Streams, path: str | os.PathLike, storage: str) -> Path:
         raise InputError(f"cannot write {target}: {exc.strerror or exc}", "check the disk space and permissions") from None
     finally:
         shutil.rmtree(tmpdir, ignore_errors=True)
-    return target
+    return target, counts
