@@ -165,3 +165,21 @@ def test_commands_mean_the_same_in_output_json_text_and_sim(tmp_path):
     assert f"wrote {out['commands']} motion commands" in text
     sim = json.loads(roarmctl("execute", str(traj), "--sim", "--yes", "--json", "--log", str(tmp_path / "l.json")).stdout)
     assert sim["commands"] == out["commands"]
+
+
+def test_json_failure_after_a_json_success_in_the_same_process(traj, tmp_path, capsys):
+    """main() keeps no state between calls: a failure after a success still prints its JSON object."""
+    from roarmctl.cli import main
+
+    def call(args):
+        try:
+            main(args)
+        except SystemExit as exc:
+            return exc.code
+        return 0
+
+    assert call(["export", str(traj), "-o", str(tmp_path / "a.csv"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["ok"] is True
+    assert call(["export", str(traj), "-o", str(tmp_path / "a.txt"), "--json"]) == 2
+    out = json.loads(capsys.readouterr().out)
+    assert out["ok"] is False and out["exit_code"] == 2
