@@ -76,6 +76,14 @@ def _batch(robot: Robot, v, what: str, is_position: bool) -> np.ndarray:
         robot.full_q(a) if is_position else _scatter_arm(robot, a))
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (..., 3) arrays: np.cross's axis handling costs 5-10x the maths on
+    the small batches RNEA works on (it was most of the torque-limited timing of a plan)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=-1)
+
+
 def _scatter_arm(robot: Robot, a: np.ndarray) -> np.ndarray:
     out = np.zeros((a.shape[0], robot.dof))
     out[:, robot.arm_indices] = a
@@ -115,7 +123,7 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
 
     def point_acc(link: int, r: np.ndarray) -> np.ndarray:
         d = r - org[:, link]
-        return a[:, link] + np.cross(dw[:, link], d) + np.cross(w[:, link], np.cross(w[:, link], d))
+        return a[:, link] + _cross(dw[:, link], d) + _cross(w[:, link], _cross(w[:, link], d))
 
     n_joints = len(robot.joints)
     axes = np.zeros((n, n_joints, 3))
@@ -128,14 +136,14 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
         if joint.kind == "revolute":
             wz = qd[:, qi, None] * z
             w[:, c] = w[:, p] + wz
-            dw[:, c] = dw[:, p] + qdd[:, qi, None] * z + np.cross(w[:, p], wz)
+            dw[:, c] = dw[:, p] + qdd[:, qi, None] * z + _cross(w[:, p], wz)
             # the pivot lies on the axis: it moves with the parent and with the child alike
             a_piv = point_acc(p, pivots[:, j])
             d = org[:, c] - pivots[:, j]
-            a[:, c] = a_piv + np.cross(dw[:, c], d) + np.cross(w[:, c], np.cross(w[:, c], d))
+            a[:, c] = a_piv + _cross(dw[:, c], d) + _cross(w[:, c], _cross(w[:, c], d))
         elif joint.kind == "prismatic":
             w[:, c], dw[:, c] = w[:, p], dw[:, p]
-            a[:, c] = point_acc(p, org[:, c]) + 2.0 * np.cross(w[:, p], qd[:, qi, None] * z) + qdd[:, qi, None] * z
+            a[:, c] = point_acc(p, org[:, c]) + 2.0 * _cross(w[:, p], qd[:, qi, None] * z) + qdd[:, qi, None] * z
         else:
             w[:, c], dw[:, c] = w[:, p], dw[:, p]
             a[:, c] = point_acc(p, org[:, c])
@@ -158,7 +166,7 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
         inertia = rot @ inertial.inertia @ np.swapaxes(rot, 1, 2)
         iw = np.einsum("nij,nj->ni", inertia, w[:, k])
         force[:, k] = inertial.mass * point_acc(k, com[:, k])
-        moment[:, k] = np.einsum("nij,nj->ni", inertia, dw[:, k]) + np.cross(w[:, k], iw)
+        moment[:, k] = np.einsum("nij,nj->ni", inertia, dw[:, k]) + _cross(w[:, k], iw)
 
     # Backward pass: subtree force and its moment about each joint's pivot.
     f_sub = force.copy()
@@ -167,7 +175,7 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
     for j in range(n_joints - 1, -1, -1):
         joint = robot.joints[j]
         c = kin._child[j]
-        n_sub[:, c] += moment[:, c] + np.cross(com[:, c] - pivots[:, j], force[:, c])
+        n_sub[:, c] += moment[:, c] + _cross(com[:, c] - pivots[:, j], force[:, c])
         p = kin._parent[j]
         if kin._qidx[j] >= 0:
             tau[:, kin._qidx[j]] = np.einsum("ni,ni->n", axes[:, j], n_sub[:, c] if joint.kind == "revolute" else f_sub[:, c])
@@ -175,7 +183,7 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
         jp = kin._child.index(p) if p != 0 else None
         pivot_p = pivots[:, jp] if jp is not None else np.zeros(3)
         f_sub[:, p] += f_sub[:, c]
-        n_sub[:, p] += n_sub[:, c] + np.cross(pivots[:, j] - pivot_p, f_sub[:, c])
+        n_sub[:, p] += n_sub[:, c] + _cross(pivots[:, j] - pivot_p, f_sub[:, c])
     return tau[0] if single else tau
 
 
