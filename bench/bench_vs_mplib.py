@@ -1,0 +1,291 @@
+"""roarmctl against mplib 0.2.1 (C++ OMPL + FCL + toppra) on the same queries, interleaved in one run.
+
+Run: .venv/bin/python bench/bench_vs_mplib.py [--rounds 20] [--venv /tmp/mplib-venv]
+
+mplib needs numpy < 2, so it lives in its own throwaway venv (created with pip on first use, reused
+afterwards) and runs as a worker process that this script drives over a pipe; both sides time only
+their own work, in the same rounds, one query after the other (so machine load hits both alike).
+
+mplib's model is built here from the bundled robot: a URDF whose collision geometry is exactly
+roarmctl's collision boxes (the same link frames and joint limits), an SRDF whose
+disable_collisions are roarmctl's allowed pairs, the scene as FCL boxes and cylinders, the table
+allowed against the base links (as roarmctl's checker does). mplib gets no padding and no
+singularity margin; roarmctl keeps both (plan padding, 0.02 m/rad), so it does more per state.
+The held object (obstacle.yaml, multi_object.yaml) is attached in roarmctl only.
+
+Queries (the start and goal configurations are the ones the pipeline plans, captured from a run):
+  free  pick_place.yaml, home -> above the cube (the straight joint move is valid)
+  wall  obstacle.yaml, above pick -> above place, through the wall
+  post  multi_object.yaml, above the can -> above its place, past the post
+Per query and round: roarmctl's free-motion geometry (OMPL RRTConnect + shortcutting) plus its timing
+and re-check of that motion, against mplib's plan_qpos (RRTConnect + simplify + TOPP-RA). Each
+round uses another seed on both sides. Also: single-state validity checks per second (roarmctl
+``CollisionChecker.is_valid`` with the margin, one state per call, vs mplib's public per-state check
+``PlanningWorld.is_state_colliding`` after ``set_qpos``) on the same random states.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+MPLIB = "mplib==0.2.1"
+QUERIES = {  # name -> (plan, label fragment of the free motion)
+    "free": ("pick_place", "transit above 'cube'"),
+    "wall": ("obstacle", "transit above the place for 'cube'"),
+    "post": ("multi_object", "transit above the place for 'can'"),
+}
+
+
+# --------------------------------------------------------------------------- the mplib side
+WORKER = r'''
+import json, sys, time
+import numpy as np
+import mplib
+from mplib import Planner, Pose
+from mplib.collision_detection.fcl import Box, Cylinder, CollisionObject, FCLObject
+
+spec = json.loads(sys.stdin.readline())
+planners = {}
+for name, q in spec["queries"].items():
+    p = Planner(urdf=spec["urdf"], srdf=spec["srdf"], move_group=spec["tcp"], user_joint_names=spec["joints"],
+                joint_vel_limits=q["vmax"], joint_acc_limits=q["amax"])
+    for it in q["items"]:
+        geom = Box(np.array(it["size"])) if it["shape"] == "box" else Cylinder(it["radius"], it["length"])
+        obj = FCLObject(it["name"], Pose(np.array(it["pose"])), [CollisionObject(geom)], [Pose()])
+        p.planning_world.add_object(obj)
+        if it["role"] == "table":
+            p.planning_world.get_allowed_collision_matrix().set_entry(it["name"], spec["base_links"], True)
+    planners[name] = p
+print("ready", flush=True)
+for line in sys.stdin:
+    cmd = json.loads(line)
+    p = planners[cmd["query"]]
+    q = spec["queries"][cmd["query"]]
+    if cmd["op"] == "plan":
+        mplib.set_global_seed(cmd["seed"])
+        t0 = time.perf_counter()
+        res = p.plan_qpos([np.array(q["goal"])], np.array(q["start"]), time_step=0.01, planning_time=1.0)
+        wall = time.perf_counter() - t0
+        ok = res["status"] == "Success"
+        out = {"ok": ok, "wall": wall, "duration": float(res["duration"]) if ok else None,
+               "path": res["position"].tolist() if ok else None}
+    else:  # single-state rate
+        states = np.array(cmd["states"])
+        world, robot = p.planning_world, p.robot
+        t0 = time.perf_counter()
+        hits = 0
+        for s in states:
+            robot.set_qpos(s, True)
+            hits += world.is_state_colliding()
+        dt = time.perf_counter() - t0
+        out = {"rate": len(states) / dt, "colliding": int(hits)}
+    print(json.dumps(out), flush=True)
+'''
+
+
+def mplib_python(venv: Path) -> Path:
+    py = venv / "bin" / "python"
+    if not py.exists():
+        print(f"creating {venv} with {MPLIB} and numpy<2 (once) ...", flush=True)
+        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+        subprocess.run([str(py), "-m", "pip", "install", "-q", MPLIB, "numpy<2"], check=True)
+    return py
+
+
+# --------------------------------------------------------------------------- model export
+def _rpy(r) -> tuple[float, float, float]:
+    """URDF roll-pitch-yaw of a rotation matrix (R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    pitch = math.asin(max(-1.0, min(1.0, -r[2][0])))
+    if abs(math.cos(pitch)) > 1e-9:
+        return math.atan2(r[2][1], r[2][2]), pitch, math.atan2(r[1][0], r[0][0])
+    return math.atan2(-r[1][2], r[1][1]), pitch, 0.0
+
+
+def _origin(t) -> str:
+    x, y, z = (float(v) for v in t[:3, 3])
+    r, p, yw = _rpy(t[:3, :3])
+    return f'<origin xyz="{x!r} {y!r} {z!r}" rpy="{r!r} {p!r} {yw!r}"/>'
+
+
+def export_model(robot, folder: Path) -> tuple[Path, Path]:
+    """URDF (kinematics + roarmctl's collision boxes) and SRDF (allowed pairs) of ``robot``."""
+    import numpy as np
+
+    links = {robot.root: []}
+    for j in robot.joints:
+        links.setdefault(j.child, [])
+        if not np.allclose(j.post, np.eye(4)) or j.offset:
+            raise SystemExit(f"{robot.name}: joint {j.name} has a post-transform or offset; not exported")
+    for c in robot.collision:
+        if c.kind != "box":
+            raise SystemExit(f"{robot.name}: only box collision shapes are exported, found {c.kind}")
+        sx, sy, sz = (float(v) for v in c.size)
+        links[c.link].append(f'<collision>{_origin(c.origin)}<geometry><box size="{sx!r} {sy!r} {sz!r}"/></geometry></collision>')
+    out = [f'<robot name="{robot.name}">']
+    for name, shapes in links.items():
+        out.append(f'<link name="{name}"><inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>'
+                   + "".join(shapes) + "</link>")
+    for j in robot.joints:
+        body = f'<parent link="{j.parent}"/><child link="{j.child}"/>{_origin(j.origin)}'
+        if j.kind != "fixed":
+            i = robot.joint_names.index(j.name)
+            ax = " ".join(repr(float(v)) for v in j.axis)
+            body += (f'<axis xyz="{ax}"/><limit lower="{float(robot.lower[i])!r}" upper="{float(robot.upper[i])!r}" '
+                     f'effort="10" velocity="{float(robot.velocity_limits[i])!r}"/>')
+        out.append(f'<joint name="{j.name}" type="{j.kind}">{body}</joint>')
+    out.append("</robot>")
+    urdf = folder / f"{robot.name}.urdf"
+    urdf.write_text("\n".join(out))
+    pairs = sorted(tuple(sorted(p)) for p in robot.allowed_collisions)
+    srdf = folder / f"{robot.name}.srdf"
+    srdf.write_text(f'<robot name="{robot.name}">\n' + "\n".join(
+        f'<disable_collisions link1="{a}" link2="{b}" reason="roarmctl"/>' for a, b in pairs) + "\n</robot>\n")
+    return urdf, srdf
+
+
+# --------------------------------------------------------------------------- the roarmctl side
+def capture(plan_name: str, fragment: str):
+    """Plan ``plan_name`` and stop at the free motion whose label contains ``fragment``: returns
+    (planner, step, q) there, with the world state (held object, object poses) as the pipeline has it."""
+    from roarmctl.motion import pipeline
+
+    found = {}
+    original = pipeline.Planner._geometry
+
+    class Captured(Exception):
+        pass
+
+    def hook(self, step, q):
+        if step.kind == "free" and fragment in step.label and not found:
+            found.update(planner=self, step=step, q=q.copy())
+            raise Captured
+        return original(self, step, q)
+
+    pipeline.Planner._geometry = hook
+    try:
+        pipeline.plan_file(ROOT / "plans" / f"{plan_name}.yaml")
+    except Captured:
+        pass
+    finally:
+        pipeline.Planner._geometry = original
+    if not found:
+        raise SystemExit(f"{plan_name}: no free motion labelled '{fragment}'")
+    return found["planner"], found["step"], found["q"]
+
+
+def roarmctl_query(planner, step, q, seed: int):
+    """One free motion as the pipeline does it: geometry (OMPL + shortcuts), timing and re-check."""
+    from roarmctl.motion import pipeline
+
+    planner.plan.planner.seed = seed
+    planner.free_count = 0
+    t0 = time.perf_counter()
+    part = pipeline.Planner._geometry(planner, step, q)
+    piece = planner._time_chain([part])
+    return time.perf_counter() - t0, piece.tp.duration, part.wps
+
+
+def main() -> None:
+    import numpy as np
+
+    from roarmctl.motion.pipeline import load_planning_libraries
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=20)
+    parser.add_argument("--venv", type=Path, default=Path(tempfile.gettempdir()) / "roarmctl-bench-mplib")
+    parser.add_argument("--states", type=int, default=3000)
+    args = parser.parse_args()
+    py = mplib_python(args.venv)
+    load_planning_libraries()
+
+    folder = Path(tempfile.mkdtemp(prefix="roarmctl-mplib-"))
+    captured = {name: capture(*q) for name, q in QUERIES.items()}
+    robot = captured["free"][0].robot
+    urdf, srdf = export_model(robot, folder)
+    arm = robot.arm_indices
+    spec = {"urdf": str(urdf), "srdf": str(srdf), "tcp": robot.tcp_link, "joints": list(robot.joint_names),
+            "base_links": ["base_link", "link1"], "queries": {}}  # roarmctl's checker: these never meet the table
+    for name, (planner, step, q) in captured.items():
+        goal = step.q_to.copy()
+        goal[planner.gi] = q[planner.gi]
+        items = [{"name": it.name, "role": it.role, "shape": it.shape, "pose": it.pose.tolist(), "size": list(it.size),
+                  "radius": it.radius, "length": it.length} for it in planner.checker.scene.items if it.name != planner.held]
+        spec["queries"][name] = {"start": q.tolist(), "goal": goal.tolist(), "items": items,
+                                 "vmax": planner.vmax[arm].tolist(), "amax": planner.amax[arm].tolist()}
+    worker = subprocess.Popen([str(py), "-c", WORKER], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    worker.stdin.write(json.dumps(spec) + "\n")
+    worker.stdin.flush()
+    line = worker.stdout.readline()
+    if line.strip() != "ready":
+        raise SystemExit("mplib worker failed to start")
+
+    def ask(cmd: dict) -> dict:
+        worker.stdin.write(json.dumps(cmd) + "\n")
+        worker.stdin.flush()
+        return json.loads(worker.stdout.readline())
+
+    ours = {k: [] for k in QUERIES}
+    theirs = {k: [] for k in QUERIES}
+    durations = {k: ([], []) for k in QUERIES}
+    padding_hits = {k: 0 for k in QUERIES}
+    fails = {k: [0, 0] for k in QUERIES}
+    for r in range(args.rounds):
+        for name, (planner, step, q) in captured.items():
+            try:
+                wall, dur, _ = roarmctl_query(planner, step, q, seed=100 + r)
+                ours[name].append(wall)
+                durations[name][0].append(dur)
+            except Exception as exc:  # noqa: BLE001 (a bench counts failures)
+                fails[name][0] += 1
+                print(f"  roarmctl {name} round {r}: {exc}", file=sys.stderr)
+            res = ask({"op": "plan", "query": name, "seed": 100 + r})
+            if res["ok"]:
+                theirs[name].append(res["wall"])
+                durations[name][1].append(res["duration"])
+                # does mplib's timed path enter roarmctl's padding (or margin)? checked by roarmctl's checker
+                path = np.array(res["path"])
+                full = np.repeat(q[None, :], len(path), axis=0)
+                full[:, arm] = path
+                planner._set_state(q[planner.gi], grasp_target=None)
+                padding_hits[name] += planner.checker.first_invalid(full[:, arm]) is not None
+            else:
+                fails[name][1] += 1
+
+    print(f"\n{args.rounds} interleaved rounds, medians (ms); ratio = roarmctl / mplib")
+    print(f"{'query':<6}{'roarmctl':>10}{'mplib':>10}{'ratio':>8}   motion duration (s) ours / mplib   "
+          "mplib paths inside our padding or margin   failures ours/mplib")
+    for name in QUERIES:
+        a, b = statistics.median(ours[name]) * 1000, statistics.median(theirs[name]) * 1000
+        da, db = statistics.median(durations[name][0]), statistics.median(durations[name][1])
+        print(f"{name:<6}{a:>10.1f}{b:>10.1f}{a / b:>7.2f}x   {da:.2f} / {db:.2f}"
+              f"{'':>22}{padding_hits[name]:>3} of {len(theirs[name])}{'':>28}{fails[name][0]}/{fails[name][1]}")
+
+    # single-state validity, the same random states on both sides
+    planner = captured["wall"][0]
+    rng = np.random.default_rng(0)
+    states = rng.uniform(robot.lower, robot.upper, (args.states, robot.dof))
+    states[:, planner.gi] = captured["wall"][2][planner.gi]
+    res = ask({"op": "rate", "query": "wall", "states": states.tolist()})
+    checker = planner.checker
+    qa = states[:, arm]
+    t0 = time.perf_counter()
+    valid = sum(checker.is_valid(s) for s in qa)
+    ours_rate = len(qa) / (time.perf_counter() - t0)
+    print(f"\nsingle-state validity, {args.states} random states: roarmctl is_valid (margin + padding) "
+          f"{ours_rate:,.0f}/s ({len(qa) - valid} invalid), mplib is_state_colliding {res['rate']:,.0f}/s "
+          f"({res['colliding']} colliding): ratio {ours_rate / res['rate']:.2f}x")
+    worker.stdin.close()
+    worker.wait(timeout=30)
+
+
+if __name__ == "__main__":
+    main()
