@@ -18,10 +18,10 @@ two states where a sphere grown by the distance any arm point can travel in half
 re-check of the segment (the pipeline's, or a test's) agrees with it.
 
 Rules: arm shapes are inflated by ``padding`` against the scene; self-collision uses the
-description's boxes as they are and skips ``robot.allowed_collisions``. base_link and link1 (the
-links that sit on the table) are never checked against items of role "table". A grasp target may
-touch the jaws (link5, gripper_link). An attached object moves with the TCP; it is checked against
-the scene and against every arm link except link5 and gripper_link, shrunk by
+description's boxes as they are and skips ``robot.allowed_collisions``. The description's
+``base_links`` (the links that sit on the table) are never checked against items of role "table".
+A grasp target may touch the description's ``jaw_links``. An attached object moves with the TCP;
+it is checked against the scene and against every arm link except the jaw links, shrunk by
 ``contact_tolerance`` so that resting on the table or touching a neighbour is not a collision.
 Static items are never checked against each other.
 """
@@ -37,8 +37,6 @@ from roarmctl.errors import InputError
 from roarmctl.motion.scene import Scene, SceneItem
 from roarmctl.robot.model import Robot
 
-JAW_LINKS = ("link5", "gripper_link")
-BASE_LINKS = ("base_link", "link1")
 _EPS = 1e-9
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
 
@@ -154,7 +152,7 @@ class CollisionChecker:
         self._q_template[self._gripper_index] = float(value)
 
     def set_grasp_target(self, name: str | None) -> None:
-        """Let scene object ``name`` touch the jaws (link5, gripper_link); None clears it."""
+        """Let scene object ``name`` touch the jaws (``robot.jaw_links``); None clears it."""
         if name is not None and name not in self.scene:
             raise InputError(f"grasp target '{name}' is not in the scene (items: {', '.join(self.scene.names())})")
         self._grasp_target = name
@@ -235,15 +233,16 @@ class CollisionChecker:
         self._mv_half_self = np.array([mv.half_self for mv in moving]).reshape(s, 3)
         self._mv_radius = np.array([mv.radius for mv in moving])
         link_names = self._fk.robot.kin.link_names
+        jaw_links, base_links = set(self.robot.jaw_links), set(self.robot.base_links)
 
         # Shape vs item mask: which pairs are checked at all.
         mask = np.ones((s, m), dtype=bool)
         for a, mv in enumerate(moving):
             lname = link_names[mv.link] if not mv.attached else None
             for k, it in enumerate(self._items):
-                if it.role == "table" and lname in BASE_LINKS:
+                if it.role == "table" and lname in base_links:
                     mask[a, k] = False
-                if it.name == self._grasp_target and lname in JAW_LINKS:
+                if it.name == self._grasp_target and lname in jaw_links:
                     mask[a, k] = False
         self._scene_mask = mask
         # Shapes that are checked against at least one item take part in the scene pre-filter.
@@ -259,7 +258,7 @@ class CollisionChecker:
                 ma, mb = moving[a], moving[b]
                 if ma.attached or mb.attached:
                     other = mb if ma.attached else ma
-                    if other.attached or link_names[other.link] in JAW_LINKS:
+                    if other.attached or link_names[other.link] in jaw_links:
                         continue
                     pairs.append((a, b))
                     continue

@@ -37,6 +37,10 @@ ORI_TOL = 1e-5  # rad: orientation check; covers the few-urad axis tilt of the r
 PITCH_GRID = 721  # pitch samples over [-pi, pi] when the RoArm pitch is left free (0.5 deg)
 
 
+#: Analytic IK families a description may name with ``ik:`` (or through ``singularity_model``).
+IK_FAMILIES = ("roarm5", "ur6")
+
+
 # ----------------------------------------------------------------------------------- public
 def solve_ik(
     robot: Robot,
@@ -90,8 +94,8 @@ def solve_ik(
         raise InputError("give either rpy or pitch/roll, not both")
     rot = None if rpy is None else transform(rpy=_vec3(rpy, "rpy"))[:3, :3]
     qr = None if q_ref is None else robot.full_q(np.asarray(q_ref, dtype=float))
-    model = robot.singularity_model or ""
-    if model == "roarm5" or robot.name == "roarm_m3_pro":
+    model = robot.ik or ""
+    if model == "roarm5":
         solver = getattr(robot, "_roarm_ik", None)
         if solver is None:  # geometry read once per loaded robot
             solver = robot._roarm_ik = _RoarmIK(robot)
@@ -572,24 +576,67 @@ def _pick_index(phis: np.ndarray, ok: np.ndarray, pref: float, margin: float = m
 
 
 # ----------------------------------------------------------------------------- UR10 (modified DH)
-def _ur6_params(robot: Robot):
-    """(T_base, d1, a2, a3, d4, d5, d6, offsets, T_tool) from a modified-DH UR-type description."""
+_UR6_ALPHA = (0.0, math.pi / 2, 0.0, 0.0, -math.pi / 2, math.pi / 2)  # modified-DH alpha_{i-1} of the seed's UR10
+
+
+def ur6_params(robot: Robot):
+    """(T_base, d1, a2, a3, d4, d5, d6, offsets, T_tool) of a UR-type arm, read from its DH table.
+
+    Either convention is accepted. A standard row i (theta_i, d_i, a_i, alpha_i) is the modified
+    row i+1's (a_i, alpha_i) (Rx and Tx commute), the last row's (a_6, alpha_6) going into the tool.
+    Link twists of the opposite sign to the seed-003 UR10 (modified alpha = 0, 90, 0, 0, -90, 90
+    deg) are turned into it by adding pi to the joint angles on both sides of that twist
+    (Rz(pi) Rx(alpha) Tx(a) Rz(pi) = Rx(-alpha) Tx(-a)). Anything else raises ``DescriptionError``.
+    Lengths in metres, angles in radians; ``offsets`` (6,) map q to the model's theta = q + offset.
+    """
+    from roarmctl.errors import DescriptionError
+
+    where = f"{robot.name} (singularity_model/ik: ur6)"
+    if robot.dh is None:
+        raise DescriptionError(f"{where}: the ur6 model needs a DH table ('dh:' rows), this robot has none",
+                               "describe the arm as a DH table or drop singularity_model/ik: ur6")
+    convention, rows = robot.dh
+    if len(rows) != 6 or any(r["kind"] != "revolute" for r in rows):
+        raise DescriptionError(f"{where}: dh: needs exactly 6 revolute rows, found {len(rows)}")
     chain = [robot.joints[j] for j in robot.kin.tcp_chain_joints]
     moving = [j for j in chain if j.kind != "fixed"]
-    if len(moving) != 6 or any(j.kind != "revolute" for j in moving):
-        raise InputError(f"{robot.name}: the ur6 IK needs 6 revolute joints")
-    first = chain.index(moving[0])
-    last = chain.index(moving[-1])
+    if len(moving) != 6:
+        raise DescriptionError(f"{where}: the TCP chain has {len(moving)} moving joints, ur6 needs 6")
+    d = [float(r["d"]) for r in rows]
+    offs = np.array([float(r["offset"]) for r in rows])
+    extra = np.eye(4)
+    if convention == "modified":
+        al = [float(r["alpha"]) for r in rows]
+        a = [float(r["a"]) for r in rows]
+    else:
+        al = [0.0] + [float(r["alpha"]) for r in rows[:5]]
+        a = [0.0] + [float(r["a"]) for r in rows[:5]]
+        extra = transform((rows[5]["a"], 0, 0)) @ transform(rpy=(rows[5]["alpha"], 0, 0))
+    for k in range(6):
+        if abs(_wrap(al[k] - _UR6_ALPHA[k])) < 1e-6:
+            continue
+        if k > 0 and _UR6_ALPHA[k] != 0 and abs(_wrap(al[k] + _UR6_ALPHA[k])) < 1e-6:
+            al[k], a[k] = -al[k], -a[k]
+            offs[k - 1] += math.pi
+            offs[k] += math.pi
+            continue
+        raise DescriptionError(
+            f"{where}: dh[{k if convention == 'modified' else k - 1}].alpha: a twist of "
+            f"{math.degrees(al[k]):.1f} deg does not fit the UR structure (twists 0, +-90, 0, 0, -+90, +-90 deg "
+            f"in modified DH)", "use another singularity_model/ik, or none (numerical IK)")
+    for k in (0, 1, 4, 5):
+        if abs(a[k]) > 1e-9:
+            raise DescriptionError(f"{where}: a link length a_{k} = {a[k]:.4g} m where the UR structure has 0 "
+                                   f"(shoulder, elbow and wrist axes must meet as in a UR arm)")
+    first, last = chain.index(moving[0]), chain.index(moving[-1])
     t_base = np.eye(4)
     for j in chain[:first]:
         t_base = t_base @ j.origin
-    t_tool = np.eye(4)
+    t_tool = extra
     for j in chain[last + 1:]:
         t_tool = t_tool @ j.origin
-    a = [float(j.origin[0, 3]) for j in moving]
-    d = [float(np.dot(j.origin[:3, 2], j.origin[:3, 3])) for j in moving]
-    # frame 1's origin sits at d1 above frame 0 (no rotation): fold it into the base
-    return t_base, d[0], a[2], a[3], d[3], d[4], d[5], np.array([j.offset for j in moving]), t_tool
+    # d2 and d3 shift the planar arm sideways like d4 does (z2, z3, z4 are parallel)
+    return t_base, d[0], a[2], a[3], d[1] + d[2] + d[3], d[4], d[5], offs, t_tool
 
 
 def _ur6_solve(robot: Robot, p: np.ndarray, rot: np.ndarray, qr: np.ndarray | None) -> list[np.ndarray]:
@@ -604,7 +651,7 @@ def _ur6_solve(robot: Robot, p: np.ndarray, rot: np.ndarray, qr: np.ndarray | No
     F2 = p5x c1 + p5y s1 + d5 s234 = a2 c2 + a3 c23 and F3 = p5z - d1 - d5 c234 = a2 s2 + a3 s23.
     At s5 = 0 (wrist singular) theta6 is free: we keep q_ref's (or 0).
     """
-    t_base, d1, a2, a3, d4, d5, d6, offs, t_tool = _ur6_params(robot)
+    t_base, d1, a2, a3, d4, d5, d6, offs, t_tool = ur6_params(robot)
     target = np.eye(4)
     target[:3, :3], target[:3, 3] = rot, p
     t = np.linalg.inv(t_base) @ target @ np.linalg.inv(t_tool)

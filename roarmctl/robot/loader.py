@@ -49,6 +49,7 @@ def load_robot(spec: str) -> Robot:
                 f"unknown robot '{spec[:80]}'",
                 f"bundled robots: {', '.join(bundled_robots())}; or give a path to a .yaml or .urdf file",
             )
+    data: dict = {}
     if path.suffix.lower() == ".urdf":
         robot = _from_urdf(path, {}, path)
     else:
@@ -65,8 +66,71 @@ def load_robot(spec: str) -> Robot:
     for f in robot.frames.values():
         if f.point_link is not None and f.point_link not in robot.link_names:
             raise DescriptionError(f"{path}: frames.{f.name}.point.link: '{f.point_link}' is not a link of {robot.name}")
+    robot = _link_roles(robot, data, str(path))
     checks.check_robot(robot, str(path))
     _CACHE[spec] = robot
+    return robot
+
+
+def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
+    """Fill ``jaw_links`` and ``base_links`` from the sidecar, or derive them from the tree.
+
+    Defaults: base links are the root and every link fixed to it; jaw links are the gripper joint's
+    child and parent (else the last moving link of the TCP chain), each with the links fixed to it.
+    """
+    links = set(robot.link_names)
+
+    def fixed_group(start: str) -> list[str]:
+        out, todo = [start], [start]
+        while todo:
+            cur = todo.pop()
+            for j in robot.joints:
+                if j.kind == "fixed" and cur in (j.parent, j.child):
+                    other = j.child if j.parent == cur else j.parent
+                    if other not in out:
+                        out.append(other)
+                        todo.append(other)
+        return out
+
+    def listed(key: str) -> tuple[str, ...] | None:
+        value = data.get(key)
+        if value is None:
+            return None
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise DescriptionError(f"{where}: {key}: expected a list of link names")
+        for v in value:
+            if v not in links:
+                raise DescriptionError(f"{where}: {key}: '{v}' is not a link (links: {', '.join(robot.link_names)})")
+        return tuple(value)
+
+    base = listed("base_links")
+    robot.base_links = base if base is not None else tuple(fixed_group(robot.root))
+    jaws = listed("jaw_links")
+    if jaws is None:
+        if robot.gripper is not None:
+            gj = next(j for j in robot.joints if j.name == robot.gripper.joint)
+            seeds = [gj.child, gj.parent]
+        else:
+            moving = [robot.joints[j] for j in robot.kin.tcp_chain_joints if robot.joints[j].kind != "fixed"]
+            seeds = [moving[-1].child] if moving else [robot.tcp_link]
+        jaws = tuple(dict.fromkeys(l for s in seeds for l in fixed_group(s)))
+    robot.jaw_links = jaws
+    from roarmctl.robot.ik import IK_FAMILIES
+    from roarmctl.robot.singularity import MODELS
+
+    sm = robot.singularity_model
+    if sm is not None and sm not in MODELS:
+        raise DescriptionError(f"{where}: singularity_model: unknown model '{sm}' (known: {', '.join(MODELS)})",
+                               "leave it out to classify by the Jacobian's smallest singular value")
+    ik = data.get("ik", sm if sm in IK_FAMILIES else None)
+    if ik is not None and ik not in IK_FAMILIES:
+        raise DescriptionError(f"{where}: ik: unknown IK family {ik!r} (known: {', '.join(IK_FAMILIES)})",
+                               "leave it out for the numerical (damped least squares) IK")
+    robot.ik = ik
+    if "ur6" in (sm, ik):
+        from roarmctl.robot.ik import ur6_params
+
+        robot._ur6_params = ur6_params(robot)  # refuses a table the ur6 model cannot serve
     return robot
 
 
@@ -357,6 +421,7 @@ def _from_dh(path: Path, data: dict) -> Robot:
         joints.append(Joint("world_to_base", "fixed", "world", "base", transform(xyz, np.radians(rpy) if deg else rpy)))
         root = "world"
     prev = "base"
+    dh_rows: list[dict] = []
     for i, row in enumerate(rows):
         loc = f"{where}: dh[{i}]"
         if not isinstance(row, dict):
@@ -396,6 +461,7 @@ def _from_dh(path: Path, data: dict) -> Robot:
         total_offset = offset + (theta if kind == "revolute" else d)
         joints.append(Joint(name, kind, prev, child, origin, np.array([0.0, 0.0, 1.0]), post, lo, hi, total_offset))
         names.append(name)
+        dh_rows.append({"kind": kind, "a": a, "alpha": alpha, "d": d, "offset": total_offset})
         prev = child
     tcp = "link" + str(len(rows))
     if data.get("tool"):
@@ -441,5 +507,6 @@ def _from_dh(path: Path, data: dict) -> Robot:
         lower=np.array([j.lower for j in joints if j.kind != "fixed"]),
         upper=np.array([j.upper for j in joints if j.kind != "fixed"]),
         inertials=inertials,
+        dh=(convention, dh_rows),
         **common,
     )

@@ -145,6 +145,14 @@ class Robot:
     singularity_model: str | None = None
     description: str = ""
     frames: dict = field(default_factory=dict)  # name -> roarmctl.robot.frames.Frame
+    #: Analytic IK family ("roarm5", "roarm3", "ur6"; None: numerical). Defaults to ``singularity_model``.
+    ik: str | None = None
+    #: Links that may touch the object being grasped (the jaws and the link that carries them).
+    jaw_links: tuple[str, ...] = ()
+    #: Links that sit on the table and are never checked against items of role "table".
+    base_links: tuple[str, ...] = ()
+    #: The DH table the robot was built from: (convention, rows of {a, alpha, d, offset}), SI units.
+    dh: tuple[str, list[dict[str, float]]] | None = None
 
     def __post_init__(self) -> None:
         from roarmctl.robot.kinematics import Kinematics

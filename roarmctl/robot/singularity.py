@@ -16,9 +16,11 @@ AXIS_TOL = 0.01  # m: a point this close to the base axis counts as on it
 
 
 def _roarm5(robot: Robot, q: np.ndarray) -> str | None:
+    # shoulder, elbow and wrist-pitch frames: the children of the 2nd..4th moving joints of the TCP chain
     frames = robot.kin.link_frames(q)
+    moving = [robot.joints[j] for j in robot.kin.tcp_chain_joints if robot.joints[j].kind != "fixed"]
     idx = robot.kin.link_index
-    shoulder, elbow, wrist = (frames[idx[n], :3, 3] for n in ("link2", "link3", "link4"))
+    shoulder, elbow, wrist = (frames[idx[m.child], :3, 3] for m in moving[1:4])
     tcp = frames[robot.kin.tcp_index, :3, 3]
     upper, fore = elbow - shoulder, wrist - elbow
     sin_elbow = np.linalg.norm(np.cross(upper, fore)) / (np.linalg.norm(upper) * np.linalg.norm(fore))
@@ -32,14 +34,20 @@ def _roarm5(robot: Robot, q: np.ndarray) -> str | None:
 
 
 def _ur6(robot: Robot, q: np.ndarray) -> str | None:
-    # UR10 in modified DH (robots/ur10.yaml): det J = a2 a3 (a2 c2 + a3 c23 - d5 s234) s3 s5, zero at the
-    # elbow (s3 = 0), wrist (s5 = 0) and shoulder (wrist centre on the base axis) singularities.
-    a2, a3, d5 = 0.6129, 0.5716, 0.1157
-    if abs(np.sin(q[2])) < SIN_TOL:
+    # UR-type 6R: det J = a2 a3 (a2 c2 + a3 c23 - d5 s234) s3 s5, dimensions from the robot's DH table
+    # (zero at the elbow s3 = 0, wrist s5 = 0 and shoulder (wrist centre on the base axis) singularities).
+    from roarmctl.robot.ik import ur6_params
+
+    params = getattr(robot, "_ur6_params", None)
+    if params is None:
+        params = robot._ur6_params = ur6_params(robot)
+    _, _, a2, a3, _, d5, _, offs, _ = params
+    th = q[robot.arm_indices] + offs
+    if abs(np.sin(th[2])) < SIN_TOL:
         return "elbow"
-    if abs(np.sin(q[4])) < SIN_TOL:
+    if abs(np.sin(th[4])) < SIN_TOL:
         return "wrist"
-    if abs(a2 * np.cos(q[1]) + a3 * np.cos(q[1] + q[2]) - d5 * np.sin(q[1] + q[2] + q[3])) < AXIS_TOL:
+    if abs(a2 * np.cos(th[1]) + a3 * np.cos(th[1] + th[2]) - d5 * np.sin(th[1] + th[2] + th[3])) < AXIS_TOL:
         return "shoulder"
     return None
 

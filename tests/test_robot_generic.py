@@ -1,0 +1,141 @@
+"""Nothing robot-specific outside the descriptions: link roles, singularity dimensions and the IK
+family come from the robot's own files (issue 8, item 3)."""
+
+from __future__ import annotations
+
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from roarmctl.errors import DescriptionError
+from roarmctl.robot.ik import solve_ik
+from roarmctl.robot.loader import bundled_dir, load_robot
+from roarmctl.robot.singularity import classify_singularity
+
+PKG = Path(__file__).resolve().parents[1] / "roarmctl"
+
+# Universal Robots' published standard-DH table of the UR10 (metres, radians).
+UR10_STANDARD = {
+    "format": "roarmctl.robot/1",
+    "name": "ur10_std",
+    "convention": "standard",
+    "singularity_model": "ur6",
+    "dh": [
+        {"name": "j1", "a": 0, "alpha": math.pi / 2, "d": 0.1273, "lower": -6.28, "upper": 6.28},
+        {"name": "j2", "a": -0.612, "alpha": 0, "d": 0, "lower": -6.28, "upper": 6.28},
+        {"name": "j3", "a": -0.5723, "alpha": 0, "d": 0, "lower": -6.28, "upper": 6.28},
+        {"name": "j4", "a": 0, "alpha": math.pi / 2, "d": 0.163941, "lower": -6.28, "upper": 6.28},
+        {"name": "j5", "a": 0, "alpha": -math.pi / 2, "d": 0.1157, "lower": -6.28, "upper": 6.28},
+        {"name": "j6", "a": 0, "alpha": 0, "d": 0.0922, "lower": -6.28, "upper": 6.28},
+    ],
+}
+
+
+def test_no_roarm_link_names_outside_descriptions():
+    """The planner, device, drawing and CLI code never names a RoArm link or joint."""
+    urdf = (bundled_dir() / "roarm_m3_pro.urdf").read_text()
+    names = set(re.findall(r'<(?:link|joint) name="([^"]+)"', urdf)) - {"world"}  # "world" is plain English
+    assert {"base_link", "link1", "gripper_link", "hand_tcp"} <= names
+    hits = []
+    for sub in ("motion", "device", "viz", "cli"):
+        for py in (PKG / sub).rglob("*.py"):
+            text = py.read_text()
+            for n in names:
+                if re.search(rf"\b{re.escape(n)}\b", text):
+                    hits.append(f"{py.relative_to(PKG)}: {n}")
+    assert not hits, hits
+
+
+def test_link_roles_from_sidecar_and_defaults(tmp_path):
+    m3 = load_robot("roarm_m3_pro")
+    assert set(m3.base_links) == {"world", "base_link", "link1"}
+    assert set(m3.jaw_links) == {"link5", "gripper_link"}
+    # without the sidecar fields: the root with the links fixed to it; the gripper's two links
+    side = yaml.safe_load((bundled_dir() / "roarm_m3_pro.yaml").read_text())
+    del side["base_links"], side["jaw_links"]
+    side["urdf"] = str(bundled_dir() / "roarm_m3_pro.urdf")
+    (tmp_path / "r.yaml").write_text(yaml.safe_dump(side))
+    r = load_robot(str(tmp_path / "r.yaml"))
+    assert set(r.base_links) == {"world", "base_link"}
+    assert {"link5", "gripper_link"} <= set(r.jaw_links)
+    side["jaw_links"] = ["link5", "nope"]
+    (tmp_path / "bad.yaml").write_text(yaml.safe_dump(side))
+    with pytest.raises(DescriptionError, match=r"jaw_links: 'nope' is not a link"):
+        load_robot(str(tmp_path / "bad.yaml"))
+
+
+def _ur10_std(tmp_path, mutate=None) -> Path:
+    data = yaml.safe_load(yaml.safe_dump(UR10_STANDARD))
+    if mutate:
+        mutate(data)
+    p = tmp_path / "ur10_std.yaml"
+    p.write_text(yaml.safe_dump(data))
+    return p
+
+
+def test_ur6_standard_dh_table_solves_like_modified(tmp_path):
+    """The standard-DH UR10 (negative a, opposite twists) gets the analytic IK: every solution
+    reaches the FK target, and the configuration the target came from is among them."""
+    robot = load_robot(str(_ur10_std(tmp_path)))
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q = rng.uniform(-2.5, 2.5, 6)
+        t = robot.kin.fk(q)
+        from roarmctl.robot.model import rpy_from_matrix
+
+        sols = solve_ik(robot, t[:3, 3], rpy=rpy_from_matrix(t[:3, :3]), all_solutions=True)
+        assert 1 <= len(sols) <= 8
+        for s in sols:
+            ts = robot.kin.fk(s)
+            assert np.linalg.norm(ts[:3, 3] - t[:3, 3]) < 1e-6
+            assert np.allclose(ts[:3, :3], t[:3, :3], atol=1e-5)
+        d = [np.max(np.abs((s - q + np.pi) % (2 * np.pi) - np.pi)) for s in sols]
+        assert min(d) < 1e-5
+
+
+def test_ur6_singularity_uses_the_tables_dimensions(tmp_path):
+    """Shoulder singularity where a2 c2 + a3 c23 - d5 s234 = 0 with this table's numbers (not the
+    seed's); the Jacobian confirms the rank loss there and not 0.3 rad away."""
+    robot = load_robot(str(_ur10_std(tmp_path)))
+    assert classify_singularity(robot, [0.3, 0.4, 1e-4, 0.2, 1.0, 0.0]) == "elbow"
+    a2, a3, d5 = -0.612, -0.5723, 0.1157
+    th2, th3 = 1.2, 0.9
+    th234 = math.asin((a2 * math.cos(th2) + a3 * math.cos(th2 + th3)) / d5)
+    # the standard table's twists (+90, -90 at the wrist) put pi on joints 4 and 6 of the seed's model
+    q = np.array([0.1, th2, th3, th234 - th2 - th3 - math.pi, 1.0, 0.0])
+    sv = np.linalg.svd(robot.kin.jacobian(q), compute_uv=False)
+    assert sv[-1] < 1e-9
+    assert classify_singularity(robot, q) == "shoulder"
+    q[3] += 0.3
+    assert np.linalg.svd(robot.kin.jacobian(q), compute_uv=False)[-1] > 1e-3
+    assert classify_singularity(robot, q) is None
+
+
+@pytest.mark.parametrize("mutate, needle", [
+    (lambda d: d["dh"][3].update(alpha=0.7), r"dh\[3\]\.alpha"),
+    (lambda d: d["dh"][0].update(a=0.05), r"a_1 = 0.05"),
+    (lambda d: d["dh"].pop(), r"6 revolute rows"),
+])
+def test_ur6_refuses_a_table_it_cannot_serve(tmp_path, mutate, needle):
+    path = _ur10_std(tmp_path, mutate)
+    with pytest.raises(DescriptionError, match=needle):
+        load_robot(str(path))
+    proc = subprocess.run([sys.executable, "-m", "roarmctl", "kin", "fk", str(path), "0", "0", "0", "0", "0", "0"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+
+
+def test_unknown_ik_family_is_an_error(tmp_path):
+    p = _ur10_std(tmp_path, lambda d: d.update(ik="magic"))
+    with pytest.raises(DescriptionError, match="ik: unknown IK family 'magic'"):
+        load_robot(str(p))
+    p = _ur10_std(tmp_path, lambda d: d.update(singularity_model="ur7"))
+    with pytest.raises(DescriptionError, match="singularity_model: unknown model 'ur7'"):
+        load_robot(str(p))
