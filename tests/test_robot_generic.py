@@ -139,3 +139,34 @@ def test_unknown_ik_family_is_an_error(tmp_path):
     p = _ur10_std(tmp_path, lambda d: d.update(singularity_model="ur7"))
     with pytest.raises(DescriptionError, match="singularity_model: unknown model 'ur7'"):
         load_robot(str(p))
+
+
+def test_renamed_links_plan_pick_and_place_exactly_as_the_original(tmp_path):
+    """Every link and joint of the M3 renamed (URDF and sidecar alike): the bundled pick-and-place
+    gives the same trajectory, sample for sample."""
+    from roarmctl.motion.pipeline import plan_file
+
+    rename = {"base_link": "pedestal", "link1": "turret", "link2": "upper_arm", "link3": "forearm",
+              "link4": "wrist", "link5": "palm", "gripper_link": "finger", "hand_tcp": "tool_point"}
+
+    def renamed(text: str) -> str:
+        for old, new in rename.items():
+            text = re.sub(rf"(?<![A-Za-z0-9]){old}(?![0-9])", new, text)
+        return text
+
+    urdf = renamed((bundled_dir() / "roarm_m3_pro.urdf").read_text())
+    assert "link1" not in urdf and "base_link" not in urdf
+    (tmp_path / "arm.urdf").write_text(urdf)
+    side = yaml.safe_load(renamed((bundled_dir() / "roarm_m3_pro.yaml").read_text()))
+    side["urdf"] = "arm.urdf"
+    (tmp_path / "arm.yaml").write_text(yaml.safe_dump(side))
+    plans = Path(__file__).resolve().parents[1] / "plans"
+    plan = yaml.safe_load((plans / "pick_place.yaml").read_text())
+    plan["robot"] = "arm.yaml"
+    (tmp_path / "pick_place.yaml").write_text(yaml.safe_dump(plan))
+    original = plan_file(plans / "pick_place.yaml").trajectory
+    other = plan_file(tmp_path / "pick_place.yaml").trajectory
+    assert other.joint_names == [renamed(n) for n in original.joint_names] != original.joint_names
+    assert np.array_equal(original.times, other.times)
+    assert np.array_equal(original.positions, other.positions)
+    assert [e.kind for e in original.events] == [e.kind for e in other.events]
