@@ -38,8 +38,24 @@ def _version(value: bool) -> None:
 def _root(
     debug: bool = typer.Option(False, "--debug", help="Show full tracebacks on errors."),
     version: bool = typer.Option(False, "--version", "-V", help="Print the version and exit.", callback=_version, is_eager=True),
+    package_path: list[str] = typer.Option(
+        [], "--package-path", metavar="NAME=DIR",
+        help="Folder of ROS package NAME for package://NAME/... mesh paths in a URDF (repeatable)."),
 ) -> None:
     common.STATE.debug = debug
+    if package_path:
+        from pathlib import Path
+
+        from roarmctl.errors import InputError
+        from roarmctl.robot.meshes import PACKAGE_PATHS
+
+        for item in package_path:
+            name, sep, folder = item.partition("=")
+            if not sep or not name or not folder:
+                raise InputError(f"--package-path: expected NAME=DIR, got '{item}'")
+            if not Path(folder).expanduser().is_dir():
+                raise InputError(f"--package-path {name}: folder '{folder}' not found")
+            PACKAGE_PATHS[name] = Path(folder).expanduser().resolve()
 
 
 @app.command("robots")

@@ -41,8 +41,22 @@ _EPS = 1e-9
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
 
 
-def _geometry(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0):
-    """An FCL geometry, every surface moved outwards by ``grow`` (m; negative shrinks)."""
+def _geometry(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0, mesh=None):
+    """An FCL geometry, every surface moved outwards by ``grow`` (m; negative shrinks).
+
+    A mesh (``MeshGeometry``) becomes an FCL convex polytope (its hull), or a BVH of its triangles
+    when ``mesh.exact``; ``grow`` > 0 moves its vertices out along their normals.
+    """
+    if kind == "mesh":
+        v = mesh.grown_vertices(max(grow, 0.0))
+        f = mesh.faces
+        if mesh.exact:
+            bvh = fcl.BVHModel()
+            bvh.beginModel(len(v), len(f))
+            bvh.addSubModel(v, f)
+            bvh.endModel()
+            return bvh
+        return fcl.Convex(v, len(f), np.hstack([np.full((len(f), 1), 3), f]).ravel())
     if kind == "box":
         return fcl.Box(*[max(float(s) + 2 * grow, 1e-6) for s in size])
     if kind == "cylinder":
@@ -54,8 +68,11 @@ def _geometry(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0
     raise InputError(f"collision shape kind '{kind}' is not supported")
 
 
-def _half_extents(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0) -> np.ndarray:
+def _half_extents(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0, mesh=None) -> np.ndarray:
     """Half extents (3,) of the shape's local bounding box, grown by ``grow``."""
+    if kind == "mesh":
+        h = np.max(np.abs(mesh.grown_vertices(max(grow, 0.0))), axis=0)
+        return np.maximum(h, 1e-6)
     if kind == "box":
         h = np.asarray(size, dtype=float) / 2
     elif kind == "cylinder":
@@ -133,17 +150,22 @@ class CollisionChecker:
         self._arm_shapes: list[_Moving] = []
         for shape in robot.collision:
             self._arm_shapes.append(self._moving(shape.name or shape.link, kin.link_index[shape.link], shape.origin,
-                                                 shape.kind, shape.size, shape.radius, shape.length, self.padding, 0.0))
+                                                 shape.kind, shape.size, shape.radius, shape.length, self.padding, 0.0,
+                                                 mesh=shape.mesh))
         self._rebuild()
 
     # ------------------------------------------------------------------ configuration
-    def _moving(self, name, link, origin, kind, size, radius, length, grow_scene, grow_self, attached=False) -> _Moving:
-        half = _half_extents(kind, size, radius, length, grow_scene)
+    def _moving(self, name, link, origin, kind, size, radius, length, grow_scene, grow_self, attached=False,
+                mesh=None) -> _Moving:
+        half = _half_extents(kind, size, radius, length, grow_scene, mesh)
+        radius_bound = float(np.linalg.norm(half))
+        if mesh is not None:  # the farthest vertex bounds the mesh more tightly than the box corner
+            radius_bound = float(np.max(np.linalg.norm(mesh.grown_vertices(max(grow_scene, 0.0)), axis=1)))
         return _Moving(name, link, origin[:3, :3].copy(), origin[:3, 3].copy(), half,
-                       _half_extents(kind, size, radius, length, grow_self),
-                       float(np.linalg.norm(half)),
-                       fcl.CollisionObject(_geometry(kind, size, radius, length, grow_scene)),
-                       fcl.CollisionObject(_geometry(kind, size, radius, length, grow_self)), attached)
+                       _half_extents(kind, size, radius, length, grow_self, mesh),
+                       radius_bound,
+                       fcl.CollisionObject(_geometry(kind, size, radius, length, grow_scene, mesh)),
+                       fcl.CollisionObject(_geometry(kind, size, radius, length, grow_self, mesh)), attached)
 
     def set_gripper(self, value: float) -> None:
         """Gripper joint value (rad) used for the jaw pose in every later check."""

@@ -343,6 +343,10 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         e = _fattr(lim, "effort", 0.0, f"{urdf}: joint '{n}' limit")
         urdf_eff.append(e if e > 0 else np.inf)  # URDF effort 0 means unset
     by_name = {j.name: j for j in ordered}
+    from roarmctl.robot.meshes import mesh_modes, package_map
+
+    meshes = {"urdf": urdf, "packages": package_map(side.get("packages"), sidecar, str(sidecar)),
+              "modes": mesh_modes(side.get("mesh_collision"), list(links), str(sidecar))}
     inertials, shapes = {}, []
     for lname, l in links.items():
         inn = l.find("inertial")
@@ -356,7 +360,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
             r = o[:3, :3]
             inertials[lname] = Inertial(_fattr(inn.find("mass"), "value", 0.0, f"{urdf}: link '{lname}' mass"), o[:3, 3], r @ tensor @ r.T)
         for k, c in enumerate(l.findall("collision")):
-            shapes.extend(_urdf_shape(lname, c, f"{urdf}: link '{lname}' collision[{k}]", k))
+            shapes.extend(_urdf_shape(lname, c, f"{urdf}: link '{lname}' collision[{k}]", k, meshes))
     tcp = side.get("tcp_link", ordered[-1].child)
     if tcp not in links:
         raise DescriptionError(f"{sidecar}: tcp_link: '{tcp}' is not a link of {urdf.name}")
@@ -376,22 +380,52 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     )
 
 
-def _urdf_shape(link: str, c: ET.Element, where: str, k: int) -> list[CollisionShape]:
+def _urdf_shape(link: str, c: ET.Element, where: str, k: int, meshes: dict) -> list[CollisionShape]:
+    """One ``<collision>`` element -> shapes. ``meshes``: {"urdf", "packages", "modes"} for mesh files."""
     origin = _origin(c.find("origin"), where)
     geom = c.find("geometry")
     name = c.get("name", f"{link}_{k}")
     if geom is None or len(geom) == 0:
         raise DescriptionError(f"{where}: missing <geometry>")
+    if len(geom) > 1:
+        raise DescriptionError(f"{where}: <geometry> holds {len(geom)} shapes; URDF allows one per <collision>")
     g = geom[0]
+
+    def req(key: str) -> float:
+        if g.get(key) is None:
+            raise DescriptionError(f"{where} {g.tag}: missing attribute '{key}'")
+        v = _fattr(g, key, 0.0, f"{where} {g.tag}")
+        if not v > 0 or not math.isfinite(v):
+            raise DescriptionError(f"{where} {g.tag} {key}: must be a positive number, got '{g.get(key)}'")
+        return v
+
     if g.tag == "box":
-        return [CollisionShape(link, "box", origin, size=tuple(_floats(g.get("size"), 3, f"{where} box size")), name=name)]
+        size = _floats(g.get("size"), 3, f"{where} box size") if g.get("size") is not None else None
+        if size is None or not np.all(size > 0):
+            raise DescriptionError(f"{where} box size: expected 3 positive numbers, got {g.get('size')!r}")
+        return [CollisionShape(link, "box", origin, size=tuple(size), name=name)]
     if g.tag == "cylinder":
-        return [CollisionShape(link, "cylinder", origin, radius=float(g.get("radius")), length=float(g.get("length")), name=name)]
+        return [CollisionShape(link, "cylinder", origin, radius=req("radius"), length=req("length"), name=name)]
     if g.tag == "sphere":
-        return [CollisionShape(link, "sphere", origin, radius=float(g.get("radius")), name=name)]
+        return [CollisionShape(link, "sphere", origin, radius=req("radius"), name=name)]
     if g.tag == "capsule":  # not URDF 1.0, but common (Gazebo/SDF extension)
-        return [CollisionShape(link, "capsule", origin, radius=float(g.get("radius")), length=float(g.get("length")), name=name)]
-    return []  # meshes are not used for collision checking: describe links with primitives
+        return [CollisionShape(link, "capsule", origin, radius=req("radius"), length=req("length"), name=name)]
+    if g.tag == "mesh":
+        from roarmctl.robot.meshes import load_mesh, resolve
+
+        if not g.get("filename"):
+            raise DescriptionError(f"{where} mesh: missing attribute 'filename'")
+        scale = np.ones(3)
+        if g.get("scale") is not None:
+            scale = _floats(g.get("scale"), 3, f"{where} mesh scale")
+            if not np.all(scale > 0):
+                raise DescriptionError(f"{where} mesh scale: expected 3 positive numbers, got '{g.get('scale')}'")
+        path = resolve(g.get("filename"), meshes["urdf"], meshes["packages"], where)
+        mesh, centre = load_mesh(path, scale, meshes["modes"].get(link, "convex") == "exact", where)
+        placed = origin.copy()
+        placed[:3, 3] = origin[:3, 3] + origin[:3, :3] @ centre
+        return [CollisionShape(link, "mesh", placed, name=name, mesh=mesh)]
+    raise DescriptionError(f"{where}: geometry <{g.tag}> is not supported (box, cylinder, sphere, capsule, mesh)")
 
 
 # --------------------------------------------------------------------------- DH

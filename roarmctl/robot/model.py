@@ -12,7 +12,7 @@ from typing import Literal
 import numpy as np
 
 JointKind = Literal["revolute", "prismatic", "fixed"]
-ShapeKind = Literal["box", "cylinder", "sphere", "capsule"]
+ShapeKind = Literal["box", "cylinder", "sphere", "capsule", "mesh"]
 
 
 def transform(xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -74,7 +74,8 @@ class CollisionShape:
     """A primitive attached to a link. ``origin`` places the shape in the link frame.
 
     Sizes (m): box ``size`` = (x, y, z); cylinder and capsule ``radius``, ``length`` along the
-    shape's local z (capsule length excludes the end caps); sphere ``radius``.
+    shape's local z (capsule length excludes the end caps); sphere ``radius``; mesh: ``mesh``
+    (``roarmctl.robot.meshes.MeshGeometry``, centred on ``origin``).
     """
 
     link: str
@@ -84,6 +85,7 @@ class CollisionShape:
     radius: float = 0.0
     length: float = 0.0
     name: str = ""
+    mesh: object | None = None
 
 
 @dataclass(frozen=True)

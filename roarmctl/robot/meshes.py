@@ -1,0 +1,168 @@
+"""Collision meshes of a description: resolve the file name, load it with trimesh, keep the convex
+hull (default, conservative) or the triangles themselves (``exact``).
+
+File names: relative to the URDF's folder, absolute, ``file://...``, or ``package://NAME/rest``
+resolved through the sidecar's ``packages: {NAME: folder}`` map (folders relative to the sidecar)
+or the command line's ``--package-path NAME=FOLDER`` (``PACKAGE_PATHS``; the sidecar wins).
+Formats: whatever trimesh reads as one triangle mesh, STL, OBJ, DAE (COLLADA, through pycollada)
+among them; a scene with several meshes is concatenated in its own frame. ``scale`` multiplies the
+vertices before anything else, as in URDF.
+
+Load time: an STL of a few thousand triangles loads and gets its hull in about 2 ms, so nothing is
+cached on disk; a mesh used by several links is read once per process (keyed by path, file
+modification time and scale).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from roarmctl.errors import DescriptionError
+
+#: NAME -> folder for ``package://NAME/...``, filled by the CLI's ``--package-path`` option.
+PACKAGE_PATHS: dict[str, Path] = {}
+
+MESH_MODES = ("convex", "exact")
+
+
+@dataclass(frozen=True)
+class MeshGeometry:
+    """Triangles (m) in the collision element's frame, centred: the vertices' bounding box is
+    symmetric about the origin (the loader moves the shape's origin by the offset).
+
+    ``vertices`` (V, 3) float, ``faces`` (F, 3) int. ``exact``: FCL checks the triangles (a BVH
+    model) instead of their convex hull. ``source``: the resolved file, for messages.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    exact: bool
+    source: str
+
+    @property
+    def half_extents(self) -> np.ndarray:
+        return np.max(np.abs(self.vertices), axis=0)
+
+    def grown_vertices(self, grow: float) -> np.ndarray:
+        """Vertices (V, 3) moved outwards by ``grow`` (m) along their normals, far enough that each
+        vertex leaves every face it belongs to by at least ``grow``."""
+        if grow == 0:
+            return self.vertices
+        v, f = self.vertices, self.faces
+        fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        area = np.linalg.norm(fn, axis=1)
+        keep = area > 1e-15
+        f, fn = f[keep], fn[keep] / area[keep, None]
+        vn = np.zeros_like(v)
+        for k in range(3):
+            np.add.at(vn, f[:, k], fn)
+        norm = np.linalg.norm(vn, axis=1)
+        vn = np.where(norm[:, None] > 1e-12, vn / np.maximum(norm, 1e-12)[:, None], 0.0)
+        worst = np.ones(len(v))
+        for k in range(3):  # the smallest cosine between a vertex normal and its faces' normals
+            np.minimum.at(worst, f[:, k], np.einsum("ij,ij->i", vn[f[:, k]], fn))
+        return v + vn * (grow / np.clip(worst, 0.2, 1.0))[:, None]
+
+
+_LOADED: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def resolve(filename: str, urdf: Path, packages: dict[str, Path], where: str) -> Path:
+    """The file a URDF ``<mesh filename=...>`` names."""
+    if filename.startswith("package://"):
+        rest = filename[len("package://"):]
+        name, _, sub = rest.partition("/")
+        folder = packages.get(name) or PACKAGE_PATHS.get(name)
+        if folder is None:
+            raise DescriptionError(
+                f"{where} mesh filename: package '{name}' of '{filename}' is unknown",
+                f"map it in the sidecar (packages: {{{name}: path/to/{name}}}) or give --package-path {name}=DIR")
+        return (Path(folder) / sub).resolve()
+    if filename.startswith("file://"):
+        return Path(filename[len("file://"):])
+    if "://" in filename:
+        raise DescriptionError(f"{where} mesh filename: '{filename}': only relative paths, file:// and package:// are supported")
+    p = Path(filename).expanduser()
+    return p if p.is_absolute() else (urdf.parent / p).resolve()
+
+
+def load_mesh(path: Path, scale: np.ndarray, exact: bool, where: str) -> tuple[MeshGeometry, np.ndarray]:
+    """Read ``path``, scale it, and return (centred geometry, centre (3,) in the element's frame)."""
+    import trimesh
+
+    if not path.is_file():
+        raise DescriptionError(f"{where} mesh filename: file '{path}' not found",
+                               "check the path (relative to the URDF) or the package folder")
+    key = (str(path.resolve()), path.stat().st_mtime_ns, tuple(scale))
+    if key not in _LOADED:
+        try:
+            loaded = trimesh.load(str(path), force="mesh", process=True)
+        except Exception as exc:  # trimesh raises many kinds for unreadable files
+            raise DescriptionError(f"{where} mesh filename: cannot read '{path}' as a mesh ({type(exc).__name__}: {exc})",
+                                   "use an STL, OBJ or DAE file") from None
+        if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+            raise DescriptionError(f"{where} mesh filename: '{path}' contains no triangles")
+        vertices = np.asarray(loaded.vertices, dtype=float) * scale
+        if not np.all(np.isfinite(vertices)):
+            raise DescriptionError(f"{where} mesh filename: '{path}' has non-finite vertex coordinates")
+        _LOADED[key] = (vertices, np.asarray(loaded.faces, dtype=np.int64))
+    vertices, faces = _LOADED[key]
+    if not exact:
+        vertices, faces = convex_hull(vertices, f"{where} mesh '{path}'")
+    centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+    return MeshGeometry(vertices - centre, faces, exact, str(path)), centre
+
+
+def convex_hull(vertices: np.ndarray, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """Convex hull (vertices (H, 3), outward-wound faces (K, 3)) of a point set, by qhull."""
+    import trimesh
+
+    try:
+        hull = trimesh.convex.convex_hull(trimesh.Trimesh(vertices=vertices, process=False))
+    except Exception as exc:
+        raise DescriptionError(f"{where}: no convex hull (flat or degenerate mesh?): {exc}") from None
+    return np.asarray(hull.vertices, dtype=float), np.asarray(hull.faces, dtype=np.int64)
+
+
+def mesh_modes(value, links: list[str], where: str) -> dict[str, str]:
+    """The sidecar's ``mesh_collision``: one mode for every link, or ``{link: mode}`` (with an
+    optional ``default``). Returns link -> mode for every link."""
+    if value is None:
+        return {l: "convex" for l in links}
+    if isinstance(value, str):
+        if value not in MESH_MODES:
+            raise DescriptionError(f"{where}: mesh_collision: '{value}' is not one of {', '.join(MESH_MODES)}")
+        return {l: value for l in links}
+    if not isinstance(value, dict):
+        raise DescriptionError(f"{where}: mesh_collision: expected 'convex', 'exact' or a mapping link -> mode")
+    default = value.get("default", "convex")
+    out = {}
+    for k, v in value.items():
+        if k != "default" and k not in links:
+            raise DescriptionError(f"{where}: mesh_collision: '{k}' is not a link")
+        if v not in MESH_MODES:
+            raise DescriptionError(f"{where}: mesh_collision.{k}: '{v}' is not one of {', '.join(MESH_MODES)}")
+    if default not in MESH_MODES:
+        raise DescriptionError(f"{where}: mesh_collision.default: '{default}' is not one of {', '.join(MESH_MODES)}")
+    for l in links:
+        out[l] = value.get(l, default)
+    return out
+
+
+def package_map(value, sidecar: Path, where: str) -> dict[str, Path]:
+    """The sidecar's ``packages: {NAME: folder}``, folders relative to the sidecar."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict) or not all(isinstance(v, str) for v in value.values()):
+        raise DescriptionError(f"{where}: packages: expected a mapping NAME -> folder")
+    out = {}
+    for name, folder in value.items():
+        p = (sidecar.parent / Path(folder).expanduser()).resolve()
+        if not p.is_dir():
+            raise DescriptionError(f"{where}: packages.{name}: folder '{folder}' not found (resolved to {p})",
+                                   "the path is relative to the sidecar YAML")
+        out[str(name)] = p
+    return out
