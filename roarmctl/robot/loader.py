@@ -50,7 +50,7 @@ def load_robot(spec: str) -> Robot:
                 f"bundled robots: {', '.join(bundled_robots())}; or give a path to a .yaml or .urdf file",
             )
     data: dict = {}
-    if path.suffix.lower() == ".urdf":
+    if path.suffix.lower() in (".urdf", ".xacro"):
         robot = _from_urdf(path, {}, path)
     else:
         data = _read_yaml(path)
@@ -289,11 +289,57 @@ def _origin(elem: ET.Element | None, where: str) -> np.ndarray:
     return transform(_floats(elem.get("xyz"), 3, f"{where} origin xyz"), _floats(elem.get("rpy"), 3, f"{where} origin rpy"))
 
 
-def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
+def _read_urdf(urdf: Path, side: dict, sidecar: Path) -> ET.Element:
+    """The URDF's XML root; a ``.xacro`` file is expanded first (``xacro_args`` in the sidecar)."""
+    if urdf.suffix.lower() == ".xacro":
+        from roarmctl.robot.xacro_input import expand
+
+        text = expand(urdf, side.get("xacro_args"), str(sidecar))
+        try:
+            return ET.fromstring(text)
+        except ET.ParseError as exc:
+            raise DescriptionError(f"{urdf}: xacro output is not valid XML ({exc})") from None
     try:
-        root = ET.parse(urdf).getroot()
+        return ET.parse(urdf).getroot()
     except ET.ParseError as exc:
         raise DescriptionError(f"{urdf}: not valid XML ({exc})") from None
+
+
+def _moveit(side: dict, sidecar: Path, joints_xml: list, links: dict, actuated: list[str]) -> tuple[dict, dict]:
+    """Merge the SRDF's fields into a copy of the sidecar (the sidecar wins); read joint_limits.yaml."""
+    from roarmctl.robot.srdf import read_joint_limits, read_srdf
+
+    side = dict(side)
+    jl: dict = {}
+    if side.get("joint_limits") is not None:
+        jl = read_joint_limits((sidecar.parent / str(side["joint_limits"])).resolve(), set(actuated), str(sidecar))
+    if side.get("srdf") is None:
+        return side, jl
+    jinfo = {j.get("name"): (j.get("type"), j.find("child").get("link")) for j in joints_xml}
+    got = read_srdf((sidecar.parent / str(side["srdf"])).resolve(), jinfo, set(links), side, str(sidecar))
+    side["allowed_collisions"] = list(got["allowed_collisions"]) + list(side.get("allowed_collisions") or [])
+    if "tcp_link" in got:
+        side.setdefault("tcp_link", got["tcp_link"])
+    if "gripper" in got:
+        side.setdefault("gripper", got["gripper"])
+    if "joints" not in side and got.get("gripper_joint") in actuated:  # gripper last
+        side["joints"] = [j for j in actuated if j != got["gripper_joint"]] + [got["gripper_joint"]]
+    names = list(side.get("joints", actuated))
+    grip = (side.get("gripper") or {}).get("joint") if isinstance(side.get("gripper"), dict) else None
+    arm = [n for n in names if n != grip]
+    poses = dict(side.get("named_poses") or {})
+    for pname, values in got["named_poses_by_joint"].items():
+        missing = [n for n in arm if n not in values]
+        if missing:
+            raise DescriptionError(f"{side['srdf']}: group_state '{pname}': no value for {', '.join(missing)}",
+                                   "give every arm joint a value, or define the pose in the sidecar's named_poses")
+        poses.setdefault(pname, [values[n] for n in arm])
+    side["named_poses"] = poses
+    return side, jl
+
+
+def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
+    root = _read_urdf(urdf, side, sidecar)
     checks.check_urdf(root, str(urdf))  # a tree with finite numbers before it is walked
     links = {l.get("name"): l for l in root.findall("link")}
     joints_xml = root.findall("joint")
@@ -331,6 +377,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
                                  axis / (np.linalg.norm(axis) or 1.0), lower=lower, upper=upper))
             stack.append(j.find("child").get("link"))
     actuated = [j.name for j in ordered if j.kind != "fixed"]
+    side, jl = _moveit(side, sidecar, joints_xml, links, actuated)
     names = list(side.get("joints", actuated))
     for n in names:
         if n not in actuated:
@@ -339,7 +386,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     for n in names:
         lim = next(j for j in joints_xml if j.get("name") == n).find("limit")
         v = _fattr(lim, "velocity", 0.0, f"{urdf}: joint '{n}' limit")
-        urdf_vel.append(v if v > 0 else DEFAULT_VELOCITY)
+        urdf_vel.append(jl.get(n, {}).get("velocity", v if v > 0 else DEFAULT_VELOCITY))
         e = _fattr(lim, "effort", 0.0, f"{urdf}: joint '{n}' limit")
         urdf_eff.append(e if e > 0 else np.inf)  # URDF effort 0 means unset
     by_name = {j.name: j for j in ordered}
@@ -364,7 +411,8 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     tcp = side.get("tcp_link", ordered[-1].child)
     if tcp not in links:
         raise DescriptionError(f"{sidecar}: tcp_link: '{tcp}' is not a link of {urdf.name}")
-    common = _common(side, sidecar, names, np.array(urdf_vel), np.full(len(names), DEFAULT_ACCELERATION), np.array(urdf_eff))
+    acc = np.array([jl.get(n, {}).get("acceleration", DEFAULT_ACCELERATION) for n in names])
+    common = _common(side, sidecar, names, np.array(urdf_vel), acc, np.array(urdf_eff))
     return Robot(
         name=str(side.get("name", root.get("name", urdf.stem))),
         source=str(side.get("source", urdf.name)),
@@ -372,8 +420,8 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         joints=ordered,
         joint_names=names,
         tcp_link=tcp,
-        lower=np.array([by_name[n].lower for n in names]),
-        upper=np.array([by_name[n].upper for n in names]),
+        lower=np.array([jl.get(n, {}).get("lower", by_name[n].lower) for n in names]),
+        upper=np.array([jl.get(n, {}).get("upper", by_name[n].upper) for n in names]),
         inertials=inertials,
         collision=shapes,
         **common,

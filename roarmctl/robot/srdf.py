@@ -1,0 +1,200 @@
+"""MoveIt's SRDF and joint_limits.yaml, turned into sidecar fields.
+
+SRDF (``srdf: file.srdf`` in the sidecar):
+- ``disable_collisions`` -> ``allowed_collisions`` pairs;
+- the arm group (``arm_group``, else the group with a ``chain``) -> ``tcp_link`` (the chain's tip)
+  and its ``group_state``s -> ``named_poses`` (every arm joint must have a value);
+- the gripper group (``end_effector``'s group, else ``gripper_group``, else a group named
+  ``gripper``) -> ``gripper.joint`` (its one movable joint), and its ``group_state``s named
+  ``open`` and ``close``/``closed`` -> ``gripper.open`` / ``gripper.closed``;
+- ``virtual_joint`` of type fixed is accepted (the URDF root is fixed to the world). Anything else
+  (passive joints, other virtual joints, unknown elements) is an error: nothing is dropped silently.
+
+joint_limits.yaml (``joint_limits: file.yaml``): per joint ``has_velocity_limits`` /
+``max_velocity``, ``has_acceleration_limits`` / ``max_acceleration``, ``has_position_limits`` /
+``min_position`` / ``max_position``; a limit whose ``has_*`` is false is not used (the URDF's or the
+sidecar's applies). ``default_velocity_scaling_factor`` / ``default_acceleration_scaling_factor``
+are MoveIt's per-request defaults: read and checked, not limits (the plan file's
+``velocity_scale`` plays that role). Jerk limits are refused when switched on.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from roarmctl.errors import DescriptionError
+
+_KNOWN = {"group", "group_state", "disable_collisions", "end_effector", "virtual_joint", "disable_default_collisions"}
+
+
+def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, where: str) -> dict[str, Any]:
+    """Sidecar fields from an SRDF. ``joints``: URDF joint name -> (type), ``links``: URDF link names."""
+    if not path.is_file():
+        raise DescriptionError(f"{where}: srdf: file '{path}' not found", "the path is relative to the sidecar YAML")
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise DescriptionError(f"{path}: not valid XML ({exc})") from None
+    src = str(path)
+    groups: dict[str, ET.Element] = {}
+    for el in root:
+        if not isinstance(el.tag, str):
+            continue
+        if el.tag not in _KNOWN:
+            raise DescriptionError(f"{src}: <{el.tag}> is not supported (roarmctl reads {', '.join(sorted(_KNOWN))})")
+        if el.tag == "group":
+            groups[el.get("name", "")] = el
+        if el.tag == "virtual_joint" and el.get("type") != "fixed":
+            raise DescriptionError(f"{src}: virtual_joint '{el.get('name')}': type '{el.get('type')}' is not supported "
+                                   f"(only a fixed mounting)")
+        if el.tag == "disable_default_collisions":
+            raise DescriptionError(f"{src}: disable_default_collisions is not supported; list the pairs instead")
+
+    def check_link(name: str | None, what: str) -> str:
+        if name not in links:
+            raise DescriptionError(f"{src}: {what}: '{name}' is not a link of the URDF")
+        return name
+
+    out: dict[str, Any] = {}
+    pairs = []
+    for el in root.iter("disable_collisions"):
+        pairs.append([check_link(el.get("link1"), "disable_collisions link1"),
+                      check_link(el.get("link2"), "disable_collisions link2")])
+    out["allowed_collisions"] = pairs
+
+    def group_joints(name: str, seen=()) -> list[str]:
+        g = groups.get(name)
+        if g is None:
+            raise DescriptionError(f"{src}: group '{name}' is not defined")
+        js: list[str] = []
+        for el in g:
+            if el.tag == "joint":
+                if el.get("name") not in joints:
+                    raise DescriptionError(f"{src}: group '{name}' joint: '{el.get('name')}' is not a joint of the URDF")
+                js.append(el.get("name"))
+            elif el.tag == "link":
+                ln = check_link(el.get("name"), f"group '{name}' link")
+                js.extend(j for j, (_, child) in joints.items() if child == ln)
+            elif el.tag == "chain":
+                check_link(el.get("base_link"), f"group '{name}' chain base_link")
+                check_link(el.get("tip_link"), f"group '{name}' chain tip_link")
+            elif el.tag == "group":
+                if el.get("name") in seen:
+                    raise DescriptionError(f"{src}: group '{name}' includes itself")
+                js.extend(group_joints(el.get("name"), seen + (name,)))
+            elif isinstance(el.tag, str):
+                raise DescriptionError(f"{src}: group '{name}': <{el.tag}> is not supported (joint, link, chain, group)")
+        return js
+
+    ee = next(iter(root.iter("end_effector")), None)
+    grip_group = side.get("gripper_group") or (ee.get("group") if ee is not None else None) or \
+        ("gripper" if "gripper" in groups else None)
+    arm_group = side.get("arm_group") or next((n for n, g in groups.items() if g.find("chain") is not None
+                                               and n != grip_group), None)
+    for key, value in (("gripper_group", side.get("gripper_group")), ("arm_group", side.get("arm_group"))):
+        if value is not None and value not in groups:
+            raise DescriptionError(f"{where}: {key}: '{value}' is not a group of {path.name} (groups: {', '.join(groups)})")
+    if arm_group is not None:
+        chain = groups[arm_group].find("chain")
+        if chain is not None:
+            out["tcp_link"] = chain.get("tip_link")
+    gripper_joint = None
+    if grip_group is not None:
+        movable = [j for j in dict.fromkeys(group_joints(grip_group)) if joints[j][0] != "fixed"]
+        if len(movable) != 1:
+            raise DescriptionError(f"{src}: gripper group '{grip_group}' has {len(movable)} movable joints "
+                                   f"({', '.join(movable) or 'none'}); roarmctl drives one gripper joint")
+        gripper_joint = movable[0]
+        out["gripper_joint"] = gripper_joint
+    poses: dict[str, dict[str, float]] = {}
+    grip_states: dict[str, float] = {}
+    for gs in root.iter("group_state"):
+        name, group = gs.get("name"), gs.get("group")
+        values = {}
+        for j in gs.findall("joint"):
+            if j.get("name") not in joints:
+                raise DescriptionError(f"{src}: group_state '{name}' joint: '{j.get('name')}' is not a joint of the URDF")
+            try:
+                values[j.get("name")] = float(j.get("value"))
+            except (TypeError, ValueError):
+                raise DescriptionError(f"{src}: group_state '{name}' joint '{j.get('name')}' value: not a number: "
+                                       f"{j.get('value')!r}") from None
+        if group == grip_group and gripper_joint is not None:
+            grip_states[name] = values.get(gripper_joint, math.nan)
+        elif group == arm_group:
+            poses[name] = values
+        else:
+            raise DescriptionError(f"{src}: group_state '{name}' is for group '{group}', which is neither the arm "
+                                   f"group ('{arm_group}') nor the gripper group ('{grip_group}')",
+                                   "name the groups with arm_group / gripper_group in the sidecar")
+    out["named_poses_by_joint"] = poses
+    if gripper_joint is not None:
+        opened = grip_states.get("open")
+        closed = grip_states.get("close", grip_states.get("closed"))
+        if opened is not None and closed is not None and math.isfinite(opened) and math.isfinite(closed):
+            out["gripper"] = {"joint": gripper_joint, "open": opened, "closed": closed}
+    return out
+
+
+_JL_KEYS = {"has_velocity_limits", "max_velocity", "has_acceleration_limits", "max_acceleration",
+            "has_position_limits", "min_position", "max_position", "has_jerk_limits", "max_jerk",
+            "has_effort_limits", "max_effort", "angle_wraparound"}
+
+
+def read_joint_limits(path: Path, joints: set[str], where: str) -> dict[str, dict[str, float]]:
+    """MoveIt joint_limits.yaml -> {joint: {velocity, acceleration, lower, upper}} (only the limits in force)."""
+    if not path.is_file():
+        raise DescriptionError(f"{where}: joint_limits: file '{path}' not found", "the path is relative to the sidecar YAML")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise DescriptionError(f"{path}: not valid YAML ({exc})") from None
+    src = str(path)
+    if not isinstance(data, dict):
+        raise DescriptionError(f"{src}: expected a mapping at the top level")
+    for key in ("default_velocity_scaling_factor", "default_acceleration_scaling_factor"):
+        v = data.get(key, 1.0)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v <= 1:
+            raise DescriptionError(f"{src}: {key}: expected a number in (0, 1], got {v!r}")
+    unknown = set(data) - {"joint_limits", "default_velocity_scaling_factor", "default_acceleration_scaling_factor"}
+    if unknown:
+        raise DescriptionError(f"{src}: unknown key(s) {sorted(unknown)}")
+    out: dict[str, dict[str, float]] = {}
+    for jname, spec in (data.get("joint_limits") or {}).items():
+        loc = f"{src}: joint_limits.{jname}"
+        if jname not in joints:
+            raise DescriptionError(f"{loc}: not a joint of the URDF")
+        if not isinstance(spec, dict):
+            raise DescriptionError(f"{loc}: expected a mapping")
+        bad = set(spec) - _JL_KEYS
+        if bad:
+            raise DescriptionError(f"{loc}: unknown key(s) {sorted(bad)}")
+
+        def num(key: str) -> float:
+            v = spec.get(key)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise DescriptionError(f"{loc}.{key}: expected a number, got {v!r}")
+            return float(v)
+
+        got: dict[str, float] = {}
+        for flag, key, name in (("has_velocity_limits", "max_velocity", "velocity"),
+                                ("has_acceleration_limits", "max_acceleration", "acceleration")):
+            if spec.get(flag) is True:
+                v = num(key)
+                if v <= 0:
+                    raise DescriptionError(f"{loc}.{key}: must be positive when {flag} is true")
+                got[name] = v
+        if spec.get("has_position_limits") is True:
+            got["lower"], got["upper"] = num("min_position"), num("max_position")
+            if got["lower"] >= got["upper"]:
+                raise DescriptionError(f"{loc}: min_position must be below max_position")
+        if spec.get("has_jerk_limits") is True:
+            raise DescriptionError(f"{loc}.has_jerk_limits: jerk limits are not supported by roarmctl's timing",
+                                   "set has_jerk_limits: false")
+        out[jname] = got
+    return out
