@@ -29,7 +29,7 @@ def cartesian_line(
     ``q_start`` is a full configuration; the gripper value is kept. The first waypoint is
     ``q_start`` itself; the tool pitch (and roll, when given) is held along the line.
     """
-    from roarmctl.robot.ik import solve_ik
+    from roarmctl.robot.ik import solve_ik, takes_pitch
 
     q_start = robot.full_q(q_start)
     p0 = robot.kin.fk(q_start)[:3, 3]
@@ -37,10 +37,12 @@ def cartesian_line(
     n = max(int(np.ceil(np.linalg.norm(p_goal - p0) / step)), 1)
     out = [q_start]
     prev = q_start
+    held = takes_pitch(robot)  # position-only IK: the pitch follows from the geometry, nothing to hold
     for k in range(1, n + 1):
         p = p0 + (p_goal - p0) * (k / n)
         try:
-            sols = solve_ik(robot, p, pitch=pitch, roll=roll, q_ref=prev, all_solutions=True)
+            sols = solve_ik(robot, p, pitch=pitch if held else None, roll=roll if held else None,
+                            q_ref=prev, all_solutions=True)
         except UnreachableError as exc:
             raise PlanningError(f"{label}: the straight line leaves the reachable space at "
                                 f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m: {exc.message}") from None

@@ -353,10 +353,12 @@ class Planner:
 
         Returns one full configuration per target (gripper value of ``q`` unless ``gripper``).
         """
-        from roarmctl.robot.ik import solve_ik
+        from roarmctl.robot.ik import solve_ik, takes_pitch
 
         t0 = time.perf_counter()
         g = q[self.gi] if gripper is None and self.gi is not None else gripper
+        if not takes_pitch(self.robot):  # position-only IK: the tool pitch follows from the geometry
+            targets = [(p, None, None) for p, _, _ in targets]
         first, pitch, roll = targets[0]
         try:
             candidates = solve_ik(self.robot, first, pitch=pitch, roll=roll, q_ref=q, all_solutions=True)

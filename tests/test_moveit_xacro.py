@@ -1,0 +1,103 @@
+"""xacro, SRDF and joint_limits.yaml input (issue 8, item 2): what they set, and bad input as exit 2."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from roarmctl.errors import DescriptionError
+from roarmctl.robot.loader import bundled_dir, load_robot
+
+SRDF = """<robot name="arm">
+  <group name="arm"><chain base_link="base_link" tip_link="hand_tcp"/></group>
+  <group name="gripper"><link name="gripper_link"/></group>
+  <group_state name="tucked" group="arm">
+    <joint name="base_link_to_link1" value="0.1"/><joint name="link1_to_link2" value="0"/>
+    <joint name="link2_to_link3" value="2.0"/><joint name="link3_to_link4" value="0"/><joint name="link4_to_link5" value="0"/>
+  </group_state>
+  <group_state name="open" group="gripper"><joint name="link5_to_gripper_link" value="1.2"/></group_state>
+  <group_state name="close" group="gripper"><joint name="link5_to_gripper_link" value="0.1"/></group_state>
+  <disable_collisions link1="link1" link2="link4" reason="Never"/>
+  %s
+</robot>"""
+
+LIMITS = {"default_velocity_scaling_factor": 0.5, "joint_limits": {
+    "base_link_to_link1": {"has_velocity_limits": True, "max_velocity": 0.7, "has_acceleration_limits": True, "max_acceleration": 1.1},
+    "link1_to_link2": {"has_velocity_limits": False, "max_velocity": 0, "has_position_limits": True, "min_position": -1.0, "max_position": 1.0}}}
+
+
+def setup(tmp_path: Path, srdf_extra: str = "", limits=None, side_extra=None) -> Path:
+    (tmp_path / "arm.srdf").write_text(SRDF % srdf_extra)
+    (tmp_path / "joint_limits.yaml").write_text(yaml.safe_dump(limits if limits is not None else LIMITS))
+    side = {"format": "roarmctl.robot/1", "urdf": str(bundled_dir() / "roarm_m3_pro.urdf"), "srdf": "arm.srdf",
+            "joint_limits": "joint_limits.yaml", "ik": "roarm5"}
+    side.update(side_extra or {})
+    (tmp_path / "arm.yaml").write_text(yaml.safe_dump(side))
+    return tmp_path / "arm.yaml"
+
+
+def test_srdf_and_joint_limits_fill_the_description(tmp_path):
+    r = load_robot(str(setup(tmp_path)))
+    assert r.tcp_link == "hand_tcp"
+    assert (r.gripper.joint, r.gripper.open, r.gripper.closed) == ("link5_to_gripper_link", 1.2, 0.1)
+    assert np.allclose(r.named_poses["tucked"], [0.1, 0, 2.0, 0, 0, 0.1])
+    assert frozenset(("link1", "link4")) in r.allowed_collisions
+    assert r.velocity_limits[0] == 0.7 and r.acceleration_limits[0] == 1.1
+    assert r.velocity_limits[1] == 1.0  # has_velocity_limits false: the URDF's 0 means unset -> default
+    assert (r.lower[1], r.upper[1]) == (-1.0, 1.0)
+
+
+def test_xacro_input_expands_arguments(tmp_path):
+    urdf = (bundled_dir() / "roarm_m3_pro.urdf").read_text()
+    urdf = urdf.replace('<robot name="roarm_m3_pro">', '<robot name="roarm_m3_pro" xmlns:xacro="http://www.ros.org/wiki/xacro">'
+                        '<xacro:arg name="base_height" default="0.0701"/>')
+    urdf = urdf.replace('<origin xyz="0 0 0.0701" rpy="0 0 0"/>', '<origin xyz="0 0 $(arg base_height)" rpy="0 0 0"/>')
+    (tmp_path / "arm.urdf.xacro").write_text(urdf)
+    side = yaml.safe_load((bundled_dir() / "roarm_m3_pro.yaml").read_text())
+    side.update(urdf="arm.urdf.xacro", xacro_args={"base_height": 0.2})
+    (tmp_path / "arm.yaml").write_text(yaml.safe_dump(side))
+    r, m3 = load_robot(str(tmp_path / "arm.yaml")), load_robot("roarm_m3_pro")
+    q = m3.full_q(m3.named_poses["home"])
+    assert np.allclose(r.kin.fk(q)[:3, 3] - m3.kin.fk(q)[:3, 3], [0, 0, 0.2 - 0.0701], atol=1e-12)
+
+
+@pytest.mark.parametrize("srdf_extra, limits, side_extra, needle", [
+    ('<passive_joint name="x"/>', None, None, r"arm.srdf: <passive_joint> is not supported"),
+    ('<disable_collisions link1="link1" link2="nolink"/>', None, None, r"arm.srdf: disable_collisions link2: 'nolink'"),
+    ('<group_state name="bad" group="arm"><joint name="base_link_to_link1" value="x"/></group_state>', None, None,
+     r"group_state 'bad' joint 'base_link_to_link1' value: not a number"),
+    ('<group_state name="part" group="arm"><joint name="base_link_to_link1" value="0"/></group_state>', None, None,
+     r"group_state 'part': no value for link1_to_link2"),
+    ("", {"joint_limits": {"nojoint": {}}}, None, r"joint_limits.yaml: joint_limits.nojoint: not a joint"),
+    ("", {"joint_limits": {"link1_to_link2": {"has_velocity_limits": True, "max_velocity": "fast"}}}, None,
+     r"joint_limits.link1_to_link2.max_velocity: expected a number"),
+    ("", {"joint_limits": {"link1_to_link2": {"max_speed": 1}}}, None, r"joint_limits.link1_to_link2: unknown key"),
+    ("", None, {"srdf": "missing.srdf"}, r"arm.yaml: srdf: file '.*missing.srdf' not found"),
+])
+def test_bad_moveit_input_is_exit_2_naming_file_and_field(tmp_path, srdf_extra, limits, side_extra, needle):
+    side = setup(tmp_path, srdf_extra, limits, side_extra)
+    with pytest.raises(DescriptionError, match=needle):
+        load_robot(str(side))
+    proc = subprocess.run([sys.executable, "-m", "roarmctl", "kin", "fk", str(side), "0", "0", "0", "0", "0"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+
+
+@pytest.mark.parametrize("body, needle", [
+    ('<robot name="r" xmlns:xacro="http://www.ros.org/wiki/xacro"><xacro:undefined_macro/></robot>', r"bad.xacro: xacro: "),
+    ('<robot name="r" xmlns:xacro="http://www.ros.org/wiki/xacro"><link name="${1/0}"/></robot>', r"bad.xacro: xacro: "),
+    ('<robot name="r"><link name="a"', r"bad.xacro: xacro: "),
+])
+def test_bad_xacro_is_exit_2_naming_the_file(tmp_path, body, needle):
+    (tmp_path / "bad.xacro").write_text(body)
+    with pytest.raises(DescriptionError, match=needle):
+        load_robot(str(tmp_path / "bad.xacro"))
+    proc = subprocess.run([sys.executable, "-m", "roarmctl", "kin", "fk", str(tmp_path / "bad.xacro"), "0"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert "bad.xacro" in proc.stderr
