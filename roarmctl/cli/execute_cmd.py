@@ -44,7 +44,7 @@ def execute(
 ) -> None:
     """Stream a trajectory to the RoArm (--port), the simulator (--sim), or a file (--output).
 
-    Before moving it checks the arm answers like an M3, that it stands at the trajectory's first
+    Before moving it checks the arm answers like the robot the trajectory is for (M3 or M2), that it stands at the trajectory's first
     point, and asks for confirmation (real arms only) unless --yes. Ctrl-C makes the arm hold where
     it is (torque stays on) and exits 130; a lost link exits 4. Every command and every feedback
     line is written to the execution log.
@@ -106,7 +106,10 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
         from roarmctl.device.simulator import PtySimulator, SimConfig
 
         sys.setswitchinterval(0.0005)  # the simulator thread shares the GIL with the real-time loop
-        simulator = PtySimulator(SimConfig()).start()
+        from roarmctl.device.protocol import WireMap
+
+        # the simulated arm is the kind the trajectory is for (an M2 trajectory gets the M2 protocol)
+        simulator = PtySimulator(SimConfig(firmware="m2" if WireMap(robot).model == "m2" else "m3-0.84")).start()
         port = simulator.path
     err = common.console(stderr=True)
     live = _Display(err, len(robot.joint_names)) if (err.is_terminal and not json_out) else None
@@ -122,7 +125,10 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
         for pid, name in port_holders(port):
             common.warn(f"{port} is also open in process {pid} ({name}); it may swallow the arm's replies "
                         "(stop it, e.g. 'sudo systemctl stop ModemManager')")
+    from roarmctl.device.protocol import WireMap
+
     link = Link(port)
+    link.expect = WireMap(robot).model
     # Built before the port opens (the schedule is pure), so that every way out has a log.
     streamer = Streamer(link, robot, traj, cfg, on_status=live.update if live else None, confirm=confirm,
                         on_start=live.start if live else None)
@@ -186,8 +192,18 @@ def _sim_tracking(simulator, robot, traj, cfg, result) -> dict:
     m = (tt >= 0) & (tt <= traj.duration / cfg.speed_scale)
     out = {"rms_mm": None, "max_mm": None, "samples": int(m.sum()), "torque_always_on": bool(torque.all())}
     if m.any() and not math.isnan(result.t0):
+        from roarmctl.device.protocol import WireMap
+        from roarmctl.device.simulator import JOINTS
+
         plan = sample(traj, tt[m] * cfg.speed_scale)
-        e = np.linalg.norm(robot.kin.fk(q[m])[:, :3, 3] - robot.kin.fk(plan)[:, :3, 3], axis=1) * 1e3
+        wm = WireMap(robot)
+        fw = q[m].copy()
+        fw[:, 5] = math.pi - fw[:, 5]  # the recording's view (hand = pi - q) back to firmware radians
+        cols = [JOINTS.index(f) for f in wm.field_names]
+        q_joint = np.zeros((len(fw), robot.dof))
+        for w, i, c in zip(wm.fields, wm.index, cols):
+            q_joint[:, i] = (fw[:, c] - w.offset) / w.sign
+        e = np.linalg.norm(robot.kin.fk(q_joint)[:, :3, 3] - robot.kin.fk(plan)[:, :3, 3], axis=1) * 1e3
         out |= {"rms_mm": float(np.sqrt(np.mean(e ** 2))), "max_mm": float(e.max())}
     return out
 
@@ -236,7 +252,9 @@ class _Display:
 
 # --------------------------------------------------------------------------- sim-device
 def sim_device(
-    firmware: str = typer.Option("m3-0.84", "--firmware", help="Which firmware to imitate: m3-0.84, m3-2026, m2."),
+    firmware: Optional[str] = typer.Option(None, "--firmware", help="Which firmware to imitate: m3-0.84 (default), m3-2026, m2."),
+    model: Optional[str] = typer.Option(None, "--model", help="Imitate this robot's firmware, from its description's wire map "
+                                        "(e.g. roarm_m2_s -> m2, roarm_m3_pro -> m3-0.84)."),
     info_print: int = typer.Option(2, "--info-print", help="InfoPrint level at start (factory 2 = continuous feedback)."),
     boot: bool = typer.Option(True, "--boot/--no-boot", help="Print the boot banner and do the boot move at start."),
     link: Optional[Path] = typer.Option(None, "--link", help="Also make this symlink to the pseudo-terminal (e.g. /tmp/ttyROARM)."),
@@ -250,6 +268,16 @@ def sim_device(
     from roarmctl.device.simulator import PtySimulator, SimConfig
     from roarmctl.errors import InputError
 
+    if model is not None:
+        from roarmctl.device.protocol import WireMap
+        from roarmctl.robot.loader import load_robot
+
+        kind = WireMap(load_robot(model)).model
+        if firmware is not None and (firmware == "m2") != (kind == "m2"):
+            raise InputError(f"--firmware {firmware} does not match --model {model} (a RoArm-{kind.upper()})",
+                             "give one of them")
+        firmware = firmware or ("m2" if kind == "m2" else "m3-0.84")
+    firmware = firmware or "m3-0.84"
     if firmware not in ("m3-0.84", "m3-2026", "m2"):
         raise InputError(f"--firmware: unknown '{firmware}'", "choose m3-0.84, m3-2026 or m2")
     if info_print not in (0, 1, 2):
@@ -271,7 +299,8 @@ def sim_device(
             common.print_json({"port": path, "pty": simulator.path, "firmware": firmware})
         else:
             print(path)
-            common.console(stderr=True).print(f"simulating RoArm-M3 firmware {firmware} on {simulator.path}; Ctrl-C to stop")
+            arm = "RoArm-M2" if firmware == "m2" else "RoArm-M3"
+            common.console(stderr=True).print(f"simulating {arm} firmware {firmware} on {simulator.path}; Ctrl-C to stop")
         sys.stdout.flush()
         while simulator._thread.is_alive():
             simulator._thread.join(0.5)

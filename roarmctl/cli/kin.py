@@ -87,7 +87,7 @@ def fk(
     """Forward kinematics: position (m), rotation (3x3) and roll-pitch-yaw of the TCP or a link.
 
     With --frame firmware (RoArm) the position is the firmware's own end point in its frame (mm):
-    what T:1051 x/y/z and roarm-sdk's pose_get() report; tcp_position is hand_tcp in that frame.
+    what T:1051 x/y/z and roarm-sdk's pose_get() report; tcp_position is the TCP (the tcp_link) in that frame.
     """
     from roarmctl.errors import InputError
     from roarmctl.robot.frames import device_point, get_frame, to_frame

@@ -51,6 +51,9 @@ class Link:
         self.ser: Any = None
         self.lines = LineBuffer()
         self.firmware: str | None = None
+        #: The protocol model the trajectory is for ("m3" or "m2", ``WireMap.model``); the handshake
+        #: refuses a device that answers like the other one.
+        self.expect = "m3"
         self.boot_text: list[str] = []
         self.received: list[Received] = []  # every line read, in order (the execution log)
         self.sent: list[tuple[float, dict[str, Any]]] = []
@@ -216,9 +219,15 @@ class Link:
 
     def _check_firmware(self, fb: Feedback) -> Feedback:
         self.firmware = fb.firmware
+        if fb.firmware == "m2" and self.expect != "m2":
+            raise DeviceError(f"{self.port} answers like RoArm-M2 firmware (feedback has b s e t, no wrist/roll), "
+                              f"but the trajectory is for a RoArm-M3",
+                              "plan for the M2 (robot: roarm_m2_s) or connect the M3")
+        if fb.firmware.startswith("m3") and self.expect == "m2":
+            raise DeviceError(f"{self.port} answers like RoArm-M3 firmware ({fb.firmware}), but the trajectory is for a "
+                              f"RoArm-M2", "plan for the M3 (robot: roarm_m3_pro) or connect the M2")
         if fb.firmware == "m2":
-            raise DeviceError(f"{self.port} answers like RoArm-M2 firmware (feedback has b s e t, no wrist/roll)",
-                              "this tool drives the RoArm-M3; flash the M3 firmware or check the arm model")
+            return fb
         if not fb.firmware.startswith("m3"):
             raise DeviceError(f"{self.port} sent feedback this tool does not recognise: {fb.raw}",
                               "expected RoArm-M3 firmware 0.84 T:1051 frames")

@@ -1,4 +1,5 @@
-"""The RoArm-M3 JSON-over-serial wire protocol (firmware 0.84): encoding, feedback parsing, units.
+"""The RoArm JSON-over-serial wire protocol (M3 firmware 0.84; the M2's T:102/T:1051 subset):
+encoding, feedback parsing, units.
 
 Host -> arm: one compact JSON object per line ending in ``\\n``. Arm -> host: lines ending in
 ``\\r\\n``; only ``"T":1051`` lines are feedback, everything else (boot text, echoes, warnings) is
@@ -33,6 +34,12 @@ ACC_MAX_REGISTER = 254
 M3_FIELDS = ("base", "shoulder", "elbow", "wrist", "roll", "hand")
 #: The matching T:1051 feedback keys.
 M3_FEEDBACK_KEYS = ("b", "s", "e", "t", "r", "g")
+#: T:102 joint fields of the RoArm-M2 firmware (waveshare_roarm_sdk roarm_sdk/common.py,
+#: handle_m2_joints_radian) and its T:1051 keys, where ``t`` is the gripper (RESEARCH.md 2.6, 2.10).
+M2_FIELDS = ("base", "shoulder", "elbow", "hand")
+M2_FEEDBACK_KEYS = ("b", "s", "e", "t")
+#: Protocol model -> (T:102 fields, T:1051 keys), chosen by the description's wire fields.
+MODELS = {"m3": (M3_FIELDS, M3_FEEDBACK_KEYS), "m2": (M2_FIELDS, M2_FEEDBACK_KEYS)}
 #: Strictly inside the firmware's clamps: base/roll +pi would map to servo step -1 (invalid), so
 #: keep one count inside; the others are the 0.84 firmware's own clamps (``RoArmM3_*JointCtrlRad`` in
 #: RoArm-M3_module.h: shoulder and wrist +-pi/2, elbow 512..3071 steps, hand 700..3396 steps).
@@ -71,17 +78,18 @@ def acc_register(rad_per_s2: float, minimum: int = 1) -> int:
     return int(min(ACC_MAX_REGISTER, max(minimum, math.ceil(abs(rad_per_s2) * STEPS_PER_RAD / ACC_UNIT - 1e-9))))
 
 
-def joints_command(wire: dict[str, float], spd: int, acc: int) -> dict[str, Any]:
-    """``T:102`` with all six joint fields (missing keys would read as 0 on the arm) and explicit spd/acc.
+def joints_command(wire: dict[str, float], spd: int, acc: int, fields: tuple[str, ...] = M3_FIELDS) -> dict[str, Any]:
+    """``T:102`` with every joint field of the model (missing keys would read as 0 on the arm) and
+    explicit spd/acc. ``fields``: ``M3_FIELDS`` (six) or ``M2_FIELDS`` (four).
 
     ``wire`` maps field name -> firmware radians. Values are clamped to ``SAFE_WIRE_RANGE`` and
     rounded to 4 decimals.
     """
-    missing = [f for f in M3_FIELDS if f not in wire]
+    missing = [f for f in fields if f not in wire]
     if missing:
         raise ValueError(f"T:102 needs every joint field; missing {missing}")
     cmd: dict[str, Any] = {"T": 102}
-    for f in M3_FIELDS:
+    for f in fields:
         lo, hi = SAFE_WIRE_RANGE[f]
         v = float(wire[f])
         if not math.isfinite(v):
@@ -112,13 +120,17 @@ class WireMap:
 
         self.robot = robot
         by_field = {w.field: w for w in robot.wire}
-        missing = [f for f in M3_FIELDS if f not in by_field]
-        if missing:
+        self.model = next((m for m, (fields, _) in MODELS.items() if set(by_field) == set(fields)), None)
+        if self.model is None:
+            missing = [f for f in M3_FIELDS if f not in by_field]
             raise DescriptionError(
-                f"robot '{robot.name}' has no RoArm wire mapping for {', '.join(missing)}",
-                "only robots with a 'wire' section for base/shoulder/elbow/wrist/roll/hand can be executed",
+                f"robot '{robot.name}' has no RoArm wire mapping for {', '.join(missing) or 'these fields'}"
+                f" (wire fields: {', '.join(by_field) or 'none'})",
+                "only robots with a 'wire' section for base/shoulder/elbow/wrist/roll/hand (RoArm-M3) or "
+                "base/shoulder/elbow/hand (RoArm-M2) can be executed",
             )
-        self.fields = [by_field[f] for f in M3_FIELDS]
+        self.field_names, self.feedback_keys = MODELS[self.model]
+        self.fields = [by_field[f] for f in self.field_names]
         self.index = [robot.joint_index(w.joint) for w in self.fields]
 
     def to_wire(self, q) -> dict[str, float]:
@@ -126,17 +138,17 @@ class WireMap:
         return {w.field: w.to_wire(float(q[i])) for w, i in zip(self.fields, self.index)}
 
     def to_wire_array(self, q) -> np.ndarray:
-        """(N, dof) joint values -> (N, 6) firmware radians in ``M3_FIELDS`` order, clamped."""
+        """(N, dof) joint values -> (N, fields) firmware radians in ``field_names`` order, clamped."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
-        out = np.empty((q.shape[0], 6))
+        out = np.empty((q.shape[0], len(self.fields)))
         for k, (w, i) in enumerate(zip(self.fields, self.index)):
             out[:, k] = np.clip(w.offset + w.sign * q[:, i], w.lower, w.upper)
         return out
 
     def from_wire(self, values: dict[str, float] | Iterable[float]) -> np.ndarray:
-        """Firmware radians (dict by field, or 6 values in ``M3_FIELDS`` order) -> (dof,) joint vector."""
+        """Firmware radians (dict by field, or values in ``field_names`` order) -> (dof,) joint vector."""
         if isinstance(values, dict):
-            vals = [float(values[f]) for f in M3_FIELDS]
+            vals = [float(values[f]) for f in self.field_names]
         else:
             vals = [float(v) for v in values]
         q = np.zeros(self.robot.dof)
@@ -145,7 +157,11 @@ class WireMap:
         return q
 
     def command(self, q, spd: int, acc: int) -> dict[str, Any]:
-        return joints_command(self.to_wire(q), spd, acc)
+        return joints_command(self.to_wire(q), spd, acc, self.field_names)
+
+    def hold(self, wire: dict[str, float], spd: int, acc: int) -> dict[str, Any]:
+        """``T:102`` for firmware radians ``wire`` (by field) in this model's fields."""
+        return joints_command(wire, spd, acc, self.field_names)
 
 
 # ----------------------------------------------------------------------------- feedback
@@ -206,21 +222,23 @@ def _num(v: Any) -> float | None:
 def parse_feedback(line: bytes | str | dict[str, Any]) -> Feedback | None:
     """A ``"T":1051`` line -> Feedback; None for any other line or a frame with bad numbers.
 
-    For M2 frames the ``joints`` dict is empty (the caller refuses M2 by ``firmware``).
+    For M2 frames ``joints`` holds base, shoulder, elbow and hand (the M2's ``t`` is its gripper).
     """
     obj = line if isinstance(line, dict) else parse_json_line(line)
     if obj is None or obj.get("T") != 1051:
         return None
     fw = identify_firmware(obj)
     joints: dict[str, float] = {}
-    if fw.startswith("m3"):
-        for f, k in zip(M3_FIELDS, M3_FEEDBACK_KEYS):
+    if fw.startswith("m3") or fw == "m2":
+        fields, keys = MODELS["m2" if fw == "m2" else "m3"]
+        for f, k in zip(fields, keys):
             v = _num(obj.get(k))
             if v is None:
                 return None
             joints[f] = v
     xyz = tuple(_num(obj.get(k)) or 0.0 for k in ("x", "y", "z"))
-    extra = {k: v for k, v in obj.items() if k not in set(M3_FEEDBACK_KEYS) | {"T", "x", "y", "z"}}
+    used = set(M2_FEEDBACK_KEYS if fw == "m2" else M3_FEEDBACK_KEYS)
+    extra = {k: v for k, v in obj.items() if k not in used | {"T", "x", "y", "z"}}
     return Feedback(raw=obj, joints=joints, xyz=xyz, firmware=fw, extra=extra)  # type: ignore[arg-type]
 
 

@@ -148,15 +148,18 @@ def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: floa
     # the gripper gets its own T:101 when it needs more speed than the arm: one shared spd would
     # otherwise make every arm joint rush ahead and wait (a staircase) while the gripper moves
     g = [k for k, w in enumerate(wm.fields) if robot.gripper is not None and w.joint == robot.gripper.joint]
-    split = strat.split_gripper and rate * (T102_BYTES + T101_BYTES + 11) <= LINK_BUDGET * protocol.BYTES_PER_SECOND
-    arm = [k for k in range(6) if k not in g]
+    # T:101's gripper joint number is the M3's (6); the M2 gets the shared spd instead
+    split = (strat.split_gripper and wm.model == "m3"
+             and rate * (T102_BYTES + T101_BYTES + 11) <= LINK_BUDGET * protocol.BYTES_PER_SECOND)
+    nf = len(wm.fields)
+    arm = [k for k in range(nf) if k not in g]
     for k in range(n):
         extra: list[dict[str, Any]] = []
         if strat.spd == "max":
             spd = 0
         else:
             span = max(t_to[k] - t_from[k], 0.0) / speed_scale
-            rates = np.abs(w_to[k] - w_from[k]) / span if span > 1e-9 else np.zeros(6)
+            rates = np.abs(w_to[k] - w_from[k]) / span if span > 1e-9 else np.zeros(nf)
             need = float(np.max(rates[arm if split else slice(None)]))
             spd = spd_register(need * strat.margin, minimum=50)
             if split and g and rates[g[0]] * strat.margin > need:
@@ -476,7 +479,7 @@ class Streamer:
             if self.last_cmd is not None and self.robot.gripper is not None:
                 hand = next(w.field for w in self.wm.fields if w.joint == self.robot.gripper.joint)
                 wire[hand] = self.last_cmd[hand]
-            self.link.send(protocol.joints_command(wire, HOLD_SPD, 0), fresh_line=True)
+            self.link.send(self.wm.hold(wire, HOLD_SPD, 0), fresh_line=True)
             self.notes.append("hold sent at the last measured pose")
         except DeviceError:
             self.notes.append("hold could not be sent: the link is gone")
