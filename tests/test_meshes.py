@@ -161,3 +161,16 @@ def test_mesh_formats_give_the_same_hull(tmp_path, ext):
     hull = trimesh.convex.convex_hull(src)
     got = {tuple(np.round(v + shape.origin[:3, 3], 6)) for v in shape.mesh.vertices}
     assert got == {tuple(np.round(v, 6)) for v in hull.vertices}
+
+
+def test_flat_mesh_has_no_hull_and_says_so(tmp_path):
+    flat = trimesh.Trimesh(vertices=[[0, 0, 0], [0.05, 0, 0], [0, 0.05, 0], [0.05, 0.05, 0]], faces=[[0, 1, 2], [1, 3, 2]])
+    side = mesh_robot(tmp_path, '<geometry><mesh filename="../meshes/forearm.stl"/></geometry>', mesh=flat)
+    with pytest.raises(DescriptionError, match=r"link 'link3' collision\[0\] mesh '.*forearm.stl': no convex hull"):
+        load_robot(str(side))
+    # as exact triangles the same flat mesh is fine
+    data = yaml.safe_load(side.read_text())
+    data["mesh_collision"] = "exact"
+    side.write_text(yaml.safe_dump(data))
+    (shape,) = [s for s in load_robot(str(side)).collision if s.link == "link3"]
+    assert shape.mesh.exact and len(shape.mesh.faces) == 2

@@ -99,7 +99,11 @@ def load_mesh(path: Path, scale: np.ndarray, exact: bool, where: str) -> tuple[M
     key = (str(path.resolve()), path.stat().st_mtime_ns, tuple(scale))
     if key not in _LOADED:
         try:
-            loaded = trimesh.load(str(path), force="mesh", process=True)
+            loaded = trimesh.load_mesh(str(path), process=False)
+            if isinstance(loaded, trimesh.Scene):  # several meshes (COLLADA, OBJ groups): in the file's frame
+                loaded = loaded.to_mesh() if len(loaded.geometry) else None
+            elif isinstance(loaded, list):
+                loaded = trimesh.util.concatenate(loaded) if loaded else None
         except Exception as exc:  # trimesh raises many kinds for unreadable files
             raise DescriptionError(f"{where} mesh filename: cannot read '{path}' as a mesh ({type(exc).__name__}: {exc})",
                                    "use an STL, OBJ or DAE file") from None
@@ -117,14 +121,23 @@ def load_mesh(path: Path, scale: np.ndarray, exact: bool, where: str) -> tuple[M
 
 
 def convex_hull(vertices: np.ndarray, where: str) -> tuple[np.ndarray, np.ndarray]:
-    """Convex hull (vertices (H, 3), outward-wound faces (K, 3)) of a point set, by qhull."""
-    import trimesh
+    """Convex hull (vertices (H, 3), outward-wound faces (K, 3)) of a point set, by qhull (scipy)."""
+    from scipy.spatial import ConvexHull, QhullError
 
     try:
-        hull = trimesh.convex.convex_hull(trimesh.Trimesh(vertices=vertices, process=False))
-    except Exception as exc:
-        raise DescriptionError(f"{where}: no convex hull (flat or degenerate mesh?): {exc}") from None
-    return np.asarray(hull.vertices, dtype=float), np.asarray(hull.faces, dtype=np.int64)
+        hull = ConvexHull(vertices)
+    except (QhullError, ValueError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise DescriptionError(f"{where}: no convex hull (flat or degenerate mesh?): {first}") from None
+    used = np.unique(hull.simplices)
+    remap = np.full(len(vertices), -1)
+    remap[used] = np.arange(len(used))
+    v, f = vertices[used], remap[hull.simplices]
+    # qhull's facet normals point outwards: wind each triangle so that its normal agrees
+    n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    flip = np.einsum("ij,ij->i", n, hull.equations[:, :3]) < 0
+    f[flip] = f[flip][:, ::-1]
+    return np.asarray(v, dtype=float), np.asarray(f, dtype=np.int64)
 
 
 def mesh_modes(value, links: list[str], where: str) -> dict[str, str]:
