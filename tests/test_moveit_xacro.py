@@ -101,3 +101,25 @@ def test_bad_xacro_is_exit_2_naming_the_file(tmp_path, body, needle):
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert "bad.xacro" in proc.stderr
+
+
+def test_xacro_find_uses_the_packages_map(tmp_path):
+    pkg = tmp_path / "armpkg"
+    pkg.mkdir()
+    (pkg / "parts.xacro").write_text('<robot xmlns:xacro="http://www.ros.org/wiki/xacro"><link name="extra"/></robot>')
+    urdf = (bundled_dir() / "roarm_m3_pro.urdf").read_text().replace(
+        '<robot name="roarm_m3_pro">', '<robot name="roarm_m3_pro" xmlns:xacro="http://www.ros.org/wiki/xacro">'
+        '<xacro:include filename="$(find armpkg)/parts.xacro"/>'
+        '<joint name="extra_joint" type="fixed"><parent link="link5"/><child link="extra"/></joint>')
+    (tmp_path / "arm.xacro").write_text(urdf)
+    side = yaml.safe_load((bundled_dir() / "roarm_m3_pro.yaml").read_text())
+    side.update(urdf="arm.xacro", packages={"armpkg": "armpkg"})
+    (tmp_path / "arm.yaml").write_text(yaml.safe_dump(side))
+    assert "extra" in load_robot(str(tmp_path / "arm.yaml")).link_names
+    del side["packages"]
+    (tmp_path / "arm.yaml").write_text(yaml.safe_dump(side))
+    from roarmctl.robot import loader
+
+    loader._CACHE.clear()
+    with pytest.raises(DescriptionError, match=r"arm.xacro: xacro: .*armpkg"):
+        load_robot(str(tmp_path / "arm.yaml"))

@@ -294,7 +294,9 @@ def _read_urdf(urdf: Path, side: dict, sidecar: Path) -> ET.Element:
     if urdf.suffix.lower() == ".xacro":
         from roarmctl.robot.xacro_input import expand
 
-        text = expand(urdf, side.get("xacro_args"), str(sidecar))
+        from roarmctl.robot.meshes import package_map
+
+        text = expand(urdf, side.get("xacro_args"), str(sidecar), package_map(side.get("packages"), sidecar, str(sidecar)))
         try:
             return ET.fromstring(text)
         except ET.ParseError as exc:
