@@ -67,8 +67,8 @@ def test_readme_command(cmd, workdir):
         assert r.returncode == 4 and r.stderr.startswith("error: ") and r.stderr.count("\n") == 1, r.stderr
         assert "/dev/ttyUSB0" in r.stderr
         return
-    if cmd == "roarmctl sim-device":  # serves until Ctrl-C: its first line is the pty to open
-        proc = subprocess.Popen([sys.executable, "-m", "roarmctl", "sim-device"], cwd=workdir, text=True,
+    if cmd.startswith("roarmctl sim-device"):  # serves until Ctrl-C: its first line is the pty to open
+        proc = subprocess.Popen([sys.executable, "-m", "roarmctl", *cmd.split()[1:]], cwd=workdir, text=True,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         try:
             path = proc.stdout.readline().strip()
