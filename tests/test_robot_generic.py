@@ -101,13 +101,13 @@ def test_ur6_standard_dh_table_solves_like_modified(tmp_path):
 
 def test_ur6_singularity_uses_the_tables_dimensions(tmp_path):
     """Shoulder singularity where a2 c2 + a3 c23 - d5 s234 = 0 with this table's numbers (not the
-    seed's); the Jacobian confirms the rank loss there and not 0.3 rad away."""
+    bundled ur10.yaml's); the Jacobian confirms the rank loss there and not 0.3 rad away."""
     robot = load_robot(str(_ur10_std(tmp_path)))
     assert classify_singularity(robot, [0.3, 0.4, 1e-4, 0.2, 1.0, 0.0]) == "elbow"
     a2, a3, d5 = -0.612, -0.5723, 0.1157
     th2, th3 = 1.2, 0.9
     th234 = math.asin((a2 * math.cos(th2) + a3 * math.cos(th2 + th3)) / d5)
-    # the standard table's twists (+90, -90 at the wrist) put pi on joints 4 and 6 of the seed's model
+    # the standard table's twists (+90, -90 at the wrist) put pi on joints 4 and 6 of the modified-DH model
     q = np.array([0.1, th2, th3, th234 - th2 - th3 - math.pi, 1.0, 0.0])
     sv = np.linalg.svd(robot.kin.jacobian(q), compute_uv=False)
     assert sv[-1] < 1e-9

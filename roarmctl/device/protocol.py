@@ -35,7 +35,7 @@ M3_FIELDS = ("base", "shoulder", "elbow", "wrist", "roll", "hand")
 #: The matching T:1051 feedback keys.
 M3_FEEDBACK_KEYS = ("b", "s", "e", "t", "r", "g")
 #: T:102 joint fields of the RoArm-M2 firmware (waveshare_roarm_sdk roarm_sdk/common.py,
-#: handle_m2_joints_radian) and its T:1051 keys, where ``t`` is the gripper (RESEARCH.md 2.6, 2.10).
+#: handle_m2_joints_radian) and its T:1051 keys, where ``t`` is the gripper.
 M2_FIELDS = ("base", "shoulder", "elbow", "hand")
 M2_FEEDBACK_KEYS = ("b", "s", "e", "t")
 #: Protocol model -> (T:102 fields, T:1051 keys), chosen by the description's wire fields.

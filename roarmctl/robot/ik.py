@@ -696,7 +696,7 @@ class _Roarm3IK:
 
 
 # ----------------------------------------------------------------------------- UR10 (modified DH)
-_UR6_ALPHA = (0.0, math.pi / 2, 0.0, 0.0, -math.pi / 2, math.pi / 2)  # modified-DH alpha_{i-1} of the seed's UR10
+_UR6_ALPHA = (0.0, math.pi / 2, 0.0, 0.0, -math.pi / 2, math.pi / 2)  # modified-DH alpha_{i-1} of robots/ur10.yaml
 
 
 def ur6_params(robot: Robot):
@@ -704,7 +704,7 @@ def ur6_params(robot: Robot):
 
     Either convention is accepted. A standard row i (theta_i, d_i, a_i, alpha_i) is the modified
     row i+1's (a_i, alpha_i) (Rx and Tx commute), the last row's (a_6, alpha_6) going into the tool.
-    Link twists of the opposite sign to the seed-003 UR10 (modified alpha = 0, 90, 0, 0, -90, 90
+    Link twists of the opposite sign to the bundled ur10.yaml (modified alpha = 0, 90, 0, 0, -90, 90
     deg) are turned into it by adding pi to the joint angles on both sides of that twist
     (Rz(pi) Rx(alpha) Tx(a) Rz(pi) = Rx(-alpha) Tx(-a)). Anything else raises ``DescriptionError``.
     Lengths in metres, angles in radians; ``offsets`` (6,) map q to the model's theta = q + offset.
