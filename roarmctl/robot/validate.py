@@ -354,7 +354,10 @@ def check_robot(robot, where: str) -> None:
         f = f"link '{s.link}' collision '{s.name or k}'"
         if not np.all(np.isfinite(s.origin)):
             _fail(where, f"{f} origin", "must be finite")
-        dims = {"box": list(s.size), "sphere": [s.radius], "cylinder": [s.radius, s.length], "capsule": [s.radius]}[s.kind]
+        if s.kind == "mesh":  # its largest extent (an exact mesh may be flat); the mesh reader checked the rest
+            dims = [float(np.max(2 * s.mesh.half_extents))]
+        else:
+            dims = {"box": list(s.size), "sphere": [s.radius], "cylinder": [s.radius, s.length], "capsule": [s.radius]}[s.kind]
         if not all(math.isfinite(d) and 0 < d <= MAX_VALUE for d in dims):
             _fail(where, f, f"sizes {dims} must be positive finite numbers")
         if s.kind == "capsule" and not (math.isfinite(s.length) and s.length >= 0):
