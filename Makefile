@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: all demo test bench clean install
+.PHONY: all demo test fuzz bench clean install
 
 all: test
 
@@ -18,6 +18,11 @@ install: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
+
+# The fuzz suite's CI profile: 1,000 plan files, 500 trajectories, 300 robot descriptions (about a
+# minute; `make test` runs a tenth of it).
+fuzz: $(STAMP)
+	ROARMCTL_FUZZ=full $(BIN)/python -m pytest -m fuzz tests/test_fuzz.py
 
 bench: $(STAMP)
 	for b in bench/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

@@ -57,11 +57,19 @@ def error(message: str, hint: str | None = None) -> None:
     """One line on stderr: the cause, and the fix where there is one."""
     STATE.last_error = (message, hint)
     text = f"error: {message}" + (f" ({hint})" if hint else "")
-    sys.stderr.write(text + "\n")
+    sys.stderr.write(one_line(text) + "\n")
+
+
+def one_line(text: str) -> str:
+    """Control characters (from file names, keys or values quoted in a message) escaped, so that a
+    message stays one line whatever the input held."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def warn(message: str) -> None:
-    sys.stderr.write(f"warning: {message}\n")
+    sys.stderr.write(f"warning: {one_line(message)}\n")
 
 
 def parse_numbers(values: list[str], what: str, deg: bool = False) -> np.ndarray:
