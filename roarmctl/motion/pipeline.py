@@ -446,11 +446,7 @@ class Planner:
         singles = [self._time_chain([p]) for p in parts]
         if not self.plan.limits.blend:
             return self._at_rest(parts, singles)
-        piece, bounds = self._superposed(parts, singles, dynamic=True)
-        if len(parts) > 1:  # the blended curve of the longest overlaps, re-timed as one path
-            retimed = self._retimed(parts, singles)
-            if retimed is not None and retimed[0].tp.duration < piece.tp.duration:
-                piece, bounds = retimed
+        piece, bounds = self._superposed(parts, singles)
         try:
             self._gripper_column(piece.tp, parts, [b[0] for b in bounds], [b[1] for b in bounds])
         except _GripperDoesNotFit as exc:  # too short to open the gripper on the way: stop after that motion
@@ -458,43 +454,12 @@ class Planner:
             return self._flush(parts[:k]) + self._at_rest([parts[k]], [singles[k]]) + self._flush(parts[k + 1:])
         return [piece]
 
-    def _superposed(self, parts: list[_Part], singles: list[_Piece], dynamic: bool) -> tuple[_Piece, list[tuple[float, float]]]:
+    def _superposed(self, parts: list[_Part], singles: list[_Piece]) -> tuple[_Piece, list[tuple[float, float]]]:
+        """The chain's motions blended join by join; also each part's (start, end) in the result."""
         piece, bounds = singles[0], [(0.0, singles[0].tp.duration)]
         for k in range(1, len(parts)):
-            piece, bounds = self._blend(piece, bounds, parts[:k], parts[k], singles[k], dynamic)
+            piece, bounds = self._blend(piece, bounds, parts[:k], parts[k], singles[k])
         return piece, bounds
-
-    def _retimed(self, parts: list[_Part], singles: list[_Piece]) -> tuple[_Piece, list[tuple[float, float]]] | None:
-        """The chain's blended curve with the longest valid overlaps (geometry only), timed again as one path by
-        TOPP-RA under every limit and re-checked in full; None if that fails."""
-        geo, bounds = self._superposed(parts, singles, dynamic=False)
-        if not geo.blends:
-            return None
-        q = geo.tp.q
-        chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q[:, self.arm], axis=0), axis=1))])
-        keep = [0]
-        for i in range(1, len(q)):  # knots at least RETIME_KNOT apart along the curve
-            if chord[i] - chord[keep[-1]] >= RETIME_KNOT or i == len(q) - 1:
-                keep.append(i)
-        wps = q[keep]
-        s_knots = chord[keep]
-        t_bounds = [0.0] + [b[1] for b in bounds]
-        s_bounds = np.interp(t_bounds, geo.tp.times, chord)
-        s_bounds = np.interp(s_bounds, s_knots, s_knots)  # on the thinned curve's own parameter
-        label = f"{parts[0].step.label} .. {parts[-1].step.label}"
-        try:
-            tp = self._time(wps, label)
-            t_all = np.interp(s_bounds, tp.s, tp.times)
-            t_all[0], t_all[-1] = 0.0, tp.duration
-            t0 = time.perf_counter()
-            try:
-                self._check_chain(tp, parts, s_bounds, label)
-            finally:
-                self.timer.add("recheck", t0)
-        except PlanningError:
-            return None
-        segments = [Segment(float(a), float(b), p.step.kind, p.step.label) for p, a, b in zip(parts, t_all[:-1], t_all[1:])]
-        return _Piece(tp, segments, None, [float(t) for t in t_all[1:-1]]), list(zip(t_all[:-1].tolist(), t_all[1:].tolist()))
 
     def _at_rest(self, parts: list[_Part], singles: list[_Piece]) -> list[_Piece]:
         """The motions one after the other from rest to rest, the gripper opened at rest after its free motion."""
@@ -508,15 +473,17 @@ class Planner:
                 pieces.append(_Piece(tp, [Segment(0.0, tp.duration, "gripper", step.label)]))
         return pieces
 
-    def _blend(self, a: _Piece, bounds: list[tuple[float, float]], a_parts: list[_Part], part: _Part, b: _Piece,
-               dynamic: bool = True) -> tuple[_Piece, list[tuple[float, float]]]:
+    def _blend(self, a: _Piece, bounds: list[tuple[float, float]], a_parts: list[_Part], part: _Part, b: _Piece
+               ) -> tuple[_Piece, list[tuple[float, float]]]:
         """``b`` started before ``a`` ends: the two motions superposed over an overlap (velocity, acceleration and
         jerk add; both are continuous, so the sum is too). The longest overlap (on the sample grid, at most the
         shorter motion's duration) is taken whose samples keep every limit (velocity, acceleration, jerk by finite
         differences, torque by RNEA, TCP speed) and are collision-free and outside the singularity margin; a
         straight line keeps at least its last (or first) LINE_KEEP of its length exact, so the overlap only
         rounds the corner near its pre-grasp end. ``bounds`` are each part's (start, end) in ``a``.
-        ``dynamic`` False checks the geometry only (joint limits, collisions): a curve to be timed again."""
+
+        (Timing the blended curve again as one TOPP-RA path gained only 0.04-0.1 s on the bundled plan,
+        and the curve's dense knots made the acceleration chatter; superposing two smooth profiles does not.)"""
         dt = SAMPLE_DT
         prev = a_parts[-1]
         ta, tb = a.tp, b.tp
@@ -531,7 +498,7 @@ class Planner:
         try:
             for m in range(limit, 0, -BLEND_STEP):
                 cand = _superpose(ta, tb, ia, m)
-                if self._overlap_ok(cand, ia + 1 - m, ia, prev, part, dynamic):
+                if self._overlap_ok(cand, ia + 1 - m, ia, prev, part):
                     break
             else:
                 m, cand = 0, _superpose(ta, tb, ia, 0)
@@ -559,24 +526,22 @@ class Planner:
         done = np.clip((p - p0) @ d / max(float(d @ d), 1e-18), 0.0, 1.0)
         return float(np.interp(fraction, np.maximum.accumulate(done), tp.times[sel]))
 
-    def _overlap_ok(self, tp: TimedPath, lo: int, hi: int, prev: _Part, part: _Part, dynamic: bool = True) -> bool:
+    def _overlap_ok(self, tp: TimedPath, lo: int, hi: int, prev: _Part, part: _Part) -> bool:
         """Limits and validity of the samples lo..hi (the overlap) of a superposed motion, one sample either side."""
         a, b = max(lo - 1, 0), min(hi + 2, len(tp.times))
         q, qd, qdd = tp.q[a:b], tp.qd[a:b], tp.qdd[a:b]
         if np.any(q < self.robot.lower - LIMIT_TOL) or np.any(q > self.robot.upper + LIMIT_TOL):
             return False
-        if dynamic and (np.any(np.abs(qd) > self.vmax * (1 + 1e-6) + LIMIT_TOL) or np.any(np.abs(qdd) > self.amax * (1 + 1e-6) + LIMIT_TOL)):
+        if np.any(np.abs(qd) > self.vmax * (1 + 1e-6) + LIMIT_TOL) or np.any(np.abs(qdd) > self.amax * (1 + 1e-6) + LIMIT_TOL):
             return False
-        if not dynamic:
-            pass
-        elif self.jmax is not None:
+        if self.jmax is not None:
             jerk = np.diff(tp.qdd[max(a - 1, 0):min(b + 1, len(tp.times))], axis=0) / np.diff(tp.times[max(a - 1, 0):min(b + 1, len(tp.times))])[:, None]
             if np.any(np.abs(jerk) > self.jmax * (1 + 1e-9)):
                 return False
-        if dynamic and self.plan.limits.max_tcp_speed is not None:
+        if self.plan.limits.max_tcp_speed is not None:
             if np.max(np.linalg.norm(self.robot.kin.tcp_velocity(q, qd[:, self.arm]), axis=1)) > self.plan.limits.max_tcp_speed:
                 return False
-        model = self._torque_model(q[0], list(range(self.robot.dof))) if dynamic else None
+        model = self._torque_model(q[0], list(range(self.robot.dof)))
         if model is not None and np.any(np.abs(model.inverse_dynamics(q, qd, qdd)) > model.limits):
             return False
         fine = _interpolate(q, RECHECK_SUBSTEPS)
@@ -905,7 +870,6 @@ def _scene_item(spec: ItemSpec):
                      radius=spec.radius, length=spec.length)
 
 
-RETIME_KNOT = 0.01  # rad between the knots of a blended curve timed again
 LINE_KEEP = 0.5  # a blend may round the corner over at most the first (last) half of a straight line
 BLEND_STEP = 2  # samples between the overlaps tried, longest first
 
