@@ -20,6 +20,31 @@ def roarmctl(*args: str, env: dict | None = None) -> subprocess.CompletedProcess
     return subprocess.run([sys.executable, "-m", "roarmctl", *args], capture_output=True, text=True, timeout=180, env=e)
 
 
+class Result:
+    def __init__(self, returncode: int, stdout: str, stderr: str) -> None:
+        self.returncode, self.stdout, self.stderr = returncode, stdout, stderr
+
+
+@pytest.fixture
+def cli(capsys, monkeypatch):
+    """The CLI in this process (no interpreter start-up per call), 80 columns wide."""
+    from roarmctl.cli import main
+
+    monkeypatch.setenv("COLUMNS", "80")
+
+    def call(*args: str) -> Result:
+        capsys.readouterr()
+        try:
+            main(list(args))
+            code = 0
+        except SystemExit as exc:
+            code = int(exc.code or 0)
+        out = capsys.readouterr()
+        return Result(code, out.out, out.err)
+
+    return call
+
+
 @pytest.fixture(scope="module")
 def traj(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("conv") / "pp.traj.json"
@@ -64,23 +89,23 @@ def test_failing_plan_is_drawn_with_the_failing_target_and_exits_3(far_plan, tmp
     assert "PLANNING FAILED at task 2" in svg
 
 
-def test_version_and_short_help():
+def test_version_and_short_help(cli):
     from roarmctl import __version__
 
     for flag in ("--version", "-V"):
-        r = roarmctl(flag)
+        r = cli(flag)
         assert r.returncode == 0 and r.stdout.strip() == f"roarmctl {__version__}"
     for args in (["-h"], ["plan", "-h"], ["kin", "ik", "-h"]):
-        r = roarmctl(*args)
+        r = cli(*args)
         assert r.returncode == 0 and "Usage: roarmctl" in r.stdout
 
 
-def test_flags_are_shown_as_flags_and_take_no_value():
+def test_flags_are_shown_as_flags_and_take_no_value(cli):
     for args in (["plan", "-h"], ["execute", "-h"], ["kin", "jacobian", "-h"], ["export", "-h"], ["-h"]):
-        out = roarmctl(*args).stdout
+        out = cli(*args).stdout
         assert "<bool>" not in out and "--help" in out
-    assert "--json " in roarmctl("plan", "-h").stdout
-    r = roarmctl("robots", "--json", "true")
+    assert "--json " in cli("plan", "-h").stdout
+    r = cli("robots", "--json", "true")
     assert r.returncode == 2  # a flag: 'true' is an unexpected extra argument
 
 
@@ -112,42 +137,42 @@ def test_json_commands_print_a_json_object_on_failure(args, code, words, traj, f
     assert r.stderr.startswith("error: ") or "Error" in r.stderr  # the line for the human stays on stderr
 
 
-def test_json_success_says_ok(traj):
-    assert json.loads(roarmctl("robots", "--json").stdout)["ok"] is True
-    assert json.loads(roarmctl("kin", "fk", "scara_2r", "0", "0", "--json").stdout)["ok"] is True
+def test_json_success_says_ok(cli, traj):
+    assert json.loads(cli("robots", "--json").stdout)["ok"] is True
+    assert json.loads(cli("kin", "fk", "scara_2r", "0", "0", "--json").stdout)["ok"] is True
 
 
 def _lines(text: str) -> list[str]:
     return [line for line in text.splitlines() if line.strip()]
 
 
-def test_tables_fit_80_columns_with_every_value():
+def test_tables_fit_80_columns_with_every_value(cli):
     q = ["0.1", "-1", "1", "0.2", "0.3", "0.1"]
     for args in (["kin", "ik", "ur10", "--xyz", "0.5", "0.2", "0.4", "--rpy", "180", "0", "0", "--all", "--deg"],
                  ["kin", "jacobian", "ur10", *q], ["kin", "dynamics", "ur10", "--q", " ".join(q)],
                  ["kin", "fk", "ur10", *q], ["robots"]):
-        r = roarmctl(*args)
+        r = cli(*args)
         assert r.returncode == 0, r.stderr
         assert max(len(line) for line in _lines(r.stdout)) <= 80 and "…" not in r.stdout, r.stdout
     # every Jacobian entry is printed, row by row, as the JSON has it (4 decimals)
-    jac = json.loads(roarmctl("kin", "jacobian", "ur10", *q, "--json").stdout)["jacobian"]
-    text = roarmctl("kin", "jacobian", "ur10", *q).stdout
+    jac = json.loads(cli("kin", "jacobian", "ur10", *q, "--json").stdout)["jacobian"]
+    text = cli("kin", "jacobian", "ur10", *q).stdout
     for name, row in zip(("vx", "vy", "vz", "wx", "wy", "wz"), jac):
         line = next(line for line in text.splitlines() if f" {name} (" in line)
         printed = [float(v) for v in line.split("│")[2:-1]]
         assert printed == pytest.approx(row, abs=5e-5)
-    mm = json.loads(roarmctl("kin", "dynamics", "ur10", "--q", " ".join(q), "--json").stdout)["mass_matrix"]
-    text = roarmctl("kin", "dynamics", "ur10", "--q", " ".join(q)).stdout
+    mm = json.loads(cli("kin", "dynamics", "ur10", "--q", " ".join(q), "--json").stdout)["mass_matrix"]
+    text = cli("kin", "dynamics", "ur10", "--q", " ".join(q)).stdout
     for i, row in enumerate(mm):
         line = next(line for line in text.splitlines() if f" row q{i + 1} " in line)
         assert [float(v) for v in line.split("│")[2:-1]] == pytest.approx(row, abs=5e-6)
 
 
-def test_units_and_singularity_are_spelled_out():
-    text = roarmctl("kin", "jacobian", "scara_2r", "0", "0").stdout
+def test_units_and_singularity_are_spelled_out(cli):
+    text = cli("kin", "jacobian", "scara_2r", "0", "0").stdout
     assert "translational, 3x2 Jv ((m/rad)^2)" in text and "full, 6x2 J (mixed units)" in text
     assert "elbow_stretched" in text and "(m/rad)" in text
-    text = roarmctl("kin", "jacobian", "ur10", "0.3", "-1", "1", "0.2", "0.3", "0.1").stdout
+    text = cli("kin", "jacobian", "ur10", "0.3", "-1", "1", "0.2", "0.3", "0.1").stdout
     assert "None" not in text and "none (no known singular configuration)" in text
 
 
