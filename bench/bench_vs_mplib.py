@@ -213,7 +213,7 @@ def main() -> None:
     urdf, srdf = export_model(robot, folder)
     arm = robot.arm_indices
     spec = {"urdf": str(urdf), "srdf": str(srdf), "tcp": robot.tcp_link, "joints": list(robot.joint_names),
-            "base_links": ["base_link", "link1"], "queries": {}}  # roarmctl's checker: these never meet the table
+            "base_links": list(robot.base_links), "queries": {}}  # roarmctl's checker: these never meet the table
     for name, (planner, step, q) in captured.items():
         goal = step.q_to.copy()
         goal[planner.gi] = q[planner.gi]
@@ -262,7 +262,7 @@ def main() -> None:
 
     print(f"\n{args.rounds} interleaved rounds, medians (ms); ratio = roarmctl / mplib")
     print(f"{'query':<6}{'roarmctl':>10}{'mplib':>10}{'ratio':>8}   motion duration (s) ours / mplib   "
-          "mplib paths inside our padding or margin   failures ours/mplib")
+          "mplib paths invalid for our checker (padding, margin, held object)   failures ours/mplib")
     for name in QUERIES:
         a, b = statistics.median(ours[name]) * 1000, statistics.median(theirs[name]) * 1000
         da, db = statistics.median(durations[name][0]), statistics.median(durations[name][1])
