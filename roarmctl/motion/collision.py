@@ -177,6 +177,8 @@ class CollisionChecker:
         """Let scene object ``name`` touch the jaws (``robot.jaw_links``); None clears it."""
         if name is not None and name not in self.scene:
             raise InputError(f"grasp target '{name}' is not in the scene (items: {', '.join(self.scene.names())})")
+        if name == self._grasp_target:  # every scene change rebuilds on its own; nothing to redo (3-4 ms)
+            return
         self._grasp_target = name
         self._rebuild()
 
