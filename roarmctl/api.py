@@ -186,12 +186,13 @@ def draw(traj: TrajectoryLike, output: PathLike, *, view: str = "iso", dpi: floa
     return visualize_trajectory(t, output, view=view, dpi=dpi, size=size, name=Path(str(output)).stem)
 
 
-def export(source: TrajectoryLike, output: PathLike) -> dict[str, Any]:
+def export(source: TrajectoryLike, output: PathLike, *, trajectory: TrajectoryLike | None = None) -> dict[str, Any]:
     """Export a trajectory (or a trajectory / execution-log file) like ``roarmctl export``: ``.mcap``
     (ROS 2 messages for Foxglove), ``.csv``, or a name without extension (a ROS 2 bag folder).
-    Returns ``{"output", "format", "topics": {topic: count}}`` (CSV: ``"rows"``)."""
+    Returns ``{"output", "format", "topics": {topic: count}}`` (CSV: ``"rows"``). For an execution
+    log, ``trajectory`` (the one it ran) adds its planned joint states and the scene."""
     from roarmctl.export import export as _export
     from roarmctl.export import format_for
 
     format_for(output)  # refuse an unknown extension before any work
-    return _export(source, output)
+    return _export(source, output, trajectory=trajectory)

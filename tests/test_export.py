@@ -240,3 +240,26 @@ def test_damaged_log_is_exit_2(demo, tmp_path, capsys):
     bad.write_text(json.dumps(log))
     assert run_cli(["export", str(bad), "-o", str(tmp_path / "bad.mcap")]) == 2
     assert "malformed" in capsys.readouterr().err and not (tmp_path / "bad.mcap").exists()
+
+
+def test_log_with_its_trajectory_adds_planned_states_and_scene(demo, capsys):
+    from roarmctl.motion.trajectory import load_trajectory
+
+    d, traj_path, log_path = demo
+    out = d / "run_with_plan.mcap"
+    assert run_cli(["export", str(log_path), "-t", str(traj_path), "-o", str(out)]) == 0
+    bag = read_bag(out)
+    traj = load_trajectory(traj_path)
+    log = json.loads(log_path.read_text())
+    assert {"/joint_states/planned", "/joint_states/commanded", "/joint_states/measured", "/scene"} <= set(bag)
+    planned = bag["/joint_states/planned"]
+    assert len(planned) == len(traj.times)
+    assert np.allclose([m[2].position for m in planned], traj.positions)
+    # on the log's clock: the plan's time 0 is when tick 0 was sent (within its lateness)
+    sent = [s for s in log["sent"] if s["cmd"].get("T") in (101, 102)]
+    k0 = next(k for k, s in enumerate(sent) if s.get("tick") == 0)
+    t_tick0 = bag["/joint_states/commanded"][k0][0] * 1e-9
+    assert abs(planned[0][0] * 1e-9 - t_tick0) < 0.05
+    assert np.allclose(np.diff([m[0] for m in planned]) * 1e-9, np.diff(traj.times) / log["speed_scale"], atol=1e-6)
+    assert run_cli(["export", str(traj_path), "-t", str(traj_path), "-o", str(d / "x.mcap")]) == 2
+    assert "goes with an execution log" in capsys.readouterr().err

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Optional
 
 import typer
 
@@ -15,12 +16,14 @@ def register(app: typer.Typer) -> None:
         source: Path = typer.Argument(..., help="Trajectory (.traj.json) or execution log (.exec.json)."),
         output: Path = typer.Option(..., "-o", "--output",
                                     help="NAME.mcap (Foxglove), NAME.csv (spreadsheet), or a folder name without extension (ROS 2 bag)."),
+        trajectory: Optional[Path] = typer.Option(None, "--trajectory", "-t",
+                                                  help="With an execution log: the trajectory it ran, added as planned joint states and scene."),
         json_out: bool = typer.Option(False, "--json", help="Print one JSON object."),
     ) -> None:
         """Export SOURCE for Foxglove, RViz (ros2 bag play) or a spreadsheet; the format follows the -o name."""
         from roarmctl.export import export
 
-        summary = export(source, output)
+        summary = export(source, output, trajectory=trajectory)
         if json_out:
             common.print_json({"ok": True, **summary})
             return

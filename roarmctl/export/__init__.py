@@ -54,24 +54,35 @@ def load_source(path: str | os.PathLike | Any) -> tuple[str, Any]:
                               "give a file written by 'roarmctl plan' or 'roarmctl execute'")
 
 
-def streams_for(source: str | os.PathLike | Any):
-    """The ``Streams`` of a trajectory or execution-log file (robot loaded by the name in the file)."""
+def streams_for(source: str | os.PathLike | Any, trajectory: str | os.PathLike | Any | None = None):
+    """The ``Streams`` of a trajectory or execution-log file (robot loaded by the name in the file).
+    ``trajectory`` (logs only): the executed trajectory, exported beside the run as ``planned``."""
     from roarmctl.export.streams import log_streams, trajectory_streams
     from roarmctl.robot.loader import load_robot
 
     kind, data = load_source(source)
     if kind == "trajectory":
+        if trajectory is not None:
+            raise InputError("--trajectory goes with an execution log, not with a trajectory",
+                             "export the trajectory by itself, or give the .exec.json it produced")
         return trajectory_streams(data, load_robot(data.robot))
-    return log_streams(data, load_robot(str(data["robot"])))
+    traj = None
+    if trajectory is not None:
+        tkind, traj = load_source(trajectory)
+        if tkind != "trajectory":
+            raise InputError(f"--trajectory {trajectory}: not a trajectory file", "give the .traj.json that was executed")
+    return log_streams(data, load_robot(str(data["robot"])), traj)
 
 
-def export(source: str | os.PathLike | Any, path: str | os.PathLike, fmt: str | None = None) -> dict[str, Any]:
+def export(source: str | os.PathLike | Any, path: str | os.PathLike, fmt: str | None = None,
+           trajectory: str | os.PathLike | Any | None = None) -> dict[str, Any]:
     """Export the trajectory or execution log at ``source`` (or a ``Trajectory``) to ``path``; returns a summary
-    (``output``, ``format``, ``topics``: message count per topic, or ``rows`` for CSV)."""
+    (``output``, ``format``, ``topics``: message count per topic, or ``rows`` for CSV). For a log,
+    ``trajectory`` adds the executed plan (``planned`` joint states and the scene)."""
     fmt = fmt or format_for(path)
     if fmt not in FORMATS:
         raise InputError(f"--format: '{fmt}' is not one of {', '.join(FORMATS)}")
-    streams = streams_for(source)
+    streams = streams_for(source, trajectory)
     return write(streams, path, fmt)
 
 

@@ -115,15 +115,33 @@ def trajectory_streams(traj: Trajectory, robot: Robot) -> Streams:
     return Streams(robot, list(traj.joint_names), {"": states}, "", traj, item_tracks(traj, robot))
 
 
-def log_streams(log: dict[str, Any], robot: Robot) -> Streams:
-    """See ``_log_streams``; a malformed entry is an input error (exit 2), not a crash."""
+def log_streams(log: dict[str, Any], robot: Robot, traj: Trajectory | None = None) -> Streams:
+    """See ``_log_streams``; a malformed entry is an input error (exit 2), not a crash.
+
+    ``traj``: the trajectory that was executed. Its samples are added as the ``planned`` joint
+    states and its scene as markers, on the log's clock: plan time / the run's ``speed_scale``
+    (the log's time 0 is the first scheduled command, which targets the plan's time 0).
+    """
     from roarmctl.errors import TrajectoryFileError
 
     try:
-        return _log_streams(log, robot)
+        streams = _log_streams(log, robot)
+        scale = float(log.get("speed_scale", 1.0) or 1.0)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise TrajectoryFileError(f"execution log: malformed entry ({type(exc).__name__}: {exc})",
                                   "export a log written by 'roarmctl execute'") from None
+    if traj is not None:
+        if list(traj.joint_names) != list(robot.joint_names):
+            raise InputError(f"--trajectory: its joints {traj.joint_names} are not those of the log's robot '{robot.name}'",
+                             "give the trajectory this log executed")
+        if not 0 < scale <= 1:
+            raise TrajectoryFileError(f"execution log: speed_scale {scale!r} is not in (0, 1]")
+        t = np.asarray(traj.times, dtype=float) / scale
+        streams.joint_states["planned"] = JointStates(t, np.asarray(traj.positions, dtype=float),
+                                                      np.asarray(traj.velocities, dtype=float) * scale)
+        streams.trajectory = None  # no /joint_trajectory: the log's topics are about the run
+        streams.items = [ItemTrack(tr.item, tr.times / scale, tr.poses) for tr in item_tracks(traj, robot)]
+    return streams
 
 
 def _log_streams(log: dict[str, Any], robot: Robot) -> Streams:
