@@ -56,6 +56,8 @@ WIRE_ELBOW = "{joint: link2_to_link3,        field: elbow,    sign: 1,  offset: 
 
 URDF_CASES = {
     "cycle": ([('<parent link="link4"/><child link="link5"/>', '<parent link="link5"/><child link="link4"/>')], "joint"),
+    "joint closing a loop": ([("</robot>", '<joint name="loop" type="fixed"><parent link="link5"/><child link="link1"/></joint>\n</robot>')],
+                             "joint 'loop' child: link 'link1' already has a parent"),  # hung kin fk before
     "joint is its own parent": ([('<parent link="link1"/><child link="link2"/>', '<parent link="link2"/><child link="link2"/>')], "joint 'link1_to_link2': link 'link2' is its own parent"),
     "NaN origin": ([('<origin xyz="0 -0.144586 0" rpy="0 0 0"/>', '<origin xyz="0 nan 0" rpy="0 0 0"/>')], "joint 'link3_to_link4' origin xyz"),
     "inf origin": ([('<origin xyz="0 -0.144586 0" rpy="0 0 0"/>', '<origin xyz="0 -0.14 0" rpy="0 inf 0"/>')], "joint 'link3_to_link4' origin rpy"),
