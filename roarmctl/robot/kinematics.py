@@ -115,6 +115,17 @@ class Kinematics:
                                     (origin.copy(), np.asarray(joint.axis, dtype=float)), post))
         self._const_links = [i for i, c in enumerate(is_const) if c]
         self._simple = all(kind in ("rz", "fixed") and post is None for kind, *_, post in self._steps)
+        if self._simple:  # every step as cos(q) A + sin(q) B + C (fixed: A = B = 0), for _frames_one
+            k = len(self._steps)
+            self._abc = np.zeros((3, k, 4, 4))
+            self._one_q = np.array([max(st[3], 0) for st in self._steps], dtype=int)
+            self._one_off = np.array([st[4] for st in self._steps])
+            self._one_pc = [(st[1], st[2]) for st in self._steps]
+            for i, (kind, *_, data, _post) in enumerate(self._steps):
+                if kind == "rz":
+                    self._abc[:, i] = data
+                else:
+                    self._abc[2, i] = data[0]
 
     def frames4(self, q: np.ndarray) -> np.ndarray:
         """Every link frame (N, L, 4, 4) in the root frame for full configurations ``q`` (N, dof), rad/m.
@@ -149,16 +160,16 @@ class Kinematics:
         return out
 
     def _frames_one(self, q: np.ndarray) -> np.ndarray:
+        """(L, 4, 4) for one full q: all joint transforms in three array operations, then the chain."""
+        ang = q[self._one_q] + self._one_off
+        abc = self._abc
+        m = np.cos(ang)[:, None, None] * abc[0]
+        m += np.sin(ang)[:, None, None] * abc[1]
+        m += abc[2]
         out = np.empty((self.n_links, 4, 4))
         out[self._const_links] = self._const[self._const_links]
-        for kind, parent, child, qi, offset, data, _ in self._steps:
-            if kind == "rz":
-                a, b, c = data
-                ang = float(q[qi]) + offset
-                m = math.cos(ang) * a + math.sin(ang) * b + c
-            else:
-                m = data[0]
-            np.matmul(out[parent], m, out=out[child])
+        for i, (parent, child) in enumerate(self._one_pc):
+            np.matmul(out[parent], m[i], out=out[child])
         return out
 
     def frames(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
