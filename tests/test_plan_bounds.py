@@ -96,3 +96,11 @@ def test_relative_robot_path_without_suffix_is_relative_to_the_plan(tmp_path, ca
     assert rc == 0, err
     robot = json.loads((tmp_path / "p.traj.json").read_text())["robot"]
     assert Path(robot).resolve() == (tmp_path / "robots" / "myscara").resolve()
+
+
+def test_short_waits_are_sampled_at_the_declared_rate(tmp_path, capsys):
+    # a 14 ms wait used to be one 14 ms step, longer than a sample at 100 Hz: execute refused the file
+    rc, err, _, _ = plan_text(tmp_path, "robot: roarm_m3_pro\ntasks: [{wait: 0.014}, {wait: 0.5}]\n", capsys)
+    assert rc == 0, err
+    traj = validate_trajectory(tmp_path / "p.traj.json")
+    assert traj.duration == pytest.approx(0.514) and np.diff(traj.times).max() <= 0.01 + 1e-9

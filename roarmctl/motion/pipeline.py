@@ -913,7 +913,7 @@ def _with(q: np.ndarray, index: int | None, value: float | None) -> np.ndarray:
 
 
 def _dwell(q: np.ndarray, duration: float) -> TimedPath:
-    n = max(int(round(duration / SAMPLE_DT)), 1)
+    n = max(int(math.ceil(duration / SAMPLE_DT - 1e-9)), 1)  # no step longer than one sample
     times = np.linspace(0.0, duration, n + 1)
     qq = np.repeat(q[None, :], len(times), axis=0)
     return TimedPath(times, qq, np.zeros_like(qq), np.zeros_like(qq))
