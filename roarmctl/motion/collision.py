@@ -146,6 +146,7 @@ class CollisionChecker:
             self._chain_children = [(kin._child[j], robot.joints[j].axis, robot.joints[j].kind)
                                     for j in kin.tcp_chain_joints if robot.joints[j].kind != "fixed"]
         self._grasp_target: str | None = None
+        self._jaw_strict = False  # set_grasp_target(..., moving_jaw_clear=True)
         self._attached: dict[str, tuple[SceneItem, np.ndarray]] = {}  # name -> (item, pose in TCP frame)
         self._arm_shapes: list[_Moving] = []
         for shape in robot.collision:
@@ -173,14 +174,28 @@ class CollisionChecker:
             raise InputError(f"{self.robot.name} has no gripper")
         self._q_template[self._gripper_index] = float(value)
 
-    def set_grasp_target(self, name: str | None) -> None:
-        """Let scene object ``name`` touch the jaws (``robot.jaw_links``); None clears it."""
+    def set_grasp_target(self, name: str | None, moving_jaw_clear: bool = False) -> None:
+        """Let scene object ``name`` touch the jaws (``robot.jaw_links``); None clears it.
+
+        With ``moving_jaw_clear`` only the jaw links the gripper joint does not move may touch it: the
+        links the gripper joint moves (``moving_jaw_links``) must stay clear of it by the padding, as
+        of any other item (used while the arm still moves and the gripper closes or opens near it).
+        """
         if name is not None and name not in self.scene:
             raise InputError(f"grasp target '{name}' is not in the scene (items: {', '.join(self.scene.names())})")
-        if name == self._grasp_target:  # every scene change rebuilds on its own; nothing to redo (3-4 ms)
+        if (name, moving_jaw_clear) == (self._grasp_target, self._jaw_strict):  # every scene change rebuilds on its own; nothing to redo (3-4 ms)
             return
-        self._grasp_target = name
+        self._grasp_target, self._jaw_strict = name, bool(moving_jaw_clear)
         self._rebuild()
+
+    @property
+    def moving_jaw_links(self) -> tuple[str, ...]:
+        """The links the gripper joint moves (its child and that link's descendants); () without a gripper."""
+        if self.robot.gripper is None:
+            return ()
+        kin = self.robot.kin
+        joint = next(j for j in self.robot.joints if j.name == self.robot.gripper.joint)
+        return tuple(name for name in kin.link_names if self._moves_with(kin, kin.link_index[name], joint))
 
     def tcp_pose(self, q_arm) -> np.ndarray:
         """TCP pose (4, 4) at arm configuration ``q_arm`` (arm_dof,) with the current gripper value."""
@@ -258,6 +273,7 @@ class CollisionChecker:
         self._mv_radius = np.array([mv.radius for mv in moving])
         link_names = self._fk.robot.kin.link_names
         jaw_links, base_links = set(self.robot.jaw_links), set(self.robot.base_links)
+        touching = jaw_links - set(self.moving_jaw_links) if self._jaw_strict else jaw_links  # may touch the grasp target
 
         # Shape vs item mask: which pairs are checked at all.
         mask = np.ones((s, m), dtype=bool)
@@ -266,7 +282,7 @@ class CollisionChecker:
             for k, it in enumerate(self._items):
                 if it.role == "table" and lname in base_links:
                     mask[a, k] = False
-                if it.name == self._grasp_target and lname in jaw_links:
+                if it.name == self._grasp_target and lname in touching:
                     mask[a, k] = False
         self._scene_mask = mask
         # Shapes that are checked against at least one item take part in the scene pre-filter.

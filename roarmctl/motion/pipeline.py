@@ -96,6 +96,7 @@ class _Piece:
     blends: list[float] = field(default_factory=list)
     attach: dict | None = None  # payload (link -> Inertial) held from this piece's end on
     detach: bool = False  # the held payload is let go at this piece's end
+    jaw_target: str | None = None  # a grasp or release: the object the jaws close on or let go
 
 
 class _GripperDoesNotFit(Exception):
@@ -209,20 +210,24 @@ class Planner:
                         if step.open_to is not None:
                             q[self.gi] = step.open_to
                         continue
-                    pieces += self._flush(chain)
+                    pieces = self._append(pieces, self._flush(chain))
                     chain = []
                     held = self.payload
                     tp = self._realise(step, q)
-                    pieces.append(_Piece(tp, [Segment(0.0, tp.duration, step.kind, step.label)],
-                                         None if step.event is None else Event(tp.duration, step.event.kind, step.event.label, step.event.position),
-                                         attach=self.payload if self.payload is not held else None,
-                                         detach=held is not None and self.payload is None))
+                    piece = _Piece(tp, [Segment(0.0, tp.duration, step.kind, step.label)],
+                                   None if step.event is None else Event(tp.duration, step.event.kind, step.event.label, step.event.position),
+                                   jaw_target=step.grasp_target if step.event is not None else None)
+                    pieces = self._append(pieces, [piece])  # before a grasp attaches the object: it is still in the scene
+                    if step.kind == "gripper":
+                        self._gripper_event(step, q)
+                    pieces[-1].attach = self.payload if self.payload is not held else None
+                    pieces[-1].detach = held is not None and self.payload is None
                     q = tp.q[-1].copy()
             except InfeasibleError as exc:
                 exc.partial = self._partial(pieces, chain[0].wps[0] if chain else q, task, i)  # what was planned, for visualize-path
                 raise
         try:
-            pieces += self._flush(chain)
+            pieces = self._append(pieces, self._flush(chain))
         except InfeasibleError as exc:
             exc.partial = self._partial(pieces, chain[0].wps[0], tasks[-1], len(tasks) - 1)
             raise
@@ -420,10 +425,11 @@ class Planner:
         self.checker.set_grasp_target(grasp_target if grasp_target != self.held else None)
 
     def _realise(self, step: _Step, q: np.ndarray) -> TimedPath:
-        """Time and check a step at rest (wait, gripper) starting at ``q``; update the world state."""
+        """Time and check a step at rest (wait, gripper) starting at ``q`` (the world update of a gripper step
+        is ``_gripper_event``'s)."""
         if step.kind == "wait":
             return _dwell(q, step.duration)
-        return self._gripper_step(step, q)
+        return self._gripper_step(step, q, update=False)
 
     def _geometry(self, step: _Step, q: np.ndarray) -> _Part:
         """The untimed path of a free or straight motion from ``q`` (OMPL + FCL, or IK along the line)."""
@@ -453,6 +459,98 @@ class Planner:
             k = exc.index
             return self._flush(parts[:k]) + self._at_rest([parts[k]], [singles[k]]) + self._flush(parts[k + 1:])
         return [piece]
+
+    def _append(self, pieces: list[_Piece], new: list[_Piece]) -> list[_Piece]:
+        """``pieces + new``; when blending, a grasp starts closing during the straight motion before it and
+        the straight motion after a release starts while the jaws still open (``_jaw_overlap``)."""
+        if not new:
+            return pieces
+        if not pieces or not self.plan.limits.blend or self.gi is None:
+            return pieces + new
+        a, b = pieces[-1], new[0]
+        if b.event is not None and b.event.kind == "grasp" and b.jaw_target and a.segments[-1].kind == "cartesian":
+            return pieces[:-1] + self._jaw_overlap(a, b, b.jaw_target, grasp=True) + new[1:]
+        if a.event is not None and a.event.kind == "release" and a.jaw_target and b.segments[0].kind == "cartesian":
+            return pieces[:-1] + self._jaw_overlap(a, b, a.jaw_target, grasp=False) + new[1:]
+        return pieces + new
+
+    def _jaw_overlap(self, a: _Piece, b: _Piece, target: str, grasp: bool) -> list[_Piece]:
+        """Superpose a gripper action with the straight motion next to it (the gripper is its own joint):
+
+        - grasp (``a`` ends with the descent, ``b`` closes the jaws): the jaws start closing while the arm
+          still descends, for as long as the moving jaw stays clear of ``target``; the arm arrives, then the
+          rest of the closing (the jaws meet the object, the squeeze) happens at rest, and the lift (the
+          next piece) starts only once the closing is done;
+        - release (``a`` opens the jaws, ``b`` starts with the retreat): the retreat starts once the moving
+          jaw has opened clear of ``target``.
+
+        While the arm moves, the links the gripper joint moves must stay clear of ``target`` by the padding
+        (no contact allowance; ``CollisionChecker.set_grasp_target(moving_jaw_clear=True)``). Only the jaw
+        links the gripper joint does not move (on the RoArm, link5 with the fixed jaw, which is inside the
+        padding of the cube at the grasp pose) keep their allowance, as during the straight motion itself:
+        they do not move relative to the TCP, so the gripper cannot press them into the object. Every other
+        check of the overlap (other items, self-collision, margin, torque by RNEA) is as for any sample;
+        velocity, acceleration and jerk are unchanged because the two motions move different joints.
+        The longest overlap (on the sample grid) that passes is taken; the result is split where the arm
+        arrives (grasp) or starts (release), so segments, the event and the payload keep their places.
+        """
+        dt = SAMPLE_DT
+        ta, tb = a.tp, b.tp
+        on_grid = np.flatnonzero(np.abs(ta.times / dt - np.round(ta.times / dt)) < 1e-6)
+        ia = int(on_grid[-1])
+        moving = int(np.count_nonzero(np.any(np.abs(tb.qd if grasp else ta.qd) > 1e-12, axis=1)))  # gripper samples in motion
+        if grasp:  # the closing starts within the descent (the last segment of a)
+            limit = min(moving, ia - int(np.ceil(a.segments[-1].start / dt - 1e-9)))
+        else:  # the retreat starts within the opening, and within its own first segment
+            limit = min(moving, ia, int(b.segments[0].end / dt))
+        t0 = time.perf_counter()
+        m, cand = 0, None
+        try:
+            for m in range(max(limit, 0), 0, -1):
+                cand = _superpose(ta, tb, ia, m)
+                start = ia + 1 - m
+                lo, hi = (start, ia + 1) if grasp else (start, min(ia + 1, len(cand.times) - 1))
+                if self._jaw_overlap_ok(cand, lo, hi, target):
+                    break
+            else:
+                m, cand = 0, None
+        finally:
+            self.timer.add("blend", t0)
+        if not m:
+            return [a, b]
+        start = ia + 1 - m
+        cut = ia + 1 if grasp else start  # where the arm arrives / starts
+        first, second = _split(cand, cut)
+        t_cut = float(cand.times[cut])
+        if grasp:
+            segs = a.segments[:-1] + [Segment(a.segments[-1].start, t_cut, a.segments[-1].kind, a.segments[-1].label)]
+            e = b.event
+            return [_Piece(first, segs, a.event, a.blends, a.attach, a.detach),
+                    _Piece(second, [Segment(0.0, second.duration, sg.kind, sg.label) for sg in b.segments[:1]],
+                           Event(second.duration, e.kind, e.label, e.position), b.blends, b.attach, b.detach, b.jaw_target)]
+        e = a.event  # released: the jaws are clear of the object when the retreat starts
+        return [_Piece(first, [Segment(0.0, t_cut, sg.kind, sg.label) for sg in a.segments[:1]],
+                       Event(t_cut, e.kind, e.label, e.position), a.blends, a.attach, a.detach, a.jaw_target),
+                _Piece(second, b.segments, b.event, b.blends, b.attach, b.detach, b.jaw_target)]
+
+    def _jaw_overlap_ok(self, tp: TimedPath, lo: int, hi: int, target: str) -> bool:
+        """Samples lo..hi of a gripper action superposed with a straight motion: collision-free (4x finer) with
+        the moving jaw kept clear of ``target`` (see ``_jaw_overlap``), outside the singularity margin, and
+        within the torque limits by RNEA (nothing is held: before a grasp, after a release)."""
+        from roarmctl.robot.dynamics import inverse_dynamics
+
+        a, b = max(lo - 1, 0), min(hi + 2, len(tp.times))
+        if self.effort is not None and np.any(np.isfinite(self.effort)) and self.robot.inertials:
+            tau = inverse_dynamics(self.robot, tp.q[a:b], tp.qd[a:b], tp.qdd[a:b])
+            if np.any(np.abs(tau) > self.effort):
+                return False
+        saved = self.checker._grasp_target, self.checker._jaw_strict, float(self.checker._q_template[self.checker._gripper_index])
+        self.checker.set_grasp_target(target, moving_jaw_clear=True)
+        try:
+            return self._first_invalid(_interpolate(tp.q[a:b], RECHECK_SUBSTEPS)) is None
+        finally:
+            self.checker.set_grasp_target(saved[0], moving_jaw_clear=saved[1])
+            self.checker.set_gripper(saved[2])
 
     def _superposed(self, parts: list[_Part], singles: list[_Piece]) -> tuple[_Piece, list[tuple[float, float]]]:
         """The chain's motions blended join by join; also each part's (start, end) in the result."""
@@ -657,12 +755,13 @@ class Planner:
                 if dev > LINE_TOLERANCE:
                     raise PlanningError(f"{part.step.label}: the timed motion leaves the straight TCP line by {dev * 1000:.1f} mm")
 
-    def _gripper_step(self, step: _Step, q: np.ndarray) -> TimedPath:
+    def _gripper_step(self, step: _Step, q: np.ndarray, update: bool = True) -> TimedPath:
+        """The gripper action ``step`` at rest at ``q``, timed and its jaw sweep checked; with ``update`` also
+        its world update (``_gripper_event``)."""
         a, b = float(q[self.gi]), float(step.gripper_to)
         tp = self._gripper_motion(q, b, step.label)
         if tp.duration < self.plan.limits.gripper_time:  # the jaws get at least gripper_time to settle
             tp = _concat(tp, _dwell(tp.q[-1], self.plan.limits.gripper_time - tp.duration))
-        tcp = self.robot.kin.fk(q)[:3, 3]
         t0 = time.perf_counter()
         for value in np.linspace(a, b, 5):  # the jaw sweeps: check it along the way
             self._set_state(value, grasp_target=step.grasp_target)
@@ -670,6 +769,15 @@ class Planner:
                 self.timer.add("recheck", t0)
                 raise PlanningError(f"{step.label}: the moving jaw collides: {self.checker.explain(q[self.arm])}")
         self.timer.add("recheck", t0)
+        if update:
+            self._gripper_event(step, q)
+        return tp
+
+    def _gripper_event(self, step: _Step, q: np.ndarray) -> None:
+        """After the gripper action ``step`` at ``q``: a grasp attaches the object (collision model and payload),
+        a release puts it back into the scene; the checker takes the new gripper value."""
+        b = float(step.gripper_to)
+        tcp = self.robot.kin.fk(q)[:3, 3]
         if step.event is not None:
             if step.event.kind == "grasp":
                 name, offset = self._pending_pick
@@ -686,7 +794,6 @@ class Planner:
                 self._set_state(b, grasp_target=name)
         else:
             self._set_state(b)
-        return tp
 
     def _free_path(self, step: _Step, q: np.ndarray) -> np.ndarray:
         """OMPL path from ``q`` to the step's goal: the few vertices (K, dof) of the shortest of a few plans, shortcut."""
@@ -903,6 +1010,14 @@ def _superpose(a: TimedPath, b: TimedPath, ia: int, m: int) -> TimedPath:
     qd[start:] += b.qd
     qdd[start:] += b.qdd
     return TimedPath(times, q, qd, qdd, max(a.jerk_filter, b.jerk_filter))
+
+
+def _split(tp: TimedPath, i: int) -> tuple[TimedPath, TimedPath]:
+    """``tp`` cut at sample ``i``: samples 0..i and i..end (times from the cut); both keep sample ``i``."""
+    t0 = tp.times[i]
+    first = TimedPath(tp.times[:i + 1].copy(), tp.q[:i + 1].copy(), tp.qd[:i + 1].copy(), tp.qdd[:i + 1].copy(), tp.jerk_filter)
+    second = TimedPath(tp.times[i:] - t0, tp.q[i:].copy(), tp.qd[i:].copy(), tp.qdd[i:].copy(), tp.jerk_filter)
+    return first, second
 
 
 def _with(q: np.ndarray, index: int | None, value: float | None) -> np.ndarray:
