@@ -431,3 +431,55 @@ def test_no_acceleration_chatter(planned, name):
             x = x[np.abs(x) > 0.05 * np.max(np.abs(x))]  # ignore rounding-level wiggles
             flips = int(np.sum(np.diff(np.sign(x)) != 0))
             assert flips <= 5, f"{seg.label}: {traj.joint_names[j]} jerk changes sign {flips} times"
+
+
+def _moving_jaw_boxes(robot) -> list:
+    """Collision boxes of the links the gripper joint moves (its child and descendants), from the joint tree."""
+    moved = set()
+    frontier = {next(j.child for j in robot.joints if j.name == robot.gripper.joint)}
+    while frontier:
+        moved |= frontier
+        frontier = {j.child for j in robot.joints if j.parent in frontier} - moved
+    return [(s, _box(s.size)) for s in robot.collision if s.link in moved and s.kind == "box"]
+
+
+def test_the_jaws_close_during_the_descent_and_open_during_the_retreat_but_never_into_the_object(planned):
+    """The gripper moves while the arm descends to the grasp and while it retreats from the place, but the moving
+    jaw stays at least the planner's padding away from the cube (python-fcl distance, generic FK) whenever the
+    TCP is not at the grasp (release) pose: it closes around the cube only once the arm has arrived."""
+    plan = load_plan(ROOT / "plans" / "pick_place.yaml")
+    traj = load_trajectory(planned["pick_place"][0])
+    robot = load_robot(traj.robot)
+    gi, arm = robot.joint_index(robot.gripper.joint), robot.arm_indices
+    jaws = _moving_jaw_boxes(robot)
+    assert jaws and all(s.link != "link5" for s, _ in jaws)  # the fixed jaw on link5 does not move with the joint
+    (cube_spec,) = plan.objects
+    cube = fcl.CollisionObject(fcl.Box(*cube_spec.size))
+    grasp, release = traj.events
+    q = _fine(traj.positions, 4)
+    t = _fine(traj.times[:, None], 4)[:, 0]
+    tcp = robot.kin.fk(q)
+    frames = robot.kin.link_frames(q)
+    k_g, k_r = int(np.argmin(np.abs(t - grasp.time))), int(np.argmin(np.abs(t - release.time)))
+    cube_at_place = tcp[k_r] @ np.linalg.inv(tcp[k_g]) @ cube_spec.pose
+    retreat = next(s for s in traj.segments if s.label.endswith("retreat from 'cube'"))
+    windows = [(t <= grasp.time, tcp[k_g], cube_spec.pose), ((t >= release.time) & (t <= retreat.end), tcp[k_r], cube_at_place)]
+    for sel, at, pose in windows:
+        cube.setTransform(fcl.Transform(pose[:3, :3], pose[:3, 3]))
+        away = sel & (np.linalg.norm(tcp[:, :3, 3] - at[:3, 3], axis=1) > 1e-4)
+        jaw_moves = away & (np.abs(np.gradient(q[:, gi], t)) > 1e-3)
+        assert np.count_nonzero(jaw_moves) > 10  # the gripper does move while the arm is away from the pose
+        for k in np.flatnonzero(away):
+            for shape, obj in jaws:
+                f = frames[k, robot.kin.link_index[shape.link]] @ shape.origin
+                obj.setTransform(fcl.Transform(f[:3, :3], f[:3, 3]))
+                d = fcl.distance(obj, cube, fcl.DistanceRequest(), fcl.DistanceResult())
+                assert d >= plan.planner.padding - 2e-4, (t[k], q[k, gi], d)
+    # and at the grasp pose the closed jaw does reach into the padding (the check above is not vacuous)
+    cube.setTransform(fcl.Transform(cube_spec.pose[:3, :3], cube_spec.pose[:3, 3]))
+    closest = []
+    for shape, obj in jaws:
+        f = frames[k_g, robot.kin.link_index[shape.link]] @ shape.origin
+        obj.setTransform(fcl.Transform(f[:3, :3], f[:3, 3]))
+        closest.append(fcl.distance(obj, cube, fcl.DistanceRequest(), fcl.DistanceResult()))
+    assert min(closest) < plan.planner.padding
