@@ -177,9 +177,12 @@ class CollisionChecker:
     def set_grasp_target(self, name: str | None, moving_jaw_clear: bool = False) -> None:
         """Let scene object ``name`` touch the jaws (``robot.jaw_links``); None clears it.
 
-        With ``moving_jaw_clear`` only the jaw links the gripper joint does not move may touch it: the
-        links the gripper joint moves (``moving_jaw_links``) must stay clear of it by the padding, as
-        of any other item (used while the arm still moves and the gripper closes or opens near it).
+        With ``moving_jaw_clear`` the checks cover only the links the gripper joint moves
+        (``moving_jaw_links``: their shapes against the scene and against the other links), and these
+        must stay clear of ``name`` by the padding like of any other item. This is for a gripper action
+        overlapped with an arm motion whose samples were checked already with the jaws elsewhere: the
+        other links are where they were, and only the moving jaw must be checked again, now without
+        contact allowance, so that it closes on (or leaves) the object only while the arm is at rest.
         """
         if name is not None and name not in self.scene:
             raise InputError(f"grasp target '{name}' is not in the scene (items: {', '.join(self.scene.names())})")
@@ -273,7 +276,8 @@ class CollisionChecker:
         self._mv_radius = np.array([mv.radius for mv in moving])
         link_names = self._fk.robot.kin.link_names
         jaw_links, base_links = set(self.robot.jaw_links), set(self.robot.base_links)
-        touching = jaw_links - set(self.moving_jaw_links) if self._jaw_strict else jaw_links  # may touch the grasp target
+        moving_jaw = set(self.moving_jaw_links) if self._jaw_strict else set()
+        touching = jaw_links - moving_jaw  # may touch the grasp target
 
         # Shape vs item mask: which pairs are checked at all.
         mask = np.ones((s, m), dtype=bool)
@@ -283,6 +287,8 @@ class CollisionChecker:
                 if it.role == "table" and lname in base_links:
                     mask[a, k] = False
                 if it.name == self._grasp_target and lname in touching:
+                    mask[a, k] = False
+                if moving_jaw and lname not in moving_jaw:  # moving_jaw_clear: only the moving jaw is checked
                     mask[a, k] = False
         self._scene_mask = mask
         # Shapes that are checked against at least one item take part in the scene pre-filter.
@@ -304,6 +310,8 @@ class CollisionChecker:
                     continue
                 la, lb = link_names[ma.link], link_names[mb.link]
                 if la == lb or frozenset((la, lb)) in allowed:
+                    continue
+                if moving_jaw and la not in moving_jaw and lb not in moving_jaw:
                     continue
                 pairs.append((a, b))
         self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
@@ -375,7 +383,8 @@ class CollisionChecker:
         rl, pl = rot[:, self._mv_link], pos[:, self._mv_link]
         return rl @ self._mv_rot, pl + np.einsum("nsij,sj->nsi", rl, self._mv_pos)
 
-    def _evaluate(self, q: np.ndarray, stop_at_first: bool, sweep: float = 0.0) -> tuple[np.ndarray, np.ndarray | None]:
+    def _evaluate(self, q: np.ndarray, stop_at_first: bool, sweep: float = 0.0,
+                  gripper: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """Validity (N,) of arm states ``q`` (N, arm_dof); with ``stop_at_first`` states after the first
         invalid one are left marked valid and not checked. Also returns, when ``sweep`` > 0 (m), which
         states are "near" (N,): some bounding sphere grown by ``sweep`` touches an item's box or another
@@ -385,6 +394,8 @@ class CollisionChecker:
         self.check_count += n
         valid = np.all((q >= self._lower - _EPS) & (q <= self._upper + _EPS), axis=1)
         q_full = self._full(q)
+        if gripper is not None:
+            q_full[:, self._gripper_index] = gripper
         rot, pos = self._fk.frames(q_full)
         if self.singularity_margin is not None:
             valid &= self._sigma_min(rot, pos, q_full) >= self.singularity_margin
@@ -483,12 +494,15 @@ class CollisionChecker:
         """True when arm configuration ``q_arm`` (arm_dof,) is within limits, margin and collision-free."""
         return bool(self._evaluate(np.asarray(q_arm, dtype=float).reshape(1, -1), stop_at_first=False)[0][0])
 
-    def first_invalid(self, Q) -> int | None:
-        """Index of the first invalid row of ``Q`` (N, arm_dof), or None when all are valid."""
+    def first_invalid(self, Q, gripper=None) -> int | None:
+        """Index of the first invalid row of ``Q`` (N, arm_dof), or None when all are valid; ``gripper`` (N,)
+        gives each row its own gripper value (rad; default: the value of ``set_gripper``)."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         if Q.shape[0] == 0:
             return None
-        valid = self._evaluate(Q, stop_at_first=True)[0]
+        if gripper is not None and self._gripper_index is None:
+            raise InputError(f"{self.robot.name} has no gripper")
+        valid = self._evaluate(Q, stop_at_first=True, gripper=None if gripper is None else np.asarray(gripper, dtype=float))[0]
         return None if valid.all() else int(np.argmin(valid))
 
     def segment_valid(self, q0, q1, resolution: float = 0.01, refine: int = 4) -> bool:

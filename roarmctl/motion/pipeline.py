@@ -485,12 +485,14 @@ class Planner:
           jaw has opened clear of ``target``.
 
         While the arm moves, the links the gripper joint moves must stay clear of ``target`` by the padding
-        (no contact allowance; ``CollisionChecker.set_grasp_target(moving_jaw_clear=True)``). Only the jaw
-        links the gripper joint does not move (on the RoArm, link5 with the fixed jaw, which is inside the
-        padding of the cube at the grasp pose) keep their allowance, as during the straight motion itself:
-        they do not move relative to the TCP, so the gripper cannot press them into the object. Every other
-        check of the overlap (other items, self-collision, margin, torque by RNEA) is as for any sample;
-        velocity, acceleration and jerk are unchanged because the two motions move different joints.
+        (no contact allowance; ``CollisionChecker.set_grasp_target(moving_jaw_clear=True)``), and of
+        everything else as always. Only the jaw links the gripper joint does not move (on the RoArm, link5
+        with the fixed jaw, which is inside the padding of the cube at the grasp pose) keep their allowance,
+        as during the straight motion itself: they do not move relative to the TCP, so closing the gripper
+        cannot press them into the object. The other links are where the straight motion's own checks
+        found them valid (the arm's samples are unchanged), so only the moving jaw is checked again (4x
+        finer), with the singularity margin and the torques (RNEA); velocity, acceleration and jerk are
+        unchanged because the two motions move different joints.
         The longest overlap (on the sample grid) that passes is taken; the result is split where the arm
         arrives (grasp) or starts (release), so segments, the event and the payload keep their places.
         """
@@ -504,17 +506,25 @@ class Planner:
         else:  # the retreat starts within the opening, and within its own first segment
             limit = min(moving, ia, int(b.segments[0].end / dt))
         t0 = time.perf_counter()
-        m, cand = 0, None
-        try:
-            for m in range(max(limit, 0), 0, -1):
+        saved = self.checker._grasp_target, self.checker._jaw_strict, float(self.checker._q_template[self.checker._gripper_index])
+        self.checker.set_grasp_target(target, moving_jaw_clear=True)
+        tried: dict[int, TimedPath | None] = {}
+
+        def attempt(m: int) -> TimedPath | None:
+            if m not in tried:
                 cand = _superpose(ta, tb, ia, m)
-                start = ia + 1 - m
-                lo, hi = (start, ia + 1) if grasp else (start, min(ia + 1, len(cand.times) - 1))
-                if self._jaw_overlap_ok(cand, lo, hi, target):
-                    break
-            else:
-                m, cand = 0, None
+                lo, hi = ia + 1 - m, min(ia + 1, len(cand.times) - 1)
+                tried[m] = cand if self._jaw_overlap_ok(cand, lo, hi, reverse=grasp) else None
+            return tried[m]
+
+        try:  # longest first, in steps of JAW_STEP, then the few longer ones above the first that passes
+            m = next((m for m in range(max(limit, 0), 0, -JAW_STEP) if attempt(m) is not None), 0)
+            if m:
+                m = next(k for k in range(min(m + JAW_STEP - 1, limit), m - 1, -1) if attempt(k) is not None)
+            cand = tried.get(m)
         finally:
+            self.checker.set_grasp_target(saved[0], moving_jaw_clear=saved[1])
+            self.checker.set_gripper(saved[2])
             self.timer.add("blend", t0)
         if not m:
             return [a, b]
@@ -533,24 +543,24 @@ class Planner:
                        Event(t_cut, e.kind, e.label, e.position), a.blends, a.attach, a.detach, a.jaw_target),
                 _Piece(second, b.segments, b.event, b.blends, b.attach, b.detach, b.jaw_target)]
 
-    def _jaw_overlap_ok(self, tp: TimedPath, lo: int, hi: int, target: str) -> bool:
-        """Samples lo..hi of a gripper action superposed with a straight motion: collision-free (4x finer) with
-        the moving jaw kept clear of ``target`` (see ``_jaw_overlap``), outside the singularity margin, and
-        within the torque limits by RNEA (nothing is held: before a grasp, after a release)."""
+    def _jaw_overlap_ok(self, tp: TimedPath, lo: int, hi: int, reverse: bool) -> bool:
+        """Samples lo..hi of a gripper action superposed with a straight motion, under the collision state set by
+        ``_jaw_overlap``: collision-free (4x finer; checked from the end when ``reverse``, where a grasp's jaw is
+        nearest the object), outside the singularity margin, and within the torque limits by RNEA (nothing is
+        held: before a grasp, after a release)."""
         from roarmctl.robot.dynamics import inverse_dynamics
 
         a, b = max(lo - 1, 0), min(hi + 2, len(tp.times))
+        fine = _interpolate(tp.q[a:b], RECHECK_SUBSTEPS)
+        if reverse:
+            fine = fine[::-1]
+        if self.checker.first_invalid(fine[:, self.arm], gripper=fine[:, self.gi]) is not None:  # the jaw moves at every sample
+            return False
         if self.effort is not None and np.any(np.isfinite(self.effort)) and self.robot.inertials:
             tau = inverse_dynamics(self.robot, tp.q[a:b], tp.qd[a:b], tp.qdd[a:b])
             if np.any(np.abs(tau) > self.effort):
                 return False
-        saved = self.checker._grasp_target, self.checker._jaw_strict, float(self.checker._q_template[self.checker._gripper_index])
-        self.checker.set_grasp_target(target, moving_jaw_clear=True)
-        try:
-            return self._first_invalid(_interpolate(tp.q[a:b], RECHECK_SUBSTEPS)) is None
-        finally:
-            self.checker.set_grasp_target(saved[0], moving_jaw_clear=saved[1])
-            self.checker.set_gripper(saved[2])
+        return True
 
     def _superposed(self, parts: list[_Part], singles: list[_Piece]) -> tuple[_Piece, list[tuple[float, float]]]:
         """The chain's motions blended join by join; also each part's (start, end) in the result."""
@@ -979,6 +989,7 @@ def _scene_item(spec: ItemSpec):
 
 LINE_KEEP = 0.5  # a blend may round the corner over at most the first (last) half of a straight line
 BLEND_STEP = 2  # samples between the overlaps tried, longest first
+JAW_STEP = 4  # samples between the gripper overlaps tried first, longest first (then refined to 1)
 
 
 def _payload_entry(start: float, end: float, body: dict) -> dict:
