@@ -486,8 +486,8 @@ class Planner:
 
         While the arm moves, the links the gripper joint moves must stay clear of ``target`` by the padding
         (no contact allowance; ``CollisionChecker.set_grasp_target(moving_jaw_clear=True)``), and of
-        everything else as always. Only the jaw links the gripper joint does not move (on the RoArm, link5
-        with the fixed jaw, which is inside the padding of the cube at the grasp pose) keep their allowance,
+        everything else as always. Only the jaw links the gripper joint does not move (a fixed jaw and the link
+        that carries it, which may sit inside the padding of the object at the grasp pose) keep their allowance,
         as during the straight motion itself: they do not move relative to the TCP, so closing the gripper
         cannot press them into the object. The other links are where the straight motion's own checks
         found them valid (the arm's samples are unchanged), so only the moving jaw is checked again (4x
