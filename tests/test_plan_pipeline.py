@@ -411,7 +411,7 @@ def test_blend_false_keeps_the_stops_and_takes_longer(tmp_path, planned):
         for t in (seg.start, seg.end):
             k = int(np.argmin(np.abs(stops.times - t)))
             assert np.max(np.abs(stops.velocities[k])) < 1e-6, seg.label
-    assert blended.duration < 0.85 * stops.duration
+    assert blended.duration < 0.75 * stops.duration  # blended joins, gripper opened in transit, close/open overlapped
 
 
 @pytest.mark.parametrize("name", ["pick_place", "payload"])
