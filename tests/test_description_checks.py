@@ -11,18 +11,12 @@ from pathlib import Path
 
 import pytest
 
-from roarmctl.cli import main
+from roarmctl.cli import run as run_cli
 from roarmctl.robot.loader import bundled_dir, bundled_robots, load_robot
 
 M3_Q = ["0", "0", "1.57", "0", "0"]
 
 
-def run_cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 def m3_copy(tmp_path: Path, urdf_edit=None, yaml_edit=None) -> Path:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from roarmctl.cli import main
+from roarmctl.cli import run as run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 PLAN = ROOT / "plans" / "pick_place.yaml"
@@ -19,12 +19,6 @@ PLACE_XYZ = (0.25, 0.15, 0.02)  # plans/pick_place.yaml: where the cube's centre
 CUBE_SIZE = (0.04, 0.04, 0.04)
 
 
-def run_cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 @pytest.fixture(scope="module")

@@ -13,19 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from roarmctl.cli import main
+from roarmctl.cli import run as run_cli
 from roarmctl.motion.validate import validate_trajectory
 from roarmctl.robot.loader import bundled_dir
 
 HEAD = "robot: roarm_m3_pro\n"
 
 
-def run_cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 def plan_text(tmp_path: Path, text: str | bytes, capsys) -> tuple[int, str, Path, float]:

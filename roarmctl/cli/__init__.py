@@ -87,10 +87,13 @@ viz_cmd.register(app)
 export_cmd.register(app)
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Console entry point: run the app, turn library errors into one line and an exit code.
+def run(argv: list[str] | None = None) -> int:
+    """Run one command line in this process and return its exit code (no ``sys.exit``).
 
-    SIGINT, SIGTERM and SIGHUP stop a command cleanly (``roarmctl.cli.signals``): exit 130, 143, 129.
+    ``argv`` is the argument list without the program name (``["plan", "p.yaml"]``); ``None``
+    reads ``sys.argv``. Errors become one line on stderr (and a JSON object with ``--json``), as
+    for the console script. SIGINT, SIGTERM and SIGHUP stop a command cleanly
+    (``roarmctl.cli.signals``): exit 130, 143, 129.
     """
     from roarmctl.cli import signals
 
@@ -99,6 +102,12 @@ def main(argv: list[str] | None = None) -> None:
         code = _run(argv, guard)
     sys.stdout.flush()
     sys.stderr.flush()
+    return code
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console entry point: :func:`run`, then exit with its code."""
+    code = run(argv)
     if "ompl" in sys.modules and argv is None:
         # OMPL's nanobind bindings print leak warnings at interpreter exit; skip the teardown
         # (only as the console script: a caller passing argv, such as a test, keeps its process).

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from devtraj import HOME, min_jerk, pick_place
-from roarmctl.cli import main
+from roarmctl.cli import run as run_cli
 from roarmctl.device.protocol import encode
 from roarmctl.device.simulator import PtySimulator, SimConfig
 from roarmctl.device.streamer import default_latency, sample
@@ -29,12 +29,6 @@ from roarmctl.robot.loader import load_robot
 ROBOT = load_robot("roarm_m3_pro")
 
 
-def run_cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 def spawn(args: list[str]) -> subprocess.Popen:

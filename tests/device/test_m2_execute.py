@@ -13,19 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from roarmctl.cli import main
+from roarmctl.cli import run as run_cli
 from roarmctl.device.simulator import PtySimulator, SimConfig
 from roarmctl.robot.loader import load_robot
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def run_cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 @pytest.fixture(scope="module")

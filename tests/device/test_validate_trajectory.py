@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from devtraj import HOME, min_jerk
-from roarmctl.cli import main
+from roarmctl.cli import run as run_cli
 from roarmctl.device.simulator import PtySimulator, SimConfig
 from roarmctl.errors import TrajectoryFileError
 from roarmctl.motion.validate import validate_trajectory
@@ -24,12 +24,6 @@ ROBOT = load_robot("roarm_m3_pro")
 NAMES = list(ROBOT.joint_names)
 
 
-def run_cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 def three_points() -> dict:
