@@ -7,6 +7,25 @@ only ``roarmctl.cli`` turns them into output and exit codes.
 
 from __future__ import annotations
 
+from typing import Any
+
+
+def describe_value(value: Any, *, json: bool = False) -> str:
+    """How an unexpected value reads in an error message ("got a list of 3", "got str 'abc'").
+
+    ``json`` names a dict "an object" and ``None`` "null", as a JSON file's reader expects; otherwise
+    (YAML, URDF) "a mapping" and "nothing". Long values are cut at 40 characters so the message
+    stays one line.
+    """
+    if isinstance(value, dict):
+        return "an object" if json else "a mapping"
+    if isinstance(value, list):
+        return f"a list of {len(value)}"
+    if value is None:
+        return "null" if json else "nothing"
+    text = repr(value)
+    return f"{type(value).__name__} {text[:40]}{'...' if len(text) > 40 else ''}"
+
 
 class RoarmError(Exception):
     """Base class. ``exit_code`` is what the CLI exits with; ``hint`` is an optional fix."""

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from roarmctl.errors import TrajectoryFileError
+from roarmctl.errors import TrajectoryFileError, describe_value
 
 MAX_FILE_BYTES = 256 * 1024 * 1024  # a one-hour trajectory at 100 Hz is about 80 MB
 MAX_POINTS = 1_000_000
@@ -50,14 +50,7 @@ def _fail(where: str, field: str, message: str, hint: str | None = None):
 
 
 def _kind(v: Any) -> str:
-    if isinstance(v, dict):
-        return "an object"
-    if isinstance(v, list):
-        return f"a list of {len(v)}"
-    if v is None:
-        return "null"
-    text = repr(v)
-    return f"{type(v).__name__} {text[:40]}{'...' if len(text) > 40 else ''}"
+    return describe_value(v, json=True)
 
 
 def _number(v: Any, where: str, field: str, *, lo: float | None = None, hi: float | None = None,

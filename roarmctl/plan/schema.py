@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from roarmctl.errors import PlanFileError
+from roarmctl.errors import PlanFileError, describe_value
 from roarmctl.plan.yamlsrc import LocatedDict, LocatedList, load_located, locate
 from roarmctl.robot.model import transform
 
@@ -217,14 +217,7 @@ def _bounds(where: str, lo: float | None, hi: float | None) -> tuple[float, floa
     return (flo if lo is None else max(lo, flo)), (fhi if hi is None else min(hi, fhi))
 
 
-def _kind(value: Any) -> str:
-    if isinstance(value, dict):
-        return "a mapping"
-    if isinstance(value, list):
-        return f"a list of {len(value)}"
-    if value is None:
-        return "nothing"
-    return f"{type(value).__name__} {value!r}"
+_kind = describe_value
 
 
 def _closest(word: str, options: tuple[str, ...] | list[str]) -> str | None:

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from roarmctl.errors import DescriptionError
+from roarmctl.errors import DescriptionError, describe_value
 
 AXIS_TOL = 1e-3  # |axis| must be 1 within this (URDF axes are unit vectors)
 MAX_VALUE = 1e6  # any length (m), angle (rad), limit or mass in a description
@@ -32,15 +32,7 @@ def _fail(where: str, field: str, message: str, hint: str | None = None):
     raise DescriptionError(f"{where}: {field}: {message}", hint)
 
 
-def _kind(v: Any) -> str:
-    if isinstance(v, dict):
-        return "a mapping"
-    if isinstance(v, list):
-        return f"a list of {len(v)}"
-    if v is None:
-        return "nothing"
-    text = repr(v)
-    return f"{type(v).__name__} {text[:40]}"
+_kind = describe_value
 
 
 # --------------------------------------------------------------------------- YAML
