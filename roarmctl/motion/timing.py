@@ -36,6 +36,10 @@ SAFETY = SAFETY_STEPS[0]
 FINE_DT = 0.002  # s: grid on which the jerk is checked (finite differences of the acceleration)
 FILTER_GROWTH = 1.25  # each try widens the jerk filter by this factor
 FILTER_TRIES = 16
+# Torque is left out of TOPP-RA while the sampled torque of the result stays under this share of every
+# limit (it needs two RNEA calls per grid point and rarely binds); above it, the torque constraint is added
+# (at the margin's share of the limits) and the margin timed again. The samples must keep the limits either way.
+TORQUE_LAZY_SHARE = 0.9
 
 InverseDynamics = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 # TOPP-RA grid: at least GRID_MIN points over the path (10 per waypoint, up to GRID_MAX) and at
@@ -146,8 +150,9 @@ def toppra_grid(ss: np.ndarray) -> np.ndarray:
     return np.append(ss[seg] + frac * d[seg], ss[-1])
 
 
-def _tcp_speed_constraint(tcp_velocity_per_ds: Callable[[np.ndarray, np.ndarray], np.ndarray], max_speed: float):
-    """A toppra constraint bounding the TCP speed: |dp/ds| * sdot <= max_speed at every grid point."""
+def _tcp_speed_constraint(speed_per_ds: np.ndarray, max_speed: float):
+    """A toppra constraint bounding the TCP speed: |dp/ds| * sdot <= max_speed at every grid point;
+    ``speed_per_ds`` (G,) is |dp/ds| (m per unit of s) on the grid (computed once per path, not per margin)."""
     from toppra.constraint import DiscretizationType
     from toppra.constraint.linear_constraint import LinearConstraint
 
@@ -158,8 +163,6 @@ def _tcp_speed_constraint(tcp_velocity_per_ds: Callable[[np.ndarray, np.ndarray]
 
         def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
             self.dof = path.dof
-            q, qs = path(gridpoints), path(gridpoints, 1)
-            speed_per_ds = np.linalg.norm(tcp_velocity_per_ds(q, qs), axis=1)
             xbound = np.empty((len(gridpoints), 2))
             xbound[:, 0] = 0.0
             with np.errstate(divide="ignore"):
@@ -172,16 +175,26 @@ def _tcp_speed_constraint(tcp_velocity_per_ds: Callable[[np.ndarray, np.ndarray]
 GEOMETRIC_JERK_SHARE = 0.5  # of each jerk limit, for the path's own term q3(s) * sdot^3
 
 
-def _geometric_jerk_constraint(jmax: np.ndarray):
+def _path_jerk(path, gridpoints: np.ndarray) -> np.ndarray:
+    """|q3(s)| (G, n) at each grid point: the slope of q2 per grid interval, the larger of the two
+    intervals at each point (the spline's q3 is constant between knots; toppra's spline gives up to q2)."""
+    d3 = np.abs(np.diff(path(gridpoints, 2), axis=0)) / np.maximum(np.diff(gridpoints), 1e-12)[:, None]
+    return np.maximum(np.vstack([d3[:1], d3]), np.vstack([d3, d3[-1:]]))
+
+
+def _geometric_jerk_constraint(at: np.ndarray, jmax: np.ndarray):
     """Bound the path speed where the path itself turns fast: |q3(s)| * sdot^3 <= share * jerk limit.
 
     Joint jerk is q1 s3 + 3 q2 s1 s2 + q3 s1^3 (qk, sk: k-th derivatives of the path and of s(t)):
     filtering s(t) bounds the first two terms, but the last comes from the path's geometry (a cubic
     spline's third derivative, constant between knots) and only a lower speed bounds it. As a bound
-    on x = sdot^2 it is a TOPP-RA constraint.
+    on x = sdot^2 it is a TOPP-RA constraint. ``at`` (G, n) is ``_path_jerk`` on the grid.
     """
     from toppra.constraint import DiscretizationType
     from toppra.constraint.linear_constraint import LinearConstraint
+
+    with np.errstate(divide="ignore", over="ignore"):
+        bound = np.min(np.where(at > 1e-9, (GEOMETRIC_JERK_SHARE * jmax / np.maximum(at, 1e-9)) ** (2 / 3), 1e12), axis=1)
 
     class GeometricJerkConstraint(LinearConstraint):
         def __init__(self) -> None:
@@ -190,11 +203,6 @@ def _geometric_jerk_constraint(jmax: np.ndarray):
 
         def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
             self.dof = path.dof
-            # q3 per grid interval (slope of q2), then the larger of the two intervals at each grid point
-            d3 = np.abs(np.diff(path(gridpoints, 2), axis=0)) / np.maximum(np.diff(gridpoints), 1e-12)[:, None]
-            at = np.maximum(np.vstack([d3[:1], d3]), np.vstack([d3, d3[-1:]]))
-            with np.errstate(divide="ignore", over="ignore"):
-                bound = np.min(np.where(at > 1e-9, (GEOMETRIC_JERK_SHARE * jmax / np.maximum(at, 1e-9)) ** (2 / 3), 1e12), axis=1)
             xbound = np.empty((len(gridpoints), 2))
             xbound[:, 0], xbound[:, 1] = 0.0, np.minimum(bound, 1e12)
             return None, None, None, None, None, None, xbound
@@ -202,14 +210,26 @@ def _geometric_jerk_constraint(jmax: np.ndarray):
     return GeometricJerkConstraint()
 
 
-def _torque_constraint(model: TorqueModel, limits: np.ndarray):
-    """toppra's joint-torque constraint, tau = a(s) sddot + b(s) sdot^2 + c(s), with batched RNEA.
+def _torque_terms(model: TorqueModel, path, gridpoints: np.ndarray, gravity: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """toppra's canonical torque form on the grid, tau = a(s) sddot + b(s) sdot^2 + c(s), each (G, n) N m.
 
-    Same canonical form as ``toppra.constraint.JointTorqueConstraint`` (which calls the dynamics
-    once per grid point and state); here three batched calls cover the whole grid.
+    Same form as ``toppra.constraint.JointTorqueConstraint`` (which calls the dynamics once per grid
+    point and state); here two batched RNEA calls cover the whole grid, ``gravity`` (G, n) being c(s),
+    the holding torques already computed by ``check_holding`` on the same grid.
     """
+    p, ps, pss = path(gridpoints), path(gridpoints, 1), path(gridpoints, 2)
+    zero = np.zeros_like(p)
+    a = model.inverse_dynamics(p, zero, ps) - gravity
+    b = model.inverse_dynamics(p, ps, pss) - gravity
+    return a, b, gravity
+
+
+def _torque_constraint(terms: tuple[np.ndarray, np.ndarray, np.ndarray], limits: np.ndarray):
+    """A toppra constraint |a sddot + b sdot^2 + c| <= ``limits`` (n,) N m from ``_torque_terms``."""
     from toppra.constraint import DiscretizationType
     from toppra.constraint.linear_constraint import LinearConstraint
+
+    a, b, c = terms
 
     class TorqueConstraint(LinearConstraint):
         def __init__(self) -> None:
@@ -219,11 +239,6 @@ def _torque_constraint(model: TorqueModel, limits: np.ndarray):
 
         def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
             self.dof = path.dof
-            p, ps, pss = path(gridpoints), path(gridpoints, 1), path(gridpoints, 2)
-            zero = np.zeros_like(p)
-            c = model.inverse_dynamics(p, zero, zero)
-            a = model.inverse_dynamics(p, zero, ps) - c
-            b = model.inverse_dynamics(p, ps, pss) - c
             n = path.dof
             F = np.vstack([np.eye(n), -np.eye(n)])
             g = np.concatenate([limits, limits])
@@ -232,11 +247,13 @@ def _torque_constraint(model: TorqueModel, limits: np.ndarray):
     return TorqueConstraint()
 
 
-def check_holding(model: TorqueModel, q: np.ndarray, label: str) -> None:
-    """Raise InfeasibleError (exit 3) when gravity alone needs more torque than a limit at any of ``q`` (G, n)."""
+def check_holding(model: TorqueModel, q: np.ndarray, label: str) -> np.ndarray:
+    """Raise InfeasibleError (exit 3) when gravity alone needs more torque than a limit at any of ``q`` (G, n);
+    otherwise return those holding torques (G, n) N m (signed)."""
     q = np.atleast_2d(q)
     zero = np.zeros_like(q)
-    tau = np.abs(model.inverse_dynamics(q, zero, zero))
+    hold = model.inverse_dynamics(q, zero, zero)
+    tau = np.abs(hold)
     ratio = tau / model.limits
     k, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
     if ratio[k, j] > 1.0:
@@ -245,6 +262,7 @@ def check_holding(model: TorqueModel, q: np.ndarray, label: str) -> None:
         what = f"{model.load} even at rest" if model.load else "itself at rest"
         raise InfeasibleError(f"{label}: the arm cannot hold {what}: {'; '.join(over)}",
                               "use a lighter load, move it closer to the base, or check limits.effort in the robot description")
+    return hold
 
 
 class _Profile:
@@ -337,20 +355,27 @@ def time_parameterise(
     ss = np.concatenate([[0.0], np.cumsum(chord)])
     path = ta.SplineInterpolator(ss, wp, bc_type="not-a-knot")
     gridpoints = toppra_grid(ss)
-    if torque is not None:
-        check_holding(torque, path(gridpoints), label)
+    hold = check_holding(torque, path(gridpoints), label) if torque is not None else None
+    torque_limited = torque is not None and bool(np.any(np.isfinite(torque.limits)))
     tcp_ok = max_tcp_speed is not None and tcp_velocity_per_ds is not None
-    for safety in SAFETY_STEPS:
+    # Constraint pieces that do not depend on the margin: computed once per path, on the one grid.
+    speed_per_ds = np.linalg.norm(tcp_velocity_per_ds(path(gridpoints), path(gridpoints, 1)), axis=1) if tcp_ok else None
+    jm = None if jmax is None else np.asarray(jmax, dtype=float)
+    path_jerk = None if jm is None else _path_jerk(path, gridpoints)
+    torque_terms = None  # lazily: only once a sampled torque comes close to a limit (TORQUE_LAZY_SHARE)
+    i = 0
+    while i < len(SAFETY_STEPS):
+        safety = SAFETY_STEPS[i]
         constraints = [
             constraint.JointVelocityConstraint(vmax * safety),
             constraint.JointAccelerationConstraint(amax * safety),
         ]
         if tcp_ok:
-            constraints.append(_tcp_speed_constraint(tcp_velocity_per_ds, max_tcp_speed * safety))
-        if jmax is not None:
-            constraints.append(_geometric_jerk_constraint(np.asarray(jmax, dtype=float) * safety))
-        if torque is not None and np.any(np.isfinite(torque.limits)):
-            constraints.append(_torque_constraint(torque, np.where(np.isfinite(torque.limits), torque.limits * safety, 1e9)))
+            constraints.append(_tcp_speed_constraint(speed_per_ds, max_tcp_speed * safety))
+        if jm is not None:
+            constraints.append(_geometric_jerk_constraint(path_jerk, jm * safety))
+        if torque_terms is not None:
+            constraints.append(_torque_constraint(torque_terms, np.where(np.isfinite(torque.limits), torque.limits * safety, 1e9)))
         instance = algo.TOPPRA(constraints, path, gridpoints=gridpoints, parametrizer="ParametrizeConstAccel")
         instance.compute_parameterization(0.0, 0.0)
         data = instance.problem_data
@@ -359,8 +384,7 @@ def time_parameterise(
                                 "the path may pass through a point where the limits allow no motion; re-plan with another seed")
         prof = _Profile(np.asarray(data.gridpoints, dtype=float), np.asarray(data.sd_vec, dtype=float))
         w = 0.0
-        if jmax is not None:
-            jm = np.asarray(jmax, dtype=float)
+        if jm is not None:
             w = max(float(np.max(amax * safety / jm)), 2 * FINE_DT)
             lo = 0.0
             for _ in range(FILTER_TRIES):
@@ -368,6 +392,7 @@ def time_parameterise(
                     break
                 lo, w = w, w * FILTER_GROWTH
             else:
+                i += 1
                 continue
             for _ in range(3 if lo > 0 else 0):  # narrow it down (each step halves the excess width)
                 mid = 0.5 * (lo + w)
@@ -384,8 +409,14 @@ def time_parameterise(
         if ok and tcp_ok:
             ok = bool(np.max(np.linalg.norm(tcp_velocity_per_ds(q, qd), axis=1)) <= max_tcp_speed)
         if ok and torque is not None:
-            ok = bool(np.all(np.abs(torque.inverse_dynamics(q, qd, qdd)) <= torque.limits))
+            tau = np.abs(torque.inverse_dynamics(q, qd, qdd))
+            if torque_limited and torque_terms is None and np.any(tau > TORQUE_LAZY_SHARE * torque.limits):
+                # close to a limit without the torque constraint: add it and time this margin again
+                torque_terms = _torque_terms(torque, path, gridpoints, hold)
+                continue
+            ok = bool(np.all(tau <= torque.limits))
         if ok:
             return TimedPath(times, q, qd, qdd, w, s_samples)
+        i += 1
     raise PlanningError(f"{label}: the timed samples exceed the limits even with a {1 - SAFETY_STEPS[-1]:.0%} margin",
                         "re-plan with another seed")

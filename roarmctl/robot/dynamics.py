@@ -120,8 +120,13 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
     a = np.zeros((n, n_links, 3))  # linear acceleration of the link frame's origin
     a[:, 0] = (0.0, 0.0, gravity)  # gravity as an upward acceleration of the root
     org = frames[:, :, :3, 3]
+    # At rest (holding torques, the gravity term of timing): no angular velocity or acceleration anywhere,
+    # so every cross-product term below is zero and is skipped (same result, a fraction of the work).
+    moving = bool(np.any(qd) or np.any(qdd))
 
     def point_acc(link: int, r: np.ndarray) -> np.ndarray:
+        if not moving:
+            return a[:, link]
         d = r - org[:, link]
         return a[:, link] + _cross(dw[:, link], d) + _cross(w[:, link], _cross(w[:, link], d))
 
@@ -133,7 +138,9 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
         before = frames[:, p] @ joint.origin
         z = before[:, :3, :3] @ joint.axis
         axes[:, j], pivots[:, j] = z, before[:, :3, 3]
-        if joint.kind == "revolute":
+        if joint.kind == "revolute" and not moving:
+            a[:, c] = a[:, p]
+        elif joint.kind == "revolute":
             wz = qd[:, qi, None] * z
             w[:, c] = w[:, p] + wz
             dw[:, c] = dw[:, p] + qdd[:, qi, None] * z + _cross(w[:, p], wz)
@@ -163,9 +170,11 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
             continue
         rot = frames[:, k, :3, :3]
         com[:, k] = org[:, k] + rot @ inertial.com
+        force[:, k] = inertial.mass * point_acc(k, com[:, k])
+        if not moving:
+            continue
         inertia = rot @ inertial.inertia @ np.swapaxes(rot, 1, 2)
         iw = np.einsum("nij,nj->ni", inertia, w[:, k])
-        force[:, k] = inertial.mass * point_acc(k, com[:, k])
         moment[:, k] = np.einsum("nij,nj->ni", inertia, dw[:, k]) + _cross(w[:, k], iw)
 
     # Backward pass: subtree force and its moment about each joint's pivot.
