@@ -483,12 +483,14 @@ class CollisionChecker:
                             break
         return valid, (near if sweep > 0 else None)
 
-    def validity_batch(self, Q) -> np.ndarray:
-        """Validity (N,) bool of arm configurations ``Q`` (N, arm_dof), rad."""
+    def validity_batch(self, Q, gripper=None) -> np.ndarray:
+        """Validity (N,) bool of arm configurations ``Q`` (N, arm_dof), rad; ``gripper`` (N,) as in ``first_invalid``."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         if Q.shape[0] == 0:
             return np.zeros(0, dtype=bool)
-        return self._evaluate(Q, stop_at_first=False)[0]
+        if gripper is not None and self._gripper_index is None:
+            raise InputError(f"{self.robot.name} has no gripper")
+        return self._evaluate(Q, stop_at_first=False, gripper=None if gripper is None else np.asarray(gripper, dtype=float))[0]
 
     def is_valid(self, q_arm) -> bool:
         """True when arm configuration ``q_arm`` (arm_dof,) is within limits, margin and collision-free."""

@@ -517,10 +517,17 @@ class Planner:
                 tried[m] = cand if self._jaw_overlap_ok(cand, lo, hi, reverse=grasp) else None
             return tried[m]
 
-        try:  # longest first, in steps of JAW_STEP, then the few longer ones above the first that passes
-            m = next((m for m in range(max(limit, 0), 0, -JAW_STEP) if attempt(m) is not None), 0)
-            if m:
-                m = next(k for k in range(min(m + JAW_STEP - 1, limit), m - 1, -1) if attempt(k) is not None)
+        try:
+            # A necessary condition, for every overlap at once: the moving jaw is clear at the first (release) or
+            # last (grasp) pose of the arm's motion with the gripper where it is then. Only the overlaps that
+            # meet it are checked in full, longest first.
+            ms = np.arange(1, max(limit, 0) + 1)
+            if grasp:
+                arm_q, g = np.repeat(ta.q[-1:, self.arm], len(ms), axis=0), tb.q[np.minimum(ms, len(tb.times) - 1), self.gi]
+            else:
+                arm_q, g = np.repeat(tb.q[1:2, self.arm], len(ms), axis=0), ta.q[np.minimum(ia + 2 - ms, len(ta.times) - 1), self.gi]
+            clear = self.checker.validity_batch(arm_q, gripper=g) if len(ms) else np.zeros(0, dtype=bool)
+            m = next((int(k) for k in ms[clear][::-1] if attempt(int(k)) is not None), 0)
             cand = tried.get(m)
         finally:
             self.checker.set_grasp_target(saved[0], moving_jaw_clear=saved[1])
@@ -989,7 +996,6 @@ def _scene_item(spec: ItemSpec):
 
 LINE_KEEP = 0.5  # a blend may round the corner over at most the first (last) half of a straight line
 BLEND_STEP = 2  # samples between the overlaps tried, longest first
-JAW_STEP = 4  # samples between the gripper overlaps tried first, longest first (then refined to 1)
 
 
 def _payload_entry(start: float, end: float, body: dict) -> dict:
