@@ -4,7 +4,9 @@ A geometric path (waypoints in joint space, joined by a clamped cubic spline) be
 trajectory that starts and ends at rest and respects, at every output sample:
 
 * joint velocity and acceleration limits, optionally a maximum TCP speed and joint torque limits
-  (inverse dynamics by the library's RNEA): all as constraints inside TOPP-RA;
+  (inverse dynamics by the library's RNEA): all as constraints inside TOPP-RA, the torque one only
+  once the sampled torque of a result comes within ``TORQUE_LAZY_SHARE`` of a limit (it costs two
+  RNEA passes over the grid and rarely binds);
 * joint jerk limits: TOPP-RA's result is bang-bang in the path acceleration (jerk unbounded), so
   the path position s(t) is passed through a moving-average (FIR) filter of width ``w``:
   s_w(t) = (1/w) * integral of s over [t - w, t]. Then ds_w/dt = (s(t) - s(t - w)) / w and
@@ -148,6 +150,21 @@ def toppra_grid(ss: np.ndarray) -> np.ndarray:
     seg = np.repeat(np.arange(len(d)), m)
     frac = (np.arange(int(m.sum())) - np.repeat(np.cumsum(m) - m, m)) / m[seg]
     return np.append(ss[seg] + frac * d[seg], ss[-1])
+
+
+_LIMIT_CONSTRAINTS: dict[tuple[bytes, bytes], tuple] = {}
+
+
+def _joint_limit_constraints(constraint, vlim: np.ndarray, alim: np.ndarray) -> list:
+    """toppra's joint velocity and acceleration constraints for limits ``vlim``/``alim`` (n,), reused across
+    calls (they hold only the limits; building one formats every limit into a string, about 0.5 ms)."""
+    key = (vlim.tobytes(), alim.tobytes())
+    pair = _LIMIT_CONSTRAINTS.get(key)
+    if pair is None:
+        if len(_LIMIT_CONSTRAINTS) > 256:
+            _LIMIT_CONSTRAINTS.clear()
+        pair = _LIMIT_CONSTRAINTS[key] = (constraint.JointVelocityConstraint(vlim), constraint.JointAccelerationConstraint(alim))
+    return list(pair)
 
 
 def _tcp_speed_constraint(speed_per_ds: np.ndarray, max_speed: float):
@@ -366,10 +383,7 @@ def time_parameterise(
     i = 0
     while i < len(SAFETY_STEPS):
         safety = SAFETY_STEPS[i]
-        constraints = [
-            constraint.JointVelocityConstraint(vmax * safety),
-            constraint.JointAccelerationConstraint(amax * safety),
-        ]
+        constraints = _joint_limit_constraints(constraint, vmax * safety, amax * safety)
         if tcp_ok:
             constraints.append(_tcp_speed_constraint(speed_per_ds, max_tcp_speed * safety))
         if jm is not None:

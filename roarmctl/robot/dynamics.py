@@ -84,6 +84,14 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=-1)
 
 
+def _has_post(joint) -> bool:
+    """Whether the joint has a fixed transform after its motion (standard DH's d/a/alpha)."""
+    return not np.array_equal(joint.post, _EYE4)
+
+
+_EYE4 = np.eye(4)
+
+
 def _scatter_arm(robot: Robot, a: np.ndarray) -> np.ndarray:
     out = np.zeros((a.shape[0], robot.dof))
     out[:, robot.arm_indices] = a
@@ -135,9 +143,15 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
     pivots = np.zeros((n, n_joints, 3))
     for j, joint in enumerate(robot.joints):
         p, c, qi = kin._parent[j], kin._child[j], kin._qidx[j]
-        before = frames[:, p] @ joint.origin
-        z = before[:, :3, :3] @ joint.axis
-        axes[:, j], pivots[:, j] = z, before[:, :3, 3]
+        at_origin = joint.kind != "prismatic" and not _has_post(joint)
+        if at_origin:
+            # child = before @ rotation about the axis (or nothing): same origin, same axis direction
+            z = frames[:, c, :3, :3] @ joint.axis
+            axes[:, j], pivots[:, j] = z, org[:, c]
+        else:
+            before = frames[:, p] @ joint.origin
+            z = before[:, :3, :3] @ joint.axis
+            axes[:, j], pivots[:, j] = z, before[:, :3, 3]
         if joint.kind == "revolute" and not moving:
             a[:, c] = a[:, p]
         elif joint.kind == "revolute":
@@ -146,8 +160,11 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
             dw[:, c] = dw[:, p] + qdd[:, qi, None] * z + _cross(w[:, p], wz)
             # the pivot lies on the axis: it moves with the parent and with the child alike
             a_piv = point_acc(p, pivots[:, j])
-            d = org[:, c] - pivots[:, j]
-            a[:, c] = a_piv + _cross(dw[:, c], d) + _cross(w[:, c], _cross(w[:, c], d))
+            if at_origin:  # the child's origin is the pivot
+                a[:, c] = a_piv
+            else:
+                d = org[:, c] - pivots[:, j]
+                a[:, c] = a_piv + _cross(dw[:, c], d) + _cross(w[:, c], _cross(w[:, c], d))
         elif joint.kind == "prismatic":
             w[:, c], dw[:, c] = w[:, p], dw[:, p]
             a[:, c] = point_acc(p, org[:, c]) + 2.0 * _cross(w[:, p], qd[:, qi, None] * z) + qdd[:, qi, None] * z
