@@ -186,7 +186,8 @@ def ik(
         None, "--pitch",
         help="RoArm: angle of the approach axis (tool +x) below the horizontal, in the vertical plane through the "
              "base axis and the target (rad; deg with --deg): 0 points away from the base (home pose), pi/2 (90 deg) "
-             "straight down. Left out: searched, preferring --ref's pitch, else straight down."),
+             "straight down. Left out: the pitch nearest to --ref's (else straight down), in 1 deg steps, at which "
+             "the arm is within its limits, free of self-collision and clear of the singularity margin; printed."),
     roll: Optional[float] = typer.Option(
         None, "--roll", help="RoArm: wrist-roll joint value, the turn of the tool about its approach axis (rad; deg with "
                              "--deg); default --ref's roll, else 0."),
@@ -211,7 +212,7 @@ def ik(
 
     from roarmctl.errors import RoarmError, UnreachableError
     from roarmctl.robot.frames import device_point, from_frame, get_frame
-    from roarmctl.robot.ik import ORI_TOL, POS_TOL, check_solution, solve_ik_frame, tool_pitch
+    from roarmctl.robot.ik import ORI_TOL, POS_TOL, check_solution, solve_ik_auto_pitch, solve_ik_frame, tool_pitch
     from roarmctl.robot.loader import load_robot
 
     r = load_robot(robot)
@@ -220,13 +221,28 @@ def ik(
     rpy_rad = None if rpy is None else np.array([conv(v) for v in rpy])
     q_ref = _split_numbers(ref, "--ref", deg)
     target = from_frame(fr, np.array(xyz, dtype=float))
+    is_roarm = r.singularity_model == "roarm5" or r.name == "roarm_m3_pro"
+    auto = is_roarm and pitch is None and rpy is None
+    xyz_arr = np.array(xyz, dtype=float)
     try:
-        sols = solve_ik_frame(r, fr, np.array(xyz, dtype=float), pitch=None if pitch is None else conv(pitch),
-                              roll=None if roll is None else conv(roll), rpy=rpy_rad, q_ref=q_ref, all_solutions=all_solutions)
+        if auto:  # the pitch nearest to --ref's (else straight down) that is valid and clear of the margin
+            from roarmctl.motion.collision import CollisionChecker
+            from roarmctl.motion.scene import Scene
+            from roarmctl.plan.schema import PlannerConfig
+
+            checker = CollisionChecker(r, Scene([]), singularity_margin=PlannerConfig().singularity_margin)
+            preferred = tool_pitch(r, q_ref, target) if q_ref is not None else float(np.pi / 2)
+            sols, _ = solve_ik_auto_pitch(
+                r, xyz_arr, preferred=preferred, roll=None if roll is None else conv(roll), q_ref=q_ref,
+                all_solutions=all_solutions, accept=lambda qq: checker.is_valid(qq[r.arm_indices]),
+                solve=lambda p, **kw: solve_ik_frame(r, fr, p, **kw))
+        else:
+            sols = solve_ik_frame(r, fr, xyz_arr, pitch=None if pitch is None else conv(pitch),
+                                  roll=None if roll is None else conv(roll), rpy=rpy_rad, q_ref=q_ref,
+                                  all_solutions=all_solutions)
     except UnreachableError as exc:
         raise UnreachableError(f"unreachable ({exc.reason}): {exc.message}", exc.reason, exc.hint) from None
     checks = [check_solution(r, q, r.kin.fk(q)[:3, 3] + target - device_point(r, fr, q), rpy_rad) for q in sols]
-    is_roarm = r.singularity_model == "roarm5" or r.name == "roarm_m3_pro"
     pitches = [tool_pitch(r, q, target) for q in sols] if is_roarm else None
     for q, c in zip(sols, checks):  # the library checked already; a failure here is a bug, not an input error
         if c.position_error > POS_TOL or (c.orientation_error is not None and c.orientation_error > ORI_TOL):
@@ -266,7 +282,7 @@ def ik(
         t.add_row(str(k), *[f"{v:.{digits}f}" for v in q], *extra, f"{c.position_error:.1e}")
     common.console().print(t)
     if pitches is not None and pitch is None and rpy is None:
-        common.console(stderr=True).print(f"pitch chosen: {out['pitches'][0]:.2f} {unit} (pass --pitch to fix it)")
+        common.console(stderr=True).print(f"pitch chosen (auto): {out['pitches'][0]:.2f} {unit} (pass --pitch to fix it)")
 
 
 @kin_app.command("dynamics")

@@ -137,6 +137,52 @@ def tool_pitch(robot: Robot, q: np.ndarray, position=None) -> float:
     return _pitch_of(t, u_h)
 
 
+PITCH_STEP = math.radians(1.0)  # pitch: auto tries the preferred pitch, then +-1 deg, +-2 deg, ...
+
+
+def pitch_candidates(preferred: float, step: float = PITCH_STEP) -> list[float]:
+    """Pitches (rad) in the order ``pitch: auto`` tries them: ``preferred``, then alternately above
+    and below it in ``step``s, over the whole circle (wrapped to [-pi, pi])."""
+    out = [float(_wrap(preferred))]
+    n = int(math.ceil(math.pi / step))
+    for k in range(1, n + 1):
+        for sgn in (1.0, -1.0):
+            v = float(_wrap(preferred + sgn * k * step))
+            if all(abs(_wrap(v - o)) > 1e-9 for o in out):
+                out.append(v)
+    return out
+
+
+def solve_ik_auto_pitch(robot: Robot, position, *, preferred: float, accept: Callable[[np.ndarray], bool],
+                        roll: float | None = None, q_ref=None, all_solutions: bool = False,
+                        solve: Callable | None = None) -> tuple[list[np.ndarray], float]:
+    """RoArm IK with the pitch chosen: the pitch nearest to ``preferred`` (rad, 1 deg steps) at which
+    some solution is within the limits and ``accept``-ed (e.g. collision-free and clear of the
+    singularity margin). Returns (the accepted solutions, best first; the pitch). ``solve`` replaces
+    ``solve_ik`` (same keywords), e.g. for targets in another frame.
+
+    Raises UnreachableError when no pitch works, naming why the preferred one failed.
+    """
+    solve = solve or (lambda p, **kw: solve_ik(robot, p, **kw))
+    first: UnreachableError | None = None
+    rejected = 0
+    for pitch in pitch_candidates(preferred):
+        try:
+            sols = solve(position, pitch=pitch, roll=roll, q_ref=q_ref, all_solutions=True)
+        except UnreachableError as exc:
+            first = first or exc
+            continue
+        ok = [q for q in sols if accept(q)]
+        rejected += len(sols) - len(ok)
+        if ok:
+            return (ok if all_solutions else ok[:1]), pitch
+    why = first.message if first is not None else "every solution collides or is too close to a singularity"
+    reason = "collision" if rejected and first is None else (first.reason if first else "out_of_reach")
+    raise UnreachableError(f"no tool pitch reaches the target validly ({rejected} in-limit solutions rejected); "
+                           f"at the preferred pitch {math.degrees(preferred):.1f} deg: {why}", reason,
+                           "move the target")
+
+
 def solve_ik_frame(robot: Robot, frame, position, **kw) -> list[np.ndarray]:
     """``solve_ik`` for a target given in a robot frame (``roarmctl.robot.frames.Frame``, its unit)
     for the frame's device end point (e.g. the RoArm firmware's own TCP, 2-3 mm from ``hand_tcp``).
