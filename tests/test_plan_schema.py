@@ -50,8 +50,8 @@ CASES = [
     ("name: RRTConnect", "name: RRTconnect", "RRTconnect", ["planner.name", "did you mean 'RRTConnect'"]),
     ("size: [0.04, 0.04, 0.04]", "size: [0.04, 0.04]", "size: [0.04, 0.04]", ["objects[0].size", "list of 3 numbers"]),
     ("xyz: [0.25, 0.15, 0.02]", "xyz: [0.25, 0.15, high]", "high", ["task 2: place.xyz[2]", "expected a number"]),
-    ("{pose: home}", "{pose: hom}", "pose: hom", ["task 3: move.pose", "did you mean 'home'"]),
-    ("  - move:  {pose: home}", "  - mvoe:  {pose: home}", "mvoe", ["unknown task 'mvoe'", "did you mean 'move'"]),
+    ("{pose: home,", "{pose: hom,", "pose: hom", ["task 3: move.pose", "did you mean 'home'"]),
+    ("  - move:  {pose: home,", "  - mvoe:  {pose: home,", "mvoe", ["unknown task 'mvoe'", "did you mean 'move'"]),
     ("seed: 1", "seed: -1", "seed: -1", ["planner.seed", "whole number"]),
     ("shape: box, size: [0.04", "shape: cube, size: [0.04", "shape: cube", ["objects[0].shape", "'cube' is not one of"]),
 ]

@@ -16,12 +16,14 @@ def default_output(plan_path: Path) -> Path:
     return plan_path.with_name(plan_path.stem + ".traj.json")
 
 
-def run_planner(plan: Path, seed: Optional[int], quiet: bool):
-    """Plan with a rich progress display on stderr (none when ``quiet``); returns the PlanResult."""
+def run_planner(plan: Path, seed: Optional[int], quiet: bool, current=None):
+    """Plan with a rich progress display on stderr (none when ``quiet``); returns the PlanResult.
+
+    ``current(robot)`` measures the arm for ``start: current``."""
     from roarmctl.motion.pipeline import plan_file
 
     if quiet or not sys.stderr.isatty():  # no live display in pipes and logs
-        return plan_file(plan, seed=seed)
+        return plan_file(plan, seed=seed, current=current)
     from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
     with Progress(SpinnerColumn(), TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} tasks"),
@@ -31,7 +33,33 @@ def run_planner(plan: Path, seed: Optional[int], quiet: bool):
         def progress(stage: str, done: int, total: int) -> None:
             bar.update(job, description=stage, completed=done, total=total)
 
-        return plan_file(plan, seed=seed, progress=progress)
+        return plan_file(plan, seed=seed, progress=progress, current=current)
+
+
+def arm_reader(port: Optional[str], sim: bool, notes: list[str]):
+    """``current(robot)`` for ``start: current``: reads the arm on ``port`` (or a fresh simulator)."""
+    from roarmctl.errors import InputError
+
+    if port is not None and sim:
+        raise InputError("give one of --port PORT and --sim, not both")
+    if port is None and not sim:
+        return None
+
+    def current(robot):
+        from roarmctl.device.pose import read_configuration
+
+        if sim:
+            from roarmctl.device.simulator import PtySimulator, SimConfig
+
+            with PtySimulator(SimConfig()) as simulator:
+                q, fb = read_configuration(simulator.path, robot)
+        else:
+            q, fb = read_configuration(port, robot)
+        notes.append("start: current = the arm's measured pose: " + ", ".join(f"{v:.4f}" for v in q) + " rad; "
+                     f"firmware x/y/z ({fb.xyz[0]:.1f}, {fb.xyz[1]:.1f}, {fb.xyz[2]:.1f}) mm")
+        return q
+
+    return current
 
 
 def register(app: typer.Typer) -> None:
@@ -41,9 +69,16 @@ def register(app: typer.Typer) -> None:
         output: Optional[Path] = typer.Option(None, "-o", "--output", help="Trajectory file to write (default: next to the plan, .traj.json)."),
         seed: Optional[int] = typer.Option(None, "--seed", help="Random seed (overrides planner.seed; same seed -> same file)."),
         json_out: bool = typer.Option(False, "--json", help="Print a JSON summary instead of the table."),
+        port: Optional[str] = typer.Option(None, "--port", "-p", help="For 'start: current': read the arm's pose from this serial port (the arm does not move)."),
+        sim: bool = typer.Option(False, "--sim", help="For 'start: current': read it from a fresh firmware simulator (its boot pose)."),
     ) -> None:
-        """Plan every task of PLAN, time it with TOPP-RA, re-check it and write the trajectory file."""
-        result = run_planner(plan, seed, quiet=json_out)
+        """Plan every task of PLAN, time it with TOPP-RA, re-check it and write the trajectory file.
+
+        A plan with 'start: current' starts where the arm is: give --port (or --sim) to read it.
+        """
+        measured: list[str] = []
+        result = run_planner(plan, seed, quiet=json_out, current=arm_reader(port, sim, measured))
+        result.notes[:0] = measured
         out = output or default_output(plan)
         result.trajectory.save(out)
         traj = result.trajectory
@@ -60,9 +95,13 @@ def register(app: typer.Typer) -> None:
             "points": len(traj.times),
             "events": [{"time_from_start": e.time, "kind": e.kind, "label": e.label} for e in traj.events],
             "warnings": result.warnings,
+            "notes": result.notes,
         }
         for w in result.warnings:
             common.warn(w)
+        if not json_out:
+            for n in result.notes:
+                sys.stderr.write(f"note: {n}\n")
         if json_out:
             common.print_json(summary)
             return

@@ -42,6 +42,7 @@ class PlanResult:
     segments: int = 0
     checks: int = 0
     peaks: dict | None = None  # roarmctl.motion.report.motion_peaks: per-joint peaks and fractions of the limits
+    notes: list[str] = field(default_factory=list)  # choices made for the user (pitch: auto, grip width)
 
     @property
     def planning_time(self) -> float:
@@ -116,13 +117,21 @@ class _Timer:
 
 
 def plan_file(path: str | Path | dict, seed: int | None = None, progress: ProgressFn | None = None,
-              base_dir: str | Path | None = None) -> PlanResult:
+              base_dir: str | Path | None = None, current: Callable[[object], np.ndarray] | None = None) -> PlanResult:
     """Load the plan at ``path`` (or a plan dict of the same form) and plan it (``seed`` overrides
-    ``planner.seed``; ``base_dir`` resolves a dict's relative robot path)."""
+    ``planner.seed``; ``base_dir`` resolves a dict's relative robot path).
+
+    ``current(robot)`` returns the arm's measured configuration (dof,) rad for ``start: current``
+    (the CLI reads it from the arm or the simulator); without it such a plan is an input error.
+    """
+    from roarmctl.errors import InputError
     from roarmctl.robot.loader import load_robot
 
     path = path if isinstance(path, dict) else Path(path)
     plan = load_plan(path, base_dir=base_dir)  # form first, so typos are reported before anything heavy
+    if isinstance(plan.start, str) and plan.start == "current" and current is None:
+        raise InputError(f"{plan.path}: start: current needs the arm to read its pose from",
+                         "pass --port PORT (or --sim), or give a named pose or joint values as start")
     load_planning_libraries()
     try:
         robot = load_robot(_robot_spec(plan))
@@ -130,7 +139,9 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
         raise
     except InputError as exc:  # unknown robot: name the plan's line
         raise PlanFileError(f"{plan.path}:{plan.lines.get('robot', 1)}: robot: {exc.message}", exc.hint) from None
-    plan = load_plan(path, named_poses=list(robot.named_poses), base_dir=base_dir)
+    plan = load_plan(path, named_poses=list(robot.named_poses), base_dir=base_dir, frames=robot.frames)
+    if isinstance(plan.start, str) and plan.start == "current":
+        plan.start = np.asarray(current(robot), dtype=float)
     if seed is not None:
         plan.planner.seed = seed
     return Planner(plan, robot, progress).run()
@@ -173,6 +184,7 @@ class Planner:
         self.progress = progress or (lambda stage, done, total: None)
         self.timer = _Timer()
         self.warnings: list[str] = []
+        self.notes: list[str] = []
         self.arm = robot.arm_indices
         self.gi = robot.joint_index(robot.gripper.joint) if robot.gripper else None
         items = [_scene_item(s) for s in plan.scene + plan.objects]
@@ -236,7 +248,7 @@ class Planner:
         from roarmctl.motion.report import motion_peaks
 
         return PlanResult(traj, dict(self.timer.t), self.warnings, len(traj.segments), int(getattr(self.checker, "check_count", 0)),
-                          motion_peaks(traj, self.robot))
+                          motion_peaks(traj, self.robot), self.notes)
 
     def _partial(self, pieces: list[_Piece], q: np.ndarray, task, index: int) -> PartialPlan:
         """The trajectory timed before the failure (just the pose ``q`` if nothing was) and the failing task's target."""
@@ -287,12 +299,32 @@ class Planner:
         if isinstance(task, WaitTask):
             return [_Step("wait", f"{where}: wait {task.seconds:g} s", duration=task.seconds)]
         if isinstance(task, MoveTask):
-            return [_Step("free", f"{where}: move", q_to=self._move_goal(task, q, where))]
+            goal, label = self._move_goal(task, q, where)
+            steps = [_Step("free", f"{where}: move{label}", q_to=goal)]
+            g = self._gripper_value(task.gripper)
+            if g is not None and abs(g - q[self.gi]) > 1e-9:
+                word = {"open": "open", "closed": "close"}.get(task.gripper, "set") if isinstance(task.gripper, str) else "set"
+                steps.append(_Step("gripper", f"{where}: {word} gripper", gripper_to=g))
+            return steps
         if isinstance(task, PickTask):
             return self._expand_pick(task, q, where)
         return self._expand_place(task, q, where)
 
-    def _move_goal(self, task: MoveTask, q: np.ndarray, where: str) -> np.ndarray:
+    def _gripper_value(self, value: float | str | None) -> float | None:
+        """A move's ``gripper:`` as a joint value (rad), or None (keep it)."""
+        if value is None:
+            return None
+        if self.gi is None:
+            raise InfeasibleError(f"{self.plan.path}: {self.robot.name} has no gripper to open or close")
+        if isinstance(value, str):
+            return float(self.robot.gripper.open if value == "open" else self.robot.gripper.closed)
+        lo, hi = self.robot.lower[self.gi], self.robot.upper[self.gi]
+        if not lo - 1e-9 <= value <= hi + 1e-9:
+            raise InfeasibleError(f"{self.plan.path}: gripper {value:.3f} rad is outside [{lo:.3f}, {hi:.3f}]")
+        return float(value)
+
+    def _move_goal(self, task: MoveTask, q: np.ndarray, where: str) -> tuple[np.ndarray, str]:
+        label = ""
         if task.pose is not None:
             goal = self.robot.full_q(self.robot.named_poses[task.pose]).copy()
         elif task.joints is not None:
@@ -302,12 +334,14 @@ class Planner:
                 raise InfeasibleError(f"{where}: joints: {exc}") from None
         else:
             pitch = task.pitch if task.pitch is not None else math.pi / 2
-            goal = self._choose_ik([(task.xyz, pitch, None)], q, where)[0]
+            chain, pitch = self._choose_ik_pitch([task.xyz], pitch, task.pitch_auto, None, q, where)
+            goal = chain[0]
+            label = _pitch_label(pitch, task.pitch_auto)
         if self.gi is not None:
             goal[self.gi] = q[self.gi]
         if not self.robot.within_limits(goal):
             raise InfeasibleError(f"{where}: the goal configuration is outside the joint limits")
-        return goal
+        return goal, label
 
     def _expand_pick(self, task: PickTask, q: np.ndarray, where: str) -> list[_Step]:
         if self.held is not None:
@@ -316,19 +350,21 @@ class Planner:
         grasp = centre + np.array([0.0, 0.0, task.grasp_offset])
         above = grasp + np.array([0.0, 0.0, task.approach_height])
         g_open = task.gripper_open if task.gripper_open is not None else self.robot.gripper.open
-        g_closed = task.gripper_closed if task.gripper_closed is not None else self.robot.gripper.closed
+        g_closed = self._grip_value(task, g_open, where)
         self._set_state(g_open, grasp_target=task.object)
-        q_grasp, q_above = self._choose_ik([(grasp, task.pitch, task.roll), (above, task.pitch, task.roll)], q, where, gripper=g_open)
+        (q_grasp, q_above), pitch = self._choose_ik_pitch([grasp, above], task.pitch, task.pitch_auto, task.roll, q, where,
+                                                          gripper=g_open)
         self._set_state(q[self.gi])
-        steps = [_Step("free", f"{where}: transit above '{task.object}'", q_to=_with(q_above, self.gi, q[self.gi]),
+        lab = _pitch_label(pitch, task.pitch_auto)
+        steps = [_Step("free", f"{where}: transit above '{task.object}'{lab}", q_to=_with(q_above, self.gi, q[self.gi]),
                        open_to=g_open if abs(q[self.gi] - g_open) > 1e-9 else None, open_label=f"{where}: open gripper")]
         steps += [
-            _Step("cartesian", f"{where}: descend to '{task.object}'", q_to=q_grasp, line=(above, grasp),
-                  pitch=task.pitch, roll=task.roll, grasp_target=task.object),
+            _Step("cartesian", f"{where}: descend to '{task.object}'{lab}", q_to=q_grasp, line=(above, grasp),
+                  pitch=pitch, roll=task.roll, grasp_target=task.object),
             _Step("gripper", f"{where}: grasp '{task.object}'", gripper_to=g_closed, grasp_target=task.object,
                   event=Event(0.0, "grasp", f"pick {task.object}", [float(v) for v in grasp])),
-            _Step("cartesian", f"{where}: lift '{task.object}'", q_to=q_above, line=(grasp, above),
-                  pitch=task.pitch, roll=task.roll, grasp_target=task.object),
+            _Step("cartesian", f"{where}: lift '{task.object}'{lab}", q_to=q_above, line=(grasp, above),
+                  pitch=pitch, roll=task.roll, grasp_target=task.object),
         ]
         self._pending_pick = (task.object, grasp - centre)
         return steps
@@ -342,15 +378,73 @@ class Planner:
         target = np.asarray(task.xyz, dtype=float) + self.held_offset
         above = target + np.array([0.0, 0.0, task.approach_height])
         g_open = task.gripper_open if task.gripper_open is not None else self.robot.gripper.open
-        q_place, q_above = self._choose_ik([(target, task.pitch, task.roll), (above, task.pitch, task.roll)], q, where)
+        (q_place, q_above), pitch = self._choose_ik_pitch([target, above], task.pitch, task.pitch_auto, task.roll, q, where)
+        lab = _pitch_label(pitch, task.pitch_auto)
         return [
-            _Step("free", f"{where}: transit above the place for '{name}'", q_to=q_above),
-            _Step("cartesian", f"{where}: lower '{name}'", q_to=q_place, line=(above, target), pitch=task.pitch, roll=task.roll),
+            _Step("free", f"{where}: transit above the place for '{name}'{lab}", q_to=q_above),
+            _Step("cartesian", f"{where}: lower '{name}'{lab}", q_to=q_place, line=(above, target), pitch=pitch, roll=task.roll),
             _Step("gripper", f"{where}: release '{name}'", gripper_to=g_open, grasp_target=name,
                   event=Event(0.0, "release", f"place {name}", [float(v) for v in target])),
-            _Step("cartesian", f"{where}: retreat from '{name}'", q_to=_with(q_above, self.gi, g_open), line=(target, above),
-                  pitch=task.pitch, roll=task.roll, grasp_target=name),
+            _Step("cartesian", f"{where}: retreat from '{name}'{lab}", q_to=_with(q_above, self.gi, g_open), line=(target, above),
+                  pitch=pitch, roll=task.roll, grasp_target=name),
         ]
+
+    def _grip_value(self, task: PickTask, g_open: float, where: str) -> float:
+        """The gripper value at the grasp; checks that the open jaws clear the object (jaw widths known)."""
+        gr = self.robot.gripper
+        if not gr.has_widths:
+            return task.gripper_closed if task.gripper_closed is not None else gr.closed
+        spec = next(o for o in self.plan.objects if o.name == task.object)
+        width = _grasp_width(spec)
+        opening = gr.width(g_open)
+        if opening < width + gr.clearance:
+            need = gr.q_for_width(width + gr.clearance)
+            fix = (f"open to at least {need:.2f} rad" if width + gr.clearance <= gr.width(gr.open)
+                   else f"the jaws open {gr.width(gr.open) * 1000:.0f} mm at most: give a smaller grasp_width or pick it another way")
+            raise InfeasibleError(
+                f"{where}: gripper_open {g_open:.3f} rad opens the jaws {opening * 1000:.1f} mm; '{task.object}' is "
+                f"{width * 1000:.1f} mm wide (+{gr.clearance * 1000:.0f} mm clearance)", fix)
+        if task.gripper_closed is not None:
+            closed = task.gripper_closed
+            if closed <= gr.closed + 1e-9 and width > gr.width(gr.closed) + 1e-6:
+                self.warnings.append(
+                    f"{where}: gripper_closed {closed:.3f} rad closes the jaws fully on '{task.object}' ({width * 1000:.1f} mm "
+                    f"wide): the servo presses until it stalls; leave gripper_closed out to close to "
+                    f"{(width - (task.squeeze if task.squeeze is not None else gr.squeeze)) * 1000:.1f} mm")
+            elif gr.width(closed) >= width:
+                self.warnings.append(
+                    f"{where}: gripper_closed {closed:.3f} rad leaves the jaws {gr.width(closed) * 1000:.1f} mm apart on "
+                    f"'{task.object}' ({width * 1000:.1f} mm wide): it would not hold; leave gripper_closed out")
+            return closed
+        squeeze = task.squeeze if task.squeeze is not None else gr.squeeze
+        want = width - squeeze
+        if want <= gr.width(gr.closed):
+            self.warnings.append(f"{where}: '{task.object}' ({width * 1000:.1f} mm) is narrower than the closed jaws "
+                                 f"({gr.width(gr.closed) * 1000:.1f} mm) plus the squeeze: the gripper closes fully")
+            return gr.closed
+        closed = gr.q_for_width(want)
+        self.notes.append(f"{where}: grip '{task.object}' ({width * 1000:.1f} mm) at {want * 1000:.1f} mm: gripper {closed:.3f} rad")
+        return closed
+
+    def _choose_ik_pitch(self, points: list[np.ndarray], pitch: float, auto: bool, roll: float | None, q: np.ndarray,
+                         where: str, gripper: float | None = None) -> tuple[list[np.ndarray], float]:
+        """``_choose_ik`` for points that share one pitch; with ``auto`` the pitch nearest to ``pitch``
+        (1 deg steps, ``ik.pitch_candidates``) at which a chain is valid (limits, collisions, margin)."""
+        from roarmctl.robot.ik import pitch_candidates
+
+        if not auto:
+            return self._choose_ik([(p, pitch, roll) for p in points], q, where, gripper=gripper), pitch
+        first: UnreachableError | None = None
+        for cand in pitch_candidates(pitch):
+            try:
+                chain = self._choose_ik([(p, cand, roll) for p in points], q, where, gripper=gripper)
+            except UnreachableError as exc:
+                first = first or exc
+                continue
+            self.notes.append(f"{where}: pitch auto chose {math.degrees(cand):.1f} deg (asked {math.degrees(pitch):.1f} deg)")
+            return chain, cand
+        raise UnreachableError(f"{where}: no tool pitch reaches it validly; at {math.degrees(pitch):.1f} deg: {first.message}",
+                               first.reason, first.hint)
 
     def _choose_ik(self, targets: list[tuple[np.ndarray, float, float | None]], q: np.ndarray, where: str,
                    gripper: float | None = None) -> list[np.ndarray]:
@@ -1035,6 +1129,21 @@ def _split(tp: TimedPath, i: int) -> tuple[TimedPath, TimedPath]:
     first = TimedPath(tp.times[:i + 1].copy(), tp.q[:i + 1].copy(), tp.qd[:i + 1].copy(), tp.qdd[:i + 1].copy(), tp.jerk_filter)
     second = TimedPath(tp.times[i:] - t0, tp.q[i:].copy(), tp.qd[i:].copy(), tp.qdd[i:].copy(), tp.jerk_filter)
     return first, second
+
+
+def _pitch_label(pitch: float, auto: bool) -> str:
+    """Segment label suffix recording an automatically chosen pitch."""
+    return f" (pitch {math.degrees(pitch):.1f} deg, auto)" if auto else ""
+
+
+def _grasp_width(spec: ItemSpec) -> float:
+    """Width (m) of an object across the jaws: ``grasp_width``, else the shape's narrowest horizontal
+    extent (box: its smaller side in x/y; cylinder, sphere: the diameter)."""
+    if spec.grasp_width is not None:
+        return float(spec.grasp_width)
+    if spec.shape == "box":
+        return float(min(spec.size[0], spec.size[1]))
+    return 2.0 * float(spec.radius)
 
 
 def _with(q: np.ndarray, index: int | None, value: float | None) -> np.ndarray:

@@ -38,6 +38,7 @@ class ItemSpec:
     mass: float | None = None  # kg; carried by the hand from grasp to release
     com: np.ndarray | None = None  # (3,) m, object frame, from the shape's centre; None: the centre
     inertia: np.ndarray | None = None  # (3, 3) kg m^2 about the COM, object axes; None: uniform solid
+    grasp_width: float | None = None  # m across the jaws; default: the shape's narrowest horizontal extent
     line: int = 0
 
     @property
@@ -55,6 +56,8 @@ class PickTask:
     gripper_open: float | None = None
     gripper_closed: float | None = None
     grasp_offset: float = 0.0
+    squeeze: float | None = None  # m the jaws close below the grasp width (default: the robot's)
+    pitch_auto: bool = False
     line: int = 0
     kind: str = "pick"
 
@@ -67,6 +70,7 @@ class PlaceTask:
     pitch: float = math.pi / 2
     roll: float | None = None
     gripper_open: float | None = None
+    pitch_auto: bool = False
     line: int = 0
     kind: str = "place"
 
@@ -77,6 +81,8 @@ class MoveTask:
     joints: np.ndarray | None = None
     xyz: np.ndarray | None = None
     pitch: float | None = None
+    pitch_auto: bool = False
+    gripper: float | str | None = None  # rad, or "open" / "closed" (the robot's values); None: keep
     line: int = 0
     kind: str = "move"
 
@@ -198,6 +204,8 @@ FIELD_BOUNDS: dict[str, tuple[float, float]] = {
     "gripper_open": (-4 * math.pi, 4 * math.pi),
     "gripper_closed": (-4 * math.pi, 4 * math.pi),
     "grasp_offset": (-0.5, 0.5),
+    "grasp_width": (0.0, 10.0),
+    "gripper": (-4 * math.pi, 4 * math.pi),
     "velocity_scale": (0.01, 1.0),
     "acceleration_scale": (0.01, 1.0),
     "max_tcp_speed": (0.001, 5.0),
@@ -217,6 +225,25 @@ def _bounds(where: str, lo: float | None, hi: float | None) -> tuple[float, floa
     return (flo if lo is None else max(lo, flo)), (fhi if hi is None else min(hi, fhi))
 
 
+def _position(ctx: _Ctx, value: Any, line: int, where: str, frames: dict | None) -> np.ndarray:
+    """A position: ``[x, y, z]`` in metres (world frame), or ``{FRAME: [x, y, z]}`` in a frame of
+    the robot (its unit, e.g. ``{firmware: [300, 0, -100]}`` in mm). Before the robot is known
+    (``frames`` None) the numbers are only checked."""
+    if isinstance(value, dict) and len(value) == 1 and next(iter(value)) != "deg":
+        (name, vals), = value.items()
+        v = ctx.vector(vals, line, f"{where}.{name}", 3)
+        if frames is None:
+            return v
+        if name == "world":
+            return v
+        if name not in frames:
+            ctx.fail(line, where, f"the robot has no frame '{name}'", f"frames: {', '.join(['world', *frames])}")
+        from roarmctl.robot.frames import from_frame
+
+        return from_frame(frames[name], v)
+    return ctx.vector(value, line, where, 3)
+
+
 _kind = describe_value
 
 
@@ -228,11 +255,11 @@ def _closest(word: str, options: tuple[str, ...] | list[str]) -> str | None:
 
 
 # ------------------------------------------------------------------ items
-def _item(ctx: _Ctx, raw: Any, line: int, where: str, role: str) -> ItemSpec:
-    keys = ("name", "shape", "size", "radius", "length", "xyz", "rpy", "mass", "com", "inertia")
+def _item(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: dict | None = None) -> ItemSpec:
+    keys = ("name", "shape", "size", "radius", "length", "xyz", "rpy", "mass", "com", "inertia", "grasp_width")
     d = ctx.mapping(raw, line, where, keys, required=("shape", "xyz") + (("name",) if role != "table" else ()))
     shape = ctx.string(d["shape"], d.line_of("shape"), f"{where}.shape", SHAPES)
-    xyz = ctx.vector(d["xyz"], d.line_of("xyz"), f"{where}.xyz", 3)
+    xyz = _position(ctx, d["xyz"], d.line_of("xyz"), f"{where}.xyz", frames)
     rpy = ctx.vector(d.get("rpy", [0, 0, 0]), d.line_of("rpy"), f"{where}.rpy", 3, angle=True)
     spec = ItemSpec(name=str(d.get("name", "table")), role=role, shape=shape, pose=transform(xyz, rpy), line=d.line)
     if shape == "box":
@@ -264,11 +291,16 @@ def _item(ctx: _Ctx, raw: Any, line: int, where: str, role: str) -> ItemSpec:
         spec.inertia = np.diag(ctx.vector(d["inertia"], d.line_of("inertia"), f"{where}.inertia", 3))
         if np.any(np.diag(spec.inertia) < 0):
             ctx.fail(d.line_of("inertia"), f"{where}.inertia", "moments of inertia must not be negative")
+    if "grasp_width" in d:
+        if role != "object":
+            ctx.fail(d.line_of("grasp_width"), f"{where}.grasp_width", "only objects are grasped")
+        spec.grasp_width = ctx.number(d["grasp_width"], d.line_of("grasp_width"), f"{where}.grasp_width", lo=0, strict_lo=True)
     return spec
 
 
 # ------------------------------------------------------------------ tasks
-def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpec], poses: list[str] | None) -> Any:
+def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpec], poses: list[str] | None,
+          frames: dict | None = None) -> Any:
     if not isinstance(raw, dict) or len(raw) != 1:
         ctx.fail(line, where, "each task is one of 'pick: {...}', 'place: {...}', 'move: {...}', 'wait: seconds'")
     (kind, body), = raw.items()
@@ -282,7 +314,8 @@ def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpe
             secs = body
         return WaitTask(ctx.number(secs, bline, w, lo=0.0), line=bline)
     if kind == "pick":
-        d = ctx.mapping(body, bline, w, ("object", "approach_height", "pitch", "roll", "gripper_open", "gripper_closed", "grasp_offset"), ("object",))
+        d = ctx.mapping(body, bline, w, ("object", "approach_height", "pitch", "roll", "gripper_open", "gripper_closed", "grasp_offset",
+                                         "squeeze"), ("object",))
         name = ctx.string(d["object"], d.line_of("object"), f"{w}.object")
         if name not in objects:
             ctx.fail(d.line_of("object"), f"{w}.object", f"no object named '{name}'",
@@ -293,10 +326,12 @@ def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpe
             t.gripper_closed = ctx.number(d["gripper_closed"], d.line_of("gripper_closed"), f"{w}.gripper_closed", angle=True)
         if "grasp_offset" in d:
             t.grasp_offset = ctx.number(d["grasp_offset"], d.line_of("grasp_offset"), f"{w}.grasp_offset")
+        if "squeeze" in d:
+            t.squeeze = ctx.number(d["squeeze"], d.line_of("squeeze"), f"{w}.squeeze", lo=0.0, hi=0.05)
         return t
     if kind == "place":
         d = ctx.mapping(body, bline, w, ("object", "xyz", "approach_height", "pitch", "roll", "gripper_open"), ("xyz",))
-        t = PlaceTask(xyz=ctx.vector(d["xyz"], d.line_of("xyz"), f"{w}.xyz", 3), line=bline)
+        t = PlaceTask(xyz=_position(ctx, d["xyz"], d.line_of("xyz"), f"{w}.xyz", frames), line=bline)
         if "object" in d:
             t.object = ctx.string(d["object"], d.line_of("object"), f"{w}.object")
             if t.object not in objects:
@@ -304,11 +339,17 @@ def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpe
         _common_grasp(ctx, d, w, t)
         return t
     if kind == "move":
-        d = ctx.mapping(body, bline, w, ("pose", "joints", "xyz", "pitch"))
+        d = ctx.mapping(body, bline, w, ("pose", "joints", "xyz", "pitch", "gripper"))
         given = [k for k in ("pose", "joints", "xyz") if k in d]
         if len(given) != 1:
             ctx.fail(bline, w, "give exactly one of 'pose' (a named pose), 'joints' (list) or 'xyz' (+ 'pitch')")
         t = MoveTask(line=bline)
+        if "gripper" in d:
+            g = d["gripper"]
+            if isinstance(g, str):
+                t.gripper = ctx.string(g, d.line_of("gripper"), f"{w}.gripper", ("open", "closed"))
+            else:
+                t.gripper = ctx.number(g, d.line_of("gripper"), f"{w}.gripper", angle=True)
         if "pose" in d:
             t.pose = ctx.string(d["pose"], d.line_of("pose"), f"{w}.pose", tuple(poses) if poses is not None else None)
         elif "joints" in d:
@@ -319,19 +360,34 @@ def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpe
                 ctx.fail(d.line_of("joints"), f"{w}.joints", "expected a list of joint values (rad) or {deg: [...]}")
             t.joints = ctx.vector(j, d.line_of("joints"), f"{w}.joints", len(vals), angle=True)
         else:
-            t.xyz = ctx.vector(d["xyz"], d.line_of("xyz"), f"{w}.xyz", 3)
+            t.xyz = _position(ctx, d["xyz"], d.line_of("xyz"), f"{w}.xyz", frames)
             if "pitch" in d:
-                t.pitch = ctx.number(d["pitch"], d.line_of("pitch"), f"{w}.pitch", angle=True)
+                _pitch(ctx, d, w, t)
         return t
     close = _closest(str(kind), ("pick", "place", "move", "wait"))
     ctx.fail(bline, f"{where}", f"unknown task '{kind}'", f"did you mean '{close}'?" if close else "tasks: pick, place, move, wait")
+
+
+def _pitch(ctx: _Ctx, d: LocatedDict, w: str, t: Any) -> None:
+    """``pitch: angle``, ``pitch: auto`` (nearest valid to straight down) or ``pitch: {auto: angle}``
+    (nearest valid to that angle)."""
+    v, line = d["pitch"], d.line_of("pitch")
+    if v == "auto":
+        t.pitch, t.pitch_auto = math.pi / 2, True
+    elif isinstance(v, dict) and set(v) == {"auto"}:
+        t.pitch = ctx.number(v["auto"], line, f"{w}.pitch.auto", angle=True, lo=-math.pi, hi=math.pi)
+        t.pitch_auto = True
+    else:
+        if isinstance(v, str):
+            ctx.fail(line, f"{w}.pitch", f"'{v}' is not an angle", "give an angle, {deg: 90}, 'auto' or {auto: {deg: 60}}")
+        t.pitch = ctx.number(v, line, f"{w}.pitch", angle=True, lo=-math.pi, hi=math.pi)
 
 
 def _common_grasp(ctx: _Ctx, d: LocatedDict, w: str, t: Any) -> None:
     if "approach_height" in d:
         t.approach_height = ctx.number(d["approach_height"], d.line_of("approach_height"), f"{w}.approach_height", lo=0.0, hi=0.3)
     if "pitch" in d:
-        t.pitch = ctx.number(d["pitch"], d.line_of("pitch"), f"{w}.pitch", angle=True, lo=-math.pi, hi=math.pi)
+        _pitch(ctx, d, w, t)
     if "roll" in d:
         t.roll = ctx.number(d["roll"], d.line_of("roll"), f"{w}.roll", angle=True, lo=-math.pi, hi=math.pi)
     if "gripper_open" in d:
@@ -342,13 +398,16 @@ def _common_grasp(ctx: _Ctx, d: LocatedDict, w: str, t: Any) -> None:
 TOP_KEYS = ("robot", "start", "scene", "objects", "tasks", "cycles", "limits", "planner")
 
 
-def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, base_dir: str | Path | None = None) -> Plan:
+def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, base_dir: str | Path | None = None,
+              frames: dict | None = None) -> Plan:
     """Read and validate a plan: a YAML file path, or a dict of the same form (built in code).
 
     ``named_poses``, when given, are the robot's pose names (for checking ``start`` and
     ``move: {pose}``); the pipeline passes them after loading the robot. For a dict, errors name
     ``<plan dict>`` instead of a file and line, and a relative ``robot`` path is taken from
-    ``base_dir`` (default: the current directory).
+    ``base_dir`` (default: the current directory). ``frames``: the robot's frames (positions written
+    as ``{FRAME: [x, y, z]}`` are converted to the world frame). ``start: current`` stays the string
+    ``"current"`` (the caller measures it).
     """
     if isinstance(source, dict):
         import json
@@ -370,7 +429,8 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
     if "start" in top:
         s = top["start"]
         if isinstance(s, str):
-            start = ctx.string(s, top.line_of("start"), "start", tuple(named_poses) if named_poses is not None else None)
+            start = "current" if s == "current" else ctx.string(
+                s, top.line_of("start"), "start", tuple(named_poses) + ("current",) if named_poses is not None else None)
         else:
             vals = s["deg"] if isinstance(s, dict) and "deg" in s else s
             if not isinstance(vals, list):
@@ -381,14 +441,14 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
     if "scene" in top:
         sc = ctx.mapping(top["scene"], top.line_of("scene"), "scene", ("table", "obstacles"))
         if "table" in sc and sc["table"] is not None:
-            scene.append(_item(ctx, sc["table"], sc.line_of("table"), "scene.table", "table"))
+            scene.append(_item(ctx, sc["table"], sc.line_of("table"), "scene.table", "table", frames))
         obs = sc.get("obstacles") or []
         if not isinstance(obs, list):
             ctx.fail(sc.line_of("obstacles"), "scene.obstacles", "expected a list")
         if len(obs) > MAX_ITEMS:
             ctx.fail(sc.line_of("obstacles"), "scene.obstacles", f"{len(obs)} obstacles are more than {MAX_ITEMS}")
         for i, o in enumerate(obs):
-            scene.append(_item(ctx, o, obs.line_of(i), f"scene.obstacles[{i}]", "obstacle"))
+            scene.append(_item(ctx, o, obs.line_of(i), f"scene.obstacles[{i}]", "obstacle", frames))
 
     objects: list[ItemSpec] = []
     objs = top.get("objects") or []
@@ -397,7 +457,7 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
     if len(objs) > MAX_ITEMS:
         ctx.fail(top.line_of("objects"), "objects", f"{len(objs)} objects are more than {MAX_ITEMS}")
     for i, o in enumerate(objs):
-        objects.append(_item(ctx, o, objs.line_of(i), f"objects[{i}]", "object"))
+        objects.append(_item(ctx, o, objs.line_of(i), f"objects[{i}]", "object", frames))
     names: dict[str, ItemSpec] = {}
     for item in scene + objects:
         if item.name in names:
@@ -410,7 +470,7 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
         ctx.fail(top.line_of("tasks"), "tasks", "expected a non-empty list of tasks")
     if len(tasks_raw) > MAX_TASKS:
         ctx.fail(top.line_of("tasks"), "tasks", f"{len(tasks_raw)} tasks are more than {MAX_TASKS}", "split the plan")
-    tasks = [_task(ctx, t, tasks_raw.line_of(i), f"task {i + 1}", by_object, named_poses) for i, t in enumerate(tasks_raw)]
+    tasks = [_task(ctx, t, tasks_raw.line_of(i), f"task {i + 1}", by_object, named_poses, frames) for i, t in enumerate(tasks_raw)]
 
     cycles = 1
     if "cycles" in top:

@@ -208,7 +208,19 @@ def _common(data: dict, path: Path, names: list[str], velocity: np.ndarray, acce
             raise DescriptionError(f"{where}: gripper: expected {{joint, open, closed}}")
         if g["joint"] not in names:
             raise DescriptionError(f"{where}: gripper.joint: '{g['joint']}' is not an actuated joint")
-        gripper = Gripper(g["joint"], _num(g.get("open"), f"{where}: gripper.open"), _num(g.get("closed"), f"{where}: gripper.closed"))
+        jq, jw = (), ()
+        if g.get("jaw_width") is not None:
+            jw_raw = g["jaw_width"]
+            if not isinstance(jw_raw, dict) or not isinstance(jw_raw.get("q"), list) or not isinstance(jw_raw.get("mm"), list):
+                raise DescriptionError(f"{where}: gripper.jaw_width: expected {{q: [rad, ...], mm: [opening, ...]}}")
+            n = len(jw_raw["q"])
+            jq = tuple(_vec(jw_raw["q"], n, f"{where}: gripper.jaw_width.q"))
+            jw = tuple(_vec(jw_raw["mm"], n, f"{where}: gripper.jaw_width.mm") / 1000.0)
+            if n < 2 or np.any(np.diff(jq) <= 0) or np.any(np.diff(jw) <= 0):
+                raise DescriptionError(f"{where}: gripper.jaw_width: needs 2+ points, q and mm both increasing")
+        extra = {k: _num(g[k], f"{where}: gripper.{k}") for k in ("squeeze", "clearance") if g.get(k) is not None}
+        gripper = Gripper(g["joint"], _num(g.get("open"), f"{where}: gripper.open"), _num(g.get("closed"), f"{where}: gripper.closed"),
+                          jq, jw, **extra)
     poses = {}
     for pname, values in (data.get("named_poses") or {}).items():
         vals = list(values) if isinstance(values, list) else values

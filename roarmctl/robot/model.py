@@ -110,11 +110,33 @@ class WireField:
 
 @dataclass(frozen=True)
 class Gripper:
-    """Which actuated joint is the gripper, and its open and closed values (rad)."""
+    """Which actuated joint is the gripper, and its open and closed values (rad).
+
+    ``jaw_q`` (K,) rad increasing and ``jaw_width`` (K,) m: the opening between the jaws at those
+    joint values (interpolated linearly, monotonic), when the description gives it. ``squeeze`` (m):
+    how far below an object's width a pick closes by default; ``clearance`` (m): how much wider than
+    the object the open jaws must be.
+    """
 
     joint: str
     open: float
     closed: float
+    jaw_q: tuple[float, ...] = ()
+    jaw_width: tuple[float, ...] = ()
+    squeeze: float = 0.002
+    clearance: float = 0.004
+
+    @property
+    def has_widths(self) -> bool:
+        return len(self.jaw_q) >= 2
+
+    def width(self, q: float) -> float:
+        """Jaw opening (m) at gripper joint value ``q`` (rad)."""
+        return float(np.interp(q, self.jaw_q, self.jaw_width))
+
+    def q_for_width(self, width: float) -> float:
+        """Gripper joint value (rad) that opens the jaws to ``width`` (m), clamped to the table."""
+        return float(np.interp(width, self.jaw_width, self.jaw_q))
 
 
 @dataclass
