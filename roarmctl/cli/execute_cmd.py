@@ -37,7 +37,8 @@ def execute(
     speed_scale: float = typer.Option(1.0, "--speed-scale", help="Slow the motion down: 0.5 = half speed (0 < S <= 1)."),
     strategy: str = typer.Option("timed", "--strategy", help=STRATEGY_HELP),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask for confirmation before moving the arm."),
-    move_to_start: bool = typer.Option(False, "--move-to-start", help="If the arm is not at the first point, go there slowly first."),
+    move_to_start: bool = typer.Option(False, "--move-to-start", help="If the arm is not at the first point, plan a collision-checked, timed motion there first (the trajectory's scene, limits and planner)."),
+    from_current: bool = typer.Option(False, "--from-current", help="If the arm is not at the first point, plan the first free motion again from where it is."),
     max_error: float = typer.Option(30.0, "--max-error", help="Abort (and hold) when the TCP tracking error exceeds this (mm)."),
     log: Optional[Path] = typer.Option(None, "--log", help="Execution log (JSON); default: next to TRAJ as NAME.exec.json."),
     json_out: bool = typer.Option(False, "--json", help="Print one JSON summary object on stdout, nothing else."),
@@ -64,8 +65,10 @@ def execute(
         raise InputError("--max-error: must be positive (mm)")
     traj = validate_trajectory(traj_path)  # limits, speeds and steps: nothing unchecked reaches the port
     robot = load_robot(traj.robot)
+    if move_to_start and from_current:
+        raise InputError("give one of --move-to-start and --from-current, not both")
     cfg = StreamConfig(rate=rate, speed_scale=speed_scale, strategy=strategy, max_error=max_error / 1e3,
-                       move_to_start=move_to_start)
+                       move_to_start=move_to_start, from_current=from_current)
     if output is not None:
         schedule = build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy)
         _write_output(output, schedule)
@@ -112,7 +115,7 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
         simulator = PtySimulator(SimConfig(firmware="m2" if WireMap(robot).model == "m2" else "m3-0.84")).start()
         port = simulator.path
     err = common.console(stderr=True)
-    live = _Display(err, len(robot.joint_names)) if (err.is_terminal and not json_out) else None
+    live = _Display(err, len(robot.joint_names), robot) if (err.is_terminal and not json_out) else None
 
     def confirm(message: str) -> bool:
         if yes or sim:
@@ -127,11 +130,20 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
                         "(stop it, e.g. 'sudo systemctl stop ModemManager')")
     from roarmctl.device.protocol import WireMap
 
+    def replan(q, mode: str):
+        from roarmctl.motion.replan import replan_start
+
+        return replan_start(traj, robot, q, mode)
+
+    def note(sentence: str) -> None:
+        if not json_out:
+            err.print(f"note: {sentence}")
+
     link = Link(port)
     link.expect = WireMap(robot).model
     # Built before the port opens (the schedule is pure), so that every way out has a log.
     streamer = Streamer(link, robot, traj, cfg, on_status=live.update if live else None, confirm=confirm,
-                        on_start=live.start if live else None)
+                        on_start=live.start if live else None, replan=replan, on_note=note)
     result = None
     try:
         link.open()
@@ -157,13 +169,15 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
             if result is None:
                 result = streamer.result("failed", "stopped before streaming (no motion command sent)")
             if simulator is not None:
-                result.log["simulator"] = _sim_tracking(simulator, robot, traj, cfg, result)
+                # streamer.traj: re-planned from the measured pose when the arm was elsewhere
+                result.log["simulator"] = _sim_tracking(simulator, robot, streamer.traj, cfg, result)
                 simulator.stop()
             try:
                 write_log(log_path, result.log)
             except (OSError, InputError) as exc:
                 common.warn(f"could not write the execution log {log_path} ({getattr(exc, 'strerror', None) or exc}); pass --log FILE")
-    summary = result.summary() | {"log": str(log_path)}
+    summary = result.summary() | {"log": str(log_path), "notes": result.log.get("notes", []),
+                                  "final_pose": result.log.get("final_pose")}
     if simulator is not None:
         summary["simulator"] = result.log["simulator"]
     if json_out:
@@ -171,13 +185,16 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
         return
     out = common.console()
     trk, lat = summary["tracking_mm"], summary["lateness_ms"]
-    out.print(f"[bold green]done[/]: {summary['commands']} motion commands in {traj.duration / cfg.speed_scale:.2f} s on {port}")
+    out.print(f"[bold green]done[/]: {summary['commands']} motion commands in {streamer.traj.duration / cfg.speed_scale:.2f} s on {port}")
     out.print(f"schedule lateness p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms, max {lat['max']:.2f} ms")
     if trk["rms"] is not None:
         out.print(f"TCP tracking error (feedback): RMS {trk['rms']:.1f} mm, max {trk['max']:.1f} mm over {trk['samples']} samples")
     if simulator is not None and summary["simulator"]["rms_mm"] is not None:
         s = summary["simulator"]
         out.print(f"TCP tracking error (simulator, true): RMS {s['rms_mm']:.2f} mm, max {s['max_mm']:.2f} mm")
+    if summary["final_pose"]:
+        out.print("arm at: " + ", ".join(f"{k.rsplit('_', 1)[0]} ({', '.join(f'{v:.4g}' for v in xyz)}) {k.rsplit('_', 1)[1]}"
+                                         for k, xyz in summary["final_pose"].items()))
     out.print(f"log: {log_path}")
 
 
@@ -211,9 +228,10 @@ def _sim_tracking(simulator, robot, traj, cfg, result) -> dict:
 class _Display:
     """The live view on stderr: progress, time, lateness, tracking error, commanded vs measured joints."""
 
-    def __init__(self, console, dof: int) -> None:
+    def __init__(self, console, dof: int, robot=None) -> None:
         self.console = console
         self.dof = dof
+        self.robot = robot
         self.live = None
         self._n = 0
 
@@ -247,6 +265,15 @@ class _Display:
         outer = Table.grid()
         outer.add_row(grid)
         outer.add_row(joints)
+        if st.measured is not None and self.robot is not None:  # where the TCP is, in both frames
+            from roarmctl.robot.frames import device_point, to_frame
+
+            p = self.robot.kin.fk(st.measured)[:3, 3]
+            text = f"TCP world ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
+            for name, fr in (getattr(self.robot, "frames", {}) or {}).items():
+                f = to_frame(fr, device_point(self.robot, fr, st.measured))
+                text += f"   {name} ({f[0]:.1f}, {f[1]:.1f}, {f[2]:.1f}) {fr.unit}"
+            outer.add_row(text)
         self.live.update(outer, refresh=True)
 
 

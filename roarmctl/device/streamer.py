@@ -37,7 +37,6 @@ MAX_LINK_RATE = 90.0  # T:102 lines/s the 115200 link can carry at all (about 10
 DEFAULT_RATE = 50.0
 FEEDBACK_RATE = 25.0  # T:105 polls per second during motion (each answer is ~200 B back)
 HOLD_SPD = 600  # the firmware's own ARM_SERVO_INIT_SPEED, steps/s
-MOVE_TO_START_SPD = 300  # steps/s (about 0.46 rad/s)
 T102_BYTES = 125  # longest T:102 line (all six fields at 4 decimals, spd, acc, newline)
 T101_BYTES = 55  # a gripper T:101 line
 LINK_BUDGET = 0.85  # share of the 11520 B/s host->arm direction the stream may use
@@ -203,7 +202,8 @@ class StreamConfig:
     max_error: float = 0.03  # m of TCP position error before aborting
     start_tolerance: float = 0.05  # rad per arm joint between the measured pose and the first point
     gripper_tolerance: float = 0.35  # rad, the gripper's own
-    move_to_start: bool = False
+    move_to_start: bool = False  # arm elsewhere: a planned motion to the start first (needs ``replan``)
+    from_current: bool = False  # arm elsewhere: the first free motion planned again from here (needs ``replan``)
     stale_after: float = 1.0  # s without feedback during motion -> link lost
     settle: float = 0.6  # s to wait for the arm to arrive after the last command
     lead: float = 0.05  # s between the start decision and the first command
@@ -253,12 +253,18 @@ class Streamer:
     ``clock``/``sleep`` are injectable (tests); ``on_status(Status)`` is called after each tick
     (the live display; ``on_start()`` before the first); ``hook(k)`` is called before tick k is sent (tests raise KeyboardInterrupt
     from it); ``confirm(message) -> bool`` is asked before any motion.
+
+    ``replan(q_measured, mode) -> (Trajectory, sentence)`` plans from the measured pose when the arm
+    is not at the start (``roarmctl.motion.replan.replan_start``; modes ``gripper`` - only the
+    gripper differs, always done -, ``move_to_start``, ``from_current``); ``on_note(sentence)`` says so.
     """
 
     def __init__(self, link, robot, traj, config: StreamConfig | None = None, *,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                  on_status: Callable[[Status], None] | None = None, hook: Callable[[int], None] | None = None,
-                 confirm: Callable[[str], bool] | None = None, on_start: Callable[[], None] | None = None) -> None:
+                 confirm: Callable[[str], bool] | None = None, on_start: Callable[[], None] | None = None,
+                 replan: Callable[[np.ndarray, str], tuple[Any, str]] | None = None,
+                 on_note: Callable[[str], None] | None = None) -> None:
         self.link = link
         self.robot = robot
         self.traj = traj
@@ -269,6 +275,8 @@ class Streamer:
         self.hook = hook
         self.confirm = confirm
         self.on_start = on_start  # after the confirmation, before the clock starts (start a display)
+        self.replan = replan
+        self.on_note = on_note
         self.wm = WireMap(robot)
         self.schedule = build_schedule(traj, robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale,
                                        strategy=self.cfg.strategy)
@@ -319,36 +327,37 @@ class Streamer:
         diff = self._start_diff(self.measured, q0)
         if diff is None:
             return
-        if not self.cfg.move_to_start:
+        if self._start_diff(self.measured, q0, arm_only=True) is None:
+            mode = "gripper"  # chained runs: the arm is there, only the gripper is not
+        elif self.cfg.from_current:
+            mode = "from_current"
+        elif self.cfg.move_to_start:
+            mode = "move_to_start"
+        else:
             raise InfeasibleError(f"the arm is not at the trajectory's start: {diff}",
-                                  "move it there first, or pass --move-to-start to go there slowly")
-        self._move_to_start(q0)
+                                  "pass --move-to-start (a planned, collision-checked motion there first) or "
+                                  "--from-current (plan the first free motion again from here)")
+        if self.replan is None:
+            raise InfeasibleError(f"the arm is not at the trajectory's start: {diff}", "move it there first")
+        measured = np.clip(self.measured, self.robot.lower, self.robot.upper)  # one servo count outside a limit
+        traj, sentence = self.replan(measured, mode)
+        self.traj = traj
+        self.schedule = build_schedule(traj, self.robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale,
+                                       strategy=self.cfg.strategy)
+        self.notes.append(sentence)
+        if self.on_note is not None:
+            self.on_note(sentence)
 
-    def _start_diff(self, q: np.ndarray, q0: np.ndarray) -> str | None:
+    def _start_diff(self, q: np.ndarray, q0: np.ndarray, arm_only: bool = False) -> str | None:
         g = self.robot.joint_index(self.robot.gripper.joint) if self.robot.gripper else None
         worst = []
         for i, name in enumerate(self.robot.joint_names):
+            if arm_only and i == g:
+                continue
             tol = self.cfg.gripper_tolerance if i == g else self.cfg.start_tolerance
             if abs(q[i] - q0[i]) > tol:
                 worst.append(f"{name} is {math.degrees(q[i]):.1f} deg, the start is {math.degrees(q0[i]):.1f} deg")
         return "; ".join(worst[:3]) if worst else None
-
-    def _move_to_start(self, q0: np.ndarray) -> None:
-        w_now = self.wm.to_wire_array(self.measured)[0]
-        w0 = self.wm.to_wire_array(q0)[0]
-        far = float(np.max(np.abs(w0 - w_now))) * protocol.STEPS_PER_RAD
-        self.link.send(self.wm.command(q0, MOVE_TO_START_SPD, 10))
-        deadline = self.clock() + far / MOVE_TO_START_SPD + 3.0
-        while self.clock() < deadline:
-            self.sleep(0.1)
-            fb = self.link.request_feedback(0.3)
-            if fb is not None:
-                self._take(fb)
-                if self._start_diff(self.measured, q0) is None:
-                    self.notes.append("moved to the start first")
-                    return
-        raise DeviceError("the arm did not reach the trajectory's start within the time allowed",
-                          "check for obstacles or a stalled servo, then try again")
 
     # ------------------------------------------------------------------ run
     def run(self) -> Result:
@@ -484,6 +493,17 @@ class Streamer:
         except DeviceError:
             self.notes.append("hold could not be sent: the link is gone")
 
+    def pose_in_frames(self) -> dict[str, Any] | None:
+        """The last measured TCP in the world frame (m) and the robot's other frames (their units)."""
+        if self.measured is None:
+            return None
+        from roarmctl.robot.frames import device_point, to_frame
+
+        out: dict[str, Any] = {"world_m": [round(float(v), 6) for v in self._tcp(self.measured)]}
+        for name, fr in (getattr(self.robot, "frames", {}) or {}).items():
+            out[f"{name}_{fr.unit}"] = [round(float(v), 3) for v in to_frame(fr, device_point(self.robot, fr, self.measured))]
+        return out
+
     def result(self, outcome: str, message: str) -> Result:
         lat = np.array([x for _, x in self.sent_lateness])
         trk = np.array([e for _, e in self.tracking])
@@ -511,14 +531,16 @@ class Streamer:
         for r in self.link.received:
             e: dict[str, Any] = {"t": round(r.t - t0, 6), "line": r.line}
             if r.feedback is not None:
-                e["feedback"] = r.feedback.raw
+                e["feedback"] = r.feedback.raw  # x, y, z: the firmware's frame (mm)
+                if r.feedback.joints:  # the same pose in the plan's world frame (m), from our FK
+                    e["tcp_world_m"] = [round(float(v), 6) for v in self._tcp(self._q_of(r.feedback))]
             received.append(e)
         return {
             "format": "roarmctl.execlog/1",
             "port": self.link.port, "firmware": self.link.firmware, "robot": self.robot.name,
             "strategy": self.cfg.strategy, "rate": self.cfg.rate, "speed_scale": self.cfg.speed_scale,
             "t0_monotonic": t0, "duration": self.schedule[-1].t,
-            "summary": res.summary(), "notes": self.notes,
+            "summary": res.summary(), "notes": self.notes, "final_pose": self.pose_in_frames(),
             "tracking": [{"t": round(t, 6), "error_m": round(e, 6)} for t, e in self.tracking],
             "sent": sent, "received": received,
         }

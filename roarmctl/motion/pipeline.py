@@ -124,7 +124,6 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
     ``current(robot)`` returns the arm's measured configuration (dof,) rad for ``start: current``
     (the CLI reads it from the arm or the simulator); without it such a plan is an input error.
     """
-    from roarmctl.errors import InputError
     from roarmctl.robot.loader import load_robot
 
     path = path if isinstance(path, dict) else Path(path)
@@ -304,6 +303,8 @@ class Planner:
             g = self._gripper_value(task.gripper)
             if g is not None and abs(g - q[self.gi]) > 1e-9:
                 word = {"open": "open", "closed": "close"}.get(task.gripper, "set") if isinstance(task.gripper, str) else "set"
+                if np.max(np.abs(goal[self.arm] - q[self.arm])) < 1e-9:
+                    steps = []  # the arm is there already: only the gripper moves
                 steps.append(_Step("gripper", f"{where}: {word} gripper", gripper_to=g))
             return steps
         if isinstance(task, PickTask):
@@ -1069,7 +1070,8 @@ class Planner:
             },
             singularity_margin={"min_singular_value": p.planner.singularity_margin} if p.planner.singularity_margin else None,
             scene=self._initial_scene_dict(),
-            plan={"path": str(p.path), "sha256": p.sha256, "planner": p.planner.name, "seed": p.planner.seed},
+            plan={"path": str(p.path), "sha256": p.sha256, "planner": p.planner.name, "seed": p.planner.seed,
+                  "padding": p.planner.padding},
             sample_rate=1.0 / SAMPLE_DT,
         )
         return traj
