@@ -125,13 +125,17 @@ def to_joint_trajectory(traj: Trajectory, frame_id: str = "") -> dict[str, Any]:
 
 def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False, rate: float = 50.0,
             speed_scale: float = 1.0, move_to_start: bool = False, max_error: float = 0.03,
-            log: PathLike | None = None, confirm: Callable[[str], bool] | None = None) -> dict[str, Any]:
+            log: PathLike | None = None, confirm: Callable[[str], bool] | None = None,
+            from_current: bool = False) -> dict[str, Any]:
     """Stream ``traj`` to the arm on ``port`` or to the built-in firmware simulator (``sim=True``,
     over a real pseudo-terminal). Blocks until the motion is done (real time).
 
     ``rate`` commands/s (at most 90), ``speed_scale`` in (0, 1], ``max_error`` TCP tracking bound (m)
     beyond which the arm is told to hold and ``DeviceError`` (exit 4) is raised; ``confirm(message)``
     is asked before a real arm moves (default: refuse, so pass ``lambda m: True`` deliberately).
+    When the arm is not at the start, ``move_to_start`` plans a checked motion there first and
+    ``from_current`` plans the first free motion again from where it is (as ``roarmctl execute``);
+    a start that differs only in the gripper is always opened/closed first.
     Writes the execution log to ``log`` when given. Returns the summary: ``outcome``, ``commands``
     (T:102/T:101 lines sent while streaming), ``lateness_ms``, ``tracking_mm``, ``final_error_mm``, ``log``.
     """
@@ -143,7 +147,8 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
     if (port is None) == (not sim):
         raise _InputError("execute: give exactly one of port=... or sim=True")
     robot = load_robot(t.robot)
-    cfg = StreamConfig(rate=rate, speed_scale=speed_scale, max_error=max_error, move_to_start=move_to_start)
+    cfg = StreamConfig(rate=rate, speed_scale=speed_scale, max_error=max_error, move_to_start=move_to_start,
+                       from_current=from_current)
     simulator = None
     if sim:
         from roarmctl.device.simulator import PtySimulator, SimConfig
@@ -152,7 +157,12 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
         port = simulator.path
         confirm = confirm or (lambda message: True)
     link = Link(str(port))
-    streamer = Streamer(link, robot, t, cfg, confirm=confirm or (lambda message: False))
+    def replan(q, mode: str):
+        from roarmctl.motion.replan import replan_start
+
+        return replan_start(t, robot, q, mode)
+
+    streamer = Streamer(link, robot, t, cfg, confirm=confirm or (lambda message: False), replan=replan)
     result = None
     try:
         link.open()
