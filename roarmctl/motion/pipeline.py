@@ -117,12 +117,15 @@ class _Timer:
 
 
 def plan_file(path: str | Path | dict, seed: int | None = None, progress: ProgressFn | None = None,
-              base_dir: str | Path | None = None, current: Callable[[object], np.ndarray] | None = None) -> PlanResult:
+              base_dir: str | Path | None = None, current: Callable[[object], np.ndarray] | None = None,
+              start_here: bool = False) -> PlanResult:
     """Load the plan at ``path`` (or a plan dict of the same form) and plan it (``seed`` overrides
     ``planner.seed``; ``base_dir`` resolves a dict's relative robot path).
 
     ``current(robot)`` returns the arm's measured configuration (dof,) rad for ``start: current``
     (the CLI reads it from the arm or the simulator); without it such a plan is an input error.
+    ``start_here``: start from ``current(robot)`` whatever the plan's ``start`` says (execute
+    --from-current plans a trajectory's plan again from the measured pose).
     """
     from roarmctl.robot.loader import load_robot
 
@@ -139,7 +142,7 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
     except InputError as exc:  # unknown robot: name the plan's line
         raise PlanFileError(f"{plan.path}:{plan.lines.get('robot', 1)}: robot: {exc.message}", exc.hint) from None
     plan = load_plan(path, named_poses=list(robot.named_poses), base_dir=base_dir, frames=robot.frames)
-    if isinstance(plan.start, str) and plan.start == "current":
+    if start_here or (isinstance(plan.start, str) and plan.start == "current"):
         plan.start = np.asarray(current(robot), dtype=float)
     if seed is not None:
         plan.planner.seed = seed

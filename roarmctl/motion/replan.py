@@ -7,8 +7,10 @@ Three cases, one code path (``plan_between`` then a splice):
 * ``"gripper"``: the arm stands at the start but the gripper does not: open/close it first.
 * ``"move_to_start"``: a planned, checked, timed motion from the measured pose to the start, then
   the whole trajectory.
-* ``"from_current"``: the first free motion is planned again from the measured pose to where it
-  ended; what came before it (gripper moves, waits) is folded into that motion; the rest follows.
+* ``"from_current"``: the first free motion is planned again from the measured pose. When the
+  trajectory's plan file is still there unchanged (same sha256), the plan is planned again from the
+  measured pose (same seed: the first free motion starts here, blending included); otherwise the
+  first free motion is replaced by one planned to where it ended, if the trajectory is at rest there.
 """
 
 from __future__ import annotations
@@ -92,6 +94,21 @@ def tail(traj: Trajectory, t: float) -> Trajectory:
         sample_rate=traj.sample_rate)
 
 
+def _plan_again(traj: Trajectory, q: np.ndarray) -> Trajectory | None:
+    """The trajectory's plan planned again from ``q`` (same seed), or None when its file is gone or changed."""
+    import hashlib
+
+    meta = traj.plan or {}
+    path = Path(str(meta.get("path", "")))
+    if not meta.get("sha256") or not path.is_file():
+        return None
+    if hashlib.sha256(path.read_bytes()).hexdigest() != meta["sha256"]:
+        return None
+    from roarmctl.motion.pipeline import plan_file
+
+    return plan_file(path, seed=meta.get("seed"), current=lambda robot: q, start_here=True).trajectory
+
+
 def replan_start(traj: Trajectory, robot, q_measured: np.ndarray, mode: str) -> tuple[Trajectory, str]:
     """The trajectory to run from ``q_measured`` (dof,) rad, and one sentence saying what was planned.
 
@@ -108,6 +125,10 @@ def replan_start(traj: Trajectory, robot, q_measured: np.ndarray, mode: str) -> 
         return concat(first, traj), what
     if mode != "from_current":
         raise ValueError(f"mode must be one of {MODES}")
+    again = _plan_again(traj, q)
+    if again is not None:
+        return again, (f"planned '{Path(traj.plan['path']).name}' again from the measured pose: {again.duration:.2f} s "
+                       f"(was {traj.duration:.2f} s from its start)")
     free = next((s for s in traj.segments if s.kind == "free"), None)
     if free is None:
         raise InfeasibleError("--from-current: the trajectory has no free motion to plan again",
@@ -120,6 +141,10 @@ def replan_start(traj: Trajectory, robot, q_measured: np.ndarray, mode: str) -> 
         raise InfeasibleError("--from-current: the trajectory grasps or releases before its first free motion ends",
                               "use --move-to-start instead")
     rest = tail(traj, free.end)
+    if np.max(np.abs(rest.velocities[0])) > 1e-6:
+        raise InfeasibleError("--from-current: the first free motion blends into the next one and the trajectory's plan "
+                              f"file ({(traj.plan or {}).get('path')}) is not there unchanged to plan it again",
+                              "use --move-to-start, or plan again with start: current")
     first = plan_between(traj, robot, q, rest.positions[0].copy(), f"{free.label} (planned again from the measured pose)")
     what = (f"re-planned the first free motion from the measured pose: {first.duration:.2f} s instead of "
             f"{free.end:.2f} s to reach '{free.label}''s end")

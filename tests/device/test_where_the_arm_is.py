@@ -165,8 +165,31 @@ def test_from_current_replans_the_first_free_motion(tmp_path, capsys):
         rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--from-current", "--json"])
         res = json.loads(capsys.readouterr().out)
         assert rc == 0 and res["outcome"] == "completed", res
-        assert any("re-planned the first free motion" in n for n in res["notes"])
+        assert any("again from the measured pose" in n for n in res["notes"])  # the plan file is there: planned again
         assert measured(sim)[ARM] == pytest.approx(traj.positions[-1][ARM], abs=0.01)
         log = json.loads((tmp_path / "pp.exec.json").read_text())
         # never went back to the trajectory's own start (home) before the pick
         assert log["duration"] < traj.duration + 1.0
+
+
+def test_from_current_without_the_plan_file_replaces_the_first_free_motion(tmp_path, capsys):
+    plan = tmp_path / "stops.yaml"
+    plan.write_text(plan_text().replace("planner: {seed: 2}", "limits: {blend: false}\nplanner: {seed: 2}"))
+    out = tmp_path / "stops.traj.json"
+    assert run_cli(["plan", str(plan), "-o", str(out), "--json"]) == 0
+    capsys.readouterr()
+    plan.unlink()  # the plan is gone: only the trajectory is left to splice
+    traj = load_trajectory(out)
+    free = next(s for s in traj.segments if s.kind == "free")
+    q_away = R.full_q(np.array([-0.5, 0.1, 1.4, 0.2, 0.0]))
+    with PtySimulator(SimConfig()) as sim:
+        hand_move(sim, q_away)
+        rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--from-current", "--json"])
+        res = json.loads(capsys.readouterr().out)
+        assert rc == 0 and res["outcome"] == "completed", res
+        assert any("re-planned the first free motion" in n for n in res["notes"])
+        log = json.loads((tmp_path / "stops.exec.json").read_text())
+        # the rest of the trajectory, after the first free motion, was streamed as planned
+        first = float(next(n for n in res["notes"] if "re-planned" in n).split(": ")[1].split(" s")[0])
+        assert log["duration"] == pytest.approx(first + traj.duration - free.end, abs=0.02)
+        assert measured(sim)[ARM] == pytest.approx(traj.positions[-1][ARM], abs=0.01)
