@@ -212,7 +212,7 @@ def ik(
 
     from roarmctl.errors import RoarmError, UnreachableError
     from roarmctl.robot.frames import device_point, from_frame, get_frame
-    from roarmctl.robot.ik import ORI_TOL, POS_TOL, check_solution, solve_ik_auto_pitch, solve_ik_frame, tool_pitch
+    from roarmctl.robot.ik import ORI_TOL, POS_TOL, check_solution, solve_ik_auto_pitch, solve_ik_frame, takes_pitch, tool_pitch
     from roarmctl.robot.loader import load_robot
 
     r = load_robot(robot)
@@ -221,7 +221,7 @@ def ik(
     rpy_rad = None if rpy is None else np.array([conv(v) for v in rpy])
     q_ref = _split_numbers(ref, "--ref", deg)
     target = from_frame(fr, np.array(xyz, dtype=float))
-    is_roarm = r.singularity_model == "roarm5" or r.name == "roarm_m3_pro"
+    is_roarm = takes_pitch(r)  # the IK takes a tool pitch: choose it when left out, print it
     auto = is_roarm and pitch is None and rpy is None
     xyz_arr = np.array(xyz, dtype=float)
     try:

@@ -30,9 +30,10 @@ def configuration_from_feedback(robot, fb: Feedback) -> np.ndarray:
 def read_configuration(port: str, robot) -> tuple[np.ndarray, Feedback]:
     """Open ``port``, handshake (M3 firmware required) and return (configuration (dof,) rad, feedback).
 
-    Raises DeviceError (exit 4) for a missing, busy or silent port; the port is always closed.
+    Raises DeviceError (exit 4) for a missing, busy, silent or wrong-firmware port; the port is always closed.
     """
     link = Link(port)
+    link.expect = WireMap(robot).model  # the firmware the description's wire fields speak (M3 or M2)
     try:
         link.open()
         fb = link.handshake()

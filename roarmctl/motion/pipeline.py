@@ -187,6 +187,9 @@ class Planner:
         self.timer = _Timer()
         self.warnings: list[str] = []
         self.notes: list[str] = []
+        from roarmctl.robot.ik import takes_pitch
+
+        self._pitch_free = takes_pitch(robot)  # the IK takes a tool pitch (pitch: auto chooses it)
         self.arm = robot.arm_indices
         self.gi = robot.joint_index(robot.gripper.joint) if robot.gripper else None
         items = [_scene_item(s) for s in plan.scene + plan.objects]
@@ -340,7 +343,7 @@ class Planner:
             pitch = task.pitch if task.pitch is not None else math.pi / 2
             chain, pitch = self._choose_ik_pitch([task.xyz], pitch, task.pitch_auto, None, q, where)
             goal = chain[0]
-            label = _pitch_label(pitch, task.pitch_auto)
+            label = _pitch_label(pitch, task.pitch_auto and self._pitch_free)
         if self.gi is not None:
             goal[self.gi] = q[self.gi]
         if not self.robot.within_limits(goal):
@@ -359,7 +362,7 @@ class Planner:
         (q_grasp, q_above), pitch = self._choose_ik_pitch([grasp, above], task.pitch, task.pitch_auto, task.roll, q, where,
                                                           gripper=g_open)
         self._set_state(q[self.gi])
-        lab = _pitch_label(pitch, task.pitch_auto)
+        lab = _pitch_label(pitch, task.pitch_auto and self._pitch_free)
         steps = [_Step("free", f"{where}: transit above '{task.object}'{lab}", q_to=_with(q_above, self.gi, q[self.gi]),
                        open_to=g_open if abs(q[self.gi] - g_open) > 1e-9 else None, open_label=f"{where}: open gripper")]
         steps += [
@@ -383,7 +386,7 @@ class Planner:
         above = target + np.array([0.0, 0.0, task.approach_height])
         g_open = task.gripper_open if task.gripper_open is not None else self.robot.gripper.open
         (q_place, q_above), pitch = self._choose_ik_pitch([target, above], task.pitch, task.pitch_auto, task.roll, q, where)
-        lab = _pitch_label(pitch, task.pitch_auto)
+        lab = _pitch_label(pitch, task.pitch_auto and self._pitch_free)
         return [
             _Step("free", f"{where}: transit above the place for '{name}'{lab}", q_to=q_above),
             _Step("cartesian", f"{where}: lower '{name}'{lab}", q_to=q_place, line=(above, target), pitch=pitch, roll=task.roll),
@@ -434,9 +437,9 @@ class Planner:
                          where: str, gripper: float | None = None) -> tuple[list[np.ndarray], float]:
         """``_choose_ik`` for points that share one pitch; with ``auto`` the pitch nearest to ``pitch``
         (1 deg steps, ``ik.pitch_candidates``) at which a chain is valid (limits, collisions, margin)."""
-        from roarmctl.robot.ik import pitch_candidates
+        from roarmctl.robot.ik import pitch_candidates, takes_pitch
 
-        if not auto:
+        if not auto or not takes_pitch(self.robot):  # position-only IK: nothing to choose
             return self._choose_ik([(p, pitch, roll) for p in points], q, where, gripper=gripper), pitch
         first: UnreachableError | None = None
         for cand in pitch_candidates(pitch):

@@ -91,8 +91,10 @@ def test_the_demo_trajectory_runs_twice_in_a_row(tmp_path, capsys):
         for run in range(2):
             rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--json"])
             res = json.loads(capsys.readouterr().out)
-            assert rc == 0 and res["outcome"] == "completed", run
-            assert res["notes"] == []  # it ended where it started: nothing to re-plan
+            assert rc == 0 and res["outcome"] == "completed", (run, res)
+            # it ended where it started: nothing to re-plan (at most the gripper, whose servo may still be
+            # creeping to its last goal at the final command's low speed, is closed the last bit first)
+            assert all("gripper differs" in n for n in res["notes"]), res["notes"]
             at = measured(sim)
             assert at[ARM] == pytest.approx(traj.positions[-1][ARM], abs=0.01)
             assert abs(at[GI] - traj.positions[-1][GI]) < 0.35  # the streamer's gripper start tolerance
