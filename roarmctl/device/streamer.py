@@ -532,7 +532,8 @@ class Streamer:
             e: dict[str, Any] = {"t": round(r.t - t0, 6), "line": r.line}
             if r.feedback is not None:
                 e["feedback"] = r.feedback.raw  # x, y, z: the firmware's frame (mm)
-                if r.feedback.joints:  # the same pose in the plan's world frame (m), from our FK
+                if r.feedback.joints and set(self.wm.field_names) <= set(r.feedback.joints):
+                    # the same pose in the plan's world frame (m), from our FK (frames of this robot's firmware only)
                     e["tcp_world_m"] = [round(float(v), 6) for v in self._tcp(self._q_of(r.feedback))]
             received.append(e)
         return {
