@@ -309,9 +309,10 @@ class Planner:
             g = self._gripper_value(task.gripper)
             if g is not None and abs(g - q[self.gi]) > 1e-9:
                 word = {"open": "open", "closed": "close"}.get(task.gripper, "set") if isinstance(task.gripper, str) else "set"
-                if np.max(np.abs(goal[self.arm] - q[self.arm])) < 1e-9:
-                    steps = []  # the arm is there already: only the gripper moves
-                steps.append(_Step("gripper", f"{where}: {word} gripper", gripper_to=g))
+                if np.max(np.abs(goal[self.arm] - q[self.arm])) < 1e-9:  # the arm is there already
+                    steps = [_Step("gripper", f"{where}: {word} gripper", gripper_to=g)]
+                else:  # during the move where the jaws are clear (blending), else right after it
+                    steps[0].open_to, steps[0].open_label = g, f"{where}: {word} gripper"
             return steps
         if isinstance(task, PickTask):
             return self._expand_pick(task, q, where)
