@@ -451,7 +451,8 @@ class Planner:
                 continue
             self.notes.append(f"{where}: pitch auto chose {math.degrees(cand):.1f} deg (asked {math.degrees(pitch):.1f} deg)")
             return chain, cand
-        raise UnreachableError(f"{where}: no tool pitch reaches it validly; at {math.degrees(pitch):.1f} deg: {first.message}",
+        why = first.message[len(where) + 2:] if first.message.startswith(f"{where}: ") else first.message
+        raise UnreachableError(f"{where}: no tool pitch reaches it validly; at {math.degrees(pitch):.1f} deg: {why}",
                                first.reason, first.hint)
 
     def _choose_ik(self, targets: list[tuple[np.ndarray, float, float | None]], q: np.ndarray, where: str,
