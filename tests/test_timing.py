@@ -115,6 +115,26 @@ def test_torque_limit_slows_a_move_and_holds_by_rnea():
     assert tp.duration > free.duration
 
 
+def test_torque_limits_far_from_binding_leave_the_motion_as_without_them():
+    """planar 2R: the same move with shoulder limits 3x its peak torque is the very same motion (bytes) as
+    with no torque model at all, and one whose peak comes within 10 % of the limit (the torque constraint
+    joins TOPP-RA) keeps the limit on the samples (RNEA)."""
+    from roarmctl.motion.timing import TorqueModel
+    from roarmctl.robot.dynamics import inverse_dynamics
+
+    robot = load_robot("planar_2r")
+    inv = lambda q, qd, qdd: inverse_dynamics(robot, q, qd, qdd)  # noqa: E731
+    wp = np.array([[-1.2, 0.0], [0.3, 0.0]])
+    v, a = np.array([3.0, 3.0]), np.array([20.0, 20.0])
+    free = time_parameterise(wp, v, a)
+    peak = np.max(np.abs(inverse_dynamics(robot, free.q, free.qd, free.qdd)), axis=0)
+    loose = time_parameterise(wp, v, a, torque=TorqueModel(inv, 3.0 * peak, ["j1", "j2"]))
+    assert loose.q.tobytes() == free.q.tobytes() and loose.times.tobytes() == free.times.tobytes()
+    near = np.array([peak[0] / 0.95, 3.0 * peak[1]])  # the free motion would use 95 % of the shoulder limit
+    tp = time_parameterise(wp, v, a, torque=TorqueModel(inv, near, ["j1", "j2"]))
+    assert np.all(np.abs(inverse_dynamics(robot, tp.q, tp.qd, tp.qdd)) <= near + 1e-9)
+
+
 def test_a_load_that_cannot_be_held_is_infeasible():
     from roarmctl.errors import InfeasibleError
     from roarmctl.motion.timing import TorqueModel
