@@ -264,6 +264,9 @@ def _rot_vec(m: np.ndarray) -> np.ndarray:
     return w * (ang / (2.0 * math.sin(ang)))
 
 
+_TWO_PI_SHIFTS = np.array([2 * np.pi * k for k in (-1, 0, 1)])
+
+
 def _wrap(a):
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
@@ -402,20 +405,17 @@ class _RoarmIK:
         return q
 
     def _in_limits(self, q: np.ndarray) -> np.ndarray:
-        lo, hi = self.robot.lower, self.robot.upper
-        qa = q.copy()
-        for i in self.arm[1:4]:  # pitch joints: bring angles to (-pi, pi] before the test
-            qa[:, i] = _wrap(qa[:, i])
+        """(N,) whether each full configuration of ``q`` (N, dof) has a 2pi representative of every arm
+        angle within the limits (all joints and representatives in one array operation)."""
+        arm = self.arm
+        qa = q[:, arm]
+        qa[:, 1:4] = _wrap(qa[:, 1:4])  # pitch joints: bring angles to (-pi, pi] before the test
         # elbow range can exceed pi (0..2.95): allow the +2pi representative too
-        ok = np.ones(len(q), dtype=bool)
         tol = LIMIT_SLACK  # the ideal-geometry closed form is off by ~urad; the polish settles it
-        for i in self.arm:
-            v = qa[:, i]
-            okk = np.zeros(len(q), dtype=bool)
-            for k in (-1, 0, 1):
-                okk |= (v + 2 * np.pi * k >= lo[i] - tol) & (v + 2 * np.pi * k <= hi[i] + tol)
-            ok &= okk
-        return ok
+        v = qa[:, :, None] + _TWO_PI_SHIFTS  # (N, 5, 3)
+        lo = (self.robot.lower[arm] - tol)[None, :, None]
+        hi = (self.robot.upper[arm] + tol)[None, :, None]
+        return np.all(np.any((v >= lo) & (v <= hi), axis=2), axis=1)
 
     def _violation(self, qs: np.ndarray) -> str:
         """Which joint limit the least-violating sample of ``qs`` (k, dof) breaks, in words."""
