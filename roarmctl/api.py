@@ -139,45 +139,22 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
     Writes the execution log to ``log`` when given. Returns the summary: ``outcome``, ``commands``
     (T:102/T:101 lines sent while streaming), ``lateness_ms``, ``tracking_mm``, ``final_error_mm``, ``log``.
     """
-    from roarmctl.device.link import Link
-    from roarmctl.device.streamer import StreamConfig, Streamer, write_log
-    from roarmctl.errors import InputError as _InputError
+    from roarmctl.device.session import run_execution
+    from roarmctl.device.streamer import StreamConfig, build_schedule
 
     t = _trajectory(traj)
-    if (port is None) == (not sim):
-        raise _InputError("execute: give exactly one of port=... or sim=True")
     robot = load_robot(t.robot)
     cfg = StreamConfig(rate=rate, speed_scale=speed_scale, max_error=max_error, move_to_start=move_to_start,
                        from_current=from_current)
-    simulator = None
+    build_schedule(t, robot, rate=rate, speed_scale=speed_scale, strategy=cfg.strategy)  # refuse before opening
     if sim:
-        from roarmctl.device.simulator import PtySimulator, SimConfig
-
-        simulator = PtySimulator(SimConfig()).start()
-        port = simulator.path
         confirm = confirm or (lambda message: True)
-    link = Link(str(port))
-    def replan(q, mode: str):
-        from roarmctl.motion.replan import replan_start
-
-        return replan_start(t, robot, q, mode)
-
-    streamer = Streamer(link, robot, t, cfg, confirm=confirm or (lambda message: False), replan=replan)
-    result = None
-    try:
-        link.open()
-        link.handshake()
-        result = streamer.run()
-    except RoarmError as exc:
-        result = getattr(exc, "result", None)
-        raise
-    finally:
-        link.close()
-        if simulator is not None:
-            simulator.stop()
-        if result is not None and log is not None:
-            write_log(log, result.log)
-    return result.summary() | {"log": None if log is None else str(log), "port": str(port)}
+    run = run_execution(t, robot, cfg, port=None if port is None else str(port), sim=sim, log_path=log,
+                        confirm=confirm or (lambda message: False))
+    summary = run.result.summary() | {"log": None if log is None else str(log), "port": run.port}
+    if run.simulator is not None:
+        summary["simulator"] = run.simulator
+    return summary
 
 
 def draw(traj: TrajectoryLike, output: PathLike, *, view: str = "iso", dpi: float = 100.0,

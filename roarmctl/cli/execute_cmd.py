@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 from typing import Optional
@@ -100,20 +99,8 @@ def _write_output(path: Path, schedule) -> None:
 
 def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path: Path, json_out: bool) -> None:
     from roarmctl.cli import signals
-    from roarmctl.device.link import Link
-    from roarmctl.device.streamer import Streamer, write_log
-    from roarmctl.errors import InputError, RoarmError
+    from roarmctl.device.session import run_execution
 
-    simulator = None
-    if sim:
-        from roarmctl.device.simulator import PtySimulator, SimConfig
-
-        sys.setswitchinterval(0.0005)  # the simulator thread shares the GIL with the real-time loop
-        from roarmctl.device.protocol import WireMap
-
-        # the simulated arm is the kind the trajectory is for (an M2 trajectory gets the M2 protocol)
-        simulator = PtySimulator(SimConfig(firmware="m2" if WireMap(robot).model == "m2" else "m3-0.84")).start()
-        port = simulator.path
     err = common.console(stderr=True)
     live = _Display(err, len(robot.joint_names), robot) if (err.is_terminal and not json_out) else None
 
@@ -128,101 +115,39 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
         for pid, name in port_holders(port):
             common.warn(f"{port} is also open in process {pid} ({name}); it may swallow the arm's replies "
                         "(stop it, e.g. 'sudo systemctl stop ModemManager')")
-    from roarmctl.device.protocol import WireMap
-
-    def replan(q, mode: str):
-        from roarmctl.motion.replan import replan_start
-
-        return replan_start(traj, robot, q, mode)
 
     def note(sentence: str) -> None:
         if not json_out:
             err.print(f"note: {sentence}")
 
-    link = Link(port)
-    link.expect = WireMap(robot).model
-    # Built before the port opens (the schedule is pure), so that every way out has a log.
-    streamer = Streamer(link, robot, traj, cfg, on_status=live.update if live else None, confirm=confirm,
-                        on_start=live.start if live else None, replan=replan, on_note=note)
-    result = None
-    try:
-        link.open()
-        link.handshake()
-        try:
-            result = streamer.run()
-        finally:
-            if live:
-                live.stop()
-    except RoarmError as exc:
-        result = getattr(exc, "result", None) or streamer.result("failed", f"{exc.message}; no motion command was sent")
-        raise
-    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP while opening or in the handshake
-        from roarmctl.errors import signal_name
+    def log_error(path: Path, exc: Exception) -> None:
+        common.warn(f"could not write the execution log {path} ({getattr(exc, 'strerror', None) or exc}); pass --log FILE")
 
-        signum = getattr(exc, "signum", 2)
-        result = streamer.result("interrupted" if signum == 2 else "terminated",
-                                 f"stopped by {signal_name(signum)} before streaming (no motion command sent)")
-        raise
-    finally:
-        with signals.shielded():  # a signal now must not cut the port's close or the log short
-            link.close()
-            if result is None:
-                result = streamer.result("failed", "stopped before streaming (no motion command sent)")
-            if simulator is not None:
-                # streamer.traj: re-planned from the measured pose when the arm was elsewhere
-                result.log["simulator"] = _sim_tracking(simulator, robot, streamer.traj, cfg, result)
-                simulator.stop()
-            try:
-                write_log(log_path, result.log)
-            except (OSError, InputError) as exc:
-                common.warn(f"could not write the execution log {log_path} ({getattr(exc, 'strerror', None) or exc}); pass --log FILE")
+    run = run_execution(traj, robot, cfg, port=port, sim=sim, log_path=log_path, confirm=confirm,
+                        on_status=live.update if live else None, on_start=live.start if live else None,
+                        on_note=note, on_end=live.stop if live else None, shield=signals.shielded,
+                        on_log_error=log_error)
+    result, port = run.result, run.port
     summary = result.summary() | {"log": str(log_path), "notes": result.log.get("notes", []),
                                   "final_pose": result.log.get("final_pose")}
-    if simulator is not None:
-        summary["simulator"] = result.log["simulator"]
+    if run.simulator is not None:
+        summary["simulator"] = run.simulator
     if json_out:
         common.print_json(summary)
         return
     out = common.console()
     trk, lat = summary["tracking_mm"], summary["lateness_ms"]
-    out.print(f"[bold green]done[/]: {summary['commands']} motion commands in {streamer.traj.duration / cfg.speed_scale:.2f} s on {port}")
+    out.print(f"[bold green]done[/]: {summary['commands']} motion commands in {run.traj.duration / cfg.speed_scale:.2f} s on {port}")
     out.print(f"schedule lateness p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms, max {lat['max']:.2f} ms")
     if trk["rms"] is not None:
         out.print(f"TCP tracking error (feedback): RMS {trk['rms']:.1f} mm, max {trk['max']:.1f} mm over {trk['samples']} samples")
-    if simulator is not None and summary["simulator"]["rms_mm"] is not None:
+    if run.simulator is not None and summary["simulator"]["rms_mm"] is not None:
         s = summary["simulator"]
         out.print(f"TCP tracking error (simulator, true): RMS {s['rms_mm']:.2f} mm, max {s['max_mm']:.2f} mm")
     if summary["final_pose"]:
         out.print("arm at: " + ", ".join(f"{k.rsplit('_', 1)[0]} ({', '.join(f'{v:.4g}' for v in xyz)}) {k.rsplit('_', 1)[1]}"
                                          for k, xyz in summary["final_pose"].items()))
     out.print(f"log: {log_path}")
-
-
-def _sim_tracking(simulator, robot, traj, cfg, result) -> dict:
-    """TCP error of the simulator's true servo positions against the plan, over the motion."""
-    import numpy as np
-
-    from roarmctl.device.streamer import sample
-
-    ts, q, torque = simulator.recording()
-    tt = ts - result.t0
-    m = (tt >= 0) & (tt <= traj.duration / cfg.speed_scale)
-    out = {"rms_mm": None, "max_mm": None, "samples": int(m.sum()), "torque_always_on": bool(torque.all())}
-    if m.any() and not math.isnan(result.t0):
-        from roarmctl.device.protocol import WireMap
-        from roarmctl.device.simulator import JOINTS
-
-        plan = sample(traj, tt[m] * cfg.speed_scale)
-        wm = WireMap(robot)
-        fw = q[m].copy()
-        fw[:, 5] = math.pi - fw[:, 5]  # the recording's view (hand = pi - q) back to firmware radians
-        cols = [JOINTS.index(f) for f in wm.field_names]
-        q_joint = np.zeros((len(fw), robot.dof))
-        for w, i, c in zip(wm.fields, wm.index, cols):
-            q_joint[:, i] = (fw[:, c] - w.offset) / w.sign
-        e = np.linalg.norm(robot.kin.fk(q_joint)[:, :3, 3] - robot.kin.fk(plan)[:, :3, 3], axis=1) * 1e3
-        out |= {"rms_mm": float(np.sqrt(np.mean(e ** 2))), "max_mm": float(e.max())}
-    return out
 
 
 class _Display:

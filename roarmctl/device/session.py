@@ -1,0 +1,146 @@
+"""One execution of a trajectory on a serial port or the built-in firmware simulator.
+
+Open the port, check the device answers like the robot the trajectory is for, stream, and on every
+way out (done, error, Ctrl-C/SIGTERM/SIGHUP, lost link) close the port and write the execution log.
+``roarmctl execute`` and ``roarmctl.api.execute`` both run through :func:`run_execution`; they
+differ only in how they ask for confirmation and show progress.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import sys
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, ContextManager
+
+from roarmctl.errors import InputError, RoarmError, signal_name
+
+
+@dataclass
+class Execution:
+    """What a run did: the streamer's ``result`` (summary and log), the trajectory as run (its start
+    re-planned when the arm stood elsewhere), the port used, and for the simulator the true TCP
+    tracking error of its servos against the plan (``rms_mm``, ``max_mm``, ``samples``, ``torque_always_on``)."""
+
+    result: Any
+    traj: Any
+    port: str
+    simulator: dict[str, Any] | None
+
+
+def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = False,
+                  log_path: str | Path | None = None, confirm: Callable[[str], bool],
+                  on_status: Callable | None = None, on_start: Callable | None = None,
+                  on_note: Callable[[str], None] | None = None, on_end: Callable[[], None] | None = None,
+                  shield: Callable[[], ContextManager] = contextlib.nullcontext,
+                  on_log_error: Callable[[Path, Exception], None] | None = None) -> Execution:
+    """Stream ``traj`` (a validated ``Trajectory`` for ``robot``) with ``cfg`` (``StreamConfig``).
+
+    Exactly one of ``port`` (a serial port name or pyserial URL) and ``sim=True`` (the firmware
+    simulator of the trajectory's robot on a pseudo-terminal). ``confirm(message)`` is asked before
+    the arm moves; ``on_status``/``on_start``/``on_note`` feed a progress display, ``on_end`` runs
+    when streaming stops (before the port closes). ``shield`` makes the close and the log write
+    uninterruptible (the CLI passes its signal shield). ``log_path``: where the execution log goes;
+    a log that cannot be written calls ``on_log_error(path, exc)`` (default: a ``RuntimeWarning``)
+    instead of hiding the run's own outcome. Errors propagate after the log is written; the stream
+    result of a failed run is the exception's ``result`` attribute when it has one.
+    """
+    from roarmctl.device.link import Link
+    from roarmctl.device.protocol import WireMap
+    from roarmctl.device.streamer import Streamer, write_log
+
+    if (port is None) == (not sim):
+        raise InputError("execute: give exactly one of a port or the simulator")
+    model = WireMap(robot).model
+    simulator = None
+    switch = sys.getswitchinterval()
+    if sim:
+        from roarmctl.device.simulator import PtySimulator, SimConfig
+
+        sys.setswitchinterval(0.0005)  # the simulator thread shares the GIL with the real-time loop
+        # the simulated arm is the kind the trajectory is for (an M2 trajectory gets the M2 protocol)
+        simulator = PtySimulator(SimConfig(firmware="m2" if model == "m2" else "m3-0.84")).start()
+        port = simulator.path
+
+    def replan(q, mode: str):
+        from roarmctl.motion.replan import replan_start
+
+        return replan_start(traj, robot, q, mode)
+
+    link = Link(str(port))
+    link.expect = model
+    # Built before the port opens (the schedule is pure), so that every way out has a log.
+    streamer = Streamer(link, robot, traj, cfg, on_status=on_status, confirm=confirm, on_start=on_start,
+                        replan=replan, on_note=on_note)
+    result = None
+    tracking = None
+    try:
+        link.open()
+        link.handshake()
+        try:
+            result = streamer.run()
+        finally:
+            if on_end is not None:
+                on_end()
+    except RoarmError as exc:
+        result = getattr(exc, "result", None) or streamer.result("failed", f"{exc.message}; no motion command was sent")
+        raise
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP while opening or in the handshake
+        signum = getattr(exc, "signum", 2)
+        result = streamer.result("interrupted" if signum == 2 else "terminated",
+                                 f"stopped by {signal_name(signum)} before streaming (no motion command sent)")
+        raise
+    finally:
+        with shield():  # a signal now must not cut the port's close or the log short
+            link.close()
+            if result is None:
+                result = streamer.result("failed", "stopped before streaming (no motion command sent)")
+            if simulator is not None:
+                # streamer.traj: re-planned from the measured pose when the arm was elsewhere
+                tracking = simulator_tracking(simulator, robot, streamer.traj, cfg, result)
+                result.log["simulator"] = tracking
+                simulator.stop()
+                sys.setswitchinterval(switch)
+            if log_path is not None:
+                try:
+                    write_log(log_path, result.log)
+                except (OSError, InputError) as exc:
+                    if on_log_error is None:
+                        warnings.warn(f"could not write the execution log {log_path}: {exc}", RuntimeWarning, stacklevel=2)
+                    else:
+                        on_log_error(Path(log_path), exc)
+    return Execution(result, streamer.traj, str(port), tracking)
+
+
+def simulator_tracking(simulator, robot, traj, cfg, result) -> dict[str, Any]:
+    """TCP error (mm) of the simulator's true servo positions against the plan, over the motion.
+
+    ``simulator.recording()`` gives times (s, the streamer's clock), firmware joint values (N, 6,
+    rad, hand as pi - q) and torque flags; the plan is sampled at the same times, scaled by
+    ``cfg.speed_scale``, and both go through the robot's FK.
+    """
+    import numpy as np
+
+    from roarmctl.device.protocol import WireMap
+    from roarmctl.device.simulator import JOINTS
+    from roarmctl.device.streamer import sample
+
+    ts, q, torque = simulator.recording()
+    tt = ts - result.t0
+    m = (tt >= 0) & (tt <= traj.duration / cfg.speed_scale)
+    out = {"rms_mm": None, "max_mm": None, "samples": int(m.sum()), "torque_always_on": bool(torque.all())}
+    if m.any() and not math.isnan(result.t0):
+        plan = sample(traj, tt[m] * cfg.speed_scale)
+        wm = WireMap(robot)
+        fw = q[m].copy()
+        fw[:, 5] = math.pi - fw[:, 5]  # the recording's view (hand = pi - q) back to firmware radians
+        cols = [JOINTS.index(f) for f in wm.field_names]
+        q_joint = np.zeros((len(fw), robot.dof))
+        for w, i, c in zip(wm.fields, wm.index, cols):
+            q_joint[:, i] = (fw[:, c] - w.offset) / w.sign
+        e = np.linalg.norm(robot.kin.fk(q_joint)[:, :3, 3] - robot.kin.fk(plan)[:, :3, 3], axis=1) * 1e3
+        out |= {"rms_mm": float(np.sqrt(np.mean(e ** 2))), "max_mm": float(e.max())}
+    return out
