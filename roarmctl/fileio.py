@@ -30,6 +30,10 @@ def atomic_write_json(path: str | os.PathLike, obj: Any, indent: int | None = 1)
 def atomic_write_with(path: str | os.PathLike, writer: Callable[[Any], Any]) -> Path:
     """Call ``writer(binary_file)`` on a temporary file next to ``path``, then rename it into place."""
     target = Path(path)
+    if target.exists() and not target.is_file():
+        # a rename would replace a device (/dev/null, a serial port) or fail on a directory
+        what = "a directory" if target.is_dir() else "not a regular file"
+        raise InputError(f"cannot write {target}: it is {what}", "give the path of a file to write")
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)

@@ -38,3 +38,18 @@ def test_unwritable_target_is_an_input_error(tmp_path):
     blocker.write_text("x")
     with pytest.raises(InputError, match="cannot write"):
         atomic_write_text(blocker / "sub" / "out.json", "data")  # a file where a directory should be
+
+
+def test_a_device_or_directory_is_never_replaced(tmp_path):
+    """A rename over /dev/null or a serial port (as root, in a writable /dev) would replace the device
+    node with a regular file; a FIFO stands in for a device here."""
+    from roarmctl.errors import InputError
+
+    fifo = tmp_path / "device"
+    os.mkfifo(fifo)
+    with pytest.raises(InputError, match="not a regular file"):
+        atomic_write_text(fifo, "data")
+    assert not fifo.is_file() and fifo.exists()
+    with pytest.raises(InputError, match="a directory"):
+        atomic_write_text(tmp_path, "data")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["device"]

@@ -211,6 +211,8 @@ def write_bag(streams: Streams, path: str | os.PathLike, storage: str) -> tuple[
         if storage == "mcap":
             if target.is_dir():
                 raise InputError(f"{target} is a folder", "give a file name ending in .mcap")
+            if target.exists() and not target.is_file():
+                raise InputError(f"cannot write {target}: it is not a regular file", "give the path of a file to write")
             os.replace(bag / f"{bag.name}.mcap", target)
         else:
             if target.is_dir():
