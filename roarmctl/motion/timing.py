@@ -167,13 +167,13 @@ def _joint_limit_constraints(constraint, vlim: np.ndarray, alim: np.ndarray) -> 
     return list(pair)
 
 
-def _tcp_speed_constraint(speed_per_ds: np.ndarray, max_speed: float):
-    """A toppra constraint bounding the TCP speed: |dp/ds| * sdot <= max_speed at every grid point;
-    ``speed_per_ds`` (G,) is |dp/ds| (m per unit of s) on the grid (computed once per path, not per margin)."""
+def _sdot_bound_constraint(x_upper: np.ndarray):
+    """A toppra constraint bounding the path speed alone: x = sdot^2 <= ``x_upper`` (G,) at every
+    grid point (computed once per path by the caller, not per margin)."""
     from toppra.constraint import DiscretizationType
     from toppra.constraint.linear_constraint import LinearConstraint
 
-    class TcpSpeedConstraint(LinearConstraint):
+    class SdotBoundConstraint(LinearConstraint):
         def __init__(self) -> None:
             super().__init__()
             self.discretization_type = DiscretizationType.Collocation
@@ -181,12 +181,16 @@ def _tcp_speed_constraint(speed_per_ds: np.ndarray, max_speed: float):
         def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
             self.dof = path.dof
             xbound = np.empty((len(gridpoints), 2))
-            xbound[:, 0] = 0.0
-            with np.errstate(divide="ignore"):
-                xbound[:, 1] = np.where(speed_per_ds > 1e-12, (max_speed / np.maximum(speed_per_ds, 1e-12)) ** 2, 1e12)
+            xbound[:, 0], xbound[:, 1] = 0.0, x_upper
             return None, None, None, None, None, None, xbound
 
-    return TcpSpeedConstraint()
+    return SdotBoundConstraint()
+
+
+def _tcp_speed_constraint(speed_per_ds: np.ndarray, max_speed: float):
+    """The TCP speed bound |dp/ds| * sdot <= max_speed; ``speed_per_ds`` (G,) is |dp/ds| (m per unit of s) on the grid."""
+    with np.errstate(divide="ignore"):
+        return _sdot_bound_constraint(np.where(speed_per_ds > 1e-12, (max_speed / np.maximum(speed_per_ds, 1e-12)) ** 2, 1e12))
 
 
 GEOMETRIC_JERK_SHARE = 0.5  # of each jerk limit, for the path's own term q3(s) * sdot^3
@@ -207,24 +211,9 @@ def _geometric_jerk_constraint(at: np.ndarray, jmax: np.ndarray):
     spline's third derivative, constant between knots) and only a lower speed bounds it. As a bound
     on x = sdot^2 it is a TOPP-RA constraint. ``at`` (G, n) is ``_path_jerk`` on the grid.
     """
-    from toppra.constraint import DiscretizationType
-    from toppra.constraint.linear_constraint import LinearConstraint
-
     with np.errstate(divide="ignore", over="ignore"):
         bound = np.min(np.where(at > 1e-9, (GEOMETRIC_JERK_SHARE * jmax / np.maximum(at, 1e-9)) ** (2 / 3), 1e12), axis=1)
-
-    class GeometricJerkConstraint(LinearConstraint):
-        def __init__(self) -> None:
-            super().__init__()
-            self.discretization_type = DiscretizationType.Collocation
-
-        def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
-            self.dof = path.dof
-            xbound = np.empty((len(gridpoints), 2))
-            xbound[:, 0], xbound[:, 1] = 0.0, np.minimum(bound, 1e12)
-            return None, None, None, None, None, None, xbound
-
-    return GeometricJerkConstraint()
+    return _sdot_bound_constraint(np.minimum(bound, 1e12))
 
 
 def _torque_terms(model: TorqueModel, path, gridpoints: np.ndarray, gravity: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
