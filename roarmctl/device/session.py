@@ -43,8 +43,9 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
     simulator of the trajectory's robot on a pseudo-terminal). ``confirm(message)`` is asked before
     the arm moves; ``on_status``/``on_start``/``on_note`` feed a progress display, ``on_end`` runs
     when streaming stops (before the port closes). ``shield`` makes the close and the log write
-    uninterruptible (the CLI passes its signal shield). ``log_path``: where the execution log goes;
-    a log that cannot be written calls ``on_log_error(path, exc)`` (default: a ``RuntimeWarning``)
+    uninterruptible (the CLI passes its signal shield). ``log_path``: where the execution log goes,
+    written on every way out once the port has opened (a port that never opened exchanged nothing
+    and leaves an existing log alone); a log that cannot be written calls ``on_log_error(path, exc)`` (default: a ``RuntimeWarning``)
     instead of hiding the run's own outcome. Errors propagate after the log is written; the stream
     result of a failed run is the exception's ``result`` attribute when it has one.
     """
@@ -77,8 +78,10 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
                         replan=replan, on_note=on_note)
     result = None
     tracking = None
+    opened = False
     try:
         link.open()
+        opened = True
         link.handshake()
         try:
             result = streamer.run()
@@ -104,7 +107,9 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
                 result.log["simulator"] = tracking
                 simulator.stop()
                 sys.setswitchinterval(switch)
-            if log_path is not None:
+            # a port that never opened exchanged nothing: keep the previous run's log rather than
+            # replace it with an empty one (the error itself says what went wrong)
+            if log_path is not None and opened:
                 try:
                     write_log(log_path, result.log)
                 except (OSError, InputError) as exc:

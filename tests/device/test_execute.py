@@ -183,10 +183,13 @@ def test_not_at_start_is_refused_then_move_to_start(tmp_path, capsys):
         assert rc == 0, capsys.readouterr().err
 
 
-def test_port_errors_are_one_clear_line(traj_file, capsys):
-    rc = run_cli(["execute", str(traj_file), "--port", "/dev/ttyNOPE0", "--yes"])
+def test_port_errors_are_one_clear_line(traj_file, capsys, tmp_path):
+    log = tmp_path / "previous.exec.json"
+    log.write_text('{"a": "successful run"}')
+    rc = run_cli(["execute", str(traj_file), "--port", "/dev/ttyNOPE0", "--yes", "--log", str(log)])
     err = capsys.readouterr().err
     assert rc == 4 and err.count("\n") == 1 and "no such serial port" in err
+    assert log.read_text() == '{"a": "successful run"}'  # nothing was exchanged: the last run's log stays
     import serial
 
     with PtySimulator(SimConfig()) as sim:
