@@ -344,19 +344,15 @@ def check_against_robot(traj, robot, where: str = "trajectory") -> None:
               f"{q[i, j]:.4f} at t = {t[i]:.3f} s is outside the joint limits [{lo[j]:.4f}, {hi[j]:.4f}]",
               "plan it again with the robot's joint limits")
     vlim = vmax * (1 + VEL_TOL) + 1e-6
-    bad = first(np.abs(v) > vlim)
-    if bad:
-        i, j = bad
-        _fail(where, f"points[{i}].velocities ({names[j]})",
-              f"{v[i, j]:.4f} at t = {t[i]:.3f} s exceeds the velocity limit {vmax[j]:.4f}",
-              "plan it again; the robot's limits are in its description")
     alim = amax * (1 + ACC_TOL) + 1e-6
-    bad = first(np.abs(a) > alim)
-    if bad:
-        i, j = bad
-        _fail(where, f"points[{i}].accelerations ({names[j]})",
-              f"{a[i, j]:.4f} at t = {t[i]:.3f} s exceeds the acceleration limit {amax[j]:.4f}",
-              "plan it again; the robot's limits are in its description")
+    for values, limit, bound, field in ((v, vmax, vlim, "velocities"), (a, amax, alim, "accelerations")):
+        bad = first(np.abs(values) > bound)
+        if bad:
+            i, j = bad
+            kind = "velocity" if field == "velocities" else "acceleration"
+            _fail(where, f"points[{i}].{field} ({names[j]})",
+                  f"{values[i, j]:.4f} at t = {t[i]:.3f} s exceeds the {kind} limit {limit[j]:.4f}",
+                  "plan it again; the robot's limits are in its description")
     if len(t) < 2:
         return
     dt = np.diff(t)

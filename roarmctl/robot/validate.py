@@ -202,17 +202,23 @@ def _attr_floats(elem, key: str, n: int, where: str, field: str, required: bool 
         _fail(where, field, f"'{text[:40]}' is not {n} finite number(s)")
 
 
+def _unique_name(element, kind: str, k: int, seen: dict[str, Any], where: str) -> str:
+    """The ``name`` of the k-th URDF <link> or <joint>, required and not already in ``seen``."""
+    name = element.get("name")
+    if not name:
+        _fail(where, f"{kind}[{k}]", "has no name")
+    if name in seen:
+        _fail(where, f"{kind} '{name}'", "the name is used twice")
+    return name
+
+
 def check_urdf(root, where: str) -> None:
     """The URDF's structure and numbers (``root`` is the parsed XML root element)."""
     if root.tag != "robot":
         _fail(where, "root element", f"<{root.tag}> is not <robot>")
     links: dict[str, Any] = {}
     for k, link in enumerate(root.findall("link")):
-        name = link.get("name")
-        if not name:
-            _fail(where, f"link[{k}]", "has no name")
-        if name in links:
-            _fail(where, f"link '{name}'", "the name is used twice")
+        name = _unique_name(link, "link", k, links, where)
         links[name] = link
         inn = link.find("inertial")
         if inn is not None:
@@ -234,11 +240,7 @@ def check_urdf(root, where: str) -> None:
     joints: dict[str, Any] = {}
     parent_of: dict[str, str] = {}
     for k, j in enumerate(root.findall("joint")):
-        name = j.get("name")
-        if not name:
-            _fail(where, f"joint[{k}]", "has no name")
-        if name in joints:
-            _fail(where, f"joint '{name}'", "the name is used twice")
+        name = _unique_name(j, "joint", k, joints, where)
         joints[name] = j
         ends = {}
         for tag in ("parent", "child"):
