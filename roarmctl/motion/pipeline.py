@@ -465,6 +465,8 @@ class Planner:
 
         t0 = time.perf_counter()
         g = q[self.gi] if gripper is None and self.gi is not None else gripper
+        if g is not None:  # the chain is checked with the gripper value it carries
+            self.checker.set_gripper(float(g))
         if not takes_pitch(self.robot):  # position-only IK: the tool pitch follows from the geometry
             targets = [(p, None, None) for p, _, _ in targets]
         first, pitch, roll = targets[0]
@@ -830,17 +832,13 @@ class Planner:
                 raise _GripperDoesNotFit(k)
 
     def _first_invalid(self, qf: np.ndarray) -> int | None:
-        """First invalid configuration of ``qf`` (M, dof), the gripper as given per sample (grasp target as set)."""
+        """First invalid configuration of ``qf`` (M, dof), the gripper as given per sample (grasp target as set).
+
+        One checker call with a gripper value per row (not one call per run of equal gripper values: while
+        the jaws move, that was one call per sample); the checker's own gripper value is left as it was."""
         if self.gi is None:
             return self.checker.first_invalid(qf[:, self.arm])
-        g = qf[:, self.gi]
-        cuts = np.flatnonzero(np.abs(np.diff(g)) > 1e-12) + 1
-        for a, b in zip(np.concatenate([[0], cuts]), np.concatenate([cuts, [len(g)]])):
-            self.checker.set_gripper(float(g[a]))
-            bad = self.checker.first_invalid(qf[a:b, self.arm])
-            if bad is not None:
-                return int(a + bad)
-        return None
+        return self.checker.first_invalid(qf[:, self.arm], gripper=qf[:, self.gi])
 
     def _check_chain(self, tp: TimedPath, parts: list[_Part], s_bounds: np.ndarray, label: str) -> None:
         """Independent check of the sampled motion: limits, TCP speed, collisions (4x finer) and singularity
