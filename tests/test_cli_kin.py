@@ -123,6 +123,20 @@ def test_dynamics_json_matches_seed001():
     assert np.allclose(out["tau"], [11.33442 + 0.649519, -2.539015 + 0.866025], atol=1e-5)
 
 
+def test_dynamics_takes_joint_values_like_fk():
+    """``kin dynamics ROBOT Q...`` (negative values too) gives what ``--q`` gives; both at once is exit 2.
+    Hand-derived: the double pendulum at q = (-pi/4, pi/3) at rest holds
+    G1 = (m1 + m2) g l1 cos q1 + m2 g l2 cos(q1 + q2), G2 = m2 g l2 cos(q1 + q2) (l = 1 m, m = 1 kg)."""
+    q1, q2 = -math.pi / 4, math.pi / 3
+    pos = run_json("kin", "dynamics", "planar_2r", f"{q1}", f"{q2}")
+    opt = run_json("kin", "dynamics", "planar_2r", "--q", f"{q1} {q2}")
+    assert np.allclose(pos["tau"], opt["tau"], atol=1e-12)
+    g = 9.81
+    assert np.allclose(pos["gravity"], [2 * g * math.cos(q1) + g * math.cos(q1 + q2), g * math.cos(q1 + q2)], atol=1e-9)
+    both = run("kin", "dynamics", "planar_2r", "0", "0", "--q", "0 0")
+    assert both.returncode == 2 and "once" in both.stderr
+
+
 def test_dynamics_deg():
     rad = run_json("kin", "dynamics", "planar_2r", "--q", f"{math.pi / 4},{math.pi / 3}", "--qdd", "1 2")
     deg = run_json("kin", "dynamics", "planar_2r", "--q", "45 60", "--qdd", f"{math.degrees(1)} {math.degrees(2)}", "--deg")

@@ -82,6 +82,13 @@ YAML_CASES = {
     "duplicate joints list": ([("joints: [base_link_to_link1,", "joints: [link1_to_link2,")], "joints"),
     "gripper outside limits": ([("open: 1.5,", "open: 2.5,")], "gripper.open"),
     "negative velocity limit": ([("base_link_to_link1: 2.0,", "base_link_to_link1: -2.0,")], "limits.velocity"),
+    # a misspelt field used to be ignored: the arm planned without its allowed pairs or limits
+    "misspelt top-level field": ([("allowed_collisions:", "allowed_colisions:")],
+                                 "allowed_colisions: unknown field (did you mean 'allowed_collisions'?)"),
+    "misspelt limits field": ([("  velocity:     {", "  velocty:      {")],
+                              "limits.velocty: unknown field (did you mean 'velocity'?)"),
+    "misspelt gripper field": ([("open: 1.5,", "opne: 1.5, open: 1.5,")], "gripper.opne: unknown field"),
+    "DH field in a URDF sidecar": ([("tcp_link: hand_tcp", "tcp_link: hand_tcp\ninertials: []")], "inertials: unknown field"),
 }
 
 DH_CASES = {
@@ -89,6 +96,9 @@ DH_CASES = {
     "inf lower": ([("lower: -110,", "lower: -.inf,")], "dh[0].lower"),
     "length_unit list": ([("convention: standard", "convention: standard\nlength_unit: [mm]")], "length_unit"),
     "lower above upper": ([("lower: -130, upper: 130", "lower: 130, upper: -130")], "dh[1]"),
+    "URDF field in a DH table": ([("convention: standard", "convention: standard\ntcp_link: link2")], "tcp_link: unknown field"),
+    "misspelt tool field": ([("convention: standard", "convention: standard\ntool: {xyz: [0, 0, 0.1], rot: [0, 0, 0]}")],
+                            "tool.rot: unknown field"),
 }
 
 
@@ -135,3 +145,16 @@ def test_bundled_and_unedited_descriptions_load(tmp_path):
         load_robot(name)
     r = load_robot(str(m3_copy(tmp_path)))
     assert r.dof == 6 and len(r.wire) == 6
+
+
+def test_tool_offset_moves_the_tcp_of_a_urdf_robot(tmp_path):
+    """``tool: {xyz, rpy}`` in a URDF sidecar puts the TCP at that offset from ``tcp_link``: checked
+    against the original TCP pose times the offset written out by hand (90 deg about y)."""
+    import numpy as np
+
+    p = m3_copy(tmp_path, yaml_edit=[("tcp_link: hand_tcp", "tcp_link: hand_tcp\ntool: {xyz: [0.01, 0.02, 0.05], rpy: [0, 1.5707963267948966, 0]}")])
+    plain, tooled = load_robot("roarm_m3_pro"), load_robot(str(p))
+    offset = np.array([[0.0, 0, 1, 0.01], [0, 1, 0, 0.02], [-1, 0, 0, 0.05], [0, 0, 0, 1]])
+    for q in ([0, 0, 1.57, 0, 0, 0], [0.3, -0.4, 1.2, 0.5, -0.7, 0.2]):
+        np.testing.assert_allclose(tooled.kin.fk(q), plain.kin.fk(q) @ offset, atol=1e-12)
+    assert tooled.tcp_link == "tool" and tooled.dof == plain.dof

@@ -151,7 +151,7 @@ def test_renamed_links_plan_pick_and_place_exactly_as_the_original(tmp_path):
 
     def renamed(text: str) -> str:
         for old, new in rename.items():
-            text = re.sub(rf"(?<![A-Za-z0-9]){old}(?![0-9])", new, text)
+            text = re.sub(rf"(?<![A-Za-z0-9]){old}(?![0-9]|s:)", new, text)  # not the 'base_links:' key
         return text
 
     urdf = renamed((bundled_dir() / "roarm_m3_pro.urdf").read_text())
@@ -170,3 +170,41 @@ def test_renamed_links_plan_pick_and_place_exactly_as_the_original(tmp_path):
     assert np.array_equal(original.times, other.times)
     assert np.array_equal(original.positions, other.positions)
     assert [e.kind for e in original.events] == [e.kind for e in other.events]
+
+
+
+TOWER = """<robot name="tower">
+  <link name="base"><collision><origin xyz="0 0 0.05"/><geometry><box size="0.1 0.1 0.1"/></geometry></collision></link>
+  <link name="post"><collision><origin xyz="0 0 0.05"/><geometry><box size="0.05 0.05 0.2"/></geometry></collision></link>
+  <link name="boom"><collision><origin xyz="0.1 0 0"/><geometry><box size="0.2 0.03 0.03"/></geometry></collision></link>
+  <joint name="yaw" type="revolute"><parent link="base"/><child link="post"/><origin xyz="0 0 0.1"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="pitch" type="revolute"><parent link="post"/><child link="boom"/><origin xyz="0 0 0.15"/>
+    <axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+</robot>"""
+
+
+def test_links_joined_by_a_joint_may_touch_without_listing_them(tmp_path):
+    """A bare URDF whose post sinks into the base and whose boom starts inside the post (as meshes do
+    at their joints): FCL on the raw boxes says both joined pairs overlap, yet the arm is valid; the
+    boom swung down into the base (not joined to it) is still a collision."""
+    import fcl
+
+    from roarmctl.motion.collision import CollisionChecker
+    from roarmctl.motion.scene import Scene
+
+    (tmp_path / "tower.urdf").write_text(TOWER)
+    robot = load_robot(str(tmp_path / "tower.urdf"))
+    q = np.zeros(2)
+    frames = robot.kin.link_frames(q)
+
+    def box(link):
+        s = next(c for c in robot.collision if c.link == link)
+        t = frames[robot.kin.link_index[link]] @ s.origin
+        return fcl.CollisionObject(fcl.Box(*s.size), fcl.Transform(t[:3, :3], t[:3, 3]))
+
+    for a, b in (("base", "post"), ("post", "boom")):
+        assert fcl.collide(box(a), box(b), fcl.CollisionRequest(), fcl.CollisionResult())
+    checker = CollisionChecker(robot, Scene(items=[]), padding=0.0)
+    assert checker.is_valid(q)
+    assert not checker.is_valid(np.array([0.0, 1.57]))  # boom pointing down, into the base

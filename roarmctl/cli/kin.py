@@ -285,10 +285,11 @@ def ik(
         common.console(stderr=True).print(f"pitch chosen (auto): {out['pitches'][0]:.2f} {unit} (pass --pitch to fix it)")
 
 
-@kin_app.command("dynamics")
+@kin_app.command("dynamics", context_settings=NUMBERS)
 def dynamics(
     robot: str = typer.Argument(..., help="Bundled robot name or path to a description (with inertials)."),
-    q: str = typer.Option(..., "--q", help="Joint positions, space- or comma-separated ('0 0.5 1.2 0 0'); arm joints, the gripper may follow."),
+    q_args: Optional[list[str]] = typer.Argument(None, metavar="[Q]...", help="Joint positions, as for kin fk (or give --q)."),
+    q: Optional[str] = typer.Option(None, "--q", help="Joint positions, space- or comma-separated ('0 0.5 1.2 0 0'); arm joints, the gripper may follow."),
     qd: Optional[str] = typer.Option(None, "--qd", help="Joint velocities (rad/s, or deg/s with --deg); default 0."),
     qdd: Optional[str] = typer.Option(None, "--qdd", help="Joint accelerations (rad/s^2, or deg/s^2 with --deg); default 0."),
     deg: bool = DEG,
@@ -304,8 +305,13 @@ def dynamics(
     from roarmctl.robot.dynamics import coriolis_vector, gravity_vector, inverse_dynamics, mass_matrix
     from roarmctl.robot.loader import load_robot
 
+    from roarmctl.errors import InputError
+
+    if (q is None) == (not q_args):
+        raise InputError("give the joint positions once: after the robot (like kin fk) or as --q",
+                         f"e.g. roarmctl kin dynamics {robot} 0 0.5 1.2 0 0")
     r = load_robot(robot)
-    qv = _split_numbers(q, "--q", deg)
+    qv = _split_numbers(q, "--q", deg) if q is not None else common.parse_numbers(q_args, "joint value", deg)
     n = qv.size
     qdv = _split_numbers(qd, "--qd", deg) if qd is not None else np.zeros(n)
     qddv = _split_numbers(qdd, "--qdd", deg) if qdd is not None else np.zeros(n)

@@ -67,6 +67,9 @@ def load_robot(spec: str) -> Robot:
         if f.point_link is not None and f.point_link not in robot.link_names:
             raise DescriptionError(f"{path}: frames.{f.name}.point.link: '{f.point_link}' is not a link of {robot.name}")
     robot = _link_roles(robot, data, str(path))
+    # Links joined by a joint touch at the joint and their meshes usually overlap there: their pair is
+    # not checked (MoveIt Setup Assistant's "Adjacent" pairs, Drake's and PyBullet's default).
+    robot.allowed_collisions |= {frozenset((j.parent, j.child)) for j in robot.joints}
     checks.check_robot(robot, str(path))
     _CACHE[spec] = robot
     return robot
@@ -272,6 +275,26 @@ def _frames(data: dict, where: str) -> dict:
     return out
 
 
+def _tool_joint(data: dict, where: str, parent: str, taken: set[str], lscale: float = 1.0,
+                deg: bool = False) -> Joint | None:
+    """The fixed joint of ``tool: {xyz, rpy}`` (the TCP offset from ``parent``; xyz in the file's length
+    unit, rpy in its angle unit), to a new link named ``tool`` (``tool_1``... if taken); None without one."""
+    tool = data.get("tool")
+    if not tool:
+        return None
+    if not isinstance(tool, dict):
+        raise DescriptionError(f"{where}: tool: expected {{xyz, rpy}}")
+    xyz = _vec(tool.get("xyz", [0, 0, 0]), 3, f"{where}: tool.xyz") * lscale
+    rpy = _vec(tool.get("rpy", [0, 0, 0]), 3, f"{where}: tool.rpy")
+    if deg:
+        rpy = np.radians(rpy)
+    name, k = "tool", 0
+    while name in taken:
+        k += 1
+        name = f"tool_{k}"
+    return Joint(name, "fixed", parent, name, transform(xyz, rpy))
+
+
 # --------------------------------------------------------------------------- URDF
 def _floats(text: str | None, n: int, where: str) -> np.ndarray:
     if text is None:
@@ -425,6 +448,10 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     tcp = side.get("tcp_link", ordered[-1].child)
     if tcp not in links:
         raise DescriptionError(f"{sidecar}: tcp_link: '{tcp}' is not a link of {urdf.name}")
+    tool = _tool_joint(side, str(sidecar), tcp, set(links) | {j.name for j in ordered})
+    if tool is not None:
+        ordered.append(tool)
+        tcp = tool.child
     acc = np.array([jl.get(n, {}).get("acceleration", DEFAULT_ACCELERATION) for n in names])
     common = _common(side, sidecar, names, np.array(urdf_vel), acc, np.array(urdf_eff))
     return Robot(
@@ -560,16 +587,11 @@ def _from_dh(path: Path, data: dict) -> Robot:
         dh_rows.append({"kind": kind, "a": a, "alpha": alpha, "d": d, "offset": total_offset})
         prev = child
     tcp = "link" + str(len(rows))
-    if data.get("tool"):
-        tool = data["tool"]
-        if not isinstance(tool, dict):
-            raise DescriptionError(f"{where}: tool: expected {{xyz, rpy}}")
-        xyz = _vec(tool.get("xyz", [0, 0, 0]), 3, f"{where}: tool.xyz") * lscale
-        rpy = _vec(tool.get("rpy", [0, 0, 0]), 3, f"{where}: tool.rpy")
-        if deg:
-            rpy = np.radians(rpy)
-        joints.append(Joint("tool", "fixed", prev, "tool", transform(xyz, rpy)))
-        tcp = "tool"
+    tool = _tool_joint(data, where, prev, {j.child for j in joints} | {j.name for j in joints} | {"base", "world"},
+                       lscale, deg)
+    if tool is not None:
+        joints.append(tool)
+        tcp = tool.child
     inertials = {}
     for i, item in enumerate(data.get("inertials") or []):
         loc = f"{where}: inertials[{i}]"

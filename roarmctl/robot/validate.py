@@ -83,6 +83,61 @@ def _xyz_rpy(v: Any, where: str, field: str) -> None:
             _nums(v[k], where, f"{field}.{k}", 3)
 
 
+# Every field a description may have. A key outside these is refused rather than ignored: a typo such
+# as ``allowed_colisions`` would otherwise silently drop a safety-relevant setting.
+COMMON_KEYS = ("format", "name", "source", "description", "limits", "gripper", "named_poses", "wire",
+               "allowed_collisions", "singularity_model", "ik", "base_links", "jaw_links", "frames")
+URDF_KEYS = ("urdf", "srdf", "joint_limits", "packages", "xacro_args", "mesh_collision", "joints", "tcp_link",
+             "arm_group", "gripper_group", "tool")
+DH_KEYS = ("dh", "convention", "length_unit", "angle_unit", "base", "tool", "inertials")
+NESTED_KEYS = {
+    "limits": ("velocity", "acceleration", "jerk", "effort"),
+    "gripper": ("joint", "open", "closed", "jaw_width", "squeeze", "clearance"),
+    "gripper.jaw_width": ("q", "mm"),
+    "tool": ("xyz", "rpy"),
+    "base": ("xyz", "rpy"),
+}
+
+
+def _known(mapping: dict, allowed: tuple[str, ...], where: str, field: str | None) -> None:
+    """Refuse a key of ``mapping`` outside ``allowed``, suggesting the closest allowed one."""
+    import difflib
+
+    for key in mapping:
+        if key not in allowed:
+            close = difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.6)
+            at = f"{field}.{key}" if field else str(key)
+            _fail(where, at, "unknown field", f"did you mean '{close[0]}'?" if close else f"known fields: {', '.join(allowed)}")
+
+
+def check_keys(data: dict, where: str) -> None:
+    """Refuse unknown fields of a sidecar (URDF) or DH description, at the top level and one level down."""
+    if "dh" in data:
+        _known(data, COMMON_KEYS + DH_KEYS, where, None)
+    elif "urdf" in data:
+        _known(data, COMMON_KEYS + URDF_KEYS, where, None)
+    # neither: the loader says that it needs one of them
+    for field, allowed in NESTED_KEYS.items():
+        head, _, tail = field.partition(".")
+        value = data.get(head)
+        if tail and isinstance(value, dict):
+            value = value.get(tail)
+        if isinstance(value, dict):
+            _known(value, allowed, where, field)
+    for i, w in enumerate(data.get("wire") or []):
+        if isinstance(w, dict):
+            _known(w, ("joint", "field", "sign", "offset", "clamp"), where, f"wire[{i}]")
+    for i, it in enumerate(data.get("inertials") or []):
+        if isinstance(it, dict):
+            _known(it, ("link", "mass", "com", "inertia"), where, f"inertials[{i}]")
+    frames = data.get("frames")
+    for name, f in (frames.items() if isinstance(frames, dict) else ()):
+        if isinstance(f, dict):
+            _known(f, ("origin", "unit", "point"), where, f"frames.{name}")
+            if isinstance(f.get("point"), dict):
+                _known(f["point"], ("link", "xyz"), where, f"frames.{name}.point")
+
+
 def check_document(data: Any, where: str) -> None:
     """Types of every field the loader reads from a sidecar or DH YAML (``where`` names the file)."""
     if not isinstance(data, dict):
@@ -185,6 +240,7 @@ def check_document(data: Any, where: str) -> None:
                         _nums(row, where, f"inertials[{i}].inertia[{r}]", 3)
                 else:
                     _nums(inertia, where, f"inertials[{i}].inertia", 3)
+    check_keys(data, where)
 
 
 # --------------------------------------------------------------------------- URDF
