@@ -305,9 +305,15 @@ def test_dls_orientation():
     assert ei.value.reason == "orientation"
 
 
-def test_pitch_rejected_for_non_roarm():
-    with pytest.raises(InputError):
-        solve_ik(load_robot("scara_2r"), [0.5, 0, 0], pitch=0.3)
+def test_pitch_a_two_joint_arm_cannot_hold_is_refused_not_ignored():
+    # the SCARA's tool +x is always horizontal: 0.3 rad below the horizontal is unreachable, and the
+    # numerical IK says so (it used to be position only, dropping the pitch)
+    r = load_robot("scara_2r")
+    with pytest.raises(UnreachableError) as ei:
+        solve_ik(r, [0.5, 0, 0], pitch=0.3)
+    assert ei.value.reason == "orientation" and "tool pitch 17.2 deg" in ei.value.message
+    with pytest.raises(InputError):  # a roll turns the tool about the axis a pitch sets: not alone
+        solve_ik(r, [0.5, 0, 0], roll=0.3)
 
 
 def test_transform_helper_consistency():

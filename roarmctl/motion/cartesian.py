@@ -19,7 +19,7 @@ def cartesian_line(
     q_start: np.ndarray,
     p_goal: np.ndarray,
     *,
-    pitch: float,
+    pitch: float | None,
     roll: float | None = None,
     step: float = 0.005,
     label: str = "line",
@@ -27,9 +27,11 @@ def cartesian_line(
     """Joint waypoints (K, dof) whose TCP runs straight from FK(q_start) to ``p_goal`` (m).
 
     ``q_start`` is a full configuration; the gripper value is kept. The first waypoint is
-    ``q_start`` itself; the tool pitch (and roll, when given) is held along the line.
+    ``q_start`` itself; the tool pitch (and roll, when given) is held along the line (``pitch`` None:
+    position-only IK, the pitch follows from the geometry). Each sample is solved from the previous one
+    (``solve_ik_near``).
     """
-    from roarmctl.robot.ik import solve_ik, takes_pitch
+    from roarmctl.robot.ik import solve_ik_near
 
     q_start = robot.full_q(q_start)
     p0 = robot.kin.fk(q_start)[:3, 3]
@@ -37,17 +39,14 @@ def cartesian_line(
     n = max(int(np.ceil(np.linalg.norm(p_goal - p0) / step)), 1)
     out = [q_start]
     prev = q_start
-    held = takes_pitch(robot)  # position-only IK: the pitch follows from the geometry, nothing to hold
     for k in range(1, n + 1):
         p = p0 + (p_goal - p0) * (k / n)
         try:
-            sols = solve_ik(robot, p, pitch=pitch if held else None, roll=roll if held else None,
-                            q_ref=prev, all_solutions=True)
+            best = solve_ik_near(robot, p, prev, pitch=pitch, roll=roll if pitch is not None else None)
         except UnreachableError as exc:
             raise PlanningError(f"{label}: the straight line leaves the reachable space at "
                                 f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m: {exc.message}") from None
         arm = robot.arm_indices
-        best = min(sols, key=lambda s: float(np.max(np.abs(s[arm] - prev[arm]))))
         jump = float(np.max(np.abs(best[arm] - prev[arm])))
         if jump > MAX_JOINT_STEP:
             raise PlanningError(f"{label}: the straight line passes a singularity near "

@@ -190,6 +190,7 @@ class Planner:
         from roarmctl.robot.ik import takes_pitch
 
         self._pitch_free = takes_pitch(robot)  # the IK takes a tool pitch (pitch: auto chooses it)
+        self._noted_position_only = False  # "no pitch given" note (generic arms): once per plan
         self.arm = robot.arm_indices
         self.gi = robot.joint_index(robot.gripper.joint) if robot.gripper else None
         items = [_scene_item(s) for s in plan.scene + plan.objects]
@@ -341,10 +342,9 @@ class Planner:
             except Exception as exc:  # wrong length
                 raise InfeasibleError(f"{where}: joints: {exc}") from None
         else:
-            pitch = task.pitch if task.pitch is not None else math.pi / 2
-            chain, pitch = self._choose_ik_pitch([task.xyz], pitch, task.pitch_auto, None, q, where)
+            chain, pitch = self._choose_ik_pitch([task.xyz], self._held_pitch(task, where), task.pitch_auto, None, q, where)
             goal = chain[0]
-            label = _pitch_label(pitch, task.pitch_auto and self._pitch_free)
+            label = _pitch_label(pitch, task.pitch_auto and pitch is not None)
         if self.gi is not None:
             goal[self.gi] = q[self.gi]
         if not self.robot.within_limits(goal):
@@ -360,10 +360,10 @@ class Planner:
         g_open = task.gripper_open if task.gripper_open is not None else self.robot.gripper.open
         g_closed = self._grip_value(task, g_open, where)
         self._set_state(g_open, grasp_target=task.object)
-        (q_grasp, q_above), pitch = self._choose_ik_pitch([grasp, above], task.pitch, task.pitch_auto, task.roll, q, where,
-                                                          gripper=g_open)
+        (q_grasp, q_above), pitch = self._choose_ik_pitch([grasp, above], self._held_pitch(task, where), task.pitch_auto,
+                                                          task.roll, q, where, gripper=g_open)
         self._set_state(q[self.gi])
-        lab = _pitch_label(pitch, task.pitch_auto and self._pitch_free)
+        lab = _pitch_label(pitch, task.pitch_auto and pitch is not None)
         steps = [_Step("free", f"{where}: transit above '{task.object}'{lab}", q_to=_with(q_above, self.gi, q[self.gi]),
                        open_to=g_open if abs(q[self.gi] - g_open) > 1e-9 else None, open_label=f"{where}: open gripper")]
         steps += [
@@ -386,8 +386,9 @@ class Planner:
         target = np.asarray(task.xyz, dtype=float) + self.held_offset
         above = target + np.array([0.0, 0.0, task.approach_height])
         g_open = task.gripper_open if task.gripper_open is not None else self.robot.gripper.open
-        (q_place, q_above), pitch = self._choose_ik_pitch([target, above], task.pitch, task.pitch_auto, task.roll, q, where)
-        lab = _pitch_label(pitch, task.pitch_auto and self._pitch_free)
+        (q_place, q_above), pitch = self._choose_ik_pitch([target, above], self._held_pitch(task, where), task.pitch_auto,
+                                                          task.roll, q, where)
+        lab = _pitch_label(pitch, task.pitch_auto and pitch is not None)
         return [
             _Step("free", f"{where}: transit above the place for '{name}'{lab}", q_to=q_above),
             _Step("cartesian", f"{where}: lower '{name}'{lab}", q_to=q_place, line=(above, target), pitch=pitch, roll=task.roll),
@@ -434,13 +435,40 @@ class Planner:
         self.notes.append(f"{where}: grip '{task.object}' ({width * 1000:.1f} mm) at {want * 1000:.1f} mm: gripper {closed:.3f} rad")
         return closed
 
-    def _choose_ik_pitch(self, points: list[np.ndarray], pitch: float, auto: bool, roll: float | None, q: np.ndarray,
-                         where: str, gripper: float | None = None) -> tuple[list[np.ndarray], float]:
-        """``_choose_ik`` for points that share one pitch; with ``auto`` the pitch nearest to ``pitch``
-        (1 deg steps, ``ik.pitch_candidates``) at which a chain is valid (limits, collisions, margin)."""
-        from roarmctl.robot.ik import pitch_candidates, takes_pitch
+    def _held_pitch(self, task: PickTask | PlaceTask | MoveTask, where: str) -> float | None:
+        """The tool pitch (rad) the IK holds for ``task``, or None (position-only IK).
 
-        if not auto or not takes_pitch(self.robot):  # position-only IK: nothing to choose
+        The RoArm (``ik.takes_pitch``) holds the task's pitch, straight down by default. Other arms hold the
+        pitch (and roll) the plan writes, through the numerical IK's approach-axis target; a task without
+        them is solved for the position only (noted once). A position-only IK family (``roarm3``) refuses
+        a written pitch or roll instead of ignoring it."""
+        from roarmctl.robot.ik import accepts_pitch
+
+        written = getattr(task, "pitch_set", False) or getattr(task, "roll", None) is not None
+        if isinstance(task, MoveTask):
+            written = task.pitch is not None
+        if self._pitch_free:
+            return task.pitch if task.pitch is not None else math.pi / 2
+        if not written:
+            if accepts_pitch(self.robot) and not isinstance(task, MoveTask) and not self._noted_position_only:
+                self._noted_position_only = True
+                self.notes.append(f"{where}: no pitch given: {self.robot.name}'s grasps and placements are solved for the "
+                                  f"position only (the tool's approach follows from the IK); write pitch (e.g. "
+                                  f"{{deg: 90}}, straight down) to hold one")
+            return None
+        if not accepts_pitch(self.robot):
+            raise PlanFileError(f"{where}: pitch/roll: {self.robot.name}'s IK is position only (its tool pitch follows "
+                                f"from the shoulder and elbow angles), so the plan's pitch cannot be held",
+                                "leave pitch and roll out for this arm")
+        return task.pitch if task.pitch is not None else math.pi / 2
+
+    def _choose_ik_pitch(self, points: list[np.ndarray], pitch: float | None, auto: bool, roll: float | None,
+                         q: np.ndarray, where: str, gripper: float | None = None) -> tuple[list[np.ndarray], float | None]:
+        """``_choose_ik`` for points that share one pitch (None: position only); with ``auto`` the pitch nearest
+        to ``pitch`` (1 deg steps, ``ik.pitch_candidates``) at which a chain is valid (limits, collisions, margin)."""
+        from roarmctl.robot.ik import pitch_candidates
+
+        if not auto or pitch is None:  # no pitch to choose
             return self._choose_ik([(p, pitch, roll) for p in points], q, where, gripper=gripper), pitch
         first: UnreachableError | None = None
         for cand in pitch_candidates(pitch):
@@ -461,14 +489,12 @@ class Planner:
 
         Returns one full configuration per target (gripper value of ``q`` unless ``gripper``).
         """
-        from roarmctl.robot.ik import solve_ik, takes_pitch
+        from roarmctl.robot.ik import solve_ik, solve_ik_near
 
         t0 = time.perf_counter()
         g = q[self.gi] if gripper is None and self.gi is not None else gripper
         if g is not None:  # the chain is checked with the gripper value it carries
             self.checker.set_gripper(float(g))
-        if not takes_pitch(self.robot):  # position-only IK: the tool pitch follows from the geometry
-            targets = [(p, None, None) for p, _, _ in targets]
         first, pitch, roll = targets[0]
         try:
             candidates = solve_ik(self.robot, first, pitch=pitch, roll=roll, q_ref=q, all_solutions=True)
@@ -484,12 +510,12 @@ class Planner:
             ok = True
             for p, pt, rl in targets[1:]:
                 try:
-                    nxt = solve_ik(self.robot, p, pitch=pt, roll=rl, q_ref=chain[-1], all_solutions=True)
+                    nxt = solve_ik_near(self.robot, p, chain[-1], pitch=pt, roll=rl)
                 except UnreachableError as exc:
                     reasons.append(exc.message)
                     ok = False
                     break
-                chain.append(_with(min(nxt, key=lambda s: float(np.max(np.abs(s[self.arm] - chain[-1][self.arm])))), self.gi, g))
+                chain.append(_with(nxt, self.gi, g))
             if not ok:
                 continue
             bad = next((c for c in chain if not self.checker.is_valid(c[self.arm])), None)

@@ -58,6 +58,7 @@ class PickTask:
     grasp_offset: float = 0.0
     squeeze: float | None = None  # m the jaws close below the grasp width (default: the robot's)
     pitch_auto: bool = False
+    pitch_set: bool = False  # the plan wrote pitch (else the default applies: held by the RoArm only)
     line: int = 0
     kind: str = "pick"
 
@@ -71,6 +72,7 @@ class PlaceTask:
     roll: float | None = None
     gripper_open: float | None = None
     pitch_auto: bool = False
+    pitch_set: bool = False
     line: int = 0
     kind: str = "place"
 
@@ -372,6 +374,7 @@ def _pitch(ctx: _Ctx, d: LocatedDict, w: str, t: Any) -> None:
     """``pitch: angle``, ``pitch: auto`` (nearest valid to straight down) or ``pitch: {auto: angle}``
     (nearest valid to that angle)."""
     v, line = d["pitch"], d.line_of("pitch")
+    t.pitch_set = True
     if v == "auto":
         t.pitch, t.pitch_auto = math.pi / 2, True
     elif isinstance(v, dict) and set(v) == {"auto"}:

@@ -9,9 +9,10 @@ Which solver runs:
 
 * ``singularity_model == "roarm5"`` (the RoArm-M3 Pro): planar closed form about the base axis,
   target = TCP position + tool pitch (+ roll), or position + full orientation (``rpy``).
-* ``singularity_model == "ur6"`` with ``rpy``: the 8-solution analytic IK of the UR10
-  (modified DH); position only falls back to damped least squares.
-* anything else: damped least squares with seeded random restarts (position only or full pose).
+* ``singularity_model == "ur6"`` with ``rpy`` (or pitch and roll): the 8-solution analytic IK of the
+  UR10 (modified DH); position only (or pitch alone) falls back to damped least squares.
+* anything else: damped least squares with seeded random restarts, run as batches of starts
+  (position only, position + approach axis for a tool pitch, or full pose).
 
 Closed forms are exact for the ideal geometry; a few Newton steps on the true FK then remove what the
 description's rounding leaves (Waveshare's URDF writes pi/2 as 1.5708, which tilts axes by 3.7 urad
@@ -56,23 +57,28 @@ def solve_ik(
 
     Args:
         position: target TCP position (3,), metres, in the robot's root (world) frame.
-        pitch: RoArm only. Angle (rad) of the TCP approach axis (+x of ``hand_tcp``) below the
+        pitch: angle (rad) of the TCP approach axis (TCP +x; ``hand_tcp`` on the RoArm) below the
             horizontal, measured in the vertical plane through the base axis and the target, positive
             downward: ``0`` points straight away from the base axis (the ``home`` pose),
             ``+pi/2`` points straight down (top-down grasp), ``-pi/2`` straight up, ``pi`` back
             toward the base axis. When the target is on the base axis, "away" is the direction of
-            the reference base angle (``q_ref`` or 0). Left out: searched (see below).
-        roll: RoArm only. The wrist-roll joint value (rad), i.e. the turn of the tool about its
+            the reference base angle (``q_ref`` or 0). Left out: searched (see below). Arms without
+            a closed form hold it with the numerical IK (``pitch_aim``; the base axis is the vertical
+            through the first joint); ``roarm3`` (position only) refuses it.
+        roll: RoArm: the wrist-roll joint value (rad), i.e. the turn of the tool about its
             approach axis relative to the arm's plane. Default: ``q_ref``'s roll, else 0. Note that
             the base-flipped branch (base + pi, arm leaning back) has the same approach axis but
-            its tool turned by pi about it for the same roll value.
+            its tool turned by pi about it for the same roll value. Other arms: the turn about the
+            approach axis from the pose whose TCP +y is horizontal (``pitch_aim``); needs ``pitch``;
+            left out, the turn is free (the numerical IK keeps near ``q_ref``).
         rpy: full target orientation of the TCP as URDF roll-pitch-yaw (rad), R = Rz Ry Rx. Excludes
             ``pitch`` and ``roll``. A 5-joint RoArm can only reach orientations whose approach axis
             lies in the vertical plane through the base axis and the target.
         q_ref: reference configuration (arm-only or full, rad). Solutions are sorted by distance to
             it, its gripper value is kept, and it seeds the numerical solver.
         all_solutions: return every solution found (every branch within limits: up to 4 for the
-            RoArm, up to 8 for the UR10, all distinct ones found by the restarts otherwise) instead
+            RoArm, up to 8 for the UR10, the distinct ones the restarts find otherwise, the search
+            stopping once ``DLS_ENOUGH`` are found or a batch of starts adds none) instead
             of only the best (closest to ``q_ref``, else to the ``home`` pose, else to zero).
 
     Returns:
@@ -109,12 +115,17 @@ def solve_ik(
             solver = robot._roarm3_ik = _Roarm3IK(robot)
         sols = solver.solve(p, qr)
     else:
+        aim = None
         if pitch is not None or roll is not None:
-            raise InputError(f"pitch/roll apply to the RoArm only; give rpy for {robot.name}")
+            if pitch is None:
+                raise InputError(f"{robot.name}: a roll needs a pitch (it turns the tool about the approach axis "
+                                 f"the pitch sets); give both")
+            aim = pitch_aim(robot, p, float(pitch), None if roll is None else float(roll), qr)
+            rot = aim.rot
         if model == "ur6" and rot is not None:
             sols = _ur6_solve(robot, p, rot, qr)
         else:
-            sols = _dls_solve(robot, p, rot, qr, all_solutions)
+            sols = _dls_solve(robot, p, rot, qr, all_solutions, aim=aim)
     ref = qr if qr is not None else _default_ref(robot)
     arm = robot.arm_indices
     sols.sort(key=lambda q: float(np.linalg.norm(q[arm] - ref[arm])))
@@ -630,8 +641,30 @@ def _pick_index(phis: np.ndarray, ok: np.ndarray, pref: float, margin: float = m
 
 
 def takes_pitch(robot: Robot) -> bool:
-    """True when the robot's IK takes a tool pitch (and roll); position-only families do not."""
+    """True when every target of the robot's IK has a tool pitch: the RoArm (``roarm5``), whose plans hold
+    the default pitch (straight down) and whose pitch is chosen when left out (``pitch: auto``, ``kin ik``)."""
     return (robot.ik or "") == "roarm5"
+
+
+def accepts_pitch(robot: Robot) -> bool:
+    """True when ``solve_ik`` takes ``pitch``/``roll``: the RoArm's closed form and the numerical IK
+    (``pitch_aim``); the position-only family ``roarm3`` (three arm joints) does not."""
+    return (robot.ik or "") != "roarm3"
+
+
+def solve_ik_near(robot: Robot, position, q_ref, *, pitch: float | None = None,
+                  roll: float | None = None) -> np.ndarray:
+    """The IK solution (full q, rad) that continues ``q_ref``: the one with the smallest largest joint change.
+
+    Closed forms give every branch and the nearest is taken; the numerical IK starts from ``q_ref`` alone
+    (converging to the solution it leads to) and runs its restarts only when that start fails.
+    Raises ``UnreachableError`` as ``solve_ik``.
+    """
+    qr = robot.full_q(np.asarray(q_ref, dtype=float))
+    arm = robot.arm_indices
+    numeric = (robot.ik or "") not in IK_FAMILIES or ((robot.ik == "ur6") and (pitch is None or roll is None))
+    sols = solve_ik(robot, position, pitch=pitch, roll=roll, q_ref=qr, all_solutions=not numeric)
+    return min(sols, key=lambda s: float(np.max(np.abs(s[arm] - qr[arm]))))
 
 
 # ----------------------------------------------------------------------------- RoArm-M2 (3 joints)
@@ -935,11 +968,75 @@ def _chain_reach(robot: Robot) -> tuple[np.ndarray, float]:
     return start, reach
 
 
+DLS_CHUNKS = (1, 16, 16, 16)  # starts per batch: the reference alone, then random starts 16 at a time
+DLS_POS_DONE = 0.1 * POS_TOL  # m: a start has converged within this (and ORI_TOL); the FK check allows POS_TOL
+DLS_ENOUGH = 8  # all_solutions: distinct solutions after which no further batch of starts is run
+
+
+@dataclass
+class _Aim:
+    """What the numerical IK aims at besides the position: nothing, a full TCP rotation ``rot`` (3, 3),
+    or the approach axis (TCP +x) along the unit vector ``axis`` (3,) with the turn about it left free."""
+
+    rot: np.ndarray | None = None
+    axis: np.ndarray | None = None
+    what: str = "the requested orientation"
+
+    @property
+    def oriented(self) -> bool:
+        return self.rot is not None or self.axis is not None
+
+
+def _base_point(robot: Robot) -> tuple[np.ndarray, float]:
+    """``_chain_reach`` once per loaded robot (the point on the first joint's axis, the reach bound)."""
+    got = getattr(robot, "_dls_reach", None)
+    if got is None:
+        got = robot._dls_reach = _chain_reach(robot)
+    return got
+
+
+def pitch_aim(robot: Robot, p: np.ndarray, pitch: float, roll: float | None, qr: np.ndarray | None) -> _Aim:
+    """The numerical IK's target orientation for a tool ``pitch`` (and ``roll``), rad, at position ``p``.
+
+    As for the RoArm: the approach axis (TCP +x) at ``pitch`` below the horizontal, in the vertical plane
+    through the base axis (the vertical line through the first moving joint) and the target, pointing away
+    from the base at 0. On the base axis "away" is the horizontal part of the reference's approach axis
+    (``qr``, else the home pose; world +x when that is vertical). ``roll`` turns the tool about the approach
+    axis, right-handed, from the pose whose +y axis is horizontal, z_up x away (the RoArm's wrist-roll
+    joint value has that meaning); left out, the turn is free.
+    """
+    base, _ = _base_point(robot)
+    rel = np.array([p[0] - base[0], p[1] - base[1], 0.0])
+    if math.hypot(rel[0], rel[1]) < 1e-9:
+        ref = qr if qr is not None else _default_ref(robot)
+        rel = robot.kin.fk(ref)[:3, 0].copy()
+        rel[2] = 0.0
+        if math.hypot(rel[0], rel[1]) < 1e-9:
+            rel = np.array([1.0, 0.0, 0.0])
+    u_h = rel / np.linalg.norm(rel)
+    up = np.array([0.0, 0.0, 1.0])
+    d = math.cos(pitch) * u_h - math.sin(pitch) * up
+    what = f"tool pitch {math.degrees(pitch):.1f} deg"
+    if roll is None:
+        return _Aim(axis=d, what=what)
+    y0 = np.cross(up, u_h)
+    y = math.cos(roll) * y0 + math.sin(roll) * np.cross(d, y0)
+    return _Aim(rot=np.column_stack([d, y, np.cross(d, y)]), what=f"{what}, roll {math.degrees(roll):.1f} deg")
+
+
 def _dls_solve(robot: Robot, p: np.ndarray, rot: np.ndarray | None, qr: np.ndarray | None,
-               all_solutions: bool, restarts: int | None = None, seed: int = 0) -> list[np.ndarray]:
-    """Damped least squares from ``q_ref`` (or home) and then seeded random starts within the limits."""
+               all_solutions: bool, restarts: int | None = None, seed: int = 0,
+               aim: _Aim | None = None) -> list[np.ndarray]:
+    """Damped least squares from ``q_ref`` (or home), then seeded random starts within the limits.
+
+    The starts run as batches (``DLS_CHUNKS``: the reference alone, then 16 at a time); the search stops
+    at the first batch with a solution (one wanted), or when ``DLS_ENOUGH`` distinct solutions are found
+    or a batch adds none (``all_solutions``). ``aim`` replaces ``rot`` (e.g. an approach axis only).
+    Every returned solution is within the limits and FK-checked (``POS_TOL``, ``ORI_TOL``).
+    """
+    aim = aim or _Aim(rot=rot)
     where = f"target ({p[0]:.4g}, {p[1]:.4g}, {p[2]:.4g}) m"
-    start, reach = _chain_reach(robot)
+    start, reach = _base_point(robot)
     dist = float(np.linalg.norm(p - start))
     if dist > reach + 1e-12:
         raise UnreachableError(f"{where} is {dist:.3f} m from the first joint; the arm reaches {reach:.3f} m",
@@ -948,89 +1045,164 @@ def _dls_solve(robot: Robot, p: np.ndarray, rot: np.ndarray | None, qr: np.ndarr
     lo, hi = robot.lower[arm], robot.upper[arm]
     rng = np.random.default_rng(seed)
     n_starts = restarts if restarts is not None else (48 if all_solutions else 24)
-    starts = [qr if qr is not None else _default_ref(robot)]
+    starts = np.array([qr if qr is not None else _default_ref(robot)]
+                      + [robot.full_q(rng.uniform(lo, hi)) for _ in range(n_starts)], dtype=float)
     grip = _gripper_value(robot, qr)
-    for _ in range(n_starts):
-        starts.append(robot.full_q(rng.uniform(lo, hi)))
+    if grip is not None:
+        starts[:, robot.joint_index(robot.gripper.joint)] = grip
     sols: list[np.ndarray] = []
-    best_free = np.inf
-    stale = 0  # restarts in a row that found nothing new
-    for q0 in starts:
-        q = robot.full_q(np.array(q0, dtype=float))
-        if grip is not None:
-            q[robot.joint_index(robot.gripper.joint)] = grip
-        q, err = _dls_run(robot, q, p, rot, lo, hi)
-        before = len(sols)
-        if err[0] <= POS_TOL * 1e-3 and (rot is None or err[1] <= ORI_TOL * 1e-3):
-            sols.append(q)
-            sols = _dedupe(sols, arm, tol=1e-4)
-            if not all_solutions:
-                break
-        stale = 0 if len(sols) > before else stale + 1
-        if sols and stale >= 16:
+    k = 0
+    for size in list(DLS_CHUNKS) + [16] * len(starts):
+        if k >= len(starts):
             break
-    if sols:  # each joint's 2 pi representative nearest the reference (or 0)
-        fitted = [_fit_limits(robot, q, qr) for q in sols]
-        return [f if f is not None else q for f, q in zip(fitted, sols)]
-    # Why not? Try again without limits (joint_limit), then position only (orientation).
-    for q0 in starts[:8]:
-        q, err = _dls_run(robot, robot.full_q(np.array(q0, dtype=float)), p, rot, None, None)
-        if err[0] <= POS_TOL and (rot is None or err[1] <= ORI_TOL):
-            raise UnreachableError(f"{where} is only reachable outside the joint limits", "joint_limit",
-                                   "move the target or widen the limits in the description")
-        best_free = min(best_free, err[0])
-    if rot is not None:
-        for q0 in starts[:8]:
-            q, err = _dls_run(robot, robot.full_q(np.array(q0, dtype=float)), p, None, lo, hi)
-            if err[0] <= POS_TOL:
-                raise UnreachableError(f"{where}: the position is reachable but not with the requested orientation",
-                                       "orientation", "relax the orientation or give the position only")
+        q, ep, eo = _dls_batch(robot, starts[k:k + size], p, aim, lo, hi)
+        k += size
+        before = len(sols)
+        sols = _dedupe(sols + _dls_accept(robot, q, ep, eo, p, aim, qr), arm, tol=1e-4)
+        if sols and (not all_solutions or len(sols) >= DLS_ENOUGH or len(sols) == before):
+            break
+    if sols:
+        return sols if all_solutions else sols[:1]  # one: the first start (in start order) that converged
+    # Why not? Try again without limits: a solution with a 2 pi representative within them is one
+    # (a clipped joint can stop the search short of it), else the limits are the reason (joint_limit);
+    # then position only (orientation).
+    q, ep, eo = _dls_batch(robot, starts[:8], p, aim, None, None)
+    sols = _dedupe(_dls_accept(robot, q, ep, eo, p, aim, qr), arm, tol=1e-4)
+    if sols:
+        return sols if all_solutions else sols[:1]
+    if np.any((ep <= POS_TOL) & (eo <= ORI_TOL)):
+        raise UnreachableError(f"{where} is only reachable outside the joint limits", "joint_limit",
+                               "move the target or widen the limits in the description")
+    best_free = float(np.min(ep))
+    if aim.oriented:
+        q, ep, eo = _dls_batch(robot, starts[:8], p, _Aim(), lo, hi)
+        if np.any(ep <= POS_TOL):
+            raise UnreachableError(f"{where}: the position is reachable but not with {aim.what}",
+                                   "orientation", "relax the orientation or give the position only")
     raise UnreachableError(f"{where} is out of reach (closest approach {best_free * 1000:.1f} mm)",
                            "out_of_reach", "move the target closer to the arm")
 
 
-def _dls_run(robot: Robot, q: np.ndarray, p: np.ndarray, rot: np.ndarray | None,
-             lo: np.ndarray | None, hi: np.ndarray | None, iters: int = 150) -> tuple[np.ndarray, tuple[float, float]]:
-    arm = robot.arm_indices
+def _dls_accept(robot: Robot, q: np.ndarray, ep: np.ndarray, eo: np.ndarray, p: np.ndarray, aim: _Aim,
+                qr: np.ndarray | None) -> list[np.ndarray]:
+    """The converged rows of a DLS batch (start order) as solutions: each joint moved by 2 pi to the
+    representative within its limits nearest to ``qr`` (or 0), then checked by FK against the tolerances.
+
+    Converged: a tenth of ``POS_TOL`` and ``ORI_TOL`` (an orientation a rounded URDF cannot hold exactly,
+    1.57079 written for pi/2 tilting an axis by 3 urad, stays a few urad off however long the search runs)."""
+    out = []
+    for i in np.flatnonzero((ep <= DLS_POS_DONE) & (eo <= ORI_TOL)):
+        f = _fit_limits(robot, q[i], qr)
+        if f is not None and robot.within_limits(f) and _dls_error_ok(robot, f, p, aim):
+            out.append(f)
+    return out
+
+
+def _dls_error_ok(robot: Robot, q: np.ndarray, p: np.ndarray, aim: _Aim) -> bool:
+    """The FK check of one returned solution: position within POS_TOL, orientation within ORI_TOL."""
+    t = robot.kin.fk(q)
+    if np.linalg.norm(t[:3, 3] - p) > POS_TOL:
+        return False
+    if aim.rot is not None:
+        return _rot_angle(aim.rot.T @ t[:3, :3]) <= ORI_TOL
+    if aim.axis is not None:
+        a = t[:3, 0]
+        return math.atan2(float(np.linalg.norm(np.cross(a, aim.axis))), float(a @ aim.axis)) <= ORI_TOL
+    return True
+
+
+def _dls_batch(robot: Robot, q: np.ndarray, p: np.ndarray, aim: _Aim, lo: np.ndarray | None,
+               hi: np.ndarray | None, iters: int = 150) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Damped least squares from each start of ``q`` (N, dof) at once; each row runs as it would alone.
+
+    Per row and iteration: the error e (position, and the orientation as a rotation vector: the full
+    rotation error, or for an approach axis the turn that brings TCP +x onto it, with the Jacobian's
+    rotation about TCP +x projected out), the step dq = J^T (J J^T + lam^2 I)^-1 e with lam 1e-2, and
+    1e-3 once |e| < 1 mm (not less: a direction the target barely constrains, such as a wrist roll about
+    an approach axis that a rounded URDF tilts by a few urad, would swing by radians chasing that urad),
+    scaled to at most 0.5 rad; joints with a full turn of range wrap, the rest are clipped. A row stops
+    when |e| < 1e-12, when it is within ``DLS_POS_DONE`` and ``ORI_TOL`` and the last step no longer
+    halved |e| (the floor a rounded model leaves), or when |e| fell by less than 10 % over 25 iterations
+    (stalled at a limit or a local minimum: the next start tries). Returns the final configurations (N, dof), position
+    errors (N,) m and orientation errors (N,) rad, by FK.
+    """
+    arm = np.asarray(robot.arm_indices)
     kin = robot.kin
-    ep = eo = np.inf
-    history: list[float] = []
-    for _ in range(iters):
-        t = kin.fk(q)
-        e = p - t[:3, 3]
-        ep = float(np.linalg.norm(e))
-        jac = kin.jacobian(q)
-        if rot is not None:
-            w = _rot_vec(rot @ t[:3, :3].T)
-            eo = float(np.linalg.norm(w))
-            e = np.concatenate([e, w])
-        else:
-            eo = 0.0
-            jac = jac[:3]
-        if ep < 1e-12 and eo < 1e-12:
+    q = np.array(q, dtype=float)
+    n = len(q)
+    active = np.arange(n)
+    hist = np.zeros((iters, n))
+    wrap = None if lo is None else (hi - lo) >= 2 * np.pi - 1e-3
+    for it in range(iters):
+        if not len(active):
             break
-        norm = float(np.linalg.norm(e))
-        history.append(norm)
-        if len(history) > 25 and norm > 0.9 * history[-25]:
-            break  # stalled (at a limit or a local minimum): let the next restart try
-        lam = 1e-2 if norm > 1e-3 else 1e-6
-        jjt = jac @ jac.T + (lam * lam) * np.eye(jac.shape[0])
-        dq = jac.T @ np.linalg.solve(jjt, e)
-        m = float(np.max(np.abs(dq)))
-        if m > 0.5:
-            dq *= 0.5 / m
-        q = q.copy()
-        q[arm] += dq
+        t, jac = kin.pose_jacobian(q[active])
+        e = p - t[:, :3, 3]
+        ep = np.linalg.norm(e, axis=1)
+        if aim.oriented:
+            w, jac = _orientation_error(t[:, :3, :3], jac, aim)
+            eo = np.linalg.norm(w, axis=1)
+            e = np.concatenate([e, w], axis=1)
+        else:
+            eo = np.zeros(len(active))
+            jac = jac[:, :3]
+        norm = np.linalg.norm(e, axis=1)
+        stop = (ep < 1e-12) & (eo < 1e-12)
+        hist[it, active] = norm
+        if it >= 1:  # converged as far as the model allows: within the tolerances and no longer improving
+            stop |= (ep <= DLS_POS_DONE) & (eo <= ORI_TOL) & (norm > 0.5 * hist[it - 1, active])
+        if it >= 25:  # stalled: history[-25] is 24 iterations back
+            stop |= norm > 0.9 * hist[it - 24, active]
+        go = ~stop
+        rows = active[go]
+        jac, e, norm = jac[go], e[go], norm[go]
+        lam2 = np.where(norm > 1e-3, 1e-4, 1e-6)
+        jjt = jac @ jac.transpose(0, 2, 1) + lam2[:, None, None] * np.eye(jac.shape[1])
+        dq = np.einsum("nji,nj->ni", jac, np.linalg.solve(jjt, e[:, :, None])[:, :, 0])
+        m = np.max(np.abs(dq), axis=1)
+        big = m > 0.5
+        dq[big] *= (0.5 / m[big])[:, None]
+        qa = q[rows][:, arm] + dq
         if lo is not None:
-            # joints with a full turn of range wrap instead of sticking at +-pi (else the second
-            # elbow branch of a 2R arm is only found from a thin band of starts)
-            wrap = (hi - lo) >= 2 * np.pi - 1e-3
-            qa = q[arm]
-            v = _wrap(qa[wrap])
-            v = np.where(v < lo[wrap], v + 2 * np.pi, np.where(v > hi[wrap], v - 2 * np.pi, v))
-            qa[wrap] = v
-            q[arm] = np.clip(qa, lo, hi)
-    t = kin.fk(q)
-    ep = float(np.linalg.norm(p - t[:3, 3]))
-    eo = _rot_angle(rot.T @ t[:3, :3]) if rot is not None else 0.0
-    return q, (ep, eo)
+            v = _wrap(qa[:, wrap])
+            qa[:, wrap] = np.where(v < lo[wrap], v + 2 * np.pi, np.where(v > hi[wrap], v - 2 * np.pi, v))
+            qa = np.clip(qa, lo, hi)
+        q[rows[:, None], arm] = qa
+        active = rows
+    t = kin.frames4(q)[:, kin.tcp_index]
+    ep = np.linalg.norm(p - t[:, :3, 3], axis=1)
+    if aim.rot is not None:
+        eo = np.array([_rot_angle(aim.rot.T @ r) for r in t[:, :3, :3]])
+    elif aim.axis is not None:
+        a = t[:, :3, 0]
+        eo = np.arctan2(np.linalg.norm(np.cross(a, aim.axis), axis=1), a @ aim.axis)
+    else:
+        eo = np.zeros(n)
+    return q, ep, eo
+
+
+def _orientation_error(r: np.ndarray, jac: np.ndarray, aim: _Aim) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation-vector errors (N, 3) of TCP rotations ``r`` (N, 3, 3) against ``aim`` and the matching
+    Jacobians (N, 6, k): unchanged for a full rotation, angular rows projected off TCP +x for an axis."""
+    if aim.rot is not None:
+        m = aim.rot @ r.transpose(0, 2, 1)
+        vee = np.stack([m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]], axis=1)
+        ang = np.arctan2(0.5 * np.linalg.norm(vee, axis=1), 0.5 * (np.trace(m, axis1=1, axis2=2) - 1.0))
+        w = np.where((ang < 1e-9)[:, None], 0.5 * vee, vee * (ang / (2.0 * np.sin(np.maximum(ang, 1e-9))))[:, None])
+        for i in np.flatnonzero(ang > math.pi - 1e-6):  # near pi: the axis from the symmetric part
+            w[i] = _rot_vec(m[i])
+        return w, jac
+    a = r[:, :, 0]
+    c = np.cross(a, aim.axis)
+    s = np.linalg.norm(c, axis=1)
+    ang = np.arctan2(s, a @ aim.axis)
+    w = np.where((s > 1e-12)[:, None], c * (ang / np.maximum(s, 1e-300))[:, None], c)
+    flip = (s <= 1e-12) & (ang > 1.0)  # exactly opposite: turn by pi about any axis normal to TCP +x
+    if np.any(flip):
+        for i in np.flatnonzero(flip):
+            k = int(np.argmin(np.abs(a[i])))
+            perp = np.cross(a[i], np.eye(3)[k])
+            w[i] = perp / np.linalg.norm(perp) * math.pi
+    proj = np.eye(3) - a[:, :, None] * a[:, None, :]
+    jac = np.concatenate([jac[:, :3], proj @ jac[:, 3:]], axis=1)
+    return w, jac

@@ -200,23 +200,34 @@ class Kinematics:
         """
         q = self.robot.full_q(q)
         single = q.ndim == 1
-        qb = np.atleast_2d(q)
-        frames = self.link_frames(qb)
-        p_tcp = frames[:, self.tcp_index, :3, 3]
-        cols = []
-        for j in self.tcp_chain_joints:
-            joint = self.robot.joints[j]
-            if joint.kind == "fixed":
-                continue
-            before = frames[:, self._parent[j]] @ joint.origin
-            z = before[:, :3, :3] @ joint.axis
-            if joint.kind == "revolute":
-                col = np.concatenate([np.cross(z, p_tcp - before[:, :3, 3]), z], axis=1)
-            else:
-                col = np.concatenate([z, np.zeros_like(z)], axis=1)
-            cols.append(col)
-        jac = np.stack(cols, axis=2)
+        jac = self.pose_jacobian(np.atleast_2d(q))[1]
         return jac[0] if single else jac
+
+    def pose_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """TCP poses (N, 4, 4) and geometric Jacobians (N, 6, arm_dof) of full configurations ``q``
+        (N, dof), rad/m, from one FK pass (the iterative IK's hot path: no conversion or checks).
+
+        Column k of a revolute joint is (z_k x (p_tcp - o_k), z_k), of a prismatic one (z_k, 0), with
+        z_k the joint axis and o_k its origin in the root frame, both taken from the parent link's frame.
+        """
+        if not hasattr(self, "_jac_parents"):  # the chain's moving joints as arrays, built once
+            moving = [j for j in self.tcp_chain_joints if self.robot.joints[j].kind != "fixed"]
+            origins = [self.robot.joints[j].origin for j in moving]
+            self._jac_parents = np.array([self._parent[j] for j in moving], dtype=int)
+            self._jac_axes = np.array([o[:3, :3] @ np.asarray(self.robot.joints[j].axis, dtype=float)
+                                       for o, j in zip(origins, moving)])  # (k, 3) in the parent frame
+            self._jac_points = np.array([o[:3, 3] for o in origins])  # (k, 3) in the parent frame
+            self._jac_revolute = np.array([self.robot.joints[j].kind == "revolute" for j in moving])
+        frames = self.frames4(q)
+        tcp = frames[:, self.tcp_index]
+        par = frames[:, self._jac_parents]  # (N, k, 4, 4)
+        rot = par[..., :3, :3]
+        z = np.einsum("nkij,kj->nki", rot, self._jac_axes)
+        o = np.einsum("nkij,kj->nki", rot, self._jac_points) + par[..., :3, 3]
+        lin = np.where(self._jac_revolute[None, :, None], np.cross(z, tcp[:, None, :3, 3] - o), z)
+        ang = np.where(self._jac_revolute[None, :, None], z, 0.0)
+        jac = np.concatenate([lin, ang], axis=2).transpose(0, 2, 1)
+        return tcp, jac
 
     def tcp_velocity(self, q, qd_arm) -> np.ndarray:
         """Linear TCP velocity (N, 3) m/s = J_v(q) @ qd_arm, for q (N, dof or arm_dof) and
