@@ -92,7 +92,11 @@ def test_ik_unreachable_exit_3_one_line(args, reason):
 
 def test_ik_bad_usage_exit_2():
     assert run("kin", "ik", "roarm_m3_pro", "--xyz", "0.3", "0", "0.2", "--pitch", "1", "--rpy", "0", "0", "0").returncode == 2
-    assert run("kin", "ik", "scara_2r", "--xyz", "0.3", "0", "0", "--pitch", "1").returncode == 2
+    assert run("kin", "ik", "roarm_m2_s", "--xyz", "0.2", "0", "0.1", "--pitch", "1").returncode == 2  # position-only IK
+    # a pitch the 2-joint SCARA cannot hold is infeasible (3), not ignored; the position alone needs the
+    # elbow at 131.8 deg (cos = (0.3^2 - 0.4^2 - 0.3^2) / (2 0.4 0.3)), beyond its 130 deg limit
+    r = run("kin", "ik", "scara_2r", "--xyz", "0.3", "0", "0", "--pitch", "1")
+    assert r.returncode == 3 and "joint_limit" in r.stderr
     assert run("kin", "ik", "roarm_m3_pro", "--xyz", "0.3", "0").returncode == 2
 
 

@@ -1073,12 +1073,16 @@ def _dls_solve(robot: Robot, p: np.ndarray, rot: np.ndarray | None, qr: np.ndarr
     if np.any((ep <= POS_TOL) & (eo <= ORI_TOL)):
         raise UnreachableError(f"{where} is only reachable outside the joint limits", "joint_limit",
                                "move the target or widen the limits in the description")
-    best_free = float(np.min(ep))
     if aim.oriented:
         q, ep, eo = _dls_batch(robot, starts[:8], p, _Aim(), lo, hi)
         if np.any(ep <= POS_TOL):
             raise UnreachableError(f"{where}: the position is reachable but not with {aim.what}",
                                    "orientation", "relax the orientation or give the position only")
+        q, ep, eo = _dls_batch(robot, starts[:8], p, _Aim(), None, None)
+        if np.any(ep <= POS_TOL):
+            raise UnreachableError(f"{where}: the position alone is only reachable outside the joint limits",
+                                   "joint_limit", "move the target or widen the limits in the description")
+    best_free = float(np.min(ep))
     raise UnreachableError(f"{where} is out of reach (closest approach {best_free * 1000:.1f} mm)",
                            "out_of_reach", "move the target closer to the arm")
 
