@@ -80,6 +80,22 @@ def test_jerk_limited_move_is_the_double_s_profile():
     assert np.allclose(tp.q[[0, -1], 0], [0.0, d]) and np.allclose(tp.qd[[0, -1]], 0) and np.allclose(tp.qdd[[0, -1]], 0)
 
 
+def test_short_jerk_limited_move_is_the_time_optimal_double_s():
+    """Too short to reach the speed limit: the optimum accelerates at a, cruises at the peak speed v_p for
+    exactly a/j (so each acceleration step passes the filter alone) and decelerates: v_p^2/a + v_p a/j = d,
+    T = 2 v_p/a + 2 a/j (hand-derived). A single filter on TOPP-RA's +a/-a profile needs width 2a/j and
+    takes a/j longer."""
+    d, v, a, j = 0.3, 1.32, 3.6, 60.0
+    tp = time_parameterise(np.array([[0.0], [d]]), np.array([v]), np.array([a]), np.array([j]))
+    as_ = a * SAFETY
+    vp = (-as_ / j + np.sqrt((as_ / j) ** 2 + 4 * d / as_)) / (2 / as_)
+    assert vp < v * SAFETY  # the speed limit is not reached
+    assert tp.duration == pytest.approx(2 * vp / as_ + 2 * as_ / j, rel=0.005)
+    jerk = np.diff(tp.qdd[:, 0]) / np.diff(tp.times)
+    assert np.max(np.abs(jerk)) <= j * (1 + 1e-9) and np.max(np.abs(tp.qdd)) <= a and np.max(np.abs(tp.qd)) <= v
+    assert np.allclose(tp.q[[0, -1], 0], [0.0, d]) and np.allclose(tp.qd[[0, -1]], 0) and np.allclose(tp.qdd[[0, -1]], 0)
+
+
 def test_jerk_limits_hold_on_a_curved_path_by_finite_differences():
     rng = np.random.default_rng(3)
     wp = np.cumsum(rng.uniform(-0.3, 0.3, size=(8, 5)), axis=0)
@@ -150,11 +166,13 @@ def test_short_segment_between_long_ones_keeps_the_first_margin(monkeypatch):
     """A 0.035 rad segment between 0.3-0.47 rad ones. On a uniform 100-point grid TOPP-RA had one
     point inside it, the spline's curvature changed between grid points and the samples overshot the
     limits at the first margin (29 of 60 such random paths; with every margin failing, a feasible plan
-    exited 3). With grid points inside every segment it must time at the first margin; the limits
-    are checked on 20 kHz samples, not on toppra's grid."""
+    exited 3). With grid points inside every segment it must time at the 2 % margin alone (the
+    first try, at 0.5 %, may be too tight on such a path; the next one is 2 %); the limits are
+    checked on 20 kHz samples, not on toppra's grid."""
     import roarmctl.motion.timing as timing
 
-    monkeypatch.setattr(timing, "SAFETY_STEPS", (SAFETY,))
+    assert 0.98 in timing.SAFETY_STEPS[:2]
+    monkeypatch.setattr(timing, "SAFETY_STEPS", (0.98,))
     wp = np.array([[0.0, 0.0, 0.0, 0.0, 0.0], [-0.0423, 0.2052, 0.0336, -0.1717, 0.1159],
                    [0.1765, 0.3642, -0.0845, -0.384, 0.0113], [0.181, 0.109, -0.1085, -0.5207, -0.069],
                    [0.0473, 0.0313, -0.0073, -0.2645, -0.1006], [0.4008, -0.1408, 0.0836, -0.0307, -0.0763],

@@ -33,11 +33,15 @@ from roarmctl.errors import InfeasibleError, PlanningError
 
 # Limits handed to TOPP-RA are this fraction of the true ones, so that the sampled (and filtered)
 # trajectory stays inside the true limits; tightened step by step if not.
-SAFETY_STEPS = (0.98, 0.95, 0.9, 0.8, 0.7, 0.6)
+SAFETY_STEPS = (0.995, 0.98, 0.95, 0.9, 0.8, 0.7, 0.6)
 SAFETY = SAFETY_STEPS[0]
 FINE_DT = 0.002  # s: grid on which the jerk is checked (finite differences of the acceleration)
 FILTER_GROWTH = 1.25  # each try widens the jerk filter by this factor
 FILTER_TRIES = 16
+# When the filter had to widen past PLATEAU_TRIGGER times its narrowest width a / j, the profile is timed
+# again with a cruise at its top speed (``_plateau_profile``) of PLATEAU_SHARES times that width (the next
+# one if no filter up to the cruise's length passes), the filter widened by PLATEAU_GROWTH per try.
+PLATEAU_TRIGGER, PLATEAU_SHARES, PLATEAU_GROWTH = 1.2, (1.1, 1.3), 1.04
 # Torque is left out of TOPP-RA while the sampled torque of the result stays under this share of every
 # limit (it needs two RNEA calls per grid point and rarely binds); above it, the torque constraint is added
 # (at the margin's share of the limits) and the margin timed again. The samples must keep the limits either way.
@@ -326,6 +330,67 @@ def _jerk_ok(path, prof: _Profile, w: float, jmax: np.ndarray) -> bool:
     return bool(np.all(np.abs(np.diff(qdd, axis=0)) / FINE_DT <= jmax * (1 + 1e-9)))
 
 
+def _filter_width(path, prof: _Profile, w0: float, jm: np.ndarray, growth: float = FILTER_GROWTH,
+                  tries: int = FILTER_TRIES) -> float | None:
+    """The narrowest filter width (s, from ``w0`` up by factors of ``growth``, then narrowed to within about
+    3 % of a step) for which the sampled jerk of ``prof`` is inside ``jm``; None if none within ``tries``."""
+    w, lo = w0, 0.0
+    for _ in range(tries):
+        if _jerk_ok(path, prof, w, jm):
+            break
+        lo, w = w, w * growth
+    else:
+        return None
+    for _ in range(3 if lo > 0 else 0):  # narrow it down (each step halves the excess width)
+        mid = 0.5 * (lo + w)
+        lo, w = (lo, mid) if _jerk_ok(path, prof, mid, jm) else (mid, w)
+    return w
+
+
+def _plateau_cap(prof: _Profile, hold: float) -> float | None:
+    """The path speed cap c (sdot) under which ``prof`` would cruise for ``hold`` s: the time the capped
+    profile spends at c is (length of s where sdot > c) / c; None if ``prof`` never moves."""
+    s, sd = prof.s, prof.sd
+    top = float(np.max(sd))
+    if top <= 0.0:
+        return None
+
+    def cruise(c: float) -> float:
+        # sdot^2 is linear in s between grid points (constant path acceleration): the length where sdot > c
+        x0, x1, ds = sd[:-1] ** 2, sd[1:] ** 2, np.diff(s)
+        c2 = c * c
+        lo, hi = np.minimum(x0, x1), np.maximum(x0, x1)
+        frac = np.where(lo >= c2, 1.0, np.where(hi <= c2, 0.0, (hi - c2) / np.maximum(hi - lo, 1e-300)))
+        return float(np.sum(frac * ds)) / c
+
+    lo, hi = 0.0, top
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if cruise(mid) >= hold else (lo, mid)
+    return lo if lo > 0.0 else None
+
+
+def _plateau_profile(algo, constraints: list, path, gridpoints: np.ndarray, prof: _Profile, hold: float) -> _Profile | None:
+    """``prof`` timed again under a path speed cap that gives it a cruise of about ``hold`` s at its top speed.
+
+    Where the time-optimal profile switches from full path acceleration straight to full deceleration (a
+    motion too short to reach its speed limits), the filter of width w turns that step of 2a into a jerk
+    of 2a / w, so w must double to 2 a / j and the motion lasts a / j longer than the jerk-limited optimum.
+    A cruise of w between the two halves lets each step of a pass the filter alone: for one joint this is
+    exactly the time-optimal double-S profile (the cruise speed v with v^2 / a + v a / j = d). The cap is a
+    TOPP-RA constraint like the others, so every other limit still holds."""
+    c = _plateau_cap(prof, hold)
+    if c is None:
+        return None
+    instance = algo.TOPPRA(constraints + [_sdot_bound_constraint(np.full(len(gridpoints), c * c))], path,
+                           gridpoints=gridpoints, parametrizer="ParametrizeConstAccel")
+    instance.compute_parameterization(0.0, 0.0)
+    data = instance.problem_data
+    if data.sd_vec is None or data.return_code.name != "Ok":
+        return None
+    return _Profile(np.asarray(data.gridpoints, dtype=float), np.asarray(data.sd_vec, dtype=float))
+
+
 def time_parameterise(
     waypoints: np.ndarray,
     vmax: np.ndarray,
@@ -389,18 +454,22 @@ def time_parameterise(
         prof = _Profile(np.asarray(data.gridpoints, dtype=float), np.asarray(data.sd_vec, dtype=float))
         w = 0.0
         if jm is not None:
-            w = max(float(np.max(amax * safety / jm)), 2 * FINE_DT)
-            lo = 0.0
-            for _ in range(FILTER_TRIES):
-                if _jerk_ok(path, prof, w, jm):
-                    break
-                lo, w = w, w * FILTER_GROWTH
-            else:
+            w0 = max(float(np.max(amax * safety / jm)), 2 * FINE_DT)
+            w = _filter_width(path, prof, w0, jm)
+            if w is None:
                 i += 1
                 continue
-            for _ in range(3 if lo > 0 else 0):  # narrow it down (each step halves the excess width)
-                mid = 0.5 * (lo + w)
-                lo, w = (lo, mid) if _jerk_ok(path, prof, mid, jm) else (mid, w)
+            if w > PLATEAU_TRIGGER * w0:
+                for share in PLATEAU_SHARES:
+                    capped = _plateau_profile(algo, constraints, path, gridpoints, prof, share * w0)
+                    if capped is None:
+                        break
+                    # the filter must stay narrower than the cruise: widen it in small steps up to there
+                    wc = _filter_width(path, capped, w0, jm, PLATEAU_GROWTH, int(np.log(share) / np.log(PLATEAU_GROWTH)) + 1)
+                    if wc is not None:
+                        if capped.T + wc < prof.T + w:
+                            prof, w = capped, wc
+                        break
         duration = prof.T + w
         count = max(int(np.ceil(duration / sample_dt - 1e-9)), 1)
         times = np.unique(np.minimum(np.arange(count + 1) * sample_dt, duration))
