@@ -6,7 +6,7 @@ For each rest-to-rest motion of plans/pick_place.yaml (scaled limits 0.6/0.6, th
   toppra      TOPP-RA alone (bang-bang acceleration, jerk unbounded)
   toppra+fir  roarmctl's timing: TOPP-RA, then the moving-average (FIR) filter on s(t) plus the
               TOPP-RA bound on the path's own jerk term; the path is unchanged
-  ruckig      Ruckig (pip install ruckig; not a roarmctl dependency), time-optimal jerk-limited
+  ruckig      Ruckig (a roarmctl dependency, used only for blended corners), time-optimal jerk-limited
               state-to-state with phase synchronisation: a straight line in JOINT space between the
               ends. It cannot follow a given path (the community version has no intermediate
               waypoints), so for a Cartesian line it leaves the TCP line (deviation printed) and for

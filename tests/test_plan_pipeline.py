@@ -397,9 +397,9 @@ def test_blended_joins_keep_moving_with_continuous_velocity(planned):
         moving += bool(speed.min() > 0.3)
         dv = np.abs(np.diff(traj.velocities[window], axis=0))
         assert np.all(dv <= amax * np.diff(traj.times[window])[:, None] * (1 + 1e-6) + 1e-9)  # no velocity step
-    # lift -> transit -> lower flow at speed; at the pre-grasp point and after the retreat the wrist
-    # reverses, its accelerations add in the overlap, and the blend is short (the arm nearly stops)
-    assert moving >= 2
+    # every join flows at speed, also where the wrist reverses (pre-grasp point, after the retreat): there
+    # a time-optimal corner move keeps decelerating through the reversal instead of stopping
+    assert moving == len(traj.blends)
 
 
 def test_the_gripper_opens_during_the_transit(planned):
@@ -437,8 +437,9 @@ def test_blend_false_keeps_the_stops_and_takes_longer(tmp_path, planned):
 @pytest.mark.parametrize("name", ["pick_place", "payload"])
 def test_no_acceleration_chatter(planned, name):
     """Within each segment a joint's jerk changes sign only a few times: a jerk-limited rest-to-rest move
-    changes it twice (+, -, -, +), two of them overlapped at a blend a few times more. TOPP-RA's raw
-    bang-bang output flips it at almost every grid interval on a curved path."""
+    changes it twice (+, -, -, +), two of them overlapped at a blend a few times more, and a corner move
+    (Ruckig's profile, at most 7 phases of constant jerk) up to 3 more at each blended join on the
+    segment's edges. TOPP-RA's raw bang-bang output flips it at almost every grid interval on a curved path."""
     traj = load_trajectory(planned[name][0])
     jerk = np.diff(traj.accelerations, axis=0) / np.diff(traj.times)[:, None]
     mids = 0.5 * (traj.times[1:] + traj.times[:-1])
@@ -450,7 +451,8 @@ def test_no_acceleration_chatter(planned, name):
                 continue
             x = x[np.abs(x) > 0.05 * np.max(np.abs(x))]  # ignore rounding-level wiggles
             flips = int(np.sum(np.diff(np.sign(x)) != 0))
-            assert flips <= 5, f"{seg.label}: {traj.joint_names[j]} jerk changes sign {flips} times"
+            joins = sum(seg.start - 1e-6 <= b <= seg.end + 1e-6 for b in traj.blends)
+            assert flips <= 5 + 3 * joins, f"{seg.label}: {traj.joint_names[j]} jerk changes sign {flips} times"
 
 
 def _moving_jaw_boxes(robot) -> list:

@@ -704,7 +704,7 @@ class Planner:
         """The chain's motions blended join by join; also each part's (start, end) in the result."""
         piece, bounds = singles[0], [(0.0, singles[0].tp.duration)]
         for k in range(1, len(parts)):
-            piece, bounds = self._blend(piece, bounds, parts[:k], parts[k], singles[k])
+            piece, bounds = self._blend(piece, bounds, parts[:k], parts[k], singles[k], singles[k - 1].tp)
         return piece, bounds
 
     def _at_rest(self, parts: list[_Part], singles: list[_Piece]) -> list[_Piece]:
@@ -719,14 +719,15 @@ class Planner:
                 pieces.append(_Piece(tp, [Segment(0.0, tp.duration, "gripper", step.label)]))
         return pieces
 
-    def _blend(self, a: _Piece, bounds: list[tuple[float, float]], a_parts: list[_Part], part: _Part, b: _Piece
-               ) -> tuple[_Piece, list[tuple[float, float]]]:
+    def _blend(self, a: _Piece, bounds: list[tuple[float, float]], a_parts: list[_Part], part: _Part, b: _Piece,
+               prev_tp: TimedPath) -> tuple[_Piece, list[tuple[float, float]]]:
         """``b`` started before ``a`` ends: the two motions superposed over an overlap (velocity, acceleration and
         jerk add; both are continuous, so the sum is too). The longest overlap (on the sample grid, at most the
         shorter motion's duration) is taken whose samples keep every limit (velocity, acceleration, jerk by finite
         differences, torque by RNEA, TCP speed) and are collision-free and outside the singularity margin; a
         straight line keeps at least its last (or first) LINE_KEEP of its length exact, so the overlap only
-        rounds the corner near its pre-grasp end. ``bounds`` are each part's (start, end) in ``a``.
+        rounds the corner near its pre-grasp end. ``bounds`` are each part's (start, end) in ``a``; ``prev_tp`` is the
+        last of them timed on its own. Where ``_bridge`` does better than the best overlap, its corner move is taken.
 
         (Timing the blended curve again as one TOPP-RA path gained only 0.04-0.1 s on the bundled plan,
         and the curve's dense knots made the acceleration chatter; superposing two smooth profiles does not.)"""
@@ -742,12 +743,17 @@ class Planner:
             limit = min(limit, int(self._line_time(part, tb, (0.0, tb.duration), 1.0 - LINE_KEEP) / dt))
         t0 = time.perf_counter()
         try:
+            bridged = self._bridge(ta, tb, ia, bounds, prev, part, prev_tp, (ia + 1) * dt + tb.duration)
+            if bridged is not None and bridged[0].duration <= (ia + 1 - max(limit, 0)) * dt + tb.duration + 1e-9:
+                return self._bridged_piece(a, b, bounds, prev, part, *bridged)  # no overlap could do better
             for m in range(limit, 0, -BLEND_STEP):
                 cand = _superpose(ta, tb, ia, m)
                 if self._overlap_ok(cand, ia + 1 - m, ia, prev, part):
                     break
             else:
                 m, cand = 0, _superpose(ta, tb, ia, 0)
+            if bridged is not None and bridged[0].duration < cand.duration - 1e-9:
+                return self._bridged_piece(a, b, bounds, prev, part, *bridged)
         finally:
             self.timer.add("blend", t0)
         start = (ia + 1 - m) * dt  # b's start in the combined timeline
@@ -762,6 +768,114 @@ class Planner:
         segments += [Segment(max(start + sg.start, join), start + sg.end, sg.kind, sg.label) for sg in b.segments]
         new_bounds = bounds[:-1] + [(bounds[-1][0], join), (join, start + tb.duration)]
         return _Piece(cand, segments, None, a.blends + ([join] if m else [])), new_bounds
+
+    def _bridge(self, ta: TimedPath, tb: TimedPath, ia: int, bounds: list[tuple[float, float]], prev: _Part, part: _Part,
+                prev_tp: TimedPath, beat: float) -> tuple[TimedPath, int, int] | None:
+        """The corner between ``ta`` (ending with the motion ``prev``, its last on-grid sample ``ia``) and ``tb`` (the
+        motion ``part``, timed from rest) cut out and replaced by a time-optimal, jerk-limited move from sample i of
+        ``ta`` to sample k of ``tb`` (Ruckig, state to state: position, velocity and acceleration at both ends, all
+        joints finishing together, duration a whole number of samples).
+
+        Where a joint reverses at the corner (the RoArm's wrist between a transit and a vertical approach), the
+        superposition of ``_blend`` can overlap only the two jerk ramps, because the two motions' accelerations
+        add; the bridge instead keeps decelerating through the reversal. A straight line keeps its LINE_KEEP
+        exact (i and k are bounded by it); a free motion is cut at most half-way and only on its last (first)
+        edge between two of its vertices (``prev_tp``: ``prev`` timed on its own), so a detour around an obstacle
+        is not cut short. Candidates (i, k) are searched
+        on a coarse grid, refined around the best ones, and taken shortest first; the first whose samples pass
+        ``_overlap_ok`` (every limit, collisions under both motions' states) and that beats ``beat`` (s, the
+        superposed result) is returned: (path, i, index of the bridge's last sample). None if none."""
+        from ruckig import DurationDiscretization, InputParameter, Result, Ruckig, RuckigError, Trajectory
+
+        dt = SAMPLE_DT
+        arm = self.arm
+        i_lo = int(np.ceil(bounds[-1][0] / dt - 1e-9))
+        if prev.step.kind == "cartesian":
+            i_lo = max(i_lo, int(np.ceil(self._line_time(prev, ta, bounds[-1], 1.0 - LINE_KEEP) / dt - 1e-9)))
+        elif len(prev.wps) > 2 and prev_tp.s is not None:  # from its last vertex on (prev ends where ta does)
+            last = float(np.sum(np.linalg.norm(np.diff(prev.wps[:-1][:, arm], axis=0), axis=1)))
+            t_v = float(prev_tp.times[min(int(np.searchsorted(prev_tp.s, last - 1e-9)), len(prev_tp.times) - 1)])
+            i_lo = max(i_lo, int(np.ceil((t_v + ta.duration - prev_tp.duration) / dt - 1e-9)))
+        k_hi = len(tb.times) - 2
+        if part.step.kind == "cartesian":
+            k_hi = min(k_hi, int(self._line_time(part, tb, (0.0, tb.duration), 1.0 - LINE_KEEP) / dt))
+        else:
+            k_hi = min(k_hi, int(0.5 * tb.duration / dt))
+            if len(part.wps) > 2 and tb.s is not None:  # up to its first vertex
+                first = float(np.linalg.norm(part.wps[1][arm] - part.wps[0][arm]))
+                k_hi = min(k_hi, int(np.searchsorted(tb.s, first + 1e-9, side="right")) - 1)
+        if ia <= i_lo or k_hi <= 0:
+            return None
+        otg, traj, inp = Ruckig(len(arm), dt), Trajectory(len(arm)), InputParameter(len(arm))
+        inp.duration_discretization = DurationDiscretization.Discrete
+        inp.max_velocity, inp.max_acceleration, inp.max_jerk = list(self.vmax[arm]), list(self.amax[arm]), list(self.jmax[arm])
+        qb = tb.q[:, arm] + (ta.q[-1, arm] - tb.q[0, arm])  # tb starts where ta comes to rest (as in _bridged)
+        ends = {"a": [(list(ta.q[i, arm]), list(ta.qd[i, arm]), list(ta.qdd[i, arm])) for i in range(len(ta.times))],
+                "b": [(list(qb[k]), list(tb.qd[k, arm]), list(tb.qdd[k, arm])) for k in range(len(tb.times))]}
+        totals: dict[tuple[int, int], int | None] = {}  # (i, k) -> bridge samples
+
+        def solve(i: int, k: int) -> int | None:
+            if (i, k) not in totals:
+                inp.current_position, inp.current_velocity, inp.current_acceleration = ends["a"][i]
+                inp.target_position, inp.target_velocity, inp.target_acceleration = ends["b"][k]
+                try:
+                    ok = otg.calculate(inp, traj) in (Result.Working, Result.Finished)
+                except RuckigError:  # an end state on or over a limit (Ruckig validates its input)
+                    ok = False
+                totals[(i, k)] = int(round(traj.duration / dt)) if ok else None
+            return totals[(i, k)]
+
+        def total(key: tuple[int, int]) -> float:
+            i, k = key
+            return i * dt + totals[key] * dt + tb.duration - tb.times[k]
+
+        coarse = [(i, k) for i in range(ia, i_lo - 1, -BRIDGE_COARSE[0]) for k in range(k_hi, 0, -BRIDGE_COARSE[1])]
+        # shortest first; among equals the earliest end in the second motion and the latest start in the first (a
+        # straight line stays exact for longer)
+        def ranked(keys) -> list[tuple[int, int]]:
+            return [key for _, key in sorted(((round(total(key), 9), key[1], -key[0], totals[key]), key) for key in keys)]
+
+        best = ranked(key for key in coarse if solve(*key) is not None)[:BRIDGE_REFINE]
+        for i0, k0 in best:  # every sample around the best coarse ones
+            for i in range(max(i0 - BRIDGE_COARSE[0] + 1, i_lo), min(i0 + BRIDGE_COARSE[0], ia + 1)):
+                for k in range(max(k0 - BRIDGE_COARSE[1] + 1, 1), min(k0 + BRIDGE_COARSE[1], k_hi + 1)):
+                    solve(i, k)
+        found = ranked(key for key, n in totals.items() if n is not None and total(key) < beat - 1e-9)
+        for i, k in found[:BRIDGE_TRIES]:
+            steps = totals[(i, k)]
+            inp.current_position, inp.current_velocity, inp.current_acceleration = ends["a"][i]
+            inp.target_position, inp.target_velocity, inp.target_acceleration = ends["b"][k]
+            otg.calculate(inp, traj)
+            cand = _bridged(ta, tb, i, k, steps, traj, arm)
+            # a cheap look first (every 4th sample of the bridge, both collision states), then the full check
+            coarse_q = cand.q[i:i + steps + 1:4]
+            if any(self._invalid_under(p, coarse_q) for p in (prev, part)):
+                continue
+            if self._overlap_ok(cand, i, i + steps, prev, part):
+                return cand, i, i + steps
+        return None
+
+    def _invalid_under(self, part: _Part, q: np.ndarray) -> bool:
+        """Whether any of ``q`` (M, dof) is invalid under ``part``'s collision state (its gripper value, its grasp target)."""
+        self._set_state(part.wps[0][self.gi] if self.gi is not None else None, grasp_target=part.step.grasp_target)
+        return self._first_invalid(q) is not None
+
+    def _bridged_piece(self, a: _Piece, b: _Piece, bounds: list[tuple[float, float]], prev: _Part, part: _Part,
+                       cand: TimedPath, i: int, e: int) -> tuple[_Piece, list[tuple[float, float]]]:
+        """The piece and part bounds after ``_bridge``: samples i..e of ``cand`` are the bridge."""
+        t_i, t_e = float(cand.times[i]), float(cand.times[e])
+        if part.step.kind == "cartesian":
+            join = t_e
+        elif prev.step.kind == "cartesian":
+            join = t_i
+        else:
+            join = 0.5 * (t_i + t_e)
+        off = float(cand.duration - b.tp.duration)  # b's time origin in the combined timeline
+        segments = a.segments[:-1] + [Segment(a.segments[-1].start, join, a.segments[-1].kind, a.segments[-1].label)]
+        segments += [Segment(join if n == 0 else max(off + sg.start, join), off + sg.end, sg.kind, sg.label)
+                     for n, sg in enumerate(b.segments)]
+        new_bounds = bounds[:-1] + [(bounds[-1][0], join), (join, float(cand.duration))]
+        return _Piece(cand, segments, None, a.blends + [join]), new_bounds
 
     def _line_time(self, part: _Part, tp: TimedPath, span: tuple[float, float], fraction: float) -> float:
         """Time (s, in ``tp``) when the TCP has covered ``fraction`` of the part's straight line."""
@@ -1124,6 +1238,9 @@ def _scene_item(spec: ItemSpec):
 
 LINE_KEEP = 0.5  # a blend may round the corner over at most the first (last) half of a straight line
 BLEND_STEP = 2  # samples between the overlaps tried, longest first
+# _bridge: corner cuts (i in the first motion, k in the second) tried every BRIDGE_COARSE samples, then every
+# sample around the BRIDGE_REFINE best; at most BRIDGE_TRIES candidates are checked, shortest first.
+BRIDGE_COARSE, BRIDGE_REFINE, BRIDGE_TRIES = (6, 3), 4, 16
 
 
 def _payload_entry(start: float, end: float, body: dict) -> dict:
@@ -1155,6 +1272,29 @@ def _superpose(a: TimedPath, b: TimedPath, ia: int, m: int) -> TimedPath:
     qd[start:] += b.qd
     qdd[start:] += b.qdd
     return TimedPath(times, q, qd, qdd, max(a.jerk_filter, b.jerk_filter))
+
+
+def _bridged(ta: TimedPath, tb: TimedPath, i: int, k: int, steps: int, traj, arm: list[int]) -> TimedPath:
+    """``ta`` up to its sample ``i``, then the Ruckig trajectory ``traj`` (``steps`` samples of SAMPLE_DT, joints
+    ``arm``; the others held), then ``tb`` from its sample ``k`` on (displaced to start where ``ta`` ends: ``tb``
+    starts at rest at ``ta``'s last sample)."""
+    dt = SAMPLE_DT
+    nb = len(tb.times) - k - 1
+    m = i + steps + nb + 1
+    times = np.empty(m)
+    times[:i + 1] = ta.times[:i + 1]
+    times[i + 1:i + steps + 1] = ta.times[i] + dt * np.arange(1, steps + 1)
+    times[i + steps + 1:] = times[i + steps] + tb.times[k + 1:] - tb.times[k]
+    q = np.repeat(ta.q[i][None, :], m, axis=0)
+    qd, qdd = np.zeros_like(q), np.zeros_like(q)
+    q[:i + 1], qd[:i + 1], qdd[:i + 1] = ta.q[:i + 1], ta.qd[:i + 1], ta.qdd[:i + 1]
+    for j in range(1, steps):
+        pos, vel, acc = traj.at_time(j * dt)
+        q[i + j, arm], qd[i + j, arm], qdd[i + j, arm] = pos, vel, acc
+    shift = ta.q[-1] - tb.q[0]
+    q[i + steps:] = tb.q[k:] + shift
+    qd[i + steps:], qdd[i + steps:] = tb.qd[k:], tb.qdd[k:]
+    return TimedPath(times, q, qd, qdd, max(ta.jerk_filter, tb.jerk_filter))
 
 
 def _split(tp: TimedPath, i: int) -> tuple[TimedPath, TimedPath]:
