@@ -634,32 +634,41 @@ class Planner:
         moving = int(np.count_nonzero(np.any(np.abs(tb.qd if grasp else ta.qd) > 1e-12, axis=1)))  # gripper samples in motion
         if grasp:  # the closing starts within the descent (the last segment of a)
             limit = min(moving, ia - int(np.ceil(a.segments[-1].start / dt - 1e-9)))
-        else:  # the retreat starts within the opening, and within its own first segment
-            limit = min(moving, ia, int(b.segments[0].end / dt))
+        else:  # the retreat starts within the opening (which may overlap a later move's close of the gripper in b:
+            # their sum is checked against the gripper's limits)
+            limit = min(moving, ia, len(tb.times) - 2)
         t0 = time.perf_counter()
         saved = self.checker._grasp_target, self.checker._jaw_strict, float(self.checker._q_template[self.checker._gripper_index])
         self.checker.set_grasp_target(target, moving_jaw_clear=True)
         tried: dict[int, TimedPath | None] = {}
 
+        pose = self.robot.kin.fk(ta.q[-1] if grasp else tb.q[0])[:3, 3]  # where the arm arrives / starts
+
         def attempt(m: int) -> TimedPath | None:
             if m not in tried:
                 cand = _superpose(ta, tb, ia, m)
                 lo, hi = ia + 1 - m, min(ia + 1, len(cand.times) - 1)
-                tried[m] = cand if self._jaw_overlap_ok(cand, lo, hi, reverse=grasp) else None
+                tried[m] = cand if self._jaw_overlap_ok(cand, lo, hi, pose, reverse=grasp) else None
             return tried[m]
 
         try:
-            # A necessary condition, for every overlap at once: the moving jaw is clear at the first (release) or
-            # last (grasp) pose of the arm's motion with the gripper where it is then. Only the overlaps that
-            # meet it are checked in full, longest first.
+            # A necessary condition, for every overlap at once: the moving jaw is clear at the last (grasp) or first
+            # (release) sample of the arm's motion that is farther than JAW_POSE_TOL from that pose, with the
+            # gripper where it is then. Only the overlaps that meet it are checked in full, longest first.
             ms = np.arange(1, max(limit, 0) + 1)
             if grasp:
-                arm_q, g = np.repeat(ta.q[-1:, self.arm], len(ms), axis=0), tb.q[np.minimum(ms, len(tb.times) - 1), self.gi]
+                far = np.flatnonzero(np.linalg.norm(self.robot.kin.fk(ta.q[:ia + 1])[:, :3, 3] - pose, axis=1) > JAW_POSE_TOL)
+                j = int(far[-1]) if len(far) else ia
+                arm_q, g = np.repeat(ta.q[j:j + 1, self.arm], len(ms), axis=0), tb.q[np.clip(ms - (ia + 1 - j), 0, len(tb.times) - 1), self.gi]
             else:
-                arm_q, g = np.repeat(tb.q[1:2, self.arm], len(ms), axis=0), ta.q[np.minimum(ia + 2 - ms, len(ta.times) - 1), self.gi]
+                far = np.flatnonzero(np.linalg.norm(self.robot.kin.fk(tb.q)[:, :3, 3] - pose, axis=1) > JAW_POSE_TOL)
+                j = int(far[0]) if len(far) else 1
+                arm_q, g = np.repeat(tb.q[j:j + 1, self.arm], len(ms), axis=0), ta.q[np.clip(ia + 1 + j - ms, 0, len(ta.times) - 1), self.gi]
             clear = self.checker.validity_batch(arm_q, gripper=g) if len(ms) else np.zeros(0, dtype=bool)
             m = next((int(k) for k in ms[clear][::-1] if attempt(int(k)) is not None), 0)
             cand = tried.get(m)
+            if m and not self._jaw_near_ok(cand, ia + 1 - m, min(ia + 1, len(cand.times) - 1), pose, target):
+                m, cand = 0, None
         finally:
             self.checker.set_grasp_target(saved[0], moving_jaw_clear=saved[1])
             self.checker.set_gripper(saved[2])
@@ -681,24 +690,46 @@ class Planner:
                        Event(t_cut, e.kind, e.label, e.position), a.blends, a.attach, a.detach, a.jaw_target),
                 _Piece(second, b.segments, b.event, b.blends, b.attach, b.detach, b.jaw_target)]
 
-    def _jaw_overlap_ok(self, tp: TimedPath, lo: int, hi: int, reverse: bool) -> bool:
+    def _jaw_overlap_ok(self, tp: TimedPath, lo: int, hi: int, pose: np.ndarray, reverse: bool) -> bool:
         """Samples lo..hi of a gripper action superposed with a straight motion, under the collision state set by
         ``_jaw_overlap``: collision-free (4x finer; checked from the end when ``reverse``, where a grasp's jaw is
-        nearest the object), outside the singularity margin, and within the torque limits by RNEA (nothing is
-        held: before a grasp, after a release)."""
+        nearest the object) wherever the TCP is farther than JAW_POSE_TOL from ``pose`` (x, y, z m: the grasp or
+        release pose; nearer, the arm is at that pose and ``_jaw_near_ok`` checks those samples as the gripper
+        action itself), outside the singularity margin, within the torque limits by RNEA (nothing is held:
+        before a grasp, after a release) and, for the gripper joint, within its position, velocity, acceleration
+        and jerk limits (the arm's samples are the straight motion's own)."""
         from roarmctl.robot.dynamics import inverse_dynamics
 
         a, b = max(lo - 1, 0), min(hi + 2, len(tp.times))
         fine = _interpolate(tp.q[a:b], RECHECK_SUBSTEPS)
+        fine = fine[np.linalg.norm(self.robot.kin.fk(fine)[:, :3, 3] - pose, axis=1) > JAW_POSE_TOL]
         if reverse:
             fine = fine[::-1]
-        if self.checker.first_invalid(fine[:, self.arm], gripper=fine[:, self.gi]) is not None:  # the jaw moves at every sample
+        if len(fine) and self.checker.first_invalid(fine[:, self.arm], gripper=fine[:, self.gi]) is not None:  # the jaw moves at every sample
+            return False
+        g, c = self.gi, slice(max(a - 1, 0), min(b + 1, len(tp.times)))  # the gripper's own limits (b may move it too)
+        if (np.any(np.abs(tp.qd[a:b, g]) > self.vmax[g] * (1 + 1e-6) + LIMIT_TOL)
+                or np.any(np.abs(tp.qdd[a:b, g]) > self.amax[g] * (1 + 1e-6) + LIMIT_TOL)
+                or np.any(tp.q[a:b, g] < self.robot.lower[g] - LIMIT_TOL) or np.any(tp.q[a:b, g] > self.robot.upper[g] + LIMIT_TOL)):
+            return False
+        if self.jmax is not None and np.any(np.abs(np.diff(tp.qdd[c, g]) / np.diff(tp.times[c])) > self.jmax[g] * (1 + 1e-9)):
             return False
         if self.effort is not None and np.any(np.isfinite(self.effort)) and self.robot.inertials:
             tau = inverse_dynamics(self.robot, tp.q[a:b], tp.qd[a:b], tp.qdd[a:b])
             if np.any(np.abs(tau) > self.effort):
                 return False
         return True
+
+    def _jaw_near_ok(self, tp: TimedPath, lo: int, hi: int, pose: np.ndarray, target: str) -> bool:
+        """The fine samples (4x) of lo..hi whose TCP is within JAW_POSE_TOL of ``pose``, checked like the gripper
+        action at that pose: every link against everything, the jaws allowed to touch ``target``."""
+        a, b = max(lo - 1, 0), min(hi + 2, len(tp.times))
+        fine = _interpolate(tp.q[a:b], RECHECK_SUBSTEPS)
+        fine = fine[np.linalg.norm(self.robot.kin.fk(fine)[:, :3, 3] - pose, axis=1) <= JAW_POSE_TOL]
+        if not len(fine):
+            return True
+        self.checker.set_grasp_target(target)
+        return self.checker.first_invalid(fine[:, self.arm], gripper=fine[:, self.gi]) is None
 
     def _superposed(self, parts: list[_Part], singles: list[_Piece]) -> tuple[_Piece, list[tuple[float, float]]]:
         """The chain's motions blended join by join; also each part's (start, end) in the result."""
@@ -1237,6 +1268,10 @@ def _scene_item(spec: ItemSpec):
 
 
 LINE_KEEP = 0.5  # a blend may round the corner over at most the first (last) half of a straight line
+# m: the TCP this near the grasp (release) pose counts as there: the moving jaw may already be inside the padding
+# of the object while the arm settles (arrives) or starts to leave (a tenth of a millimetre, far below what the
+# RoArm's servos resolve: one step of 2 pi / 4096 rad at the shoulder moves the TCP about 0.4 mm).
+JAW_POSE_TOL = 1e-4
 BLEND_STEP = 2  # samples between the overlaps tried, longest first
 # _bridge: corner cuts (i in the first motion, k in the second) tried every BRIDGE_COARSE samples, then every
 # sample around the BRIDGE_REFINE best; at most BRIDGE_TRIES candidates are checked, shortest first.
