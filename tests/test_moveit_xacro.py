@@ -123,3 +123,32 @@ def test_xacro_find_uses_the_packages_map(tmp_path):
     loader._CACHE.clear()
     with pytest.raises(DescriptionError, match=r"arm.xacro: xacro: .*armpkg"):
         load_robot(str(tmp_path / "arm.yaml"))
+
+
+JOINT_LIST_SRDF = """<robot name="arm">
+  <group name="arm">%s</group>
+  <group name="hand"><joint name="link5_to_gripper_link"/></group>
+  <group name="arm_and_hand"><group name="arm"/><group name="hand"/></group>
+  <group_state name="ready" group="arm_and_hand">
+    <joint name="base_link_to_link1" value="0.2"/><joint name="link1_to_link2" value="0.1"/>
+    <joint name="link2_to_link3" value="1.9"/><joint name="link3_to_link4" value="0.3"/><joint name="link4_to_link5" value="0"/>
+    <joint name="link5_to_gripper_link" value="0.7"/>
+  </group_state>
+  <end_effector name="ee" parent_link="hand_tcp" group="arm"/>
+</robot>"""
+
+
+def test_srdf_with_an_arm_group_of_joints_and_a_composite_state(tmp_path):
+    """An SRDF in the style of Franka's in example-robot-data: the arm group lists joints (no chain),
+    the end effector names the TCP link (and, unusually, the arm group), a pose is given for a group
+    made of the arm and hand groups. With ``gripper_group: hand`` it loads: TCP from the end effector,
+    the pose with its gripper value."""
+    joints = "".join(f'<joint name="{n}"/>' for n in ("base_link_to_link1", "link1_to_link2", "link2_to_link3",
+                                                       "link3_to_link4", "link4_to_link5"))
+    (tmp_path / "arm.srdf").write_text(JOINT_LIST_SRDF % joints)
+    side = {"format": "roarmctl.robot/1", "urdf": str(bundled_dir() / "roarm_m3_pro.urdf"), "srdf": "arm.srdf",
+            "ik": "roarm5", "gripper_group": "hand", "gripper": {"joint": "link5_to_gripper_link", "open": 1.2, "closed": 0.0}}
+    (tmp_path / "arm.yaml").write_text(yaml.safe_dump(side))
+    r = load_robot(str(tmp_path / "arm.yaml"))
+    assert r.tcp_link == "hand_tcp"
+    assert np.allclose(r.named_poses["ready"], [0.2, 0.1, 1.9, 0.3, 0, 0.7])

@@ -208,3 +208,60 @@ def test_links_joined_by_a_joint_may_touch_without_listing_them(tmp_path):
     checker = CollisionChecker(robot, Scene(items=[]), padding=0.0)
     assert checker.is_valid(q)
     assert not checker.is_valid(np.array([0.0, 1.57]))  # boom pointing down, into the base
+
+
+LIFT = """<robot name="lift">
+  <link name="base"/>
+  <link name="carriage"><inertial><mass value="2.0"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="counterweight"><inertial><mass value="0.5"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="left"><inertial><mass value="0"/></inertial></link><link name="right"><inertial><mass value="0"/></inertial></link>
+  <joint name="z" type="prismatic"><parent link="base"/><child link="carriage"/><origin xyz="0 0 0.1"/>
+    <axis xyz="0 0 1"/><limit lower="0" upper="0.5" effort="100" velocity="1"/></joint>
+  <joint name="z2" type="prismatic"><parent link="base"/><child link="counterweight"/><origin xyz="0.3 0 0.2"/>
+    <axis xyz="0 0 1"/><limit lower="-0.5" upper="0.5" effort="100" velocity="1"/><mimic joint="z" multiplier="%s" offset="0.01"/></joint>
+  <joint name="grip" type="prismatic"><parent link="carriage"/><child link="left"/><origin xyz="0 0.02 0"/>
+    <axis xyz="0 1 0"/><limit lower="0" upper="0.04" effort="10" velocity="0.1"/></joint>
+  <joint name="grip2" type="prismatic"><parent link="carriage"/><child link="right"/><origin xyz="0 -0.02 0"/>
+    <axis xyz="0 -1 0"/><limit lower="0" upper="0.04" effort="10" velocity="0.1"/><mimic joint="grip"/></joint>
+</robot>"""
+
+
+@pytest.mark.parametrize("mult", [1, -1])
+def test_mimic_joints_follow_their_joint(tmp_path, mult):
+    """URDF <mimic>: the mimicking joints are not actuated; FK puts their links where multiplier x q +
+    offset does (by hand), and RNEA adds their load to the joint they follow: holding the 2 kg
+    carriage with the 0.5 kg counterweight mimicking it needs (2 + 0.5) g N with multiplier 1 and
+    (2 - 0.5) g N with -1 (virtual work: the counterweight moves the other way)."""
+    from roarmctl.robot.dynamics import gravity_vector
+
+    (tmp_path / "lift.urdf").write_text(LIFT % mult)
+    robot = load_robot(str(tmp_path / "lift.urdf"))
+    assert robot.joint_names == ["z", "grip"]
+    q = np.array([0.2, 0.03])
+    f = robot.kin.link_frames(q)
+    at = lambda link: f[robot.kin.link_index[link]][:3, 3]  # noqa: E731
+    np.testing.assert_allclose(at("counterweight"), [0.3, 0, 0.2 + mult * 0.2 + 0.01], atol=1e-12)
+    np.testing.assert_allclose(at("left"), [0, 0.02 + 0.03, 0.3], atol=1e-12)
+    np.testing.assert_allclose(at("right"), [0, -0.02 - 0.03, 0.3], atol=1e-12)
+    g = 9.81
+    np.testing.assert_allclose(gravity_vector(robot, q), [(2.0 + mult * 0.5) * g, 0.0], atol=1e-9)
+
+
+def test_mimic_multiplier_other_than_one_is_refused(tmp_path):
+    (tmp_path / "lift.urdf").write_text(LIFT % "0.5")
+    with pytest.raises(DescriptionError, match="joint 'z2': mimic multiplier 0.5 is not supported"):
+        load_robot(str(tmp_path / "lift.urdf"))
+
+
+def test_a_finger_that_mimics_the_gripper_is_a_jaw(tmp_path):
+    """Both fingers of a parallel gripper whose second finger mimics the first are jaws (they may touch
+    the grasped object) and both move when the gripper closes (checked against the object then)."""
+    from roarmctl.motion.collision import CollisionChecker
+    from roarmctl.motion.scene import Scene
+
+    (tmp_path / "lift.urdf").write_text(LIFT % 1)
+    (tmp_path / "lift.yaml").write_text(yaml.safe_dump({"format": "roarmctl.robot/1", "urdf": "lift.urdf",
+                                                        "gripper": {"joint": "grip", "open": 0.04, "closed": 0.0}}))
+    robot = load_robot(str(tmp_path / "lift.yaml"))
+    assert {"left", "right", "carriage"} <= set(robot.jaw_links)
+    assert set(CollisionChecker(robot, Scene(items=[])).moving_jaw_links) == {"left", "right"}

@@ -197,8 +197,8 @@ class CollisionChecker:
         if self.robot.gripper is None:
             return ()
         kin = self.robot.kin
-        joint = next(j for j in self.robot.joints if j.name == self.robot.gripper.joint)
-        return tuple(name for name in kin.link_names if self._moves_with(kin, kin.link_index[name], joint))
+        joints = self.robot.joints_moved_by(self.robot.gripper.joint)  # with the fingers that mimic it
+        return tuple(name for name in kin.link_names if any(self._moves_with(kin, kin.link_index[name], j) for j in joints))
 
     def tcp_pose(self, q_arm) -> np.ndarray:
         """TCP pose (4, 4) at arm configuration ``q_arm`` (arm_dof,) with the current gripper value."""

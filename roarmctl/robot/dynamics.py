@@ -203,8 +203,8 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
         c = kin._child[j]
         n_sub[:, c] += moment[:, c] + _cross(com[:, c] - pivots[:, j], force[:, c])
         p = kin._parent[j]
-        if kin._qidx[j] >= 0:
-            tau[:, kin._qidx[j]] = np.einsum("ni,ni->n", axes[:, j], n_sub[:, c] if joint.kind == "revolute" else f_sub[:, c])
+        if kin._qidx[j] >= 0:  # += : a mimic joint's generalised force adds to the joint it follows
+            tau[:, kin._qidx[j]] += np.einsum("ni,ni->n", axes[:, j], n_sub[:, c] if joint.kind == "revolute" else f_sub[:, c])
         # hand the subtree's wrench to the parent, as a moment about the parent's own pivot
         jp = kin._child.index(p) if p != 0 else None
         pivot_p = pivots[:, jp] if jp is not None else np.zeros(3)

@@ -73,7 +73,8 @@ class Kinematics:
         self.link_index = index
         self._parent = [index[j.parent] for j in robot.joints]
         self._child = [index[j.child] for j in robot.joints]
-        self._qidx = [robot.joint_names.index(j.name) if j.kind != "fixed" else -1 for j in robot.joints]
+        # q index that drives each joint (-1: fixed); a mimic joint is driven by the joint it mimics
+        self._qidx = [robot.joint_names.index(j.mimic or j.name) if j.kind != "fixed" else -1 for j in robot.joints]
         self.tcp_index = index[robot.tcp_link]
         # Joints between the root and the TCP, in chain order; their q indices form the arm.
         chain: list[int] = []

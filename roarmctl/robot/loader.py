@@ -66,6 +66,10 @@ def load_robot(spec: str) -> Robot:
     for f in robot.frames.values():
         if f.point_link is not None and f.point_link not in robot.link_names:
             raise DescriptionError(f"{path}: frames.{f.name}.point.link: '{f.point_link}' is not a link of {robot.name}")
+    mimic = [robot.joints[j].name for j in robot.kin.tcp_chain_joints if robot.joints[j].mimic]
+    if mimic:
+        raise DescriptionError(f"{path}: tcp_link: '{robot.tcp_link}' is moved by the mimic joint '{mimic[0]}'",
+                               "put the TCP on a link the arm joints move, e.g. the hand between the fingers")
     robot = _link_roles(robot, data, str(path))
     # Links joined by a joint touch at the joint and their meshes usually overlap there: their pair is
     # not checked (MoveIt Setup Assistant's "Adjacent" pairs, Drake's and PyBullet's default).
@@ -79,7 +83,8 @@ def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
     """Fill ``jaw_links`` and ``base_links`` from the sidecar, or derive them from the tree.
 
     Defaults: base links are the root and every link fixed to it; jaw links are the gripper joint's
-    child and parent (else the last moving link of the TCP chain), each with the links fixed to it.
+    child and parent and the children of joints that mimic it (else the last moving link of the TCP
+    chain), each with the links fixed to it.
     """
     links = set(robot.link_names)
 
@@ -111,8 +116,8 @@ def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
     jaws = listed("jaw_links")
     if jaws is None:
         if robot.gripper is not None:
-            gj = next(j for j in robot.joints if j.name == robot.gripper.joint)
-            seeds = [gj.child, gj.parent]
+            moved = robot.joints_moved_by(robot.gripper.joint)  # a mimicking finger is a jaw too
+            seeds = [j.child for j in moved] + [moved[0].parent]
         else:
             moving = [robot.joints[j] for j in robot.kin.tcp_chain_joints if robot.joints[j].kind != "fixed"]
             seeds = [moving[-1].child] if moving else [robot.tcp_link]
@@ -275,6 +280,21 @@ def _frames(data: dict, where: str) -> dict:
     return out
 
 
+def _mimic(elem: ET.Element, axis: np.ndarray, where: str) -> tuple[str, np.ndarray, float]:
+    """URDF ``<mimic joint= multiplier= offset=>``: value = multiplier * q[joint] + offset. Returns the
+    joint followed, and the axis and offset that give that motion from q[joint] itself (multiplier -1
+    turns the axis round: a turn of -q about a is a turn of q about -a)."""
+    master = elem.get("joint")
+    if not master:
+        raise DescriptionError(f"{where}: <mimic> needs joint=...")
+    mult = _fattr(elem, "multiplier", 1.0, f"{where} mimic")
+    offset = _fattr(elem, "offset", 0.0, f"{where} mimic")
+    if mult not in (1.0, -1.0):
+        raise DescriptionError(f"{where}: mimic multiplier {mult:g} is not supported (1 or -1)",
+                               "make the joint fixed at a chosen value in a copy of the URDF")
+    return master, axis * mult, offset * mult
+
+
 def _tool_joint(data: dict, where: str, parent: str, taken: set[str], lscale: float = 1.0,
                 deg: bool = False) -> Joint | None:
     """The fixed joint of ``tool: {xyz, rpy}`` (the TCP offset from ``parent``; xyz in the file's length
@@ -370,7 +390,8 @@ def _moveit(side: dict, sidecar: Path, joints_xml: list, links: dict, actuated: 
         if missing:
             raise DescriptionError(f"{side['srdf']}: group_state '{pname}': no value for {', '.join(missing)}",
                                    "give every arm joint a value, or define the pose in the sidecar's named_poses")
-        poses.setdefault(pname, [values[n] for n in arm])
+        grip_value = [values[grip]] if grip is not None and grip in values and grip in names else []
+        poses.setdefault(pname, [values[n] for n in arm] + grip_value)
     side["named_poses"] = poses
     return side, jl
 
@@ -410,15 +431,24 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
             upper = _fattr(lim, "upper", math.pi, f"{where} limit")
             if j.get("type") == "continuous":
                 lower, upper = -2 * math.pi, 2 * math.pi
+            axis = axis / (np.linalg.norm(axis) or 1.0)
+            master, offset = None, 0.0
+            if j.find("mimic") is not None and kind != "fixed":
+                master, axis, offset = _mimic(j.find("mimic"), axis, where)
             ordered.append(Joint(name, kind, link, j.find("child").get("link"), _origin(j.find("origin"), where),
-                                 axis / (np.linalg.norm(axis) or 1.0), lower=lower, upper=upper))
+                                 axis, lower=lower, upper=upper, offset=offset, mimic=master))
             stack.append(j.find("child").get("link"))
-    actuated = [j.name for j in ordered if j.kind != "fixed"]
+    actuated = [j.name for j in ordered if j.kind != "fixed" and j.mimic is None]
+    for j in ordered:
+        if j.mimic is not None and j.mimic not in actuated:
+            raise DescriptionError(f"{urdf}: joint '{j.name}' mimic joint: '{j.mimic}' is not a movable, non-mimic joint")
     side, jl = _moveit(side, sidecar, joints_xml, links, actuated)
     names = list(side.get("joints", actuated))
     for n in names:
         if n not in actuated:
-            raise DescriptionError(f"{sidecar}: joints: '{n}' is not a movable joint of {urdf.name}")
+            mimics = next((j.mimic for j in ordered if j.name == n and j.mimic), None)
+            raise DescriptionError(f"{sidecar}: joints: '{n}' is not a movable joint of {urdf.name}"
+                                   + (f" (it mimics '{mimics}')" if mimics else ""))
     urdf_vel, urdf_eff = [], []
     for n in names:
         lim = next(j for j in joints_xml if j.get("name") == n).find("limit")
@@ -445,7 +475,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
             inertials[lname] = Inertial(_fattr(inn.find("mass"), "value", 0.0, f"{urdf}: link '{lname}' mass"), o[:3, 3], r @ tensor @ r.T)
         for k, c in enumerate(l.findall("collision")):
             shapes.extend(_urdf_shape(lname, c, f"{urdf}: link '{lname}' collision[{k}]", k, meshes))
-    tcp = side.get("tcp_link", ordered[-1].child)
+    tcp = side.get("tcp_link", next((j.child for j in reversed(ordered) if j.mimic is None), ordered[-1].child))
     if tcp not in links:
         raise DescriptionError(f"{sidecar}: tcp_link: '{tcp}' is not a link of {urdf.name}")
     tool = _tool_joint(side, str(sidecar), tcp, set(links) | {j.name for j in ordered})

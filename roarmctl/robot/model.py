@@ -58,6 +58,9 @@ class Joint:
     lower: float = -np.pi
     upper: float = np.pi
     offset: float = 0.0
+    #: URDF ``<mimic>``: the joint moves with this actuated joint's value (its multiplier, 1 or -1, is
+    #: folded into ``axis`` and its offset into ``offset``); not itself an actuated joint.
+    mimic: str | None = None
 
 
 @dataclass(frozen=True)
@@ -200,6 +203,10 @@ class Robot:
     @property
     def link_names(self) -> list[str]:
         return [self.root] + [j.child for j in self.joints]
+
+    def joints_moved_by(self, name: str) -> list[Joint]:
+        """Actuated joint ``name`` and every joint that mimics it (e.g. both fingers of a gripper)."""
+        return [j for j in self.joints if name in (j.name, j.mimic)]
 
     def joint_index(self, name: str) -> int:
         return self.joint_names.index(name)

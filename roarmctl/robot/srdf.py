@@ -99,10 +99,16 @@ def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, w
     for key, value in (("gripper_group", side.get("gripper_group")), ("arm_group", side.get("arm_group"))):
         if value is not None and value not in groups:
             raise DescriptionError(f"{where}: {key}: '{value}' is not a group of {path.name} (groups: {', '.join(groups)})")
+    if arm_group is None and grip_group is not None:  # an arm group given as joints: the other group
+        # holding only non-gripper movable joints and not composed of groups (e.g. Franka's 'arm')
+        plain = [n for n, g in groups.items() if n != grip_group and g.find("group") is None and g.find("chain") is None]
+        arm_group = plain[0] if len(plain) == 1 else None
     if arm_group is not None:
         chain = groups[arm_group].find("chain")
         if chain is not None:
             out["tcp_link"] = chain.get("tip_link")
+        elif ee is not None and ee.get("parent_link"):  # no chain: the end effector's mounting link
+            out["tcp_link"] = check_link(ee.get("parent_link"), "end_effector parent_link")
     gripper_joint = None
     if grip_group is not None:
         movable = [j for j in dict.fromkeys(group_joints(grip_group)) if joints[j][0] != "fixed"]
@@ -128,6 +134,9 @@ def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, w
             grip_states[name] = values.get(gripper_joint, math.nan)
         elif group == arm_group:
             poses[name] = values
+        elif group in groups and arm_group is not None and {g.get("name") for g in groups[group].findall("group")} \
+                >= {arm_group} and set(group_joints(group)) <= set(group_joints(arm_group)) | {gripper_joint}:
+            poses[name] = values  # a group of the arm and gripper groups: a pose with the gripper's value
         else:
             raise DescriptionError(f"{src}: group_state '{name}' is for group '{group}', which is neither the arm "
                                    f"group ('{arm_group}') nor the gripper group ('{grip_group}')",

@@ -229,8 +229,8 @@ def check_document(data: Any, where: str) -> None:
             if "link" in it:
                 _str(it["link"], where, f"inertials[{i}].link")
             _num(it.get("mass"), where, f"inertials[{i}].mass")
-            if it["mass"] <= 0:
-                _fail(where, f"inertials[{i}].mass", f"{it['mass']} must be positive")
+            if it["mass"] < 0:
+                _fail(where, f"inertials[{i}].mass", f"{it['mass']} must not be negative")
             if "com" in it:
                 _nums(it["com"], where, f"inertials[{i}].com", 3)
             inertia = it.get("inertia")
@@ -281,8 +281,9 @@ def check_urdf(root, where: str) -> None:
             mass = inn.find("mass")
             if mass is not None:
                 _attr_floats(mass, "value", 1, where, f"link '{name}' mass value", required=True)
-                if float(mass.get("value")) <= 0:
-                    _fail(where, f"link '{name}' mass value", f"{mass.get('value')} must be positive")
+                # 0 is a massless frame link (Franka's panda_link8, many tool frames); only negative is wrong
+                if float(mass.get("value")) < 0:
+                    _fail(where, f"link '{name}' mass value", f"{mass.get('value')} must not be negative")
             for tag, keys in (("origin", ("xyz", "rpy")), ("inertia", ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))):
                 e = inn.find(tag)
                 if e is not None:
@@ -396,8 +397,8 @@ def check_robot(robot, where: str) -> None:
         if len(bad):
             _fail(where, f"limits.effort.{names[int(bad[0])]}", f"{eff[bad[0]]:g} must be positive")
     for link, inn in robot.inertials.items():
-        if not (math.isfinite(inn.mass) and inn.mass > 0):
-            _fail(where, f"link '{link}' mass", f"{inn.mass:g} must be a positive finite number")
+        if not (math.isfinite(inn.mass) and inn.mass >= 0):
+            _fail(where, f"link '{link}' mass", f"{inn.mass:g} must be a finite number, not negative")
         if not (np.all(np.isfinite(inn.com)) and np.all(np.isfinite(inn.inertia))):
             _fail(where, f"link '{link}' inertial", "centre of mass and inertia must be finite")
     for k, s in enumerate(robot.collision):
