@@ -1,16 +1,20 @@
 """State-validity checking: joint limits, singularity margin, arm vs scene and arm vs itself (FCL).
 
-How a batch of states (N, arm_dof) is checked:
+How a batch of states (N, arm_dof) is checked, in one call of the compiled kernel
+(``_checkkernel.c``, a small C extension built at install time) per batch:
 
-1. joint limits and, when a margin is set, the smallest singular value of the translational
-   Jacobian, all vectorised in numpy;
-2. batched FK (``robot.kin``) gives every collision shape's centre;
-3. a vectorised pre-filter keeps the (state, shape, item) pairs whose bounding sphere reaches the
-   item's axis-aligned box, and the (state, shape, shape) pairs whose spheres overlap; of those,
-   only the pairs whose world-axis-aligned boxes overlap too; nothing else can collide;
-4. python-fcl answers the remaining pairs exactly (boxes, cylinders, spheres), in state order,
-   one loop of calls, skipping the rest of a state after its first collision (and every later
-   state in ``first_invalid``).
+1. joint limits, the FK of the library's tables (``robot.kin``'s compiled steps, packed here; a test
+   compares every link frame with ``Kinematics.frames4``) and, when a margin is set, the smallest
+   singular value of the translational Jacobian;
+2. every collision shape's world pose;
+3. conservative pre-filters that only clear pairs that are certainly apart: a shape's bounding
+   sphere vs the item's axis-aligned box (and shape spheres against each other), the world boxes,
+   then the separating-axis test of the two oriented bounding boxes (each shape lies inside its
+   box, so an axis that separates the boxes separates the shapes);
+4. python-fcl answers the pairs that no filter cleared, exactly (boxes, cylinders, spheres, meshes),
+   in state order, skipping the rest of a state after its first collision (and every later state
+   in ``first_invalid``). For two boxes the kernel only leaves pairs that overlap, so FCL is called
+   about once per colliding state.
 
 Motion segments (``segment_valid``) are checked as one batch at ``resolution``; steps between
 two states where a sphere grown by the distance any arm point can travel in half a step
@@ -34,10 +38,12 @@ import fcl
 import numpy as np
 
 from roarmctl.errors import InputError
+from roarmctl.motion import _checkkernel as _kernel
 from roarmctl.motion.scene import Scene, SceneItem
 from roarmctl.robot.model import Robot
 
-_EPS = 1e-9
+_EPS = 1e-9  # rad: joint-limit tolerance (the kernel uses the same)
+_NO_GRIP = np.zeros(0)  # "every state at the set_gripper value"
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
 
 
@@ -84,15 +90,6 @@ def _half_extents(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float
     return np.maximum(h + grow, 1e-6)
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (N, 3) arrays; np.cross costs ~25 us of overhead per call."""
-    out = np.empty_like(a)
-    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
-    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
-    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    return out
-
-
 @dataclass
 class _Moving:
     """A shape that moves with a link: arm collision boxes and attached objects."""
@@ -132,19 +129,13 @@ class CollisionChecker:
         self._arm = np.asarray(robot.arm_indices)
         self._lower = robot.lower[self._arm]
         self._upper = robot.upper[self._arm]
-        self._q_template = robot.full_q(np.zeros(robot.arm_dof))
+        self._q_template = robot.full_q(np.zeros(robot.arm_dof))  # a view into the kernel's table after _rebuild
+        self._bufs: dict[str, np.ndarray] = {}
         self._gripper_index = robot.joint_index(robot.gripper.joint) if robot.gripper else None
         kin = robot.kin
         self._link_index = kin.link_index
         self._tcp = kin.tcp_index
         self._chain = [(kin._parent[j], robot.joints[j]) for j in kin.tcp_chain_joints if robot.joints[j].kind != "fixed"]
-        # With no fixed transform after the joint motion (all URDF joints), the joint axis in the
-        # world is the child frame's rotation applied to the axis and the axis passes through the
-        # child frame's origin: one small product per joint instead of three.
-        self._chain_children = None
-        if all(np.allclose(joint.post, np.eye(4)) for _, joint in self._chain):
-            self._chain_children = [(kin._child[j], robot.joints[j].axis, robot.joints[j].kind)
-                                    for j in kin.tcp_chain_joints if robot.joints[j].kind != "fixed"]
         self._grasp_target: str | None = None
         self._jaw_strict = False  # set_grasp_target(..., moving_jaw_clear=True)
         self._attached: dict[str, tuple[SceneItem, np.ndarray]] = {}  # name -> (item, pose in TCP frame)
@@ -321,6 +312,58 @@ class CollisionChecker:
             self._sweep_key = key
         self._pair_r2 = (self._mv_radius[self._pairs[:, 0]] + self._mv_radius[self._pairs[:, 1]]) ** 2 if len(pairs) else np.zeros(0)
         # Self checks use unpadded geometry: the pre-filter radii above are padded, hence conservative.
+        self._pack()
+
+    def _pack(self) -> None:
+        """The kernel's tables: one int64 and one float64 array (layout: the header of _checkkernel.c)."""
+        kin = self._fk
+        steps_i, steps_f = [], []
+        for kind, parent, child, qi, offset, data, post in kin._steps:
+            rec = np.zeros((4, 16))
+            if kind == "rz":
+                code = 1
+                rec[0], rec[1], rec[2] = (m.ravel() for m in data)
+            elif kind == "revolute":
+                code = 2
+                rec[0, :3], rec[2] = data[1], data[0].ravel()
+            elif kind == "prismatic":
+                code = 3
+                rec[0, :3], rec[2] = data[0][:3, :3] @ data[1], data[0].ravel()
+            else:
+                code = 0
+                rec[2] = data[0].ravel()
+            if post is not None:
+                rec[3] = post.ravel()
+            steps_i += [code, parent, child, qi, int(post is not None)]
+            steps_f += [[offset], rec.ravel()]
+        chain_i, chain_f = [], []
+        for parent, joint in self._chain:
+            chain_i += [parent, 0 if joint.kind == "revolute" else 1]
+            chain_f += [joint.origin.ravel(), np.asarray(joint.axis, dtype=float)]
+        s, m = len(self._moving_shapes), len(self._items)
+        shapes = np.hstack([self._mv_rot.reshape(s, 9), self._mv_pos, self._mv_half, self._mv_half_self,
+                            self._mv_radius[:, None]]) if s else np.zeros((0, 19))
+        items = np.zeros((m, 24))
+        for k, it in enumerate(self._items):
+            local = {"box": np.asarray(it.size, dtype=float) / 2, "sphere": np.full(3, it.radius),
+                     "cylinder": np.array([it.radius, it.radius, it.length / 2])}[it.shape]
+            items[k, :3], items[k, 3:6] = self._item_c[k], self._item_h[k]
+            items[k, 6:15], items[k, 15:18], items[k, 18:21] = it.pose[:3, :3].ravel(), it.pose[:3, 3], local
+        margin = self.singularity_margin
+        const = list(kin._const_links)
+        ints = [len(self._q_template), len(self._arm), kin.n_links, len(kin._steps), self._tcp, len(self._chain), s, m,
+                len(self._active), len(self._pairs), -1 if self._gripper_index is None else self._gripper_index,
+                int(margin is not None), len(const)]
+        ints += list(self._arm) + const + steps_i + chain_i + list(self._mv_link) + list(self._active)
+        ints += list(self._active_mask.astype(np.int64).ravel()) + list(self._pairs.ravel())
+        self._ki = np.array(ints, dtype=np.int64)
+        floats = [self._lower, self._upper, self._q_template, [0.0 if margin is None else float(margin)],
+                  kin._const[const].ravel(), *steps_f, *chain_f, shapes.ravel(), items.ravel(),
+                  self._active_r2.ravel(), self._pair_r2]
+        self._kf = np.concatenate([np.asarray(f, dtype=float).ravel() for f in floats])
+        off = 2 * len(self._arm)
+        self._q_template = self._kf[off:off + len(self._q_template)]  # set_gripper writes the kernel's table
+        self._bufs = {}
 
     def _sweep_gain(self) -> float:
         """Bound (m per rad) on how far any point of a moving shape moves for a joint step of
@@ -359,29 +402,31 @@ class CollisionChecker:
         full[:, self._arm] = q
         return full
 
-    def _sigma_min(self, rot: np.ndarray, pos: np.ndarray, q_full: np.ndarray) -> np.ndarray:
-        """Smallest singular value (N,) of the translational Jacobian (3 x arm_dof), m/rad."""
-        p_tcp = pos[:, self._tcp]
-        cols = []
-        if self._chain_children is not None:
-            for child, axis, kind in self._chain_children:
-                z = rot[:, child] @ axis
-                cols.append(_cross(z, p_tcp - pos[:, child]) if kind == "revolute" else z)
-        for parent, joint in (self._chain if self._chain_children is None else ()):
-            r0 = rot[:, parent] @ joint.origin[:3, :3]
-            o = pos[:, parent] + rot[:, parent] @ joint.origin[:3, 3]
-            z = r0 @ joint.axis
-            cols.append(_cross(z, p_tcp - o) if joint.kind == "revolute" else z)
-        jv = np.stack(cols, axis=2)  # (N, 3, n)
-        if jv.shape[2] < 3:
-            return np.linalg.svd(jv, compute_uv=False)[:, -1]
-        ev = np.linalg.eigvalsh(jv @ jv.transpose(0, 2, 1))
-        return np.sqrt(np.clip(ev[:, 0], 0.0, None))
+    def margin_measure(self, Q, gripper=None) -> np.ndarray:
+        """Smallest singular value (N,) of the translational Jacobian (3 x arm_dof), m/rad, at arm
+        configurations ``Q`` (N, arm_dof): the quantity the singularity margin bounds."""
+        Q = np.ascontiguousarray(np.atleast_2d(Q), dtype=float)
+        out = np.empty(Q.shape[0])
+        _kernel.sigma(self._kf, self._ki, Q, self._grip_arg(gripper, Q.shape[0]), out)
+        return out
 
-    def _shape_poses(self, rot: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """World rotations (N, S, 3, 3) and centres (N, S, 3) of every moving shape."""
-        rl, pl = rot[:, self._mv_link], pos[:, self._mv_link]
-        return rl @ self._mv_rot, pl + np.einsum("nsij,sj->nsi", rl, self._mv_pos)
+    def _grip_arg(self, gripper, n: int) -> np.ndarray:
+        if gripper is None:
+            return _NO_GRIP
+        if self._gripper_index is None:
+            raise InputError(f"{self.robot.name} has no gripper")
+        return np.ascontiguousarray(np.broadcast_to(np.asarray(gripper, dtype=float), (n,)))
+
+    def _buffers(self, n: int) -> dict[str, np.ndarray]:
+        """Output buffers of the kernel for batches of up to ``n`` states (reused between calls)."""
+        b = self._bufs
+        if b.get("n", 0) < n:
+            s, m = len(self._moving_shapes), len(self._items)
+            self._bufs = b = {"n": n, "valid": np.empty(n, dtype=np.uint8), "near": np.empty(n, dtype=np.uint8),
+                              "scene": np.empty((n * max(len(self._active) * m, 1), 3), dtype=np.int64),
+                              "self": np.empty((n * max(len(self._pairs), 1), 2), dtype=np.int64),
+                              "pose": np.empty((n, max(s, 1), 12))}
+        return b
 
     def _evaluate(self, q: np.ndarray, stop_at_first: bool, sweep: float = 0.0,
                   gripper: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
@@ -389,99 +434,51 @@ class CollisionChecker:
         invalid one are left marked valid and not checked. Also returns, when ``sweep`` > 0 (m), which
         states are "near" (N,): some bounding sphere grown by ``sweep`` touches an item's box or another
         shape's grown sphere; else None."""
-        q = np.asarray(q, dtype=float)
+        q = np.ascontiguousarray(q, dtype=float)
         n = q.shape[0]
         self.check_count += n
-        valid = np.all((q >= self._lower - _EPS) & (q <= self._upper + _EPS), axis=1)
-        q_full = self._full(q)
-        if gripper is not None:
-            q_full[:, self._gripper_index] = gripper
-        rot, pos = self._fk.frames(q_full)
-        if self.singularity_margin is not None:
-            valid &= self._sigma_min(rot, pos, q_full) >= self.singularity_margin
-        limit = n
-        if stop_at_first and not valid.all():
-            limit = int(np.argmin(valid))
-        # Shape centres only; rotations are computed for the few pairs that reach FCL.
-        rl = rot[:, self._mv_link]
-        scen = pos[:, self._mv_link] + np.einsum("nsij,sj->nsi", rl, self._mv_pos)
-        # Pre-filter against items: bounding sphere vs item AABB (distance from the centre to the box).
-        near = np.zeros(n, dtype=bool)
-        cand_scene = None
-        if len(self._active):
-            e = np.abs(scen[:, self._active, None, :] - self._item_c) - self._item_h  # (N, S', M, 3)
-            np.maximum(e, 0.0, out=e)
-            d2 = np.einsum("nsmi,nsmi->nsm", e, e)
-            cand_scene = (d2 < self._active_r2) & self._active_mask
-            if sweep > 0:
-                grown = (np.sqrt(self._active_r2) + sweep) ** 2
-                near |= ((d2 < grown) & self._active_mask).any(axis=(1, 2))
-        cand_self = None
-        if len(self._pairs):
-            diff = scen[:, self._pairs[:, 0]] - scen[:, self._pairs[:, 1]]
-            d2p = np.einsum("npi,npi->np", diff, diff)
-            cand_self = d2p < self._pair_r2
-            if sweep > 0:
-                near |= (d2p < (np.sqrt(self._pair_r2) + 2 * sweep) ** 2).any(axis=1)
-        # Narrow phase, vectorised bookkeeping: all candidate pairs at once (state-major order),
-        # their shape rotations in one matmul, then one Python loop of FCL calls.
-        check = valid.copy()
-        check[limit:] = False
-        moving = self._moving_shapes
-        first_hit = n
-        if cand_scene is not None:
-            si, sa, sk = np.nonzero(cand_scene & check[:, None, None])
-            if len(si):
-                sa = self._active[sa]
-                rots = rl[si, sa] @ self._mv_rot[sa]
-                cents = scen[si, sa]
-                # Second filter: the shape's world AABB (exact extent of the box along the world
-                # axes) against the item's AABB. Prunes most sphere false alarms (e.g. the table).
-                hw = np.einsum("kij,kj->ki", np.abs(rots), self._mv_half[sa])
-                keep = np.all(np.abs(cents - self._item_c[sk]) < hw + self._item_h[sk], axis=1)
-                si, sa, sk, rots, cents = si[keep], sa[keep], sk[keep], rots[keep], cents[keep]
-                objs = [moving[a].obj_scene for a in sa.tolist()]
-                items = self._item_objs
-                skip = -1
-                for c, (i, k) in enumerate(zip(si.tolist(), sk.tolist())):
-                    if i == skip:
-                        continue
-                    obj = objs[c]
-                    obj.setRotation(rots[c])
-                    obj.setTranslation(cents[c])
-                    if fcl.collide(obj, items[k]):
-                        valid[i] = False
-                        skip = i
-                        if stop_at_first:
-                            first_hit = i
-                            break
-        if cand_self is not None:
-            check &= valid
-            check[first_hit:] = False
-            pi, pp = np.nonzero(cand_self & check[:, None])
-            if len(pi):
-                pa, pb = self._pairs[pp, 0], self._pairs[pp, 1]
-                rot_a = rl[pi, pa] @ self._mv_rot[pa]
-                rot_b = rl[pi, pb] @ self._mv_rot[pb]
-                cen_a, cen_b = scen[pi, pa], scen[pi, pb]
-                hw_a = np.einsum("kij,kj->ki", np.abs(rot_a), self._mv_half_self[pa])
-                hw_b = np.einsum("kij,kj->ki", np.abs(rot_b), self._mv_half_self[pb])
-                keep = np.all(np.abs(cen_a - cen_b) < hw_a + hw_b, axis=1)
-                pi, pa, pb = pi[keep], pa[keep], pb[keep]
-                rot_a, rot_b, cen_a, cen_b = rot_a[keep], rot_b[keep], cen_a[keep], cen_b[keep]
-                skip = -1
-                for c, (i, a, b) in enumerate(zip(pi.tolist(), pa.tolist(), pb.tolist())):
-                    if i == skip:
-                        continue
-                    oa, ob = moving[a].obj_self, moving[b].obj_self
-                    oa.setRotation(rot_a[c]); oa.setTranslation(cen_a[c])
-                    ob.setRotation(rot_b[c]); ob.setTranslation(cen_b[c])
-                    if fcl.collide(oa, ob):
-                        valid[i] = False
-                        skip = i
-                        if stop_at_first:
-                            break
-        return valid, (near if sweep > 0 else None)
+        b = self._buffers(n)
+        ns, npairs, _ = _kernel.check(self._kf, self._ki, q, self._grip_arg(gripper, n), b["valid"], b["near"],
+                                      b["scene"], b["self"], b["pose"], float(sweep), stop_at_first)
+        valid = b["valid"][:n].astype(bool)
+        near = b["near"][:n].astype(bool) if sweep > 0 else None
+        if ns or npairs:
+            self._narrow(valid, b, ns, npairs, stop_at_first)
+        return valid, near
+
+    def _narrow(self, valid: np.ndarray, b: dict, ns: int, npairs: int, stop_at_first: bool) -> None:
+        """FCL on the kernel's candidate pairs, in state order; marks colliding states invalid in ``valid``."""
+        moving, items, pose = self._moving_shapes, self._item_objs, b["pose"]
+        first_hit = len(valid)
+        skip = -1
+        for i, a, k in b["scene"][:ns].tolist():
+            if i == skip:
+                continue
+            obj = moving[a].obj_scene
+            p = pose[i, a]
+            obj.setRotation(p[:9].reshape(3, 3))
+            obj.setTranslation(p[9:])
+            if fcl.collide(obj, items[k]):
+                valid[i] = False
+                skip = i
+                if stop_at_first:
+                    first_hit = i
+                    break
+        pairs = self._pairs
+        for i, pp in b["self"][:npairs].tolist():
+            if i >= first_hit:
+                break
+            if not valid[i]:
+                continue
+            a, c = pairs[pp]
+            oa, ob = moving[a].obj_self, moving[c].obj_self
+            pa, pc = pose[i, a], pose[i, c]
+            oa.setRotation(pa[:9].reshape(3, 3)); oa.setTranslation(pa[9:])
+            ob.setRotation(pc[:9].reshape(3, 3)); ob.setTranslation(pc[9:])
+            if fcl.collide(oa, ob):
+                valid[i] = False
+                if stop_at_first:
+                    break
 
     def validity_batch(self, Q, gripper=None) -> np.ndarray:
         """Validity (N,) bool of arm configurations ``Q`` (N, arm_dof), rad; ``gripper`` (N,) as in ``first_invalid``."""
@@ -494,7 +491,20 @@ class CollisionChecker:
 
     def is_valid(self, q_arm) -> bool:
         """True when arm configuration ``q_arm`` (arm_dof,) is within limits, margin and collision-free."""
-        return bool(self._evaluate(np.asarray(q_arm, dtype=float).reshape(1, -1), stop_at_first=False)[0][0])
+        q = np.ascontiguousarray(q_arm, dtype=float)
+        if q.size != len(self._arm):
+            raise InputError(f"an arm configuration has {len(self._arm)} values, got {q.size}")
+        self.check_count += 1
+        b = self._bufs if self._bufs else self._buffers(1)
+        ns, npairs, _ = _kernel.check(self._kf, self._ki, q, _NO_GRIP, b["valid"], b["near"], b["scene"], b["self"],
+                                      b["pose"], 0.0, False)
+        if not b["valid"][0]:
+            return False
+        if not (ns or npairs):
+            return True
+        valid = np.ones(1, dtype=bool)
+        self._narrow(valid, b, ns, npairs, True)
+        return bool(valid[0])
 
     def first_invalid(self, Q, gripper=None) -> int | None:
         """Index of the first invalid row of ``Q`` (N, arm_dof), or None when all are valid; ``gripper`` (N,)
@@ -543,12 +553,13 @@ class CollisionChecker:
         q_full = self._full(q)
         rot, pos = self._fk.frames(q_full)
         if self.singularity_margin is not None:
-            sig = float(self._sigma_min(rot, pos, q_full)[0])
+            sig = float(self.margin_measure(q)[0])
             if sig < self.singularity_margin:
                 return (f"closer to the base-axis singularity than the margin (smallest singular value of the "
                         f"translational Jacobian {sig:.4f} < {self.singularity_margin:.4f} m/rad)")
         # Exhaustive FCL pass without the pre-filter, so explain() never depends on it.
-        srot, scen = self._shape_poses(rot, pos)
+        rl = rot[:, self._mv_link]
+        srot, scen = rl @ self._mv_rot, pos[:, self._mv_link] + np.einsum("nsij,sj->nsi", rl, self._mv_pos)
         link_names = self.robot.kin.link_names
         moving = self._moving_shapes
 
