@@ -43,7 +43,7 @@ from roarmctl.motion.scene import Scene, SceneItem
 from roarmctl.robot.model import Robot
 
 _EPS = 1e-9  # rad: joint-limit tolerance (the kernel uses the same)
-_NO_GRIP = np.zeros(0)  # "every state at the set_gripper value"
+_NO_GRIP = memoryview(np.zeros(0))  # "every state at the set_gripper value"
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
 
 
@@ -363,6 +363,7 @@ class CollisionChecker:
         self._kf = np.concatenate([np.asarray(f, dtype=float).ravel() for f in floats])
         off = 2 * len(self._arm)
         self._q_template = self._kf[off:off + len(self._q_template)]  # set_gripper writes the kernel's table
+        self._kfm, self._kim = memoryview(self._kf), memoryview(self._ki)  # cheaper to pass than the arrays
         self._bufs = {}
 
     def _sweep_gain(self) -> float:
@@ -426,6 +427,7 @@ class CollisionChecker:
                               "scene": np.empty((n * max(len(self._active) * m, 1), 3), dtype=np.int64),
                               "self": np.empty((n * max(len(self._pairs), 1), 2), dtype=np.int64),
                               "pose": np.empty((n, max(s, 1), 12))}
+            b["views"] = tuple(memoryview(b[k]) for k in ("valid", "near", "scene", "self", "pose"))
         return b
 
     def _evaluate(self, q: np.ndarray, stop_at_first: bool, sweep: float = 0.0,
@@ -438,8 +440,8 @@ class CollisionChecker:
         n = q.shape[0]
         self.check_count += n
         b = self._buffers(n)
-        ns, npairs, _ = _kernel.check(self._kf, self._ki, q, self._grip_arg(gripper, n), b["valid"], b["near"],
-                                      b["scene"], b["self"], b["pose"], float(sweep), stop_at_first)
+        ns, npairs, _ = _kernel.check(self._kfm, self._kim, q, self._grip_arg(gripper, n), *b["views"], float(sweep),
+                                      stop_at_first)
         valid = b["valid"][:n].astype(bool)
         near = b["near"][:n].astype(bool) if sweep > 0 else None
         if ns or npairs:
@@ -492,12 +494,11 @@ class CollisionChecker:
     def is_valid(self, q_arm) -> bool:
         """True when arm configuration ``q_arm`` (arm_dof,) is within limits, margin and collision-free."""
         q = np.ascontiguousarray(q_arm, dtype=float)
-        if q.size != len(self._arm):
-            raise InputError(f"an arm configuration has {len(self._arm)} values, got {q.size}")
+        if q.size != self._lower.size:
+            raise InputError(f"an arm configuration has {self._lower.size} values, got {q.size}")
         self.check_count += 1
-        b = self._bufs if self._bufs else self._buffers(1)
-        ns, npairs, _ = _kernel.check(self._kf, self._ki, q, _NO_GRIP, b["valid"], b["near"], b["scene"], b["self"],
-                                      b["pose"], 0.0, False)
+        b = self._bufs or self._buffers(1)
+        ns, npairs, _ = _kernel.check(self._kfm, self._kim, q, _NO_GRIP, *b["views"], 0.0, False)
         if not b["valid"][0]:
             return False
         if not (ns or npairs):
@@ -529,7 +530,8 @@ class CollisionChecker:
         q = interpolate(q0, q1, resolution)
         if len(q) > 4 * COARSE_STRIDE and not self._evaluate(q[COARSE_STRIDE::COARSE_STRIDE], stop_at_first=True)[0].all():
             return False  # most invalid motions are caught by every 8th state, at an eighth of the cost
-        step = float(np.linalg.norm(q[1] - q[0])) if len(q) > 1 else 0.0
+        d = q[1] - q[0]
+        step = float(np.sqrt(d.dot(d)))
         valid, near = self._evaluate(q, stop_at_first=True, sweep=0.5 * step * self.sweep_gain)
         if not valid.all():
             return False
@@ -586,9 +588,17 @@ def interpolate(q0, q1, resolution: float) -> np.ndarray:
     """States (K, n) on the straight segment q0 -> q1, both ends included, at most ``resolution``
     apart (Euclidean norm, rad); K >= 2."""
     q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
-    steps = max(1, int(np.ceil(np.linalg.norm(q1 - q0) / resolution)))
-    t = np.linspace(0.0, 1.0, steps + 1)[:, None]
-    return q0 + (q1 - q0) * t
+    d = q1 - q0
+    steps = max(1, int(np.ceil(np.sqrt(d.dot(d)) / resolution)))  # = np.linalg.norm(d), without its overhead
+    t = _T_GRIDS.get(steps)
+    if t is None:
+        t = np.linspace(0.0, 1.0, steps + 1)[:, None]
+        if len(_T_GRIDS) < 4096:
+            _T_GRIDS[steps] = t
+    return q0 + d * t
+
+
+_T_GRIDS: dict[int, np.ndarray] = {}  # steps -> np.linspace(0, 1, steps + 1)[:, None] (read-only use)
 
 
 def densify(path: np.ndarray, max_step: float | None) -> np.ndarray:
