@@ -114,14 +114,15 @@ def test_pairs_the_kernel_clears_are_apart_for_fcl(attached):
     scene_c = {tuple(r) for r in b["scene"][:ns].tolist()}
     self_c = {tuple(r) for r in b["self"][:npairs].tolist()}
     moving = checker._moving_shapes
+    frames = robot.kin.frames4(checker._full(q))  # shape poses by the library's FK, not the kernel's
     hits = {"scene": 0, "self": 0}
     checked = 0
     for i in np.flatnonzero(b["valid"][:len(q)]):
-        for a, mv in enumerate(moving):
-            p = b["pose"][i, a]
+        for mv in moving:
+            link = frames[i, mv.link]
             for obj in (mv.obj_scene, mv.obj_self):
-                obj.setRotation(p[:9].reshape(3, 3))
-                obj.setTranslation(p[9:])
+                obj.setRotation(link[:3, :3] @ mv.rot)
+                obj.setTranslation(link[:3, 3] + link[:3, :3] @ mv.pos)
         for a in range(len(moving)):
             for k, item in enumerate(checker._item_objs):
                 if checker._scene_mask[a, k] and (i, a, k) not in scene_c:

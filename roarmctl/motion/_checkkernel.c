@@ -36,7 +36,7 @@
 typedef struct {
     int64_t dof, arm_n, n_links, n_steps, tcp, n_chain, S, M, n_active, n_pairs, grip, has_margin, n_const;
     const int64_t *arm, *const_idx, *steps, *chain, *shape_link, *active, *amask, *pairs;
-    const double *lower, *upper, *qt, *margin, *const_fr, *stepf, *chainf, *shapef, *itemf, *active_r2, *pair_r2;
+    const double *lower, *upper, *qt, *margin, *const_fr, *stepf, *chainf, *shapef, *itemf, *active_r2, *pair_r2, *active_r, *pair_r;
 } Model;
 
 #define HEADER 13
@@ -54,7 +54,7 @@ static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     Py_ssize_t need_i = HEADER + m->arm_n + m->n_const + STEPI * m->n_steps + CHAINI * m->n_chain + m->S
                         + m->n_active + m->n_active * m->M + 2 * m->n_pairs;
     Py_ssize_t need_f = 2 * m->arm_n + m->dof + 1 + 16 * m->n_const + STEPF * m->n_steps + CHAINF * m->n_chain
-                        + SHAPEF * m->S + ITEMF * m->M + m->n_active + m->n_pairs;
+                        + SHAPEF * m->S + ITEMF * m->M + 2 * m->n_active + 2 * m->n_pairs;
     if (ni != need_i || nf != need_f) goto bad;
     const int64_t *p = I + HEADER;
     m->arm = p; p += m->arm_n;
@@ -76,17 +76,27 @@ static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     m->shapef = q; q += SHAPEF * m->S;
     m->itemf = q; q += ITEMF * m->M;
     m->active_r2 = q; q += m->n_active;
-    m->pair_r2 = q;
+    m->pair_r2 = q; q += m->n_pairs;
+    m->active_r = q; q += m->n_active;  /* sqrt of the above, for the grown ("near") tests */
+    m->pair_r = q;
     return 0;
 bad:
     PyErr_SetString(PyExc_ValueError, "_checkkernel: packed tables do not match their header");
     return -1;
 }
 
+/* out = a @ b for homogeneous transforms (bottom rows 0 0 0 1): the terms with the bottom row's zeros
+ * are left out, the others summed in the order of the full 4 x 4 product (same numbers). */
 static inline void mat4mul(const double *a, const double *b, double *out) {
-    for (int r = 0; r < 4; r++)
-        for (int c = 0; c < 4; c++)
-            out[4 * r + c] = a[4 * r] * b[c] + a[4 * r + 1] * b[4 + c] + a[4 * r + 2] * b[8 + c] + a[4 * r + 3] * b[12 + c];
+    for (int r = 0; r < 3; r++) {
+        const double a0 = a[4 * r], a1 = a[4 * r + 1], a2 = a[4 * r + 2];
+        out[4 * r] = a0 * b[0] + a1 * b[4] + a2 * b[8];
+        out[4 * r + 1] = a0 * b[1] + a1 * b[5] + a2 * b[9];
+        out[4 * r + 2] = a0 * b[2] + a1 * b[6] + a2 * b[10];
+        out[4 * r + 3] = a0 * b[3] + a1 * b[7] + a2 * b[11] + a[4 * r + 3];
+    }
+    out[12] = out[13] = out[14] = 0.0;
+    out[15] = 1.0;
 }
 
 /* Link frames (n_links x 16, row-major 4x4) for the full configuration qf. */
@@ -104,7 +114,7 @@ static void fk(const Model *m, const double *qf, double *Fr) {
             mp = C;
         } else if (kind == 1) {    /* revolute about local z: cos A + sin B + C */
             double ang = qf[qi] + sf[0], c = cos(ang), sn = sin(ang);
-            for (int k = 0; k < 16; k++) mm[k] = c * A[k] + sn * B[k] + C[k];
+            for (int k = 0; k < 12; k++) mm[k] = c * A[k] + sn * B[k] + C[k];  /* mat4mul reads no bottom row */
         } else if (kind == 2) {    /* revolute about A[0..2]: origin @ Rodrigues */
             double ang = qf[qi] + sf[0], c = cos(ang), sn = sin(ang), v = 1.0 - c;
             double x = A[0], y = A[1], z = A[2], r[16] = {0};
@@ -127,8 +137,9 @@ static void fk(const Model *m, const double *qf, double *Fr) {
     }
 }
 
-/* Smallest singular value of the 3 x n translational Jacobian (m/rad). */
-static double sigma_min(const Model *m, const double *Fr) {
+/* Gram matrix of the 3 x n translational Jacobian J: J J^T (3 x 3) when n >= 3, else J^T J (n x n);
+ * returns its size. Its smallest eigenvalue is the square of J's smallest singular value. */
+static int gram(const Model *m, const double *Fr, double A[3][3]) {
     int64_t n = m->n_chain;
     double J[3 * MAXDOF];
     const double *T = Fr + 16 * m->tcp;
@@ -155,12 +166,27 @@ static double sigma_min(const Model *m, const double *Fr) {
             col[0] = z[0]; col[1] = z[1]; col[2] = z[2];
         }
     }
-    if (n == 0) return 0.0;
-    if (n == 1) return sqrt(J[0] * J[0] + J[1] * J[1] + J[2] * J[2]);
-    if (n == 2) {  /* smallest eigenvalue of the 2 x 2 J^T J */
-        double a = J[0] * J[0] + J[1] * J[1] + J[2] * J[2];
-        double b = J[0] * J[3] + J[1] * J[4] + J[2] * J[5];
-        double c = J[3] * J[3] + J[4] * J[4] + J[5] * J[5];
+    if (n >= 3) {
+        for (int r = 0; r < 3; r++)
+            for (int c = r; c < 3; c++) {
+                double s = 0;
+                for (int64_t k = 0; k < n; k++) s += J[3 * k + r] * J[3 * k + c];
+                A[r][c] = A[c][r] = s;
+            }
+        return 3;
+    }
+    for (int r = 0; r < n; r++)
+        for (int c = r; c < n; c++)
+            A[r][c] = A[c][r] = J[3 * r] * J[3 * c] + J[3 * r + 1] * J[3 * c + 1] + J[3 * r + 2] * J[3 * c + 2];
+    return (int)n;
+}
+
+/* Smallest singular value of the 3 x n translational Jacobian (m/rad), from its Gram matrix G (dim x dim). */
+static double sigma_min(double G[3][3], int dim) {
+    if (dim == 0) return 0.0;
+    if (dim == 1) return sqrt(G[0][0]);
+    if (dim == 2) {  /* smallest eigenvalue of the 2 x 2 J^T J */
+        double a = G[0][0], b = G[0][1], c = G[1][1];
         double h = 0.5 * (a + c), d = sqrt(0.25 * (a - c) * (a - c) + b * b);
         double lo = h - d;
         /* the product of the eigenvalues is the determinant: the small one without cancellation */
@@ -169,15 +195,10 @@ static double sigma_min(const Model *m, const double *Fr) {
         if (hi > 0 && det >= 0) lo = det / hi;
         return sqrt(lo > 0 ? lo : 0.0);
     }
+    double A[3][3];
+    memcpy(A, G, sizeof A);
     /* smallest eigenvalue of the 3 x 3 symmetric J J^T: cyclic Jacobi rotations (accurate for the
      * small eigenvalue of a positive semi-definite matrix, also when eigenvalues are close) */
-    double A[3][3];
-    for (int r = 0; r < 3; r++)
-        for (int c = r; c < 3; c++) {
-            double s = 0;
-            for (int64_t k = 0; k < n; k++) s += J[3 * k + r] * J[3 * k + c];
-            A[r][c] = A[c][r] = s;
-        }
     static const int PQ[3][2] = {{0, 1}, {0, 2}, {1, 2}};
     for (int sweep = 0; sweep < 50; sweep++) {
         double off = A[0][1] * A[0][1] + A[0][2] * A[0][2] + A[1][2] * A[1][2];
@@ -205,6 +226,35 @@ static double sigma_min(const Model *m, const double *Fr) {
     if (A[1][1] < lo) lo = A[1][1];
     if (A[2][2] < lo) lo = A[2][2];
     return sqrt(lo > 0 ? lo : 0.0);
+}
+
+/* sigma_min >= margin, decided by the closed-form smallest eigenvalue of the 3 x 3 Gram matrix (Smith
+ * 1961: a few operations, error below about 3e-8 of the trace even for close eigenvalues) wherever it is
+ * clearly on one side (1e-6 of the trace), else by sigma_min itself: the same decisions as sigma_min. */
+static int margin_ok(const Model *m, const double *Fr) {
+    double G[3][3];
+    int dim = gram(m, Fr, G);
+    double margin = m->margin[0];
+    if (dim == 3) {
+        double p1 = G[0][1] * G[0][1] + G[0][2] * G[0][2] + G[1][2] * G[1][2];
+        double tr = G[0][0] + G[1][1] + G[2][2], qm = tr / 3.0;
+        double p2 = (G[0][0] - qm) * (G[0][0] - qm) + (G[1][1] - qm) * (G[1][1] - qm) + (G[2][2] - qm) * (G[2][2] - qm) + 2 * p1;
+        double lo = qm;
+        if (p2 > 0) {
+            double p = sqrt(p2 / 6.0), B[3][3];
+            for (int r = 0; r < 3; r++)
+                for (int c = 0; c < 3; c++) B[r][c] = (G[r][c] - (r == c ? qm : 0.0)) / p;
+            double det = B[0][0] * (B[1][1] * B[2][2] - B[1][2] * B[2][1]) - B[0][1] * (B[1][0] * B[2][2] - B[1][2] * B[2][0])
+                         + B[0][2] * (B[1][0] * B[2][1] - B[1][1] * B[2][0]);
+            double r = det / 2.0;
+            r = r < -1 ? -1 : r > 1 ? 1 : r;
+            lo = qm + 2 * p * cos(acos(r) / 3.0 + 2.0943951023931957);
+        }
+        double band = 1e-6 * tr;
+        if (lo > margin * margin + band) return 1;
+        if (lo < margin * margin - band) return 0;
+    }
+    return sigma_min(G, dim) >= margin;
 }
 
 /* Separating-axis test of two oriented boxes: 1 when some axis separates them by more than SEP_TOL.
@@ -247,7 +297,8 @@ static int get_out(PyObject *o, Py_buffer *b) { return PyObject_GetBuffer(o, b, 
 
 /* check(F, I, q, grip, valid, near, scene, self, pose, sweep, stop_at_first) -> (n_scene, n_self, limit)
  * q (N, arm_n) float64; grip (N,) or empty; valid, near (N,) uint8; scene (cap, 3) and self (cap, 2)
- * int64 candidates (state, shape, item) / (state, pair); pose (N, S, 12) float64. */
+ * int64 candidates (state, shape, item) / (state, pair); pose (N, S, 12) float64: every shape's centre,
+ * the rotation only of the shapes that some pair's sphere test kept (all shapes of the candidates). */
 static PyObject *check(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 11) {
         PyErr_SetString(PyExc_TypeError, "check() takes 11 arguments");
@@ -283,26 +334,34 @@ static PyObject *check(PyObject *self, PyObject *const *args, Py_ssize_t nargs) 
             if (!(qi[j] >= m.lower[j] - 1e-9 && qi[j] <= m.upper[j] + 1e-9)) ok = 0;
         full_q(&m, q, grip, n_grip, i, qf);
         fk(&m, qf, Fr);
-        if (ok && m.has_margin && !(sigma_min(&m, Fr) >= m.margin[0])) ok = 0;
+        if (ok && m.has_margin && !margin_ok(&m, Fr)) ok = 0;
         valid[i] = (uint8_t)ok;
         if (!ok && stop) {
             limit = i;
             break;
         }
         double *ps = pose + i * m.S * POSEF;
+        uint8_t rot_done[MAXSHAPES];  /* rotations only for the shapes that pass a sphere test */
         for (int64_t a = 0; a < m.S; a++) {
             const double *L = Fr + 16 * m.shape_link[a], *sf = m.shapef + SHAPEF * a;
             double *o = ps + POSEF * a;
-            for (int r = 0; r < 3; r++) {
-                for (int c = 0; c < 3; c++)
-                    o[3 * r + c] = L[4 * r] * sf[c] + L[4 * r + 1] * sf[3 + c] + L[4 * r + 2] * sf[6 + c];
+            for (int r = 0; r < 3; r++)
                 o[9 + r] = L[4 * r + 3] + (L[4 * r] * sf[9] + L[4 * r + 1] * sf[10] + L[4 * r + 2] * sf[11]);
-            }
+            rot_done[a] = 0;
         }
+#define NEED_ROT(a)                                                                                          \
+    if (!rot_done[a]) {                                                                                     \
+        const double *L_ = Fr + 16 * m.shape_link[a], *sf_ = m.shapef + SHAPEF * (a);                        \
+        double *o_ = ps + POSEF * (a);                                                                      \
+        for (int r = 0; r < 3; r++)                                                                         \
+            for (int c = 0; c < 3; c++)                                                                     \
+                o_[3 * r + c] = L_[4 * r] * sf_[c] + L_[4 * r + 1] * sf_[3 + c] + L_[4 * r + 2] * sf_[6 + c]; \
+        rot_done[a] = 1;                                                                                    \
+    }
         for (int64_t ai = 0; ai < m.n_active; ai++) {
             int64_t a = m.active[ai];
             const double *o = ps + POSEF * a, *sf = m.shapef + SHAPEF * a;
-            double r2 = m.active_r2[ai], grown = sweep > 0 ? (sqrt(r2) + sweep) * (sqrt(r2) + sweep) : 0;
+            double r2 = m.active_r2[ai], grown = (m.active_r[ai] + sweep) * (m.active_r[ai] + sweep);
             for (int64_t k = 0; k < m.M; k++) {
                 if (!m.amask[ai * m.M + k]) continue;
                 const double *it = m.itemf + ITEMF * k;
@@ -313,6 +372,7 @@ static PyObject *check(PyObject *self, PyObject *const *args, Py_ssize_t nargs) 
                 }
                 if (sweep > 0 && d2 < grown) near[i] = 1;
                 if (!ok || !(d2 < r2)) continue;
+                NEED_ROT(a)
                 int in = 1;  /* world boxes */
                 for (int r = 0; r < 3 && in; r++) {
                     double hw = fabs(o[3 * r]) * sf[12] + fabs(o[3 * r + 1]) * sf[13] + fabs(o[3 * r + 2]) * sf[14];
@@ -333,8 +393,10 @@ static PyObject *check(PyObject *self, PyObject *const *args, Py_ssize_t nargs) 
                 d2 += dd[r] * dd[r];
             }
             double r2 = m.pair_r2[p];
-            if (sweep > 0 && d2 < (sqrt(r2) + 2 * sweep) * (sqrt(r2) + 2 * sweep)) near[i] = 1;
+            if (sweep > 0 && !near[i] && d2 < (m.pair_r[p] + 2 * sweep) * (m.pair_r[p] + 2 * sweep)) near[i] = 1;
             if (!ok || !(d2 < r2)) continue;
+            NEED_ROT(a)
+            NEED_ROT(bb)
             int in = 1;
             for (int r = 0; r < 3 && in; r++) {
                 double ha = fabs(oa[3 * r]) * fa[15] + fabs(oa[3 * r + 1]) * fa[16] + fabs(oa[3 * r + 2]) * fa[17];
@@ -383,8 +445,11 @@ static PyObject *frames_or_sigma(PyObject *const *args, Py_ssize_t nargs, int wa
     for (Py_ssize_t i = 0; i < N; i++) {
         full_q(&m, b[2].buf, b[3].buf, n_grip, i, qf);
         fk(&m, qf, Fr);
-        if (want_sigma)
-            out[i] = sigma_min(&m, Fr);
+        if (want_sigma) {
+            double G[3][3];
+            int dim = gram(&m, Fr, G);
+            out[i] = sigma_min(G, dim);
+        }
         else
             memcpy(out + i * 16 * m.n_links, Fr, 16 * m.n_links * sizeof(double));
     }

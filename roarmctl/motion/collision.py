@@ -359,7 +359,7 @@ class CollisionChecker:
         self._ki = np.array(ints, dtype=np.int64)
         floats = [self._lower, self._upper, self._q_template, [0.0 if margin is None else float(margin)],
                   kin._const[const].ravel(), *steps_f, *chain_f, shapes.ravel(), items.ravel(),
-                  self._active_r2.ravel(), self._pair_r2]
+                  self._active_r2.ravel(), self._pair_r2, np.sqrt(self._active_r2.ravel()), np.sqrt(self._pair_r2)]
         self._kf = np.concatenate([np.asarray(f, dtype=float).ravel() for f in floats])
         off = 2 * len(self._arm)
         self._q_template = self._kf[off:off + len(self._q_template)]  # set_gripper writes the kernel's table
