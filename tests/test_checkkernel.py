@@ -135,3 +135,18 @@ def test_pairs_the_kernel_clears_are_apart_for_fcl(attached):
                 assert not fcl.collide(moving[a].obj_self, moving[c].obj_self), (i, a, c)
             hits["self"] += (i, p) in self_c and fcl.collide(moving[a].obj_self, moving[c].obj_self) > 0
     assert checked > 10000 and hits["scene"] > 0 and hits["self"] > 0  # both kinds of candidates occur
+
+
+@pytest.mark.parametrize("name", ["ur10", "roarm_m3_pro", "planar_2r"])
+def test_margin_decisions_equal_the_margin_measure(name):
+    """The kernel decides the margin by a closed form away from the boundary and by the Jacobi measure near
+    it: its decisions equal margin_measure(q) >= margin, with margins at quantiles of the measure (many
+    states within a hair of the boundary) and at measured values exactly."""
+    robot = load_robot(name)
+    plain = CollisionChecker(robot, Scene([]))
+    q = np.random.default_rng(11).uniform(plain._lower, plain._upper, (5000, robot.arm_dof))
+    free = plain.validity_batch(q)  # self-collision and limits, without a margin
+    sig = CollisionChecker(robot, Scene([]), singularity_margin=0.01).margin_measure(q)
+    for margin in [*np.quantile(sig, [0.05, 0.3, 0.6]), sig[17], sig[99]]:
+        checker = CollisionChecker(robot, Scene([]), singularity_margin=float(margin))
+        np.testing.assert_array_equal(checker.validity_batch(q), free & (sig >= margin))

@@ -34,12 +34,13 @@
 #define POSEF 12   /* per state and shape: world rot (9), centre (3) */
 
 typedef struct {
-    int64_t dof, arm_n, n_links, n_steps, tcp, n_chain, S, M, n_active, n_pairs, grip, has_margin, n_const;
-    const int64_t *arm, *const_idx, *steps, *chain, *shape_link, *active, *amask, *pairs;
-    const double *lower, *upper, *qt, *margin, *const_fr, *stepf, *chainf, *shapef, *itemf, *active_r2, *pair_r2, *active_r, *pair_r;
+    int64_t dof, arm_n, n_links, n_steps, tcp, n_chain, S, M, n_active, n_pairs, grip, has_margin, n_const, n_groups;
+    const int64_t *arm, *const_idx, *steps, *chain, *shape_link, *active, *amask, *pairs, *g_link, *g_start, *g_order,
+        *g_mask;
+    const double *lower, *upper, *qt, *margin, *const_fr, *stepf, *chainf, *shapef, *itemf, *active_r2, *pair_r2, *active_r, *pair_r, *g_c, *g_r;
 } Model;
 
-#define HEADER 13
+#define HEADER 14
 
 static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     const int64_t *I = (const int64_t *)ib->buf;
@@ -48,13 +49,14 @@ static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     if (ni < HEADER) goto bad;
     m->dof = I[0]; m->arm_n = I[1]; m->n_links = I[2]; m->n_steps = I[3]; m->tcp = I[4]; m->n_chain = I[5];
     m->S = I[6]; m->M = I[7]; m->n_active = I[8]; m->n_pairs = I[9]; m->grip = I[10]; m->has_margin = I[11];
-    m->n_const = I[12];
+    m->n_const = I[12]; m->n_groups = I[13];
     if (m->dof > MAXDOF || m->n_links > MAXLINKS || m->S > MAXSHAPES || m->arm_n > m->dof || m->n_chain > MAXDOF)
         goto bad;
     Py_ssize_t need_i = HEADER + m->arm_n + m->n_const + STEPI * m->n_steps + CHAINI * m->n_chain + m->S
-                        + m->n_active + m->n_active * m->M + 2 * m->n_pairs;
+                        + m->n_active + m->n_active * m->M + 2 * m->n_pairs
+                        + m->n_groups + (m->n_groups + 1) + m->n_active + m->n_groups * m->M;
     Py_ssize_t need_f = 2 * m->arm_n + m->dof + 1 + 16 * m->n_const + STEPF * m->n_steps + CHAINF * m->n_chain
-                        + SHAPEF * m->S + ITEMF * m->M + 2 * m->n_active + 2 * m->n_pairs;
+                        + SHAPEF * m->S + ITEMF * m->M + 2 * m->n_active + 2 * m->n_pairs + 4 * m->n_groups;
     if (ni != need_i || nf != need_f) goto bad;
     const int64_t *p = I + HEADER;
     m->arm = p; p += m->arm_n;
@@ -64,7 +66,11 @@ static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     m->shape_link = p; p += m->S;
     m->active = p; p += m->n_active;
     m->amask = p; p += m->n_active * m->M;
-    m->pairs = p;
+    m->pairs = p; p += 2 * m->n_pairs;
+    m->g_link = p; p += m->n_groups;      /* groups: the active shapes of one link, in one bounding sphere */
+    m->g_start = p; p += m->n_groups + 1;
+    m->g_order = p; p += m->n_active;     /* active indices, group by group */
+    m->g_mask = p;
     const double *q = F;
     m->lower = q; q += m->arm_n;
     m->upper = q; q += m->arm_n;
@@ -78,7 +84,9 @@ static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     m->active_r2 = q; q += m->n_active;
     m->pair_r2 = q; q += m->n_pairs;
     m->active_r = q; q += m->n_active;  /* sqrt of the above, for the grown ("near") tests */
-    m->pair_r = q;
+    m->pair_r = q; q += m->n_pairs;
+    m->g_c = q; q += 3 * m->n_groups;     /* group sphere centre in the link frame, radius */
+    m->g_r = q;
     return 0;
 bad:
     PyErr_SetString(PyExc_ValueError, "_checkkernel: packed tables do not match their header");
@@ -358,29 +366,43 @@ static PyObject *check(PyObject *self, PyObject *const *args, Py_ssize_t nargs) 
                 o_[3 * r + c] = L_[4 * r] * sf_[c] + L_[4 * r + 1] * sf_[3 + c] + L_[4 * r + 2] * sf_[6 + c]; \
         rot_done[a] = 1;                                                                                    \
     }
-        for (int64_t ai = 0; ai < m.n_active; ai++) {
-            int64_t a = m.active[ai];
-            const double *o = ps + POSEF * a, *sf = m.shapef + SHAPEF * a;
-            double r2 = m.active_r2[ai], grown = (m.active_r[ai] + sweep) * (m.active_r[ai] + sweep);
+        for (int64_t g = 0; g < m.n_groups; g++) {
+            /* the group's sphere holds every sphere of its shapes: where it (grown by sweep) misses an item's
+             * box, so do they, and the item is skipped for all of them */
+            const double *L = Fr + 16 * m.g_link[g], *gc = m.g_c + 3 * g;
+            double cg[3], gr = m.g_r[g] + (sweep > 0 ? sweep : 0.0);
+            for (int r = 0; r < 3; r++) cg[r] = L[4 * r + 3] + L[4 * r] * gc[0] + L[4 * r + 1] * gc[1] + L[4 * r + 2] * gc[2];
             for (int64_t k = 0; k < m.M; k++) {
-                if (!m.amask[ai * m.M + k]) continue;
+                if (!m.g_mask[g * m.M + k]) continue;
                 const double *it = m.itemf + ITEMF * k;
-                double d2 = 0;
+                double dg = 0;
                 for (int r = 0; r < 3; r++) {
-                    double e = fabs(o[9 + r] - it[r]) - it[3 + r];
-                    if (e > 0) d2 += e * e;
+                    double e = fabs(cg[r] - it[r]) - it[3 + r];
+                    if (e > 0) dg += e * e;
                 }
-                if (sweep > 0 && d2 < grown) near[i] = 1;
-                if (!ok || !(d2 < r2)) continue;
-                NEED_ROT(a)
-                int in = 1;  /* world boxes */
-                for (int r = 0; r < 3 && in; r++) {
-                    double hw = fabs(o[3 * r]) * sf[12] + fabs(o[3 * r + 1]) * sf[13] + fabs(o[3 * r + 2]) * sf[14];
-                    if (!(fabs(o[9 + r] - it[r]) < hw + it[3 + r])) in = 0;
+                if (!(dg < gr * gr)) continue;
+                for (int64_t gi = m.g_start[g]; gi < m.g_start[g + 1]; gi++) {
+                    int64_t ai = m.g_order[gi], a = m.active[ai];
+                    if (!m.amask[ai * m.M + k]) continue;
+                    const double *o = ps + POSEF * a, *sf = m.shapef + SHAPEF * a;
+                    double r2 = m.active_r2[ai];
+                    double d2 = 0;
+                    for (int r = 0; r < 3; r++) {
+                        double e = fabs(o[9 + r] - it[r]) - it[3 + r];
+                        if (e > 0) d2 += e * e;
+                    }
+                    if (sweep > 0 && d2 < (m.active_r[ai] + sweep) * (m.active_r[ai] + sweep)) near[i] = 1;
+                    if (!ok || !(d2 < r2)) continue;
+                    NEED_ROT(a)
+                    int in = 1;  /* world boxes */
+                    for (int r = 0; r < 3 && in; r++) {
+                        double hw = fabs(o[3 * r]) * sf[12] + fabs(o[3 * r + 1]) * sf[13] + fabs(o[3 * r + 2]) * sf[14];
+                        if (!(fabs(o[9 + r] - it[r]) < hw + it[3 + r])) in = 0;
+                    }
+                    if (!in || obb_apart(o, o + 9, sf + 12, it + 6, it + 15, it + 18)) continue;
+                    if (ns >= cap_s) goto overflow;
+                    sc[3 * ns] = i; sc[3 * ns + 1] = a; sc[3 * ns + 2] = k; ns++;
                 }
-                if (!in || obb_apart(o, o + 9, sf + 12, it + 6, it + 15, it + 18)) continue;
-                if (ns >= cap_s) goto overflow;
-                sc[3 * ns] = i; sc[3 * ns + 1] = a; sc[3 * ns + 2] = k; ns++;
             }
         }
         for (int64_t p = 0; p < m.n_pairs; p++) {

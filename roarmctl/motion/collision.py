@@ -349,17 +349,33 @@ class CollisionChecker:
                      "cylinder": np.array([it.radius, it.radius, it.length / 2])}[it.shape]
             items[k, :3], items[k, 3:6] = self._item_c[k], self._item_h[k]
             items[k, 6:15], items[k, 15:18], items[k, 18:21] = it.pose[:3, :3].ravel(), it.pose[:3, 3], local
+        # Groups for the kernel's first scene test: the active shapes of one link, in one sphere about their
+        # mean centre (link frame) that holds each shape's sphere, plus 1e-9 m against rounding.
+        links = self._mv_link[self._active]
+        g_links = sorted(set(links.tolist()))
+        g_order, g_start, g_c, g_r, g_mask = [], [0], [], [], []
+        for link in g_links:
+            members = np.flatnonzero(links == link)
+            centres = self._mv_pos[self._active[members]]
+            c = centres.mean(axis=0)
+            g_order += members.tolist()
+            g_start.append(len(g_order))
+            g_c.append(c)
+            g_r.append(float(np.max(np.linalg.norm(centres - c, axis=1) + self._mv_radius[self._active[members]])) + 1e-9)
+            g_mask.append(self._active_mask[members].any(axis=0))
         margin = self.singularity_margin
         const = list(kin._const_links)
         ints = [len(self._q_template), len(self._arm), kin.n_links, len(kin._steps), self._tcp, len(self._chain), s, m,
                 len(self._active), len(self._pairs), -1 if self._gripper_index is None else self._gripper_index,
-                int(margin is not None), len(const)]
+                int(margin is not None), len(const), len(g_links)]
         ints += list(self._arm) + const + steps_i + chain_i + list(self._mv_link) + list(self._active)
         ints += list(self._active_mask.astype(np.int64).ravel()) + list(self._pairs.ravel())
+        ints += g_links + g_start + g_order + list(np.array(g_mask, dtype=np.int64).ravel())
         self._ki = np.array(ints, dtype=np.int64)
         floats = [self._lower, self._upper, self._q_template, [0.0 if margin is None else float(margin)],
                   kin._const[const].ravel(), *steps_f, *chain_f, shapes.ravel(), items.ravel(),
-                  self._active_r2.ravel(), self._pair_r2, np.sqrt(self._active_r2.ravel()), np.sqrt(self._pair_r2)]
+                  self._active_r2.ravel(), self._pair_r2, np.sqrt(self._active_r2.ravel()), np.sqrt(self._pair_r2),
+                  np.array(g_c, dtype=float).ravel(), g_r]
         self._kf = np.concatenate([np.asarray(f, dtype=float).ravel() for f in floats])
         off = 2 * len(self._arm)
         self._q_template = self._kf[off:off + len(self._q_template)]  # set_gripper writes the kernel's table
