@@ -544,21 +544,37 @@ class CollisionChecker:
         so that a finer re-check of the segment does not find what the coarse one missed.
         """
         q = interpolate(q0, q1, resolution)
-        if len(q) > 4 * COARSE_STRIDE and not self._evaluate(q[COARSE_STRIDE::COARSE_STRIDE], stop_at_first=True)[0].all():
+        if len(q) > 4 * COARSE_STRIDE and not self._all_valid(q[COARSE_STRIDE::COARSE_STRIDE]):
             return False  # most invalid motions are caught by every 8th state, at an eighth of the cost
         d = q[1] - q[0]
-        step = float(np.sqrt(d.dot(d)))
-        valid, near = self._evaluate(q, stop_at_first=True, sweep=0.5 * step * self.sweep_gain)
-        if not valid.all():
+        sweep = 0.5 * float(np.sqrt(d.dot(d))) * self.sweep_gain
+        if not self._all_valid(q, sweep):
             return False
-        if refine <= 1 or near is None:
+        if refine <= 1 or sweep <= 0:
             return True
+        near = self._bufs["near"][:len(q)].view(bool)  # of the call just made
         steps = np.flatnonzero(near[:-1] | near[1:])
         if len(steps) == 0:
             return True
         t = np.arange(1, refine)[None, :, None] / refine
         sub = q[steps][:, None, :] + (q[steps + 1] - q[steps])[:, None, :] * t
-        return bool(self._evaluate(sub.reshape(-1, q.shape[1]), stop_at_first=True)[0].all())
+        return self._all_valid(sub.reshape(-1, q.shape[1]))
+
+    def _all_valid(self, q: np.ndarray, sweep: float = 0.0) -> bool:
+        """True when every state of ``q`` (N, arm_dof) is valid; stops at the first invalid one. With ``sweep``
+        > 0 the kernel also leaves the "near" flags (see ``_evaluate``) in ``self._bufs["near"]``."""
+        q = np.ascontiguousarray(q, dtype=float)
+        n = q.shape[0]
+        self.check_count += n
+        b = self._buffers(n)
+        ns, npairs, limit = _kernel.check(self._kfm, self._kim, q, _NO_GRIP, *b["views"], float(sweep), True)
+        if limit < n:  # limits or margin
+            return False
+        if ns or npairs:
+            valid = np.ones(n, dtype=bool)
+            self._narrow(valid, b, ns, npairs, True)
+            return bool(valid.all())
+        return True
 
     def explain(self, q_arm) -> str:
         """Why ``q_arm`` (arm_dof,) is invalid, in words; "valid" when it is not."""

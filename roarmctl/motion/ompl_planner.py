@@ -115,14 +115,16 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
     until = time.perf_counter() + ceiling
     path = _drop_vertices(checker, path, resolution)
     failures = 0
+    seg = cum = None  # of the current path (recomputed only when a shortcut changes it)
     for _ in range(attempts):
         if time.perf_counter() > until:
             raise _ceiling_error("path shortcutting", ceiling, "planner.simplify_budget")
         if len(path) < 3 or failures >= SHORTCUT_PATIENCE:
             break
         failures += 1
-        seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        if seg is None:
+            seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+            cum = np.concatenate([[0.0], np.cumsum(seg)])
         ta, tb = np.sort(rng.uniform(0.0, cum[-1], 2))
         ia = min(int(np.searchsorted(cum, ta, side="right")) - 1, len(seg) - 1)
         ib = min(int(np.searchsorted(cum, tb, side="right")) - 1, len(seg) - 1)
@@ -138,6 +140,7 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
                 and checker.segment_valid(pb, path[ib + 1], resolution)):
             path = np.vstack([path[:ia + 1], pa, pb, path[ib + 1:]])
             failures = 0
+            seg = None
     path = _drop_vertices(checker, path, resolution)
     # Remove vertices that coincide (a shortcut ending on a vertex).
     keep = np.concatenate([[True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9])
