@@ -183,15 +183,17 @@ def capture(plan_name: str, fragment: str):
 
 
 def roarmctl_query(planner, step, q, seed: int):
-    """One free motion as the pipeline does it: geometry (OMPL + shortcuts), timing and re-check."""
+    """One free motion as the pipeline does it: geometry (OMPL + shortcuts), timing and re-check.
+    Returns (wall s, geometry s, motion duration s, waypoints)."""
     from roarmctl.motion import pipeline
 
     planner.plan.planner.seed = seed
     planner.free_count = 0
     t0 = time.perf_counter()
     part = pipeline.Planner._geometry(planner, step, q)
+    t1 = time.perf_counter()
     piece = planner._time_chain([part])
-    return time.perf_counter() - t0, piece.tp.duration, part.wps
+    return time.perf_counter() - t0, t1 - t0, piece.tp.duration, part.wps
 
 
 def main() -> None:
@@ -234,6 +236,7 @@ def main() -> None:
         return json.loads(worker.stdout.readline())
 
     ours = {k: [] for k in QUERIES}
+    geometry = {k: [] for k in QUERIES}
     theirs = {k: [] for k in QUERIES}
     durations = {k: ([], []) for k in QUERIES}
     padding_hits = {k: 0 for k in QUERIES}
@@ -241,8 +244,9 @@ def main() -> None:
     for r in range(args.rounds):
         for name, (planner, step, q) in captured.items():
             try:
-                wall, dur, _ = roarmctl_query(planner, step, q, seed=100 + r)
+                wall, geo, dur, _ = roarmctl_query(planner, step, q, seed=100 + r)
                 ours[name].append(wall)
+                geometry[name].append(geo)
                 durations[name][0].append(dur)
             except Exception as exc:  # noqa: BLE001 (a bench counts failures)
                 fails[name][0] += 1
@@ -268,6 +272,11 @@ def main() -> None:
         da, db = statistics.median(durations[name][0]), statistics.median(durations[name][1])
         print(f"{name:<6}{a:>10.1f}{b:>10.1f}{a / b:>7.2f}x   {da:.2f} / {db:.2f}"
               f"{'':>22}{padding_hits[name]:>3} of {len(theirs[name])}{'':>28}{fails[name][0]}/{fails[name][1]}")
+    print("roarmctl's part, medians (ms): geometry (OMPL tries + shortcutting) | timing + re-check (TOPP-RA etc.)")
+    for name in QUERIES:
+        g = statistics.median(geometry[name]) * 1000
+        t = statistics.median(w - x for w, x in zip(ours[name], geometry[name])) * 1000
+        print(f"  {name:<6}{g:>8.1f} | {t:.1f}")
 
     # single-state validity, the same random states on both sides
     planner = captured["wall"][0]

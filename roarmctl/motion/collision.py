@@ -32,6 +32,7 @@ Static items are never checked against each other.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import fcl
@@ -131,6 +132,9 @@ class CollisionChecker:
         self._upper = robot.upper[self._arm]
         self._q_template = robot.full_q(np.zeros(robot.arm_dof))  # a view into the kernel's table after _rebuild
         self._bufs: dict[str, np.ndarray] = {}
+        # One check at a time: the kernel's output buffers and the FCL objects' poses are shared (OMPL's PRM
+        # calls back from two threads).
+        self._lock = threading.RLock()
         self._gripper_index = robot.joint_index(robot.gripper.joint) if robot.gripper else None
         kin = robot.kin
         self._link_index = kin.link_index
@@ -317,6 +321,11 @@ class CollisionChecker:
     def _pack(self) -> None:
         """The kernel's tables: one int64 and one float64 array (layout: the header of _checkkernel.c)."""
         kin = self._fk
+        for what, count, most in (("joints", len(self._q_template), 64), ("links", kin.n_links, 256),
+                                  ("collision shapes (with attached objects)", len(self._moving_shapes), 512)):
+            if count > most:  # the kernel's fixed-size work arrays (_checkkernel.c: MAXDOF, MAXLINKS, MAXSHAPES)
+                raise InputError(f"{self.robot.name} has {count} {what}; the collision checker handles at most {most}",
+                                 "merge collision shapes, or split the description")
         steps_i, steps_f = [], []
         for kind, parent, child, qi, offset, data, post in kin._steps:
             rec = np.zeros((4, 16))
@@ -500,39 +509,42 @@ class CollisionChecker:
 
     def validity_batch(self, Q, gripper=None) -> np.ndarray:
         """Validity (N,) bool of arm configurations ``Q`` (N, arm_dof), rad; ``gripper`` (N,) as in ``first_invalid``."""
-        Q = np.atleast_2d(np.asarray(Q, dtype=float))
-        if Q.shape[0] == 0:
-            return np.zeros(0, dtype=bool)
-        if gripper is not None and self._gripper_index is None:
-            raise InputError(f"{self.robot.name} has no gripper")
-        return self._evaluate(Q, stop_at_first=False, gripper=None if gripper is None else np.asarray(gripper, dtype=float))[0]
+        with self._lock:
+            Q = np.atleast_2d(np.asarray(Q, dtype=float))
+            if Q.shape[0] == 0:
+                return np.zeros(0, dtype=bool)
+            if gripper is not None and self._gripper_index is None:
+                raise InputError(f"{self.robot.name} has no gripper")
+            return self._evaluate(Q, stop_at_first=False, gripper=None if gripper is None else np.asarray(gripper, dtype=float))[0]
 
     def is_valid(self, q_arm) -> bool:
         """True when arm configuration ``q_arm`` (arm_dof,) is within limits, margin and collision-free."""
-        q = np.ascontiguousarray(q_arm, dtype=float)
-        if q.size != self._lower.size:
-            raise InputError(f"an arm configuration has {self._lower.size} values, got {q.size}")
-        self.check_count += 1
-        b = self._bufs or self._buffers(1)
-        ns, npairs, _ = _kernel.check(self._kfm, self._kim, q, _NO_GRIP, *b["views"], 0.0, False)
-        if not b["valid"][0]:
-            return False
-        if not (ns or npairs):
-            return True
-        valid = np.ones(1, dtype=bool)
-        self._narrow(valid, b, ns, npairs, True)
-        return bool(valid[0])
+        with self._lock:
+            q = np.ascontiguousarray(q_arm, dtype=float)
+            if q.size != self._lower.size:
+                raise InputError(f"an arm configuration has {self._lower.size} values, got {q.size}")
+            self.check_count += 1
+            b = self._bufs or self._buffers(1)
+            ns, npairs, _ = _kernel.check(self._kfm, self._kim, q, _NO_GRIP, *b["views"], 0.0, False)
+            if not b["valid"][0]:
+                return False
+            if not (ns or npairs):
+                return True
+            valid = np.ones(1, dtype=bool)
+            self._narrow(valid, b, ns, npairs, True)
+            return bool(valid[0])
 
     def first_invalid(self, Q, gripper=None) -> int | None:
         """Index of the first invalid row of ``Q`` (N, arm_dof), or None when all are valid; ``gripper`` (N,)
         gives each row its own gripper value (rad; default: the value of ``set_gripper``)."""
-        Q = np.atleast_2d(np.asarray(Q, dtype=float))
-        if Q.shape[0] == 0:
-            return None
-        if gripper is not None and self._gripper_index is None:
-            raise InputError(f"{self.robot.name} has no gripper")
-        valid = self._evaluate(Q, stop_at_first=True, gripper=None if gripper is None else np.asarray(gripper, dtype=float))[0]
-        return None if valid.all() else int(np.argmin(valid))
+        with self._lock:
+            Q = np.atleast_2d(np.asarray(Q, dtype=float))
+            if Q.shape[0] == 0:
+                return None
+            if gripper is not None and self._gripper_index is None:
+                raise InputError(f"{self.robot.name} has no gripper")
+            valid = self._evaluate(Q, stop_at_first=True, gripper=None if gripper is None else np.asarray(gripper, dtype=float))[0]
+            return None if valid.all() else int(np.argmin(valid))
 
     def segment_valid(self, q0, q1, resolution: float = 0.01, refine: int = 4) -> bool:
         """True when the straight joint-space segment q0 -> q1 (arm_dof,) is valid.
@@ -543,22 +555,23 @@ class CollisionChecker:
         comes near anything; the other steps are re-checked at ``refine`` times finer resolution,
         so that a finer re-check of the segment does not find what the coarse one missed.
         """
-        q = interpolate(q0, q1, resolution)
-        if len(q) > 4 * COARSE_STRIDE and not self._all_valid(q[COARSE_STRIDE::COARSE_STRIDE]):
-            return False  # most invalid motions are caught by every 8th state, at an eighth of the cost
-        d = q[1] - q[0]
-        sweep = 0.5 * float(np.sqrt(d.dot(d))) * self.sweep_gain
-        if not self._all_valid(q, sweep):
-            return False
-        if refine <= 1 or sweep <= 0:
-            return True
-        near = self._bufs["near"][:len(q)].view(bool)  # of the call just made
-        steps = np.flatnonzero(near[:-1] | near[1:])
-        if len(steps) == 0:
-            return True
-        t = np.arange(1, refine)[None, :, None] / refine
-        sub = q[steps][:, None, :] + (q[steps + 1] - q[steps])[:, None, :] * t
-        return self._all_valid(sub.reshape(-1, q.shape[1]))
+        with self._lock:
+            q = interpolate(q0, q1, resolution)
+            if len(q) > 4 * COARSE_STRIDE and not self._all_valid(q[COARSE_STRIDE::COARSE_STRIDE]):
+                return False  # most invalid motions are caught by every 8th state, at an eighth of the cost
+            d = q[1] - q[0]
+            sweep = 0.5 * float(np.sqrt(d.dot(d))) * self.sweep_gain
+            if not self._all_valid(q, sweep):
+                return False
+            if refine <= 1 or sweep <= 0:
+                return True
+            near = self._bufs["near"][:len(q)].view(bool)  # of the call just made
+            steps = np.flatnonzero(near[:-1] | near[1:])
+            if len(steps) == 0:
+                return True
+            t = np.arange(1, refine)[None, :, None] / refine
+            sub = q[steps][:, None, :] + (q[steps + 1] - q[steps])[:, None, :] * t
+            return self._all_valid(sub.reshape(-1, q.shape[1]))
 
     def _all_valid(self, q: np.ndarray, sweep: float = 0.0) -> bool:
         """True when every state of ``q`` (N, arm_dof) is valid; stops at the first invalid one. With ``sweep``
@@ -578,42 +591,43 @@ class CollisionChecker:
 
     def explain(self, q_arm) -> str:
         """Why ``q_arm`` (arm_dof,) is invalid, in words; "valid" when it is not."""
-        q = np.asarray(q_arm, dtype=float).reshape(1, -1)
-        names = self.robot.joint_names
-        for j, idx in enumerate(self._arm):
-            if not (self._lower[j] - _EPS <= q[0, j] <= self._upper[j] + _EPS):
-                return (f"joint limit: {names[idx]} = {q[0, j]:.4f} rad is outside "
-                        f"[{self._lower[j]:.4f}, {self._upper[j]:.4f}]")
-        q_full = self._full(q)
-        rot, pos = self._fk.frames(q_full)
-        if self.singularity_margin is not None:
-            sig = float(self.margin_measure(q)[0])
-            if sig < self.singularity_margin:
-                return (f"closer to the base-axis singularity than the margin (smallest singular value of the "
-                        f"translational Jacobian {sig:.4f} < {self.singularity_margin:.4f} m/rad)")
-        # Exhaustive FCL pass without the pre-filter, so explain() never depends on it.
-        rl = rot[:, self._mv_link]
-        srot, scen = rl @ self._mv_rot, pos[:, self._mv_link] + np.einsum("nsij,sj->nsi", rl, self._mv_pos)
-        link_names = self.robot.kin.link_names
-        moving = self._moving_shapes
+        with self._lock:
+            q = np.asarray(q_arm, dtype=float).reshape(1, -1)
+            names = self.robot.joint_names
+            for j, idx in enumerate(self._arm):
+                if not (self._lower[j] - _EPS <= q[0, j] <= self._upper[j] + _EPS):
+                    return (f"joint limit: {names[idx]} = {q[0, j]:.4f} rad is outside "
+                            f"[{self._lower[j]:.4f}, {self._upper[j]:.4f}]")
+            q_full = self._full(q)
+            rot, pos = self._fk.frames(q_full)
+            if self.singularity_margin is not None:
+                sig = float(self.margin_measure(q)[0])
+                if sig < self.singularity_margin:
+                    return (f"closer to the base-axis singularity than the margin (smallest singular value of the "
+                            f"translational Jacobian {sig:.4f} < {self.singularity_margin:.4f} m/rad)")
+            # Exhaustive FCL pass without the pre-filter, so explain() never depends on it.
+            rl = rot[:, self._mv_link]
+            srot, scen = rl @ self._mv_rot, pos[:, self._mv_link] + np.einsum("nsij,sj->nsi", rl, self._mv_pos)
+            link_names = self.robot.kin.link_names
+            moving = self._moving_shapes
 
-        def label(mv: _Moving) -> str:
-            return f"attached object '{mv.name}'" if mv.attached else link_names[mv.link]
+            def label(mv: _Moving) -> str:
+                return f"attached object '{mv.name}'" if mv.attached else link_names[mv.link]
 
-        for a, mv in enumerate(moving):
-            mv.obj_scene.setRotation(srot[0, a]); mv.obj_scene.setTranslation(scen[0, a])
-            for k, it in enumerate(self._items):
-                if self._scene_mask[a, k] and fcl.collide(mv.obj_scene, self._item_objs[k]):
-                    return f"{label(mv)} hits {it.role} '{it.name}'"
-        for a, b in self._pairs:
-            oa, ob = moving[a].obj_self, moving[b].obj_self
-            oa.setRotation(srot[0, a]); oa.setTranslation(scen[0, a])
-            ob.setRotation(srot[0, b]); ob.setTranslation(scen[0, b])
-            if fcl.collide(oa, ob):
-                if moving[a].attached or moving[b].attached:
-                    return f"{label(moving[a])} hits {label(moving[b])}"
-                return f"self-collision: {label(moving[a])} hits {label(moving[b])}"
-        return "valid"
+            for a, mv in enumerate(moving):
+                mv.obj_scene.setRotation(srot[0, a]); mv.obj_scene.setTranslation(scen[0, a])
+                for k, it in enumerate(self._items):
+                    if self._scene_mask[a, k] and fcl.collide(mv.obj_scene, self._item_objs[k]):
+                        return f"{label(mv)} hits {it.role} '{it.name}'"
+            for a, b in self._pairs:
+                oa, ob = moving[a].obj_self, moving[b].obj_self
+                oa.setRotation(srot[0, a]); oa.setTranslation(scen[0, a])
+                ob.setRotation(srot[0, b]); ob.setTranslation(scen[0, b])
+                if fcl.collide(oa, ob):
+                    if moving[a].attached or moving[b].attached:
+                        return f"{label(moving[a])} hits {label(moving[b])}"
+                    return f"self-collision: {label(moving[a])} hits {label(moving[b])}"
+            return "valid"
 
 
 def interpolate(q0, q1, resolution: float) -> np.ndarray:
