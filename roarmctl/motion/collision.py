@@ -525,8 +525,8 @@ class CollisionChecker:
                 raise InputError(f"an arm configuration has {self._lower.size} values, got {q.size}")
             self.check_count += 1
             b = self._bufs or self._buffers(1)
-            ns, npairs, _ = _kernel.check(self._kfm, self._kim, q, _NO_GRIP, *b["views"], 0.0, False)
-            if not b["valid"][0]:
+            ns, npairs, limit = _kernel.check(self._kfm, self._kim, q, _NO_GRIP, *b["views"], 0.0, True)
+            if limit == 0:  # limits or margin
                 return False
             if not (ns or npairs):
                 return True
