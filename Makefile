@@ -8,7 +8,9 @@ STAMP  := $(VENV)/.installed
 
 all: test
 
-$(STAMP): pyproject.toml
+# The install compiles the state checker's C kernel into the source tree (editable install): a change to
+# the C source needs a new install too.
+$(STAMP): pyproject.toml roarmctl/motion/_checkkernel.c
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'
