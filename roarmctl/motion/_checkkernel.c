@@ -34,13 +34,13 @@
 #define POSEF 12   /* per state and shape: world rot (9), centre (3) */
 
 typedef struct {
-    int64_t dof, arm_n, n_links, n_steps, tcp, n_chain, S, M, n_active, n_pairs, grip, has_margin, n_const, n_groups;
+    int64_t dof, arm_n, n_links, n_steps, tcp, n_chain, S, M, n_active, n_pairs, grip, has_margin, n_const, n_groups, n_lp;
     const int64_t *arm, *const_idx, *steps, *chain, *shape_link, *active, *amask, *pairs, *g_link, *g_start, *g_order,
-        *g_mask;
-    const double *lower, *upper, *qt, *margin, *const_fr, *stepf, *chainf, *shapef, *itemf, *active_r2, *pair_r2, *active_r, *pair_r, *g_c, *g_r;
+        *g_mask, *lp_links, *lp_start, *lp_order;
+    const double *lower, *upper, *qt, *margin, *const_fr, *stepf, *chainf, *shapef, *itemf, *active_r2, *pair_r2, *active_r, *pair_r, *g_c, *g_r, *lp_f;
 } Model;
 
-#define HEADER 14
+#define HEADER 15
 
 static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     const int64_t *I = (const int64_t *)ib->buf;
@@ -49,14 +49,15 @@ static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     if (ni < HEADER) goto bad;
     m->dof = I[0]; m->arm_n = I[1]; m->n_links = I[2]; m->n_steps = I[3]; m->tcp = I[4]; m->n_chain = I[5];
     m->S = I[6]; m->M = I[7]; m->n_active = I[8]; m->n_pairs = I[9]; m->grip = I[10]; m->has_margin = I[11];
-    m->n_const = I[12]; m->n_groups = I[13];
+    m->n_const = I[12]; m->n_groups = I[13]; m->n_lp = I[14];
     if (m->dof > MAXDOF || m->n_links > MAXLINKS || m->S > MAXSHAPES || m->arm_n > m->dof || m->n_chain > MAXDOF)
         goto bad;
     Py_ssize_t need_i = HEADER + m->arm_n + m->n_const + STEPI * m->n_steps + CHAINI * m->n_chain + m->S
                         + m->n_active + m->n_active * m->M + 2 * m->n_pairs
-                        + m->n_groups + (m->n_groups + 1) + m->n_active + m->n_groups * m->M;
+                        + m->n_groups + (m->n_groups + 1) + m->n_active + m->n_groups * m->M
+                        + 2 * m->n_lp + (m->n_lp + 1) + m->n_pairs;
     Py_ssize_t need_f = 2 * m->arm_n + m->dof + 1 + 16 * m->n_const + STEPF * m->n_steps + CHAINF * m->n_chain
-                        + SHAPEF * m->S + ITEMF * m->M + 2 * m->n_active + 2 * m->n_pairs + 4 * m->n_groups;
+                        + SHAPEF * m->S + ITEMF * m->M + 2 * m->n_active + 2 * m->n_pairs + 4 * m->n_groups + 8 * m->n_lp;
     if (ni != need_i || nf != need_f) goto bad;
     const int64_t *p = I + HEADER;
     m->arm = p; p += m->arm_n;
@@ -70,7 +71,10 @@ static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     m->g_link = p; p += m->n_groups;      /* groups: the active shapes of one link, in one bounding sphere */
     m->g_start = p; p += m->n_groups + 1;
     m->g_order = p; p += m->n_active;     /* active indices, group by group */
-    m->g_mask = p;
+    m->g_mask = p; p += m->n_groups * m->M;
+    m->lp_links = p; p += 2 * m->n_lp;    /* link pairs: the self pairs between the shapes of two links */
+    m->lp_start = p; p += m->n_lp + 1;
+    m->lp_order = p;                      /* pair indices, link pair by link pair */
     const double *q = F;
     m->lower = q; q += m->arm_n;
     m->upper = q; q += m->arm_n;
@@ -86,7 +90,8 @@ static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     m->active_r = q; q += m->n_active;  /* sqrt of the above, for the grown ("near") tests */
     m->pair_r = q; q += m->n_pairs;
     m->g_c = q; q += 3 * m->n_groups;     /* group sphere centre in the link frame, radius */
-    m->g_r = q;
+    m->g_r = q; q += m->n_groups;
+    m->lp_f = q;                          /* per link pair: sphere centre (link frame) and radius of each link */
     return 0;
 bad:
     PyErr_SetString(PyExc_ValueError, "_checkkernel: packed tables do not match their header");
@@ -405,7 +410,19 @@ static PyObject *check(PyObject *self, PyObject *const *args, Py_ssize_t nargs) 
                 }
             }
         }
-        for (int64_t p = 0; p < m.n_pairs; p++) {
+        for (int64_t lp = 0; lp < m.n_lp; lp++) {
+            /* each link's sphere holds the spheres of its shapes: where the two links' spheres (grown by sweep)
+             * are apart, so are all their shape pairs */
+            const double *LA = Fr + 16 * m.lp_links[2 * lp], *LB = Fr + 16 * m.lp_links[2 * lp + 1], *f = m.lp_f + 8 * lp;
+            double dl = 0, lim = f[3] + f[7] + (sweep > 0 ? 2 * sweep : 0.0);
+            for (int r = 0; r < 3; r++) {
+                double e = (LA[4 * r + 3] + LA[4 * r] * f[0] + LA[4 * r + 1] * f[1] + LA[4 * r + 2] * f[2])
+                           - (LB[4 * r + 3] + LB[4 * r] * f[4] + LB[4 * r + 1] * f[5] + LB[4 * r + 2] * f[6]);
+                dl += e * e;
+            }
+            if (!(dl < lim * lim)) continue;
+          for (int64_t pk = m.lp_start[lp]; pk < m.lp_start[lp + 1]; pk++) {
+            int64_t p = m.lp_order[pk];
             int64_t a = m.pairs[2 * p], bb = m.pairs[2 * p + 1];
             const double *oa = ps + POSEF * a, *ob = ps + POSEF * bb;
             const double *fa = m.shapef + SHAPEF * a, *fb = m.shapef + SHAPEF * bb;
@@ -428,6 +445,7 @@ static PyObject *check(PyObject *self, PyObject *const *args, Py_ssize_t nargs) 
             if (!in || obb_apart(oa, oa + 9, fa + 15, ob, ob + 9, fb + 15)) continue;
             if (np_ >= cap_p) goto overflow;
             pc[2 * np_] = i; pc[2 * np_ + 1] = p; np_++;
+          }
         }
     }
     for (Py_ssize_t i = limit + 1; i < N; i++) {

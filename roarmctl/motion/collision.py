@@ -372,19 +372,35 @@ class CollisionChecker:
             g_c.append(c)
             g_r.append(float(np.max(np.linalg.norm(centres - c, axis=1) + self._mv_radius[self._active[members]])) + 1e-9)
             g_mask.append(self._active_mask[members].any(axis=0))
+        # Link pairs for the kernel's first self test: every link's sphere holds the spheres of all its shapes.
+        sphere = {}
+        for link in sorted(set(self._mv_link.tolist())):
+            members = np.flatnonzero(self._mv_link == link)
+            c = self._mv_pos[members].mean(axis=0)
+            sphere[link] = (c, float(np.max(np.linalg.norm(self._mv_pos[members] - c, axis=1) + self._mv_radius[members])) + 1e-9)
+        by_links: dict[tuple[int, int], list[int]] = {}
+        for p, (a, b) in enumerate(self._pairs.tolist()):
+            by_links.setdefault((int(self._mv_link[a]), int(self._mv_link[b])), []).append(p)
+        lp_links, lp_start, lp_order, lp_f = [], [0], [], []
+        for (la, lb), members in by_links.items():
+            lp_links += [la, lb]
+            lp_order += members
+            lp_start.append(len(lp_order))
+            lp_f += [*sphere[la][0], sphere[la][1], *sphere[lb][0], sphere[lb][1]]
         margin = self.singularity_margin
         const = list(kin._const_links)
         ints = [len(self._q_template), len(self._arm), kin.n_links, len(kin._steps), self._tcp, len(self._chain), s, m,
                 len(self._active), len(self._pairs), -1 if self._gripper_index is None else self._gripper_index,
-                int(margin is not None), len(const), len(g_links)]
+                int(margin is not None), len(const), len(g_links), len(by_links)]
         ints += list(self._arm) + const + steps_i + chain_i + list(self._mv_link) + list(self._active)
         ints += list(self._active_mask.astype(np.int64).ravel()) + list(self._pairs.ravel())
         ints += g_links + g_start + g_order + list(np.array(g_mask, dtype=np.int64).ravel())
+        ints += lp_links + lp_start + lp_order
         self._ki = np.array(ints, dtype=np.int64)
         floats = [self._lower, self._upper, self._q_template, [0.0 if margin is None else float(margin)],
                   kin._const[const].ravel(), *steps_f, *chain_f, shapes.ravel(), items.ravel(),
                   self._active_r2.ravel(), self._pair_r2, np.sqrt(self._active_r2.ravel()), np.sqrt(self._pair_r2),
-                  np.array(g_c, dtype=float).ravel(), g_r]
+                  np.array(g_c, dtype=float).ravel(), g_r, lp_f]
         self._kf = np.concatenate([np.asarray(f, dtype=float).ravel() for f in floats])
         off = 2 * len(self._arm)
         self._q_template = self._kf[off:off + len(self._q_template)]  # set_gripper writes the kernel's table
