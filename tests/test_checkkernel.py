@@ -13,7 +13,7 @@ from roarmctl.motion.scene import Scene, SceneItem, example_scene
 from roarmctl.robot.loader import bundled_robots, load_robot
 from roarmctl.robot.model import transform
 
-# A small arm with the joint kinds no bundled robot has: a prismatic lift and a revolute joint about x.
+# A small arm with the joint kinds no bundled robot has: a prismatic lift, a revolute joint about x, a mimic joint.
 ODD_URDF = """<robot name="odd">
   <link name="base"><collision><origin xyz="0 0 0.05"/><geometry><box size="0.1 0.1 0.1"/></geometry></collision></link>
   <link name="slide"><collision><origin xyz="0 0 0.1"/><geometry><box size="0.04 0.04 0.2"/></geometry></collision></link>
@@ -27,6 +27,9 @@ ODD_URDF = """<robot name="odd">
   <joint name="twist" type="revolute"><parent link="arm"/><child link="hand"/><origin xyz="0 0.2 0"/>
     <axis xyz="0 0.6 0.8"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
   <joint name="tool" type="fixed"><parent link="hand"/><child link="tip"/><origin xyz="0 0 0.06"/></joint>
+  <link name="finger"><collision><origin xyz="0 0 0.02"/><geometry><box size="0.01 0.01 0.04"/></geometry></collision></link>
+  <joint name="finger_joint" type="revolute"><parent link="hand"/><child link="finger"/><origin xyz="0.02 0 0.05"/>
+    <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/><mimic joint="twist" multiplier="-1" offset="0.2"/></joint>
 </robot>
 """
 
