@@ -835,6 +835,12 @@ class Planner:
             if len(part.wps) > 2 and tb.s is not None:  # up to its first vertex
                 first = float(np.linalg.norm(part.wps[1][arm] - part.wps[0][arm]))
                 k_hi = min(k_hi, int(np.searchsorted(tb.s, first + 1e-9, side="right")) - 1)
+        # the ends themselves must be valid under both motions' states (the bridge's samples are checked under both)
+        bad = self._first_invalid_under(prev, tb.q[1:k_hi + 1] + (ta.q[-1] - tb.q[0]))
+        k_hi = k_hi if bad is None else bad
+        if k_hi > 0 and ia > i_lo:
+            bad = self._first_invalid_under(part, ta.q[i_lo:ia + 1][::-1])
+            i_lo = i_lo if bad is None else ia + 1 - bad
         if ia <= i_lo or k_hi <= 0:
             return None
         otg, traj, inp = Ruckig(len(arm), dt), Trajectory(len(arm)), InputParameter(len(arm))
@@ -858,13 +864,13 @@ class Planner:
 
         def total(key: tuple[int, int]) -> float:
             i, k = key
-            return i * dt + totals[key] * dt + tb.duration - tb.times[k]
+            return round((i + totals[key] - k) * dt + tb.duration, 9)  # tb's samples before its end are on the grid
 
         coarse = [(i, k) for i in range(ia, i_lo - 1, -BRIDGE_COARSE[0]) for k in range(k_hi, 0, -BRIDGE_COARSE[1])]
         # shortest first; among equals the earliest end in the second motion and the latest start in the first (a
         # straight line stays exact for longer)
         def ranked(keys) -> list[tuple[int, int]]:
-            return [key for _, key in sorted(((round(total(key), 9), key[1], -key[0], totals[key]), key) for key in keys)]
+            return [key for _, key in sorted(((total(key), key[1], -key[0], totals[key]), key) for key in keys)]
 
         best = ranked(key for key in coarse if solve(*key) is not None)[:BRIDGE_REFINE]
         for i0, k0 in best:  # every sample around the best coarse ones
@@ -880,7 +886,7 @@ class Planner:
             cand = _bridged(ta, tb, i, k, steps, traj, arm)
             # a cheap look first (every 4th sample of the bridge, both collision states), then the full check
             coarse_q = cand.q[i:i + steps + 1:4]
-            if any(self._invalid_under(p, coarse_q) for p in (prev, part)):
+            if any(self._invalid_under(p, coarse_q) for p in (part, prev)):  # prev last: _overlap_ok starts with it
                 continue
             if self._overlap_ok(cand, i, i + steps, prev, part):
                 return cand, i, i + steps
@@ -888,8 +894,18 @@ class Planner:
 
     def _invalid_under(self, part: _Part, q: np.ndarray) -> bool:
         """Whether any of ``q`` (M, dof) is invalid under ``part``'s collision state (its gripper value, its grasp target)."""
+        return self._first_invalid_under(part, q) is not None
+
+    def _first_invalid_under(self, part: _Part, q: np.ndarray) -> int | None:
+        """The first invalid row of ``q`` (M, dof) under ``part``'s collision state (its gripper value for every row,
+        its grasp target); None if all are valid."""
+        if not len(q):
+            return None
+        q = q.copy()
+        if self.gi is not None:
+            q[:, self.gi] = part.wps[0][self.gi]
         self._set_state(part.wps[0][self.gi] if self.gi is not None else None, grasp_target=part.step.grasp_target)
-        return self._first_invalid(q) is not None
+        return self._first_invalid(q)
 
     def _bridged_piece(self, a: _Piece, b: _Piece, bounds: list[tuple[float, float]], prev: _Part, part: _Part,
                        cand: TimedPath, i: int, e: int) -> tuple[_Piece, list[tuple[float, float]]]:
@@ -1275,7 +1291,7 @@ JAW_POSE_TOL = 1e-4
 BLEND_STEP = 2  # samples between the overlaps tried, longest first
 # _bridge: corner cuts (i in the first motion, k in the second) tried every BRIDGE_COARSE samples, then every
 # sample around the BRIDGE_REFINE best; at most BRIDGE_TRIES candidates are checked, shortest first.
-BRIDGE_COARSE, BRIDGE_REFINE, BRIDGE_TRIES = (6, 3), 4, 16
+BRIDGE_COARSE, BRIDGE_REFINE, BRIDGE_TRIES = (8, 4), 2, 16
 
 
 def _payload_entry(start: float, end: float, body: dict) -> dict:
