@@ -1068,11 +1068,13 @@ class Planner:
         if tp.duration < self.plan.limits.gripper_time:  # the jaws get at least gripper_time to settle
             tp = _concat(tp, _dwell(tp.q[-1], self.plan.limits.gripper_time - tp.duration))
         t0 = time.perf_counter()
-        for value in np.linspace(a, b, 5):  # the jaw sweeps: check it along the way
-            self._set_state(value, grasp_target=step.grasp_target)
-            if not self.checker.is_valid(q[self.arm]):
-                self.timer.add("recheck", t0)
-                raise PlanningError(f"{step.label}: the moving jaw collides: {self.checker.explain(q[self.arm])}")
+        values = np.linspace(a, b, 5)  # the jaw sweeps: check it along the way (one batch, a gripper value per row)
+        self._set_state(b, grasp_target=step.grasp_target)
+        valid = self.checker.validity_batch(np.repeat(q[None, self.arm], len(values), axis=0), gripper=values)
+        if not valid.all():
+            self.checker.set_gripper(float(values[int(np.argmin(valid))]))
+            self.timer.add("recheck", t0)
+            raise PlanningError(f"{step.label}: the moving jaw collides: {self.checker.explain(q[self.arm])}")
         self.timer.add("recheck", t0)
         if update:
             self._gripper_event(step, q)

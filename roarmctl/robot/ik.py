@@ -505,17 +505,26 @@ class _RoarmIK:
         cands: list[list[tuple[np.ndarray, float]]] = []
         any_reach = False
         reachable: list[np.ndarray] = []  # reachable samples, to explain a joint-limit failure
-        for base, r_signed, sign in branches:
-            # world approach a = cos(pitch) u_h - sin(pitch) z; in this branch's plane coordinates
+        if pitch is not None:  # one pitch: the four (base, elbow) branches as one batch, in that order
+            sign = np.array([1.0, 1.0, -1.0, -1.0])
+            # world approach a = cos(pitch) u_h - sin(pitch) z; in a branch's plane coordinates
             # (forward = sign * u_h) its angle from vertical is atan2(sign cos(pitch), -sin(pitch)).
             phi = np.arctan2(sign * np.cos(phis), -np.sin(phis))
-            for elbow in (1.0, -1.0):
-                s, e, w, ok = self._planar(r_signed, z, phi, elbow)
-                qs = self._branch_q(_wrap(base), s, e, w, want_roll, grip)
-                any_reach |= bool(ok.any())
-                reachable.append(qs[ok])
-                ok &= self._in_limits(qs)
-                if pitch is None:
+            s, e, w, ok = self._planar(sign * rho, z, phi, np.array([1.0, -1.0, 1.0, -1.0]))
+            qs = self._branch_q(_wrap(np.array([az, az, az + math.pi, az + math.pi])), s, e, w, want_roll, grip)
+            any_reach = bool(ok.any())
+            reachable = [qs[:2][ok[:2]], qs[2:][ok[2:]]]
+            ok &= self._in_limits(qs)
+            cands.extend([(qq, float(pitch))] for qq in qs[ok])
+        else:  # pitch free: each branch over the pitch grid
+            for base, r_signed, sign in branches:
+                phi = np.arctan2(sign * np.cos(phis), -np.sin(phis))  # as above, over the pitch grid
+                for elbow in (1.0, -1.0):
+                    s, e, w, ok = self._planar(r_signed, z, phi, elbow)
+                    qs = self._branch_q(_wrap(base), s, e, w, want_roll, grip)
+                    any_reach |= bool(ok.any())
+                    reachable.append(qs[ok])
+                    ok &= self._in_limits(qs)
                     # the preferred pitch itself when this branch can hold it, else a grid sample
                     exact = self._planar(r_signed, z, np.arctan2(sign * np.cos([pref]), -np.sin([pref])), elbow)
                     qe = self._branch_q(_wrap(base), *exact[:3], want_roll, grip)
@@ -525,8 +534,6 @@ class _RoarmIK:
                         alts.append((qs[k], float(phis[k])))
                     if alts:
                         cands.append(alts)
-                elif ok.any():
-                    cands.extend([(qq, float(pitch))] for qq in qs[ok])
 
         if not cands:
             if not any_reach:
@@ -545,7 +552,7 @@ class _RoarmIK:
             what = f"with pitch {math.degrees(pitch):.1f} deg " if pitch is not None else "at any pitch "
             raise UnreachableError(
                 f"{where} is within reach but not {what}within the joint limits: "
-                + self._violation(_first_nonempty(np.concatenate(reachable[:2]), np.concatenate(reachable[2:]))),
+                + self._violation(_first_nonempty(np.concatenate(reachable[:len(reachable) // 2]), np.concatenate(reachable[len(reachable) // 2:]))),
                 "joint_limit", "try another pitch, or move the target")
 
         # Polish on the true FK and verify.
