@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from roarmctl.errors import DescriptionError, InputError
+from roarmctl.robot.kinematics import cross_rows
 from roarmctl.robot.model import Inertial, Robot
 
 GRAVITY = 9.81  # m/s^2, along -z of the root frame
@@ -76,18 +77,6 @@ def _batch(robot: Robot, v, what: str, is_position: bool) -> np.ndarray:
         robot.full_q(a) if is_position else _scatter_arm(robot, a))
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of (..., 3) arrays: np.cross's axis handling costs 5-10x the maths on
-    the small batches RNEA works on (it was most of the torque-limited timing of a plan)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    out = np.empty(a.shape if a.shape == b.shape else np.broadcast_shapes(a.shape, b.shape))  # np.stack cost more than the maths
-    out[..., 0] = a1 * b2 - a2 * b1
-    out[..., 1] = a2 * b0 - a0 * b2
-    out[..., 2] = a0 * b1 - a1 * b0
-    return out
-
-
 def _has_post(joint) -> bool:
     """Whether the joint has a fixed transform after its motion (standard DH's d/a/alpha)."""
     return not np.array_equal(joint.post, _EYE4)
@@ -140,7 +129,7 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
         if not moving:
             return a[:, link]
         d = r - org[:, link]
-        return a[:, link] + _cross(dw[:, link], d) + _cross(w[:, link], _cross(w[:, link], d))
+        return a[:, link] + cross_rows(dw[:, link], d) + cross_rows(w[:, link], cross_rows(w[:, link], d))
 
     n_joints = len(robot.joints)
     axes = np.zeros((n, n_joints, 3))
@@ -161,17 +150,17 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
         elif joint.kind == "revolute":
             wz = qd[:, qi, None] * z
             w[:, c] = w[:, p] + wz
-            dw[:, c] = dw[:, p] + qdd[:, qi, None] * z + _cross(w[:, p], wz)
+            dw[:, c] = dw[:, p] + qdd[:, qi, None] * z + cross_rows(w[:, p], wz)
             # the pivot lies on the axis: it moves with the parent and with the child alike
             a_piv = point_acc(p, pivots[:, j])
             if at_origin:  # the child's origin is the pivot
                 a[:, c] = a_piv
             else:
                 d = org[:, c] - pivots[:, j]
-                a[:, c] = a_piv + _cross(dw[:, c], d) + _cross(w[:, c], _cross(w[:, c], d))
+                a[:, c] = a_piv + cross_rows(dw[:, c], d) + cross_rows(w[:, c], cross_rows(w[:, c], d))
         elif joint.kind == "prismatic":
             w[:, c], dw[:, c] = w[:, p], dw[:, p]
-            a[:, c] = point_acc(p, org[:, c]) + 2.0 * _cross(w[:, p], qd[:, qi, None] * z) + qdd[:, qi, None] * z
+            a[:, c] = point_acc(p, org[:, c]) + 2.0 * cross_rows(w[:, p], qd[:, qi, None] * z) + qdd[:, qi, None] * z
         else:
             w[:, c], dw[:, c] = w[:, p], dw[:, p]
             a[:, c] = point_acc(p, org[:, c])
@@ -196,7 +185,7 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
             continue
         inertia = rot @ inertial.inertia @ np.swapaxes(rot, 1, 2)
         iw = np.einsum("nij,nj->ni", inertia, w[:, k])
-        moment[:, k] = np.einsum("nij,nj->ni", inertia, dw[:, k]) + _cross(w[:, k], iw)
+        moment[:, k] = np.einsum("nij,nj->ni", inertia, dw[:, k]) + cross_rows(w[:, k], iw)
 
     # Backward pass: subtree force and its moment about each joint's pivot.
     f_sub = force.copy()
@@ -205,7 +194,7 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
     for j in range(n_joints - 1, -1, -1):
         joint = robot.joints[j]
         c = kin._child[j]
-        n_sub[:, c] += moment[:, c] + _cross(com[:, c] - pivots[:, j], force[:, c])
+        n_sub[:, c] += moment[:, c] + cross_rows(com[:, c] - pivots[:, j], force[:, c])
         p = kin._parent[j]
         if kin._qidx[j] >= 0:  # += : a mimic joint's generalised force adds to the joint it follows
             tau[:, kin._qidx[j]] += np.einsum("ni,ni->n", axes[:, j], n_sub[:, c] if joint.kind == "revolute" else f_sub[:, c])
@@ -213,7 +202,7 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
         jp = kin._child.index(p) if p != 0 else None
         pivot_p = pivots[:, jp] if jp is not None else np.zeros(3)
         f_sub[:, p] += f_sub[:, c]
-        n_sub[:, p] += n_sub[:, c] + _cross(pivots[:, j] - pivot_p, f_sub[:, c])
+        n_sub[:, p] += n_sub[:, c] + cross_rows(pivots[:, j] - pivot_p, f_sub[:, c])
     return tau[0] if single else tau
 
 

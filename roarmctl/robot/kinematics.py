@@ -63,6 +63,18 @@ class ManipulabilityReport:
     ellipsoid_axes: np.ndarray
 
 
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (..., 3) arrays, the same arithmetic as ``np.cross`` (bit for bit), whose
+    axis handling costs several times the maths on the small batches of the Jacobian and of RNEA."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(a.shape if a.shape == b.shape else np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
+
+
 _SMALL_BATCH = 200  # states: up to here frames4 of a z-rotation chain takes _frames_simple
 
 
@@ -245,7 +257,7 @@ class Kinematics:
         rot = par[..., :3, :3]
         z = np.einsum("nkij,kj->nki", rot, self._jac_axes)
         o = np.einsum("nkij,kj->nki", rot, self._jac_points) + par[..., :3, 3]
-        lin = np.where(self._jac_revolute[None, :, None], np.cross(z, tcp[:, None, :3, 3] - o), z)
+        lin = np.where(self._jac_revolute[None, :, None], cross_rows(z, tcp[:, None, :3, 3] - o), z)
         ang = np.where(self._jac_revolute[None, :, None], z, 0.0)
         jac = np.concatenate([lin, ang], axis=2).transpose(0, 2, 1)
         return tcp, jac
