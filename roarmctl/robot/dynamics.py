@@ -85,6 +85,18 @@ def _has_post(joint) -> bool:
 _EYE4 = np.eye(4)
 
 
+def _joint_table(robot: Robot) -> list[tuple]:
+    """Per joint (joint, parent link, child link, q index or -1, whether the child frame's origin and axis are
+    the joint's: revolute or fixed without a DH ``post``), computed once per robot."""
+    table = getattr(robot, "_rnea_joints", None)
+    if table is None:
+        kin = robot.kin
+        table = robot._rnea_joints = [(joint, kin._parent[j], kin._child[j], kin._qidx[j],
+                                       joint.kind != "prismatic" and not _has_post(joint))
+                                      for j, joint in enumerate(robot.joints)]
+    return table
+
+
 def _scatter_arm(robot: Robot, a: np.ndarray) -> np.ndarray:
     out = np.zeros((a.shape[0], robot.dof))
     out[:, robot.arm_indices] = a
@@ -125,8 +137,12 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
     # so every cross-product term below is zero and is skipped (same result, a fraction of the work).
     moving = bool(np.any(qd) or np.any(qdd))
 
+    # Links whose angular velocity and acceleration are zero in every state (no moving joint between them
+    # and the root, e.g. the base): the cross-product terms with their w and dw are zero and are skipped.
+    spins = [False] * n_links
+
     def point_acc(link: int, r: np.ndarray) -> np.ndarray:
-        if not moving:
+        if not moving or not spins[link]:
             return a[:, link]
         d = r - org[:, link]
         return a[:, link] + cross_rows(dw[:, link], d) + cross_rows(w[:, link], cross_rows(w[:, link], d))
@@ -134,9 +150,7 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
     n_joints = len(robot.joints)
     axes = np.zeros((n, n_joints, 3))
     pivots = np.zeros((n, n_joints, 3))
-    for j, joint in enumerate(robot.joints):
-        p, c, qi = kin._parent[j], kin._child[j], kin._qidx[j]
-        at_origin = joint.kind != "prismatic" and not _has_post(joint)
+    for j, (joint, p, c, qi, at_origin) in enumerate(_joint_table(robot)):
         if at_origin:
             # child = before @ rotation about the axis (or nothing): same origin, same axis direction
             z = frames[:, c, :3, :3] @ joint.axis
@@ -150,7 +164,8 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
         elif joint.kind == "revolute":
             wz = qd[:, qi, None] * z
             w[:, c] = w[:, p] + wz
-            dw[:, c] = dw[:, p] + qdd[:, qi, None] * z + cross_rows(w[:, p], wz)
+            dw[:, c] = dw[:, p] + qdd[:, qi, None] * z + cross_rows(w[:, p], wz) if spins[p] else dw[:, p] + qdd[:, qi, None] * z
+            spins[c] = True
             # the pivot lies on the axis: it moves with the parent and with the child alike
             a_piv = point_acc(p, pivots[:, j])
             if at_origin:  # the child's origin is the pivot
@@ -160,9 +175,11 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
                 a[:, c] = a_piv + cross_rows(dw[:, c], d) + cross_rows(w[:, c], cross_rows(w[:, c], d))
         elif joint.kind == "prismatic":
             w[:, c], dw[:, c] = w[:, p], dw[:, p]
+            spins[c] = spins[p]
             a[:, c] = point_acc(p, org[:, c]) + 2.0 * cross_rows(w[:, p], qd[:, qi, None] * z) + qdd[:, qi, None] * z
         else:
             w[:, c], dw[:, c] = w[:, p], dw[:, p]
+            spins[c] = spins[p]
             a[:, c] = point_acc(p, org[:, c])
 
     bodies = dict(robot.inertials)
@@ -174,33 +191,38 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
     force = np.zeros((n, n_links, 3))
     moment = np.zeros((n, n_links, 3))
     com = org.copy()
+    heavy = [False] * n_links  # the link or a link below it carries a body
     for name, inertial in bodies.items():
         k = kin.link_index.get(name)
         if k is None:
             continue
+        heavy[k] = True
         rot = frames[:, k, :3, :3]
         com[:, k] = org[:, k] + rot @ inertial.com
         force[:, k] = inertial.mass * point_acc(k, com[:, k])
-        if not moving:
+        if not moving or not spins[k]:
             continue
         inertia = rot @ inertial.inertia @ np.swapaxes(rot, 1, 2)
         iw = np.einsum("nij,nj->ni", inertia, w[:, k])
         moment[:, k] = np.einsum("nij,nj->ni", inertia, dw[:, k]) + cross_rows(w[:, k], iw)
 
-    # Backward pass: subtree force and its moment about each joint's pivot.
+    # Backward pass: subtree force and its moment about each joint's pivot. A subtree without a body adds
+    # nothing (its torques are zero), and the root's own sums are never read.
     f_sub = force.copy()
     n_sub = np.zeros((n, n_links, 3))  # moment of the subtree about the pivot of the joint above the link
     tau = np.zeros((n, robot.dof))
     for j in range(n_joints - 1, -1, -1):
-        joint = robot.joints[j]
-        c = kin._child[j]
+        joint, p, c, qi, _ = _joint_table(robot)[j]
+        if not heavy[c]:
+            continue
+        heavy[p] = True
         n_sub[:, c] += moment[:, c] + cross_rows(com[:, c] - pivots[:, j], force[:, c])
-        p = kin._parent[j]
-        if kin._qidx[j] >= 0:  # += : a mimic joint's generalised force adds to the joint it follows
-            tau[:, kin._qidx[j]] += np.einsum("ni,ni->n", axes[:, j], n_sub[:, c] if joint.kind == "revolute" else f_sub[:, c])
+        if qi >= 0:  # += : a mimic joint's generalised force adds to the joint it follows
+            tau[:, qi] += np.einsum("ni,ni->n", axes[:, j], n_sub[:, c] if joint.kind == "revolute" else f_sub[:, c])
+        if p == 0:
+            continue
         # hand the subtree's wrench to the parent, as a moment about the parent's own pivot
-        jp = kin._child.index(p) if p != 0 else None
-        pivot_p = pivots[:, jp] if jp is not None else np.zeros(3)
+        pivot_p = pivots[:, kin._child.index(p)]
         f_sub[:, p] += f_sub[:, c]
         n_sub[:, p] += n_sub[:, c] + cross_rows(pivots[:, j] - pivot_p, f_sub[:, c])
     return tau[0] if single else tau
