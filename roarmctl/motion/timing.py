@@ -23,6 +23,7 @@ runs again with limits tightened by ``SAFETY_STEPS``.
 
 from __future__ import annotations
 
+import logging
 import types
 from dataclasses import dataclass
 from typing import Callable, Sequence
@@ -142,6 +143,15 @@ def import_toppra():
     import toppra.constraint  # noqa: F401
 
     return toppra
+
+
+def _quiet_toppra() -> None:
+    """Keep only toppra's CRITICAL log messages (it warns about awkward grid points while it works). toppra's
+    own ``setup_logging`` adds another console handler at every call: a long-lived process repeated each
+    message once per motion it had timed."""
+    logger = logging.getLogger("toppra")
+    if logger.level != logging.CRITICAL:
+        logger.setLevel(logging.CRITICAL)
 
 
 def toppra_grid(ss: np.ndarray) -> np.ndarray:
@@ -289,6 +299,25 @@ class _Profile:
         self.s_end = float(self.s[-1])
         # integral of s over [0, t_i]
         self.S = np.concatenate([[0.0], np.cumsum(self.s[:-1] * dt + sd[:-1] * dt**2 / 2 + self.sdd * dt**3 / 6)])
+        self._last: tuple[np.ndarray, tuple] | None = None  # (t, eval(t)) of the last _eval_grid call
+
+    def _eval_grid(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``eval(t)``, reusing the previous call's values where ``t`` and the previous ``t`` agree: the jerk
+        check asks for the same fine grid (growing with the filter width) at every width it tries. ``eval`` is
+        elementwise in ``t``, so the result is the same bit for bit."""
+        last = self._last
+        if last is not None:
+            lt, lv = last
+            m = min(len(t), len(lt))
+            if m and np.array_equal(t[:m], lt[:m]):
+                if len(t) <= len(lt):
+                    return tuple(v[:len(t)] for v in lv)
+                out = tuple(np.concatenate([a, b]) for a, b in zip(lv, self.eval(t[m:])))
+                self._last = (t, out)
+                return out
+        out = self.eval(t)
+        self._last = (t, out)
+        return out
 
     def eval(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Integral of s, s, sdot, sddot at times ``t`` (any shape); at rest before 0 and after the end."""
@@ -310,7 +339,7 @@ class _Profile:
         if w <= 0:
             _, s, v, a = self.eval(t)
             return s, v, a
-        S1, s1, v1, a1 = self.eval(t)
+        S1, s1, v1, a1 = self._eval_grid(t)
         S0, s0, v0, a0 = self.eval(t - w)
         s = np.clip((S1 - S0) / w, 0.0, self.s_end)
         return s, (s1 - s0) / w, (v1 - v0) / w
@@ -416,7 +445,7 @@ def time_parameterise(
     ta = import_toppra()
     algo, constraint = ta.algorithm, ta.constraint
 
-    ta.setup_logging("CRITICAL")
+    _quiet_toppra()
     wp = dedupe(np.asarray(waypoints, dtype=float))
     n = wp.shape[1]
     if len(wp) < 2:
