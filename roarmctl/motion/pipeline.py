@@ -150,8 +150,13 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
 
 
 def load_planning_libraries() -> None:
-    """Import toppra (about 0.5 s, mostly scipy), OMPL and FCL up front, so stage timings measure work, not imports."""
+    """Import toppra (about 0.5 s, mostly scipy), OMPL and FCL up front, so stage timings measure work, not imports
+    (also Ruckig, the blend's corner moves, and RNEA's module: 1-2 ms that a fresh process otherwise counted as
+    blend and toppra time)."""
     import fcl  # noqa: F401
+    import ruckig  # noqa: F401
+
+    import roarmctl.robot.dynamics  # noqa: F401
     from roarmctl.motion.timing import import_toppra
 
     import_toppra()
