@@ -4,7 +4,7 @@ Run: .venv/bin/python bench/bench_startup.py [--rounds 20]
 
 Each round runs, one after the other (interleaved, so machine load hits every command alike):
 ``python -c pass``; ``roarmctl --help``; ``roarmctl plan plans/pick_place.yaml`` (whole process,
-planning included; its own ``planning_time`` in this fresh process is reported too); a bare
+planning included; its own ``planning_time`` in this fresh process is reported too, with its stage split); a bare
 ``import toppra``; and ``import_toppra()`` (toppra with pyplot and the matplotlib package deferred).
 Targets (issue 10): plan <= 1.0 s, --help <= 0.3 s on an idle 2-core machine; planning_time <= 100 ms.
 Bytecode: roarmctl is compiled first (python -m compileall), as a normal install does; the
@@ -54,18 +54,24 @@ def main() -> None:
     }
     walls: dict[str, list[float]] = {k: [] for k in cases}
     planning: list[float] = []
+    stages: dict[str, list[float]] = {}
     for _ in range(args.rounds):
         for name, cmd in cases.items():
             dt, stdout = _run(cmd)
             walls[name].append(dt)
             if name.startswith("roarmctl plan"):
-                planning.append(json.loads(stdout)["planning_time"])
+                result = json.loads(stdout)
+                planning.append(result["planning_time"])
+                for stage, t in result["timings"].items():
+                    stages.setdefault(stage, []).append(t)
     base = statistics.median(walls["python -c pass"])
     print(f"{args.rounds} interleaved rounds; medians (ratio to `python -c pass` in the same run)")
     for name, v in walls.items():
         m = statistics.median(v)
         print(f"  {name:<36} {m * 1000:7.0f} ms   {m / base:6.1f}x")
     print(f"  {'planning_time of pick_place (fresh)':<36} {statistics.median(planning) * 1000:7.0f} ms")
+    split = ", ".join(f"{k} {statistics.median(v) * 1000:.0f}" for k, v in stages.items() if any(v))
+    print(f"  {'  its stages (medians, ms)':<36} {split}")
 
 
 if __name__ == "__main__":
