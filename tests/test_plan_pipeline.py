@@ -507,3 +507,50 @@ def test_the_jaws_close_during_the_descent_and_open_during_the_retreat_but_never
         obj.setTransform(fcl.Transform(f[:3, :3], f[:3, 3]))
         closest.append(fcl.distance(obj, cube, fcl.DistanceRequest(), fcl.DistanceResult()))
     assert min(closest) < plan.planner.padding
+
+
+def test_a_gripper_action_that_swings_the_jaw_into_an_obstacle_is_refused(tmp_path):
+    """Opening the gripper at rest is checked along the jaw's sweep: a small post beside the moving jaw at home,
+    clear of the closed jaw but inside the padding somewhere on the jaw's way to open (python-fcl distance,
+    generic FK, boxes from the description), makes the plan fail with exit 3 naming the jaw link and the post
+    and writing nothing; 10 cm further out the same plan is planned."""
+    robot = load_robot("roarm_m3_pro")
+    gi = robot.joint_index(robot.gripper.joint)
+    padding = 0.005
+    home = robot.full_q(robot.named_poses["home"])
+    jaws = _moving_jaw_boxes(robot)
+
+    def clearance(y: float, g: float) -> float:
+        post = fcl.CollisionObject(fcl.Box(0.01, 0.01, 0.01), fcl.Transform(np.eye(3), np.array([0.30, y, 0.344])))
+        q = home.copy()
+        q[gi] = g
+        frames = robot.kin.link_frames(q)
+        out = []
+        for shape, obj in jaws:
+            f = frames[robot.kin.link_index[shape.link]] @ shape.origin
+            obj.setTransform(fcl.Transform(f[:3, :3], f[:3, 3]))
+            out.append(fcl.distance(obj, post, fcl.DistanceRequest(), fcl.DistanceResult()))
+        return min(out)
+
+    sweep = np.linspace(robot.gripper.closed, robot.gripper.open, 61)
+    assert clearance(-0.06, robot.gripper.closed) > padding
+    assert min(clearance(-0.06, g) for g in sweep) < padding
+    assert min(clearance(-0.16, g) for g in sweep) > padding
+
+    def plan(y: float) -> tuple[subprocess.CompletedProcess, Path]:
+        src = tmp_path / f"jaw_{-y:.2f}.yaml"
+        src.write_text("robot: roarm_m3_pro\nstart: home\nscene:\n  obstacles:\n"
+                       f"    - {{name: post, shape: box, size: [0.01, 0.01, 0.01], xyz: [0.30, {y}, 0.344]}}\n"
+                       "tasks:\n  - move: {pose: home, gripper: open}\n"
+                       f"planner: {{padding: {padding}}}\n")
+        out = tmp_path / f"jaw_{-y:.2f}.traj.json"
+        return roarmctl("plan", str(src), "-o", str(out)), out
+
+    bad, out = plan(-0.06)
+    assert bad.returncode == 3, bad.stderr
+    (line,) = bad.stderr.strip().splitlines()
+    assert "moving jaw collides" in line and "gripper_link" in line and "'post'" in line
+    assert not out.exists()
+    good, out = plan(-0.16)
+    assert good.returncode == 0, good.stderr
+    assert out.is_file()
