@@ -305,6 +305,122 @@ static void full_q(const Model *m, const double *q, const double *grip, Py_ssize
     if (n_grip && m->grip >= 0) qf[m->grip] = grip[i];
 }
 
+/* One state: arm values qi (arm_n), gripper value *gp (or the template's when gp is NULL), output row i.
+ * Returns 1 (valid so far: FCL decides the candidates it added), 0 (limits or margin) or -1 (a candidate
+ * buffer is full). With stop, an invalid state returns at once (no near flag, no poses). */
+static int check_state(const Model *mp, const double *qi, const double *gp, Py_ssize_t i, uint8_t *valid, uint8_t *near,
+                       int64_t *sc, Py_ssize_t *ns, Py_ssize_t cap_s, int64_t *pc, Py_ssize_t *np_, Py_ssize_t cap_p,
+                       double *pose, double sweep, int stop) {
+    const Model m = *mp;
+    double qf[MAXDOF], Fr[16 * MAXLINKS];
+    near[i] = 0;
+    int ok = 1;
+    for (int64_t j = 0; j < m.arm_n; j++)
+        if (!(qi[j] >= m.lower[j] - 1e-9 && qi[j] <= m.upper[j] + 1e-9)) ok = 0;
+    memcpy(qf, m.qt, m.dof * sizeof(double));
+    for (int64_t j = 0; j < m.arm_n; j++) qf[m.arm[j]] = qi[j];
+    if (gp && m.grip >= 0) qf[m.grip] = *gp;
+    fk(&m, qf, Fr);
+    if (ok && m.has_margin && !margin_ok(&m, Fr)) ok = 0;
+    valid[i] = (uint8_t)ok;
+    if (!ok && stop) return 0;
+    double *ps = pose + i * m.S * POSEF;
+    uint8_t rot_done[MAXSHAPES];  /* rotations only for the shapes that pass a sphere test */
+    for (int64_t a = 0; a < m.S; a++) {
+        const double *L = Fr + 16 * m.shape_link[a], *sf = m.shapef + SHAPEF * a;
+        double *o = ps + POSEF * a;
+        for (int r = 0; r < 3; r++)
+            o[9 + r] = L[4 * r + 3] + (L[4 * r] * sf[9] + L[4 * r + 1] * sf[10] + L[4 * r + 2] * sf[11]);
+        rot_done[a] = 0;
+    }
+#define NEED_ROT(a)                                                                                          \
+    if (!rot_done[a]) {                                                                                     \
+    const double *L_ = Fr + 16 * m.shape_link[a], *sf_ = m.shapef + SHAPEF * (a);                        \
+    double *o_ = ps + POSEF * (a);                                                                      \
+    for (int r = 0; r < 3; r++)                                                                         \
+        for (int c = 0; c < 3; c++)                                                                     \
+            o_[3 * r + c] = L_[4 * r] * sf_[c] + L_[4 * r + 1] * sf_[3 + c] + L_[4 * r + 2] * sf_[6 + c]; \
+    rot_done[a] = 1;                                                                                    \
+    }
+    for (int64_t g = 0; g < m.n_groups; g++) {
+        /* the group's sphere holds every sphere of its shapes: where it (grown by sweep) misses an item's
+         * box, so do they, and the item is skipped for all of them */
+        const double *L = Fr + 16 * m.g_link[g], *gc = m.g_c + 3 * g;
+        double cg[3], gr = m.g_r[g] + (sweep > 0 ? sweep : 0.0);
+        for (int r = 0; r < 3; r++) cg[r] = L[4 * r + 3] + L[4 * r] * gc[0] + L[4 * r + 1] * gc[1] + L[4 * r + 2] * gc[2];
+        for (int64_t k = 0; k < m.M; k++) {
+            if (!m.g_mask[g * m.M + k]) continue;
+            const double *it = m.itemf + ITEMF * k;
+            double dg = 0;
+            for (int r = 0; r < 3; r++) {
+                double e = fabs(cg[r] - it[r]) - it[3 + r];
+                if (e > 0) dg += e * e;
+            }
+            if (!(dg < gr * gr)) continue;
+            for (int64_t gi = m.g_start[g]; gi < m.g_start[g + 1]; gi++) {
+                int64_t ai = m.g_order[gi], a = m.active[ai];
+                if (!m.amask[ai * m.M + k]) continue;
+                const double *o = ps + POSEF * a, *sf = m.shapef + SHAPEF * a;
+                double r2 = m.active_r2[ai];
+                double d2 = 0;
+                for (int r = 0; r < 3; r++) {
+                    double e = fabs(o[9 + r] - it[r]) - it[3 + r];
+                    if (e > 0) d2 += e * e;
+                }
+                if (sweep > 0 && d2 < (m.active_r[ai] + sweep) * (m.active_r[ai] + sweep)) near[i] = 1;
+                if (!ok || !(d2 < r2)) continue;
+                NEED_ROT(a)
+                int in = 1;  /* world boxes */
+                for (int r = 0; r < 3 && in; r++) {
+                    double hw = fabs(o[3 * r]) * sf[12] + fabs(o[3 * r + 1]) * sf[13] + fabs(o[3 * r + 2]) * sf[14];
+                    if (!(fabs(o[9 + r] - it[r]) < hw + it[3 + r])) in = 0;
+                }
+                if (!in || obb_apart(o, o + 9, sf + 12, it + 6, it + 15, it + 18)) continue;
+                if (*ns >= cap_s) return -1;
+                sc[3 * *ns] = i; sc[3 * *ns + 1] = a; sc[3 * *ns + 2] = k; (*ns)++;
+            }
+        }
+    }
+    for (int64_t lp = 0; lp < m.n_lp; lp++) {
+        /* each link's sphere holds the spheres of its shapes: where the two links' spheres (grown by sweep)
+         * are apart, so are all their shape pairs */
+        const double *LA = Fr + 16 * m.lp_links[2 * lp], *LB = Fr + 16 * m.lp_links[2 * lp + 1], *f = m.lp_f + 8 * lp;
+        double dl = 0, lim = f[3] + f[7] + (sweep > 0 ? 2 * sweep : 0.0);
+        for (int r = 0; r < 3; r++) {
+            double e = (LA[4 * r + 3] + LA[4 * r] * f[0] + LA[4 * r + 1] * f[1] + LA[4 * r + 2] * f[2])
+                       - (LB[4 * r + 3] + LB[4 * r] * f[4] + LB[4 * r + 1] * f[5] + LB[4 * r + 2] * f[6]);
+            dl += e * e;
+        }
+        if (!(dl < lim * lim)) continue;
+      for (int64_t pk = m.lp_start[lp]; pk < m.lp_start[lp + 1]; pk++) {
+        int64_t p = m.lp_order[pk];
+        int64_t a = m.pairs[2 * p], bb = m.pairs[2 * p + 1];
+        const double *oa = ps + POSEF * a, *ob = ps + POSEF * bb;
+        const double *fa = m.shapef + SHAPEF * a, *fb = m.shapef + SHAPEF * bb;
+        double d2 = 0, dd[3];
+        for (int r = 0; r < 3; r++) {
+            dd[r] = oa[9 + r] - ob[9 + r];
+            d2 += dd[r] * dd[r];
+        }
+        double r2 = m.pair_r2[p];
+        if (sweep > 0 && !near[i] && d2 < (m.pair_r[p] + 2 * sweep) * (m.pair_r[p] + 2 * sweep)) near[i] = 1;
+        if (!ok || !(d2 < r2)) continue;
+        NEED_ROT(a)
+        NEED_ROT(bb)
+        int in = 1;
+        for (int r = 0; r < 3 && in; r++) {
+            double ha = fabs(oa[3 * r]) * fa[15] + fabs(oa[3 * r + 1]) * fa[16] + fabs(oa[3 * r + 2]) * fa[17];
+            double hb = fabs(ob[3 * r]) * fb[15] + fabs(ob[3 * r + 1]) * fb[16] + fabs(ob[3 * r + 2]) * fb[17];
+            if (!(fabs(dd[r]) < ha + hb)) in = 0;
+        }
+        if (!in || obb_apart(oa, oa + 9, fa + 15, ob, ob + 9, fb + 15)) continue;
+        if (*np_ >= cap_p) return -1;
+        pc[2 * *np_] = i; pc[2 * *np_ + 1] = p; (*np_)++;
+      }
+    }
+        return ok;
+}
+
 static int get_in(PyObject *o, Py_buffer *b) { return PyObject_GetBuffer(o, b, PyBUF_C_CONTIGUOUS); }
 static int get_out(PyObject *o, Py_buffer *b) { return PyObject_GetBuffer(o, b, PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE); }
 
@@ -337,115 +453,14 @@ static PyObject *check(PyObject *self, PyObject *const *args, Py_ssize_t nargs) 
         PyErr_SetString(PyExc_ValueError, "_checkkernel.check: output buffers too small");
         goto done;
     }
-    double qf[MAXDOF], Fr[16 * MAXLINKS];
     Py_ssize_t ns = 0, np_ = 0, limit = N;
     for (Py_ssize_t i = 0; i < N; i++) {
-        near[i] = 0;
-        const double *qi = q + i * m.arm_n;
-        int ok = 1;
-        for (int64_t j = 0; j < m.arm_n; j++)
-            if (!(qi[j] >= m.lower[j] - 1e-9 && qi[j] <= m.upper[j] + 1e-9)) ok = 0;
-        full_q(&m, q, grip, n_grip, i, qf);
-        fk(&m, qf, Fr);
-        if (ok && m.has_margin && !margin_ok(&m, Fr)) ok = 0;
-        valid[i] = (uint8_t)ok;
+        int ok = check_state(&m, q + i * m.arm_n, n_grip ? grip + i : NULL, i, valid, near, sc, &ns, cap_s, pc, &np_,
+                             cap_p, pose, sweep, stop);
+        if (ok < 0) goto overflow;
         if (!ok && stop) {
             limit = i;
             break;
-        }
-        double *ps = pose + i * m.S * POSEF;
-        uint8_t rot_done[MAXSHAPES];  /* rotations only for the shapes that pass a sphere test */
-        for (int64_t a = 0; a < m.S; a++) {
-            const double *L = Fr + 16 * m.shape_link[a], *sf = m.shapef + SHAPEF * a;
-            double *o = ps + POSEF * a;
-            for (int r = 0; r < 3; r++)
-                o[9 + r] = L[4 * r + 3] + (L[4 * r] * sf[9] + L[4 * r + 1] * sf[10] + L[4 * r + 2] * sf[11]);
-            rot_done[a] = 0;
-        }
-#define NEED_ROT(a)                                                                                          \
-    if (!rot_done[a]) {                                                                                     \
-        const double *L_ = Fr + 16 * m.shape_link[a], *sf_ = m.shapef + SHAPEF * (a);                        \
-        double *o_ = ps + POSEF * (a);                                                                      \
-        for (int r = 0; r < 3; r++)                                                                         \
-            for (int c = 0; c < 3; c++)                                                                     \
-                o_[3 * r + c] = L_[4 * r] * sf_[c] + L_[4 * r + 1] * sf_[3 + c] + L_[4 * r + 2] * sf_[6 + c]; \
-        rot_done[a] = 1;                                                                                    \
-    }
-        for (int64_t g = 0; g < m.n_groups; g++) {
-            /* the group's sphere holds every sphere of its shapes: where it (grown by sweep) misses an item's
-             * box, so do they, and the item is skipped for all of them */
-            const double *L = Fr + 16 * m.g_link[g], *gc = m.g_c + 3 * g;
-            double cg[3], gr = m.g_r[g] + (sweep > 0 ? sweep : 0.0);
-            for (int r = 0; r < 3; r++) cg[r] = L[4 * r + 3] + L[4 * r] * gc[0] + L[4 * r + 1] * gc[1] + L[4 * r + 2] * gc[2];
-            for (int64_t k = 0; k < m.M; k++) {
-                if (!m.g_mask[g * m.M + k]) continue;
-                const double *it = m.itemf + ITEMF * k;
-                double dg = 0;
-                for (int r = 0; r < 3; r++) {
-                    double e = fabs(cg[r] - it[r]) - it[3 + r];
-                    if (e > 0) dg += e * e;
-                }
-                if (!(dg < gr * gr)) continue;
-                for (int64_t gi = m.g_start[g]; gi < m.g_start[g + 1]; gi++) {
-                    int64_t ai = m.g_order[gi], a = m.active[ai];
-                    if (!m.amask[ai * m.M + k]) continue;
-                    const double *o = ps + POSEF * a, *sf = m.shapef + SHAPEF * a;
-                    double r2 = m.active_r2[ai];
-                    double d2 = 0;
-                    for (int r = 0; r < 3; r++) {
-                        double e = fabs(o[9 + r] - it[r]) - it[3 + r];
-                        if (e > 0) d2 += e * e;
-                    }
-                    if (sweep > 0 && d2 < (m.active_r[ai] + sweep) * (m.active_r[ai] + sweep)) near[i] = 1;
-                    if (!ok || !(d2 < r2)) continue;
-                    NEED_ROT(a)
-                    int in = 1;  /* world boxes */
-                    for (int r = 0; r < 3 && in; r++) {
-                        double hw = fabs(o[3 * r]) * sf[12] + fabs(o[3 * r + 1]) * sf[13] + fabs(o[3 * r + 2]) * sf[14];
-                        if (!(fabs(o[9 + r] - it[r]) < hw + it[3 + r])) in = 0;
-                    }
-                    if (!in || obb_apart(o, o + 9, sf + 12, it + 6, it + 15, it + 18)) continue;
-                    if (ns >= cap_s) goto overflow;
-                    sc[3 * ns] = i; sc[3 * ns + 1] = a; sc[3 * ns + 2] = k; ns++;
-                }
-            }
-        }
-        for (int64_t lp = 0; lp < m.n_lp; lp++) {
-            /* each link's sphere holds the spheres of its shapes: where the two links' spheres (grown by sweep)
-             * are apart, so are all their shape pairs */
-            const double *LA = Fr + 16 * m.lp_links[2 * lp], *LB = Fr + 16 * m.lp_links[2 * lp + 1], *f = m.lp_f + 8 * lp;
-            double dl = 0, lim = f[3] + f[7] + (sweep > 0 ? 2 * sweep : 0.0);
-            for (int r = 0; r < 3; r++) {
-                double e = (LA[4 * r + 3] + LA[4 * r] * f[0] + LA[4 * r + 1] * f[1] + LA[4 * r + 2] * f[2])
-                           - (LB[4 * r + 3] + LB[4 * r] * f[4] + LB[4 * r + 1] * f[5] + LB[4 * r + 2] * f[6]);
-                dl += e * e;
-            }
-            if (!(dl < lim * lim)) continue;
-          for (int64_t pk = m.lp_start[lp]; pk < m.lp_start[lp + 1]; pk++) {
-            int64_t p = m.lp_order[pk];
-            int64_t a = m.pairs[2 * p], bb = m.pairs[2 * p + 1];
-            const double *oa = ps + POSEF * a, *ob = ps + POSEF * bb;
-            const double *fa = m.shapef + SHAPEF * a, *fb = m.shapef + SHAPEF * bb;
-            double d2 = 0, dd[3];
-            for (int r = 0; r < 3; r++) {
-                dd[r] = oa[9 + r] - ob[9 + r];
-                d2 += dd[r] * dd[r];
-            }
-            double r2 = m.pair_r2[p];
-            if (sweep > 0 && !near[i] && d2 < (m.pair_r[p] + 2 * sweep) * (m.pair_r[p] + 2 * sweep)) near[i] = 1;
-            if (!ok || !(d2 < r2)) continue;
-            NEED_ROT(a)
-            NEED_ROT(bb)
-            int in = 1;
-            for (int r = 0; r < 3 && in; r++) {
-                double ha = fabs(oa[3 * r]) * fa[15] + fabs(oa[3 * r + 1]) * fa[16] + fabs(oa[3 * r + 2]) * fa[17];
-                double hb = fabs(ob[3 * r]) * fb[15] + fabs(ob[3 * r + 1]) * fb[16] + fabs(ob[3 * r + 2]) * fb[17];
-                if (!(fabs(dd[r]) < ha + hb)) in = 0;
-            }
-            if (!in || obb_apart(oa, oa + 9, fa + 15, ob, ob + 9, fb + 15)) continue;
-            if (np_ >= cap_p) goto overflow;
-            pc[2 * np_] = i; pc[2 * np_ + 1] = p; np_++;
-          }
         }
     }
     for (Py_ssize_t i = limit + 1; i < N; i++) {
@@ -456,6 +471,88 @@ static PyObject *check(PyObject *self, PyObject *const *args, Py_ssize_t nargs) 
     goto done;
 overflow:
     PyErr_SetString(PyExc_ValueError, "_checkkernel.check: candidate buffer too small");
+done:
+    for (int k = 0; k < got; k++) PyBuffer_Release(&b[k]);
+    return result;
+}
+
+/* check_line(F, I, q0, d, steps, start, stride, idx, refine, valid, near, scene, self, pose, sweep, stop)
+ *   -> (n_scene, n_self, limit, count)
+ * Like check() for the states of the segment q0 -> q0 + d without building them in Python: state i of the
+ * segment is q0 + d * t_i with t_i = i * (1 / steps) and t_steps = 1 (np.linspace's numbers). Without idx
+ * (empty) the states are i = start, start + stride, ... <= steps; with idx, the states between i and i + 1
+ * for each i of idx: s_i + (s_{i+1} - s_i) * (k / refine), k = 1 .. refine - 1 (the refinement). */
+static void line_state(const double *q0, const double *d, int64_t n, int64_t steps, int64_t i, double *out) {
+    double t = i == steps ? 1.0 : (double)i * (1.0 / (double)steps);
+    for (int64_t j = 0; j < n; j++) out[j] = q0[j] + d[j] * t;
+}
+
+static PyObject *check_line(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 16) {
+        PyErr_SetString(PyExc_TypeError, "check_line() takes 16 arguments");
+        return NULL;
+    }
+    static const int bufarg[10] = {0, 1, 2, 3, 7, 9, 10, 11, 12, 13};
+    Py_buffer b[10];
+    int got = 0;
+    PyObject *result = NULL;
+    for (; got < 10; got++)
+        if ((got < 5 ? get_in(args[bufarg[got]], &b[got]) : get_out(args[bufarg[got]], &b[got])) < 0) goto done;
+    int64_t steps = PyLong_AsLongLong(args[4]), start = PyLong_AsLongLong(args[5]), stride = PyLong_AsLongLong(args[6]);
+    int64_t refine = PyLong_AsLongLong(args[8]);
+    double sweep = PyFloat_AsDouble(args[14]);
+    int stop = PyObject_IsTrue(args[15]);
+    if (PyErr_Occurred()) goto done;
+    Model m;
+    if (parse_model(&m, &b[0], &b[1]) < 0) goto done;
+    const double *q0 = b[2].buf, *d = b[3].buf;
+    const int64_t *idx = b[4].buf;
+    Py_ssize_t n_idx = b[4].len / 8;
+    uint8_t *valid = b[5].buf, *near = b[6].buf;
+    int64_t *sc = b[7].buf, *pc = b[8].buf;
+    double *pose = b[9].buf;
+    Py_ssize_t cap_s = b[7].len / 24, cap_p = b[8].len / 16;
+    if (steps < 1 || stride < 1 || start < 0 || refine < 1 || b[2].len != 8 * m.arm_n || b[3].len != 8 * m.arm_n) {
+        PyErr_SetString(PyExc_ValueError, "_checkkernel.check_line: bad arguments");
+        goto done;
+    }
+    Py_ssize_t N = n_idx ? n_idx * (refine - 1) : (start > steps ? 0 : (steps - start) / stride + 1);
+    if (b[5].len < N || b[6].len < N || b[9].len < (Py_ssize_t)(N * m.S * POSEF * 8)) {
+        PyErr_SetString(PyExc_ValueError, "_checkkernel.check_line: output buffers too small");
+        goto done;
+    }
+    double qa[MAXDOF], qb[MAXDOF], qs[MAXDOF];
+    Py_ssize_t ns = 0, np_ = 0, limit = N, row = 0;
+    for (Py_ssize_t u = 0; u < (n_idx ? n_idx : N); u++) {
+        int64_t kmax = n_idx ? refine - 1 : 1;
+        if (n_idx) {
+            line_state(q0, d, m.arm_n, steps, idx[u], qa);
+            line_state(q0, d, m.arm_n, steps, idx[u] + 1, qb);
+        }
+        for (int64_t k = 1; k <= kmax; k++, row++) {
+            if (n_idx) {
+                double t = (double)k / (double)refine;
+                for (int64_t j = 0; j < m.arm_n; j++) qs[j] = qa[j] + (qb[j] - qa[j]) * t;
+            } else {
+                line_state(q0, d, m.arm_n, steps, start + u * stride, qs);
+            }
+            int ok = check_state(&m, qs, NULL, row, valid, near, sc, &ns, cap_s, pc, &np_, cap_p, pose, sweep, stop);
+            if (ok < 0) goto overflow;
+            if (!ok && stop) {
+                limit = row;
+                goto finished;
+            }
+        }
+    }
+finished:
+    for (Py_ssize_t i = limit + 1; i < N; i++) {
+        valid[i] = 1;
+        near[i] = 0;
+    }
+    result = Py_BuildValue("nnnn", ns, np_, limit, N);
+    goto done;
+overflow:
+    PyErr_SetString(PyExc_ValueError, "_checkkernel.check_line: candidate buffer too small");
 done:
     for (int k = 0; k < got; k++) PyBuffer_Release(&b[k]);
     return result;
@@ -528,6 +625,7 @@ done:
 
 static PyMethodDef methods[] = {
     {"check", (PyCFunction)(void (*)(void))check, METH_FASTCALL, "Batch state check (see collision.py)."},
+    {"check_line", (PyCFunction)(void (*)(void))check_line, METH_FASTCALL, "Check states of a straight segment."},
     {"frames", (PyCFunction)(void (*)(void))frames, METH_FASTCALL, "Link frames of a batch."},
     {"sigma", (PyCFunction)(void (*)(void))sigma, METH_FASTCALL, "Margin measure of a batch."},
     {"apart", (PyCFunction)(void (*)(void))apart, METH_FASTCALL, "Separating-axis test of two boxes."},

@@ -45,6 +45,7 @@ from roarmctl.robot.model import Robot
 
 _EPS = 1e-9  # rad: joint-limit tolerance (the kernel uses the same)
 _NO_GRIP = memoryview(np.zeros(0))  # "every state at the set_gripper value"
+_NO_IDX = np.zeros(0, dtype=np.int64)
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
 
 
@@ -572,22 +573,41 @@ class CollisionChecker:
         so that a finer re-check of the segment does not find what the coarse one missed.
         """
         with self._lock:
-            q = interpolate(q0, q1, resolution)
-            if len(q) > 4 * COARSE_STRIDE and not self._all_valid(q[COARSE_STRIDE::COARSE_STRIDE]):
+            # The states of interpolate(q0, q1, resolution), made by the kernel itself (same numbers).
+            q0 = np.ascontiguousarray(q0, dtype=float).ravel()
+            d = np.ascontiguousarray(q1, dtype=float).ravel() - q0
+            steps = max(1, int(np.ceil(np.sqrt(d.dot(d)) / resolution)))
+            if steps + 1 > 4 * COARSE_STRIDE and not self._line_ok(q0, d, steps, COARSE_STRIDE, COARSE_STRIDE):
                 return False  # most invalid motions are caught by every 8th state, at an eighth of the cost
-            d = q[1] - q[0]
-            sweep = 0.5 * float(np.sqrt(d.dot(d))) * self.sweep_gain
-            if not self._all_valid(q, sweep):
+            e = (q0 + d * (1.0 / steps)) - q0  # the first step, as interpolate's q[1] - q[0]
+            sweep = 0.5 * float(np.sqrt(e.dot(e))) * self.sweep_gain
+            if not self._line_ok(q0, d, steps, 0, 1, sweep):
                 return False
             if refine <= 1 or sweep <= 0:
                 return True
-            near = self._bufs["near"][:len(q)].view(bool)  # of the call just made
-            steps = np.flatnonzero(near[:-1] | near[1:])
-            if len(steps) == 0:
+            near = self._bufs["near"][:steps + 1].view(bool)  # of the call just made
+            idx = np.flatnonzero(near[:-1] | near[1:])
+            if len(idx) == 0:
                 return True
-            t = np.arange(1, refine)[None, :, None] / refine
-            sub = q[steps][:, None, :] + (q[steps + 1] - q[steps])[:, None, :] * t
-            return self._all_valid(sub.reshape(-1, q.shape[1]))
+            return self._line_ok(q0, d, steps, 0, 1, 0.0, idx, refine)
+
+    def _line_ok(self, q0: np.ndarray, d: np.ndarray, steps: int, start: int, stride: int, sweep: float = 0.0,
+                 idx: np.ndarray | None = None, refine: int = 1) -> bool:
+        """True when the states of the segment q0 -> q0 + d that ``_checkkernel.check_line`` makes (see there) are
+        all valid; stops at the first invalid one. With ``sweep`` > 0 the "near" flags stay in ``self._bufs``."""
+        idx = _NO_IDX if idx is None else np.ascontiguousarray(idx, dtype=np.int64)
+        n = len(idx) * (refine - 1) if len(idx) else (steps - start) // stride + 1 if start <= steps else 0
+        self.check_count += n
+        b = self._buffers(max(n, 1))
+        ns, npairs, limit, _ = _kernel.check_line(self._kfm, self._kim, q0, d, steps, start, stride, idx, refine,
+                                                  *b["views"], float(sweep), True)
+        if limit < n:  # limits or margin
+            return False
+        if ns or npairs:
+            valid = np.ones(n, dtype=bool)
+            self._narrow(valid, b, ns, npairs, True)
+            return bool(valid.all())
+        return True
 
     def _all_valid(self, q: np.ndarray, sweep: float = 0.0) -> bool:
         """True when every state of ``q`` (N, arm_dof) is valid; stops at the first invalid one. With ``sweep``
