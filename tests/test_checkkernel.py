@@ -153,3 +153,22 @@ def test_margin_decisions_equal_the_margin_measure(name):
     for margin in [*np.quantile(sig, [0.05, 0.3, 0.6]), sig[17], sig[99]]:
         checker = CollisionChecker(robot, Scene([]), singularity_margin=float(margin))
         np.testing.assert_array_equal(checker.validity_batch(q), free & (sig >= margin))
+
+
+def test_segment_states_made_by_the_kernel_are_interpolates_states():
+    """segment_valid without refinement (the kernel makes the states) answers as validity_batch of
+    interpolate()'s states, on 600 random segments around the example scene's obstacles, at two resolutions."""
+    from roarmctl.motion.collision import interpolate
+
+    robot = load_robot("roarm_m3_pro")
+    checker = CollisionChecker(robot, example_scene(), singularity_margin=0.02)
+    rng = np.random.default_rng(8)
+    q = rng.uniform(checker._lower, checker._upper, (600, robot.arm_dof))
+    answers = set()
+    for q0 in q:
+        q1 = q0 + rng.normal(size=robot.arm_dof) * rng.choice([0.05, 0.3, 1.0])
+        for res in (0.01, 0.07):
+            expected = bool(checker.validity_batch(interpolate(q0, q1, res)).all())
+            assert checker.segment_valid(q0, q1, res, refine=1) is expected
+            answers.add(expected)
+    assert answers == {True, False}
