@@ -875,7 +875,12 @@ class Planner:
         # shortest first; among equals the earliest end in the second motion and the latest start in the first (a
         # straight line stays exact for longer)
         def ranked(keys) -> list[tuple[int, int]]:
-            return [key for _, key in sorted(((total(key), key[1], -key[0], totals[key]), key) for key in keys)]
+            keys = list(keys)
+            if not keys:
+                return []
+            i, k = np.array(keys).T
+            n = np.array([totals[key] for key in keys])
+            return [keys[j] for j in np.lexsort((n, -i, k, i + n - k))]  # total = (i + n - k) dt + tb.duration
 
         best = ranked(key for key in coarse if solve(*key) is not None)[:BRIDGE_REFINE]
         for i0, k0 in best:  # every sample around the best coarse ones
@@ -883,23 +888,20 @@ class Planner:
                 for k in range(max(k0 - BRIDGE_COARSE[1] + 1, 1), min(k0 + BRIDGE_COARSE[1], k_hi + 1)):
                     solve(i, k)
         found = ranked(key for key, n in totals.items() if n is not None and total(key) < beat - 1e-9)
-        for i, k in found[:BRIDGE_TRIES]:
+        found = found[:BRIDGE_TRIES]
+        for i, k in found:
             steps = totals[(i, k)]
             inp.current_position, inp.current_velocity, inp.current_acceleration = ends["a"][i]
             inp.target_position, inp.target_velocity, inp.target_acceleration = ends["b"][k]
             otg.calculate(inp, traj)
             cand = _bridged(ta, tb, i, k, steps, traj, arm)
-            # a cheap look first (every 4th sample of the bridge, both collision states), then the full check
-            coarse_q = cand.q[i:i + steps + 1:4]
-            if any(self._invalid_under(p, coarse_q) for p in (part, prev)):  # prev last: _overlap_ok starts with it
-                continue
             if self._overlap_ok(cand, i, i + steps, prev, part):
                 return cand, i, i + steps
         return None
 
-    def _invalid_under(self, part: _Part, q: np.ndarray) -> bool:
-        """Whether any of ``q`` (M, dof) is invalid under ``part``'s collision state (its gripper value, its grasp target)."""
-        return self._first_invalid_under(part, q) is not None
+    def _target_of(self, part: _Part) -> str | None:
+        """The grasp target the checker gets for ``part`` (``_set_state``: none for the held object)."""
+        return part.step.grasp_target if part.step.grasp_target != self.held else None
 
     def _first_invalid_under(self, part: _Part, q: np.ndarray) -> int | None:
         """The first invalid row of ``q`` (M, dof) under ``part``'s collision state (its gripper value for every row,
@@ -957,7 +959,9 @@ class Planner:
         if model is not None and np.any(np.abs(model.inverse_dynamics(q, qd, qdd)) > model.limits):
             return False
         fine = _interpolate(q, RECHECK_SUBSTEPS)
-        for p in (prev, part):  # each motion's own collision state: the stricter one decides
+        current = self.checker._grasp_target
+        first = part if current is not None and current == self._target_of(part) else prev  # no state switch first
+        for p in (first, part if first is prev else prev):  # each motion's own collision state: the stricter one decides
             self._set_state(p.wps[0][self.gi] if self.gi is not None else None, grasp_target=p.step.grasp_target)
             if self._first_invalid(fine) is not None:
                 return False

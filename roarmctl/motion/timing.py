@@ -399,7 +399,8 @@ def _plateau_cap(prof: _Profile, hold: float) -> float | None:
     return lo if lo > 0.0 else None
 
 
-def _plateau_profile(algo, constraints: list, path, gridpoints: np.ndarray, prof: _Profile, hold: float) -> _Profile | None:
+def _plateau_profile(algo, constraints: list, path, gridpoints: np.ndarray, prof: _Profile, hold: float,
+                     alim: np.ndarray | None = None) -> _Profile | None:
     """``prof`` timed again under a path speed cap that gives it a cruise of about ``hold`` s at its top speed.
 
     Where the time-optimal profile switches from full path acceleration straight to full deceleration (a
@@ -407,10 +408,24 @@ def _plateau_profile(algo, constraints: list, path, gridpoints: np.ndarray, prof
     of 2a / w, so w must double to 2 a / j and the motion lasts a / j longer than the jerk-limited optimum.
     A cruise of w between the two halves lets each step of a pass the filter alone: for one joint this is
     exactly the time-optimal double-S profile (the cruise speed v with v^2 / a + v a / j = d). The cap is a
-    TOPP-RA constraint like the others, so every other limit still holds."""
+    TOPP-RA constraint like the others, so every other limit still holds.
+
+    The capped profile is the uncapped one clipped at c wherever cruising there (zero path acceleration)
+    is allowed, as TOPP-RA's greedy forward pass would make it; with ``alim`` (n,) (the joint acceleration
+    limits TOPP-RA got, None: not known) the clipped profile's joint accelerations are checked at the grid
+    points and, if they keep ``alim``, it is taken without running TOPP-RA again."""
     c = _plateau_cap(prof, hold)
     if c is None:
         return None
+    if alim is not None:
+        clipped = _Profile(gridpoints, np.minimum(prof.sd, c))
+        s = gridpoints
+        ps, pss = path(s, 1), path(s, 2)
+        x = clipped.sd ** 2
+        acc = np.concatenate([ps[:-1] * clipped.sdd[:, None] + pss[:-1] * x[:-1, None],
+                              ps[1:] * clipped.sdd[:, None] + pss[1:] * x[1:, None]])
+        if np.all(np.abs(acc) <= alim * (1 + 1e-9)):
+            return clipped
     instance = algo.TOPPRA(constraints + [_sdot_bound_constraint(np.full(len(gridpoints), c * c))], path,
                            gridpoints=gridpoints, parametrizer="ParametrizeConstAccel")
     instance.compute_parameterization(0.0, 0.0)
@@ -418,6 +433,21 @@ def _plateau_profile(algo, constraints: list, path, gridpoints: np.ndarray, prof
     if data.sd_vec is None or data.return_code.name != "Ok":
         return None
     return _Profile(np.asarray(data.gridpoints, dtype=float), np.asarray(data.sd_vec, dtype=float))
+
+
+def _plateau(algo, constraints: list, path, gridpoints: np.ndarray, prof: _Profile, w0: float, jm: np.ndarray,
+             alim: np.ndarray | None) -> tuple[_Profile, float] | None:
+    """``_plateau_profile`` with a cruise of PLATEAU_SHARES times ``w0`` (the next share if no filter up to the
+    cruise's length passes) and its filter width; None if none passes."""
+    for share in PLATEAU_SHARES:
+        capped = _plateau_profile(algo, constraints, path, gridpoints, prof, share * w0, alim)
+        if capped is None:
+            return None
+        # the filter must stay narrower than the cruise: widen it in small steps up to there
+        wc = _filter_width(path, capped, w0, jm, PLATEAU_GROWTH, int(np.log(share) / np.log(PLATEAU_GROWTH)) + 1)
+        if wc is not None:
+            return capped, wc
+    return None
 
 
 def time_parameterise(
@@ -484,21 +514,22 @@ def time_parameterise(
         w = 0.0
         if jm is not None:
             w0 = max(float(np.max(amax * safety / jm)), 2 * FINE_DT)
-            w = _filter_width(path, prof, w0, jm)
+            w, plateau = None, None
+            if not _jerk_ok(path, prof, w0, jm) and not _jerk_ok(path, prof, PLATEAU_TRIGGER * w0, jm):
+                # the filter would have to widen past the trigger: a cruise at the top first; if it beats even
+                # the trigger's width it beats any width that passes (no full search needed)
+                plateau = _plateau(algo, constraints, path, gridpoints, prof, w0, jm, None if torque_terms is not None else amax * safety)
+                if plateau is not None and plateau[0].T + plateau[1] < prof.T + PLATEAU_TRIGGER * w0:
+                    prof, w = plateau
             if w is None:
-                i += 1
-                continue
-            if w > PLATEAU_TRIGGER * w0:
-                for share in PLATEAU_SHARES:
-                    capped = _plateau_profile(algo, constraints, path, gridpoints, prof, share * w0)
-                    if capped is None:
-                        break
-                    # the filter must stay narrower than the cruise: widen it in small steps up to there
-                    wc = _filter_width(path, capped, w0, jm, PLATEAU_GROWTH, int(np.log(share) / np.log(PLATEAU_GROWTH)) + 1)
-                    if wc is not None:
-                        if capped.T + wc < prof.T + w:
-                            prof, w = capped, wc
-                        break
+                w = _filter_width(path, prof, w0, jm)
+                if w is None:
+                    i += 1
+                    continue
+                if plateau is None and w > PLATEAU_TRIGGER * w0:
+                    plateau = _plateau(algo, constraints, path, gridpoints, prof, w0, jm, None if torque_terms is not None else amax * safety)
+                if plateau is not None and plateau[0].T + plateau[1] < prof.T + w:
+                    prof, w = plateau
         duration = prof.T + w
         count = max(int(np.ceil(duration / sample_dt - 1e-9)), 1)
         times = np.unique(np.minimum(np.arange(count + 1) * sample_dt, duration))
