@@ -1052,8 +1052,8 @@ def _dls_solve(robot: Robot, p: np.ndarray, rot: np.ndarray | None, qr: np.ndarr
     lo, hi = robot.lower[arm], robot.upper[arm]
     rng = np.random.default_rng(seed)
     n_starts = restarts if restarts is not None else (48 if all_solutions else 24)
-    starts = np.array([qr if qr is not None else _default_ref(robot)]
-                      + [robot.full_q(rng.uniform(lo, hi)) for _ in range(n_starts)], dtype=float)
+    starts = np.concatenate([[qr if qr is not None else _default_ref(robot)],
+                             robot.full_q(rng.uniform(lo, hi, size=(n_starts, len(arm))))]).astype(float)
     grip = _gripper_value(robot, qr)
     if grip is not None:
         starts[:, robot.joint_index(robot.gripper.joint)] = grip

@@ -10,8 +10,10 @@ joints only are computed once. A revolute joint about its local z axis (every UR
 RoArm, every DH joint) contributes origin @ Rz(q), which is linear in (cos q, sin q):
 origin @ Rz(q) = cos(q) A + sin(q) B + C with fixed 4x4 A, B, C, so it costs two trig calls, three
 multiply-adds and one batched matmul. One configuration goes through 2-D arrays and Python floats
-(about 40 % less numpy overhead than a batch of one). Other axes and prismatic joints take the
-general path (Rodrigues rotation, translation along the axis).
+(about 40 % less numpy overhead than a batch of one). A revolute joint about another axis u is linear
+in (cos q, sin q) too (Rodrigues: R_u(q) = cos q (I - u u^T) + sin q [u]x + u u^T): its step keeps
+the general form (origin, axis) for the compiled collision checker and carries its A, B, C as a third
+item, which frames4 uses. Prismatic joints take the general path (translation along the axis).
 """
 
 from __future__ import annotations
@@ -126,11 +128,19 @@ class Kinematics:
                 b[:3, 0], b[:3, 1] = origin[:3, 1], -origin[:3, 0]  # sin q terms
                 c[:3, 2], c[:, 3] = origin[:3, 2], origin[:, 3]
                 self._steps.append(("rz", parent, child, qi, float(joint.offset), (a, b, c), post))
+            elif joint.kind == "revolute":
+                u = np.asarray(joint.axis, dtype=float)
+                ux = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+                a, b, c = np.zeros((4, 4)), np.zeros((4, 4)), np.zeros((4, 4))
+                a[:3, :3] = origin[:3, :3] @ (np.eye(3) - np.outer(u, u))
+                b[:3, :3] = origin[:3, :3] @ ux
+                c[:3, :3], c[:, 3] = origin[:3, :3] @ np.outer(u, u), origin[:, 3]
+                self._steps.append(("revolute", parent, child, qi, float(joint.offset), (origin.copy(), u, (a, b, c)), post))
             else:
                 self._steps.append((joint.kind, parent, child, qi, float(joint.offset),
                                     (origin.copy(), np.asarray(joint.axis, dtype=float)), post))
         self._const_links = [i for i, c in enumerate(is_const) if c]
-        self._simple = all(kind in ("rz", "fixed") and post is None for kind, *_, post in self._steps)
+        self._simple = all(kind in ("rz", "revolute", "fixed") and post is None for kind, *_, post in self._steps)
         if self._simple:  # every step as cos(q) A + sin(q) B + C (fixed: A = B = 0), for _frames_one
             k = len(self._steps)
             self._abc = np.zeros((3, k, 4, 4))
@@ -140,6 +150,8 @@ class Kinematics:
             for i, (kind, *_, data, _post) in enumerate(self._steps):
                 if kind == "rz":
                     self._abc[:, i] = data
+                elif kind == "revolute":
+                    self._abc[:, i] = data[2]
                 else:
                     self._abc[2, i] = data[0]
 
@@ -153,18 +165,12 @@ class Kinematics:
         out = np.empty((n, self.n_links, 4, 4))
         out[:, self._const_links] = self._const[self._const_links]
         for kind, parent, child, qi, offset, data, post in self._steps:
-            if kind == "rz":
-                a, b, c = data
+            if kind == "rz" or kind == "revolute":
+                a, b, c = data if kind == "rz" else data[2]
                 ang = q[:, qi] + offset if offset else q[:, qi]
                 m = np.cos(ang)[:, None, None] * a
                 m += np.sin(ang)[:, None, None] * b
                 m += c
-            elif kind == "revolute":
-                origin, axis = data
-                m = np.zeros((n, 4, 4))
-                m[:, :3, :3] = axis_rotation(axis, q[:, qi] + offset)
-                m[:, 3, 3] = 1.0
-                m = origin @ m
             elif kind == "prismatic":
                 origin, axis = data
                 m = np.broadcast_to(origin, (n, 4, 4)).copy()
