@@ -23,6 +23,16 @@ def main() -> None:
         if len(received) == 1:
             raise KeyboardInterrupt
 
+    # Where Python discards exceptions (a weakref callback or __del__ running during the imports) the
+    # KeyboardInterrupt is printed as "Exception ignored" and lost: the stop is still a stop (checked after
+    # the imports), and it is not printed.
+    previous_hook = sys.unraisablehook
+
+    def unraisable(info) -> None:
+        if not (received and info.exc_type is not None and issubclass(info.exc_type, KeyboardInterrupt)):
+            previous_hook(info)
+
+    sys.unraisablehook = unraisable
     previous = {}
     for name in ("SIGINT", "SIGTERM", "SIGHUP"):
         s = getattr(signal, name, None)
@@ -30,12 +40,17 @@ def main() -> None:
             previous[s] = signal.signal(s, early)
     try:
         from roarmctl.cli import main as cli_main
+
+        for s, h in previous.items():
+            signal.signal(s, h)
+        if received:  # raised where Python discarded it
+            raise KeyboardInterrupt
     except KeyboardInterrupt:
         signum = received[0] if received else signal.SIGINT
         what = "interrupted" if signum == signal.SIGINT else f"terminated by {signal.Signals(signum).name}"
         sys.stderr.write(f"error: {what} (nothing was written)\n")
         sys.stderr.flush()
         os._exit(128 + int(signum))
-    for s, h in previous.items():
-        signal.signal(s, h)
+    finally:
+        sys.unraisablehook = previous_hook
     cli_main()

@@ -29,3 +29,41 @@ def test_toppra_for_planning_defers_pyplot_and_pyplot_still_works():
             "import matplotlib\nassert matplotlib.rcParams['figure.dpi'] > 0")
     mods = _imported(code)
     assert "toppra" in mods and "scipy.interpolate" in mods
+
+
+def test_a_stop_that_python_discards_during_the_imports_still_stops(tmp_path):
+    """A SIGINT whose KeyboardInterrupt is raised where Python prints and discards exceptions (here, as seen in
+    a busy test run, inside a weakref callback while the CLI is being imported) still stops the program: one
+    line (no "Exception ignored" report), exit 130, and the command never runs. The CLI module is replaced by
+    one that provokes exactly that. The old entry point ran the command (exit 0) after printing the report."""
+    marker, finished = tmp_path / "the command ran", tmp_path / "the callback finished"
+    code = f"""
+import importlib.abc, importlib.util, os, signal, sys, weakref
+
+class Fake(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    def find_spec(self, name, path, target=None):
+        return importlib.util.spec_from_loader(name, self) if name == "roarmctl.cli" else None
+    def create_module(self, spec):
+        return None
+    def exec_module(self, module):
+        class Thing:
+            pass
+        def callback(ref):  # the interrupt is raised in here, and Python discards it
+            os.kill(os.getpid(), signal.SIGINT)
+            for _ in range(100000):
+                pass
+            open({str(finished)!r}, "w").close()
+        thing = Thing()
+        ref = weakref.ref(thing, callback)
+        del thing
+        module.main = lambda: open({str(marker)!r}, "w").close()
+
+sys.meta_path.insert(0, Fake())
+from roarmctl.launch import main
+main()
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert not finished.exists()  # the interrupt did land inside the callback (which Python then discards)
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr.strip().splitlines() == ["error: interrupted (nothing was written)"]
+    assert not marker.exists()
