@@ -841,35 +841,44 @@ class Planner:
                 first = float(np.linalg.norm(part.wps[1][arm] - part.wps[0][arm]))
                 k_hi = min(k_hi, int(np.searchsorted(tb.s, first + 1e-9, side="right")) - 1)
         # the ends themselves must be valid under both motions' states (the bridge's samples are checked under both)
-        bad = self._first_invalid_under(prev, tb.q[1:k_hi + 1] + (ta.q[-1] - tb.q[0]))
-        k_hi = k_hi if bad is None else bad
-        if k_hi > 0 and ia > i_lo:
-            bad = self._first_invalid_under(part, ta.q[i_lo:ia + 1][::-1])
-            i_lo = i_lo if bad is None else ia + 1 - bad
+        # (the state the checker is in first: each switch rebuilds its collision objects)
+        part_first = self.checker._grasp_target is not None and self.checker._grasp_target == self._target_of(part)
+        for p in ((part, prev) if part_first else (prev, part)):
+            if ia <= i_lo or k_hi <= 0:
+                break
+            if p is prev:
+                bad = self._first_invalid_under(prev, tb.q[1:k_hi + 1] + (ta.q[-1] - tb.q[0]))
+                k_hi = k_hi if bad is None else bad
+            else:
+                bad = self._first_invalid_under(part, ta.q[i_lo:ia + 1][::-1])
+                i_lo = i_lo if bad is None else ia + 1 - bad
         if ia <= i_lo or k_hi <= 0:
             return None
         otg, traj, inp = Ruckig(len(arm), dt), Trajectory(len(arm)), InputParameter(len(arm))
         inp.duration_discretization = DurationDiscretization.Discrete
         inp.max_velocity, inp.max_acceleration, inp.max_jerk = list(self.vmax[arm]), list(self.amax[arm]), list(self.jmax[arm])
         qb = tb.q[:, arm] + (ta.q[-1, arm] - tb.q[0, arm])  # tb starts where ta comes to rest (as in _bridged)
-        ends = {"a": [(list(ta.q[i, arm]), list(ta.qd[i, arm]), list(ta.qdd[i, arm])) for i in range(len(ta.times))],
-                "b": [(list(qb[k]), list(tb.qd[k, arm]), list(tb.qdd[k, arm])) for k in range(len(tb.times))]}
+        sa = np.stack([ta.q[:, arm], ta.qd[:, arm], ta.qdd[:, arm]], axis=1).tolist()  # (N, 3, n) states as lists
+        sb = np.stack([qb, tb.qd[:, arm], tb.qdd[:, arm]], axis=1).tolist()
         totals: dict[tuple[int, int], int | None] = {}  # (i, k) -> bridge samples
+        at = [-1, -1]  # the ends inp holds now
+
+        def set_ends(i: int, k: int) -> None:
+            if at[0] != i:
+                inp.current_position, inp.current_velocity, inp.current_acceleration = sa[i]
+            if at[1] != k:
+                inp.target_position, inp.target_velocity, inp.target_acceleration = sb[k]
+            at[:] = i, k
 
         def solve(i: int, k: int) -> int | None:
             if (i, k) not in totals:
-                inp.current_position, inp.current_velocity, inp.current_acceleration = ends["a"][i]
-                inp.target_position, inp.target_velocity, inp.target_acceleration = ends["b"][k]
+                set_ends(i, k)
                 try:
                     ok = otg.calculate(inp, traj) in (Result.Working, Result.Finished)
                 except RuckigError:  # an end state on or over a limit (Ruckig validates its input)
                     ok = False
                 totals[(i, k)] = int(round(traj.duration / dt)) if ok else None
             return totals[(i, k)]
-
-        def total(key: tuple[int, int]) -> float:
-            i, k = key
-            return round((i + totals[key] - k) * dt + tb.duration, 9)  # tb's samples before its end are on the grid
 
         coarse = [(i, k) for i in range(ia, i_lo - 1, -BRIDGE_COARSE[0]) for k in range(k_hi, 0, -BRIDGE_COARSE[1])]
         # shortest first; among equals the earliest end in the second motion and the latest start in the first (a
@@ -887,12 +896,12 @@ class Planner:
             for i in range(max(i0 - BRIDGE_COARSE[0] + 1, i_lo), min(i0 + BRIDGE_COARSE[0], ia + 1)):
                 for k in range(max(k0 - BRIDGE_COARSE[1] + 1, 1), min(k0 + BRIDGE_COARSE[1], k_hi + 1)):
                     solve(i, k)
-        found = ranked(key for key, n in totals.items() if n is not None and total(key) < beat - 1e-9)
-        found = found[:BRIDGE_TRIES]
+        # tb's samples before its end are on the grid: the result lasts (i + n - k) dt + tb.duration
+        under = int(np.floor((beat - tb.duration) / dt - 1e-6))
+        found = ranked(key for key, n in totals.items() if n is not None and key[0] + n - key[1] <= under)[:BRIDGE_TRIES]
         for i, k in found:
             steps = totals[(i, k)]
-            inp.current_position, inp.current_velocity, inp.current_acceleration = ends["a"][i]
-            inp.target_position, inp.target_velocity, inp.target_acceleration = ends["b"][k]
+            set_ends(i, k)
             otg.calculate(inp, traj)
             cand = _bridged(ta, tb, i, k, steps, traj, arm)
             if self._overlap_ok(cand, i, i + steps, prev, part):
