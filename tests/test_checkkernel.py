@@ -172,3 +172,39 @@ def test_segment_states_made_by_the_kernel_are_interpolates_states():
             assert checker.segment_valid(q0, q1, res, refine=1) is expected
             answers.add(expected)
     assert answers == {True, False}
+
+
+def test_checks_from_two_threads_answer_as_one_thread():
+    """OMPL's PRM calls the checker from two threads: with a tiny GIL switch interval, two threads checking
+    different segments and states at once get the answers a single thread gets (shared kernel buffers and
+    FCL objects are used one check at a time)."""
+    import sys
+    import threading
+
+    robot = load_robot("roarm_m3_pro")
+    checker = CollisionChecker(robot, example_scene(), singularity_margin=0.02)
+    rng = np.random.default_rng(9)
+    q = rng.uniform(checker._lower, checker._upper, (1500, robot.arm_dof))
+    segs = [(a, a + rng.normal(size=robot.arm_dof) * 0.4) for a in q[:300]] * 2
+    expected_seg = [checker.segment_valid(a, b) for a, b in segs]
+    expected_one = [checker.is_valid(x) for x in q[300:]] * 2
+    got: dict[str, list] = {}
+
+    def run_segments():
+        got["seg"] = [checker.segment_valid(a, b) for a, b in segs]
+
+    def run_states():
+        got["one"] = [checker.is_valid(x) for x in q[300:]] + [checker.is_valid(x) for x in q[300:]]
+
+    old = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)
+    try:
+        threads = [threading.Thread(target=run_segments), threading.Thread(target=run_states)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        sys.setswitchinterval(old)
+    assert got["seg"] == expected_seg and got["one"] == expected_one
+    assert 0 < sum(expected_seg) < len(segs) and 0 < sum(expected_one) < len(expected_one)
