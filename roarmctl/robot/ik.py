@@ -28,6 +28,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from roarmctl.errors import InputError, UnreachableError
+from roarmctl.robot.kinematics import cross_rows
 from roarmctl.robot.model import Robot, transform
 
 WRIST_SINGULAR = 1e-6  # |sin theta5| below this is the UR wrist singularity (theta4, theta6 coupled)
@@ -993,6 +994,9 @@ class _Aim:
     def oriented(self) -> bool:
         return self.rot is not None or self.axis is not None
 
+    def key(self) -> tuple:
+        return (None if self.rot is None else self.rot.tobytes(), None if self.axis is None else self.axis.tobytes())
+
 
 def _base_point(robot: Robot) -> tuple[np.ndarray, float]:
     """``_chain_reach`` once per loaded robot (the point on the first joint's axis, the reach bound)."""
@@ -1057,12 +1061,33 @@ def _dls_solve(robot: Robot, p: np.ndarray, rot: np.ndarray | None, qr: np.ndarr
     grip = _gripper_value(robot, qr)
     if grip is not None:
         starts[:, robot.joint_index(robot.gripper.joint)] = grip
+    # Rows after the reference start do not depend on q_ref (same seed, same random starts), so their
+    # outcome is kept per robot: a target asked again from another reference (each candidate of a chain
+    # in the planner, each pitch of pitch: auto) costs its reference start only. Same results.
+    memo = robot.__dict__.setdefault("_dls_memo", {})
+    if len(memo) > 2048:
+        memo.clear()
+    key = (p.tobytes(), seed, n_starts, grip)
+
+    def run(k: int, size: int, a: _Aim, limited: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        bounds = (lo, hi) if limited else (None, None)
+        parts = []
+        if k == 0:
+            parts.append(_dls_batch(robot, starts[:1], p, a, *bounds))
+            k, size = 1, size - 1
+        if size > 0 and k < len(starts):
+            mk = key + (a.key(), limited, k, size)
+            if mk not in memo:
+                memo[mk] = _dls_batch(robot, starts[k:k + size], p, a, *bounds)
+            parts.append(memo[mk])
+        return tuple(np.concatenate(x) for x in zip(*parts))
+
     sols: list[np.ndarray] = []
     k = 0
     for size in list(DLS_CHUNKS) + [16] * len(starts):
         if k >= len(starts):
             break
-        q, ep, eo = _dls_batch(robot, starts[k:k + size], p, aim, lo, hi)
+        q, ep, eo = run(k, size, aim, True)
         k += size
         before = len(sols)
         sols = _dedupe(sols + _dls_accept(robot, q, ep, eo, p, aim, qr), arm, tol=1e-4)
@@ -1073,7 +1098,7 @@ def _dls_solve(robot: Robot, p: np.ndarray, rot: np.ndarray | None, qr: np.ndarr
     # Why not? Try again without limits: a solution with a 2 pi representative within them is one
     # (a clipped joint can stop the search short of it), else the limits are the reason (joint_limit);
     # then position only (orientation).
-    q, ep, eo = _dls_batch(robot, starts[:8], p, aim, None, None)
+    q, ep, eo = run(0, 8, aim, False)
     sols = _dedupe(_dls_accept(robot, q, ep, eo, p, aim, qr), arm, tol=1e-4)
     if sols:
         return sols if all_solutions else sols[:1]
@@ -1081,11 +1106,11 @@ def _dls_solve(robot: Robot, p: np.ndarray, rot: np.ndarray | None, qr: np.ndarr
         raise UnreachableError(f"{where} is only reachable outside the joint limits", "joint_limit",
                                "move the target or widen the limits in the description")
     if aim.oriented:
-        q, ep, eo = _dls_batch(robot, starts[:8], p, _Aim(), lo, hi)
+        q, ep, eo = run(0, 8, _Aim(), True)
         if np.any(ep <= POS_TOL):
             raise UnreachableError(f"{where}: the position is reachable but not with {aim.what}",
                                    "orientation", "relax the orientation or give the position only")
-        q, ep, eo = _dls_batch(robot, starts[:8], p, _Aim(), None, None)
+        q, ep, eo = run(0, 8, _Aim(), False)
         if np.any(ep <= POS_TOL):
             raise UnreachableError(f"{where}: the position alone is only reachable outside the joint limits",
                                    "joint_limit", "move the target or widen the limits in the description")
@@ -1204,8 +1229,8 @@ def _orientation_error(r: np.ndarray, jac: np.ndarray, aim: _Aim) -> tuple[np.nd
             w[i] = _rot_vec(m[i])
         return w, jac
     a = r[:, :, 0]
-    c = np.cross(a, aim.axis)
-    s = np.linalg.norm(c, axis=1)
+    c = cross_rows(a, aim.axis)
+    s = np.sqrt(np.einsum("ij,ij->i", c, c))
     ang = np.arctan2(s, a @ aim.axis)
     w = np.where((s > 1e-12)[:, None], c * (ang / np.maximum(s, 1e-300))[:, None], c)
     flip = (s <= 1e-12) & (ang > 1.0)  # exactly opposite: turn by pi about any axis normal to TCP +x
@@ -1214,6 +1239,6 @@ def _orientation_error(r: np.ndarray, jac: np.ndarray, aim: _Aim) -> tuple[np.nd
             k = int(np.argmin(np.abs(a[i])))
             perp = np.cross(a[i], np.eye(3)[k])
             w[i] = perp / np.linalg.norm(perp) * math.pi
-    proj = np.eye(3) - a[:, :, None] * a[:, None, :]
-    jac = np.concatenate([jac[:, :3], proj @ jac[:, 3:]], axis=1)
-    return w, jac
+    jw = jac[:, 3:]
+    jw = jw - a[:, :, None] * np.einsum("ni,nik->nk", a, jw)[:, None, :]  # (I - a a^T) J_w
+    return w, np.concatenate([jac[:, :3], jw], axis=1)
