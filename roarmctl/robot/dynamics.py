@@ -211,12 +211,15 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
     f_sub = force.copy()
     n_sub = np.zeros((n, n_links, 3))  # moment of the subtree about the pivot of the joint above the link
     tau = np.zeros((n, robot.dof))
+    table = _joint_table(robot)
+    kids = [c for _, _, c, _, _ in table]
+    own = cross_rows(com[:, kids] - pivots, force[:, kids])  # (n, joints, 3): each child's own force about the pivot
     for j in range(n_joints - 1, -1, -1):
-        joint, p, c, qi, _ = _joint_table(robot)[j]
+        joint, p, c, qi, _ = table[j]
         if not heavy[c]:
             continue
         heavy[p] = True
-        n_sub[:, c] += moment[:, c] + cross_rows(com[:, c] - pivots[:, j], force[:, c])
+        n_sub[:, c] += moment[:, c] + own[:, j]
         if qi >= 0:  # += : a mimic joint's generalised force adds to the joint it follows
             tau[:, qi] += np.einsum("ni,ni->n", axes[:, j], n_sub[:, c] if joint.kind == "revolute" else f_sub[:, c])
         if p == 0:

@@ -326,13 +326,13 @@ def _newton(residual: Callable[[np.ndarray], np.ndarray], q: np.ndarray, idx: li
         batch[np.arange(1, len(idx) + 1), idx] += h
         res = residual(batch)
         r = res[0]
-        if np.linalg.norm(r) < tol:
+        if math.sqrt(r.dot(r)) < tol:  # np.linalg.norm of a real vector, without its call overhead
             break
         jac = (res[1:] - r).T / h
         # a whisker of damping: directions the target does not constrain (the base, when the TCP is
         # on the base axis) stay put instead of absorbing urad-level model noise with huge steps
         step = np.linalg.solve(jac.T @ jac + 1e-10 * np.eye(len(idx)), -jac.T @ r)
-        if np.linalg.norm(step) > 0.2:  # a polish, not a search: never wander to another branch
+        if math.sqrt(step.dot(step)) > 0.2:  # a polish, not a search: never wander to another branch
             break
         q[idx] += step
     return q
