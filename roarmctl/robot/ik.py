@@ -1159,7 +1159,7 @@ def _dls_batch(robot: Robot, q: np.ndarray, p: np.ndarray, aim: _Aim, lo: np.nda
     scaled to at most 0.5 rad; joints with a full turn of range wrap, the rest are clipped. A row stops
     when |e| < 1e-12, when it is within ``DLS_POS_DONE`` and ``ORI_TOL`` and the last step no longer
     halved |e| (the floor a rounded model leaves), or when |e| fell by less than 10 % over 25 iterations
-    (stalled at a limit or a local minimum: the next start tries). Returns the final configurations (N, dof), position
+    or by less than 0.1 % over 5 (stalled at a limit or a local minimum: the next start tries). Returns the final configurations (N, dof), position
     errors (N,) m and orientation errors (N,) rad, by FK.
     """
     arm = np.asarray(robot.arm_indices)
@@ -1189,6 +1189,8 @@ def _dls_batch(robot: Robot, q: np.ndarray, p: np.ndarray, aim: _Aim, lo: np.nda
             stop |= (ep <= DLS_POS_DONE) & (eo <= ORI_TOL) & (norm > 0.5 * hist[it - 1, active])
         if it >= 25:  # stalled: history[-25] is 24 iterations back
             stop |= norm > 0.9 * hist[it - 24, active]
+        if it >= 10:  # stuck: not 0.1 % better than 5 iterations ago (a local minimum; saves the wait above)
+            stop |= norm > 0.999 * hist[it - 5, active]
         go = ~stop
         rows = active[go]
         jac, e, norm = jac[go], e[go], norm[go]
