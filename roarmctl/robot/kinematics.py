@@ -29,24 +29,6 @@ if TYPE_CHECKING:
     from roarmctl.robot.model import Robot
 
 
-def axis_rotation(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Rotation matrices about a fixed unit ``axis`` (3,) by ``angle`` (N,) rad -> (N, 3, 3) (Rodrigues)."""
-    x, y, z = axis
-    c, s = np.cos(angle), np.sin(angle)
-    v = 1.0 - c
-    out = np.empty(angle.shape + (3, 3))
-    out[..., 0, 0] = c + x * x * v
-    out[..., 0, 1] = x * y * v - z * s
-    out[..., 0, 2] = x * z * v + y * s
-    out[..., 1, 0] = y * x * v + z * s
-    out[..., 1, 1] = c + y * y * v
-    out[..., 1, 2] = y * z * v - x * s
-    out[..., 2, 0] = z * x * v - y * s
-    out[..., 2, 1] = z * y * v + x * s
-    out[..., 2, 2] = c + z * z * v
-    return out
-
-
 @dataclass
 class ManipulabilityReport:
     """Velocity-manipulability figures at one configuration.
