@@ -67,3 +67,37 @@ main()
     assert proc.returncode == 130, proc.stderr
     assert proc.stderr.strip().splitlines() == ["error: interrupted (nothing was written)"]
     assert not marker.exists()
+
+
+def test_a_stop_while_the_planning_libraries_load_waits_until_they_have_loaded(tmp_path):
+    """A stop signal that arrives while load_planning_libraries imports the native modules is delivered once
+    they have loaded (a Python handler raising inside a nanobind module's initialisation, OMPL's or Ruckig's,
+    makes it call C++ terminate: the process aborted instead of stopping). Here the signal is sent from inside
+    the toppra import step, which then runs to its end; the interrupt comes out of load_planning_libraries."""
+    finished = tmp_path / "the import step finished"
+    code = f"""
+import os, signal
+import roarmctl.motion.timing as timing
+from roarmctl.motion.pipeline import load_planning_libraries
+
+real = timing.import_toppra
+
+def import_toppra():
+    os.kill(os.getpid(), signal.SIGINT)
+    for _ in range(100000):  # a Python handler would run (and raise) during these
+        pass
+    out = real()
+    open({str(finished)!r}, "w").close()
+    return out
+
+timing.import_toppra = import_toppra
+try:
+    load_planning_libraries()
+except KeyboardInterrupt:
+    import ompl.geometric
+    print("interrupted after the imports")
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "interrupted after the imports"
+    assert finished.exists()

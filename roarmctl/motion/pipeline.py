@@ -152,15 +152,37 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
 def load_planning_libraries() -> None:
     """Import toppra (about 0.5 s, mostly scipy), OMPL and FCL up front, so stage timings measure work, not imports
     (also Ruckig, the blend's corner moves, and RNEA's module: 1-2 ms that a fresh process otherwise counted as
-    blend and toppra time)."""
-    import fcl  # noqa: F401
-    import ruckig  # noqa: F401
+    blend and toppra time).
 
-    import roarmctl.robot.dynamics  # noqa: F401
-    from roarmctl.motion.timing import import_toppra
+    A stop signal (SIGINT, SIGTERM, SIGHUP) that arrives while these native modules load is noted and raised
+    again once they have loaded, for the handler that was in place: a Python handler that raises while a
+    nanobind module (OMPL, Ruckig) initialises makes it call C++ terminate, so a Ctrl-C at that moment
+    aborted the process instead of stopping it. (Blocking the signals would not do: numpy's BLAS threads
+    receive them.)"""
+    import signal
+    import threading
 
-    import_toppra()
-    from ompl import base, geometric  # noqa: F401
+    received: list[int] = []
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+            s = getattr(signal, name, None)
+            if s is not None and signal.getsignal(s) is not None:  # None: a handler not set from Python, left alone
+                previous[s] = signal.signal(s, lambda signum, frame: received.append(signum))
+    try:
+        import fcl  # noqa: F401
+        import ruckig  # noqa: F401
+
+        import roarmctl.robot.dynamics  # noqa: F401
+        from roarmctl.motion.timing import import_toppra
+
+        import_toppra()
+        from ompl import base, geometric  # noqa: F401
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        if received:
+            signal.raise_signal(received[0])
 
 
 def _robot_spec(plan: Plan) -> str:
