@@ -601,6 +601,11 @@ class CollisionChecker:
         b = self._buffers(max(n, 1))
         ns, npairs, limit, _ = _kernel.check_line(self._kfm, self._kim, q0, d, steps, start, stride, idx, refine,
                                                   *b["views"], float(sweep), True)
+        return self._all_clear(b, n, ns, npairs, limit)
+
+    def _all_clear(self, b: dict, n: int, ns: int, npairs: int, limit: int) -> bool:
+        """The verdict on ``n`` states the kernel checked with stop-at-first: False at a limit or margin
+        failure (``limit`` < n), else FCL decides the ``ns`` scene and ``npairs`` self candidates it left."""
         if limit < n:  # limits or margin
             return False
         if ns or npairs:
@@ -617,13 +622,7 @@ class CollisionChecker:
         self.check_count += n
         b = self._buffers(n)
         ns, npairs, limit = _kernel.check(self._kfm, self._kim, q, _NO_GRIP, *b["views"], float(sweep), True)
-        if limit < n:  # limits or margin
-            return False
-        if ns or npairs:
-            valid = np.ones(n, dtype=bool)
-            self._narrow(valid, b, ns, npairs, True)
-            return bool(valid.all())
-        return True
+        return self._all_clear(b, n, ns, npairs, limit)
 
     def explain(self, q_arm) -> str:
         """Why ``q_arm`` (arm_dof,) is invalid, in words; "valid" when it is not."""
