@@ -175,6 +175,47 @@ def test_attached_object_hits_obstacle_then_detached_is_valid(robot):
     assert checker.is_valid(q0)
 
 
+def test_a_collision_state_returned_to_answers_like_a_checker_built_for_it(robot):
+    # The checker keeps the tables of earlier collision states; going back to one (with the gripper moved in
+    # between) must answer exactly as a checker built afresh for that state and gripper value.
+    q0 = np.array([0.0, 0.3, 1.2, 0.3, 0.0])
+    stick, _, _ = stick_scene(robot, q0)
+    block = SceneItem.box("block", (0.05, 0.05, 0.05), (0.2, 0.12, 0.06))
+    checker = CollisionChecker(robot, Scene([stick, block]), singularity_margin=0.01)
+    rng = np.random.default_rng(5)
+    q = rng.uniform(robot.lower[:5], robot.upper[:5], (400, 5))
+    q[:50] = q0 + rng.normal(0.0, 0.05, (50, 5))  # near the stick, where the grasp target and jaw rules matter
+
+    def fresh(target, strict, gripper, attached=False, detach_at=None):
+        c = CollisionChecker(robot, Scene([stick, block]), singularity_margin=0.01)
+        c.set_gripper(gripper)
+        c.set_grasp_target(target, moving_jaw_clear=strict)
+        if attached:
+            c.attach("stick", q0)
+        if detach_at is not None:
+            c.detach("stick", detach_at)
+        return c
+
+    steps = [("stick", False, 0.3), (None, False, 0.0), ("stick", True, 0.9), ("stick", False, 0.0),
+             (None, False, 0.5), ("stick", True, 0.2), ("stick", False, 0.7)]
+    answers = set()
+    for target, strict, gripper in steps:
+        checker.set_gripper(gripper)
+        checker.set_grasp_target(target, moving_jaw_clear=strict)
+        other = fresh(target, strict, gripper)
+        np.testing.assert_array_equal(checker._kf, other._kf)
+        np.testing.assert_array_equal(checker._ki, other._ki)
+        got = checker.validity_batch(q)
+        np.testing.assert_array_equal(got, other.validity_batch(q))
+        answers.add(got.tobytes())
+    assert len(answers) >= 3  # the states differ in their answers
+    checker.attach("stick", q0)
+    np.testing.assert_array_equal(checker.validity_batch(q), fresh("stick", False, 0.7, attached=True).validity_batch(q))
+    checker.detach("stick", q0)
+    checker.set_grasp_target("stick")  # the stick back where it was: a state seen before
+    np.testing.assert_array_equal(checker.validity_batch(q), fresh("stick", False, 0.7).validity_batch(q))
+
+
 def test_attached_object_resting_on_the_table_is_not_a_collision(robot):
     q0 = np.array([0.0, 0.1, 1.4, 1.4, 0.0])  # jaws pointing down, the stick hangs below them
     stick, _, _ = stick_scene(robot, q0)

@@ -47,6 +47,11 @@ _EPS = 1e-9  # rad: joint-limit tolerance (the kernel uses the same)
 _NO_GRIP = memoryview(np.zeros(0))  # "every state at the set_gripper value"
 _NO_IDX = np.zeros(0, dtype=np.int64)
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
+_STATE_CACHE = 8  # collision states whose tables a checker keeps
+# What _build_tables sets: the kept tables of one collision state.
+_TABLES = ("_items", "_item_objs", "_item_lo", "_item_hi", "_item_c", "_item_h", "_moving_shapes", "_mv_link", "_mv_rot",
+           "_mv_pos", "_mv_half", "_mv_half_self", "_mv_radius", "_scene_mask", "_active", "_active_mask", "_active_r2",
+           "_pairs", "_pair_r2", "_ki", "_kf", "_q_template", "_kfm", "_kim")
 
 
 def _geometry(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0, mesh=None):
@@ -145,6 +150,7 @@ class CollisionChecker:
         self._jaw_strict = False  # set_grasp_target(..., moving_jaw_clear=True)
         self._attached: dict[str, tuple[SceneItem, np.ndarray]] = {}  # name -> (item, pose in TCP frame)
         self._arm_shapes: list[_Moving] = []
+        self._states: dict[tuple, dict] = {}  # state key -> the tables of _build_tables (see _rebuild)
         for shape in robot.collision:
             self._arm_shapes.append(self._moving(shape.name or shape.link, kin.link_index[shape.link], shape.origin,
                                                  shape.kind, shape.size, shape.radius, shape.length, self.padding, 0.0,
@@ -243,8 +249,40 @@ class CollisionChecker:
     def attached(self) -> list[str]:
         return list(self._attached)
 
+    def _state_key(self) -> tuple:
+        """What the tables of ``_build_tables`` are made from, besides the robot (fixed per checker)."""
+        items = tuple((it.name, it.role, it.shape, it.size, it.radius, it.length, it.pose.tobytes()) for it in self.scene.items)
+        attached = tuple((name, item.shape, item.size, item.radius, item.length, rel.tobytes())
+                         for name, (item, rel) in self._attached.items())
+        return (self._grasp_target, self._jaw_strict, self.padding, self.singularity_margin, self.contact_tolerance,
+                items, attached)
+
     def _rebuild(self) -> None:
-        """Recompute the static tables (items, moving shapes, pair masks) after a scene change."""
+        """Recompute the static tables (items, moving shapes, pair masks) after a scene change.
+
+        The tables of the last few collision states are kept (``_STATE_CACHE``): a plan switches back and forth
+        between a handful (grasp target, moving-jaw check, attached object), and building them costs ~0.5 ms.
+        A kept state gets the current joint template (the gripper value), as a new build would."""
+        key = self._state_key()
+        tables = self._states.get(key)
+        if tables is None:
+            self._build_tables()
+            if len(self._states) >= _STATE_CACHE:
+                self._states.pop(next(iter(self._states)))
+            self._states[key] = {name: getattr(self, name) for name in _TABLES}
+        else:
+            template = self._q_template.copy()
+            for name, value in tables.items():
+                setattr(self, name, value)
+            self._q_template[:] = template  # a view into the kept kernel table
+            self._items = list(self.scene.items)
+            self._bufs = {}
+        key = tuple((name, rel.tobytes()) for name, (_, rel) in self._attached.items())  # moving shapes only
+        if getattr(self, "_sweep_key", None) != key:
+            self.sweep_gain = self._sweep_gain()
+            self._sweep_key = key
+
+    def _build_tables(self) -> None:
         self._items = list(self.scene.items)
         self._item_objs = []
         for it in self._items:
@@ -311,10 +349,6 @@ class CollisionChecker:
                     continue
                 pairs.append((a, b))
         self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
-        key = tuple((name, rel.tobytes()) for name, (_, rel) in self._attached.items())  # moving shapes only
-        if getattr(self, "_sweep_key", None) != key:
-            self.sweep_gain = self._sweep_gain()
-            self._sweep_key = key
         self._pair_r2 = (self._mv_radius[self._pairs[:, 0]] + self._mv_radius[self._pairs[:, 1]]) ** 2 if len(pairs) else np.zeros(0)
         # Self checks use unpadded geometry: the pre-filter radii above are padded, hence conservative.
         self._pack()
