@@ -300,6 +300,7 @@ class _Profile:
         # integral of s over [0, t_i]
         self.S = np.concatenate([[0.0], np.cumsum(self.s[:-1] * dt + sd[:-1] * dt**2 / 2 + self.sdd * dt**3 / 6)])
         self._last: tuple[np.ndarray, tuple] | None = None  # (t, eval(t)) of the last _eval_grid call
+        self.jerk_answers: dict = {}  # _jerk_ok's answers for this profile ("path": the path they are for)
 
     def _eval_grid(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``eval(t)``, reusing the previous call's values where ``t`` and the previous ``t`` agree: the jerk
@@ -353,10 +354,19 @@ def _sample(path, prof: _Profile, times: np.ndarray, w: float) -> tuple[np.ndarr
 
 
 def _jerk_ok(path, prof: _Profile, w: float, jmax: np.ndarray) -> bool:
-    t = np.arange(0.0, prof.T + w + FINE_DT, FINE_DT)
-    s, sd, sdd = prof.filtered(t, w)
-    qdd = path(s, 1) * sdd[:, None] + path(s, 2) * (sd**2)[:, None]  # as in _sample, without the positions
-    return bool(np.all(np.abs(np.diff(qdd, axis=0)) / FINE_DT <= jmax * (1 + 1e-9)))
+    """Whether the jerk of ``prof`` filtered at width ``w`` (s), sampled every FINE_DT, keeps ``jmax`` (n,).
+    Answers are kept on ``prof`` per path (the filter search asks again for w0, which the plateau test asked)."""
+    memo = prof.jerk_answers
+    if memo.get("path") is not path:
+        memo.clear()
+        memo["path"] = path
+    key = (w, jmax.tobytes())
+    if key not in memo:
+        t = np.arange(0.0, prof.T + w + FINE_DT, FINE_DT)
+        s, sd, sdd = prof.filtered(t, w)
+        qdd = path(s, 1) * sdd[:, None] + path(s, 2) * (sd**2)[:, None]  # as in _sample, without the positions
+        memo[key] = bool(np.all(np.abs(np.diff(qdd, axis=0)) / FINE_DT <= jmax * (1 + 1e-9)))
+    return memo[key]
 
 
 def _filter_width(path, prof: _Profile, w0: float, jm: np.ndarray, growth: float = FILTER_GROWTH,
@@ -384,12 +394,14 @@ def _plateau_cap(prof: _Profile, hold: float) -> float | None:
     if top <= 0.0:
         return None
 
+    # sdot^2 is linear in s between grid points (constant path acceleration): the length where sdot > c
+    x0, x1, ds = sd[:-1] ** 2, sd[1:] ** 2, np.diff(s)
+    x_lo, x_hi = np.minimum(x0, x1), np.maximum(x0, x1)
+    span = np.maximum(x_hi - x_lo, 1e-300)
+
     def cruise(c: float) -> float:
-        # sdot^2 is linear in s between grid points (constant path acceleration): the length where sdot > c
-        x0, x1, ds = sd[:-1] ** 2, sd[1:] ** 2, np.diff(s)
         c2 = c * c
-        lo, hi = np.minimum(x0, x1), np.maximum(x0, x1)
-        frac = np.where(lo >= c2, 1.0, np.where(hi <= c2, 0.0, (hi - c2) / np.maximum(hi - lo, 1e-300)))
+        frac = np.where(x_lo >= c2, 1.0, np.where(x_hi <= c2, 0.0, (x_hi - c2) / span))
         return float(np.sum(frac * ds)) / c
 
     lo, hi = 0.0, top
