@@ -19,7 +19,9 @@ Queries (the start and goal configurations are the ones the pipeline plans, capt
   post  multi_object.yaml, above the can -> above its place, past the post
 Per query and round: roarmctl's free-motion geometry (OMPL RRTConnect + shortcutting) plus its timing
 and re-check of that motion, against mplib's plan_qpos (RRTConnect + simplify + TOPP-RA). Each
-round uses another seed on both sides. Also: single-state validity checks per second (roarmctl
+round uses another seed on both sides. On the wall and post queries also "like for like": roarmctl's geometry
+with only the timing mplib does (one plain TOPP-RA under joint velocity and acceleration limits), which shows
+how much of the gap is the jerk limit, torque and TCP-speed checks and the re-check mplib does not do. Also: single-state validity checks per second (roarmctl
 ``CollisionChecker.is_valid`` with the margin, one state per call, vs mplib's public per-state check
 ``PlanningWorld.is_state_colliding`` after ``set_qpos``) on the same random states.
 """
@@ -196,6 +198,22 @@ def roarmctl_query(planner, step, q, seed: int):
     return time.perf_counter() - t0, t1 - t0, piece.tp.duration, part.wps
 
 
+def roarmctl_like_mplib(planner, step, q, seed: int):
+    """The same free motion with only the work mplib's plan_qpos does after planning: the geometry as above,
+    then one plain TOPP-RA timing under the joint velocity and acceleration limits (no jerk limit, torque
+    limit, TCP speed limit or re-check of the timed samples). Returns (wall s, motion duration s)."""
+    from roarmctl.motion import pipeline
+    from roarmctl.motion.timing import time_parameterise
+
+    planner.plan.planner.seed = seed
+    planner.free_count = 0
+    arm = planner.arm
+    t0 = time.perf_counter()
+    part = pipeline.Planner._geometry(planner, step, q)
+    tp = time_parameterise(part.wps[:, arm], planner.vmax[arm], planner.amax[arm], None, sample_dt=pipeline.SAMPLE_DT)
+    return time.perf_counter() - t0, tp.duration
+
+
 def main() -> None:
     import numpy as np
 
@@ -241,6 +259,8 @@ def main() -> None:
     durations = {k: ([], []) for k in QUERIES}
     padding_hits = {k: 0 for k in QUERIES}
     fails = {k: [0, 0] for k in QUERIES}
+    like = {k: [] for k in QUERIES if k != "free"}  # our geometry + plain TOPP-RA only (mplib's post-planning work)
+    like_dur = {k: [] for k in like}
     for r in range(args.rounds):
         for name, (planner, step, q) in captured.items():
             try:
@@ -251,6 +271,10 @@ def main() -> None:
             except Exception as exc:  # noqa: BLE001 (a bench counts failures)
                 fails[name][0] += 1
                 print(f"  roarmctl {name} round {r}: {exc}", file=sys.stderr)
+            if name != "free":
+                wall, dur = roarmctl_like_mplib(planner, step, q, seed=100 + r)
+                like[name].append(wall)
+                like_dur[name].append(dur)
             res = ask({"op": "plan", "query": name, "seed": 100 + r})
             if res["ok"]:
                 theirs[name].append(res["wall"])
@@ -277,6 +301,12 @@ def main() -> None:
         g = statistics.median(geometry[name]) * 1000
         t = statistics.median(w - x for w, x in zip(ours[name], geometry[name])) * 1000
         print(f"  {name:<6}{g:>8.1f} | {t:.1f}")
+
+    print("like for like: roarmctl's geometry + one plain TOPP-RA (joint velocity/acceleration limits only, as mplib "
+          "times its path), medians (ms); ratio to mplib's query | motion duration (s)")
+    for name in like:
+        a, b = statistics.median(like[name]) * 1000, statistics.median(theirs[name]) * 1000
+        print(f"  {name:<6}{a:>8.1f}{a / b:>7.2f}x | {statistics.median(like_dur[name]):.2f}")
 
     # single-state validity, the same random states on both sides
     planner = captured["wall"][0]
