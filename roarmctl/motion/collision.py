@@ -14,7 +14,9 @@ How a batch of states (N, arm_dof) is checked, in one call of the compiled kerne
 4. python-fcl answers the pairs that no filter cleared, exactly (boxes, cylinders, spheres, meshes),
    in state order, skipping the rest of a state after its first collision (and every later state
    in ``first_invalid``). For two boxes the kernel only leaves pairs that overlap, so FCL is called
-   about once per colliding state.
+   about once per colliding state. A pair with a cylinder item first meets the separating-axis test
+   against a second box of the cylinder (``_second_box``), which clears most pairs near the first
+   box's corners.
 
 Motion segments (``segment_valid``) are checked as one batch at ``resolution``; steps between
 two states where a sphere grown by the distance any arm point can travel in half a step
@@ -32,6 +34,7 @@ Static items are never checked against each other.
 
 from __future__ import annotations
 
+import math
 import threading
 from dataclasses import dataclass
 
@@ -49,7 +52,7 @@ _NO_IDX = np.zeros(0, dtype=np.int64)
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
 _STATE_CACHE = 8  # collision states whose tables a checker keeps
 # What _build_tables sets: the kept tables of one collision state.
-_TABLES = ("_items", "_item_objs", "_item_lo", "_item_hi", "_item_c", "_item_h", "_moving_shapes", "_mv_link", "_mv_rot",
+_TABLES = ("_items", "_item_objs", "_item_box2", "_item_lo", "_item_hi", "_item_c", "_item_h", "_moving_shapes", "_mv_link", "_mv_rot",
            "_mv_pos", "_mv_half", "_mv_half_self", "_mv_radius", "_scene_mask", "_active", "_active_mask", "_active_r2",
            "_pairs", "_pair_r2", "_ki", "_kf", "_q_template", "_kfm", "_kim")
 
@@ -95,6 +98,24 @@ def _half_extents(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float
     else:  # capsule
         h = np.array([radius, radius, length / 2 + radius])
     return np.maximum(h + grow, 1e-6)
+
+
+_FCL_REQUEST = fcl.CollisionRequest()  # FCL's defaults (what fcl.collide makes when given none), made once
+_BOX2_GROW = 1e-5  # m: the second box of a cylinder stands off it, far beyond FCL's own tolerances
+
+
+def _second_box(item: SceneItem) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """For a cylinder item: a second box that holds it, its own box turned 45 degrees about the axis and grown by
+    ``_BOX2_GROW`` (rotation (9,) row-major, centre (3,), half extents (3,), as ``_checkkernel.apart`` takes them).
+    The two boxes meet in an octagonal prism around the cylinder, so a shape whose box is apart from this one is
+    apart from the cylinder even where it overlaps the first box (near its corners); None for other items."""
+    if item.shape != "cylinder":
+        return None
+    c = s = np.sqrt(0.5)
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    half = np.array([item.radius, item.radius, item.length / 2]) + _BOX2_GROW
+    return (np.ascontiguousarray((item.pose[:3, :3] @ turn).ravel()), np.ascontiguousarray(item.pose[:3, 3], dtype=float),
+            np.ascontiguousarray(half))
 
 
 @dataclass
@@ -289,6 +310,7 @@ class CollisionChecker:
             obj = fcl.CollisionObject(_geometry(it.shape, it.size, it.radius, it.length),
                                       fcl.Transform(it.pose[:3, :3], it.pose[:3, 3]))
             self._item_objs.append(obj)
+        self._item_box2 = [_second_box(it) for it in self._items]
         m = len(self._items)
         lo = np.array([it.aabb()[0] for it in self._items]).reshape(m, 3)
         hi = np.array([it.aabb()[1] for it in self._items]).reshape(m, 3)
@@ -499,7 +521,9 @@ class CollisionChecker:
         b = self._bufs
         if b.get("n", 0) < n:
             s, m = len(self._moving_shapes), len(self._items)
-            self._bufs = b = {"n": n, "valid": np.empty(n, dtype=np.uint8), "near": np.empty(n, dtype=np.uint8),
+            near = bytearray(n)  # also seen as bytes: segment_valid asks bytearray.find whether any state is near
+            self._bufs = b = {"n": n, "valid": np.empty(n, dtype=np.uint8), "near": np.frombuffer(near, dtype=np.uint8),
+                              "near_bytes": near,
                               "scene": np.empty((n * max(len(self._active) * m, 1), 3), dtype=np.int64),
                               "self": np.empty((n * max(len(self._pairs), 1), 2), dtype=np.int64),
                               "pose": np.empty((n, max(s, 1), 12))}
@@ -526,17 +550,20 @@ class CollisionChecker:
 
     def _narrow(self, valid: np.ndarray, b: dict, ns: int, npairs: int, stop_at_first: bool) -> None:
         """FCL on the kernel's candidate pairs, in state order; marks colliding states invalid in ``valid``."""
-        moving, items, pose = self._moving_shapes, self._item_objs, b["pose"]
+        moving, items, box2, pose, req = self._moving_shapes, self._item_objs, self._item_box2, b["pose"], _FCL_REQUEST
+        res = fcl.CollisionResult()  # one for the call: fcl.collide adds a contact to it per hit, which no one reads
         first_hit = len(valid)
         skip = -1
         for i, a, k in b["scene"][:ns].tolist():
             if i == skip:
                 continue
-            obj = moving[a].obj_scene
             p = pose[i, a]
+            if box2[k] is not None and _kernel.apart(p[:9], p[9:], moving[a].half, *box2[k]):
+                continue  # apart from a box that holds the item (the kernel tested the other one)
+            obj = moving[a].obj_scene
             obj.setRotation(p[:9].reshape(3, 3))
             obj.setTranslation(p[9:])
-            if fcl.collide(obj, items[k]):
+            if fcl.collide(obj, items[k], req, res):
                 valid[i] = False
                 skip = i
                 if stop_at_first:
@@ -553,7 +580,7 @@ class CollisionChecker:
             pa, pc = pose[i, a], pose[i, c]
             oa.setRotation(pa[:9].reshape(3, 3)); oa.setTranslation(pa[9:])
             ob.setRotation(pc[:9].reshape(3, 3)); ob.setTranslation(pc[9:])
-            if fcl.collide(oa, ob):
+            if fcl.collide(oa, ob, req, res):
                 valid[i] = False
                 if stop_at_first:
                     break
@@ -610,32 +637,35 @@ class CollisionChecker:
             # The states of interpolate(q0, q1, resolution), made by the kernel itself (same numbers).
             q0 = np.ascontiguousarray(q0, dtype=float).ravel()
             d = np.ascontiguousarray(q1, dtype=float).ravel() - q0
-            steps = max(1, int(np.ceil(np.sqrt(d.dot(d)) / resolution)))
-            if steps + 1 > 4 * COARSE_STRIDE and not self._line_ok(q0, d, steps, COARSE_STRIDE, COARSE_STRIDE):
+            steps = max(1, math.ceil(math.sqrt(d.dot(d)) / resolution))  # the same numbers as np.sqrt / np.ceil
+            b = self._bufs if self._bufs.get("n", 0) > steps else self._buffers(steps + 1)
+            if steps + 1 > 4 * COARSE_STRIDE and not self._line_ok(b, q0, d, steps, COARSE_STRIDE, COARSE_STRIDE):
                 return False  # most invalid motions are caught by every 8th state, at an eighth of the cost
             e = (q0 + d * (1.0 / steps)) - q0  # the first step, as interpolate's q[1] - q[0]
-            sweep = 0.5 * float(np.sqrt(e.dot(e))) * self.sweep_gain
-            if not self._line_ok(q0, d, steps, 0, 1, sweep):
+            sweep = 0.5 * math.sqrt(e.dot(e)) * self.sweep_gain
+            if not self._line_ok(b, q0, d, steps, 0, 1, sweep):
                 return False
             if refine <= 1 or sweep <= 0:
                 return True
-            near = self._bufs["near"][:steps + 1].view(bool)  # of the call just made
-            idx = np.flatnonzero(near[:-1] | near[1:])
-            if len(idx) == 0:
+            if b["near_bytes"].find(1, 0, steps + 1) < 0:  # no state of the call just made is near anything
                 return True
-            return self._line_ok(q0, d, steps, 0, 1, 0.0, idx, refine)
+            near = b["near"][:steps + 1].view(bool)
+            idx = np.flatnonzero(near[:-1] | near[1:])
+            n = len(idx) * (refine - 1)
+            return self._line_ok(b if b["n"] >= n else self._buffers(n), q0, d, steps, 0, 1, 0.0, idx, refine)
 
-    def _line_ok(self, q0: np.ndarray, d: np.ndarray, steps: int, start: int, stride: int, sweep: float = 0.0,
-                 idx: np.ndarray | None = None, refine: int = 1) -> bool:
+    def _line_ok(self, b: dict, q0: np.ndarray, d: np.ndarray, steps: int, start: int, stride: int, sweep: float = 0.0,
+                 idx: np.ndarray = _NO_IDX, refine: int = 1) -> bool:
         """True when the states of the segment q0 -> q0 + d that ``_checkkernel.check_line`` makes (see there) are
-        all valid; stops at the first invalid one. With ``sweep`` > 0 the "near" flags stay in ``self._bufs``."""
-        idx = _NO_IDX if idx is None else np.ascontiguousarray(idx, dtype=np.int64)
+        all valid; stops at the first invalid one. ``b``: output buffers (``_buffers``) large enough for them; with
+        ``sweep`` > 0 the "near" flags stay in ``b``. ``idx``: int64 step indices (refinement), as the kernel takes."""
         n = len(idx) * (refine - 1) if len(idx) else (steps - start) // stride + 1 if start <= steps else 0
         self.check_count += n
-        b = self._buffers(max(n, 1))
         ns, npairs, limit, _ = _kernel.check_line(self._kfm, self._kim, q0, d, steps, start, stride, idx, refine,
-                                                  *b["views"], float(sweep), True)
-        return self._all_clear(b, n, ns, npairs, limit)
+                                                  *b["views"], sweep, True)
+        if limit < n:  # limits or margin
+            return False
+        return not (ns or npairs) or self._all_clear(b, n, ns, npairs, limit)
 
     def _all_clear(self, b: dict, n: int, ns: int, npairs: int, limit: int) -> bool:
         """The verdict on ``n`` states the kernel checked with stop-at-first: False at a limit or margin
