@@ -115,6 +115,7 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
     until = time.perf_counter() + ceiling
     path = _drop_vertices(checker, path, resolution)
     failures = 0
+    changed = False
     seg = cum = None  # of the current path (recomputed only when a shortcut changes it)
     for _ in range(attempts):
         if time.perf_counter() > until:
@@ -140,8 +141,10 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
                 and checker.segment_valid(pb, path[ib + 1], resolution)):
             path = np.vstack([path[:ia + 1], pa, pb, path[ib + 1:]])
             failures = 0
+            changed = True
             seg = None
-    path = _drop_vertices(checker, path, resolution)
+    if changed:  # else a second pass would keep every vertex: the first one found each farther one unreachable
+        path = _drop_vertices(checker, path, resolution)
     # Remove vertices that coincide (a shortcut ending on a vertex).
     keep = np.concatenate([[True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9])
     keep[-1] = True

@@ -1154,10 +1154,10 @@ class Planner:
         self.free_count += 1
         best = None
         for attempt in range(FREE_MOTION_TRIES):  # raw plans, only greedily pruned
-            path, stats = plan_joint_path_with_stats(
+            path, stats = plan_joint_path_with_stats(  # the straight move is tried once (a later try would fail it again)
                 self.checker, q[self.arm], goal[self.arm], planner=cfg.name, time_budget=cfg.time_budget,
                 simplify_budget=cfg.simplify_budget, seed=seed + attempt, resolution=0.01, max_step=None,
-                simplify_attempts=0, max_checks=cfg.max_checks)
+                try_direct=attempt == 0, simplify_attempts=0, max_checks=cfg.max_checks)
             self.timer.t["ompl"] += stats.solve_time
             self.timer.t["simplify"] += stats.simplify_time
             if best is None or stats.length < best[1].length:
