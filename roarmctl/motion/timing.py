@@ -541,11 +541,12 @@ def time_parameterise(
         w = 0.0
         if jm is not None:
             w0 = max(float(np.max(amax * safety / jm)), 2 * FINE_DT)
-            w, plateau = None, None
+            w, plateau, tried = None, None, False
             if not _jerk_ok(path, prof, w0, jm) and not _jerk_ok(path, prof, PLATEAU_TRIGGER * w0, jm):
                 # the filter would have to widen past the trigger: a cruise at the top first; if it beats even
                 # the trigger's width it beats any width that passes (no full search needed)
                 plateau = _plateau(algo, constraints, path, gridpoints, prof, w0, jm, None if torque_terms is not None else amax * safety)
+                tried = True  # a None is final: _plateau is deterministic in its arguments, which stay the same
                 if plateau is not None and plateau[0].T + plateau[1] < prof.T + PLATEAU_TRIGGER * w0:
                     prof, w = plateau
             if w is None:
@@ -553,7 +554,7 @@ def time_parameterise(
                 if w is None:
                     i += 1
                     continue
-                if plateau is None and w > PLATEAU_TRIGGER * w0:
+                if not tried and w > PLATEAU_TRIGGER * w0:
                     plateau = _plateau(algo, constraints, path, gridpoints, prof, w0, jm, None if torque_terms is not None else amax * safety)
                 if plateau is not None and plateau[0].T + plateau[1] < prof.T + w:
                     prof, w = plateau
