@@ -8,9 +8,9 @@ STAMP  := $(VENV)/.installed
 
 all: test
 
-# The install compiles the C kernels (state checker, timing) into the source tree (editable install): a change to
-# the C source needs a new install too.
-$(STAMP): pyproject.toml roarmctl/motion/_checkkernel.c roarmctl/motion/_timekernel.c
+# The install compiles the C kernels (FK, dynamics and state checker; timing) into the source tree (editable
+# install): a change to the C source needs a new install too.
+$(STAMP): pyproject.toml roarmctl/_kernel.c roarmctl/motion/_timekernel.c
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'

@@ -1,5 +1,6 @@
-"""The checker's compiled kernel (roarmctl/motion/_checkkernel.c) against independent answers:
-its FK against the library's FK, its separating-axis filter and its candidate pairs against FCL."""
+"""The compiled kernel (roarmctl/_kernel.c) against independent answers: its FK (the library's one FK) against
+a naive chain product, its margin measure against the SVD of a finite-difference Jacobian, its
+separating-axis filter and its candidate pairs against FCL."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import fcl
 import numpy as np
 import pytest
 
-from roarmctl.motion import _checkkernel as kernel
+from roarmctl import _kernel as kernel
 from roarmctl.motion.collision import CollisionChecker
 from roarmctl.motion.scene import Scene, SceneItem, example_scene
 from roarmctl.robot.loader import bundled_robots, load_robot
@@ -40,29 +41,47 @@ def robots(tmp_path_factory) -> list:
     return [load_robot(name) for name in bundled_robots()] + [load_robot(str(odd))]
 
 
-def test_kernel_fk_and_margin_measure_equal_the_library_fk(tmp_path_factory):
-    """Every link frame of the kernel's FK equals Kinematics.frames4 (rz, general revolute, prismatic,
-    fixed and DH post steps), gripper values included; the margin measure equals numpy's SVD of the
-    translational part of Kinematics.jacobian."""
+def _step_kinds(kin) -> set[int]:
+    """Kind codes of the kinematic table's steps (roarmctl/_kernel.c: 0 fixed, 1 z rotation, 2 other axis,
+    3 prismatic, plus 4 for a step with a DH post)."""
+    n_steps, n_const = int(kin._ki[2]), int(kin._ki[3])
+    steps = kin._ki[7 + n_const:7 + n_const + 5 * n_steps].reshape(-1, 5)
+    return set(steps[:, 0].tolist()) | ({4} if steps[:, 4].any() else set())
+
+
+def test_kernel_fk_and_margin_measure_against_independent_answers(tmp_path_factory):
+    """Every link frame of the kernel's FK (Kinematics.frames4, as the checker's tables hold it) equals a
+    naive chain product origin @ motion(q) @ post (z rotation, other-axis revolute, prismatic, fixed, DH
+    post, mimic), gripper values included; the margin measure equals the smallest singular value of a
+    central-difference Jacobian of the naive FK."""
+    from test_kinematics import naive_link_frames
+
     kinds = set()
     for robot in robots(tmp_path_factory):
-        kinds |= {step[0] for step in robot.kin._steps}
+        kinds |= _step_kinds(robot.kin)
         checker = CollisionChecker(robot, Scene([]), singularity_margin=0.01)
         rng = np.random.default_rng(2)
-        q = rng.uniform(checker._lower, checker._upper, (64, robot.arm_dof))
+        q = rng.uniform(checker._lower, checker._upper, (24, robot.arm_dof))
         grip = None
         full = checker._full(q)
         if robot.gripper is not None:
             g = robot.joint_index(robot.gripper.joint)
-            grip = rng.uniform(robot.lower[g], robot.upper[g], 64)
+            grip = rng.uniform(robot.lower[g], robot.upper[g], 24)
             full[:, g] = grip
-        out = np.empty((64, robot.kin.n_links, 16))
-        kernel.frames(checker._kf, checker._ki, q, np.zeros(0) if grip is None else grip, out)
-        np.testing.assert_allclose(out.reshape(64, -1, 4, 4), robot.kin.frames4(full), atol=1e-12, rtol=0,
-                                   err_msg=robot.name)
-        ref = np.linalg.svd(robot.kin.jacobian(full)[:, :3, :], compute_uv=False)[:, -1]
-        np.testing.assert_allclose(checker.margin_measure(q, grip), ref, atol=1e-12, err_msg=robot.name)
-    assert kinds == {"rz", "revolute", "prismatic", "fixed"}
+        ref = np.array([naive_link_frames(robot, qi) for qi in full])
+        np.testing.assert_allclose(robot.kin.frames4(full), ref, atol=1e-12, rtol=0, err_msg=robot.name)
+        h = 1e-6
+        tcp = robot.kin.tcp_index
+        num = np.zeros((len(full), 3, robot.arm_dof))
+        for c, i in enumerate(robot.arm_indices):
+            for k, qi in enumerate(full):
+                dq = np.zeros(robot.dof)
+                dq[i] = h
+                num[k, :, c] = (naive_link_frames(robot, qi + dq)[tcp, :3, 3]
+                                - naive_link_frames(robot, qi - dq)[tcp, :3, 3]) / (2 * h)
+        sv = np.linalg.svd(num, compute_uv=False)[:, -1]
+        np.testing.assert_allclose(checker.margin_measure(q, grip), sv, atol=1e-8, err_msg=robot.name)
+    assert kinds == {0, 1, 2, 3, 4}
 
 
 def _random_rotation(rng) -> np.ndarray:

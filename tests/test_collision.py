@@ -345,7 +345,7 @@ def test_second_box_of_a_cylinder_never_clears_what_fcl_finds_touching():
     """A cylinder item's second box (its box turned 45 degrees about the axis, grown 10 um) against 4000 random boxes
     around the touching distance: whenever the separating-axis test calls a box apart from it, FCL finds the box
     apart from the cylinder; and it clears about half of the pairs that FCL finds apart but the first box does not."""
-    from roarmctl.motion import _checkkernel as kernel
+    from roarmctl import _kernel as kernel
     from roarmctl.motion.collision import _second_box
 
     rng = np.random.default_rng(8)

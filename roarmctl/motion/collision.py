@@ -1,11 +1,11 @@
 """State-validity checking: joint limits, singularity margin, arm vs scene and arm vs itself (FCL).
 
 How a batch of states (N, arm_dof) is checked, in one call of the compiled kernel
-(``_checkkernel.c``, a small C extension built at install time) per batch:
+(``roarmctl/_kernel.c``, a small C extension built at install time) per batch:
 
-1. joint limits, the FK of the library's tables (``robot.kin``'s compiled steps, packed here; a test
-   compares every link frame with ``Kinematics.frames4``) and, when a margin is set, the smallest
-   singular value of the translational Jacobian;
+1. joint limits, the library's one FK (the kernel's ``fk`` on ``robot.kin``'s tables, which
+   ``Kinematics.frames4`` also calls) and, when a margin is set, the smallest singular value of the
+   translational Jacobian (the kernel's Jacobian columns, as ``Kinematics.pose_jacobian``);
 2. every collision shape's world pose;
 3. conservative pre-filters that only clear pairs that are certainly apart: a shape's bounding
    sphere vs the item's axis-aligned box (and shape spheres against each other), the world boxes,
@@ -42,7 +42,7 @@ import fcl
 import numpy as np
 
 from roarmctl.errors import InputError
-from roarmctl.motion import _checkkernel as _kernel
+from roarmctl import _kernel
 from roarmctl.motion.scene import Scene, SceneItem
 from roarmctl.robot.model import Robot
 
@@ -106,7 +106,7 @@ _BOX2_GROW = 1e-5  # m: the second box of a cylinder stands off it, far beyond F
 
 def _second_box(item: SceneItem) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """For a cylinder item: a second box that holds it, its own box turned 45 degrees about the axis and grown by
-    ``_BOX2_GROW`` (rotation (9,) row-major, centre (3,), half extents (3,), as ``_checkkernel.apart`` takes them).
+    ``_BOX2_GROW`` (rotation (9,) row-major, centre (3,), half extents (3,), as ``_kernel.apart`` takes them).
     The two boxes meet in an octagonal prism around the cylinder, so a shape whose box is apart from this one is
     apart from the cylinder even where it overlaps the first box (near its corners); None for other items."""
     if item.shape != "cylinder":
@@ -376,36 +376,14 @@ class CollisionChecker:
         self._pack()
 
     def _pack(self) -> None:
-        """The kernel's tables: one int64 and one float64 array (layout: the header of _checkkernel.c)."""
+        """The kernel's tables: one int64 and one float64 array (layout: parse_model in roarmctl/_kernel.c), the
+        robot's kinematic tables (``Kinematics._pack``) inside."""
         kin = self._fk
         for what, count, most in (("joints", len(self._q_template), 64), ("links", kin.n_links, 256),
                                   ("collision shapes (with attached objects)", len(self._moving_shapes), 512)):
-            if count > most:  # the kernel's fixed-size work arrays (_checkkernel.c: MAXDOF, MAXLINKS, MAXSHAPES)
+            if count > most:  # the kernel's fixed-size work arrays (_kernel.c: MAXDOF, MAXLINKS, MAXSHAPES)
                 raise InputError(f"{self.robot.name} has {count} {what}; the collision checker handles at most {most}",
                                  "merge collision shapes, or split the description")
-        steps_i, steps_f = [], []
-        for kind, parent, child, qi, offset, data, post in kin._steps:
-            rec = np.zeros((4, 16))
-            if kind == "rz":
-                code = 1
-                rec[0], rec[1], rec[2] = (m.ravel() for m in data)
-            elif kind == "revolute":
-                code = 2
-                rec[0, :3], rec[2] = data[1], data[0].ravel()
-            elif kind == "prismatic":
-                code = 3
-                rec[0, :3], rec[2] = data[0][:3, :3] @ data[1], data[0].ravel()
-            else:
-                code = 0
-                rec[2] = data[0].ravel()
-            if post is not None:
-                rec[3] = post.ravel()
-            steps_i += [code, parent, child, qi, int(post is not None)]
-            steps_f += [[offset], rec.ravel()]
-        chain_i, chain_f = [], []
-        for parent, joint in self._chain:
-            chain_i += [parent, 0 if joint.kind == "revolute" else 1]
-            chain_f += [joint.origin.ravel(), np.asarray(joint.axis, dtype=float)]
         s, m = len(self._moving_shapes), len(self._items)
         shapes = np.hstack([self._mv_rot.reshape(s, 9), self._mv_pos, self._mv_half, self._mv_half_self,
                             self._mv_radius[:, None]]) if s else np.zeros((0, 19))
@@ -445,21 +423,20 @@ class CollisionChecker:
             lp_start.append(len(lp_order))
             lp_f += [*sphere[la][0], sphere[la][1], *sphere[lb][0], sphere[lb][1]]
         margin = self.singularity_margin
-        const = list(kin._const_links)
-        ints = [len(self._q_template), len(self._arm), kin.n_links, len(kin._steps), self._tcp, len(self._chain), s, m,
-                len(self._active), len(self._pairs), -1 if self._gripper_index is None else self._gripper_index,
-                int(margin is not None), len(const), len(g_links), len(by_links)]
-        ints += list(self._arm) + const + steps_i + chain_i + list(self._mv_link) + list(self._active)
+        ints = [len(self._arm), s, m, len(self._active), len(self._pairs),
+                -1 if self._gripper_index is None else self._gripper_index, int(margin is not None), len(g_links),
+                len(by_links), len(kin._ki), len(kin._kf)]
+        ints += list(kin._ki) + list(self._arm) + list(self._mv_link) + list(self._active)
         ints += list(self._active_mask.astype(np.int64).ravel()) + list(self._pairs.ravel())
         ints += g_links + g_start + g_order + list(np.array(g_mask, dtype=np.int64).ravel())
         ints += lp_links + lp_start + lp_order
         self._ki = np.array(ints, dtype=np.int64)
-        floats = [self._lower, self._upper, self._q_template, [0.0 if margin is None else float(margin)],
-                  kin._const[const].ravel(), *steps_f, *chain_f, shapes.ravel(), items.ravel(),
+        floats = [kin._kf, self._lower, self._upper, self._q_template, [0.0 if margin is None else float(margin)],
+                  shapes.ravel(), items.ravel(),
                   self._active_r2.ravel(), self._pair_r2, np.sqrt(self._active_r2.ravel()), np.sqrt(self._pair_r2),
                   np.array(g_c, dtype=float).ravel(), g_r, lp_f]
         self._kf = np.concatenate([np.asarray(f, dtype=float).ravel() for f in floats])
-        off = 2 * len(self._arm)
+        off = len(kin._kf) + 2 * len(self._arm)
         self._q_template = self._kf[off:off + len(self._q_template)]  # set_gripper writes the kernel's table
         self._kfm, self._kim = memoryview(self._kf), memoryview(self._ki)  # cheaper to pass than the arrays
         self._bufs = {}
@@ -656,7 +633,7 @@ class CollisionChecker:
 
     def _line_ok(self, b: dict, q0: np.ndarray, d: np.ndarray, steps: int, start: int, stride: int, sweep: float = 0.0,
                  idx: np.ndarray = _NO_IDX, refine: int = 1) -> bool:
-        """True when the states of the segment q0 -> q0 + d that ``_checkkernel.check_line`` makes (see there) are
+        """True when the states of the segment q0 -> q0 + d that ``_kernel.check_line`` makes (see there) are
         all valid; stops at the first invalid one. ``b``: output buffers (``_buffers``) large enough for them; with
         ``sweep`` > 0 the "near" flags stay in ``b``. ``idx``: int64 step indices (refinement), as the kernel takes."""
         n = len(idx) * (refine - 1) if len(idx) else (steps - start) // stride + 1 if start <= steps else 0

@@ -9,18 +9,21 @@ Gravity acts along -z of the root frame (``GRAVITY`` = 9.81 m/s^2). Vectors ``q`
 every actuated joint (``robot.dof``, gripper included); arm-only vectors are accepted and completed
 (gripper closed for ``q``, zero rate and acceleration). Results cover every actuated joint.
 
-Everything is computed in root-frame coordinates: the forward pass carries each link's angular
-velocity and acceleration and the linear acceleration of its frame origin (gravity enters as an
-upward acceleration of the root), the backward pass sums each subtree's force and its moment about
-the joint's axis point, and the torque is that moment projected on the joint axis.
+The recursion runs in the compiled kernel (``roarmctl/_kernel.c``, function ``rnea``) on the kinematic
+tables of ``robot.kin`` and the library's FK, in root-frame coordinates: the forward pass carries each
+link's angular velocity and acceleration and the linear acceleration of its frame origin (gravity enters
+as an upward acceleration of the root), the backward pass sums each subtree's force and its moment about
+the joint's axis point, and the torque is that moment projected on the joint axis (the force, for a
+prismatic joint). A mimic joint's share adds to the joint it follows. Bodies are the links' inertials,
+with any payload combined into its link (``combine_inertials``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from roarmctl import _kernel
 from roarmctl.errors import DescriptionError, InputError
-from roarmctl.robot.kinematics import cross_rows
 from roarmctl.robot.model import Inertial, Robot
 
 GRAVITY = 9.81  # m/s^2, along -z of the root frame
@@ -77,23 +80,40 @@ def _batch(robot: Robot, v, what: str, is_position: bool) -> np.ndarray:
         robot.full_q(a) if is_position else _scatter_arm(robot, a))
 
 
-def _has_post(joint) -> bool:
-    """Whether the joint has a fixed transform after its motion (standard DH's d/a/alpha)."""
-    return not np.array_equal(joint.post, _EYE4)
+_BODYF = 14  # per link: has a body, mass, com (3), inertia (9): roarmctl/_kernel.c BODYF
 
 
-_EYE4 = np.eye(4)
-
-
-def _joint_table(robot: Robot) -> list[tuple]:
-    """Per joint (joint, parent link, child link, q index or -1, whether the child frame's origin and axis are
-    the joint's: revolute or fixed without a DH ``post``), computed once per robot."""
-    table = getattr(robot, "_rnea_joints", None)
-    if table is None:
-        kin = robot.kin
-        table = robot._rnea_joints = [(joint, kin._parent[j], kin._child[j], kin._qidx[j],
-                                       joint.kind != "prismatic" and not _has_post(joint))
-                                      for j, joint in enumerate(robot.joints)]
+def _bodies(robot: Robot, payload: dict[str, Inertial] | None) -> np.ndarray:
+    """The kernel's body table (n_links, 14) of the robot's inertials with ``payload`` combined in; the table
+    without payload, and the last few with one, are kept on the robot."""
+    kin = robot.kin
+    cache = getattr(robot, "_rnea_bodies", None)
+    if cache is None:
+        cache = robot._rnea_bodies = {}
+    key: tuple = ()
+    if payload:
+        for name, extra in payload.items():
+            if name not in kin.link_index:
+                raise InputError(f"payload: '{name}' is not a link of {robot.name}")
+            key += ((name, float(extra.mass), np.asarray(extra.com, dtype=float).tobytes(),
+                     np.asarray(extra.inertia, dtype=float).tobytes()),)
+    table = cache.get(key)
+    if table is not None:
+        return table
+    bodies = dict(robot.inertials)
+    for name, extra in (payload or {}).items():
+        bodies[name] = combine_inertials(bodies[name], extra) if name in bodies else extra
+    table = np.zeros((kin.n_links, _BODYF))
+    for name, inertial in bodies.items():
+        k = kin.link_index.get(name)
+        if k is None:
+            continue
+        table[k, 0], table[k, 1] = 1.0, float(inertial.mass)
+        table[k, 2:5] = np.asarray(inertial.com, dtype=float)
+        table[k, 5:] = np.asarray(inertial.inertia, dtype=float).ravel()
+    if len(cache) > 16:
+        cache.clear()
+    cache[key] = table
     return table
 
 
@@ -123,120 +143,18 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
     n = q.shape[0]
     if qd.shape[0] != n or qdd.shape[0] != n:
         raise InputError(f"q, qd, qdd: batches of different lengths ({n}, {qd.shape[0]}, {qdd.shape[0]})")
+    tau = np.empty((n, robot.dof))
     kin = robot.kin
-    frames = kin.link_frames(q)
-    if frames.ndim == 3:
-        frames = frames[None]
-    n_links = len(kin.link_names)
-    w = np.zeros((n, n_links, 3))  # angular velocity of each link
-    dw = np.zeros((n, n_links, 3))  # angular acceleration
-    a = np.zeros((n, n_links, 3))  # linear acceleration of the link frame's origin
-    a[:, 0] = (0.0, 0.0, gravity)  # gravity as an upward acceleration of the root
-    org = frames[:, :, :3, 3]
-    # At rest (holding torques, the gravity term of timing): no angular velocity or acceleration anywhere,
-    # so every cross-product term below is zero and is skipped (same result, a fraction of the work).
-    moving = bool(np.any(qd) or np.any(qdd))
-
-    # Links whose angular velocity and acceleration are zero in every state (no moving joint between them
-    # and the root, e.g. the base): the cross-product terms with their w and dw are zero and are skipped.
-    spins = [False] * n_links
-
-    def point_acc(link: int, r: np.ndarray) -> np.ndarray:
-        if not moving or not spins[link]:
-            return a[:, link]
-        d = r - org[:, link]
-        return a[:, link] + cross_rows(dw[:, link], d) + cross_rows(w[:, link], cross_rows(w[:, link], d))
-
-    n_joints = len(robot.joints)
-    axes = np.zeros((n, n_joints, 3))
-    pivots = np.zeros((n, n_joints, 3))
-    for j, (joint, p, c, qi, at_origin) in enumerate(_joint_table(robot)):
-        if at_origin:
-            # child = before @ rotation about the axis (or nothing): same origin, same axis direction
-            z = frames[:, c, :3, :3] @ joint.axis
-            axes[:, j], pivots[:, j] = z, org[:, c]
-        else:
-            before = frames[:, p] @ joint.origin
-            z = before[:, :3, :3] @ joint.axis
-            axes[:, j], pivots[:, j] = z, before[:, :3, 3]
-        if joint.kind == "revolute" and not moving:
-            a[:, c] = a[:, p]
-        elif joint.kind == "revolute":
-            wz = qd[:, qi, None] * z
-            w[:, c] = w[:, p] + wz
-            dw[:, c] = dw[:, p] + qdd[:, qi, None] * z + cross_rows(w[:, p], wz) if spins[p] else dw[:, p] + qdd[:, qi, None] * z
-            spins[c] = True
-            # the pivot lies on the axis: it moves with the parent and with the child alike
-            a_piv = point_acc(p, pivots[:, j])
-            if at_origin:  # the child's origin is the pivot
-                a[:, c] = a_piv
-            else:
-                d = org[:, c] - pivots[:, j]
-                a[:, c] = a_piv + cross_rows(dw[:, c], d) + cross_rows(w[:, c], cross_rows(w[:, c], d))
-        elif joint.kind == "prismatic":
-            w[:, c], dw[:, c] = w[:, p], dw[:, p]
-            spins[c] = spins[p]
-            a[:, c] = point_acc(p, org[:, c]) + 2.0 * cross_rows(w[:, p], qd[:, qi, None] * z) + qdd[:, qi, None] * z
-        else:
-            w[:, c], dw[:, c] = w[:, p], dw[:, p]
-            spins[c] = spins[p]
-            a[:, c] = point_acc(p, org[:, c])
-
-    bodies = dict(robot.inertials)
-    for name, extra in (payload or {}).items():
-        if name not in kin.link_index:
-            raise InputError(f"payload: '{name}' is not a link of {robot.name}")
-        bodies[name] = combine_inertials(bodies[name], extra) if name in bodies else extra
-    # Each link's own inertial force (at its COM) and moment about the COM.
-    force = np.zeros((n, n_links, 3))
-    moment = np.zeros((n, n_links, 3))
-    com = org.copy()
-    heavy = [False] * n_links  # the link or a link below it carries a body
-    for name, inertial in bodies.items():
-        k = kin.link_index.get(name)
-        if k is None:
-            continue
-        heavy[k] = True
-        rot = frames[:, k, :3, :3]
-        com[:, k] = org[:, k] + rot @ inertial.com
-        force[:, k] = inertial.mass * point_acc(k, com[:, k])
-        if not moving or not spins[k]:
-            continue
-        inertia = rot @ inertial.inertia @ np.swapaxes(rot, 1, 2)
-        iw = np.einsum("nij,nj->ni", inertia, w[:, k])
-        moment[:, k] = np.einsum("nij,nj->ni", inertia, dw[:, k]) + cross_rows(w[:, k], iw)
-
-    # Backward pass: subtree force and its moment about each joint's pivot. A subtree without a body adds
-    # nothing (its torques are zero), and the root's own sums are never read.
-    f_sub = force.copy()
-    n_sub = np.zeros((n, n_links, 3))  # moment of the subtree about the pivot of the joint above the link
-    tau = np.zeros((n, robot.dof))
-    table = _joint_table(robot)
-    kids = [c for _, _, c, _, _ in table]
-    own = cross_rows(com[:, kids] - pivots, force[:, kids])  # (n, joints, 3): each child's own force about the pivot
-    for j in range(n_joints - 1, -1, -1):
-        joint, p, c, qi, _ = table[j]
-        if not heavy[c]:
-            continue
-        heavy[p] = True
-        n_sub[:, c] += moment[:, c] + own[:, j]
-        if qi >= 0:  # += : a mimic joint's generalised force adds to the joint it follows
-            tau[:, qi] += np.einsum("ni,ni->n", axes[:, j], n_sub[:, c] if joint.kind == "revolute" else f_sub[:, c])
-        if p == 0:
-            continue
-        # hand the subtree's wrench to the parent, as a moment about the parent's own pivot
-        pivot_p = pivots[:, kin._child.index(p)]
-        f_sub[:, p] += f_sub[:, c]
-        n_sub[:, p] += n_sub[:, c] + cross_rows(pivots[:, j] - pivot_p, f_sub[:, c])
+    _kernel.rnea(kin._kfm, kin._kim, _bodies(robot, payload), np.ascontiguousarray(q), np.ascontiguousarray(qd),
+                 np.ascontiguousarray(qdd), float(gravity), tau)
     return tau[0] if single else tau
 
 
 def mass_matrix(robot: Robot, q) -> np.ndarray:
     """Joint-space inertia matrix M(q), (dof, dof), symmetric positive definite (kg m^2 for revolute joints)."""
     q = _complete(robot, q, "q", True)
-    zero = np.zeros(robot.dof)
-    cols = [inverse_dynamics(robot, q, zero, e, gravity=0.0) for e in np.eye(robot.dof)]
-    m = np.stack(cols, axis=1)
+    zero = np.zeros((robot.dof, robot.dof))
+    m = inverse_dynamics(robot, np.repeat(q[None], robot.dof, axis=0), zero, np.eye(robot.dof), gravity=0.0).T
     return 0.5 * (m + m.T)
 
 

@@ -1,29 +1,29 @@
 """The library's one forward kinematics, plus the geometric Jacobian and manipulability, for any
 tree of joints. IK, the collision checker, timing (TCP speed), dynamics and the pictures all use it.
 
-Everything is batched: a configuration array of shape (N, dof) goes through one numpy pass per
-joint, so FK of many configurations costs little more than FK of one. Single configurations of
-shape (dof,) are accepted too and give unbatched results.
+The FK runs in the compiled kernel (``roarmctl/_kernel.c``, function ``fk``) from tables that
+``Kinematics`` builds once per robot (``_pack``): links reached from the root through fixed joints
+only are constant; every other joint is one step, origin @ motion(q) @ post, with a revolute joint
+about its local z axis (every URDF joint of the RoArm, every DH joint) as cos(q) A + sin(q) B + C
+(fixed 4x4 A, B, C), one about another unit axis u as origin @ Rodrigues(u, q), a prismatic one as
+the origin moved along its axis, and a DH ``post`` as a fixed product after the motion. A mimic joint
+reads the value of the joint it follows (its multiplier, +-1, and offset are folded into its axis
+and offset by the loader); a continuous joint is a revolute joint without limits. The collision
+checker, the Jacobian and the inverse dynamics (robot/dynamics.py) run on the same tables and the
+same C function.
 
-How it is fast: the fixed joint origins are pre-split and links reached from the root through fixed
-joints only are computed once. A revolute joint about its local z axis (every URDF joint of the
-RoArm, every DH joint) contributes origin @ Rz(q), which is linear in (cos q, sin q):
-origin @ Rz(q) = cos(q) A + sin(q) B + C with fixed 4x4 A, B, C, so it costs two trig calls, three
-multiply-adds and one batched matmul. One configuration goes through 2-D arrays and Python floats
-(about 40 % less numpy overhead than a batch of one). A revolute joint about another axis u is linear
-in (cos q, sin q) too (Rodrigues: R_u(q) = cos q (I - u u^T) + sin q [u]x + u u^T): its step keeps
-the general form (origin, axis) for the compiled collision checker and carries its A, B, C as a third
-item, which frames4 uses. Prismatic joints take the general path (translation along the axis).
+Everything is batched: a configuration array of shape (N, dof) is one call into the kernel. Single
+configurations of shape (dof,) are accepted by the friendly forms and give unbatched results.
 """
 
 from __future__ import annotations
-
-import math
 
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from roarmctl import _kernel
 
 if TYPE_CHECKING:
     from roarmctl.robot.model import Robot
@@ -59,7 +59,9 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-_SMALL_BATCH = 200  # states: up to here frames4 of a z-rotation chain takes _frames_simple
+# Kind codes of the kernel's step and joint records (roarmctl/_kernel.c: STEPI, JOINTI).
+_STEP_KIND = {"fixed": 0, "rz": 1, "revolute": 2, "prismatic": 3}
+_JOINT_KIND = {"fixed": 0, "revolute": 1, "prismatic": 2}
 
 
 class Kinematics:
@@ -84,113 +86,88 @@ class Kinematics:
             link = self._parent[j]
         self.tcp_chain_joints = list(reversed(chain))
         self.tcp_chain_indices = [self._qidx[j] for j in self.tcp_chain_joints if self._qidx[j] >= 0]
-
-        self._compile()
+        self.n_links = len(self.link_names)
+        self._pack()
 
     # ------------------------------------------------------------------ FK
-    def _compile(self) -> None:
-        """Per-joint steps (kind, parent, child, q index, offset, data, post) and the constant links."""
+    def _pack(self) -> None:
+        """The kernel's kinematic tables ``_ki`` (int64) and ``_kf`` (float64), layout as in roarmctl/_kernel.c:
+        constant link frames, one step per joint that moves a link (kind, parent, child, q index, post;
+        offset and the 4 x 4 A, B, C, post), the TCP chain (parent link, revolute or prismatic; axis and
+        origin point in the parent frame) and every joint for the dynamics (kind, parent, child, q index,
+        axis at the child's origin, joint above the parent; axis, origin)."""
         robot = self.robot
-        self.n_links = len(self.link_names)
-        self._const = np.zeros((self.n_links, 4, 4))
-        self._const[0] = np.eye(4)
+        eye = np.eye(4)
+        const = np.zeros((self.n_links, 4, 4))
+        const[0] = eye
         is_const = [True] + [False] * (self.n_links - 1)
-        self._steps: list[tuple] = []
+        steps_i: list[int] = []
+        steps_f: list[np.ndarray] = []
         for j, joint in enumerate(robot.joints):
             parent, child, qi = self._parent[j], self._child[j], self._qidx[j]
             origin = joint.origin
-            post = None if np.allclose(joint.post, np.eye(4)) else joint.post.copy()
+            post = None if np.allclose(joint.post, eye) else joint.post
             if joint.kind == "fixed" and is_const[parent]:
-                self._const[child] = self._const[parent] @ origin @ (post if post is not None else np.eye(4))
+                const[child] = const[parent] @ origin @ (post if post is not None else eye)
                 is_const[child] = True
                 continue
-            if joint.kind == "revolute" and np.allclose(joint.axis, (0.0, 0.0, 1.0)):
+            rec = np.zeros((4, 16))  # A, B, C, post
+            u = np.asarray(joint.axis, dtype=float)
+            if joint.kind == "revolute" and np.allclose(u, (0.0, 0.0, 1.0)):
+                kind = "rz"
                 a, b, c = np.zeros((4, 4)), np.zeros((4, 4)), np.zeros((4, 4))
                 a[:3, 0], a[:3, 1] = origin[:3, 0], origin[:3, 1]  # cos q terms of the first two columns
                 b[:3, 0], b[:3, 1] = origin[:3, 1], -origin[:3, 0]  # sin q terms
                 c[:3, 2], c[:, 3] = origin[:3, 2], origin[:, 3]
-                self._steps.append(("rz", parent, child, qi, float(joint.offset), (a, b, c), post))
+                rec[0], rec[1], rec[2] = a.ravel(), b.ravel(), c.ravel()
             elif joint.kind == "revolute":
-                u = np.asarray(joint.axis, dtype=float)
-                ux = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
-                a, b, c = np.zeros((4, 4)), np.zeros((4, 4)), np.zeros((4, 4))
-                a[:3, :3] = origin[:3, :3] @ (np.eye(3) - np.outer(u, u))
-                b[:3, :3] = origin[:3, :3] @ ux
-                c[:3, :3], c[:, 3] = origin[:3, :3] @ np.outer(u, u), origin[:, 3]
-                self._steps.append(("revolute", parent, child, qi, float(joint.offset), (origin.copy(), u, (a, b, c)), post))
+                kind = "revolute"
+                rec[0, :3], rec[2] = u, origin.ravel()
+            elif joint.kind == "prismatic":
+                kind = "prismatic"
+                rec[0, :3], rec[2] = origin[:3, :3] @ u, origin.ravel()
             else:
-                self._steps.append((joint.kind, parent, child, qi, float(joint.offset),
-                                    (origin.copy(), np.asarray(joint.axis, dtype=float)), post))
-        self._const_links = [i for i, c in enumerate(is_const) if c]
-        self._simple = all(kind in ("rz", "revolute", "fixed") and post is None for kind, *_, post in self._steps)
-        if self._simple:  # every step as cos(q) A + sin(q) B + C (fixed: A = B = 0), for _frames_one
-            k = len(self._steps)
-            self._abc = np.zeros((3, k, 4, 4))
-            self._one_q = np.array([max(st[3], 0) for st in self._steps], dtype=int)
-            self._one_off = np.array([st[4] for st in self._steps])
-            self._one_pc = [(st[1], st[2]) for st in self._steps]
-            for i, (kind, *_, data, _post) in enumerate(self._steps):
-                if kind == "rz":
-                    self._abc[:, i] = data
-                elif kind == "revolute":
-                    self._abc[:, i] = data[2]
-                else:
-                    self._abc[2, i] = data[0]
+                kind = "fixed"
+                rec[2] = origin.ravel()
+            if post is not None:
+                rec[3] = post.ravel()
+            steps_i += [_STEP_KIND[kind], parent, child, max(qi, 0), int(post is not None)]
+            steps_f += [np.array([float(joint.offset)]), rec.ravel()]
+        const_links = [i for i, c in enumerate(is_const) if c]
+        chain_i: list[int] = []
+        chain_f: list[float] = []
+        for j in self.tcp_chain_joints:
+            joint = robot.joints[j]
+            if joint.kind == "fixed":
+                continue
+            o, ax = joint.origin, [float(v) for v in joint.axis]
+            # the axis in the parent frame, summed as the kernel sums (no FMA, this order)
+            chain_i += [self._parent[j], 0 if joint.kind == "revolute" else 1]
+            chain_f += [float(o[r, 0]) * ax[0] + float(o[r, 1]) * ax[1] + float(o[r, 2]) * ax[2] for r in range(3)]
+            chain_f += [float(v) for v in o[:3, 3]]
+        joints_i: list[int] = []
+        joints_f: list[np.ndarray] = []
+        for j, joint in enumerate(robot.joints):
+            p = self._parent[j]
+            at_origin = joint.kind != "prismatic" and np.array_equal(joint.post, eye)
+            joints_i += [_JOINT_KIND[joint.kind], p, self._child[j], self._qidx[j], int(at_origin),
+                         self._child.index(p) if p != 0 else -1]
+            joints_f += [np.asarray(joint.axis, dtype=float), joint.origin.ravel()]
+        n_chain = len(chain_i) // 2
+        ints = [robot.dof, self.n_links, len(steps_i) // 5, len(const_links), n_chain, self.tcp_index, len(robot.joints)]
+        self._ki = np.array(ints + const_links + steps_i + chain_i + joints_i, dtype=np.int64)
+        self._kf = np.concatenate([const[const_links].ravel(), *steps_f, np.array(chain_f, dtype=float),
+                                   *joints_f]).astype(float)
+        self._kim, self._kfm = memoryview(self._ki), memoryview(self._kf)  # cheaper to pass than the arrays
+        self._n_chain = n_chain
 
     def frames4(self, q: np.ndarray) -> np.ndarray:
         """Every link frame (N, L, 4, 4) in the root frame for full configurations ``q`` (N, dof), rad/m.
 
         No conversion or checks (the checker's hot path); ``link_frames`` is the friendly form."""
-        n = q.shape[0]
-        if self._simple and n <= _SMALL_BATCH:
-            return self._frames_one(q[0])[None] if n == 1 else self._frames_simple(q)
-        out = np.empty((n, self.n_links, 4, 4))
-        out[:, self._const_links] = self._const[self._const_links]
-        for kind, parent, child, qi, offset, data, post in self._steps:
-            if kind == "rz" or kind == "revolute":
-                a, b, c = data if kind == "rz" else data[2]
-                ang = q[:, qi] + offset if offset else q[:, qi]
-                m = np.cos(ang)[:, None, None] * a
-                m += np.sin(ang)[:, None, None] * b
-                m += c
-            elif kind == "prismatic":
-                origin, axis = data
-                m = np.broadcast_to(origin, (n, 4, 4)).copy()
-                m[:, :3, 3] += (q[:, qi] + offset)[:, None] * (origin[:3, :3] @ axis)
-            else:
-                m = data[0]
-            t = out[:, parent] @ m
-            out[:, child] = t @ post if post is not None else t
-        return out
-
-    def _frames_simple(self, q: np.ndarray) -> np.ndarray:
-        """``frames4`` of a chain of z rotations and fixed joints for a small batch: every joint transform of
-        every state in three array operations (as ``_frames_one``), then one batched product per joint.
-        Small batches (IK's Newton steps: 5 states) were mostly per-joint numpy call overhead, 37 -> 22 us
-        on the RoArm; from a few hundred states on, the per-joint loop is faster. Same results bit for bit."""
-        n = q.shape[0]
-        ang = (q[:, self._one_q] + self._one_off).T  # (K, N)
-        abc = self._abc
-        m = np.cos(ang)[:, :, None, None] * abc[0][:, None]  # (K, N, 4, 4)
-        m += np.sin(ang)[:, :, None, None] * abc[1][:, None]
-        m += abc[2][:, None]
-        out = np.empty((n, self.n_links, 4, 4))
-        out[:, self._const_links] = self._const[self._const_links]
-        for i, (parent, child) in enumerate(self._one_pc):
-            out[:, child] = out[:, parent] @ m[i]
-        return out
-
-    def _frames_one(self, q: np.ndarray) -> np.ndarray:
-        """(L, 4, 4) for one full q: all joint transforms in three array operations, then the chain."""
-        ang = q[self._one_q] + self._one_off
-        abc = self._abc
-        m = np.cos(ang)[:, None, None] * abc[0]
-        m += np.sin(ang)[:, None, None] * abc[1]
-        m += abc[2]
-        out = np.empty((self.n_links, 4, 4))
-        out[self._const_links] = self._const[self._const_links]
-        for i, (parent, child) in enumerate(self._one_pc):
-            np.matmul(out[parent], m[i], out=out[child])
+        q = np.ascontiguousarray(q, dtype=float)
+        out = np.empty((q.shape[0], self.n_links, 4, 4))
+        _kernel.fk(self._kfm, self._kim, q, out)
         return out
 
     def frames(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -231,30 +208,24 @@ class Kinematics:
         Column k of a revolute joint is (z_k x (p_tcp - o_k), z_k), of a prismatic one (z_k, 0), with
         z_k the joint axis and o_k its origin in the root frame, both taken from the parent link's frame.
         """
-        if not hasattr(self, "_jac_parents"):  # the chain's moving joints as arrays, built once
-            moving = [j for j in self.tcp_chain_joints if self.robot.joints[j].kind != "fixed"]
-            origins = [self.robot.joints[j].origin for j in moving]
-            self._jac_parents = np.array([self._parent[j] for j in moving], dtype=int)
-            self._jac_axes = np.array([o[:3, :3] @ np.asarray(self.robot.joints[j].axis, dtype=float)
-                                       for o, j in zip(origins, moving)])  # (k, 3) in the parent frame
-            self._jac_points = np.array([o[:3, 3] for o in origins])  # (k, 3) in the parent frame
-            self._jac_revolute = np.array([self.robot.joints[j].kind == "revolute" for j in moving])
-        frames = self.frames4(q)
-        tcp = frames[:, self.tcp_index]
-        par = frames[:, self._jac_parents]  # (N, k, 4, 4)
-        rot = par[..., :3, :3]
-        z = np.einsum("nkij,kj->nki", rot, self._jac_axes)
-        o = np.einsum("nkij,kj->nki", rot, self._jac_points) + par[..., :3, 3]
-        lin = np.where(self._jac_revolute[None, :, None], cross_rows(z, tcp[:, None, :3, 3] - o), z)
-        ang = np.where(self._jac_revolute[None, :, None], z, 0.0)
-        jac = np.concatenate([lin, ang], axis=2).transpose(0, 2, 1)
+        q = np.ascontiguousarray(q, dtype=float)
+        tcp = np.empty((q.shape[0], 4, 4))
+        jac = np.empty((q.shape[0], 6, self._n_chain))
+        _kernel.jacobian(self._kfm, self._kim, q, tcp, jac)
         return tcp, jac
 
     def tcp_velocity(self, q, qd_arm) -> np.ndarray:
         """Linear TCP velocity (N, 3) m/s = J_v(q) @ qd_arm, for q (N, dof or arm_dof) and
         qd_arm (N, arm_dof) rad/s (or any path derivative, giving the TCP derivative per unit)."""
-        jv = self.jacobian(np.atleast_2d(q))[:, :3, :]
-        return np.einsum("nij,nj->ni", jv, np.atleast_2d(qd_arm))
+        q = self.robot.full_q(np.atleast_2d(q))
+        qd = np.atleast_2d(qd_arm)
+        if len(q) != len(qd):
+            n = max(len(q), len(qd))
+            q, qd = np.broadcast_to(q, (n, q.shape[1])), np.broadcast_to(qd, (n, qd.shape[1]))
+        q, qd = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float)
+        out = np.empty((len(q), 3))
+        _kernel.tcp_velocity(self._kfm, self._kim, q, qd, out)
+        return out
 
     def manipulability(self, q) -> ManipulabilityReport:
         """Manipulability figures at one configuration (see ``ManipulabilityReport``)."""
