@@ -24,6 +24,8 @@ OMPL is imported inside the functions (heavy import; ``roarmctl --help`` must st
 
 from __future__ import annotations
 
+import bisect
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -123,17 +125,20 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
         if len(path) < 3 or failures >= SHORTCUT_PATIENCE:
             break
         failures += 1
-        if seg is None:
-            seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
-            cum = np.concatenate([[0.0], np.cumsum(seg)])
-        ta, tb = np.sort(rng.uniform(0.0, cum[-1], 2))
-        ia = min(int(np.searchsorted(cum, ta, side="right")) - 1, len(seg) - 1)
-        ib = min(int(np.searchsorted(cum, tb, side="right")) - 1, len(seg) - 1)
+        if seg is None:  # as Python floats: the same numbers, cheaper to pick from (bisect for searchsorted)
+            seg_arr = np.linalg.norm(np.diff(path, axis=0), axis=1)
+            seg, cum = seg_arr.tolist(), np.concatenate([[0.0], np.cumsum(seg_arr)]).tolist()
+        ta, tb = rng.uniform(0.0, cum[-1], 2).tolist()
+        if tb < ta:
+            ta, tb = tb, ta
+        ia = min(bisect.bisect_right(cum, ta) - 1, len(seg) - 1)
+        ib = min(bisect.bisect_right(cum, tb) - 1, len(seg) - 1)
         if ia == ib:
             continue
         pa = path[ia] + (path[ia + 1] - path[ia]) * ((ta - cum[ia]) / seg[ia])
         pb = path[ib] + (path[ib + 1] - path[ib]) * ((tb - cum[ib]) / seg[ib])
-        if np.linalg.norm(pb - pa) >= (tb - ta) - 1e-6:
+        gap = pb - pa
+        if math.sqrt(gap.dot(gap)) >= (tb - ta) - 1e-6:  # np.linalg.norm's own sum for a vector
             continue
         # The pieces left of the two cut segments are re-checked too: a sub-segment is sampled on
         # a different grid than the segment it came from.
