@@ -236,3 +236,27 @@ def test_fk_equals_a_naive_chain_product(robot):
     np.testing.assert_allclose(robot.kin.link_frames(q), ref, atol=1e-12, rtol=0)  # batched
     for qi, ri in zip(q[:8], ref[:8]):
         np.testing.assert_allclose(robot.kin.link_frames(qi), ri, atol=1e-12, rtol=0)  # one configuration
+
+
+def test_jacobian_and_tcp_velocity_of_prismatic_and_tilted_joints_match_finite_differences(tmp_path):
+    """A chain with a prismatic lift, an x-axis joint and a tilted axis (plus a mimic finger off the chain):
+    the Jacobian equals central differences of the FK, and tcp_velocity(q, qd) equals the TCP's
+    finite-difference velocity along qd, batched as one at a time."""
+    from test_checkkernel import ODD_URDF
+
+    path = tmp_path / "odd.urdf"
+    path.write_text(ODD_URDF)
+    robot = load_robot(str(path))
+    assert {j.kind for j in robot.joints} == {"prismatic", "revolute", "fixed"}
+    rng = np.random.default_rng(6)
+    q = rng.uniform(robot.lower, robot.upper, (16, robot.dof))
+    qd = rng.uniform(-1, 1, (16, robot.arm_dof))
+    h = 1e-6
+    for qi, vi in zip(q, qd):
+        assert np.allclose(robot.kin.jacobian(qi), numeric_jacobian(robot, qi), atol=1e-8)
+        step = np.zeros(robot.dof)
+        step[robot.arm_indices] = h * vi
+        v = (robot.kin.fk(qi + step)[:3, 3] - robot.kin.fk(qi - step)[:3, 3]) / (2 * h)
+        np.testing.assert_allclose(robot.kin.tcp_velocity(qi, vi)[0], v, atol=1e-8)
+    np.testing.assert_array_equal(robot.kin.tcp_velocity(q, qd),
+                                  np.concatenate([robot.kin.tcp_velocity(qi, vi) for qi, vi in zip(q, qd)]))
