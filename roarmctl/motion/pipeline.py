@@ -1381,9 +1381,9 @@ def _bridged(ta: TimedPath, tb: TimedPath, i: int, k: int, steps: int, traj, arm
     q = np.repeat(ta.q[i][None, :], m, axis=0)
     qd, qdd = np.zeros_like(q), np.zeros_like(q)
     q[:i + 1], qd[:i + 1], qdd[:i + 1] = ta.q[:i + 1], ta.qd[:i + 1], ta.qdd[:i + 1]
-    for j in range(1, steps):
-        pos, vel, acc = traj.at_time(j * dt)
-        q[i + j, arm], qd[i + j, arm], qdd[i + j, arm] = pos, vel, acc
+    if steps > 1:  # the bridge's inner samples (steps - 1, 3, len(arm)): position, velocity, acceleration
+        inner = np.array([traj.at_time(j * dt) for j in range(1, steps)])
+        q[i + 1:i + steps, arm], qd[i + 1:i + steps, arm], qdd[i + 1:i + steps, arm] = inner[:, 0], inner[:, 1], inner[:, 2]
     shift = ta.q[-1] - tb.q[0]
     q[i + steps:] = tb.q[k:] + shift
     qd[i + steps:], qdd[i + steps:] = tb.qd[k:], tb.qdd[k:]
