@@ -1,10 +1,13 @@
-"""FK, Jacobian and IK throughput for a bundled robot (default roarm_m3_pro), configurations per second.
+"""FK, Jacobian, TCP velocity, inverse dynamics and IK throughput for a bundled robot (default roarm_m3_pro),
+configurations per second.
 
 Run: .venv/bin/python bench/bench_kinematics.py [--robot NAME] [--repeats N]
 
 "single" calls the function once per configuration in a Python loop; "batch N" passes an (N, dof)
 array in one call. Each figure is the median over the repeats of (configurations / wall time);
-random configurations within the joint limits, fixed seed. IK: one closed-form/DLS solve per target.
+random configurations within the joint limits, fixed seed (rates and accelerations uniform in +-1 rad/s,
++-2 rad/s^2). Inverse dynamics is skipped for robots without inertial data. IK: one closed-form/DLS solve
+per target.
 """
 
 from __future__ import annotations
@@ -53,6 +56,21 @@ def main() -> None:
     show("Jacobian single-call loop", rate(lambda: [kin.jacobian(q) for q in single], len(single), args.repeats))
     for n in (1000, 10000):
         show(f"Jacobian batch {n}", rate(lambda n=n: kin.jacobian(qs[n]), n, args.repeats))
+
+    qd = {n: rng.uniform(-1, 1, size=(n, robot.dof)) for n in (1000, 10000)}
+    qdd = {n: rng.uniform(-2, 2, size=(n, robot.dof)) for n in (1000, 10000)}
+    arm = robot.arm_indices
+    show("TCP velocity batch 1000", rate(lambda: kin.tcp_velocity(qs[1000], qd[1000][:, arm]), 1000, args.repeats))
+    if robot.inertials:
+        from roarmctl.robot.dynamics import inverse_dynamics
+
+        show("inverse dynamics single-call loop",
+             rate(lambda: [inverse_dynamics(robot, q, v, a) for q, v, a in zip(single, qd[1000], qdd[1000])],
+                  len(single), args.repeats))
+        for n in (1000, 10000):
+            show(f"inverse dynamics batch {n}", rate(lambda n=n: inverse_dynamics(robot, qs[n], qd[n], qdd[n]), n, args.repeats))
+        show("holding torques (at rest) batch 1000",
+             rate(lambda: inverse_dynamics(robot, qs[1000], 0 * qd[1000], 0 * qdd[1000]), 1000, args.repeats))
 
     from roarmctl.errors import UnreachableError
     from roarmctl.robot.ik import solve_ik
