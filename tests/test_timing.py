@@ -221,3 +221,26 @@ def test_a_clipped_cruise_is_taken_without_toppra_only_where_toppra_under_the_ca
         else:
             assert np.array_equal(got.sd, ref.sd)
     assert taken >= 20 and strictly_over >= 5  # the tolerance is what lets most of them skip TOPP-RA
+
+
+def test_a_one_joint_line_timed_again_either_way_gives_the_bytes_of_a_fresh_timing():
+    """The gripper's moves reuse the profile of an earlier move of the same length and limits (either direction);
+    the result is byte for byte what timing it afresh gives."""
+    from roarmctl.motion import timing
+
+    v, a, j = np.array([1.5]), np.array([3.6]), np.array([60.0])
+
+    def fresh(x0, x1):
+        timing._ONE_JOINT_LINES.clear()
+        return time_parameterise(np.array([[x0], [x1]]), v, a, j)
+
+    def arrays(tp):
+        return [tp.times, tp.q, tp.qd, tp.qdd, tp.s, np.array([tp.jerk_filter])]
+
+    for x0, x1 in ((0.0, 1.0), (1.0, 0.6), (0.9, 0.36842105263157898)):
+        want = arrays(fresh(x1, x0))
+        fresh(x0, x1)  # the other way first: this one comes from it
+        assert len(timing._ONE_JOINT_LINES) == 1
+        again = arrays(time_parameterise(np.array([[x1], [x0]]), v, a, j))
+        assert all(np.array_equal(p, q) for p, q in zip(again, want))
+        assert not np.array_equal(again[1], arrays(fresh(x0, x1))[1])  # a different motion, not a copy

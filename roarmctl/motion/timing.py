@@ -168,6 +168,10 @@ def toppra_grid(ss: np.ndarray) -> np.ndarray:
 
 
 _LIMIT_CONSTRAINTS: dict[tuple[bytes, bytes], tuple] = {}
+# One joint moved along a line (the gripper) -> (profile, filter width, sample times) of its timing: the same for
+# the same length and limits either way (TOPP-RA sees q' = +-1 and q'' = 0), and a plan opens and closes the jaws
+# by the same amounts.
+_ONE_JOINT_LINES: dict[tuple, tuple] = {}
 
 
 def _joint_limit_constraints(constraint, vlim: np.ndarray, alim: np.ndarray) -> list:
@@ -362,6 +366,14 @@ def _spline_tables(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             np.ascontiguousarray(d2.c, dtype=float))
 
 
+def _ends_at_rest(samples: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], wp: np.ndarray):
+    """``_sample``'s q, qd, qdd, s with the exact end waypoints of ``wp`` (K, n) and velocity and acceleration 0 there."""
+    q, qd, qdd, s = samples
+    q[0], q[-1] = wp[0], wp[-1]
+    qd[0] = qd[-1] = qdd[0] = qdd[-1] = 0.0
+    return q, qd, qdd, s
+
+
 def _jerk_ok(path, prof: _Profile, w: float, jmax: np.ndarray) -> bool:
     """Whether the jerk of ``prof`` filtered at width ``w`` (s), sampled every FINE_DT, keeps ``jmax`` (n,):
     with s, sdot, sddot of ``prof.filtered`` on the grid t = 0, FINE_DT, ... past ``prof.T + w``, the joint
@@ -526,6 +538,16 @@ def time_parameterise(
     speed_per_ds = np.linalg.norm(tcp_velocity_per_ds(path(gridpoints), path(gridpoints, 1)), axis=1) if tcp_ok else None
     jm = None if jmax is None else np.asarray(jmax, dtype=float)
     path_jerk = None if jm is None else _path_jerk(path, gridpoints)
+    line_key = None
+    if n == 1 and len(wp) == 2 and not tcp_ok and torque is None:
+        line_key = (float(ss[-1]), vmax.tobytes(), amax.tobytes(), None if jm is None else jm.tobytes(), float(sample_dt))
+        known = _ONE_JOINT_LINES.get(line_key)
+        if known is not None:
+            prof, w, times = known
+            times = times.copy()  # the caller owns its arrays
+            q, qd, qdd, s_samples = _ends_at_rest(_sample(path, prof, times, w), wp)
+            if np.all(np.abs(qd) <= vmax) and np.all(np.abs(qdd) <= amax):  # as they were for that motion
+                return TimedPath(times, q, qd, qdd, w, s_samples)
     torque_terms = None  # lazily: only once a sampled torque comes close to a limit (TORQUE_LAZY_SHARE)
     i = 0
     while i < len(SAFETY_STEPS):
@@ -567,9 +589,7 @@ def time_parameterise(
         duration = prof.T + w
         count = max(int(np.ceil(duration / sample_dt - 1e-9)), 1)
         times = np.unique(np.minimum(np.arange(count + 1) * sample_dt, duration))
-        q, qd, qdd, s_samples = _sample(path, prof, times, w)
-        q[0], q[-1] = wp[0], wp[-1]  # exact ends, at rest
-        qd[0] = qd[-1] = qdd[0] = qdd[-1] = 0.0
+        q, qd, qdd, s_samples = _ends_at_rest(_sample(path, prof, times, w), wp)
         # The constraints hold at grid points; between them (and after filtering) a sample can be
         # slightly over. Check the samples and tighten until they are inside.
         ok = np.all(np.abs(qd) <= vmax) and np.all(np.abs(qdd) <= amax)
@@ -583,6 +603,10 @@ def time_parameterise(
                 continue
             ok = bool(np.all(tau <= torque.limits))
         if ok:
+            if line_key is not None:
+                if len(_ONE_JOINT_LINES) > 256:
+                    _ONE_JOINT_LINES.clear()
+                _ONE_JOINT_LINES[line_key] = (prof, w, times.copy())
             return TimedPath(times, q, qd, qdd, w, s_samples)
         i += 1
     raise PlanningError(f"{label}: the timed samples exceed the limits even with a {1 - SAFETY_STEPS[-1]:.0%} margin",
