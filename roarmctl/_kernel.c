@@ -73,6 +73,24 @@ static int parse_kin(Kin *k, const int64_t *I, Py_ssize_t ni, const double *F, P
     k->stepf = q; q += STEPF * k->n_steps;
     k->chainf = q; q += CHAINF * k->n_chain;
     k->jointf = q;
+    /* every index in range, so that no table can make the loops read or write outside their arrays */
+    for (int64_t c = 0; c < k->n_const; c++)
+        if (k->const_idx[c] < 0 || k->const_idx[c] >= k->n_links) goto bad;
+    for (int64_t s = 0; s < k->n_steps; s++) {
+        const int64_t *si = k->steps + STEPI * s;
+        if (si[0] < 0 || si[0] > 3 || si[1] < 0 || si[1] >= k->n_links || si[2] < 0 || si[2] >= k->n_links
+            || (si[0] != 0 && (si[3] < 0 || si[3] >= k->dof)))
+            goto bad;
+    }
+    for (int64_t j = 0; j < k->n_chain; j++)
+        if (k->chain[CHAINI * j] < 0 || k->chain[CHAINI * j] >= k->n_links) goto bad;
+    for (int64_t j = 0; j < k->n_joints; j++) {
+        const int64_t *ji = k->joints + JOINTI * j;
+        if (ji[0] < 0 || ji[0] > 2 || ji[1] < 0 || ji[1] >= k->n_links || ji[2] < 0 || ji[2] >= k->n_links
+            || ji[3] < -1 || ji[3] >= k->dof || (ji[0] != 0 && ji[3] < 0) || ji[5] < -1 || ji[5] >= k->n_joints
+            || (ji[1] != 0 && ji[5] < 0))
+            goto bad;
+    }
     return 0;
 bad:
     PyErr_SetString(PyExc_ValueError, "_kernel: kinematic tables do not match their header");
