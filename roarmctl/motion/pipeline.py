@@ -880,14 +880,15 @@ class Planner:
         inp.duration_discretization = DurationDiscretization.Discrete
         inp.max_velocity, inp.max_acceleration, inp.max_jerk = list(self.vmax[arm]), list(self.amax[arm]), list(self.jmax[arm])
         qb = tb.q[:, arm] + (ta.q[-1, arm] - tb.q[0, arm])  # tb starts where ta comes to rest (as in _bridged)
-        sa = np.stack([ta.q[:, arm], ta.qd[:, arm], ta.qdd[:, arm]], axis=1).tolist()  # (N, 3, n) states as lists
-        sb = np.stack([qb, tb.qd[:, arm], tb.qdd[:, arm]], axis=1).tolist()
+        # the end states as lists, (3, n) per sample: ta's samples i_lo..ia (sa[i - i_lo]), tb's 0..k_hi (sb[k])
+        sa = np.stack([ta.q[i_lo:ia + 1, arm], ta.qd[i_lo:ia + 1, arm], ta.qdd[i_lo:ia + 1, arm]], axis=1).tolist()
+        sb = np.stack([qb[:k_hi + 1], tb.qd[:k_hi + 1, arm], tb.qdd[:k_hi + 1, arm]], axis=1).tolist()
         totals: dict[tuple[int, int], int | None] = {}  # (i, k) -> bridge samples
         at = [-1, -1]  # the ends inp holds now
 
         def set_ends(i: int, k: int) -> None:
             if at[0] != i:
-                inp.current_position, inp.current_velocity, inp.current_acceleration = sa[i]
+                inp.current_position, inp.current_velocity, inp.current_acceleration = sa[i - i_lo]
             if at[1] != k:
                 inp.target_position, inp.target_velocity, inp.target_acceleration = sb[k]
             at[:] = i, k
