@@ -795,13 +795,16 @@ class Planner:
         on_grid = np.flatnonzero(np.abs(ta.times / dt - np.round(ta.times / dt)) < 1e-6)
         ia = int(on_grid[-1])
         limit = min(ia - int(np.ceil(bounds[-1][0] / dt - 1e-9)), len(tb.times) - 2)  # overlap stays inside both motions
-        if prev.step.kind == "cartesian":  # the line must be exact until LINE_KEEP of it is done
-            limit = min(limit, ia - int(np.ceil(self._line_time(prev, ta, bounds[-1], 1.0 - LINE_KEEP) / dt - 1e-9)))
-        if part.step.kind == "cartesian":
-            limit = min(limit, int(self._line_time(part, tb, (0.0, tb.duration), 1.0 - LINE_KEEP) / dt))
+        # when a straight line is (1 - LINE_KEEP) done: the line must be exact until LINE_KEEP of it is done
+        lines = (self._line_time(prev, ta, bounds[-1], 1.0 - LINE_KEEP) if prev.step.kind == "cartesian" else None,
+                 self._line_time(part, tb, (0.0, tb.duration), 1.0 - LINE_KEEP) if part.step.kind == "cartesian" else None)
+        if lines[0] is not None:
+            limit = min(limit, ia - int(np.ceil(lines[0] / dt - 1e-9)))
+        if lines[1] is not None:
+            limit = min(limit, int(lines[1] / dt))
         t0 = time.perf_counter()
         try:
-            bridged = self._bridge(ta, tb, ia, bounds, prev, part, prev_tp, (ia + 1) * dt + tb.duration)
+            bridged = self._bridge(ta, tb, ia, bounds, prev, part, prev_tp, (ia + 1) * dt + tb.duration, lines)
             if bridged is not None and bridged[0].duration <= (ia + 1 - max(limit, 0)) * dt + tb.duration + 1e-9:
                 return self._bridged_piece(a, b, bounds, prev, part, *bridged)  # no overlap could do better
             for m in range(limit, 0, -BLEND_STEP):
@@ -828,7 +831,7 @@ class Planner:
         return _Piece(cand, segments, None, a.blends + ([join] if m else [])), new_bounds
 
     def _bridge(self, ta: TimedPath, tb: TimedPath, ia: int, bounds: list[tuple[float, float]], prev: _Part, part: _Part,
-                prev_tp: TimedPath, beat: float) -> tuple[TimedPath, int, int] | None:
+                prev_tp: TimedPath, beat: float, lines: tuple[float | None, float | None]) -> tuple[TimedPath, int, int] | None:
         """The corner between ``ta`` (ending with the motion ``prev``, its last on-grid sample ``ia``) and ``tb`` (the
         motion ``part``, timed from rest) cut out and replaced by a time-optimal, jerk-limited move from sample i of
         ``ta`` to sample k of ``tb`` (Ruckig, state to state: position, velocity and acceleration at both ends, all
@@ -842,21 +845,23 @@ class Planner:
         is not cut short. Candidates (i, k) are searched
         on a coarse grid, refined around the best ones, and taken shortest first; the first whose samples pass
         ``_overlap_ok`` (every limit, collisions under both motions' states) and that beats ``beat`` (s, the
-        superposed result) is returned: (path, i, index of the bridge's last sample). None if none."""
+        superposed result) is returned: (path, i, index of the bridge's last sample). None if none. ``lines``: the
+        times (s, in ``ta`` and ``tb``) when ``prev`` and ``part`` are 1 - LINE_KEEP along their straight lines (None:
+        not a line), as ``_blend`` found them."""
         from ruckig import DurationDiscretization, InputParameter, Result, Ruckig, RuckigError, Trajectory
 
         dt = SAMPLE_DT
         arm = self.arm
         i_lo = int(np.ceil(bounds[-1][0] / dt - 1e-9))
-        if prev.step.kind == "cartesian":
-            i_lo = max(i_lo, int(np.ceil(self._line_time(prev, ta, bounds[-1], 1.0 - LINE_KEEP) / dt - 1e-9)))
+        if lines[0] is not None:
+            i_lo = max(i_lo, int(np.ceil(lines[0] / dt - 1e-9)))
         elif len(prev.wps) > 2 and prev_tp.s is not None:  # from its last vertex on (prev ends where ta does)
             last = float(np.sum(np.linalg.norm(np.diff(prev.wps[:-1][:, arm], axis=0), axis=1)))
             t_v = float(prev_tp.times[min(int(np.searchsorted(prev_tp.s, last - 1e-9)), len(prev_tp.times) - 1)])
             i_lo = max(i_lo, int(np.ceil((t_v + ta.duration - prev_tp.duration) / dt - 1e-9)))
         k_hi = len(tb.times) - 2
-        if part.step.kind == "cartesian":
-            k_hi = min(k_hi, int(self._line_time(part, tb, (0.0, tb.duration), 1.0 - LINE_KEEP) / dt))
+        if lines[1] is not None:
+            k_hi = min(k_hi, int(lines[1] / dt))
         else:
             k_hi = min(k_hi, int(0.5 * tb.duration / dt))
             if len(part.wps) > 2 and tb.s is not None:  # up to its first vertex
