@@ -25,7 +25,7 @@ import numpy as np
 
 from roarmctl.motion.cartesian import cartesian_line, line_deviation
 from roarmctl.motion.pipeline import load_planning_libraries
-from roarmctl.motion.timing import time_parameterise
+from roarmctl.motion.timing import _ONE_JOINT_LINES, time_parameterise
 from roarmctl.plan.schema import load_plan
 from roarmctl.robot.ik import solve_ik
 from roarmctl.robot.loader import load_robot
@@ -99,7 +99,8 @@ def main() -> None:
             return f"{line_deviation(robot, qq, *line) * 1000:.2f}"
 
         for option, jm in (("toppra", None), ("toppra+fir", j)):
-            tp, ms = median_ms(lambda: time_parameterise(wps, v, a, jm), args.repeats)
+            # each from scratch: timing.py keeps one-joint line timings (a plan's gripper moves reuse them)
+            tp, ms = median_ms(lambda: (_ONE_JOINT_LINES.clear(), time_parameterise(wps, v, a, jm))[1], args.repeats)
             jerk = np.max(np.abs(np.diff(tp.qdd, axis=0)) / np.diff(tp.times)[:, None] / j)
             print(f"{name:<31}{option:<12}{tp.duration:>11.3f}{ms:>9.1f}{jerk:>11.2f}{dev(tp.q):>12}")
         if have_ruckig:
