@@ -260,3 +260,18 @@ def test_jacobian_and_tcp_velocity_of_prismatic_and_tilted_joints_match_finite_d
         np.testing.assert_allclose(robot.kin.tcp_velocity(qi, vi)[0], v, atol=1e-8)
     np.testing.assert_array_equal(robot.kin.tcp_velocity(q, qd),
                                   np.concatenate([robot.kin.tcp_velocity(qi, vi) for qi, vi in zip(q, qd)]))
+
+
+def test_a_robot_survives_pickling_and_deep_copy():
+    """A robot can be sent to another process (pickle) or deep-copied, and its FK, Jacobian and dynamics work
+    there with the same numbers."""
+    import copy
+    import pickle
+
+    from roarmctl.robot.dynamics import inverse_dynamics
+
+    q = np.random.default_rng(7).uniform(ROARM.lower, ROARM.upper, (4, ROARM.dof))
+    for other in (pickle.loads(pickle.dumps(ROARM)), copy.deepcopy(ROARM)):
+        assert np.array_equal(other.kin.link_frames(q), ROARM.kin.link_frames(q))
+        assert np.array_equal(other.kin.jacobian(q), ROARM.kin.jacobian(q))
+        assert np.array_equal(inverse_dynamics(other, q, q, q), inverse_dynamics(ROARM, q, q, q))

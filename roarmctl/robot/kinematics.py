@@ -158,8 +158,21 @@ class Kinematics:
         self._ki = np.array(ints + const_links + steps_i + chain_i + joints_i, dtype=np.int64)
         self._kf = np.concatenate([const[const_links].ravel(), *steps_f, np.array(chain_f, dtype=float),
                                    *joints_f]).astype(float)
-        self._kim, self._kfm = memoryview(self._ki), memoryview(self._kf)  # cheaper to pass than the arrays
         self._n_chain = n_chain
+        self._views()
+
+    def _views(self) -> None:
+        self._kim, self._kfm = memoryview(self._ki), memoryview(self._kf)  # cheaper to pass than the arrays
+
+    def __getstate__(self) -> dict:
+        """Picklable (a robot can go to another process, or be deep-copied): the memoryviews are left out."""
+        state = dict(self.__dict__)
+        del state["_kim"], state["_kfm"]
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._views()
 
     def frames4(self, q: np.ndarray) -> np.ndarray:
         """Every link frame (N, L, 4, 4) in the root frame for full configurations ``q`` (N, dof), rad/m.
