@@ -28,6 +28,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from peers import peer_python, urdf_origin
+
 import numpy as np
 
 WORKER = r"""
@@ -62,29 +64,6 @@ print(json.dumps({"tau": tau.tolist(), "us": statistics.median(times) * 1e6, "ve
 """
 
 
-def pin_python(venv: Path) -> Path:
-    py = venv / "bin" / "python"
-    if not py.exists():
-        print(f"creating {venv} with pin (Pinocchio) (once) ...", flush=True)
-        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
-        subprocess.run([str(py), "-m", "pip", "install", "-q", "pin"], check=True)
-    return py
-
-
-def _rpy(r) -> tuple[float, float, float]:
-    """URDF roll-pitch-yaw of a rotation matrix (R = Rz(yaw) Ry(pitch) Rx(roll))."""
-    pitch = math.asin(max(-1.0, min(1.0, -r[2][0])))
-    if abs(math.cos(pitch)) > 1e-9:
-        return math.atan2(r[2][1], r[2][2]), pitch, math.atan2(r[1][0], r[0][0])
-    return math.atan2(-r[1][2], r[1][1]), pitch, 0.0
-
-
-def _origin(t) -> str:
-    x, y, z = (float(v) for v in t[:3, 3])
-    r, p, yw = _rpy(t[:3, :3])
-    return f'<origin xyz="{x!r} {y!r} {z!r}" rpy="{r!r} {p!r} {yw!r}"/>'
-
-
 def _motion(joint, value: float) -> np.ndarray:
     """The joint's motion by ``value`` (rad about its axis, or m along it) as a 4 x 4 transform."""
     m = np.eye(4)
@@ -110,8 +89,8 @@ def export_urdf(robot, folder: Path) -> Path:
             child = f"{j.child}__dh"
             links.append(child)
             joints.append(f'<joint name="{j.name}__post" type="fixed"><parent link="{child}"/><child link="{j.child}"/>'
-                          f'{_origin(j.post)}</joint>')
-        body = f'<parent link="{j.parent}"/><child link="{child}"/>{_origin(j.origin @ _motion(j, j.offset))}'
+                          f'{urdf_origin(j.post)}</joint>')
+        body = f'<parent link="{j.parent}"/><child link="{child}"/>{urdf_origin(j.origin @ _motion(j, j.offset))}'
         if j.kind != "fixed":
             i = robot.joint_names.index(j.name)
             ax = " ".join(repr(float(v)) for v in j.axis)
@@ -151,7 +130,7 @@ def main() -> None:
     parser.add_argument("--robots", nargs="+", default=["roarm_m3_pro", "roarm_m2_s", "ur10", "planar_2r"])
     parser.add_argument("--venv", type=Path, default=Path(tempfile.gettempdir()) / "roarmctl-bench-pin")
     args = parser.parse_args()
-    py = pin_python(args.venv)
+    py = peer_python(args.venv, ["pin"], "pin (Pinocchio)")
     print(f"{args.states} random states per robot; time per state in us (medians of 5 repeats)")
     print(f"{'robot':<14}{'max |tau diff| N m':>20}{'max |tau| N m':>15}{'ours 1/call':>13}{'ours batch':>12}{'pin 1/call':>12}")
     version = "?"

@@ -30,13 +30,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from peers import peer_python, urdf_origin
 
 ROOT = Path(__file__).resolve().parents[1]
 MPLIB = "mplib==0.2.1"
@@ -94,30 +95,7 @@ for line in sys.stdin:
 '''
 
 
-def mplib_python(venv: Path) -> Path:
-    py = venv / "bin" / "python"
-    if not py.exists():
-        print(f"creating {venv} with {MPLIB} and numpy<2 (once) ...", flush=True)
-        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
-        subprocess.run([str(py), "-m", "pip", "install", "-q", MPLIB, "numpy<2"], check=True)
-    return py
-
-
 # --------------------------------------------------------------------------- model export
-def _rpy(r) -> tuple[float, float, float]:
-    """URDF roll-pitch-yaw of a rotation matrix (R = Rz(yaw) Ry(pitch) Rx(roll))."""
-    pitch = math.asin(max(-1.0, min(1.0, -r[2][0])))
-    if abs(math.cos(pitch)) > 1e-9:
-        return math.atan2(r[2][1], r[2][2]), pitch, math.atan2(r[1][0], r[0][0])
-    return math.atan2(-r[1][2], r[1][1]), pitch, 0.0
-
-
-def _origin(t) -> str:
-    x, y, z = (float(v) for v in t[:3, 3])
-    r, p, yw = _rpy(t[:3, :3])
-    return f'<origin xyz="{x!r} {y!r} {z!r}" rpy="{r!r} {p!r} {yw!r}"/>'
-
-
 def export_model(robot, folder: Path) -> tuple[Path, Path]:
     """URDF (kinematics + roarmctl's collision boxes) and SRDF (allowed pairs) of ``robot``."""
     import numpy as np
@@ -131,13 +109,13 @@ def export_model(robot, folder: Path) -> tuple[Path, Path]:
         if c.kind != "box":
             raise SystemExit(f"{robot.name}: only box collision shapes are exported, found {c.kind}")
         sx, sy, sz = (float(v) for v in c.size)
-        links[c.link].append(f'<collision>{_origin(c.origin)}<geometry><box size="{sx!r} {sy!r} {sz!r}"/></geometry></collision>')
+        links[c.link].append(f'<collision>{urdf_origin(c.origin)}<geometry><box size="{sx!r} {sy!r} {sz!r}"/></geometry></collision>')
     out = [f'<robot name="{robot.name}">']
     for name, shapes in links.items():
         out.append(f'<link name="{name}"><inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/></inertial>'
                    + "".join(shapes) + "</link>")
     for j in robot.joints:
-        body = f'<parent link="{j.parent}"/><child link="{j.child}"/>{_origin(j.origin)}'
+        body = f'<parent link="{j.parent}"/><child link="{j.child}"/>{urdf_origin(j.origin)}'
         if j.kind != "fixed":
             i = robot.joint_names.index(j.name)
             ax = " ".join(repr(float(v)) for v in j.axis)
@@ -224,7 +202,7 @@ def main() -> None:
     parser.add_argument("--venv", type=Path, default=Path(tempfile.gettempdir()) / "roarmctl-bench-mplib")
     parser.add_argument("--states", type=int, default=3000)
     args = parser.parse_args()
-    py = mplib_python(args.venv)
+    py = peer_python(args.venv, [MPLIB, "numpy<2"], f"{MPLIB} and numpy<2")
     load_planning_libraries()
 
     folder = Path(tempfile.mkdtemp(prefix="roarmctl-mplib-"))
