@@ -31,18 +31,21 @@ def cartesian_line(
     position-only IK, the pitch follows from the geometry). Each sample is solved from the previous one
     (``solve_ik_near``).
     """
-    from roarmctl.robot.ik import solve_ik_near
+    from roarmctl.robot.ik import LineIK
 
     q_start = robot.full_q(q_start)
     p0 = robot.kin.fk(q_start)[:3, 3]
     p_goal = np.asarray(p_goal, dtype=float)
     n = max(int(np.ceil(np.linalg.norm(p_goal - p0) / step)), 1)
+    pts = np.array([p0 + (p_goal - p0) * (k / n) for k in range(1, n + 1)])
+    # every sample's IK batched where it can be (LineIK: the same solutions as one solve_ik_near each)
+    line = LineIK(robot, pts, q_start, pitch=pitch, roll=roll if pitch is not None else None)
     out = [q_start]
     prev = q_start
     for k in range(1, n + 1):
-        p = p0 + (p_goal - p0) * (k / n)
+        p = pts[k - 1]
         try:
-            best = solve_ik_near(robot, p, prev, pitch=pitch, roll=roll if pitch is not None else None)
+            best = line.near(k - 1, prev)
         except UnreachableError as exc:
             raise PlanningError(f"{label}: the straight line leaves the reachable space at "
                                 f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m: {exc.message}") from None

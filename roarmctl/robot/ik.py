@@ -338,6 +338,77 @@ def _newton(residual: Callable[[np.ndarray], np.ndarray], q: np.ndarray, idx: li
     return q
 
 
+def _newton_rows(residual: Callable[[np.ndarray, np.ndarray, int], np.ndarray], q: np.ndarray, idx: list[int],
+                 iters: int = 12, tol: float = 1e-13, h: float = 1e-7) -> np.ndarray:
+    """``_newton`` for every row of ``q`` (N, dof) at once, each row exactly as ``_newton`` runs it alone.
+
+    ``residual(batch, rows, k1)`` maps the configurations (len(rows) * k1, dof), k1 consecutive ones per
+    active row (the row, then its perturbations), to residuals (len(rows) * k1, m). The per-row linear
+    algebra is the same numpy/LAPACK call per matrix (stacked); the stops compare as ``_newton`` does.
+    """
+    q = q.copy()
+    n, dof = q.shape
+    k = len(idx)
+    idx_a = np.asarray(idx)
+    pert = np.arange(1, k + 1)
+    damp = 1e-10 * np.eye(k)
+    active = np.arange(n)
+    for _ in range(iters):
+        if not len(active):
+            break
+        batch = np.repeat(q[active][:, None], k + 1, axis=1)
+        batch[:, pert, idx_a] += h
+        res = residual(batch.reshape(-1, dof), active, k + 1).reshape(len(active), k + 1, -1)
+        r = res[:, 0]
+        go = ~_below(r, tol)
+        active, res, r = active[go], res[go], r[go]
+        if not len(active):
+            break
+        jac = (res[:, 1:] - r[:, None]).transpose(0, 2, 1) / h
+        jt = jac.transpose(0, 2, 1)
+        step = np.linalg.solve(jt @ jac + damp, ((-jt) @ r[:, :, None]))[:, :, 0]
+        move = ~_above(step, 0.2)
+        active, step = active[move], step[move]
+        q[active[:, None], idx_a] += step
+    return q
+
+
+def _below(v: np.ndarray, tol: float) -> np.ndarray:
+    """Rows of ``v`` (N, m) whose norm is below ``tol``, decided as ``math.sqrt(r.dot(r)) < tol`` (the
+    scalar form where the batched sum could differ in the last bit)."""
+    nv = np.sqrt(np.sum(v * v, axis=1))
+    out = nv < tol
+    for i in np.flatnonzero(np.abs(nv - tol) <= 1e-6 * tol):
+        out[i] = math.sqrt(v[i].dot(v[i])) < tol
+    return out
+
+
+def _above(v: np.ndarray, tol: float) -> np.ndarray:
+    """Rows of ``v`` (N, m) whose norm exceeds ``tol`` (``math.sqrt(s.dot(s)) > tol``, as ``_below``)."""
+    nv = np.sqrt(np.sum(v * v, axis=1))
+    out = nv > tol
+    for i in np.flatnonzero(np.abs(nv - tol) <= 1e-6 * tol):
+        out[i] = math.sqrt(v[i].dot(v[i])) > tol
+    return out
+
+
+def _fit_limits_rows(robot: Robot, q: np.ndarray, tol: float = 1e-7) -> tuple[np.ndarray, np.ndarray]:
+    """``_fit_limits`` of every row of ``q`` (N, dof) where it does not depend on the reference.
+
+    Returns (fitted (N, dof), with NaN rows where no representative is within a limit; ambiguous (N,):
+    rows where some joint has two representatives within its limits, so the reference picks one)."""
+    arm = robot.arm_indices
+    lo, hi = robot.lower[arm], robot.upper[arm]
+    v = q[:, arm, None] + 2 * np.pi * np.arange(-2, 3)  # (N, A, 5): the candidates _fit_limits tries
+    inside = (lo[None, :, None] - tol <= v) & (v <= hi[None, :, None] + tol)
+    count = inside.sum(axis=2)
+    out = q.copy()
+    pick = np.take_along_axis(v, np.argmax(inside, axis=2)[:, :, None], 2)[:, :, 0]
+    out[:, arm] = np.minimum(np.maximum(pick, lo), hi)
+    out[np.any(count == 0, axis=1)] = np.nan
+    return out, np.any(count > 1, axis=1)
+
+
 def _dedupe(sols: list[np.ndarray], idx: list[int], tol: float = 1e-5) -> list[np.ndarray]:
     out: list[np.ndarray] = []
     for q in sols:
@@ -578,10 +649,15 @@ class _RoarmIK:
             m = robot.kin.fk(q)[:3, :3].T @ rot
             q = q.copy()
             q[self.arm[4]] = math.atan2(m[2, 1], m[1, 1])
-        q = _fit_limits(robot, self._polish(q, p, rot, u_h, q_pitch), qr)
+        return self._verify(_fit_limits(robot, self._polish(q, p, rot, u_h, q_pitch), qr), p, rot, u_h, q_pitch,
+                            check_pitch)
+
+    def _verify(self, q: np.ndarray | None, p: np.ndarray, rot: np.ndarray | None, u_h: np.ndarray, q_pitch: float,
+                check_pitch: bool) -> np.ndarray | None:
+        """The FK check of a polished, fitted candidate (None passes through): ``q`` if it meets the tolerances."""
         if q is None:
             return None
-        t = robot.kin.fk(q)
+        t = self.robot.kin.fk(q)
         if np.linalg.norm(t[:3, 3] - p) > POS_TOL:
             return None
         if rot is not None and _rot_angle(rot.T @ t[:3, :3]) > ORI_TOL:
@@ -589,6 +665,95 @@ class _RoarmIK:
         if check_pitch and abs(_wrap(_pitch_of(t, u_h) - q_pitch)) > ORI_TOL:
             return None
         return q
+
+    def line(self, points: np.ndarray, pitch: float, roll: float | None, q0: np.ndarray) -> list[list | None]:
+        """``solve`` (pitch held, no ``rpy``) for every point of ``points`` (n, 3) m, batched, for ``LineIK``.
+
+        Per point: None (solve it alone: on the base axis, beyond the reach, roll outside its range), or
+        ``solve``'s branches in its order as (q, u_h, done): ``done`` q is polished, fitted into the limits
+        and FK-checked (a branch that fails is left out); otherwise q is only polished, because its limit
+        fit depends on the reference (``_fit_limits`` has two representatives to choose from). The
+        reference is assumed to carry ``q0``'s gripper value and, ``roll`` None, its wrist roll. Every
+        number is computed as ``solve`` computes it (elementwise, or per row of one batched kernel call).
+        """
+        robot = self.robot
+        n = len(points)
+        out: list[list | None] = [None] * n
+        ri = self.arm[4]
+        if roll is not None:
+            want_roll = float(roll)
+            if not robot.lower[ri] - 1e-9 <= want_roll <= robot.upper[ri] + 1e-9:
+                return out
+        else:
+            want_roll = float(q0[ri])
+        grip = _gripper_value(robot, q0)
+        rows, rhos, zs, azs = [], [], [], []
+        for i, p in enumerate(points):  # solve's scalar prologue, point by point
+            rel = p.copy()
+            rel[:2] -= self.base_xy
+            rho = float(np.hypot(rel[0], rel[1]))
+            z = float(p[2] - self.z_s)
+            if math.hypot(rho, z) > self.reach + 1e-6 or rho < 1e-9:
+                continue
+            rows.append(i)
+            rhos.append(rho)
+            zs.append(z)
+            azs.append(math.atan2(rel[1], rel[0]))
+        if not rows:
+            return out
+        m = len(rows)
+        u_h = np.zeros((m, 3))
+        u_h[:, 0] = [math.cos(a) for a in azs]
+        u_h[:, 1] = [math.sin(a) for a in azs]
+        sign = np.array([1.0, 1.0, -1.0, -1.0])
+        phis = np.array([float(pitch)])
+        phi = np.arctan2(sign * np.cos(phis), -np.sin(phis))
+        s, e, w, ok = self._planar(np.array(rhos)[:, None] * sign, np.array(zs)[:, None], phi,
+                                   np.array([1.0, -1.0, 1.0, -1.0]))
+        base = _wrap(np.array([[a, a, a + math.pi, a + math.pi] for a in azs]))
+        qs = self._branch_q(base.ravel(), s.ravel(), e.ravel(), w.ravel(), want_roll, grip)
+        ok = ok.ravel() & self._in_limits(qs)
+        sel = np.flatnonzero(ok)  # sample-major, branch order within a sample: solve's order
+        owner = sel // 4
+        pts = points[np.array(rows)][owner]
+        uh = u_h[owner]
+        kin = self.robot.kin
+
+        def res(qq: np.ndarray, act: np.ndarray, k1: int) -> np.ndarray:
+            t = kin.frames4(qq)[:, kin.tcp_index]
+            a = t[:, :3, 0]
+            u = np.repeat(uh[act], k1, axis=0)
+            dot = a[:, 0] * u[:, 0] + a[:, 1] * u[:, 1] + a[:, 2] * u[:, 2]  # _pitches' a @ u_h, summed in its order
+            return np.column_stack([t[:, :3, 3] - np.repeat(pts[act], k1, axis=0),
+                                    _wrap(np.arctan2(-a[:, 2], dot) - pitch)])
+
+        pol = _newton_rows(res, qs[sel], self.arm[:4])
+        fit, amb = _fit_limits_rows(robot, pol)
+        good = ~amb & ~np.isnan(fit[:, 0])
+        passed = np.zeros(len(sel), dtype=bool)
+        if np.any(good):
+            g = np.flatnonzero(good)
+            t = kin.frames4(fit[g])[:, kin.tcp_index]
+            d = t[:, :3, 3] - pts[g]
+            perr = np.sqrt(np.sum(d * d, axis=1))
+            a = t[:, :3, 0]
+            perr_p = np.abs(_wrap(np.arctan2(-a[:, 2], a[:, 0] * uh[g, 0] + a[:, 1] * uh[g, 1] + a[:, 2] * uh[g, 2])
+                                  - pitch))
+            passed[g] = (perr <= POS_TOL) & (perr_p <= ORI_TOL)
+            # near a tolerance the last bit matters: the scalar check decides, as in solve
+            for j in np.flatnonzero((np.abs(perr - POS_TOL) < 1e-3 * POS_TOL) | (np.abs(perr_p - ORI_TOL) < 1e-3 * ORI_TOL)):
+                i = g[j]
+                passed[i] = self._verify(fit[i], pts[i], None, uh[i], float(pitch), True) is not None
+        lists: dict[int, list] = {}
+        for j, o in enumerate(owner):
+            lst = lists.setdefault(int(o), [])
+            if amb[j]:
+                lst.append((pol[j], uh[j], False))
+            elif passed[j]:
+                lst.append((fit[j], uh[j], True))
+        for o in range(m):
+            out[rows[o]] = lists.get(o, [])
+        return out
 
     def _polish(self, q: np.ndarray, p: np.ndarray, rot: np.ndarray | None, u_h: np.ndarray,
                 pitch: float) -> np.ndarray:
@@ -673,6 +838,59 @@ def solve_ik_near(robot: Robot, position, q_ref, *, pitch: float | None = None,
     numeric = (robot.ik or "") not in IK_FAMILIES or ((robot.ik == "ur6") and (pitch is None or roll is None))
     sols = solve_ik(robot, position, pitch=pitch, roll=roll, q_ref=qr, all_solutions=not numeric)
     return min(sols, key=lambda s: float(np.max(np.abs(s[arm] - qr[arm]))))
+
+
+class LineIK:
+    """``solve_ik_near`` along a sampled straight line, with the RoArm's work batched over the samples.
+
+    ``near(k, prev)`` returns exactly ``solve_ik_near(robot, points[k], prev, pitch=pitch, roll=roll)``
+    (same solution, same bits, same errors). For the RoArm (``roarm5``) with the pitch held, every sample's
+    closed form, limit test and Newton polish run as one batch up front, on the assumption that each
+    ``prev`` carries ``q_start``'s gripper value and (roll left out) wrist roll, as ``cartesian_line``'s
+    samples do; ``near`` then only picks the branch. A sample the batch cannot settle on its own (on the
+    base axis, out of reach, a limit fit that depends on ``prev``) or a ``prev`` that breaks the assumption
+    is solved one at a time by ``solve_ik_near`` itself. Other robots and a free pitch: one at a time.
+
+    ``points`` (n, 3) m; ``q_start`` a full configuration; ``pitch``, ``roll`` rad as ``solve_ik``'s.
+    """
+
+    def __init__(self, robot: Robot, points: np.ndarray, q_start: np.ndarray, *, pitch: float | None,
+                 roll: float | None) -> None:
+        self.robot, self.points, self.pitch, self.roll = robot, np.asarray(points, dtype=float), pitch, roll
+        self.cands: list[list | None] = [None] * len(self.points)
+        self.key: tuple | None = None
+        if (robot.ik or "") == "roarm5" and pitch is not None and len(self.points):
+            solver = getattr(robot, "_roarm_ik", None)
+            if solver is None:
+                solver = robot._roarm_ik = _RoarmIK(robot)
+            q0 = robot.full_q(np.asarray(q_start, dtype=float))
+            self.key = self._key(q0)
+            self.cands = solver.line(self.points, float(pitch), roll, q0)
+
+    def _key(self, q: np.ndarray) -> tuple:
+        """What of ``prev`` the batch assumed: the gripper value and, roll left out, the wrist roll."""
+        robot = self.robot
+        grip = _gripper_value(robot, q)
+        return (grip, None if self.roll is not None else float(q[robot.arm_indices[4]]))
+
+    def near(self, k: int, prev: np.ndarray) -> np.ndarray:
+        robot, p = self.robot, self.points[k]
+        cands = self.cands[k]
+        qr = robot.full_q(np.asarray(prev, dtype=float))
+        if cands is None or self._key(qr) != self.key:
+            return solve_ik_near(robot, p, qr, pitch=self.pitch, roll=self.roll)
+        solver: _RoarmIK = robot._roarm_ik
+        out = []
+        for q, u_h, done in cands:  # as _RoarmIK.solve: per branch, polished, fitted and FK-checked
+            q2 = q if done else solver._verify(_fit_limits(robot, q, qr), p, None, u_h, float(self.pitch), True)
+            if q2 is not None:
+                out.append(q2)
+        out = _dedupe(out, solver.arm)
+        if not out:
+            return solve_ik_near(robot, p, qr, pitch=self.pitch, roll=self.roll)  # raises as one solve would
+        arm = robot.arm_indices
+        out.sort(key=lambda q: float(np.linalg.norm(q[arm] - qr[arm])))  # solve_ik's order, then solve_ik_near's pick
+        return min(out, key=lambda s: float(np.max(np.abs(s[arm] - qr[arm]))))
 
 
 # ----------------------------------------------------------------------------- RoArm-M2 (3 joints)
