@@ -6,12 +6,25 @@ closest to the previous sample, so the joint path follows the line without branc
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from roarmctl.errors import PlanningError, UnreachableError
 from roarmctl.robot.model import Robot
 
 MAX_JOINT_STEP = 0.15  # rad between neighbouring samples; more means a branch switch or singularity
+STEP_SLACK = 1e-9  # of a step: a length this close above a whole number of steps counts as that number
+
+
+def line_steps(length: float, step: float) -> int:
+    """Number of equal segments (>= 1) of a straight line ``length`` m long, none longer than ``step`` m.
+
+    A length within ``STEP_SLACK`` steps above a whole number of steps counts as that number: a length
+    meant as 5 cm comes out of FK as 0.05000000000000006 m or 0.049999999999999996 m depending on the
+    last bit of a rounding, and that must not add a waypoint (a segment longer than ``step`` by 5 pm
+    changes nothing that matters)."""
+    return max(int(math.ceil(length / step - STEP_SLACK)), 1)
 
 
 def cartesian_line(
@@ -36,7 +49,7 @@ def cartesian_line(
     q_start = robot.full_q(q_start)
     p0 = robot.kin.fk(q_start)[:3, 3]
     p_goal = np.asarray(p_goal, dtype=float)
-    n = max(int(np.ceil(np.linalg.norm(p_goal - p0) / step)), 1)
+    n = line_steps(float(np.linalg.norm(p_goal - p0)), step)
     pts = np.array([p0 + (p_goal - p0) * (k / n) for k in range(1, n + 1)])
     # every sample's IK batched where it can be (LineIK: the same solutions as one solve_ik_near each)
     line = LineIK(robot, pts, q_start, pitch=pitch, roll=roll if pitch is not None else None)
