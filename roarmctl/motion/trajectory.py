@@ -85,33 +85,52 @@ class Trajectory:
         return float(self.times[-1]) if len(self.times) else 0.0
 
     def to_dict(self) -> dict[str, Any]:
-        r = lambda a: [round(float(v), 9) for v in a]  # noqa: E731  (9 decimals: nm / nrad)
+        """The document as written (numbers rounded to 9 decimals; no float is -0.0, see ``_z``)."""
+        r = lambda a: [_z(round(float(v), 9)) for v in a]  # noqa: E731  (9 decimals: nm / nrad)
+        t9 = lambda v: _z(round(float(v), 9))  # noqa: E731
         return {
             "format": FORMAT,
             "robot": self.robot,
             "joint_names": list(self.joint_names),
             "sample_rate": self.sample_rate,
             "points": [
-                {"time_from_start": round(float(t), 9), "positions": r(p), "velocities": r(v), "accelerations": r(a)}
+                {"time_from_start": t9(t), "positions": r(p), "velocities": r(v), "accelerations": r(a)}
                 for t, p, v, a in zip(self.times, self.positions, self.velocities, self.accelerations)
             ],
             "events": [
-                {"time_from_start": round(e.time, 9), "kind": e.kind, "label": e.label}
+                {"time_from_start": t9(e.time), "kind": e.kind, "label": e.label}
                 | ({"position": r(e.position)} if e.position is not None else {})
                 for e in self.events
             ],
-            "segments": [{"start": round(s.start, 9), "end": round(s.end, 9), "kind": s.kind, "label": s.label} for s in self.segments],
-            "blends": [round(float(b), 9) for b in self.blends],
-            "payloads": self.payloads,
-            "limits": self.limits,
-            "singularity_margin": self.singularity_margin,
-            "scene": self.scene,
+            "segments": [{"start": t9(s.start), "end": t9(s.end), "kind": s.kind, "label": s.label} for s in self.segments],
+            "blends": [t9(b) for b in self.blends],
+            "payloads": _unsigned_zeros(self.payloads),
+            "limits": _unsigned_zeros(self.limits),
+            "singularity_margin": _unsigned_zeros(self.singularity_margin),
+            "scene": _unsigned_zeros(self.scene),
             "plan": self.plan,
         }
 
     def save(self, path: str | Path) -> Path:
         """Write the trajectory atomically (temporary file, then rename)."""
         return atomic_write_json(path, self.to_dict(), indent=None)
+
+
+def _z(v: float) -> float:
+    """``v`` with a negative zero made positive (``-0.0 + 0.0`` is ``0.0``; every other value is unchanged):
+    whether a rounding or a product leaves the sign bit on a zero must not change the file."""
+    return v + 0.0
+
+
+def _unsigned_zeros(x: Any) -> Any:
+    """``x`` (nested dicts, lists, tuples) with ``_z`` applied to every float; other values as they are."""
+    if isinstance(x, float):
+        return _z(x)
+    if isinstance(x, dict):
+        return {k: _unsigned_zeros(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return type(x)(_unsigned_zeros(v) for v in x)
+    return x
 
 
 def load_trajectory(path: str | Path) -> Trajectory:
