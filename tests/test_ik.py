@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -378,3 +379,82 @@ def test_roarm_near_stretched_elbow():
         sols = solve_ik(ROARM, t[:3, 3], pitch=_pitch(t), roll=qa[4], all_solutions=True)
         _check_all(ROARM, sols, t[:3, 3], pitch=_pitch(t))
         assert min(np.max(np.abs(q[:5] - qa)) for q in sols) < 1e-3
+
+
+# ------------------------------------------------------------------- straight lines, batched
+def _line_targets(rng, n_lines):
+    """Random straight lines of 13 samples from FK targets (pitch held, roll given or not), with a gripper value."""
+    out = []
+    while len(out) < n_lines:
+        pitch = float(rng.choice([math.pi / 2, math.pi / 4, 0.0, rng.uniform(-1.0, 2.0)]))
+        roll = None if rng.random() < 0.5 else float(rng.uniform(-1.0, 1.0))
+        p0 = np.array([rng.uniform(0.1, 0.4), rng.uniform(-0.25, 0.25), rng.uniform(-0.05, 0.3)])
+        try:
+            q0 = solve_ik(ROARM, p0, pitch=pitch, roll=roll)[0]
+        except UnreachableError:
+            continue
+        q0[ROARM.joint_index(ROARM.gripper.joint)] = rng.uniform(0.0, 1.0)
+        d = rng.normal(size=3)
+        d *= rng.uniform(0.01, 0.15) / np.linalg.norm(d)
+        out.append((np.array([p0 + d * (k / 13) for k in range(1, 14)]), q0, pitch, roll))
+    return out
+
+
+def test_line_ik_batch_equals_one_solve_per_sample(monkeypatch):
+    """LineIK (every sample's closed form and polish in one batch) answers exactly as one solve_ik_near
+    per sample from the previous sample's solution does: the same bits, the same errors; every solution
+    hits its target by FK; and the batch, not a fallback to the single solve, does the work."""
+    from roarmctl.robot import ik
+
+    single = ik.solve_ik_near
+    fallbacks = []
+    monkeypatch.setattr(ik, "solve_ik_near", lambda *a, **k: fallbacks.append(1) or single(*a, **k))
+    samples = errors = 0
+    for pts, q0, pitch, roll in _line_targets(np.random.default_rng(7), 60):
+        line = ik.LineIK(ROARM, pts, q0, pitch=pitch, roll=roll)
+        prev = q0
+        for k, p in enumerate(pts):
+            try:
+                want = single(ROARM, p, prev, pitch=pitch, roll=roll)
+            except UnreachableError as exc:
+                with pytest.raises(UnreachableError) as got:
+                    line.near(k, prev)
+                assert got.value.message == exc.message and got.value.reason == exc.reason
+                errors += 1
+                break
+            got = line.near(k, prev)
+            assert got.tobytes() == want.tobytes()
+            _check_all(ROARM, [got], p, pitch=pitch)
+            if roll is not None:
+                assert got[ROARM.arm_indices[4]] == roll
+            samples += 1
+            prev = got
+    assert samples > 500 and errors > 0  # both outcomes were exercised
+    assert len(fallbacks) <= errors  # only a sample that fails is solved alone (to raise its error)
+
+
+def test_line_ik_falls_back_where_the_batch_cannot_decide():
+    """Samples on the base axis, a roll outside its range and a reference whose roll differs from the
+    start's are solved one at a time, with solve_ik_near's answer."""
+    from roarmctl.robot import ik
+
+    base = ik._RoarmIK(ROARM).base_xy
+    q0 = solve_ik(ROARM, [0.1, 0.0, 0.35], pitch=0.0)[0]
+    pts = np.array([[0.05, 0.0, 0.35], [base[0], base[1], 0.35], [0.05, 0.0, 0.35], [0.2, 0.0, 0.8]])
+    line = ik.LineIK(ROARM, pts, q0, pitch=0.0, roll=None)
+    assert line.cands[1] is None and line.cands[3] is None  # on the base axis; beyond the reach
+    solved = 0
+    for k, p in enumerate(pts):
+        for prev in (q0, np.where(np.arange(ROARM.dof) == ROARM.arm_indices[4], 0.3, q0)):
+            try:
+                want = ik.solve_ik_near(ROARM, p, prev, pitch=0.0)
+            except UnreachableError as exc:
+                with pytest.raises(UnreachableError, match=re.escape(exc.message)):
+                    line.near(k, prev)
+                continue
+            assert line.near(k, prev).tobytes() == want.tobytes()
+            solved += 1
+    assert solved == 6  # all but the unreachable one, from both references
+    bad = ik.LineIK(ROARM, pts[:1], q0, pitch=0.0, roll=10.0)
+    with pytest.raises(UnreachableError, match="outside the wrist-roll range"):
+        bad.near(0, q0)
