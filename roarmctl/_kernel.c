@@ -603,7 +603,14 @@ static int check_state(const Model *mp, const double *qi, const double *gp, Py_s
                     double e = fabs(o[9 + r] - it[r]) - it[3 + r];
                     if (e > 0) d2 += e * e;
                 }
-                if (sweep > 0 && d2 < (m.active_r[ai] + sweep) * (m.active_r[ai] + sweep)) near[i] = 1;
+                if (sweep > 0 && !near[i] && d2 < (m.active_r[ai] + sweep) * (m.active_r[ai] + sweep)) {
+                    /* the sphere grown by the sweep touches the item's box; the shape's box grown by the sweep
+                     * holds every point the shape reaches within the sweep, so the state is near only when that
+                     * box is not apart from the item's */
+                    NEED_ROT(a)
+                    const double hs[3] = {sf[12] + sweep, sf[13] + sweep, sf[14] + sweep};
+                    if (!obb_apart(o, o + 9, hs, it + 6, it + 15, it + 18)) near[i] = 1;
+                }
                 if (!ok || !(d2 < r2)) continue;
                 NEED_ROT(a)
                 int in = 1;  /* world boxes */

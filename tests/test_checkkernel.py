@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from roarmctl import _kernel as kernel
-from roarmctl.motion.collision import CollisionChecker
+from roarmctl.motion.collision import CollisionChecker, interpolate
 from roarmctl.motion.scene import Scene, SceneItem, example_scene
 from roarmctl.robot.loader import bundled_robots, load_robot
 from roarmctl.robot.model import transform
@@ -227,3 +227,99 @@ def test_checks_from_two_threads_answer_as_one_thread():
         sys.setswitchinterval(old)
     assert got["seg"] == expected_seg and got["one"] == expected_one
     assert 0 < sum(expected_seg) < len(segs) and 0 < sum(expected_one) < len(expected_one)
+
+
+
+def _near_scene_checker(attached: bool) -> CollisionChecker:
+    """The example scene plus a tilted slab and a cylinder post (no margin: FCL and the limits decide alone),
+    optionally holding a box."""
+    robot = load_robot("roarm_m3_pro")
+    scene = example_scene()
+    scene.items.append(SceneItem.box("slab", (0.03, 0.16, 0.2), (0.05, 0.24, 0.1), rpy=(0.0, 0.0, 0.6)))
+    scene.items.append(SceneItem.cylinder("post", 0.03, 0.4, (0.2, -0.22, 0.2)))
+    checker = CollisionChecker(robot, scene, padding=0.005)
+    if attached:
+        q0 = np.array([0.0, 0.4, 1.6, 0.5, 0.0])
+        held = SceneItem.box("held", (0.03, 0.03, 0.05), checker.tcp_pose(q0)[:3, 3] + [0, 0, -0.03])
+        checker.add_item(held)
+        checker.set_grasp_target("held")
+        checker.attach("held", q0)
+    return checker
+
+
+def _sphere_slack(checker: CollisionChecker, q: np.ndarray) -> np.ndarray:
+    """(N, S, M) m: distance from each shape's bounding sphere to each item's world box (what the kernel's sphere
+    test measures), by the library's FK; inf for the pairs the checker skips."""
+    frames = checker.robot.kin.frames4(checker._full(q))[:, checker._mv_link]
+    centres = frames[:, :, :3, 3] + np.einsum("nsij,sj->nsi", frames[:, :, :3, :3], checker._mv_pos)
+    lo, hi = checker._item_lo[None, None], checker._item_hi[None, None]
+    gap = np.linalg.norm(np.maximum(np.maximum(lo - centres[:, :, None], centres[:, :, None] - hi), 0.0), axis=3)
+    return np.where(checker._scene_mask[None], gap - checker._mv_radius[None, :, None], np.inf)
+
+
+def _states_near_items(checker: CollisionChecker, seed: int, n: int) -> np.ndarray:
+    """n valid random states (n, arm_dof) where some shape's bounding sphere is within 3 cm of an item's box."""
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(checker._lower, checker._upper, (40 * n, checker._lower.size))
+    q = q[checker.validity_batch(q)]
+    q = q[_sphere_slack(checker, q).min(axis=(1, 2)) < 0.03]
+    assert len(q) >= n
+    return q[:n]
+
+
+@pytest.mark.parametrize("attached", [False, True])
+def test_a_state_that_is_not_near_is_clear_for_its_whole_sweep(attached):
+    """The "near" flag is what segment_valid's proof rests on: a state not near at sweep s (m) must stay valid for
+    FCL at every state within s / sweep_gain (rad) of it, since no arm point moves farther than s there. On 1500
+    random states close to the scene's items: every (shape, item) pair of a not-near state is more than s apart
+    (FCL's distance), 8 states at that joint distance (random directions) and 8 at half of it per not-near state
+    are all valid, and the shapes' grown boxes clear many states whose grown bounding spheres (the test before)
+    were near."""
+    checker = _near_scene_checker(attached)
+    q = _states_near_items(checker, 11, 1500)
+    rng = np.random.default_rng(13)
+    slack = _sphere_slack(checker, q)
+    frames = checker.robot.kin.frames4(checker._full(q))  # shape poses by the library's FK, not the kernel's
+    checked = box_cleared = pairs = 0
+    for sweep in (0.003, 0.01, 0.03):
+        b = checker._buffers(len(q))
+        kernel.check(checker._kf, checker._ki, q, np.zeros(0), b["valid"], b["near"], b["scene"], b["self"], b["pose"],
+                     sweep, False)
+        near = b["near"][:len(q)].astype(bool)
+        sphere_near = (slack < sweep - 1e-9).any(axis=(1, 2))
+        box_cleared += int((sphere_near & ~near).sum())
+        for i, a, k in zip(*np.nonzero(~near[:, None, None] & (slack < sweep))):  # the pairs only the box test clears
+            mv, frame = checker._moving_shapes[a], frames[i, checker._mv_link[a]]
+            mv.obj_scene.setRotation(frame[:3, :3] @ mv.rot)
+            mv.obj_scene.setTranslation(frame[:3, 3] + frame[:3, :3] @ mv.pos)
+            result = fcl.DistanceResult()
+            gap = fcl.distance(mv.obj_scene, checker._item_objs[k], fcl.DistanceRequest(), result)
+            assert gap > sweep - 1e-7, (sweep, gap, i, a, k)  # no point that moves <= sweep can reach the item
+            pairs += 1
+        free = q[~near]
+        d = rng.normal(size=(len(free), 16, q.shape[1]))
+        d /= np.linalg.norm(d, axis=2)[:, :, None]
+        d[:, 8:] *= 0.5
+        moved = np.clip(free[:, None] + d * (sweep / checker.sweep_gain), checker._lower, checker._upper)
+        ok = checker.validity_batch(moved.reshape(-1, q.shape[1]))
+        assert ok.all(), moved.reshape(-1, q.shape[1])[~ok][:3]
+        checked += ok.size
+    assert checked > 20000 and box_cleared > 300 and pairs > 300, (checked, box_cleared, pairs)
+
+
+@pytest.mark.parametrize("attached", [False, True])
+def test_valid_segments_have_no_colliding_state_at_eight_times_the_resolution(attached):
+    """segment_valid's verdict against a dense re-check (validity_batch, FCL on every candidate) of 1500 random
+    short segments from states close to the scene's items: no segment it passes has an invalid state at 1/8 of
+    its resolution."""
+    checker = _near_scene_checker(attached)
+    q = _states_near_items(checker, 12, 1500)
+    rng = np.random.default_rng(14)
+    d = rng.normal(size=q.shape)
+    d *= rng.uniform(0.05, 0.6, (len(q), 1)) / np.linalg.norm(d, axis=1)[:, None]
+    passed = 0
+    for q0, q1 in zip(q, np.clip(q + d, checker._lower, checker._upper)):
+        if checker.segment_valid(q0, q1, 0.01):
+            passed += 1
+            assert checker.validity_batch(interpolate(q0, q1, 0.01 / 8)).all(), (q0, q1)
+    assert 300 < passed < 1450, passed
