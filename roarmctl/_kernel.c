@@ -344,7 +344,8 @@ static void rnea_state(const Kin *m, const double *Fr, const double *qd, const d
 /* The checker's tables (CollisionChecker._pack): ints = header (HEADER) + the kinematic ints + the rest,
  * floats = the kinematic floats + the rest (layout in parse_model). */
 #define SHAPEF 19  /* rot (9), pos (3), half (3), half_self (3), radius (1) */
-#define ITEMF 24   /* aabb centre (3), aabb half (3), rot (9), centre (3), local half (3), pad (3) */
+#define ITEMF 37   /* aabb centre (3), aabb half (3), rot (9), centre (3), local half (3), pad (3), has a second box
+                      (1), the second box's rot (9) and half (3) (same centre; a cylinder's, see collision.py) */
 #define POSEF 12   /* per state and shape: world rot (9), centre (3) */
 
 typedef struct {
@@ -609,7 +610,9 @@ static int check_state(const Model *mp, const double *qi, const double *gp, Py_s
                      * box is not apart from the item's */
                     NEED_ROT(a)
                     const double hs[3] = {sf[12] + sweep, sf[13] + sweep, sf[14] + sweep};
-                    if (!obb_apart(o, o + 9, hs, it + 6, it + 15, it + 18)) near[i] = 1;
+                    if (!obb_apart(o, o + 9, hs, it + 6, it + 15, it + 18)
+                        && !(it[24] != 0.0 && obb_apart(o, o + 9, hs, it + 25, it + 15, it + 34)))
+                        near[i] = 1;
                 }
                 if (!ok || !(d2 < r2)) continue;
                 NEED_ROT(a)
@@ -619,6 +622,9 @@ static int check_state(const Model *mp, const double *qi, const double *gp, Py_s
                     if (!(fabs(o[9 + r] - it[r]) < hw + it[3 + r])) in = 0;
                 }
                 if (!in || obb_apart(o, o + 9, sf + 12, it + 6, it + 15, it + 18)) continue;
+                /* an item with a second box that holds it (a cylinder's, turned 45 degrees about its axis): apart from
+                 * either box is apart from the item */
+                if (it[24] != 0.0 && obb_apart(o, o + 9, sf + 12, it + 25, it + 15, it + 34)) continue;
                 if (*ns >= cap_s) return -1;
                 sc[3 * *ns] = i; sc[3 * *ns + 1] = a; sc[3 * *ns + 2] = k; (*ns)++;
             }

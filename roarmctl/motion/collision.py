@@ -10,17 +10,18 @@ How a batch of states (N, arm_dof) is checked, in one call of the compiled kerne
 3. conservative pre-filters that only clear pairs that are certainly apart: a shape's bounding
    sphere vs the item's axis-aligned box (and shape spheres against each other), the world boxes,
    then the separating-axis test of the two oriented bounding boxes (each shape lies inside its
-   box, so an axis that separates the boxes separates the shapes);
+   box, so an axis that separates the boxes separates the shapes); a pair with a cylinder item also
+   meets the separating-axis test against a second box of the cylinder (``_second_box``), which
+   clears most pairs near the first box's corners;
 4. python-fcl answers the pairs that no filter cleared, exactly (boxes, cylinders, spheres, meshes),
    in state order, skipping the rest of a state after its first collision (and every later state
    in ``first_invalid``). For two boxes the kernel only leaves pairs that overlap, so FCL is called
-   about once per colliding state. A pair with a cylinder item first meets the separating-axis test
-   against a second box of the cylinder (``_second_box``), which clears most pairs near the first
-   box's corners.
+   about once per colliding state.
 
 Motion segments (``segment_valid``) are checked as one batch at ``resolution``; steps between
-two states where a sphere grown by the distance any arm point can travel in half a step
-(``sweep_gain``) comes near anything are re-checked at a finer resolution, so that a finer
+two states where a shape's box grown by the distance any arm point can travel in half a step
+(``sweep_gain``) is not apart from an item's box (or a shape's sphere so grown comes near another
+shape's) are re-checked at a finer resolution, so that a finer
 re-check of the segment (the pipeline's, or a test's) agrees with it.
 
 Rules: arm shapes are inflated by ``padding`` against the scene; self-collision uses the
@@ -52,7 +53,7 @@ _NO_IDX = np.zeros(0, dtype=np.int64)
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
 _STATE_CACHE = 8  # collision states whose tables a checker keeps
 # What _build_tables sets: the kept tables of one collision state.
-_TABLES = ("_items", "_item_objs", "_item_box2", "_item_lo", "_item_hi", "_item_c", "_item_h", "_moving_shapes", "_mv_link", "_mv_rot",
+_TABLES = ("_items", "_item_objs", "_item_lo", "_item_hi", "_item_c", "_item_h", "_moving_shapes", "_mv_link", "_mv_rot",
            "_mv_pos", "_mv_half", "_mv_half_self", "_mv_radius", "_scene_mask", "_active", "_active_mask", "_active_r2",
            "_pairs", "_pair_r2", "_ki", "_kf", "_q_template", "_kfm", "_kim")
 
@@ -310,7 +311,6 @@ class CollisionChecker:
             obj = fcl.CollisionObject(_geometry(it.shape, it.size, it.radius, it.length),
                                       fcl.Transform(it.pose[:3, :3], it.pose[:3, 3]))
             self._item_objs.append(obj)
-        self._item_box2 = [_second_box(it) for it in self._items]
         m = len(self._items)
         lo = np.array([it.aabb()[0] for it in self._items]).reshape(m, 3)
         hi = np.array([it.aabb()[1] for it in self._items]).reshape(m, 3)
@@ -387,12 +387,15 @@ class CollisionChecker:
         s, m = len(self._moving_shapes), len(self._items)
         shapes = np.hstack([self._mv_rot.reshape(s, 9), self._mv_pos, self._mv_half, self._mv_half_self,
                             self._mv_radius[:, None]]) if s else np.zeros((0, 19))
-        items = np.zeros((m, 24))
+        items = np.zeros((m, 37))
         for k, it in enumerate(self._items):
             local = {"box": np.asarray(it.size, dtype=float) / 2, "sphere": np.full(3, it.radius),
                      "cylinder": np.array([it.radius, it.radius, it.length / 2])}[it.shape]
             items[k, :3], items[k, 3:6] = self._item_c[k], self._item_h[k]
             items[k, 6:15], items[k, 15:18], items[k, 18:21] = it.pose[:3, :3].ravel(), it.pose[:3, 3], local
+            box2 = _second_box(it)
+            if box2 is not None:
+                items[k, 24], items[k, 25:34], items[k, 34:37] = 1.0, box2[0], box2[2]
         # Groups for the kernel's first scene test: the active shapes of one link, in one sphere about their
         # mean centre (link frame) that holds each shape's sphere, plus 1e-9 m against rounding.
         links = self._mv_link[self._active]
@@ -511,8 +514,8 @@ class CollisionChecker:
                   gripper: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """Validity (N,) of arm states ``q`` (N, arm_dof); with ``stop_at_first`` states after the first
         invalid one are left marked valid and not checked. Also returns, when ``sweep`` > 0 (m), which
-        states are "near" (N,): some bounding sphere grown by ``sweep`` touches an item's box or another
-        shape's grown sphere; else None."""
+        states are "near" (N,): some shape's box grown by ``sweep`` is not apart from an item's box (nor from
+        a cylinder's second box), or its bounding sphere so grown touches another shape's; else None."""
         q = np.ascontiguousarray(q, dtype=float)
         n = q.shape[0]
         self.check_count += n
@@ -527,7 +530,7 @@ class CollisionChecker:
 
     def _narrow(self, valid: np.ndarray, b: dict, ns: int, npairs: int, stop_at_first: bool) -> None:
         """FCL on the kernel's candidate pairs, in state order; marks colliding states invalid in ``valid``."""
-        moving, items, box2, pose, req = self._moving_shapes, self._item_objs, self._item_box2, b["pose"], _FCL_REQUEST
+        moving, items, pose, req = self._moving_shapes, self._item_objs, b["pose"], _FCL_REQUEST
         res = fcl.CollisionResult()  # one for the call: fcl.collide adds a contact to it per hit, which no one reads
         first_hit = len(valid)
         skip = -1
@@ -535,8 +538,6 @@ class CollisionChecker:
             if i == skip:
                 continue
             p = pose[i, a]
-            if box2[k] is not None and _kernel.apart(p[:9], p[9:], moving[a].half, *box2[k]):
-                continue  # apart from a box that holds the item (the kernel tested the other one)
             obj = moving[a].obj_scene
             obj.setRotation(p[:9].reshape(3, 3))
             obj.setTranslation(p[9:])
@@ -605,9 +606,9 @@ class CollisionChecker:
         """True when the straight joint-space segment q0 -> q1 (arm_dof,) is valid.
 
         States are checked at steps of at most ``resolution`` rad (Euclidean norm over the arm
-        joints), both ends included. A step between two states is proven clear when no bounding
-        sphere, grown by how far any point of the arm can move in half a step (``sweep_gain``),
-        comes near anything; the other steps are re-checked at ``refine`` times finer resolution,
+        joints), both ends included. A step between two states is proven clear when at both ends no
+        shape's box, grown by how far any point of the arm can move in half a step (``sweep_gain``),
+        comes near an item's box, nor its bounding sphere so grown near another shape's; the other steps are re-checked at ``refine`` times finer resolution,
         so that a finer re-check of the segment does not find what the coarse one missed.
         """
         with self._lock:
