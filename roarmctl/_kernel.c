@@ -725,30 +725,34 @@ done:
     return result;
 }
 
-/* check_line(F, I, q0, d, steps, start, stride, idx, refine, valid, near, scene, self, pose, sweep, stop)
+/* check_line(F, I, q0, d, steps, start, stride, idx, refine, valid, near, scene, self, pose, sweep, stop, skip)
  *   -> (n_scene, n_self, limit, count)
  * Like check() for the states of the segment q0 -> q0 + d without building them in Python: state i of the
  * segment is q0 + d * t_i with t_i = i * (1 / steps) and t_steps = 1 (np.linspace's numbers). Without idx
  * (empty) the states are i = start, start + stride, ... <= steps; with idx, the states between i and i + 1
- * for each i of idx: s_i + (s_{i+1} - s_i) * (k / refine), k = 1 .. refine - 1 (the refinement). */
+ * for each i of idx: s_i + (s_{i+1} - s_i) * (k / refine), k = 1 .. refine - 1 (the refinement).
+ * skip > 0 (without idx, start 0, stride 1): the states skip, 2 skip, ... <= steps were checked already by a call
+ * with start = stride = skip (same sweep) whose rows are still in valid/near; they are not checked again: they
+ * count as valid and keep their near flags, moved to their rows here. */
 static void line_state(const double *q0, const double *d, int64_t n, int64_t steps, int64_t i, double *out) {
     double t = i == steps ? 1.0 : (double)i * (1.0 / (double)steps);
     for (int64_t j = 0; j < n; j++) out[j] = q0[j] + d[j] * t;
 }
 
 static PyObject *check_line(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    if (nargs != 16) {
-        PyErr_SetString(PyExc_TypeError, "check_line() takes 16 arguments");
+    if (nargs != 17) {
+        PyErr_SetString(PyExc_TypeError, "check_line() takes 17 arguments");
         return NULL;
     }
     static const int bufarg[10] = {0, 1, 2, 3, 7, 9, 10, 11, 12, 13};
     Py_buffer b[10];
     int got = 0;
     PyObject *result = NULL;
+    uint8_t *pre = NULL;  /* with skip: the earlier call's near flags (its rows 0 .. n_pre - 1) */
     for (; got < 10; got++)
         if ((got < 5 ? get_in(args[bufarg[got]], &b[got]) : get_out(args[bufarg[got]], &b[got])) < 0) goto done;
     int64_t steps = PyLong_AsLongLong(args[4]), start = PyLong_AsLongLong(args[5]), stride = PyLong_AsLongLong(args[6]);
-    int64_t refine = PyLong_AsLongLong(args[8]);
+    int64_t refine = PyLong_AsLongLong(args[8]), skip = PyLong_AsLongLong(args[16]);
     double sweep = PyFloat_AsDouble(args[14]);
     int stop = PyObject_IsTrue(args[15]);
     if (PyErr_Occurred()) goto done;
@@ -761,7 +765,8 @@ static PyObject *check_line(PyObject *self, PyObject *const *args, Py_ssize_t na
     int64_t *sc = b[7].buf, *pc = b[8].buf;
     double *pose = b[9].buf;
     Py_ssize_t cap_s = b[7].len / 24, cap_p = b[8].len / 16;
-    if (steps < 1 || stride < 1 || start < 0 || refine < 1 || b[2].len != 8 * m.arm_n || b[3].len != 8 * m.arm_n) {
+    if (steps < 1 || stride < 1 || start < 0 || refine < 1 || b[2].len != 8 * m.arm_n || b[3].len != 8 * m.arm_n
+        || skip < 0 || (skip > 0 && (n_idx || start != 0 || stride != 1))) {
         PyErr_SetString(PyExc_ValueError, "_kernel.check_line: bad arguments");
         goto done;
     }
@@ -772,6 +777,14 @@ static PyObject *check_line(PyObject *self, PyObject *const *args, Py_ssize_t na
     }
     double qa[MAXDOF], qb[MAXDOF], qs[MAXDOF];
     Py_ssize_t ns = 0, np_ = 0, limit = N, row = 0;
+    Py_ssize_t n_pre = skip > 0 && steps >= skip ? (steps - skip) / skip + 1 : 0;
+    if (n_pre) {
+        if (!(pre = PyMem_Malloc(n_pre))) {
+            PyErr_NoMemory();
+            goto done;
+        }
+        memcpy(pre, near, n_pre);
+    }
     for (Py_ssize_t u = 0; u < (n_idx ? n_idx : N); u++) {
         int64_t kmax = n_idx ? refine - 1 : 1;
         if (n_idx) {
@@ -783,7 +796,13 @@ static PyObject *check_line(PyObject *self, PyObject *const *args, Py_ssize_t na
                 double t = (double)k / (double)refine;
                 for (int64_t j = 0; j < m.arm_n; j++) qs[j] = qa[j] + (qb[j] - qa[j]) * t;
             } else {
-                line_state(q0, d, m.arm_n, steps, start + u * stride, qs);
+                int64_t s_i = start + u * stride;
+                if (n_pre && s_i >= skip && s_i % skip == 0) {
+                    valid[row] = 1;
+                    near[row] = pre[s_i / skip - 1];
+                    continue;
+                }
+                line_state(q0, d, m.arm_n, steps, s_i, qs);
             }
             int ok = check_state(&m, qs, NULL, row, valid, near, sc, &ns, cap_s, pc, &np_, cap_p, pose, sweep, stop);
             if (ok < 0) goto overflow;
@@ -803,6 +822,7 @@ finished:
 overflow:
     PyErr_SetString(PyExc_ValueError, "_kernel.check_line: candidate buffer too small");
 done:
+    PyMem_Free(pre);
     for (int k = 0; k < got; k++) PyBuffer_Release(&b[k]);
     return result;
 }

@@ -323,3 +323,39 @@ def test_valid_segments_have_no_colliding_state_at_eight_times_the_resolution(at
             passed += 1
             assert checker.validity_batch(interpolate(q0, q1, 0.01 / 8)).all(), (q0, q1)
     assert 300 < passed < 1450, passed
+
+
+def test_a_full_pass_that_skips_the_coarse_states_keeps_their_flags():
+    """check_line's skip: after a coarse call (every 8th state, with the sweep), the full pass that skips those states
+    leaves the same near flags on every row as a full pass that checks them all, and segment_valid answers as its
+    states checked one by one (validity_batch) where no state is near, on 300 long random segments."""
+    checker = _near_scene_checker(False)
+    rng = np.random.default_rng(15)
+    q = _states_near_items(checker, 16, 300)
+    d = rng.normal(size=q.shape)
+    d *= rng.uniform(0.4, 1.2, (len(q), 1)) / np.linalg.norm(d, axis=1)[:, None]
+    compared = near = 0
+    for q0, q1 in zip(q, np.clip(q + d, checker._lower, checker._upper)):
+        dq = np.ascontiguousarray(q1 - q0)
+        steps = int(np.ceil(np.linalg.norm(dq) / 0.01))
+        if steps < 32:
+            continue
+        b = checker._buffers(steps + 1)
+        views = b["views"]
+
+        def line(start, stride, skip):
+            kernel.check_line(checker._kf, checker._ki, q0, dq, steps, start, stride, np.zeros(0, dtype=np.int64), 1,
+                              *views, 0.004, False, skip)
+            return b["valid"][:steps + 1].copy(), b["near"][:steps + 1].copy()
+
+        valid_all, near_all = line(0, 1, 0)
+        line(8, 8, 0)
+        valid_skip, near_skip = line(0, 1, 8)
+        np.testing.assert_array_equal(near_skip, near_all)
+        coarse = np.arange(8, steps + 1, 8)
+        assert valid_skip[coarse].all()  # skipped: they count as valid (the coarse call decided them)
+        np.testing.assert_array_equal(np.delete(valid_skip, coarse), np.delete(valid_all, coarse))
+        compared += 1
+        near += int(near_all.sum())
+        assert checker.segment_valid(q0, q1, 0.01, refine=1) == bool(checker.validity_batch(interpolate(q0, q1, 0.01)).all())
+    assert compared > 200 and near > 100, (compared, near)

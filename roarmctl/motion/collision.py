@@ -617,11 +617,13 @@ class CollisionChecker:
             d = np.ascontiguousarray(q1, dtype=float).ravel() - q0
             steps = max(1, math.ceil(math.sqrt(d.dot(d)) / resolution))  # the same numbers as np.sqrt / np.ceil
             b = self._bufs if self._bufs.get("n", 0) > steps else self._buffers(steps + 1)
-            if steps + 1 > 4 * COARSE_STRIDE and not self._line_ok(b, q0, d, steps, COARSE_STRIDE, COARSE_STRIDE):
-                return False  # most invalid motions are caught by every 8th state, at an eighth of the cost
             e = (q0 + d * (1.0 / steps)) - q0  # the first step, as interpolate's q[1] - q[0]
             sweep = 0.5 * math.sqrt(e.dot(e)) * self.sweep_gain
-            if not self._line_ok(b, q0, d, steps, 0, 1, sweep):
+            coarse = steps + 1 > 4 * COARSE_STRIDE
+            if coarse and not self._line_ok(b, q0, d, steps, COARSE_STRIDE, COARSE_STRIDE, sweep):
+                return False  # most invalid motions are caught by every 8th state, at an eighth of the cost
+            # the full pass skips the states the coarse pass checked (their near flags stay in b)
+            if not self._line_ok(b, q0, d, steps, 0, 1, sweep, skip=COARSE_STRIDE if coarse else 0):
                 return False
             if refine <= 1 or sweep <= 0:
                 return True
@@ -633,14 +635,16 @@ class CollisionChecker:
             return self._line_ok(b if b["n"] >= n else self._buffers(n), q0, d, steps, 0, 1, 0.0, idx, refine)
 
     def _line_ok(self, b: dict, q0: np.ndarray, d: np.ndarray, steps: int, start: int, stride: int, sweep: float = 0.0,
-                 idx: np.ndarray = _NO_IDX, refine: int = 1) -> bool:
+                 idx: np.ndarray = _NO_IDX, refine: int = 1, skip: int = 0) -> bool:
         """True when the states of the segment q0 -> q0 + d that ``_kernel.check_line`` makes (see there) are
         all valid; stops at the first invalid one. ``b``: output buffers (``_buffers``) large enough for them; with
-        ``sweep`` > 0 the "near" flags stay in ``b``. ``idx``: int64 step indices (refinement), as the kernel takes."""
+        ``sweep`` > 0 the "near" flags stay in ``b``. ``idx``: int64 step indices (refinement), as the kernel takes.
+        ``skip`` > 0: the states skip, 2 skip, ... were checked (and passed) by the call just made with
+        start = stride = skip and this sweep; they are not checked again."""
         n = len(idx) * (refine - 1) if len(idx) else (steps - start) // stride + 1 if start <= steps else 0
-        self.check_count += n
+        self.check_count += n - (steps // skip if skip else 0)
         ns, npairs, limit, _ = _kernel.check_line(self._kfm, self._kim, q0, d, steps, start, stride, idx, refine,
-                                                  *b["views"], sweep, True)
+                                                  *b["views"], sweep, True, skip)
         if limit < n:  # limits or margin
             return False
         return not (ns or npairs) or self._all_clear(b, n, ns, npairs, limit)
