@@ -55,6 +55,8 @@ def cartesian_line(
     line = LineIK(robot, pts, q_start, pitch=pitch, roll=roll if pitch is not None else None)
     out = [q_start]
     prev = q_start
+    arm = robot.arm_indices
+    rest = [i for i in range(robot.dof) if i not in arm]  # the gripper: q_start's value all along
     for k in range(1, n + 1):
         p = pts[k - 1]
         try:
@@ -62,14 +64,13 @@ def cartesian_line(
         except UnreachableError as exc:
             raise PlanningError(f"{label}: the straight line leaves the reachable space at "
                                 f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m: {exc.message}") from None
-        arm = robot.arm_indices
         jump = float(np.max(np.abs(best[arm] - prev[arm])))
         if jump > MAX_JOINT_STEP:
             raise PlanningError(f"{label}: the straight line passes a singularity near "
                                 f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m (a joint would jump {jump:.2f} rad)",
                                 "move the target or change the approach height or pitch")
         best = best.copy()
-        best[[i for i in range(robot.dof) if i not in arm]] = q_start[[i for i in range(robot.dof) if i not in arm]]
+        best[rest] = q_start[rest]
         out.append(best)
         prev = best
     return np.array(out)

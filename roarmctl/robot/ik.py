@@ -885,12 +885,14 @@ class LineIK:
             q2 = q if done else solver._verify(_fit_limits(robot, q, qr), p, None, u_h, float(self.pitch), True)
             if q2 is not None:
                 out.append(q2)
+        if len(out) == 1:  # one branch (the usual case): nothing to dedupe, sort or pick
+            return out[0].copy()  # a fresh array, as solve_ik_near's (the kept ones stay as they are)
         out = _dedupe(out, solver.arm)
         if not out:
             return solve_ik_near(robot, p, qr, pitch=self.pitch, roll=self.roll)  # raises as one solve would
         arm = robot.arm_indices
         out.sort(key=lambda q: float(np.linalg.norm(q[arm] - qr[arm])))  # solve_ik's order, then solve_ik_near's pick
-        return min(out, key=lambda s: float(np.max(np.abs(s[arm] - qr[arm]))))
+        return min(out, key=lambda s: float(np.max(np.abs(s[arm] - qr[arm])))).copy()
 
 
 # ----------------------------------------------------------------------------- RoArm-M2 (3 joints)
