@@ -93,7 +93,7 @@ static int parse_kin(Kin *k, const int64_t *I, Py_ssize_t ni, const double *F, P
     }
     return 0;
 bad:
-    PyErr_SetString(PyExc_ValueError, "_kernel: kinematic tables do not match their header");
+    PyErr_SetString(PyExc_ValueError, "_kernel: kinematic tables do not match their header (if roarmctl's source was updated, its compiled kernel is older: rebuild it with `make install` or `pip install .`)");
     return -1;
 }
 
@@ -406,7 +406,7 @@ static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     m->lp_f = q;                          /* per link pair: sphere centre (link frame) and radius of each link */
     return 0;
 bad:
-    PyErr_SetString(PyExc_ValueError, "_kernel: packed checker tables do not match their header");
+    PyErr_SetString(PyExc_ValueError, "_kernel: packed checker tables do not match their header (if roarmctl's source was updated, its compiled kernel is older: rebuild it with `make install` or `pip install .`)");
     return -1;
 }
 
