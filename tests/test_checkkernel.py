@@ -116,6 +116,15 @@ def test_separating_axis_never_clears_boxes_that_fcl_finds_touching():
     assert apart_fcl > 1000 and cleared >= 0.99 * apart_fcl
 
 
+def _hold_a_box(checker: CollisionChecker) -> None:
+    """Attach a 3 x 3 x 5 cm box held 3 cm below the TCP at a fixed arm pose, as a grasped object."""
+    q0 = np.array([0.0, 0.4, 1.6, 0.5, 0.0])
+    held = SceneItem.box("held", (0.03, 0.03, 0.05), checker.tcp_pose(q0)[:3, 3] + [0, 0, -0.03])
+    checker.add_item(held)
+    checker.set_grasp_target("held")
+    checker.attach("held", q0)
+
+
 @pytest.mark.parametrize("attached", [False, True])
 def test_pairs_the_kernel_clears_are_apart_for_fcl(attached):
     """On 1500 random RoArm states in the example scene (padding 5 mm, with and without a held box), every
@@ -123,11 +132,7 @@ def test_pairs_the_kernel_clears_are_apart_for_fcl(attached):
     robot = load_robot("roarm_m3_pro")
     checker = CollisionChecker(robot, example_scene(), padding=0.005)
     if attached:
-        q0 = np.array([0.0, 0.4, 1.6, 0.5, 0.0])
-        held = SceneItem.box("held", (0.03, 0.03, 0.05), checker.tcp_pose(q0)[:3, 3] + [0, 0, -0.03])
-        checker.add_item(held)
-        checker.set_grasp_target("held")
-        checker.attach("held", q0)
+        _hold_a_box(checker)
     rng = np.random.default_rng(7)
     q = rng.uniform(checker._lower, checker._upper, (1500, robot.arm_dof))
     b = checker._buffers(len(q))
@@ -239,11 +244,7 @@ def _near_scene_checker(attached: bool) -> CollisionChecker:
     scene.items.append(SceneItem.cylinder("post", 0.03, 0.4, (0.2, -0.22, 0.2)))
     checker = CollisionChecker(robot, scene, padding=0.005)
     if attached:
-        q0 = np.array([0.0, 0.4, 1.6, 0.5, 0.0])
-        held = SceneItem.box("held", (0.03, 0.03, 0.05), checker.tcp_pose(q0)[:3, 3] + [0, 0, -0.03])
-        checker.add_item(held)
-        checker.set_grasp_target("held")
-        checker.attach("held", q0)
+        _hold_a_box(checker)
     return checker
 
 
