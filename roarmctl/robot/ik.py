@@ -315,36 +315,22 @@ def _fit_limits(robot: Robot, q: np.ndarray, ref: np.ndarray | None, tol: float 
 
 def _newton(residual: Callable[[np.ndarray], np.ndarray], q: np.ndarray, idx: list[int],
             iters: int = 12, tol: float = 1e-13, h: float = 1e-7) -> np.ndarray:
-    """Gauss-Newton on the joints ``idx`` of ``q`` with a forward-difference Jacobian.
-
-    ``residual`` maps a batch of configurations (k, dof) to residuals (k, m), so that q and its
-    len(idx) perturbations cost one batched FK call per iteration.
-    """
-    q = q.copy()
-    for _ in range(iters):
-        batch = np.repeat(q[None], len(idx) + 1, axis=0)
-        batch[np.arange(1, len(idx) + 1), idx] += h
-        res = residual(batch)
-        r = res[0]
-        if math.sqrt(r.dot(r)) < tol:  # np.linalg.norm of a real vector, without its call overhead
-            break
-        jac = (res[1:] - r).T / h
-        # a whisker of damping: directions the target does not constrain (the base, when the TCP is
-        # on the base axis) stay put instead of absorbing urad-level model noise with huge steps
-        step = np.linalg.solve(jac.T @ jac + 1e-10 * np.eye(len(idx)), -jac.T @ r)
-        if math.sqrt(step.dot(step)) > 0.2:  # a polish, not a search: never wander to another branch
-            break
-        q[idx] += step
-    return q
+    """Gauss-Newton on the joints ``idx`` of one configuration ``q`` (dof,) with a forward-difference
+    Jacobian: ``_newton_rows`` with one row. ``residual`` maps a batch of configurations (k, dof), q and
+    its len(idx) perturbations, to residuals (k, m), so each iteration costs one batched FK call."""
+    return _newton_rows(lambda batch, rows, k1: residual(batch), q[None], idx, iters, tol, h)[0]
 
 
 def _newton_rows(residual: Callable[[np.ndarray, np.ndarray, int], np.ndarray], q: np.ndarray, idx: list[int],
                  iters: int = 12, tol: float = 1e-13, h: float = 1e-7) -> np.ndarray:
-    """``_newton`` for every row of ``q`` (N, dof) at once, each row exactly as ``_newton`` runs it alone.
+    """Gauss-Newton on the joints ``idx`` of every row of ``q`` (N, dof) at once, each row on its own: it stops
+    when its residual norm is below ``tol`` or its step would exceed 0.2 rad (a polish, not a search: never
+    wander to another branch). A whisker of damping keeps directions the target does not constrain (the
+    base, when the TCP is on the base axis) put instead of absorbing urad-level model noise with huge steps.
 
     ``residual(batch, rows, k1)`` maps the configurations (len(rows) * k1, dof), k1 consecutive ones per
     active row (the row, then its perturbations), to residuals (len(rows) * k1, m). The per-row linear
-    algebra is the same numpy/LAPACK call per matrix (stacked); the stops compare as ``_newton`` does.
+    algebra is one stacked numpy/LAPACK call; the stops compare norms as ``math.sqrt(v.dot(v))`` does.
     """
     q = q.copy()
     n, dof = q.shape
