@@ -112,6 +112,66 @@ def test_jerk_limits_hold_on_a_curved_path_by_finite_differences():
     assert free.duration < tp.duration < free.duration + 1.0
 
 
+def test_slowing_a_profile_in_time_follows_the_chain_rule():
+    """``_slowed`` by a factor f: the same path positions at f times the time, joint velocities / f and joint
+    accelerations / f**2 (q(s(t / f)) by the chain rule), compared on the spline at matching times, unfiltered and
+    with the jerk filter's width scaled to f w (the whole filtered motion slowed)."""
+    from roarmctl.motion.timing import _Profile, _sample, _slowed, import_toppra, toppra_grid
+
+    ta = import_toppra()
+    wp = np.cumsum(np.random.default_rng(8).uniform(-0.4, 0.4, size=(6, 4)), axis=0)
+    ss = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(wp, axis=0), axis=1))])
+    path = ta.SplineInterpolator(ss, wp, bc_type="not-a-knot")
+    grid = toppra_grid(ss)
+    prof = _Profile(grid, 0.9 * np.sqrt(np.sin(np.pi * grid / grid[-1]).clip(0.0)))  # a rest-to-rest path speed
+    f = 1.037
+    slow, width = _slowed(path, prof, 0.0, f, None)
+    assert width == 0.0 and slow.T == pytest.approx(f * prof.T, rel=1e-12)
+    t = np.linspace(0.0, prof.T, 301)
+    for w in (0.0, 0.12):
+        q, qd, qdd, s = _sample(path, prof, t, w)
+        q2, qd2, qdd2, s2 = _sample(path, slow, f * t, f * w)
+        assert np.allclose(s2, s, atol=1e-10) and np.allclose(q2, q, atol=1e-10)
+        assert np.allclose(qd2 * f, qd, atol=1e-9) and np.allclose(qdd2 * f**2, qdd, atol=1e-8)
+        assert np.max(np.abs(qd)) > 0.1 and np.max(np.abs(qdd)) > 0.1  # the comparison is not of zeros
+
+
+def test_a_result_over_a_limit_is_slowed_in_time_not_timed_again(monkeypatch):
+    """A bent RoArm-M3 arm path past a post (4 waypoints from a planned motion, rounded to 0.1 mrad; its joint
+    limits) whose first TOPP-RA result overshoots the acceleration limits after the jerk filter (the filter averages
+    the path speed where the path bends). It is slowed down in time, so TOPP-RA runs once, where a tighter margin
+    needed a second run; every sample keeps the velocity and acceleration limits, the jerk by finite differences of
+    the samples too, and here the motion is even shorter than the one timed again."""
+    import toppra.algorithm
+
+    import roarmctl.motion.timing as timing
+
+    runs = []
+    real = toppra.algorithm.TOPPRA.compute_parameterization
+
+    def counted(self, *args, **kwargs):
+        runs.append(1)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(toppra.algorithm.TOPPRA, "compute_parameterization", counted)
+    wp = np.array([[-0.3217, 0.7863, 0.9515, 1.4037, 0.0], [-0.2166, 0.7347, 0.9459, 1.1674, 0.2038],
+                   [0.0898, 0.6725, 0.98, 0.9066, 0.4356], [0.3218, 0.7863, 0.9515, 1.4037, 0.0]])
+    vmax, amax = np.array([1.4, 1.05, 1.26, 1.54, 1.75]), np.array([3.0, 2.4, 3.0, 3.6, 3.6])
+    jmax = np.array([50.0, 40.0, 50.0, 60.0, 60.0])
+    dt = 0.002
+    tp = time_parameterise(wp, vmax, amax, jmax, sample_dt=dt)
+    assert len(runs) == 1
+    assert np.all(np.abs(tp.qd) <= vmax) and np.all(np.abs(tp.qdd) <= amax)
+    jerk = np.diff(tp.qdd, axis=0) / np.diff(tp.times)[:, None]
+    assert np.all(np.abs(jerk) <= jmax * (1 + 1e-9))
+    assert np.max(np.abs(tp.qdd) / amax) > 0.97  # slowed just enough: the limit is still used
+    runs.clear()
+    monkeypatch.setattr(timing, "SLOWDOWN_TRIES", 0)
+    again = time_parameterise(wp, vmax, amax, jmax, sample_dt=dt)
+    assert len(runs) == 2  # the first margin's samples were over a limit
+    assert tp.duration <= again.duration
+
+
 def test_torque_limit_slows_a_move_and_holds_by_rnea():
     """planar 2R (1 kg point masses at the link ends): lifting both links against gravity under a 35 N m shoulder limit."""
     from roarmctl.motion.timing import TorqueModel
@@ -173,6 +233,7 @@ def test_short_segment_between_long_ones_keeps_the_first_margin(monkeypatch):
 
     assert 0.98 in timing.SAFETY_STEPS[:2]
     monkeypatch.setattr(timing, "SAFETY_STEPS", (0.98,))
+    monkeypatch.setattr(timing, "SLOWDOWN_TRIES", 0)  # no slowing down in time: the margin alone must do
     wp = np.array([[0.0, 0.0, 0.0, 0.0, 0.0], [-0.0423, 0.2052, 0.0336, -0.1717, 0.1159],
                    [0.1765, 0.3642, -0.0845, -0.384, 0.0113], [0.181, 0.109, -0.1085, -0.5207, -0.069],
                    [0.0473, 0.0313, -0.0073, -0.2645, -0.1006], [0.4008, -0.1408, 0.0836, -0.0307, -0.0763],

@@ -17,8 +17,13 @@ trajectory that starts and ends at rest and respects, at every output sample:
   with time- and frequency-domain specifications", Control Engineering Practice 20(12), 2012)
   applied to the path parameter. ``w`` grows until the sampled joint jerk is inside the limits.
 
-Everything is re-checked on the samples; where the filtered profile pokes over a limit, TOPP-RA
-runs again with limits tightened by ``SAFETY_STEPS``.
+Everything is re-checked on the samples. Where the filtered profile pokes over a velocity,
+acceleration or TCP-speed limit (the filter averages the path speed over a stretch where the path
+bends, by 1-5 % on curved paths), the motion is slowed down in time by the factor the samples call
+for: the path speed divided by ``f`` at every grid point divides joint and TCP velocities by ``f``
+and path accelerations by ``f**2`` on the same path (``_slowed``), so one TOPP-RA run suffices where
+tightening its limits needed two or three. Where that does not pass (torque, which gravity keeps
+from scaling, or a jerk check), TOPP-RA runs again with limits tightened by ``SAFETY_STEPS``.
 """
 
 from __future__ import annotations
@@ -38,6 +43,9 @@ from roarmctl.motion import _timekernel
 SAFETY_STEPS = (0.995, 0.98, 0.95, 0.9, 0.8, 0.7, 0.6)
 SAFETY = SAFETY_STEPS[0]
 FINE_DT = 0.002  # s: grid on which the jerk is checked (finite differences of the acceleration)
+# A timed result over a limit by ratio r on its samples is slowed by r * (1 + SLOWDOWN_SLACK) (the square root
+# of it for accelerations), at most SLOWDOWN_TRIES times, before TOPP-RA runs again at the next margin.
+SLOWDOWN_TRIES, SLOWDOWN_SLACK = 3, 1e-3
 FILTER_GROWTH = 1.25  # each try widens the jerk filter by this factor
 FILTER_TRIES = 16
 # When the filter had to widen past PLATEAU_TRIGGER times its narrowest width a / j, the profile is timed
@@ -295,6 +303,7 @@ class _Profile:
 
     def __init__(self, grid: np.ndarray, sd: np.ndarray) -> None:
         sd = np.maximum(sd, 0.0)
+        self.grid = grid
         ds = np.diff(grid)
         dt = 2.0 * ds / np.maximum(sd[:-1] + sd[1:], 1e-12)
         self.t = np.concatenate([[0.0], np.cumsum(dt)])
@@ -495,6 +504,23 @@ def _plateau(algo, constraints: list, path, gridpoints: np.ndarray, prof: _Profi
     return None
 
 
+def _slowed(path, prof: _Profile, w: float, factor: float, jm: np.ndarray | None) -> tuple[_Profile, float] | None:
+    """``prof`` (filtered at width ``w`` s) run ``factor`` (> 1) times slower on the same path, and its filter width.
+
+    The path speed sdot / factor at every grid point makes the unfiltered motion exactly ``factor`` times longer:
+    joint and TCP velocities / factor, path accelerations / factor**2 (the joint accelerations q' sddot + q'' sdot**2
+    too). Filtered at ``w * factor`` the whole motion is the old one slowed (jerk / factor**3); the narrower ``w`` is
+    kept when the sampled jerk stays inside ``jm`` (n,) there, which it usually does (the profile's steps of path
+    acceleration shrink by factor**2). None if neither width passes the jerk check."""
+    slow = _Profile(prof.grid, prof.sd / factor)
+    if jm is None or w <= 0.0:
+        return slow, w
+    for width in (w, w * factor):
+        if _jerk_ok(path, slow, width, jm):
+            return slow, width
+    return None
+
+
 def time_parameterise(
     waypoints: np.ndarray,
     vmax: np.ndarray,
@@ -586,15 +612,25 @@ def time_parameterise(
                     plateau = _plateau(algo, constraints, path, gridpoints, prof, w0, jm, None if torque_terms is not None else amax * safety)
                 if plateau is not None and plateau[0].T + plateau[1] < prof.T + w:
                     prof, w = plateau
-        duration = prof.T + w
-        count = max(int(np.ceil(duration / sample_dt - 1e-9)), 1)
-        times = np.unique(np.minimum(np.arange(count + 1) * sample_dt, duration))
-        q, qd, qdd, s_samples = _ends_at_rest(_sample(path, prof, times, w), wp)
-        # The constraints hold at grid points; between them (and after filtering) a sample can be
-        # slightly over. Check the samples and tighten until they are inside.
-        ok = np.all(np.abs(qd) <= vmax) and np.all(np.abs(qdd) <= amax)
-        if ok and tcp_ok:
-            ok = bool(np.max(np.linalg.norm(tcp_velocity_per_ds(q, qd), axis=1)) <= max_tcp_speed)
+        for slowdown in range(SLOWDOWN_TRIES + 1):
+            duration = prof.T + w
+            count = max(int(np.ceil(duration / sample_dt - 1e-9)), 1)
+            times = np.unique(np.minimum(np.arange(count + 1) * sample_dt, duration))
+            q, qd, qdd, s_samples = _ends_at_rest(_sample(path, prof, times, w), wp)
+            # The constraints hold at grid points; between them (and after filtering) a sample can be
+            # slightly over. Check the samples and slow the motion down until they are inside.
+            ok = bool(np.all(np.abs(qd) <= vmax) and np.all(np.abs(qdd) <= amax))
+            tcp_speed = np.linalg.norm(tcp_velocity_per_ds(q, qd), axis=1) if tcp_ok else None
+            if tcp_speed is not None:
+                ok = ok and bool(np.max(tcp_speed) <= max_tcp_speed)
+            if ok or slowdown == SLOWDOWN_TRIES:
+                break
+            excess = max(float(np.max(np.abs(qd) / vmax)), float(np.sqrt(np.max(np.abs(qdd) / amax))),
+                         0.0 if tcp_speed is None else float(np.max(tcp_speed)) / max_tcp_speed)
+            slowed = _slowed(path, prof, w, excess * (1.0 + SLOWDOWN_SLACK), jm)
+            if slowed is None:
+                break
+            prof, w = slowed
         if ok and torque is not None:
             tau = np.abs(torque.inverse_dynamics(q, qd, qdd))
             if torque_limited and torque_terms is None and np.any(tau > TORQUE_LAZY_SHARE * torque.limits):
