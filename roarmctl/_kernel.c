@@ -111,35 +111,51 @@ static inline void mat4mul(const double *a, const double *b, double *out) {
     out[15] = 1.0;
 }
 
-/* Link frames Fr (n_links x 16, row-major 4x4, root frame) for the full configuration qf (dof). */
-static void fk(const Kin *m, const double *qf, double *Fr) {
+/* The matrix of step s (parent link frame -> child before any post) at joint value qv: C itself for a fixed step,
+ * else written to mm (16, of which fk reads the top 12). */
+static inline const double *step_matrix(const Kin *m, int64_t s, double qv, double *mm) {
+    int64_t kind = m->steps[STEPI * s];
+    const double *sf = m->stepf + STEPF * s;
+    const double *A = sf + 1, *B = sf + 17, *C = sf + 33;
+    if (kind == 0) {           /* fixed */
+        return C;
+    } else if (kind == 1) {    /* revolute about local z: origin @ Rz(q) = cos A + sin B + C */
+        double ang = qv + sf[0], c = cos(ang), sn = sin(ang);
+        for (int k = 0; k < 12; k++) mm[k] = c * A[k] + sn * B[k] + C[k];  /* mat4mul reads no bottom row */
+    } else if (kind == 2) {    /* revolute about the unit axis A[0..2]: origin @ Rodrigues */
+        double ang = qv + sf[0], c = cos(ang), sn = sin(ang), v = 1.0 - c;
+        double x = A[0], y = A[1], z = A[2], r[16] = {0};
+        r[0] = c + x * x * v;     r[1] = x * y * v - z * sn; r[2] = x * z * v + y * sn;
+        r[4] = y * x * v + z * sn; r[5] = c + y * y * v;     r[6] = y * z * v - x * sn;
+        r[8] = z * x * v - y * sn; r[9] = z * y * v + x * sn; r[10] = c + z * z * v;
+        r[15] = 1.0;
+        mat4mul(C, r, mm);
+    } else {                   /* prismatic: origin, moved by d along origin_rot @ axis (in A) */
+        double d = qv + sf[0];
+        memcpy(mm, C, 16 * sizeof(double));
+        mm[3] += d * A[0]; mm[7] += d * A[1]; mm[11] += d * A[2];
+    }
+    return mm;
+}
+
+/* Step matrices that a batch holds fixed (the joint value is the same in every state of the call: a joint outside the
+ * arm, e.g. the gripper at its set value), made once for the call by step_matrix itself: the same numbers. */
+typedef struct {
+    uint8_t on[MAXLINKS];
+    double mm[MAXLINKS][16];
+} FkHeld;
+
+/* Link frames Fr (n_links x 16, row-major 4x4, root frame) for the full configuration qf (dof); the steps that held
+ * marks take their matrix from it (held may be NULL). */
+static void fk_held(const Kin *m, const double *qf, double *Fr, const FkHeld *held) {
     for (int64_t c = 0; c < m->n_const; c++)
         memcpy(Fr + 16 * m->const_idx[c], m->const_fr + 16 * c, 16 * sizeof(double));
     double mm[16], t[16];
     for (int64_t s = 0; s < m->n_steps; s++) {
         const int64_t *si = m->steps + STEPI * s;
-        const double *sf = m->stepf + STEPF * s;
-        int64_t kind = si[0], parent = si[1], child = si[2], qi = si[3], has_post = si[4];
-        const double *A = sf + 1, *B = sf + 17, *C = sf + 33, *P = sf + 49;
-        const double *mp = mm;
-        if (kind == 0) {           /* fixed */
-            mp = C;
-        } else if (kind == 1) {    /* revolute about local z: origin @ Rz(q) = cos A + sin B + C */
-            double ang = qf[qi] + sf[0], c = cos(ang), sn = sin(ang);
-            for (int k = 0; k < 12; k++) mm[k] = c * A[k] + sn * B[k] + C[k];  /* mat4mul reads no bottom row */
-        } else if (kind == 2) {    /* revolute about the unit axis A[0..2]: origin @ Rodrigues */
-            double ang = qf[qi] + sf[0], c = cos(ang), sn = sin(ang), v = 1.0 - c;
-            double x = A[0], y = A[1], z = A[2], r[16] = {0};
-            r[0] = c + x * x * v;     r[1] = x * y * v - z * sn; r[2] = x * z * v + y * sn;
-            r[4] = y * x * v + z * sn; r[5] = c + y * y * v;     r[6] = y * z * v - x * sn;
-            r[8] = z * x * v - y * sn; r[9] = z * y * v + x * sn; r[10] = c + z * z * v;
-            r[15] = 1.0;
-            mat4mul(C, r, mm);
-        } else {                   /* prismatic: origin, moved by d along origin_rot @ axis (in A) */
-            double d = qf[qi] + sf[0];
-            memcpy(mm, C, sizeof mm);
-            mm[3] += d * A[0]; mm[7] += d * A[1]; mm[11] += d * A[2];
-        }
+        int64_t parent = si[1], child = si[2], qi = si[3], has_post = si[4];
+        const double *P = m->stepf + STEPF * s + 49;
+        const double *mp = held && held->on[s] ? held->mm[s] : step_matrix(m, s, si[0] == 0 ? 0.0 : qf[qi], mm);
         if (has_post) {
             mat4mul(Fr + 16 * parent, mp, t);
             mat4mul(t, P, Fr + 16 * child);
@@ -148,6 +164,8 @@ static void fk(const Kin *m, const double *qf, double *Fr) {
         }
     }
 }
+
+static void fk(const Kin *m, const double *qf, double *Fr) { fk_held(m, qf, Fr, NULL); }
 
 /* Geometric Jacobian at the TCP from the link frames Fr: column j (6 values: linear, angular) of the chain's
  * joint j is (z x (p_tcp - o), z) for a revolute joint and (z, 0) for a prismatic one, with z the joint axis
@@ -350,13 +368,14 @@ static void rnea_state(const Kin *m, const double *Fr, const double *qd, const d
 
 typedef struct {
     Kin k;
-    int64_t arm_n, S, M, n_active, n_pairs, grip, has_margin, n_groups, n_lp;
-    const int64_t *arm, *shape_link, *active, *amask, *pairs, *g_link, *g_start, *g_order,
-        *g_mask, *lp_links, *lp_start, *lp_order;
-    const double *lower, *upper, *qt, *margin, *shapef, *itemf, *active_r2, *pair_r2, *active_r, *pair_r, *g_c, *g_r, *lp_f;
+    int64_t arm_n, S, M, n_active, n_pairs, grip, has_margin, n_groups, n_lp, n_sph;
+    const int64_t *arm, *shape_link, *active, *amask, *pairs, *g_sph, *g_start, *g_order,
+        *g_mask, *lp_sph, *lp_start, *lp_order, *sph_link;
+    const double *lower, *upper, *qt, *margin, *shapef, *itemf, *active_r2, *pair_r2, *active_r, *pair_r, *g_r, *lp_r, *sph_c;
 } Model;
 
-#define HEADER 11  /* arm_n, S, M, n_active, n_pairs, grip, has_margin, n_groups, n_lp, kin ints, kin floats */
+#define HEADER 12  /* arm_n, S, M, n_active, n_pairs, grip, has_margin, n_groups, n_lp, kin ints, kin floats, n_sph */
+#define MAXSPH (2 * MAXLINKS)
 
 static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     const int64_t *I = (const int64_t *)ib->buf;
@@ -366,16 +385,19 @@ static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     m->arm_n = I[0]; m->S = I[1]; m->M = I[2]; m->n_active = I[3]; m->n_pairs = I[4]; m->grip = I[5];
     m->has_margin = I[6]; m->n_groups = I[7]; m->n_lp = I[8];
     int64_t kni = I[9], knf = I[10];
+    m->n_sph = I[11];
     if (kni < 0 || knf < 0 || HEADER + kni > ni || knf > nf) goto bad;
     if (parse_kin(&m->k, I + HEADER, kni, F, knf) < 0) return -1;
-    if (m->k.dof > MAXDOF || m->k.n_links > MAXLINKS || m->S > MAXSHAPES || m->arm_n > m->k.dof || m->k.n_chain > MAXDOF)
+    if (m->k.dof > MAXDOF || m->k.n_links > MAXLINKS || m->S > MAXSHAPES || m->arm_n > m->k.dof || m->k.n_chain > MAXDOF
+        || m->k.n_steps > MAXLINKS || m->n_sph < 0 || m->n_sph > MAXSPH)
         goto bad;
     Py_ssize_t need_i = HEADER + kni + m->arm_n + m->S
                         + m->n_active + m->n_active * m->M + 2 * m->n_pairs
                         + m->n_groups + (m->n_groups + 1) + m->n_active + m->n_groups * m->M
-                        + 2 * m->n_lp + (m->n_lp + 1) + m->n_pairs;
+                        + 2 * m->n_lp + (m->n_lp + 1) + m->n_pairs + m->n_sph;
     Py_ssize_t need_f = knf + 2 * m->arm_n + m->k.dof + 1
-                        + SHAPEF * m->S + ITEMF * m->M + 2 * m->n_active + 2 * m->n_pairs + 4 * m->n_groups + 8 * m->n_lp;
+                        + SHAPEF * m->S + ITEMF * m->M + 2 * m->n_active + 2 * m->n_pairs + m->n_groups + 2 * m->n_lp
+                        + 3 * m->n_sph;
     if (ni != need_i || nf != need_f) goto bad;
     const int64_t *p = I + HEADER + kni;
     m->arm = p; p += m->arm_n;
@@ -383,13 +405,14 @@ static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     m->active = p; p += m->n_active;
     m->amask = p; p += m->n_active * m->M;
     m->pairs = p; p += 2 * m->n_pairs;
-    m->g_link = p; p += m->n_groups;      /* groups: the active shapes of one link, in one bounding sphere */
+    m->g_sph = p; p += m->n_groups;       /* groups: the active shapes of one link, in one bounding sphere (its centre) */
     m->g_start = p; p += m->n_groups + 1;
     m->g_order = p; p += m->n_active;     /* active indices, group by group */
     m->g_mask = p; p += m->n_groups * m->M;
-    m->lp_links = p; p += 2 * m->n_lp;    /* link pairs: the self pairs between the shapes of two links */
+    m->lp_sph = p; p += 2 * m->n_lp;      /* link pairs: the self pairs between the shapes of two links (their centres) */
     m->lp_start = p; p += m->n_lp + 1;
-    m->lp_order = p;                      /* pair indices, link pair by link pair */
+    m->lp_order = p; p += m->n_pairs;     /* pair indices, link pair by link pair */
+    m->sph_link = p;                      /* sphere centres: the link of each */
     const double *q = F + knf;
     m->lower = q; q += m->arm_n;
     m->upper = q; q += m->arm_n;
@@ -401,9 +424,16 @@ static int parse_model(Model *m, const Py_buffer *fb, const Py_buffer *ib) {
     m->pair_r2 = q; q += m->n_pairs;
     m->active_r = q; q += m->n_active;  /* sqrt of the above, for the grown ("near") tests */
     m->pair_r = q; q += m->n_pairs;
-    m->g_c = q; q += 3 * m->n_groups;     /* group sphere centre in the link frame, radius */
-    m->g_r = q; q += m->n_groups;
-    m->lp_f = q;                          /* per link pair: sphere centre (link frame) and radius of each link */
+    m->g_r = q; q += m->n_groups;         /* group sphere radius */
+    m->lp_r = q; q += 2 * m->n_lp;        /* per link pair: the sphere radius of each link */
+    m->sph_c = q;                         /* sphere centres in their link's frame (3 each); one world centre per state
+                                           * serves every group and link pair that shares it */
+    for (int64_t j = 0; j < m->n_sph; j++)
+        if (m->sph_link[j] < 0 || m->sph_link[j] >= m->k.n_links) goto bad;
+    for (int64_t g = 0; g < m->n_groups; g++)
+        if (m->g_sph[g] < 0 || m->g_sph[g] >= m->n_sph) goto bad;
+    for (int64_t j = 0; j < 2 * m->n_lp; j++)
+        if (m->lp_sph[j] < 0 || m->lp_sph[j] >= m->n_sph) goto bad;
     return 0;
 bad:
     PyErr_SetString(PyExc_ValueError, "_kernel: packed checker tables do not match their header (if roarmctl's source was updated, its compiled kernel is older: rebuild it with `make install` or `pip install .`)");
@@ -478,16 +508,38 @@ static double sigma_min(double G[3][3], int dim) {
     return sqrt(lo > 0 ? lo : 0.0);
 }
 
+/* 1 when the symmetric 3 x 3 matrix (a00 a01 a02; a11 a12; a22) is positive definite by its LDL^T factorisation
+ * without pivoting (every pivot > 0), else 0. Backward stable like Cholesky: when it succeeds the matrix differs from a positive definite one by
+ * about 2e-15 times its largest diagonal entry at most, and it succeeds whenever the smallest eigenvalue exceeds
+ * about that much (Higham, Accuracy and Stability of Numerical Algorithms, 2nd ed., 10.1). */
+static inline int pd3(double a00, double a01, double a02, double a11, double a12, double a22) {
+    if (!(a00 > 0)) return 0;
+    double l1 = a01 / a00, l2 = a02 / a00;
+    double d1 = a11 - l1 * a01;
+    if (!(d1 > 0)) return 0;
+    double e = a12 - l2 * a01;
+    return a22 - l2 * a02 - (e / d1) * e > 0;
+}
+
 /* sigma_min >= margin, decided by the closed-form smallest eigenvalue of the 3 x 3 Gram matrix (Smith
  * 1961: a few operations, error below about 3e-8 of the trace even for close eigenvalues) wherever it is
- * clearly on one side (1e-6 of the trace), else by sigma_min itself: the same decisions as sigma_min. */
-static int margin_ok(const Model *m, const double *Fr) {
-    double G[3][3];
-    int dim = gram(m, Fr, G);
-    double margin = m->margin[0];
+ * clearly on one side (1e-6 of the trace), else by sigma_min itself: the same decisions as sigma_min.
+ * Most states are decided before that, by whether G - t I is positive definite (pd3) at t = margin^2 + 2 band and
+ * at t = margin^2 - 2 band: positive definite at the first means the smallest eigenvalue exceeds margin^2 + band by
+ * about a band, so the closed form (off by far less than a band) says "above" too; not positive definite at the second
+ * means it is below margin^2 - band by about a band, and the closed form says "below". The decisions are the closed
+ * form's, without its acos, cos, square root and nine divisions. */
+static int margin_decide(double G[3][3], int dim, double margin) {
     if (dim == 3) {
+        double tr = G[0][0] + G[1][1] + G[2][2], band = 1e-6 * tr, mm2 = margin * margin;
+        if (tr > 1e-100 && tr < 1e100) {  /* no underflow or overflow in pd3's products */
+            double t = mm2 + 2.0 * band;
+            if (pd3(G[0][0] - t, G[0][1], G[0][2], G[1][1] - t, G[1][2], G[2][2] - t)) return 1;
+            t = mm2 - 2.0 * band;
+            if (!pd3(G[0][0] - t, G[0][1], G[0][2], G[1][1] - t, G[1][2], G[2][2] - t)) return 0;
+        }
         double p1 = G[0][1] * G[0][1] + G[0][2] * G[0][2] + G[1][2] * G[1][2];
-        double tr = G[0][0] + G[1][1] + G[2][2], qm = tr / 3.0;
+        double qm = tr / 3.0;
         double p2 = (G[0][0] - qm) * (G[0][0] - qm) + (G[1][1] - qm) * (G[1][1] - qm) + (G[2][2] - qm) * (G[2][2] - qm) + 2 * p1;
         double lo = qm;
         if (p2 > 0) {
@@ -500,11 +552,16 @@ static int margin_ok(const Model *m, const double *Fr) {
             r = r < -1 ? -1 : r > 1 ? 1 : r;
             lo = qm + 2 * p * cos(acos(r) / 3.0 + 2.0943951023931957);
         }
-        double band = 1e-6 * tr;
-        if (lo > margin * margin + band) return 1;
-        if (lo < margin * margin - band) return 0;
+        if (lo > mm2 + band) return 1;
+        if (lo < mm2 - band) return 0;
     }
     return sigma_min(G, dim) >= margin;
+}
+
+static int margin_ok(const Model *m, const double *Fr) {
+    double G[3][3];
+    int dim = gram(m, Fr, G);
+    return margin_decide(G, dim, m->margin[0]);
 }
 
 /* Separating-axis test of two oriented boxes: 1 when some axis separates them by more than SEP_TOL.
@@ -542,12 +599,28 @@ static void full_q(const Model *m, const double *q, const double *grip, Py_ssize
     if (n_grip && m->grip >= 0) qf[m->grip] = grip[i];
 }
 
+/* The steps whose joint value no state of a call changes (not an arm joint, nor the gripper when the call gives the
+ * gripper per state): their matrices at the template's values, for fk_held. */
+static void held_init(const Model *m, int grip_per_state, FkHeld *h) {
+    for (int64_t s = 0; s < m->k.n_steps; s++) {
+        const int64_t *si = m->k.steps + STEPI * s;
+        int held = si[0] != 0 && !(grip_per_state && si[3] == m->grip);
+        for (int64_t j = 0; j < m->arm_n && held; j++)
+            if (m->arm[j] == si[3]) held = 0;
+        h->on[s] = (uint8_t)held;
+        if (held) {
+            const double *mp = step_matrix(&m->k, s, m->qt[si[3]], h->mm[s]);
+            if (mp != h->mm[s]) memcpy(h->mm[s], mp, 16 * sizeof(double));
+        }
+    }
+}
+
 /* One state: arm values qi (arm_n), gripper value *gp (or the template's when gp is NULL), output row i.
  * Returns 1 (valid so far: FCL decides the candidates it added), 0 (limits or margin) or -1 (a candidate
  * buffer is full). With stop, an invalid state returns at once (no near flag, no poses). */
 static int check_state(const Model *mp, const double *qi, const double *gp, Py_ssize_t i, uint8_t *valid, uint8_t *near,
                        int64_t *sc, Py_ssize_t *ns, Py_ssize_t cap_s, int64_t *pc, Py_ssize_t *np_, Py_ssize_t cap_p,
-                       double *pose, double sweep, int stop) {
+                       double *pose, double sweep, int stop, const FkHeld *held) {
     const Model m = *mp;
     double qf[MAXDOF], Fr[16 * MAXLINKS];
     near[i] = 0;
@@ -557,18 +630,31 @@ static int check_state(const Model *mp, const double *qi, const double *gp, Py_s
     memcpy(qf, m.qt, m.k.dof * sizeof(double));
     for (int64_t j = 0; j < m.arm_n; j++) qf[m.arm[j]] = qi[j];
     if (gp && m.grip >= 0) qf[m.grip] = *gp;
-    fk(&m.k, qf, Fr);
+    fk_held(&m.k, qf, Fr, held);
     if (ok && m.has_margin && !margin_ok(&m, Fr)) ok = 0;
     valid[i] = (uint8_t)ok;
     if (!ok && stop) return 0;
     double *ps = pose + i * m.S * POSEF;
-    uint8_t rot_done[MAXSHAPES];  /* rotations only for the shapes that pass a sphere test */
-    for (int64_t a = 0; a < m.S; a++) {
-        const double *L = Fr + 16 * m.shape_link[a], *sf = m.shapef + SHAPEF * a;
-        double *o = ps + POSEF * a;
-        for (int r = 0; r < 3; r++)
-            o[9 + r] = L[4 * r + 3] + (L[4 * r] * sf[9] + L[4 * r + 1] * sf[10] + L[4 * r + 2] * sf[11]);
-        rot_done[a] = 0;
+    /* a shape's centre only when a group or link-pair sphere test reaches it, its rotation only when one of its own
+     * sphere tests passes */
+    uint8_t cen_done[MAXSHAPES], rot_done[MAXSHAPES], sph_done[MAXSPH];
+    double wsph[MAXSPH][3];  /* world sphere centres, each made once */
+    memset(cen_done, 0, m.S);
+    memset(rot_done, 0, m.S);
+    memset(sph_done, 0, m.n_sph);
+#define NEED_SPH(j)                                                                                          \
+    if (!sph_done[j]) {                                                                                     \
+    const double *L_ = Fr + 16 * m.sph_link[j], *c_ = m.sph_c + 3 * (j);                                  \
+    for (int r = 0; r < 3; r++) wsph[j][r] = L_[4 * r + 3] + L_[4 * r] * c_[0] + L_[4 * r + 1] * c_[1] + L_[4 * r + 2] * c_[2]; \
+    sph_done[j] = 1;                                                                                    \
+    }
+#define NEED_CEN(a)                                                                                          \
+    if (!cen_done[a]) {                                                                                     \
+    const double *L_ = Fr + 16 * m.shape_link[a], *sf_ = m.shapef + SHAPEF * (a);                        \
+    double *o_ = ps + POSEF * (a);                                                                      \
+    for (int r = 0; r < 3; r++)                                                                         \
+        o_[9 + r] = L_[4 * r + 3] + (L_[4 * r] * sf_[9] + L_[4 * r + 1] * sf_[10] + L_[4 * r + 2] * sf_[11]); \
+    cen_done[a] = 1;                                                                                    \
     }
 #define NEED_ROT(a)                                                                                          \
     if (!rot_done[a]) {                                                                                     \
@@ -582,9 +668,10 @@ static int check_state(const Model *mp, const double *qi, const double *gp, Py_s
     for (int64_t g = 0; g < m.n_groups; g++) {
         /* the group's sphere holds every sphere of its shapes: where it (grown by sweep) misses an item's
          * box, so do they, and the item is skipped for all of them */
-        const double *L = Fr + 16 * m.g_link[g], *gc = m.g_c + 3 * g;
-        double cg[3], gr = m.g_r[g] + (sweep > 0 ? sweep : 0.0);
-        for (int r = 0; r < 3; r++) cg[r] = L[4 * r + 3] + L[4 * r] * gc[0] + L[4 * r + 1] * gc[1] + L[4 * r + 2] * gc[2];
+        int64_t gs = m.g_sph[g];
+        NEED_SPH(gs)
+        const double *cg = wsph[gs];
+        double gr = m.g_r[g] + (sweep > 0 ? sweep : 0.0);
         for (int64_t k = 0; k < m.M; k++) {
             if (!m.g_mask[g * m.M + k]) continue;
             const double *it = m.itemf + ITEMF * k;
@@ -597,6 +684,7 @@ static int check_state(const Model *mp, const double *qi, const double *gp, Py_s
             for (int64_t gi = m.g_start[g]; gi < m.g_start[g + 1]; gi++) {
                 int64_t ai = m.g_order[gi], a = m.active[ai];
                 if (!m.amask[ai * m.M + k]) continue;
+                NEED_CEN(a)
                 const double *o = ps + POSEF * a, *sf = m.shapef + SHAPEF * a;
                 double r2 = m.active_r2[ai];
                 double d2 = 0;
@@ -633,17 +721,20 @@ static int check_state(const Model *mp, const double *qi, const double *gp, Py_s
     for (int64_t lp = 0; lp < m.n_lp; lp++) {
         /* each link's sphere holds the spheres of its shapes: where the two links' spheres (grown by sweep)
          * are apart, so are all their shape pairs */
-        const double *LA = Fr + 16 * m.lp_links[2 * lp], *LB = Fr + 16 * m.lp_links[2 * lp + 1], *f = m.lp_f + 8 * lp;
-        double dl = 0, lim = f[3] + f[7] + (sweep > 0 ? 2 * sweep : 0.0);
+        int64_t sa = m.lp_sph[2 * lp], sb = m.lp_sph[2 * lp + 1];
+        NEED_SPH(sa)
+        NEED_SPH(sb)
+        double dl = 0, lim = m.lp_r[2 * lp] + m.lp_r[2 * lp + 1] + (sweep > 0 ? 2 * sweep : 0.0);
         for (int r = 0; r < 3; r++) {
-            double e = (LA[4 * r + 3] + LA[4 * r] * f[0] + LA[4 * r + 1] * f[1] + LA[4 * r + 2] * f[2])
-                       - (LB[4 * r + 3] + LB[4 * r] * f[4] + LB[4 * r + 1] * f[5] + LB[4 * r + 2] * f[6]);
+            double e = wsph[sa][r] - wsph[sb][r];
             dl += e * e;
         }
         if (!(dl < lim * lim)) continue;
       for (int64_t pk = m.lp_start[lp]; pk < m.lp_start[lp + 1]; pk++) {
         int64_t p = m.lp_order[pk];
         int64_t a = m.pairs[2 * p], bb = m.pairs[2 * p + 1];
+        NEED_CEN(a)
+        NEED_CEN(bb)
         const double *oa = ps + POSEF * a, *ob = ps + POSEF * bb;
         const double *fa = m.shapef + SHAPEF * a, *fb = m.shapef + SHAPEF * bb;
         double d2 = 0, dd[3];
@@ -675,8 +766,9 @@ static int get_out(PyObject *o, Py_buffer *b) { return PyObject_GetBuffer(o, b, 
 
 /* check(F, I, q, grip, valid, near, scene, self, pose, sweep, stop_at_first) -> (n_scene, n_self, limit)
  * q (N, arm_n) float64; grip (N,) or empty; valid, near (N,) uint8; scene (cap, 3) and self (cap, 2)
- * int64 candidates (state, shape, item) / (state, pair); pose (N, S, 12) float64: every shape's centre,
- * the rotation only of the shapes that some pair's sphere test kept (all shapes of the candidates). */
+ * int64 candidates (state, shape, item) / (state, pair); pose (N, S, 12) float64: the centre of the shapes that
+ * some group or link-pair sphere test reached, the rotation of those that some pair's sphere test kept (all shapes of
+ * the candidates have both; the other rows are left as they were). */
 static PyObject *check(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 11) {
         PyErr_SetString(PyExc_TypeError, "check() takes 11 arguments");
@@ -703,9 +795,11 @@ static PyObject *check(PyObject *self, PyObject *const *args, Py_ssize_t nargs) 
         goto done;
     }
     Py_ssize_t ns = 0, np_ = 0, limit = N;
+    FkHeld held;
+    held_init(&m, n_grip > 0, &held);
     for (Py_ssize_t i = 0; i < N; i++) {
         int ok = check_state(&m, q + i * m.arm_n, n_grip ? grip + i : NULL, i, valid, near, sc, &ns, cap_s, pc, &np_,
-                             cap_p, pose, sweep, stop);
+                             cap_p, pose, sweep, stop, &held);
         if (ok < 0) goto overflow;
         if (!ok && stop) {
             limit = i;
@@ -777,6 +871,8 @@ static PyObject *check_line(PyObject *self, PyObject *const *args, Py_ssize_t na
     }
     double qa[MAXDOF], qb[MAXDOF], qs[MAXDOF];
     Py_ssize_t ns = 0, np_ = 0, limit = N, row = 0;
+    FkHeld held;
+    held_init(&m, 0, &held);
     Py_ssize_t n_pre = skip > 0 && steps >= skip ? (steps - skip) / skip + 1 : 0;
     if (n_pre) {
         if (!(pre = PyMem_Malloc(n_pre))) {
@@ -804,7 +900,7 @@ static PyObject *check_line(PyObject *self, PyObject *const *args, Py_ssize_t na
                 }
                 line_state(q0, d, m.arm_n, steps, s_i, qs);
             }
-            int ok = check_state(&m, qs, NULL, row, valid, near, sc, &ns, cap_s, pc, &np_, cap_p, pose, sweep, stop);
+            int ok = check_state(&m, qs, NULL, row, valid, near, sc, &ns, cap_s, pc, &np_, cap_p, pose, sweep, stop, &held);
             if (ok < 0) goto overflow;
             if (!ok && stop) {
                 limit = row;

@@ -360,3 +360,50 @@ def test_a_full_pass_that_skips_the_coarse_states_keeps_their_flags():
         near += int(near_all.sum())
         assert checker.segment_valid(q0, q1, 0.01, refine=1) == bool(checker.validity_batch(interpolate(q0, q1, 0.01)).all())
     assert compared > 200 and near > 100, (compared, near)
+
+
+@pytest.mark.parametrize("attached", [False, True])
+def test_a_segment_at_the_set_gripper_value_checks_as_its_states_with_the_gripper_given_per_state(attached):
+    """check_line makes the gripper step's matrix once per call (the gripper stays at its set value); ``check`` with
+    the gripper value given per state makes it at every state. On 150 segments from states near the items, at three
+    gripper values (open, half, closed), both give the same verdicts, near flags, candidate pairs and candidate
+    poses (bit for bit), with the margin on; the answers differ between the open and the closed gripper."""
+    checker = _near_scene_checker(attached)
+    checker.singularity_margin = 0.02
+    checker._pack()
+    grip = checker.robot.gripper
+    rng = np.random.default_rng(21)
+    q = _states_near_items(checker, 22, 150)
+    d = rng.normal(size=q.shape)
+    d *= rng.uniform(0.05, 0.5, (len(q), 1)) / np.linalg.norm(d, axis=1)[:, None]
+    answers: dict[float, list] = {}
+    candidates = 0
+    for g in (grip.open, 0.5 * (grip.open + grip.closed), grip.closed):
+        checker.set_gripper(g)
+        answers[g] = []
+        for q0, q1 in zip(q, np.clip(q + d, checker._lower, checker._upper)):
+            dq = np.ascontiguousarray(q1 - q0)
+            states = interpolate(q0, q1, 0.01)
+            n = len(states)
+            out = []
+            for per_state in (False, True):
+                b = checker._buffers(n)
+                if per_state:
+                    r = kernel.check(checker._kf, checker._ki, states, np.full(n, g), *b["views"], 0.004, False)
+                else:
+                    r = kernel.check_line(checker._kf, checker._ki, q0, dq, n - 1, 0, 1, np.zeros(0, dtype=np.int64), 1,
+                                          *b["views"], 0.004, False, 0)[:3]
+                sc, pc = b["scene"][:r[0]].copy(), b["self"][:r[1]].copy()
+                poses = [b["pose"][i, a].copy() for i, a, _ in sc]
+                poses += [b["pose"][i, a].copy() for i, p in pc for a in checker._pairs[p]]
+                out.append((r, b["valid"][:n].copy(), b["near"][:n].copy(), sc, pc, poses))
+            (r1, v1, n1, s1, p1, P1), (r2, v2, n2, s2, p2, P2) = out
+            assert r1 == r2
+            for x, y in ((v1, v2), (n1, n2), (s1, s2), (p1, p2)):
+                np.testing.assert_array_equal(x, y)
+            for x, y in zip(P1, P2):
+                np.testing.assert_array_equal(x, y)
+            candidates += len(s1) + len(p1)
+            answers[g].append((v1.tobytes(), n1.tobytes(), s1.tobytes(), p1.tobytes()))
+    assert candidates > 500, candidates
+    assert answers[grip.open] != answers[grip.closed]  # the gripper value matters to these states

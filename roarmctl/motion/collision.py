@@ -396,18 +396,32 @@ class CollisionChecker:
             box2 = _second_box(it)
             if box2 is not None:
                 items[k, 24], items[k, 25:34], items[k, 34:37] = 1.0, box2[0], box2[2]
+        # Sphere centres (link, centre in the link frame), each listed once: the kernel makes each world centre once
+        # per state, for every group and link pair that has it (a link's group and link-pair spheres are the same
+        # sphere when all its shapes take part in the scene test).
+        sph_index: dict[tuple[int, bytes], int] = {}
+        sph_link, sph_c = [], []
+
+        def sph(link: int, c: np.ndarray) -> int:
+            key = (int(link), np.asarray(c, dtype=float).tobytes())
+            if key not in sph_index:
+                sph_index[key] = len(sph_link)
+                sph_link.append(int(link))
+                sph_c.append(c)
+            return sph_index[key]
+
         # Groups for the kernel's first scene test: the active shapes of one link, in one sphere about their
         # mean centre (link frame) that holds each shape's sphere, plus 1e-9 m against rounding.
         links = self._mv_link[self._active]
         g_links = sorted(set(links.tolist()))
-        g_order, g_start, g_c, g_r, g_mask = [], [0], [], [], []
+        g_order, g_start, g_sph, g_r, g_mask = [], [0], [], [], []
         for link in g_links:
             members = np.flatnonzero(links == link)
             centres = self._mv_pos[self._active[members]]
             c = centres.mean(axis=0)
             g_order += members.tolist()
             g_start.append(len(g_order))
-            g_c.append(c)
+            g_sph.append(sph(link, c))
             g_r.append(float(np.max(np.linalg.norm(centres - c, axis=1) + self._mv_radius[self._active[members]])) + 1e-9)
             g_mask.append(self._active_mask[members].any(axis=0))
         # Link pairs for the kernel's first self test: every link's sphere holds the spheres of all its shapes.
@@ -419,25 +433,25 @@ class CollisionChecker:
         by_links: dict[tuple[int, int], list[int]] = {}
         for p, (a, b) in enumerate(self._pairs.tolist()):
             by_links.setdefault((int(self._mv_link[a]), int(self._mv_link[b])), []).append(p)
-        lp_links, lp_start, lp_order, lp_f = [], [0], [], []
+        lp_sph, lp_start, lp_order, lp_r = [], [0], [], []
         for (la, lb), members in by_links.items():
-            lp_links += [la, lb]
+            lp_sph += [sph(la, sphere[la][0]), sph(lb, sphere[lb][0])]
             lp_order += members
             lp_start.append(len(lp_order))
-            lp_f += [*sphere[la][0], sphere[la][1], *sphere[lb][0], sphere[lb][1]]
+            lp_r += [sphere[la][1], sphere[lb][1]]
         margin = self.singularity_margin
         ints = [len(self._arm), s, m, len(self._active), len(self._pairs),
                 -1 if self._gripper_index is None else self._gripper_index, int(margin is not None), len(g_links),
-                len(by_links), len(kin._ki), len(kin._kf)]
+                len(by_links), len(kin._ki), len(kin._kf), len(sph_link)]
         ints += list(kin._ki) + list(self._arm) + list(self._mv_link) + list(self._active)
         ints += list(self._active_mask.astype(np.int64).ravel()) + list(self._pairs.ravel())
-        ints += g_links + g_start + g_order + list(np.array(g_mask, dtype=np.int64).ravel())
-        ints += lp_links + lp_start + lp_order
+        ints += g_sph + g_start + g_order + list(np.array(g_mask, dtype=np.int64).ravel())
+        ints += lp_sph + lp_start + lp_order + sph_link
         self._ki = np.array(ints, dtype=np.int64)
         floats = [kin._kf, self._lower, self._upper, self._q_template, [0.0 if margin is None else float(margin)],
                   shapes.ravel(), items.ravel(),
                   self._active_r2.ravel(), self._pair_r2, np.sqrt(self._active_r2.ravel()), np.sqrt(self._pair_r2),
-                  np.array(g_c, dtype=float).ravel(), g_r, lp_f]
+                  g_r, lp_r, np.array(sph_c, dtype=float).ravel()]
         self._kf = np.concatenate([np.asarray(f, dtype=float).ravel() for f in floats])
         off = len(kin._kf) + 2 * len(self._arm)
         self._q_template = self._kf[off:off + len(self._q_template)]  # set_gripper writes the kernel's table
