@@ -68,7 +68,8 @@ def _promises(tp, wp, vmax, amax, jmax, dt, tcp=None, torque=None) -> dict[str, 
         speed, fk, limit = tcp
         shares["tcp"] = float(np.max(speed(q, qd)) / limit)
         assert shares["tcp"] <= 1.0
-        assert np.max(np.linalg.norm(np.diff(fk(q), axis=0), axis=1) / h) <= limit * (1 + 2e-3)
+        # chord speeds of FK: between samples the speed may pass the sampled one by a little (0.2 % seen at 20 ms)
+        assert np.max(np.linalg.norm(np.diff(fk(q), axis=0), axis=1) / h) <= limit * (1 + 5e-3)
     if torque is not None:
         rnea, limits = torque
         shares["tau"] = float(np.max(np.abs(rnea(q, qd, qdd)) / limits))
