@@ -833,6 +833,70 @@ static void line_state(const double *q0, const double *d, int64_t n, int64_t ste
     for (int64_t j = 0; j < n; j++) out[j] = q0[j] + d[j] * t;
 }
 
+/* The rows of a pass: the states start, start + stride, ... <= steps, or refine - 1 per index of idx. */
+static Py_ssize_t pass_rows(int64_t steps, int64_t start, int64_t stride, Py_ssize_t n_idx, int64_t refine) {
+    return n_idx ? n_idx * (refine - 1) : (start > steps ? 0 : (steps - start) / stride + 1);
+}
+
+/* One pass of check_line over its N = pass_rows(...) rows (the buffers hold them); returns 0, or -1 with a Python
+ * error (a candidate buffer is full, or no memory). */
+static int line_pass(const Model *m, const FkHeld *held, const double *q0, const double *d, int64_t steps, int64_t start,
+                     int64_t stride, const int64_t *idx, Py_ssize_t n_idx, int64_t refine, int64_t skip, double sweep,
+                     int stop, uint8_t *valid, uint8_t *near, int64_t *sc, Py_ssize_t cap_s, int64_t *pc, Py_ssize_t cap_p,
+                     double *pose, Py_ssize_t *ns, Py_ssize_t *np_, Py_ssize_t *limit, const char *name) {
+    Py_ssize_t N = pass_rows(steps, start, stride, n_idx, refine), row = 0;
+    double qa[MAXDOF], qb[MAXDOF], qs[MAXDOF];
+    uint8_t *pre = NULL;  /* with skip: the earlier call's near flags (its rows 0 .. n_pre - 1) */
+    *ns = *np_ = 0;
+    *limit = N;
+    Py_ssize_t n_pre = skip > 0 && steps >= skip ? (steps - skip) / skip + 1 : 0;
+    if (n_pre) {
+        if (!(pre = PyMem_Malloc(n_pre))) {
+            PyErr_NoMemory();
+            return -1;
+        }
+        memcpy(pre, near, n_pre);
+    }
+    for (Py_ssize_t u = 0; u < (n_idx ? n_idx : N); u++) {
+        int64_t kmax = n_idx ? refine - 1 : 1;
+        if (n_idx) {
+            line_state(q0, d, m->arm_n, steps, idx[u], qa);
+            line_state(q0, d, m->arm_n, steps, idx[u] + 1, qb);
+        }
+        for (int64_t k = 1; k <= kmax; k++, row++) {
+            if (n_idx) {
+                double t = (double)k / (double)refine;
+                for (int64_t j = 0; j < m->arm_n; j++) qs[j] = qa[j] + (qb[j] - qa[j]) * t;
+            } else {
+                int64_t s_i = start + u * stride;
+                if (n_pre && s_i >= skip && s_i % skip == 0) {
+                    valid[row] = 1;
+                    near[row] = pre[s_i / skip - 1];
+                    continue;
+                }
+                line_state(q0, d, m->arm_n, steps, s_i, qs);
+            }
+            int ok = check_state(m, qs, NULL, row, valid, near, sc, ns, cap_s, pc, np_, cap_p, pose, sweep, stop, held);
+            if (ok < 0) {
+                PyMem_Free(pre);
+                PyErr_Format(PyExc_ValueError, "_kernel.%s: candidate buffer too small", name);
+                return -1;
+            }
+            if (!ok && stop) {
+                *limit = row;
+                goto finished;
+            }
+        }
+    }
+finished:
+    for (Py_ssize_t i = *limit + 1; i < N; i++) {
+        valid[i] = 1;
+        near[i] = 0;
+    }
+    PyMem_Free(pre);
+    return 0;
+}
+
 static PyObject *check_line(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (nargs != 17) {
         PyErr_SetString(PyExc_TypeError, "check_line() takes 17 arguments");
@@ -842,7 +906,6 @@ static PyObject *check_line(PyObject *self, PyObject *const *args, Py_ssize_t na
     Py_buffer b[10];
     int got = 0;
     PyObject *result = NULL;
-    uint8_t *pre = NULL;  /* with skip: the earlier call's near flags (its rows 0 .. n_pre - 1) */
     for (; got < 10; got++)
         if ((got < 5 ? get_in(args[bufarg[got]], &b[got]) : get_out(args[bufarg[got]], &b[got])) < 0) goto done;
     int64_t steps = PyLong_AsLongLong(args[4]), start = PyLong_AsLongLong(args[5]), stride = PyLong_AsLongLong(args[6]);
@@ -852,73 +915,127 @@ static PyObject *check_line(PyObject *self, PyObject *const *args, Py_ssize_t na
     if (PyErr_Occurred()) goto done;
     Model m;
     if (parse_model(&m, &b[0], &b[1]) < 0) goto done;
-    const double *q0 = b[2].buf, *d = b[3].buf;
-    const int64_t *idx = b[4].buf;
     Py_ssize_t n_idx = b[4].len / 8;
-    uint8_t *valid = b[5].buf, *near = b[6].buf;
-    int64_t *sc = b[7].buf, *pc = b[8].buf;
-    double *pose = b[9].buf;
-    Py_ssize_t cap_s = b[7].len / 24, cap_p = b[8].len / 16;
     if (steps < 1 || stride < 1 || start < 0 || refine < 1 || b[2].len != 8 * m.arm_n || b[3].len != 8 * m.arm_n
         || skip < 0 || (skip > 0 && (n_idx || start != 0 || stride != 1))) {
         PyErr_SetString(PyExc_ValueError, "_kernel.check_line: bad arguments");
         goto done;
     }
-    Py_ssize_t N = n_idx ? n_idx * (refine - 1) : (start > steps ? 0 : (steps - start) / stride + 1);
+    Py_ssize_t N = pass_rows(steps, start, stride, n_idx, refine);
     if (b[5].len < N || b[6].len < N || b[9].len < (Py_ssize_t)(N * m.S * POSEF * 8)) {
         PyErr_SetString(PyExc_ValueError, "_kernel.check_line: output buffers too small");
         goto done;
     }
-    double qa[MAXDOF], qb[MAXDOF], qs[MAXDOF];
-    Py_ssize_t ns = 0, np_ = 0, limit = N, row = 0;
+    Py_ssize_t ns, np_, limit;
     FkHeld held;
     held_init(&m, 0, &held);
-    Py_ssize_t n_pre = skip > 0 && steps >= skip ? (steps - skip) / skip + 1 : 0;
-    if (n_pre) {
-        if (!(pre = PyMem_Malloc(n_pre))) {
-            PyErr_NoMemory();
-            goto done;
-        }
-        memcpy(pre, near, n_pre);
-    }
-    for (Py_ssize_t u = 0; u < (n_idx ? n_idx : N); u++) {
-        int64_t kmax = n_idx ? refine - 1 : 1;
-        if (n_idx) {
-            line_state(q0, d, m.arm_n, steps, idx[u], qa);
-            line_state(q0, d, m.arm_n, steps, idx[u] + 1, qb);
-        }
-        for (int64_t k = 1; k <= kmax; k++, row++) {
-            if (n_idx) {
-                double t = (double)k / (double)refine;
-                for (int64_t j = 0; j < m.arm_n; j++) qs[j] = qa[j] + (qb[j] - qa[j]) * t;
-            } else {
-                int64_t s_i = start + u * stride;
-                if (n_pre && s_i >= skip && s_i % skip == 0) {
-                    valid[row] = 1;
-                    near[row] = pre[s_i / skip - 1];
-                    continue;
-                }
-                line_state(q0, d, m.arm_n, steps, s_i, qs);
-            }
-            int ok = check_state(&m, qs, NULL, row, valid, near, sc, &ns, cap_s, pc, &np_, cap_p, pose, sweep, stop, &held);
-            if (ok < 0) goto overflow;
-            if (!ok && stop) {
-                limit = row;
-                goto finished;
-            }
-        }
-    }
-finished:
-    for (Py_ssize_t i = limit + 1; i < N; i++) {
-        valid[i] = 1;
-        near[i] = 0;
-    }
+    if (line_pass(&m, &held, b[2].buf, b[3].buf, steps, start, stride, b[4].buf, n_idx, refine, skip, sweep, stop,
+                  b[5].buf, b[6].buf, b[7].buf, b[7].len / 24, b[8].buf, b[8].len / 16, b[9].buf, &ns, &np_, &limit,
+                  "check_line") < 0)
+        goto done;
     result = Py_BuildValue("nnnn", ns, np_, limit, N);
-    goto done;
-overflow:
-    PyErr_SetString(PyExc_ValueError, "_kernel.check_line: candidate buffer too small");
 done:
-    PyMem_Free(pre);
+    for (int k = 0; k < got; k++) PyBuffer_Release(&b[k]);
+    return result;
+}
+
+/* segment(F, I, q0, q1, resolution, gain, refine, coarse, first, valid, near, scene, self, pose, idx)
+ *   -> (status, pass, n_scene, n_self, limit, n, count, steps, sweep)
+ * CollisionChecker.segment_valid's passes over the segment q0 -> q1 (arm_n each) in one call, with the same numbers:
+ * steps = max(1, ceil(|q1 - q0| / resolution)), the sweep 0.5 |e| gain with e = (q0 + d (1 / steps)) - q0 (the first
+ * step), the sums of squares in index order (numpy's dot for fewer than 16 values); pass 0 every coarse-th state
+ * (segments of more than 4 coarse states), pass 1 the rest (check_line's skip), pass 2 the refinement of the steps
+ * next to a near state (refine, sweep 0), each with stop at the first invalid state, from pass `first` on (a
+ * later call for the same segment, once FCL cleared the candidates of pass first - 1). It stops after the first pass
+ * that fails (status 0: limits or margin, at row limit < n) or leaves candidates for FCL (status 2: n_scene, n_self,
+ * limit and n of that pass, whose rows are in the buffers); status 1: every pass clear; status 3: the buffers are
+ * too small for pass `pass` (nothing of it ran); status 4: not for this call (arm of 16 or more joints, lengths
+ * that do not match, or numbers that are not finite): nothing ran. count: the states checked (as check_count
+ * counts them); idx (int64, >= steps values): work space for the refined steps. */
+static PyObject *segment(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 15) {
+        PyErr_SetString(PyExc_TypeError, "segment() takes 15 arguments");
+        return NULL;
+    }
+    static const int bufarg[10] = {0, 1, 2, 3, 9, 10, 11, 12, 13, 14};
+    Py_buffer b[10];
+    int got = 0;
+    PyObject *result = NULL;
+    for (; got < 10; got++)
+        if ((got < 4 ? get_in(args[bufarg[got]], &b[got]) : get_out(args[bufarg[got]], &b[got])) < 0) goto done;
+    double resolution = PyFloat_AsDouble(args[4]), gain = PyFloat_AsDouble(args[5]);
+    int64_t refine = PyLong_AsLongLong(args[6]), cs = PyLong_AsLongLong(args[7]), first = PyLong_AsLongLong(args[8]);
+    if (PyErr_Occurred()) goto done;
+    Model m;
+    if (parse_model(&m, &b[0], &b[1]) < 0) goto done;
+    const double *q0 = b[2].buf, *q1 = b[3].buf;
+    uint8_t *valid = b[4].buf, *near = b[5].buf;
+    int64_t *sc = b[6].buf, *pc = b[7].buf, *idx = b[9].buf;
+    double *pose = b[8].buf;
+    Py_ssize_t cap_s = b[6].len / 24, cap_p = b[7].len / 16, rows = b[4].len < b[5].len ? b[4].len : b[5].len;
+    if (m.S && rows > b[8].len / (Py_ssize_t)(m.S * POSEF * 8)) rows = b[8].len / (Py_ssize_t)(m.S * POSEF * 8);
+    int status = 4, pass = 0;
+    Py_ssize_t ns = 0, np_ = 0, limit = 0, N = 0, count = 0;
+    int64_t steps = 0;
+    double sweep = 0.0;
+    if (m.arm_n >= 16 || m.arm_n < 1 || b[2].len != 8 * m.arm_n || b[3].len != 8 * m.arm_n || !(resolution > 0) || cs < 1
+        || first < 0 || first > 2)
+        goto out;
+    double d[MAXDOF], dd = 0.0, ee = 0.0;
+    for (int64_t j = 0; j < m.arm_n; j++) {
+        d[j] = q1[j] - q0[j];
+        dd += d[j] * d[j];
+    }
+    double x = sqrt(dd) / resolution;
+    if (!(x <= 1e15)) goto out;  /* not finite, or more steps than anyone checks */
+    steps = (int64_t)ceil(x);
+    if (steps < 1) steps = 1;
+    double t1 = 1.0 / (double)steps;
+    for (int64_t j = 0; j < m.arm_n; j++) {
+        double e = (q0[j] + d[j] * t1) - q0[j];
+        ee += e * e;
+    }
+    sweep = 0.5 * sqrt(ee) * gain;
+    status = 3;
+    if (rows < steps + 1 || b[9].len / 8 < steps) goto out;
+    FkHeld held;
+    held_init(&m, 0, &held);
+    int coarse = steps + 1 > 4 * cs;
+    for (pass = coarse && first == 0 ? 0 : first > 1 ? 2 : 1; pass < 2; pass++) {
+        int64_t skip = pass == 1 && coarse ? cs : 0;
+        N = pass == 0 ? pass_rows(steps, cs, cs, 0, 1) : steps + 1;
+        if (line_pass(&m, &held, q0, d, steps, pass == 0 ? cs : 0, pass == 0 ? cs : 1, NULL, 0, 1, skip, sweep, 1, valid,
+                      near, sc, cap_s, pc, cap_p, pose, &ns, &np_, &limit, "segment") < 0)
+            goto done;
+        count += N - (skip ? steps / skip : 0);
+        if (limit < N) {
+            status = 0;
+            goto out;
+        }
+        if (ns || np_) {
+            status = 2;
+            goto out;
+        }
+    }
+    status = 1;
+    if (refine <= 1 || sweep <= 0) goto out;
+    Py_ssize_t n_idx = 0;
+    for (int64_t i = 0; i < steps; i++)
+        if (near[i] || near[i + 1]) idx[n_idx++] = i;
+    if (!n_idx) goto out;
+    N = n_idx * (refine - 1);
+    if (N > rows) {
+        status = 3;
+        goto out;
+    }
+    if (line_pass(&m, &held, q0, d, steps, 0, 1, idx, n_idx, refine, 0, 0.0, 1, valid, near, sc, cap_s, pc, cap_p, pose,
+                  &ns, &np_, &limit, "segment") < 0)
+        goto done;
+    count += N;
+    status = limit < N ? 0 : ns || np_ ? 2 : 1;
+out:
+    result = Py_BuildValue("iinnnnnLd", status, pass, ns, np_, limit, N, count, (long long)steps, sweep);
+done:
     for (int k = 0; k < got; k++) PyBuffer_Release(&b[k]);
     return result;
 }
@@ -1146,6 +1263,7 @@ done:
 static PyMethodDef methods[] = {
     {"check", (PyCFunction)(void (*)(void))check, METH_FASTCALL, "Batch state check (see collision.py)."},
     {"check_line", (PyCFunction)(void (*)(void))check_line, METH_FASTCALL, "Check states of a straight segment."},
+    {"segment", (PyCFunction)(void (*)(void))segment, METH_FASTCALL, "segment_valid's passes over a segment, in one call."},
     {"fk", (PyCFunction)(void (*)(void))fk_py, METH_FASTCALL, "Link frames of a batch (Kinematics.frames4)."},
     {"jacobian", (PyCFunction)(void (*)(void))jacobian, METH_FASTCALL, "TCP poses and Jacobians of a batch."},
     {"tcp_velocity", (PyCFunction)(void (*)(void))tcp_velocity, METH_FASTCALL, "TCP linear velocities of a batch."},

@@ -407,3 +407,33 @@ def test_a_segment_at_the_set_gripper_value_checks_as_its_states_with_the_grippe
             answers[g].append((v1.tobytes(), n1.tobytes(), s1.tobytes(), p1.tobytes()))
     assert candidates > 500, candidates
     assert answers[grip.open] != answers[grip.closed]  # the gripper value matters to these states
+
+
+@pytest.mark.parametrize("attached", [False, True])
+def test_segment_valid_in_one_kernel_call_answers_as_its_passes_made_in_python(attached):
+    """segment_valid runs its passes (every 8th state, the others, the refinement next to near states) in one kernel
+    call (_kernel.segment), back in Python only for FCL; on 600 random segments of 0.01-1 rad from states near the
+    items (margin on), at resolutions 0.005-0.02 and refine 1-4, its verdicts and its count of checked states equal
+    those of the same passes made one by one from Python (``_passes``, with steps and sweep from numpy)."""
+    checker = _near_scene_checker(attached)
+    checker.singularity_margin = 0.02
+    checker._pack()
+    rng = np.random.default_rng(31)
+    q = _states_near_items(checker, 32, 600)
+    d = rng.normal(size=q.shape)
+    d *= rng.uniform(0.01, 1.0, (len(q), 1)) / np.linalg.norm(d, axis=1)[:, None]
+    verdicts = {True: 0, False: 0}
+    for q0, q1 in zip(q, q + d):
+        resolution, refine = float(rng.choice([0.005, 0.01, 0.02])), int(rng.choice([1, 4, 4, 3]))
+        c0 = checker.check_count
+        got = checker.segment_valid(q0, q1, resolution, refine)
+        got_count = checker.check_count - c0
+        dq = q1 - q0
+        steps = max(1, int(np.ceil(np.sqrt(dq.dot(dq)) / resolution)))
+        e = (q0 + dq * (1.0 / steps)) - q0
+        sweep = 0.5 * float(np.sqrt(e.dot(e))) * checker.sweep_gain
+        c0 = checker.check_count
+        want = checker._passes(q0, dq, steps, sweep, refine, 0)
+        assert (got, got_count) == (want, checker.check_count - c0)
+        verdicts[got] += 1
+    assert verdicts[True] > 100 and verdicts[False] > 100, verdicts

@@ -520,8 +520,9 @@ class CollisionChecker:
                               "near_bytes": near,
                               "scene": np.empty((n * max(len(self._active) * m, 1), 3), dtype=np.int64),
                               "self": np.empty((n * max(len(self._pairs), 1), 2), dtype=np.int64),
-                              "pose": np.empty((n, max(s, 1), 12))}
+                              "pose": np.empty((n, max(s, 1), 12)), "idx": np.empty(n, dtype=np.int64)}
             b["views"] = tuple(memoryview(b[k]) for k in ("valid", "near", "scene", "self", "pose"))
+            b["seg_views"] = b["views"] + (memoryview(b["idx"]),)  # _kernel.segment's
         return b
 
     def _evaluate(self, q: np.ndarray, stop_at_first: bool, sweep: float = 0.0,
@@ -626,27 +627,52 @@ class CollisionChecker:
         so that a finer re-check of the segment does not find what the coarse one missed.
         """
         with self._lock:
-            # The states of interpolate(q0, q1, resolution), made by the kernel itself (same numbers).
+            # The states of interpolate(q0, q1, resolution), made by the kernel itself (same numbers), every pass in one
+            # kernel call until one leaves candidates for FCL; once FCL cleared them, the next call goes on from there.
             q0 = np.ascontiguousarray(q0, dtype=float).ravel()
-            d = np.ascontiguousarray(q1, dtype=float).ravel() - q0
-            steps = max(1, math.ceil(math.sqrt(d.dot(d)) / resolution))  # the same numbers as np.sqrt / np.ceil
-            b = self._bufs if self._bufs.get("n", 0) > steps else self._buffers(steps + 1)
-            e = (q0 + d * (1.0 / steps)) - q0  # the first step, as interpolate's q[1] - q[0]
-            sweep = 0.5 * math.sqrt(e.dot(e)) * self.sweep_gain
-            coarse = steps + 1 > 4 * COARSE_STRIDE
-            if coarse and not self._line_ok(b, q0, d, steps, COARSE_STRIDE, COARSE_STRIDE, sweep):
-                return False  # most invalid motions are caught by every 8th state, at an eighth of the cost
-            # the full pass skips the states the coarse pass checked (their near flags stay in b)
-            if not self._line_ok(b, q0, d, steps, 0, 1, sweep, skip=COARSE_STRIDE if coarse else 0):
-                return False
-            if refine <= 1 or sweep <= 0:
-                return True
-            if b["near_bytes"].find(1, 0, steps + 1) < 0:  # no state of the call just made is near anything
-                return True
-            near = b["near"][:steps + 1].view(bool)
-            idx = np.flatnonzero(near[:-1] | near[1:])
-            n = len(idx) * (refine - 1)
-            return self._line_ok(b if b["n"] >= n else self._buffers(n), q0, d, steps, 0, 1, 0.0, idx, refine)
+            q1 = np.ascontiguousarray(q1, dtype=float).ravel()
+            b = self._bufs or self._buffers(1)
+            first = 0
+            while True:
+                status, done, ns, npairs, limit, n, count, steps, sweep = _kernel.segment(
+                    self._kfm, self._kim, q0, q1, resolution, self.sweep_gain, refine, COARSE_STRIDE, first, *b["seg_views"])
+                self.check_count += count
+                if status < 2:  # 0: a limit or the margin; 1: every pass clear
+                    return status == 1
+                if status > 2:
+                    break
+                if not self._all_clear(b, n, ns, npairs, limit):  # pass `done` left candidates: FCL decides them
+                    return False
+                first = done + 1
+                if first > 2:
+                    return True
+            if status == 4:  # not for the kernel alone (an arm of 16 joints or more, bad input): numpy's numbers
+                d = q1 - q0
+                steps = max(1, math.ceil(math.sqrt(d.dot(d)) / resolution))  # the same numbers as np.sqrt / np.ceil
+                e = (q0 + d * (1.0 / steps)) - q0  # the first step, as interpolate's q[1] - q[0]
+                sweep = 0.5 * math.sqrt(e.dot(e)) * self.sweep_gain
+            return self._passes(q0, q1 - q0, steps, sweep, refine, done)  # 3: buffers too small for pass `done`
+
+    def _passes(self, q0: np.ndarray, d: np.ndarray, steps: int, sweep: float, refine: int, first: int) -> bool:
+        """segment_valid's passes ``first`` (0: every COARSE_STRIDE-th state, 1: the others, 2: the refinement, 3:
+        none) to the last over the segment q0 -> q0 + d (arm_dof,) of ``steps`` steps; True when all are clear."""
+        if first > 2:
+            return True
+        b = self._bufs if self._bufs.get("n", 0) > steps else self._buffers(steps + 1)
+        coarse = steps + 1 > 4 * COARSE_STRIDE
+        if first == 0 and coarse and not self._line_ok(b, q0, d, steps, COARSE_STRIDE, COARSE_STRIDE, sweep):
+            return False  # most invalid motions are caught by every 8th state, at an eighth of the cost
+        # the full pass skips the states the coarse pass checked (their near flags stay in b)
+        if first <= 1 and not self._line_ok(b, q0, d, steps, 0, 1, sweep, skip=COARSE_STRIDE if coarse else 0):
+            return False
+        if refine <= 1 or sweep <= 0:
+            return True
+        if b["near_bytes"].find(1, 0, steps + 1) < 0:  # no state of the call just made is near anything
+            return True
+        near = b["near"][:steps + 1].view(bool)
+        idx = np.flatnonzero(near[:-1] | near[1:])
+        n = len(idx) * (refine - 1)
+        return self._line_ok(b if b["n"] >= n else self._buffers(n), q0, d, steps, 0, 1, 0.0, idx, refine)
 
     def _line_ok(self, b: dict, q0: np.ndarray, d: np.ndarray, steps: int, start: int, stride: int, sweep: float = 0.0,
                  idx: np.ndarray = _NO_IDX, refine: int = 1, skip: int = 0) -> bool:
