@@ -102,6 +102,30 @@ def _allocate(name: str, si):
     raise AssertionError(name)
 
 
+_SEGMENT_VALIDATOR = None  # the MotionValidator subclass, made at the first OMPL plan (class creation costs ~60 us)
+
+
+def _segment_validator(si, checker: CollisionChecker, n: int, resolution: float):
+    """OMPL's MotionValidator for ``si`` that checks a whole motion in one ``checker.segment_valid`` call."""
+    global _SEGMENT_VALIDATOR
+    if _SEGMENT_VALIDATOR is None:
+        from ompl import base as ob
+
+        class SegmentValidator(ob.MotionValidator):
+            """Checks a whole motion in one batched call (the pre-filter and FK run once per segment)."""
+
+            def checkMotion(self, s1, s2) -> bool:  # noqa: N802 (OMPL's name)
+                n = self.n
+                a = np.array([s1[i] for i in range(n)])
+                b = np.array([s2[i] for i in range(n)])
+                return bool(self.checker.segment_valid(a, b, self.resolution))
+
+        _SEGMENT_VALIDATOR = SegmentValidator
+    validator = _SEGMENT_VALIDATOR(si)
+    validator.checker, validator.n, validator.resolution = checker, n, resolution
+    return validator
+
+
 def _drop_vertices(checker: CollisionChecker, path: np.ndarray, resolution: float) -> np.ndarray:
     """Greedy: from each kept vertex, jump to the farthest later vertex reachable in a straight line."""
     keep = [0]
@@ -116,17 +140,20 @@ def _drop_vertices(checker: CollisionChecker, path: np.ndarray, resolution: floa
 
 
 def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: float,
-                      rng: np.random.Generator, attempts: int, ceiling: float) -> np.ndarray:
+                      rng: np.random.Generator | None, attempts: int, ceiling: float) -> np.ndarray:
     """Classic random shortcutting through ``checker.segment_valid`` (so every new segment gets the
     same refined check): join two random points of the path by a straight segment when it is
-    valid and shorter. A fixed number of attempts from a seeded generator; ``ceiling`` (s of wall
-    time) is a safety stop that raises ``CeilingError``."""
+    valid and shorter. A fixed number of attempts from a seeded generator (None when ``attempts`` is 0);
+    ``ceiling`` (s of wall time) is a safety stop that raises ``CeilingError``."""
     until = time.perf_counter() + ceiling
     path = _drop_vertices(checker, path, resolution)
     failures = 0
     changed = False
-    seg = cum = None  # of the current path (recomputed only when a shortcut changes it)
-    for _ in range(attempts):
+    seg = cum = rows = None  # of the current path (recomputed only when a shortcut changes it)
+    # The draws of rng.uniform(0.0, c, 2) at each attempt, made at once: uniform is low + (high - low) * next_double,
+    # the doubles that random() gives in the same order (the generator is not used afterwards).
+    draws = rng.random(2 * attempts).tolist() if attempts > 0 else []
+    for k in range(0, 2 * attempts, 2):
         if time.perf_counter() > until:
             raise _ceiling_error("path shortcutting", ceiling, "planner.simplify_budget")
         if len(path) < 3 or failures >= SHORTCUT_PATIENCE:
@@ -135,15 +162,18 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
         if seg is None:  # as Python floats: the same numbers, cheaper to pick from (bisect for searchsorted)
             seg_arr = np.linalg.norm(np.diff(path, axis=0), axis=1)
             seg, cum = seg_arr.tolist(), np.concatenate([[0.0], np.cumsum(seg_arr)]).tolist()
-        ta, tb = rng.uniform(0.0, cum[-1], 2).tolist()
+            rows = path.tolist()
+        ta, tb = 0.0 + cum[-1] * draws[k], 0.0 + cum[-1] * draws[k + 1]
         if tb < ta:
             ta, tb = tb, ta
         ia = min(bisect.bisect_right(cum, ta) - 1, len(seg) - 1)
         ib = min(bisect.bisect_right(cum, tb) - 1, len(seg) - 1)
         if ia == ib:
             continue
-        pa = path[ia] + (path[ia + 1] - path[ia]) * ((ta - cum[ia]) / seg[ia])
-        pb = path[ib] + (path[ib + 1] - path[ib]) * ((tb - cum[ib]) / seg[ib])
+        # path[i] + (path[i + 1] - path[i]) * s, one float at a time (the same operations as numpy's)
+        sa, sb = (ta - cum[ia]) / seg[ia], (tb - cum[ib]) / seg[ib]
+        pa = np.array([x + (y - x) * sa for x, y in zip(rows[ia], rows[ia + 1])])
+        pb = np.array([x + (y - x) * sb for x, y in zip(rows[ib], rows[ib + 1])])
         gap = pb - pa
         if math.sqrt(gap.dot(gap)) >= (tb - ta) - 1e-6:  # np.linalg.norm's own sum for a vector
             continue
@@ -265,16 +295,8 @@ def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarra
     def state_valid(state) -> bool:
         return checker.is_valid(to_np(state))
 
-    class SegmentValidator(ob.MotionValidator):
-        """Checks a whole motion in one batched call (the pre-filter and FK run once per segment)."""
-
-        def checkMotion(self, s1, s2) -> bool:  # noqa: N802 (OMPL's name)
-            a = np.array([s1[i] for i in range(n)])
-            b = np.array([s2[i] for i in range(n)])
-            return bool(checker.segment_valid(a, b, resolution))
-
     si.setStateValidityChecker(state_valid)
-    validator = SegmentValidator(si)
+    validator = _segment_validator(si, checker, n, resolution)
     si.setMotionValidator(validator)
     si.setStateValidityCheckingResolution(min(1.0, resolution / max(space.getMaximumExtent(), 1e-9)))
     si.setup()
@@ -338,8 +360,8 @@ def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarra
     t0 = time.perf_counter()
     out = np.array([[st[i] for i in range(n)] for st in path.getStates()])
     out[0], out[-1] = q_start, q_goal
-    out = _random_shortcuts(checker, out, resolution, np.random.default_rng(seed), simplify_attempts,
-                            simplify_budget)
+    rng = np.random.default_rng(seed) if simplify_attempts > 0 else None  # none drawn without attempts (~25 us to make)
+    out = _random_shortcuts(checker, out, resolution, rng, simplify_attempts, simplify_budget)
     stats.simplify_time = time.perf_counter() - t0
     stats.waypoints = out.copy()
     return out
