@@ -15,8 +15,8 @@ samples by a method that does not go through the timing code:
 Cases cover the edge cases of the timing path, including results over a limit that are slowed down in time (the
 test asserts that this happens): multi-joint random walks, very short moves, a tiny segment between long ones,
 one-joint lines (timed again either way: the cached profile), RoArm-M3 motions bound by a TCP speed limit and by
-torque limits with a payload at the TCP. Two known defects are marked ``xfail(strict=True)``: they fail today and
-will say so when fixed.
+torque limits with a payload at the TCP. Two former defects have a test of their own: the last output interval
+shorter than the jerk check's step, and a tiny segment whose bend no jerk filter width tames.
 """
 
 from __future__ import annotations
@@ -83,9 +83,9 @@ def slowdowns(monkeypatch) -> list[float]:
     factors: list[float] = []
     real = timing._slowed
 
-    def counted(path, prof, w, factor, jm):
+    def counted(path, prof, w, factor, jm, **kwargs):
         factors.append(factor)
-        return real(path, prof, w, factor, jm)
+        return real(path, prof, w, factor, jm, **kwargs)
 
     monkeypatch.setattr(timing, "_slowed", counted)
     return factors
@@ -97,7 +97,7 @@ def _walk(rng, k: int, n: int, step: float) -> np.ndarray:
 
 def test_random_joint_paths_keep_every_promise(slowdowns):
     """Random walks in 2-6 joints (with and without jerk limits, sample steps of 10, 5 and 13.7 ms), very short ones
-    (0.1-10 mrad) and paths with a segment of 1 urad-10 mrad between long ones (no jerk limits: see the xfail test)."""
+    (0.1-10 mrad) and paths with a segment of 1 urad-10 mrad between long ones."""
     rng = np.random.default_rng(20261202)
     shares = []
     for case in range(24):
@@ -110,7 +110,6 @@ def test_random_joint_paths_keep_every_promise(slowdowns):
         if case >= 18:  # a tiny segment between long ones
             i = int(rng.integers(0, k))
             wp = np.insert(wp, i + 1, wp[i] + rng.uniform(-1, 1, n) * 10 ** rng.uniform(-6, -2), axis=0)
-            jmax = None
         dt = (0.01, 0.005, 0.0137)[case % 3]
         shares.append(_promises(time_parameterise(wp, vmax, amax, jmax, sample_dt=dt), wp, vmax, amax, jmax, dt))
     assert len(slowdowns) >= 3  # results over a limit were slowed down in time, and kept every promise
@@ -209,23 +208,21 @@ def test_roarm_motions_under_torque_limits_with_a_payload_keep_every_promise(roa
     assert held >= 5 and max(s["tau"] for s in shares) > 0.97  # motions were timed, and torque bound some
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason="known defect (s4rev): the jerk check's last FINE_DT step straddles the end of the "
-                                       "motion, so a last output interval shorter than FINE_DT can exceed jmax")
 def test_jerk_holds_on_a_last_sample_interval_shorter_than_the_check_step():
     """A 0.13 mrad back-and-forth of one joint ends 1.89 ms after its last 10 ms sample. The jerk is checked on a 2 ms
     grid that runs past the end, so its last step spreads the final change of acceleration (0.19 rad/s^2) over 2 ms
-    (96 rad/s^3, inside the 98.5 limit) although it happens within 1.89 ms: 101 rad/s^3 on the samples."""
+    (96 rad/s^3, inside the 98.5 limit) although it happens within 1.89 ms: it was 101 rad/s^3 on the samples. The
+    output samples' own jerk is checked too, and a result over it slowed down in time."""
     wp = np.array([[0.4375587], [0.4375072], [0.4374695], [0.4375395]])
     vmax, amax, jmax = np.array([0.97]), np.array([5.11]), np.array([98.5])
     _promises(time_parameterise(wp, vmax, amax, jmax), wp, vmax, amax, jmax, 0.01)
 
 
-@pytest.mark.xfail(strict=True, raises=PlanningError, reason="known defect (s4rev): with jerk limits, a 1.4 mrad segment between long ones makes "
-                                       "every margin fail the jerk filter search (PlanningError) though slower timings keep every limit")
 def test_a_tiny_segment_between_long_ones_is_timed_when_a_slower_timing_keeps_every_limit():
     """A 3-joint path with a 1.4 mrad segment between 0.2-0.6 rad ones. Timed under half the velocity and a quarter of
     the acceleration limits (the same jerk limits) its samples keep the full limits, so a valid timing exists; under
-    the full limits the jerk filter finds no width at any margin and the call raises PlanningError (exit 3: re-plan)."""
+    the full limits the jerk filter finds no width at any margin (the bend itself makes the jerk): the call raised
+    PlanningError (exit 3: re-plan); now the profile is slowed down in time just enough for its jerk."""
     wp = np.array([[0.407, -0.222, -0.41], [0.363, -0.575, 0.047], [0.218, -1.139, -0.15], [0.219, -1.138, -0.15],
                    [0.194, -1.388, 0.219], [0.045, -0.968, 0.206]])
     vmax, amax, jmax = np.array([0.87, 0.7, 2.46]), np.array([7.25, 11.96, 4.13]), np.array([128.6, 224.9, 17.1])

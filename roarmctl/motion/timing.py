@@ -375,11 +375,14 @@ def _spline_tables(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             np.ascontiguousarray(d2.c, dtype=float))
 
 
-def _ends_at_rest(samples: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], wp: np.ndarray):
-    """``_sample``'s q, qd, qdd, s with the exact end waypoints of ``wp`` (K, n) and velocity and acceleration 0 there."""
+def _ends_at_rest(samples: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], wp: np.ndarray, s_end: float):
+    """``_sample``'s q, qd, qdd, s with the exact end waypoints of ``wp`` (K, n), velocity and acceleration 0 there,
+    and the path parameter exactly 0 and ``s_end`` (the filtered s can end an ulp short, after a sample already at
+    ``s_end``)."""
     q, qd, qdd, s = samples
     q[0], q[-1] = wp[0], wp[-1]
     qd[0] = qd[-1] = qdd[0] = qdd[-1] = 0.0
+    s[0], s[-1] = 0.0, s_end
     return q, qd, qdd, s
 
 
@@ -504,20 +507,54 @@ def _plateau(algo, constraints: list, path, gridpoints: np.ndarray, prof: _Profi
     return None
 
 
-def _slowed(path, prof: _Profile, w: float, factor: float, jm: np.ndarray | None) -> tuple[_Profile, float] | None:
+def _slowed(path, prof: _Profile, w: float, factor: float, jm: np.ndarray | None,
+            keep_width: bool = True) -> tuple[_Profile, float] | None:
     """``prof`` (filtered at width ``w`` s) run ``factor`` (> 1) times slower on the same path, and its filter width.
 
     The path speed sdot / factor at every grid point makes the unfiltered motion exactly ``factor`` times longer:
     joint and TCP velocities / factor, path accelerations / factor**2 (the joint accelerations q' sddot + q'' sdot**2
-    too). Filtered at ``w * factor`` the whole motion is the old one slowed (jerk / factor**3); the narrower ``w`` is
-    kept when the sampled jerk stays inside ``jm`` (n,) there, which it usually does (the profile's steps of path
-    acceleration shrink by factor**2). None if neither width passes the jerk check."""
+    too). Filtered at ``w * factor`` the whole motion is the old one slowed (jerk / factor**3); with ``keep_width``
+    the narrower ``w`` is kept when the sampled jerk stays inside ``jm`` (n,) there, which it usually does (the
+    profile's steps of path acceleration shrink by factor**2). None if no width tried passes the jerk check."""
     slow = _Profile(prof.grid, prof.sd / factor)
     if jm is None or w <= 0.0:
         return slow, w
-    for width in (w, w * factor):
+    for width in ((w, w * factor) if keep_width else (w * factor,)):
         if _jerk_ok(path, slow, width, jm):
             return slow, width
+    return None
+
+
+def _jerk_ratio(path, prof: _Profile, w: float, jm: np.ndarray) -> float:
+    """The largest sampled joint jerk of ``prof`` filtered at width ``w`` (s) as a share of ``jm`` (n,): on the grid
+    of ``_jerk_ok`` (every FINE_DT from 0 past the end), the largest change of a joint acceleration per FINE_DT over
+    jm * FINE_DT."""
+    t = np.arange(0.0, prof.T + w + FINE_DT, FINE_DT)
+    qdd = _sample(path, prof, t, w)[2]
+    return float(np.max(np.abs(np.diff(qdd, axis=0)) / (FINE_DT * jm)))
+
+
+def _jerk_slowdown(path, prof: _Profile, w0: float, jm: np.ndarray) -> tuple[_Profile, float] | None:
+    """For a profile whose jerk no filter width of ``_filter_width``'s search brings inside ``jm`` (n,): the path's
+    own shape (a sharp bend on a tiny segment) makes jerk that filtering does not remove, only a lower speed does.
+
+    Of the widths that search tried (``w0`` up by FILTER_GROWTH), each with the slowdown f = (jerk ratio)**(1/3)
+    that brings its jerk inside the limits (the motion f times slower, filter f times wider: jerk / f**3), the one
+    that ends soonest. The slowed motion is sampled at other instants, where a sharp bend can show more jerk: its
+    own ratio then slows it further, up to SLOWDOWN_TRIES times. Returns (slowed profile, its filter width), None if
+    its sampled jerk still fails."""
+    best = None
+    for k in range(FILTER_TRIES):
+        w = w0 * FILTER_GROWTH**k
+        f = max(_jerk_ratio(path, prof, w, jm), 1.0) ** (1.0 / 3.0) * (1.0 + SLOWDOWN_SLACK)
+        if best is None or f * (prof.T + w) < best[0]:
+            best = (f * (prof.T + w), w, f)
+    _, w, f = best
+    for _ in range(SLOWDOWN_TRIES):
+        slowed = _slowed(path, prof, w, f, jm, keep_width=False)
+        if slowed is not None:
+            return slowed
+        f *= max(_jerk_ratio(path, _Profile(prof.grid, prof.sd / f), w * f, jm), 1.0) ** (1.0 / 3.0) * (1.0 + SLOWDOWN_SLACK)
     return None
 
 
@@ -571,7 +608,7 @@ def time_parameterise(
         if known is not None:
             prof, w, times = known
             times = times.copy()  # the caller owns its arrays
-            q, qd, qdd, s_samples = _ends_at_rest(_sample(path, prof, times, w), wp)
+            q, qd, qdd, s_samples = _ends_at_rest(_sample(path, prof, times, w), wp, prof.s_end)
             if np.all(np.abs(qd) <= vmax) and np.all(np.abs(qdd) <= amax):  # as they were for that motion
                 return TimedPath(times, q, qd, qdd, w, s_samples)
     torque_terms = None  # lazily: only once a sampled torque comes close to a limit (TORQUE_LAZY_SHARE)
@@ -606,8 +643,11 @@ def time_parameterise(
             if w is None:
                 w = _filter_width(path, prof, w0, jm)
                 if w is None:
-                    i += 1
-                    continue
+                    slowed = _jerk_slowdown(path, prof, w0, jm)
+                    if slowed is None:
+                        i += 1
+                        continue
+                    prof, w = slowed
                 if not tried and w > PLATEAU_TRIGGER * w0:
                     plateau = _plateau(algo, constraints, path, gridpoints, prof, w0, jm, None if torque_terms is not None else amax * safety)
                 if plateau is not None and plateau[0].T + plateau[1] < prof.T + w:
@@ -616,18 +656,25 @@ def time_parameterise(
             duration = prof.T + w
             count = max(int(np.ceil(duration / sample_dt - 1e-9)), 1)
             times = np.unique(np.minimum(np.arange(count + 1) * sample_dt, duration))
-            q, qd, qdd, s_samples = _ends_at_rest(_sample(path, prof, times, w), wp)
+            q, qd, qdd, s_samples = _ends_at_rest(_sample(path, prof, times, w), wp, prof.s_end)
             # The constraints hold at grid points; between them (and after filtering) a sample can be
             # slightly over. Check the samples and slow the motion down until they are inside.
             ok = bool(np.all(np.abs(qd) <= vmax) and np.all(np.abs(qdd) <= amax))
             tcp_speed = np.linalg.norm(tcp_velocity_per_ds(q, qd), axis=1) if tcp_ok else None
             if tcp_speed is not None:
                 ok = ok and bool(np.max(tcp_speed) <= max_tcp_speed)
+            # The jerk was checked every FINE_DT up to past the end: the output's last interval, shorter than that,
+            # can still be over (the check spread its change of acceleration over a whole FINE_DT).
+            jerk = None if jm is None or len(times) < 2 else np.abs(np.diff(qdd, axis=0)) / np.diff(times)[:, None]
+            if jerk is not None:
+                ok = ok and bool(np.all(jerk <= jm * (1 + 1e-9)))
             if ok or slowdown == SLOWDOWN_TRIES:
                 break
             excess = max(float(np.max(np.abs(qd) / vmax)), float(np.sqrt(np.max(np.abs(qdd) / amax))),
                          0.0 if tcp_speed is None else float(np.max(tcp_speed)) / max_tcp_speed)
-            slowed = _slowed(path, prof, w, excess * (1.0 + SLOWDOWN_SLACK), jm)
+            jerk_excess = 0.0 if jerk is None else float(np.max(jerk / jm)) ** (1.0 / 3.0)
+            slowed = _slowed(path, prof, w, max(excess, jerk_excess) * (1.0 + SLOWDOWN_SLACK), jm,
+                             keep_width=jerk_excess <= 1.0)
             if slowed is None:
                 break
             prof, w = slowed
