@@ -46,6 +46,10 @@ FINE_DT = 0.002  # s: grid on which the jerk is checked (finite differences of t
 # A timed result over a limit by ratio r on its samples is slowed by r * (1 + SLOWDOWN_SLACK) (the square root
 # of it for accelerations), at most SLOWDOWN_TRIES times, before TOPP-RA runs again at the next margin.
 SLOWDOWN_TRIES, SLOWDOWN_SLACK = 3, 1e-3
+# A result slowed down by more than SLOWDOWN_KEEP in all is kept aside while the next margin is timed: its jerk filter,
+# chosen for the faster profile, can be far wider than the next margin needs (a motion up to 1.9x as long was seen);
+# the shorter of the two is returned.
+SLOWDOWN_KEEP = 1.05
 FILTER_GROWTH = 1.25  # each try widens the jerk filter by this factor
 FILTER_TRIES = 16
 # When the filter had to widen past PLATEAU_TRIGGER times its narrowest width a / j, the profile is timed
@@ -612,6 +616,18 @@ def time_parameterise(
             if np.all(np.abs(qd) <= vmax) and np.all(np.abs(qdd) <= amax):  # as they were for that motion
                 return TimedPath(times, q, qd, qdd, w, s_samples)
     torque_terms = None  # lazily: only once a sampled torque comes close to a limit (TORQUE_LAZY_SHARE)
+    kept: tuple[TimedPath, _Profile] | None = None  # a passing result slowed by more than SLOWDOWN_KEEP, and its profile
+
+    def result(timed: TimedPath, timed_prof: _Profile) -> TimedPath:
+        """``timed`` or the kept result, whichever is shorter (the one-joint cache remembers that one)."""
+        if kept is not None and kept[0].duration <= timed.duration:
+            timed, timed_prof = kept
+        if line_key is not None:
+            if len(_ONE_JOINT_LINES) > 256:
+                _ONE_JOINT_LINES.clear()
+            _ONE_JOINT_LINES[line_key] = (timed_prof, timed.jerk_filter, timed.times.copy())
+        return timed
+
     i = 0
     while i < len(SAFETY_STEPS):
         safety = SAFETY_STEPS[i]
@@ -626,6 +642,8 @@ def time_parameterise(
         instance.compute_parameterization(0.0, 0.0)
         data = instance.problem_data
         if data.sd_vec is None or data.return_code.name != "Ok":
+            if kept is not None:
+                return result(*kept)
             raise PlanningError(f"{label}: TOPP-RA found no time parameterisation under the limits",
                                 "the path may pass through a point where the limits allow no motion; re-plan with another seed")
         prof = _Profile(np.asarray(data.gridpoints, dtype=float), np.asarray(data.sd_vec, dtype=float))
@@ -652,6 +670,7 @@ def time_parameterise(
                     plateau = _plateau(algo, constraints, path, gridpoints, prof, w0, jm, None if torque_terms is not None else amax * safety)
                 if plateau is not None and plateau[0].T + plateau[1] < prof.T + w:
                     prof, w = plateau
+        slowed_by = 1.0
         for slowdown in range(SLOWDOWN_TRIES + 1):
             duration = prof.T + w
             count = max(int(np.ceil(duration / sample_dt - 1e-9)), 1)
@@ -673,11 +692,12 @@ def time_parameterise(
             excess = max(float(np.max(np.abs(qd) / vmax)), float(np.sqrt(np.max(np.abs(qdd) / amax))),
                          0.0 if tcp_speed is None else float(np.max(tcp_speed)) / max_tcp_speed)
             jerk_excess = 0.0 if jerk is None else float(np.max(jerk / jm)) ** (1.0 / 3.0)
-            slowed = _slowed(path, prof, w, max(excess, jerk_excess) * (1.0 + SLOWDOWN_SLACK), jm,
-                             keep_width=jerk_excess <= 1.0)
+            factor = max(excess, jerk_excess) * (1.0 + SLOWDOWN_SLACK)
+            slowed = _slowed(path, prof, w, factor, jm, keep_width=jerk_excess <= 1.0)
             if slowed is None:
                 break
             prof, w = slowed
+            slowed_by *= factor
         if ok and torque is not None:
             tau = np.abs(torque.inverse_dynamics(q, qd, qdd))
             if torque_limited and torque_terms is None and np.any(tau > TORQUE_LAZY_SHARE * torque.limits):
@@ -686,11 +706,13 @@ def time_parameterise(
                 continue
             ok = bool(np.all(tau <= torque.limits))
         if ok:
-            if line_key is not None:
-                if len(_ONE_JOINT_LINES) > 256:
-                    _ONE_JOINT_LINES.clear()
-                _ONE_JOINT_LINES[line_key] = (prof, w, times.copy())
-            return TimedPath(times, q, qd, qdd, w, s_samples)
+            timed = TimedPath(times, q, qd, qdd, w, s_samples)
+            if slowed_by <= SLOWDOWN_KEEP or i + 1 == len(SAFETY_STEPS):
+                return result(timed, prof)
+            if kept is None or timed.duration < kept[0].duration:
+                kept = (timed, prof)
         i += 1
+    if kept is not None:
+        return result(*kept)
     raise PlanningError(f"{label}: the timed samples exceed the limits even with a {1 - SAFETY_STEPS[-1]:.0%} margin",
                         "re-plan with another seed")
