@@ -675,11 +675,12 @@ static int check_state(const Model *mp, const double *qi, const double *gp, Py_s
         for (int64_t k = 0; k < m.M; k++) {
             if (!m.g_mask[g * m.M + k]) continue;
             const double *it = m.itemf + ITEMF * k;
+            double e0 = fabs(cg[0] - it[0]) - it[3], e1 = fabs(cg[1] - it[1]) - it[4], e2 = fabs(cg[2] - it[2]) - it[5];
+            if (e0 > gr || e1 > gr || e2 > gr) continue;  /* one term alone is >= gr^2 already */
             double dg = 0;
-            for (int r = 0; r < 3; r++) {
-                double e = fabs(cg[r] - it[r]) - it[3 + r];
-                if (e > 0) dg += e * e;
-            }
+            if (e0 > 0) dg += e0 * e0;
+            if (e1 > 0) dg += e1 * e1;
+            if (e2 > 0) dg += e2 * e2;
             if (!(dg < gr * gr)) continue;
             for (int64_t gi = m.g_start[g]; gi < m.g_start[g + 1]; gi++) {
                 int64_t ai = m.g_order[gi], a = m.active[ai];
