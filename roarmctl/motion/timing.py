@@ -28,6 +28,7 @@ from scaling, or a jerk check), TOPP-RA runs again with limits tightened by ``SA
 
 from __future__ import annotations
 
+import functools
 import logging
 import types
 from dataclasses import dataclass
@@ -106,8 +107,11 @@ class TorqueModel:
 
 
 def dedupe(waypoints: np.ndarray, tol: float = 1e-9) -> np.ndarray:
-    """Drop consecutive duplicate waypoints (TOPP-RA needs a strictly increasing path parameter)."""
-    keep = [0] + [i for i in range(1, len(waypoints)) if np.max(np.abs(waypoints[i] - waypoints[i - 1])) > tol]
+    """Drop consecutive duplicate waypoints (TOPP-RA needs a strictly increasing path parameter): each waypoint
+    of ``waypoints`` (K, n) within ``tol`` (every coordinate) of the one before it."""
+    if len(waypoints) < 2:
+        return waypoints.copy()
+    keep = np.concatenate([[True], np.max(np.abs(np.diff(waypoints, axis=0)), axis=1) > tol])
     return waypoints[keep]
 
 
@@ -198,24 +202,51 @@ def _joint_limit_constraints(constraint, vlim: np.ndarray, alim: np.ndarray) -> 
     return list(pair)
 
 
-def _sdot_bound_constraint(x_upper: np.ndarray):
-    """A toppra constraint bounding the path speed alone: x = sdot^2 <= ``x_upper`` (G,) at every
-    grid point (computed once per path by the caller, not per margin)."""
+@functools.cache
+def _own_constraint_types() -> tuple[type, type]:
+    """roarmctl's two toppra constraint classes (defined once, after toppra is imported): a bound on the path speed
+    alone, and joint torque in toppra's canonical form."""
     from toppra.constraint import DiscretizationType
     from toppra.constraint.linear_constraint import LinearConstraint
 
     class SdotBoundConstraint(LinearConstraint):
-        def __init__(self) -> None:
+        """x = sdot^2 <= ``x_upper`` (G,) at every grid point."""
+
+        def __init__(self, x_upper: np.ndarray) -> None:
             super().__init__()
             self.discretization_type = DiscretizationType.Collocation
+            self.x_upper = x_upper
 
         def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
             self.dof = path.dof
             xbound = np.empty((len(gridpoints), 2))
-            xbound[:, 0], xbound[:, 1] = 0.0, x_upper
+            xbound[:, 0], xbound[:, 1] = 0.0, self.x_upper
             return None, None, None, None, None, None, xbound
 
-    return SdotBoundConstraint()
+    class TorqueConstraint(LinearConstraint):
+        """|a sddot + b sdot^2 + c| <= ``limits`` (n,) N m, with ``terms`` = (a, b, c) (G, n) each."""
+
+        def __init__(self, terms: tuple[np.ndarray, np.ndarray, np.ndarray], limits: np.ndarray) -> None:
+            super().__init__()
+            self.discretization_type = DiscretizationType.Collocation
+            self.identical = True  # F, g are the same at every grid point
+            self.terms, self.limits = terms, limits
+
+        def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
+            self.dof = path.dof
+            n = path.dof
+            F = np.vstack([np.eye(n), -np.eye(n)])
+            g = np.concatenate([self.limits, self.limits])
+            a, b, c = self.terms
+            return a, b, c, F, g, None, None
+
+    return SdotBoundConstraint, TorqueConstraint
+
+
+def _sdot_bound_constraint(x_upper: np.ndarray):
+    """A toppra constraint bounding the path speed alone: x = sdot^2 <= ``x_upper`` (G,) at every
+    grid point (computed once per path by the caller, not per margin)."""
+    return _own_constraint_types()[0](x_upper)
 
 
 def _tcp_speed_constraint(speed_per_ds: np.ndarray, max_speed: float):
@@ -263,25 +294,7 @@ def _torque_terms(model: TorqueModel, path, gridpoints: np.ndarray, gravity: np.
 
 def _torque_constraint(terms: tuple[np.ndarray, np.ndarray, np.ndarray], limits: np.ndarray):
     """A toppra constraint |a sddot + b sdot^2 + c| <= ``limits`` (n,) N m from ``_torque_terms``."""
-    from toppra.constraint import DiscretizationType
-    from toppra.constraint.linear_constraint import LinearConstraint
-
-    a, b, c = terms
-
-    class TorqueConstraint(LinearConstraint):
-        def __init__(self) -> None:
-            super().__init__()
-            self.discretization_type = DiscretizationType.Collocation
-            self.identical = True  # F, g are the same at every grid point
-
-        def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
-            self.dof = path.dof
-            n = path.dof
-            F = np.vstack([np.eye(n), -np.eye(n)])
-            g = np.concatenate([limits, limits])
-            return a, b, c, F, g, None, None
-
-    return TorqueConstraint()
+    return _own_constraint_types()[1](terms, limits)
 
 
 def check_holding(model: TorqueModel, q: np.ndarray, label: str) -> np.ndarray:
