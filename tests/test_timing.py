@@ -127,7 +127,8 @@ def test_slowing_a_profile_in_time_follows_the_chain_rule():
     f = 1.037
     slow, width = _slowed(path, prof, 0.0, f, None)
     assert width == 0.0 and slow.T == pytest.approx(f * prof.T, rel=1e-12)
-    t = np.linspace(0.0, prof.T, 301)
+    t = np.linspace(0.0, prof.T, 301)[1:-1]
+    t = t[np.min(np.abs(t[:, None] - prof.t[None, :]), axis=1) > 1e-9]  # the path acceleration jumps at knots
     for w in (0.0, 0.12):
         q, qd, qdd, s = _sample(path, prof, t, w)
         q2, qd2, qdd2, s2 = _sample(path, slow, f * t, f * w)

@@ -66,8 +66,11 @@ InverseDynamics = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 # TOPP-RA grid: at least GRID_MIN points over the path (10 per waypoint, up to GRID_MAX) and at
 # least GRID_PER_SEGMENT intervals between any two waypoints. A cubic spline changes curvature
 # fastest over a short segment between long ones; a uniform grid with one or two points there let
-# sampled accelerations overshoot by 25 % (obstacle.yaml, seeds 15, 27, 44).
-GRID_MIN, GRID_MAX, GRID_PER_SEGMENT = 100, 800, 4
+# sampled accelerations overshoot by 25 % (obstacle.yaml, seeds 15, 27, 44). TOPP-RA's own Python costs
+# ~14 us per grid point and run; 80 points rather than 100 cost 0.02-0.06 % of summed motion time on the
+# wall and post queries of bench/bench_vs_mplib.py (40 seeds each; single motions -0.6 .. +2.2 %, as 150
+# points also give: the jerk filter's width flips between choices) for 15-20 % less timing work.
+GRID_MIN, GRID_MAX, GRID_PER_SEGMENT = 80, 800, 4
 
 
 @dataclass
