@@ -578,6 +578,78 @@ def _jerk_slowdown(path, prof: _Profile, w0: float, jm: np.ndarray) -> tuple[_Pr
     return None
 
 
+def _jerk_filtered(algo, constraints: list, path, gridpoints: np.ndarray, prof: _Profile, alim: np.ndarray,
+                   jm: np.ndarray, alim_known: bool) -> tuple[_Profile, float] | None:
+    """TOPP-RA's profile ``prof`` (under ``constraints``, joint accelerations ``alim`` (n,)) made jerk-limited: the
+    profile and the narrowest filter width (s) whose sampled jerk keeps ``jm`` (n,), or the profile with a cruise at
+    its top speed (``_plateau``) when that ends sooner, or, when no width passes, the profile slowed down in time for
+    its jerk (``_jerk_slowdown``); None if that fails too. ``alim_known``: TOPP-RA had no constraint besides ``alim``
+    that a clipped cruise could break (no torque constraint), so ``_plateau_profile`` may skip its own TOPP-RA run."""
+    w0 = max(float(np.max(alim / jm)), 2 * FINE_DT)
+    clip_limits = alim if alim_known else None
+    plateau, tried = None, False
+    if not _jerk_ok(path, prof, w0, jm) and not _jerk_ok(path, prof, PLATEAU_TRIGGER * w0, jm):
+        # the filter would have to widen past the trigger: a cruise at the top first; if it beats even
+        # the trigger's width it beats any width that passes (no full search needed)
+        plateau = _plateau(algo, constraints, path, gridpoints, prof, w0, jm, clip_limits)
+        tried = True  # a None is final: _plateau is deterministic in its arguments, which stay the same
+        if plateau is not None and plateau[0].T + plateau[1] < prof.T + PLATEAU_TRIGGER * w0:
+            return plateau
+    w = _filter_width(path, prof, w0, jm)
+    if w is None:
+        slowed = _jerk_slowdown(path, prof, w0, jm)
+        if slowed is None:
+            return None
+        prof, w = slowed
+    if not tried and w > PLATEAU_TRIGGER * w0:
+        plateau = _plateau(algo, constraints, path, gridpoints, prof, w0, jm, clip_limits)
+    if plateau is not None and plateau[0].T + plateau[1] < prof.T + w:
+        return plateau
+    return prof, w
+
+
+def _sampled_within_limits(path, prof: _Profile, w: float, wp: np.ndarray, sample_dt: float, vmax: np.ndarray,
+                           amax: np.ndarray, jm: np.ndarray | None,
+                           tcp_velocity_per_ds: Callable[[np.ndarray, np.ndarray], np.ndarray] | None,
+                           max_tcp_speed: float | None):
+    """``prof`` filtered at width ``w`` (s) sampled every ``sample_dt`` s, at rest at the end waypoints of ``wp``
+    (K, n), and slowed down in time (``_slowed``, at most SLOWDOWN_TRIES times) until the samples keep the joint
+    velocity, acceleration and jerk limits ``vmax``, ``amax``, ``jm`` (n,; jm None: no jerk limit) and, with
+    ``tcp_velocity_per_ds``, the TCP speed ``max_tcp_speed`` (m/s).
+
+    Returns (prof, w, times (N,), (q, qd, qdd (N, n), s (N,)), ok, slowed_by): the profile and width sampled last,
+    its samples, whether they keep those limits, and the product of the slowdown factors applied (1: none)."""
+    slowed_by = 1.0
+    for slowdown in range(SLOWDOWN_TRIES + 1):
+        duration = prof.T + w
+        count = max(int(np.ceil(duration / sample_dt - 1e-9)), 1)
+        times = np.unique(np.minimum(np.arange(count + 1) * sample_dt, duration))
+        q, qd, qdd, s_samples = _ends_at_rest(_sample(path, prof, times, w), wp, prof.s_end)
+        # The constraints hold at grid points; between them (and after filtering) a sample can be
+        # slightly over. Check the samples and slow the motion down until they are inside.
+        ok = bool(np.all(np.abs(qd) <= vmax) and np.all(np.abs(qdd) <= amax))
+        tcp_speed = np.linalg.norm(tcp_velocity_per_ds(q, qd), axis=1) if tcp_velocity_per_ds is not None else None
+        if tcp_speed is not None:
+            ok = ok and bool(np.max(tcp_speed) <= max_tcp_speed)
+        # The jerk was checked every FINE_DT up to past the end: the output's last interval, shorter than that,
+        # can still be over (the check spread its change of acceleration over a whole FINE_DT).
+        jerk = None if jm is None or len(times) < 2 else np.abs(np.diff(qdd, axis=0)) / np.diff(times)[:, None]
+        if jerk is not None:
+            ok = ok and bool(np.all(jerk <= jm * (1 + 1e-9)))
+        if ok or slowdown == SLOWDOWN_TRIES:
+            break
+        excess = max(float(np.max(np.abs(qd) / vmax)), float(np.sqrt(np.max(np.abs(qdd) / amax))),
+                     0.0 if tcp_speed is None else float(np.max(tcp_speed)) / max_tcp_speed)
+        jerk_excess = 0.0 if jerk is None else float(np.max(jerk / jm)) ** (1.0 / 3.0)
+        factor = max(excess, jerk_excess) * (1.0 + SLOWDOWN_SLACK)
+        slowed = _slowed(path, prof, w, factor, jm, keep_width=jerk_excess <= 1.0)
+        if slowed is None:
+            break
+        prof, w = slowed
+        slowed_by *= factor
+    return prof, w, times, (q, qd, qdd, s_samples), ok, slowed_by
+
+
 def time_parameterise(
     waypoints: np.ndarray,
     vmax: np.ndarray,
@@ -665,55 +737,13 @@ def time_parameterise(
         prof = _Profile(np.asarray(data.gridpoints, dtype=float), np.asarray(data.sd_vec, dtype=float))
         w = 0.0
         if jm is not None:
-            w0 = max(float(np.max(amax * safety / jm)), 2 * FINE_DT)
-            w, plateau, tried = None, None, False
-            if not _jerk_ok(path, prof, w0, jm) and not _jerk_ok(path, prof, PLATEAU_TRIGGER * w0, jm):
-                # the filter would have to widen past the trigger: a cruise at the top first; if it beats even
-                # the trigger's width it beats any width that passes (no full search needed)
-                plateau = _plateau(algo, constraints, path, gridpoints, prof, w0, jm, None if torque_terms is not None else amax * safety)
-                tried = True  # a None is final: _plateau is deterministic in its arguments, which stay the same
-                if plateau is not None and plateau[0].T + plateau[1] < prof.T + PLATEAU_TRIGGER * w0:
-                    prof, w = plateau
-            if w is None:
-                w = _filter_width(path, prof, w0, jm)
-                if w is None:
-                    slowed = _jerk_slowdown(path, prof, w0, jm)
-                    if slowed is None:
-                        i += 1
-                        continue
-                    prof, w = slowed
-                if not tried and w > PLATEAU_TRIGGER * w0:
-                    plateau = _plateau(algo, constraints, path, gridpoints, prof, w0, jm, None if torque_terms is not None else amax * safety)
-                if plateau is not None and plateau[0].T + plateau[1] < prof.T + w:
-                    prof, w = plateau
-        slowed_by = 1.0
-        for slowdown in range(SLOWDOWN_TRIES + 1):
-            duration = prof.T + w
-            count = max(int(np.ceil(duration / sample_dt - 1e-9)), 1)
-            times = np.unique(np.minimum(np.arange(count + 1) * sample_dt, duration))
-            q, qd, qdd, s_samples = _ends_at_rest(_sample(path, prof, times, w), wp, prof.s_end)
-            # The constraints hold at grid points; between them (and after filtering) a sample can be
-            # slightly over. Check the samples and slow the motion down until they are inside.
-            ok = bool(np.all(np.abs(qd) <= vmax) and np.all(np.abs(qdd) <= amax))
-            tcp_speed = np.linalg.norm(tcp_velocity_per_ds(q, qd), axis=1) if tcp_ok else None
-            if tcp_speed is not None:
-                ok = ok and bool(np.max(tcp_speed) <= max_tcp_speed)
-            # The jerk was checked every FINE_DT up to past the end: the output's last interval, shorter than that,
-            # can still be over (the check spread its change of acceleration over a whole FINE_DT).
-            jerk = None if jm is None or len(times) < 2 else np.abs(np.diff(qdd, axis=0)) / np.diff(times)[:, None]
-            if jerk is not None:
-                ok = ok and bool(np.all(jerk <= jm * (1 + 1e-9)))
-            if ok or slowdown == SLOWDOWN_TRIES:
-                break
-            excess = max(float(np.max(np.abs(qd) / vmax)), float(np.sqrt(np.max(np.abs(qdd) / amax))),
-                         0.0 if tcp_speed is None else float(np.max(tcp_speed)) / max_tcp_speed)
-            jerk_excess = 0.0 if jerk is None else float(np.max(jerk / jm)) ** (1.0 / 3.0)
-            factor = max(excess, jerk_excess) * (1.0 + SLOWDOWN_SLACK)
-            slowed = _slowed(path, prof, w, factor, jm, keep_width=jerk_excess <= 1.0)
-            if slowed is None:
-                break
-            prof, w = slowed
-            slowed_by *= factor
+            filtered = _jerk_filtered(algo, constraints, path, gridpoints, prof, amax * safety, jm, torque_terms is None)
+            if filtered is None:
+                i += 1
+                continue
+            prof, w = filtered
+        prof, w, times, (q, qd, qdd, s_samples), ok, slowed_by = _sampled_within_limits(
+            path, prof, w, wp, sample_dt, vmax, amax, jm, tcp_velocity_per_ds if tcp_ok else None, max_tcp_speed)
         if ok and torque is not None:
             tau = np.abs(torque.inverse_dynamics(q, qd, qdd))
             if torque_limited and torque_terms is None and np.any(tau > TORQUE_LAZY_SHARE * torque.limits):
