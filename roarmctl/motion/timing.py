@@ -336,6 +336,11 @@ class _Profile:
         self._last: tuple[np.ndarray, tuple] | None = None  # (t, eval(t)) of the last _eval_grid call
         self.jerk_answers: dict = {}  # _jerk_ok's answers for this profile ("path": the path they are for)
 
+    def slowed(self, factor: float) -> "_Profile":
+        """The same profile ``factor`` times slower: path speed / factor at every grid point (times * factor, path
+        accelerations / factor**2)."""
+        return _Profile(self.grid, self.sd / factor)
+
     def _eval_grid(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``eval(t)``, reusing the previous call's values where ``t`` and the previous ``t`` agree: the jerk
         check asks for the same fine grid (growing with the filter width) at every width it tries. ``eval`` is
@@ -536,13 +541,19 @@ def _slowed(path, prof: _Profile, w: float, factor: float, jm: np.ndarray | None
     too). Filtered at ``w * factor`` the whole motion is the old one slowed (jerk / factor**3); with ``keep_width``
     the narrower ``w`` is kept when the sampled jerk stays inside ``jm`` (n,) there, which it usually does (the
     profile's steps of path acceleration shrink by factor**2). None if no width tried passes the jerk check."""
-    slow = _Profile(prof.grid, prof.sd / factor)
+    slow = prof.slowed(factor)
     if jm is None or w <= 0.0:
         return slow, w
     for width in ((w, w * factor) if keep_width else (w * factor,)):
         if _jerk_ok(path, slow, width, jm):
             return slow, width
     return None
+
+
+def _jerk_slowdown_factor(ratio: float) -> float:
+    """The slowdown (>= 1) that brings a jerk ``ratio`` times its limit inside it when the filter widens with the
+    motion (jerk / f**3), with SLOWDOWN_SLACK to spare; 1 + SLOWDOWN_SLACK when the ratio is not over 1."""
+    return max(ratio, 1.0) ** (1.0 / 3.0) * (1.0 + SLOWDOWN_SLACK)
 
 
 def _jerk_ratio(path, prof: _Profile, w: float, jm: np.ndarray) -> float:
@@ -566,15 +577,15 @@ def _jerk_slowdown(path, prof: _Profile, w0: float, jm: np.ndarray) -> tuple[_Pr
     best = None
     for k in range(FILTER_TRIES):
         w = w0 * FILTER_GROWTH**k
-        f = max(_jerk_ratio(path, prof, w, jm), 1.0) ** (1.0 / 3.0) * (1.0 + SLOWDOWN_SLACK)
+        f = _jerk_slowdown_factor(_jerk_ratio(path, prof, w, jm))
         if best is None or f * (prof.T + w) < best[0]:
             best = (f * (prof.T + w), w, f)
     _, w, f = best
     for _ in range(SLOWDOWN_TRIES):
-        slowed = _slowed(path, prof, w, f, jm, keep_width=False)
-        if slowed is not None:
-            return slowed
-        f *= max(_jerk_ratio(path, _Profile(prof.grid, prof.sd / f), w * f, jm), 1.0) ** (1.0 / 3.0) * (1.0 + SLOWDOWN_SLACK)
+        slow = prof.slowed(f)
+        if _jerk_ok(path, slow, w * f, jm):
+            return slow, w * f
+        f *= _jerk_slowdown_factor(_jerk_ratio(path, slow, w * f, jm))
     return None
 
 
