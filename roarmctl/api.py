@@ -1,4 +1,4 @@
-"""The documented Python surface of roarmctl (see the README, "Python API").
+"""The documented Python surface of roarmctl (see docs/guide.md, "Python API").
 
     import roarmctl.api as rc
 
@@ -61,7 +61,7 @@ def load_robot(spec: PathLike) -> "Robot":
 
 def plan(source: PathLike | Mapping[str, Any], *, seed: int | None = None, base_dir: PathLike | None = None,
          progress: Callable[[str, int, int], None] | None = None) -> "PlanResult":
-    """Plan a pick/place plan: a YAML file path, or a dict of the same form (see the README, "The plan file").
+    """Plan a pick/place plan: a YAML file path, or a dict of the same form (see docs/reference.md, "The plan file").
 
     ``seed`` overrides ``planner.seed`` (same seed, same trajectory); ``base_dir`` resolves a dict's
     relative ``robot`` path; ``progress(stage, done, total)`` is called as tasks are planned.

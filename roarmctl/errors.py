@@ -1,6 +1,6 @@
 """One exception hierarchy for the whole library.
 
-Each class carries the process exit code the CLI maps it to (see README, "Exit codes") and a
+Each class carries the process exit code the CLI maps it to (see docs/reference.md, "Exit codes") and a
 one-line message that names the cause and, where there is one, the fix. The library raises these;
 only ``roarmctl.cli`` turns them into output and exit codes.
 """

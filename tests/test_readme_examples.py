@@ -1,5 +1,6 @@
-"""Every command line the README shows runs here, as written (in a scratch folder with the bundled
-plans), and does what the README says next to it."""
+"""Every command line the README and docs/*.md show runs here, as written (in a scratch folder with the
+bundled plans), and does what the text says next to it; the README fits a screen and every relative
+link of README and docs/ leads to a file (and a heading) that exists."""
 
 from __future__ import annotations
 
@@ -16,19 +17,48 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
+DOCS = sorted((ROOT / "docs").glob("*.md"))
+TEXTS = {"README.md": README} | {f"docs/{p.name}": p.read_text() for p in DOCS}
 
 
-def readme_commands() -> list[str]:
+def readme_commands(text: str) -> list[str]:
     """Indented example lines starting with 'roarmctl ', and backticked ones without placeholders."""
-    cmds = [m.group(1).split("  #")[0].strip() for m in re.finditer(r"^ {4}(roarmctl .*)$", README, re.M)]
-    for span in re.findall(r"`(roarmctl [^`]*)`", README):
+    cmds = [m.group(1).split("  #")[0].strip() for m in re.finditer(r"^ {4}(roarmctl .*)$", text, re.M)]
+    for span in re.findall(r"`(roarmctl [^`]*)`", text):
         placeholder = re.search(r"\b[A-Z][A-Z_]+\b|\.\.\.|\||\[", span)
         if not placeholder and span not in cmds:
             cmds.append(span)
     return [c for c in dict.fromkeys(cmds) if "--install-completion" not in c]  # never touch the shell rc files
 
 
-COMMANDS = readme_commands()
+COMMANDS = list(dict.fromkeys(c for text in TEXTS.values() for c in readme_commands(text)))
+
+
+def slug(heading: str) -> str:
+    """GitHub's anchor for a heading: lower case, punctuation dropped, spaces as hyphens."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_the_readme_fits_a_screen_and_points_to_the_docs():
+    assert len(README.splitlines()) <= 250
+    assert README.splitlines()[2].strip().startswith("make demo") and README.splitlines()[3].strip().startswith("make test")
+    for name in ("guide", "reference", "design", "benchmarks"):
+        assert f"docs/{name}.md" in README and (ROOT / "docs" / f"{name}.md").is_file()
+
+
+@pytest.mark.parametrize("name", sorted(TEXTS))
+def test_relative_links_lead_somewhere(name):
+    """Each relative link names an existing file and, with '#', one of that file's headings."""
+    here = (ROOT / name).parent
+    for target in re.findall(r"\]\(([^)\s]+)\)", TEXTS[name]):
+        if re.match(r"[a-z]+:", target):
+            continue
+        path, _, anchor = target.partition("#")
+        file = (here / path).resolve() if path else ROOT / name
+        assert file.exists(), f"{name}: link to {target}: no such file"
+        if anchor:
+            headings = re.findall(r"^#+ (.*)$", file.read_text(), re.M)
+            assert anchor in {slug(h) for h in headings}, f"{name}: link to {target}: no such heading"
 
 
 def run(cmd: str, cwd: Path, tty: bool = False) -> subprocess.CompletedProcess:
@@ -56,6 +86,7 @@ def workdir(tmp_path_factory) -> Path:
 
 
 def test_the_readme_shows_the_main_commands():
+    assert {"plan", "visualize-path", "execute", "export"} <= {c.split()[1] for c in readme_commands(README)}
     verbs = {c.split()[1] for c in COMMANDS}
     assert {"plan", "visualize-path", "execute", "kin", "export", "ports", "sim-device", "workspace", "robots"} <= verbs
 

@@ -12,7 +12,7 @@ Two stages:
   limits (``VEL_TOL``/``ACC_TOL``), sample spacing at the declared rate, and position steps that
   agree with the velocities given the acceleration limit.
 
-Bounds that keep memory and time small (documented in the README, "Trajectory files"):
+Bounds that keep memory and time small (documented in docs/reference.md, "The trajectory file"):
 ``MAX_FILE_BYTES``, ``MAX_POINTS``, ``MAX_DURATION``, ``SAMPLE_RATE_RANGE``.
 """
 

@@ -1,7 +1,7 @@
 """The pick/place plan file: schema, validation and the ``Plan`` it becomes.
 
 Every mistake of form (unknown key, wrong type, impossible value, missing reference) raises
-``PlanFileError`` naming the file, the line and the field. The README documents every field.
+``PlanFileError`` naming the file, the line and the field. docs/reference.md documents every field.
 Lengths are metres; angles radians, or degrees when written as ``{deg: value}`` / ``{deg: [..]}``.
 """
 

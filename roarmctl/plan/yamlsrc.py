@@ -37,7 +37,7 @@ class LocatedList(list):
 
 MERGE_TAG = "tag:yaml.org,2002:merge"
 
-#: Limits of what a plan file may be (README, "The plan file"): its size in bytes, how deep its
+#: Limits of what a plan file may be (docs/reference.md, "The plan file"): its size in bytes, how deep its
 #: mappings and lists nest, and how many values it expands to (an alias counts again each time it is
 #: used, so a "billion laughs" alias bomb or a recursive alias stops here, not in memory).
 MAX_BYTES = 1024 * 1024

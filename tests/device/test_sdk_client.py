@@ -65,7 +65,7 @@ def _settle(client, want, index, tol, timeout=4.0):
 
 
 def test_every_sdk_call_the_readme_lists(arm):
-    """The SDK calls named in the README, each against what the simulated servos did."""
+    """The SDK calls named in docs/guide.md, each against what the simulated servos did."""
     client, sim = arm
     fw = sim.firmware
     client.echo_set(0)  # T:605
