@@ -21,8 +21,9 @@ need them.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence, Union
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -41,16 +42,25 @@ if TYPE_CHECKING:
     from roarmctl.motion.pipeline import PlanResult
     from roarmctl.robot.model import Robot
 
-PathLike = Union[str, "os.PathLike[str]"]
-TrajectoryLike = Union[Trajectory, PathLike]
+PathLike = str | os.PathLike[str]
+TrajectoryLike = Trajectory | PathLike
 
 __all__ = [
-    "load_robot", "plan", "load_trajectory", "save_trajectory", "sample", "to_joint_trajectory",
-    "execute", "draw", "export", "Trajectory", "RoarmError",
+    "RoarmError",
+    "Trajectory",
+    "draw",
+    "execute",
+    "export",
+    "load_robot",
+    "load_trajectory",
+    "plan",
+    "sample",
+    "save_trajectory",
+    "to_joint_trajectory",
 ]
 
 
-def load_robot(spec: PathLike) -> "Robot":
+def load_robot(spec: PathLike) -> Robot:
     """A bundled robot by name (``roarmctl robots`` lists them) or a description file (URDF sidecar
     ``.yaml`` or DH table). The ``Robot`` offers ``robot.kin.fk(q)`` (4x4 TCP pose), ``robot.kin.jacobian(q)``
     (6 x arm_dof), ``joint_names``, ``lower``/``upper`` limits (rad) and ``named_poses``."""
@@ -60,7 +70,7 @@ def load_robot(spec: PathLike) -> "Robot":
 
 
 def plan(source: PathLike | Mapping[str, Any], *, seed: int | None = None, base_dir: PathLike | None = None,
-         progress: Callable[[str, int, int], None] | None = None) -> "PlanResult":
+         progress: Callable[[str, int, int], None] | None = None) -> PlanResult:
     """Plan a pick/place plan: a YAML file path, or a dict of the same form (see docs/reference.md, "The plan file").
 
     ``seed`` overrides ``planner.seed`` (same seed, same trajectory); ``base_dir`` resolves a dict's
@@ -109,7 +119,7 @@ def to_joint_trajectory(traj: Trajectory, frame_id: str = "") -> dict[str, Any]:
     "velocities", "accelerations", "effort": [], "time_from_start": {"sec", "nanosec"}}, ...]}``.
     Lists of floats, so ``json.dumps`` or a ROS 2 message constructor takes it as is."""
     def duration(t: float) -> dict[str, int]:
-        ns = int(round(float(t) * 1e9))
+        ns = round(float(t) * 1e9)
         return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
 
     return {
@@ -118,7 +128,7 @@ def to_joint_trajectory(traj: Trajectory, frame_id: str = "") -> dict[str, Any]:
         "points": [
             {"positions": [float(v) for v in p], "velocities": [float(v) for v in v_],
              "accelerations": [float(v) for v in a], "effort": [], "time_from_start": duration(t)}
-            for t, p, v_, a in zip(traj.times, traj.positions, traj.velocities, traj.accelerations)
+            for t, p, v_, a in zip(traj.times, traj.positions, traj.velocities, traj.accelerations, strict=True)
         ],
     }
 

@@ -13,8 +13,7 @@ import traceback
 
 import typer
 
-from roarmctl.cli import common
-from roarmctl.cli import execute_cmd, export_cmd, kin, plan_cmd, viz_cmd
+from roarmctl.cli import common, execute_cmd, export_cmd, kin, plan_cmd, viz_cmd
 
 app = typer.Typer(
     name="roarmctl",
@@ -193,7 +192,7 @@ def _run_command(argv: list[str] | None, guard) -> int:
     except SystemExit as exc:  # typer.Exit raised inside a command
         guard.live = False
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-    except Exception as exc:  # noqa: BLE001 - the last line of defence: a bug
+    except Exception as exc:
         guard.live = False
         try:
             from click import ClickException

@@ -23,6 +23,7 @@ STATE = _State()
 
 
 def console(stderr: bool = False):
+    """A rich console on stdout (or stderr) without highlighting: what every command renders with."""
     from rich.console import Console
 
     return Console(stderr=stderr, highlight=False)
@@ -69,6 +70,7 @@ def one_line(text: str) -> str:
 
 
 def warn(message: str) -> None:
+    """Write ``warning: MESSAGE`` to stderr on one line."""
     sys.stderr.write(f"warning: {one_line(message)}\n")
 
 

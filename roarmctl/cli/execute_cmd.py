@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -15,12 +14,14 @@ STRATEGY_HELP = "Streaming strategy: timed (default), timed-shared, timed-acc, d
 
 
 def register(app: typer.Typer) -> None:
+    """Add ``execute``, ``sim-device`` and ``ports`` to the app."""
     app.command("execute")(execute)
     app.command("sim-device")(sim_device)
     app.command("ports")(ports)
 
 
 def default_log_path(traj: Path) -> Path:
+    """Where a run of ``NAME.traj.json`` logs by default: ``NAME.exec.json`` beside it."""
     name = traj.name
     stem = name[: -len(".traj.json")] if name.endswith(".traj.json") else traj.stem
     return traj.with_name(f"{stem}.exec.json")
@@ -29,9 +30,9 @@ def default_log_path(traj: Path) -> Path:
 # --------------------------------------------------------------------------- execute
 def execute(
     traj_path: Path = typer.Argument(..., metavar="TRAJ", help="Trajectory file (*.traj.json) from 'roarmctl plan'."),
-    port: Optional[str] = typer.Option(None, "--port", "-p", help="Serial port of the arm (/dev/ttyUSB0, COM3, or a pyserial URL)."),
+    port: str | None = typer.Option(None, "--port", "-p", help="Serial port of the arm (/dev/ttyUSB0, COM3, or a pyserial URL)."),
     sim: bool = typer.Option(False, "--sim", help="Run against the built-in firmware simulator (over a real pseudo-terminal)."),
-    output: Optional[Path] = typer.Option(None, "--output", "-o", help="Write the commands that would be sent (JSON lines) instead; no device."),
+    output: Path | None = typer.Option(None, "--output", "-o", help="Write the commands that would be sent (JSON lines) instead; no device."),
     rate: float = typer.Option(50.0, "--rate", help="Commands per second (at most 90 at 115200 baud)."),
     speed_scale: float = typer.Option(1.0, "--speed-scale", help="Slow the motion down: 0.5 = half speed (0 < S <= 1)."),
     strategy: str = typer.Option("timed", "--strategy", help=STRATEGY_HELP),
@@ -39,7 +40,7 @@ def execute(
     move_to_start: bool = typer.Option(False, "--move-to-start", help="If the arm is not at the first point, plan a collision-checked, timed motion there first (the trajectory's scene, limits and planner)."),
     from_current: bool = typer.Option(False, "--from-current", help="If the arm is not at the first point, plan the first free motion again from where it is."),
     max_error: float = typer.Option(30.0, "--max-error", help="Abort (and hold) when the TCP tracking error exceeds this (mm)."),
-    log: Optional[Path] = typer.Option(None, "--log", help="Execution log (JSON); default: next to TRAJ as NAME.exec.json."),
+    log: Path | None = typer.Option(None, "--log", help="Execution log (JSON); default: next to TRAJ as NAME.exec.json."),
     json_out: bool = typer.Option(False, "--json", help="Print one JSON summary object on stdout, nothing else."),
 ) -> None:
     """Stream a trajectory to the RoArm (--port), the simulator (--sim), or a file (--output).
@@ -204,12 +205,12 @@ class _Display:
 
 # --------------------------------------------------------------------------- sim-device
 def sim_device(
-    firmware: Optional[str] = typer.Option(None, "--firmware", help="Which firmware to imitate: m3-0.84 (default), m3-2026, m2."),
-    model: Optional[str] = typer.Option(None, "--model", help="Imitate this robot's firmware, from its description's wire map "
+    firmware: str | None = typer.Option(None, "--firmware", help="Which firmware to imitate: m3-0.84 (default), m3-2026, m2."),
+    model: str | None = typer.Option(None, "--model", help="Imitate this robot's firmware, from its description's wire map "
                                         "(e.g. roarm_m2_s -> m2, roarm_m3_pro -> m3-0.84)."),
     info_print: int = typer.Option(2, "--info-print", help="InfoPrint level at start (factory 2 = continuous feedback)."),
     boot: bool = typer.Option(True, "--boot/--no-boot", help="Print the boot banner and do the boot move at start."),
-    link: Optional[Path] = typer.Option(None, "--link", help="Also make this symlink to the pseudo-terminal (e.g. /tmp/ttyROARM)."),
+    link: Path | None = typer.Option(None, "--link", help="Also make this symlink to the pseudo-terminal (e.g. /tmp/ttyROARM)."),
     json_out: bool = typer.Option(False, "--json", help="Print {\"port\": PATH} as JSON."),
 ) -> None:
     """Start the firmware simulator on a pseudo-terminal, print its path, and serve until Ctrl-C.

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -11,12 +10,13 @@ from roarmctl.cli import common
 
 
 def register(app: typer.Typer) -> None:
+    """Add ``export`` to the app."""
     @app.command("export")
     def export_cmd(
         source: Path = typer.Argument(..., help="Trajectory (.traj.json) or execution log (.exec.json)."),
         output: Path = typer.Option(..., "-o", "--output",
                                     help="NAME.mcap (Foxglove), NAME.csv (spreadsheet), or a folder name without extension (ROS 2 bag)."),
-        trajectory: Optional[Path] = typer.Option(None, "--trajectory", "-t",
+        trajectory: Path | None = typer.Option(None, "--trajectory", "-t",
                                                   help="With an execution log: the trajectory it ran, added as planned joint states and scene."),
         json_out: bool = typer.Option(False, "--json", help="Print one JSON object."),
     ) -> None:

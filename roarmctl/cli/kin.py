@@ -6,9 +6,12 @@ stdout, nothing else); without ``--json`` a readable table is printed.
 
 from __future__ import annotations
 
-from typing import Optional, Tuple
+from typing import TYPE_CHECKING
 
 import typer
+
+if TYPE_CHECKING:  # numpy itself is imported where a command runs (start-up time)
+    import numpy as np
 
 from roarmctl.cli import common
 
@@ -24,6 +27,7 @@ FRAME = typer.Option("world", "--frame", help="Positions in this frame of the ro
 
 
 def register(app: typer.Typer) -> None:
+    """Add the ``kin`` command group to the app."""
     app.add_typer(kin_app, name="kin")
 
 
@@ -79,7 +83,7 @@ def _fmt(a, digits: int = 6) -> str:
 def fk(
     robot: str = typer.Argument(..., help="Bundled robot name or path to a description."),
     q: list[str] = typer.Argument(..., help="Joint values (arm joints; the gripper may follow)."),
-    link: Optional[str] = typer.Option(None, "--link", help="Link to report (default: the TCP)."),
+    link: str | None = typer.Option(None, "--link", help="Link to report (default: the TCP)."),
     frame: str = FRAME,
     deg: bool = DEG,
     json_out: bool = JSON,
@@ -181,20 +185,20 @@ def _split_numbers(text: str | None, what: str, deg: bool) -> np.ndarray | None:
 @kin_app.command("ik")
 def ik(
     robot: str = typer.Argument(..., help="Bundled robot name or path to a description."),
-    xyz: Tuple[float, float, float] = typer.Option(..., "--xyz", help="Target TCP position X Y Z in metres (root frame), or in --frame's unit."),
-    pitch: Optional[float] = typer.Option(
+    xyz: tuple[float, float, float] = typer.Option(..., "--xyz", help="Target TCP position X Y Z in metres (root frame), or in --frame's unit."),
+    pitch: float | None = typer.Option(
         None, "--pitch",
         help="RoArm: angle of the approach axis (tool +x) below the horizontal, in the vertical plane through the "
              "base axis and the target (rad; deg with --deg): 0 points away from the base (home pose), pi/2 (90 deg) "
              "straight down. Left out: the pitch nearest to --ref's (else straight down), in 1 deg steps, at which "
              "the arm is within its limits, free of self-collision and clear of the singularity margin; printed."),
-    roll: Optional[float] = typer.Option(
+    roll: float | None = typer.Option(
         None, "--roll", help="RoArm: wrist-roll joint value, the turn of the tool about its approach axis (rad; deg with "
                              "--deg); default --ref's roll, else 0."),
-    rpy: Optional[Tuple[float, float, float]] = typer.Option(
+    rpy: tuple[float, float, float] | None = typer.Option(
         None, "--rpy", help="Full target orientation as URDF roll pitch yaw, R = Rz Ry Rx (rad; deg with --deg). "
                             "Not with --pitch/--roll."),
-    ref: Optional[str] = typer.Option(
+    ref: str | None = typer.Option(
         None, "--ref", help="Reference configuration ('0 0 1.57 0 0' or comma-separated): solutions are sorted by "
                             "distance to it and its gripper value is kept."),
     all_solutions: bool = typer.Option(False, "--all", help="Print every solution (every branch) instead of the best one."),
@@ -212,7 +216,15 @@ def ik(
 
     from roarmctl.errors import RoarmError, UnreachableError
     from roarmctl.robot.frames import device_point, from_frame, get_frame
-    from roarmctl.robot.ik import ORI_TOL, POS_TOL, check_solution, solve_ik_auto_pitch, solve_ik_frame, takes_pitch, tool_pitch
+    from roarmctl.robot.ik import (
+        ORI_TOL,
+        POS_TOL,
+        check_solution,
+        solve_ik_auto_pitch,
+        solve_ik_frame,
+        takes_pitch,
+        tool_pitch,
+    )
     from roarmctl.robot.loader import load_robot
 
     r = load_robot(robot)
@@ -244,7 +256,7 @@ def ik(
         raise UnreachableError(f"unreachable ({exc.reason}): {exc.message}", exc.reason, exc.hint) from None
     checks = [check_solution(r, q, r.kin.fk(q)[:3, 3] + target - device_point(r, fr, q), rpy_rad) for q in sols]
     pitches = [tool_pitch(r, q, target) for q in sols] if is_roarm else None
-    for q, c in zip(sols, checks):  # the library checked already; a failure here is a bug, not an input error
+    for q, c in zip(sols, checks, strict=True):  # the library checked already; a failure here is a bug, not an input error
         if c.position_error > POS_TOL or (c.orientation_error is not None and c.orientation_error > ORI_TOL):
             raise RoarmError(f"internal error: IK solution {np.round(q, 6).tolist()} misses the target by "
                              f"{c.position_error:.2e} m; please report this")
@@ -277,7 +289,7 @@ def ik(
         t.add_column(f"pitch ({unit})", justify="right")
     t.add_column("error (m)", justify="right")
     digits = 2 if deg else 4  # 0.01 deg or 0.0001 rad: a UR10 row of 6 joints fits 80 columns
-    for k, (q, c) in enumerate(zip(out["solutions"], checks), 1):
+    for k, (q, c) in enumerate(zip(out["solutions"], checks, strict=True), 1):
         extra = [f"{out['pitches'][k - 1]:.2f}"] if pitches is not None else []
         t.add_row(str(k), *[f"{v:.{digits}f}" for v in q], *extra, f"{c.position_error:.1e}")
     common.console().print(t)
@@ -288,10 +300,10 @@ def ik(
 @kin_app.command("dynamics", context_settings=NUMBERS)
 def dynamics(
     robot: str = typer.Argument(..., help="Bundled robot name or path to a description (with inertials)."),
-    q_args: Optional[list[str]] = typer.Argument(None, metavar="[Q]...", help="Joint positions, as for kin fk (or give --q)."),
-    q: Optional[str] = typer.Option(None, "--q", help="Joint positions, space- or comma-separated ('0 0.5 1.2 0 0'); arm joints, the gripper may follow."),
-    qd: Optional[str] = typer.Option(None, "--qd", help="Joint velocities (rad/s, or deg/s with --deg); default 0."),
-    qdd: Optional[str] = typer.Option(None, "--qdd", help="Joint accelerations (rad/s^2, or deg/s^2 with --deg); default 0."),
+    q_args: list[str] | None = typer.Argument(None, metavar="[Q]...", help="Joint positions, as for kin fk (or give --q)."),
+    q: str | None = typer.Option(None, "--q", help="Joint positions, space- or comma-separated ('0 0.5 1.2 0 0'); arm joints, the gripper may follow."),
+    qd: str | None = typer.Option(None, "--qd", help="Joint velocities (rad/s, or deg/s with --deg); default 0."),
+    qdd: str | None = typer.Option(None, "--qdd", help="Joint accelerations (rad/s^2, or deg/s^2 with --deg); default 0."),
     deg: bool = DEG,
     json_out: bool = JSON,
 ) -> None:
@@ -302,10 +314,9 @@ def dynamics(
     """
     import numpy as np
 
+    from roarmctl.errors import InputError
     from roarmctl.robot.dynamics import coriolis_vector, gravity_vector, inverse_dynamics, mass_matrix
     from roarmctl.robot.loader import load_robot
-
-    from roarmctl.errors import InputError
 
     if (q is None) == (not q_args):
         raise InputError("give the joint positions once: after the robot (like kin fk) or as --q",

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -16,7 +15,7 @@ def default_output(plan_path: Path) -> Path:
     return plan_path.with_name(plan_path.stem + ".traj.json")
 
 
-def run_planner(plan: Path, seed: Optional[int], quiet: bool, current=None):
+def run_planner(plan: Path, seed: int | None, quiet: bool, current=None):
     """Plan with a rich progress display on stderr (none when ``quiet``); returns the PlanResult.
 
     ``current(robot)`` measures the arm for ``start: current``."""
@@ -36,7 +35,7 @@ def run_planner(plan: Path, seed: Optional[int], quiet: bool, current=None):
         return plan_file(plan, seed=seed, progress=progress, current=current)
 
 
-def arm_reader(port: Optional[str], sim: bool, notes: list[str]):
+def arm_reader(port: str | None, sim: bool, notes: list[str]):
     """``current(robot)`` for ``start: current``: reads the arm on ``port`` (or a fresh simulator)."""
     from roarmctl.errors import InputError
 
@@ -63,13 +62,14 @@ def arm_reader(port: Optional[str], sim: bool, notes: list[str]):
 
 
 def register(app: typer.Typer) -> None:
+    """Add ``plan`` to the app."""
     @app.command("plan")
     def plan_cmd(
         plan: Path = typer.Argument(..., help="Pick/place plan file (YAML)."),
-        output: Optional[Path] = typer.Option(None, "-o", "--output", help="Trajectory file to write (default: next to the plan, .traj.json)."),
-        seed: Optional[int] = typer.Option(None, "--seed", help="Random seed (overrides planner.seed; same seed -> same file)."),
+        output: Path | None = typer.Option(None, "-o", "--output", help="Trajectory file to write (default: next to the plan, .traj.json)."),
+        seed: int | None = typer.Option(None, "--seed", help="Random seed (overrides planner.seed; same seed -> same file)."),
         json_out: bool = typer.Option(False, "--json", help="Print a JSON summary instead of the table."),
-        port: Optional[str] = typer.Option(None, "--port", "-p", help="For 'start: current': read the arm's pose from this serial port (the arm does not move)."),
+        port: str | None = typer.Option(None, "--port", "-p", help="For 'start: current': read the arm's pose from this serial port (the arm does not move)."),
         sim: bool = typer.Option(False, "--sim", help="For 'start: current': read it from a fresh firmware simulator (its boot pose)."),
     ) -> None:
         """Plan every task of PLAN, time it with TOPP-RA, re-check it and write the trajectory file.

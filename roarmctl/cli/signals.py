@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import signal
 import threading
+from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Iterator
 
 from roarmctl.errors import StopRequested
 
@@ -36,6 +36,7 @@ class Guard:
         self.shield = 0
 
     def handle(self, signum: int, frame) -> None:
+        """The signal handler: record the signal; raise StopRequested for the first one unless shielded."""
         self.received.append(signum)
         if self.raised or not self.live or self.shield:
             return
@@ -44,6 +45,7 @@ class Guard:
 
     @property
     def first(self) -> int | None:
+        """The first signal that arrived, or None."""
         return self.received[0] if self.received else None
 
 

@@ -7,7 +7,6 @@ matplotlib is imported inside the commands (through ``roarmctl.viz.*_figure``), 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -76,7 +75,7 @@ def _load(path: Path):
 def visualize_path(
     source: Path = typer.Argument(..., help="Trajectory file (*.traj.json), or a plan file (.yaml) to plan first.",
                                   show_default=False),
-    output: Optional[Path] = typer.Option(None, "-o", "--output", help="Picture to write: .png, .svg or .pdf (default: next to SOURCE, same name, .png)."),
+    output: Path | None = typer.Option(None, "-o", "--output", help="Picture to write: .png, .svg or .pdf (default: next to SOURCE, same name, .png)."),
     view: str = typer.Option("iso", "--view", help="3D view: iso, top, front or side."),
     dpi: float = typer.Option(100.0, "--dpi", help="Pixels per inch of the PNG."),
     size: str = typer.Option("16x10", "--size", help="Sheet size WxH in inches (pixels = size x dpi)."),
@@ -112,10 +111,10 @@ def visualize_path(
 
 def workspace(
     robot: str = typer.Argument(..., help="Bundled robot name or path to a description."),
-    output: Optional[Path] = typer.Option(None, "-o", "--output", help="Picture to write: .png, .svg or .pdf (default: ROBOT_workspace.png here)."),
+    output: Path | None = typer.Option(None, "-o", "--output", help="Picture to write: .png, .svg or .pdf (default: ROBOT_workspace.png here)."),
     samples: int = typer.Option(80000, "--samples", help="Random configurations to sample."),
     seed: int = typer.Option(0, "--seed", help="Random seed (the same seed draws the same picture)."),
-    height: Optional[float] = typer.Option(None, "--height", help="Top map as a section at this z (m) instead of the footprint."),
+    height: float | None = typer.Option(None, "--height", help="Top map as a section at this z (m) instead of the footprint."),
     measure: str = typer.Option("sigma", "--measure", help="Colour by 'sigma' (smallest singular value) or 'w' (product)."),
     dpi: float = typer.Option(100.0, "--dpi", help="Pixels per inch of the PNG."),
     size: str = typer.Option("13x6", "--size", help="Sheet size WxH in inches."),
