@@ -192,7 +192,7 @@ def _run_command(argv: list[str] | None, guard) -> int:
     except SystemExit as exc:  # typer.Exit raised inside a command
         guard.live = False
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-    except Exception as exc:
+    except Exception as exc:  # noqa: BLE001 - the last line of defence: a bug
         guard.live = False
         try:
             from click import ClickException

@@ -9,8 +9,9 @@ from __future__ import annotations
 import errno
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from roarmctl.device import protocol
 from roarmctl.device.protocol import Feedback, LineBuffer, encode, parse_feedback, parse_json_line
@@ -34,6 +35,8 @@ class LinkTimings:
 
 @dataclass
 class Received:
+    """A line from the device: when it arrived (s, link clock), its text, and its parsed feedback if any."""
+
     t: float
     line: str
     feedback: Feedback | None = None
@@ -60,7 +63,7 @@ class Link:
         self.closed = False
 
     # ------------------------------------------------------------------ open
-    def open(self) -> "Link":
+    def open(self) -> Link:
         """Open with DTR and RTS low *before* opening (no ESP32 reset where the driver allows), exclusive."""
         import serial
 
@@ -102,6 +105,7 @@ class Link:
         return DeviceError(f"cannot open serial port {self.port}: {text}")
 
     def close(self) -> None:
+        """Close the port (once; later calls do nothing)."""
         if self.ser is not None and not self.closed:
             self.closed = True
             try:
@@ -109,7 +113,7 @@ class Link:
             except Exception:  # noqa: BLE001 - closing a dead port must not mask the real error
                 pass
 
-    def __enter__(self) -> "Link":
+    def __enter__(self) -> Link:
         return self.open()
 
     def __exit__(self, *exc) -> None:
@@ -177,6 +181,7 @@ class Link:
         return out
 
     def discard_input(self) -> None:
+        """Drop whatever the device sent that has not been read yet."""
         try:
             self.ser.reset_input_buffer()
         except Exception:  # noqa: BLE001

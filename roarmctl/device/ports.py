@@ -16,6 +16,8 @@ LIKELY_ARM = {
 
 @dataclass
 class PortInfo:
+    """A serial port as the OS lists it: device path, description, USB vendor and product id."""
+
     device: str
     description: str
     vid: int | None
@@ -26,6 +28,7 @@ class PortInfo:
     bridge: str | None
 
     def as_dict(self) -> dict:
+        """The port as a JSON-ready dict (``vid_pid`` as ``VVVV:PPPP``)."""
         return {
             "device": self.device, "description": self.description,
             "vid_pid": f"{self.vid:04X}:{self.pid:04X}" if self.vid is not None and self.pid is not None else None,

@@ -11,7 +11,6 @@ from roarmctl.device.link import Link
 from roarmctl.device.protocol import Feedback, WireMap
 from roarmctl.errors import DeviceError
 
-
 COUNT = 2 * np.pi / 4096  # one servo step (rad)
 
 

@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 
@@ -65,6 +66,7 @@ def r4(x: float) -> float:
 
 
 def steps_per_s(rad_per_s: float) -> float:
+    """A joint speed in servo steps/s (4096 per turn) from rad/s."""
     return abs(rad_per_s) * STEPS_PER_RAD
 
 
@@ -101,6 +103,7 @@ def joints_command(wire: dict[str, float], spd: int, acc: int, fields: tuple[str
 
 
 def feedback_request() -> dict[str, Any]:
+    """The ``T:105`` request for one ``T:1051`` feedback line."""
     return {"T": 105}
 
 
@@ -134,6 +137,7 @@ class WireMap:
         self.index = [robot.joint_index(w.joint) for w in self.fields]
 
     def to_wire(self, q) -> dict[str, float]:
+        """Joint values (dof,) rad -> {device field: firmware radians}, clamped."""
         q = np.asarray(q, dtype=float)
         return {w.field: w.to_wire(float(q[i])) for w, i in zip(self.fields, self.index)}
 
@@ -157,6 +161,7 @@ class WireMap:
         return q
 
     def command(self, q, spd: int, acc: int) -> dict[str, Any]:
+        """The joints command (``T:102``) that drives the arm to ``q`` (dof,) rad with these ``spd``/``acc``."""
         return joints_command(self.to_wire(q), spd, acc, self.field_names)
 
     def hold(self, wire: dict[str, float], spd: int, acc: int) -> dict[str, Any]:
@@ -250,6 +255,7 @@ class LineBuffer:
         self.max_line = max_line
 
     def feed(self, data: bytes) -> list[bytes]:
+        """Add received bytes; return the lines now complete."""
         self._buf.extend(data)
         lines = []
         while True:
@@ -263,6 +269,7 @@ class LineBuffer:
         return lines
 
     def clear(self) -> None:
+        """Forget a partial line."""
         self._buf.clear()
 
 

@@ -12,9 +12,11 @@ import contextlib
 import math
 import sys
 import warnings
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, ContextManager
+from typing import Any
 
 from roarmctl.errors import InputError, RoarmError, signal_name
 
@@ -35,7 +37,7 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
                   log_path: str | Path | None = None, confirm: Callable[[str], bool],
                   on_status: Callable | None = None, on_start: Callable | None = None,
                   on_note: Callable[[str], None] | None = None, on_end: Callable[[], None] | None = None,
-                  shield: Callable[[], ContextManager] = contextlib.nullcontext,
+                  shield: Callable[[], AbstractContextManager] = contextlib.nullcontext,
                   on_log_error: Callable[[Path, Exception], None] | None = None) -> Execution:
     """Stream ``traj`` (a validated ``Trajectory`` for ``robot``) with ``cfg`` (``StreamConfig``).
 

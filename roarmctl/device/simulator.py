@@ -44,8 +44,8 @@ import select
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -473,17 +473,19 @@ class PtySimulator:
         self._thread = threading.Thread(target=self._run, name="roarm-sim", daemon=True)
         self.error: BaseException | None = None
 
-    def start(self) -> "PtySimulator":
+    def start(self) -> PtySimulator:
+        """Start serving the pseudo-terminal in a background thread; return self."""
         self._thread.start()
         return self
 
-    def __enter__(self) -> "PtySimulator":
+    def __enter__(self) -> PtySimulator:
         return self.start()
 
     def __exit__(self, *exc) -> None:
         self.stop()
 
     def stop(self) -> None:
+        """Stop the thread and close the pseudo-terminal."""
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=2.0)
@@ -498,6 +500,7 @@ class PtySimulator:
         self.stop()
 
     def recording(self):
+        """The firmware's record of servo positions over time (see ``Firmware.recording``)."""
         return self.firmware.recording()
 
     def _run(self) -> None:

@@ -23,9 +23,10 @@ import gc
 import math
 import signal
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -113,6 +114,7 @@ class Tick:
 
     @property
     def commands(self) -> list[dict[str, Any]]:
+        """The lines this tick sends, in order: the joints command, then any gripper command."""
         return [self.cmd, *self.extra]
 
 
@@ -196,6 +198,8 @@ def _check_wire_range(traj, wm: WireMap) -> None:
 # ----------------------------------------------------------------------------- the loop
 @dataclass
 class StreamConfig:
+    """How to stream: rate (Hz), speed scale, strategy, and the tolerances and waits of a run."""
+
     rate: float = DEFAULT_RATE
     speed_scale: float = 1.0
     strategy: str = "timed"
@@ -225,6 +229,8 @@ class Status:
 
 @dataclass
 class Result:
+    """How a run ended (``outcome``, ``message``), what was sent, and its lateness and tracking over time."""
+
     outcome: str  # "completed" | "interrupted" | "aborted" | "link_lost"
     message: str
     n_sent: int
@@ -235,6 +241,7 @@ class Result:
     log: dict[str, Any] = field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
+        """The log's ``summary``: outcome, counts, lateness p50/p99 (ms), tracking RMS/max (mm)."""
         lat = self.lateness * 1e3
         trk = self.tracking * 1e3
         pct = lambda a, p: float(np.percentile(a, p)) if len(a) else None  # noqa: E731
@@ -242,7 +249,7 @@ class Result:
             "outcome": self.outcome, "message": self.message, "commands": self.n_sent,
             "lateness_ms": {"p50": pct(lat, 50), "p99": pct(lat, 99), "max": float(lat.max()) if len(lat) else None},
             "tracking_mm": {"rms": float(np.sqrt(np.mean(trk ** 2))) if len(trk) else None,
-                            "max": float(trk.max()) if len(trk) else None, "samples": int(len(trk))},
+                            "max": float(trk.max()) if len(trk) else None, "samples": len(trk)},
             "final_error_mm": None if self.final_error is None else self.final_error * 1e3,
         }
 
@@ -505,6 +512,7 @@ class Streamer:
         return out
 
     def result(self, outcome: str, message: str) -> Result:
+        """The run's Result so far, ending with this outcome and message."""
         lat = np.array([x for _, x in self.sent_lateness])
         trk = np.array([e for _, e in self.tracking])
         final = None
@@ -552,6 +560,7 @@ class _Abort(Exception):
 
 
 def write_log(path: str | Path, log: dict[str, Any]) -> Path:
+    """Write an execution log atomically (compact JSON); return its path."""
     from roarmctl.fileio import atomic_write_json
 
     return atomic_write_json(path, log, indent=None)

@@ -64,7 +64,7 @@ def place_labels(ax, labels: list[Label]) -> list[tuple[float, float]]:
     placed: list[tuple[float, float, float, float]] = []  # x0, y0, x1, y1 in points
     out = []
     offsets = [(0, 12), (0, 26), (0, 40), (48, 12), (-48, 12), (48, 30), (-48, 30), (0, -22), (60, -10), (-60, -10), (0, 56)]
-    for lab in sorted(labels, key=lambda l: l.priority):
+    for lab in sorted(labels, key=lambda lb: lb.priority):
         x2, y2, _ = proj3d.proj_transform(*lab.anchor, proj)
         ax_pt = np.array(ax.transData.transform((x2, y2))) * to_pt
         w, h = 0.62 * lab.size * max(len(lab.text), 1) + 4, 1.45 * lab.size + 2

@@ -48,6 +48,7 @@ def sphere_faces(radius: float, pose: np.ndarray, n: int = 12) -> list[np.ndarra
 
 
 def item_pose(item: dict, where: str) -> np.ndarray:
+    """A scene item's 4x4 pose from its ``xyz`` (m) and ``rpy`` (rad); ``where`` names it in errors."""
     try:
         xyz = [float(v) for v in item.get("xyz", (0, 0, 0))]
         rpy = [float(v) for v in item.get("rpy", (0, 0, 0))]
