@@ -35,6 +35,7 @@ Static items are never checked against each other.
 
 from __future__ import annotations
 
+import itertools
 import math
 import threading
 from dataclasses import dataclass
@@ -42,8 +43,8 @@ from dataclasses import dataclass
 import fcl
 import numpy as np
 
-from roarmctl.errors import InputError
 from roarmctl import _kernel
+from roarmctl.errors import InputError
 from roarmctl.motion.scene import Scene, SceneItem
 from roarmctl.robot.model import Robot
 
@@ -269,6 +270,7 @@ class CollisionChecker:
 
     @property
     def attached(self) -> list[str]:
+        """Names of the items attached to the arm (carried), in attach order."""
         return list(self._attached)
 
     def _state_key(self) -> tuple:
@@ -571,8 +573,10 @@ class CollisionChecker:
             a, c = pairs[pp]
             oa, ob = moving[a].obj_self, moving[c].obj_self
             pa, pc = pose[i, a], pose[i, c]
-            oa.setRotation(pa[:9].reshape(3, 3)); oa.setTranslation(pa[9:])
-            ob.setRotation(pc[:9].reshape(3, 3)); ob.setTranslation(pc[9:])
+            oa.setRotation(pa[:9].reshape(3, 3))
+            oa.setTranslation(pa[9:])
+            ob.setRotation(pc[:9].reshape(3, 3))
+            ob.setTranslation(pc[9:])
             if fcl.collide(oa, ob, req, res):
                 valid[i] = False
                 if stop_at_first:
@@ -736,14 +740,17 @@ class CollisionChecker:
                 return f"attached object '{mv.name}'" if mv.attached else link_names[mv.link]
 
             for a, mv in enumerate(moving):
-                mv.obj_scene.setRotation(srot[0, a]); mv.obj_scene.setTranslation(scen[0, a])
+                mv.obj_scene.setRotation(srot[0, a])
+                mv.obj_scene.setTranslation(scen[0, a])
                 for k, it in enumerate(self._items):
                     if self._scene_mask[a, k] and fcl.collide(mv.obj_scene, self._item_objs[k]):
                         return f"{label(mv)} hits {it.role} '{it.name}'"
             for a, b in self._pairs:
                 oa, ob = moving[a].obj_self, moving[b].obj_self
-                oa.setRotation(srot[0, a]); oa.setTranslation(scen[0, a])
-                ob.setRotation(srot[0, b]); ob.setTranslation(scen[0, b])
+                oa.setRotation(srot[0, a])
+                oa.setTranslation(scen[0, a])
+                ob.setRotation(srot[0, b])
+                ob.setTranslation(scen[0, b])
                 if fcl.collide(oa, ob):
                     if moving[a].attached or moving[b].attached:
                         return f"{label(moving[a])} hits {label(moving[b])}"
@@ -774,6 +781,6 @@ def densify(path: np.ndarray, max_step: float | None) -> np.ndarray:
     if max_step is None or len(path) < 2:
         return path
     out = [path[:1]]
-    for a, b in zip(path[:-1], path[1:]):
+    for a, b in itertools.pairwise(path):
         out.append(interpolate(a, b, max_step)[1:])
     return np.vstack(out)

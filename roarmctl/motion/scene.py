@@ -61,14 +61,17 @@ class SceneItem:
 
     @classmethod
     def cylinder(cls, name: str, radius: float, length: float, xyz, rpy=(0.0, 0.0, 0.0), role: Role = "obstacle") -> SceneItem:
+        """A cylinder of ``radius`` and ``length`` (m) along its local z, centred at ``xyz`` (m), turned by ``rpy`` (rad)."""
         return cls(name, role, "cylinder", transform(xyz, rpy), radius=radius, length=length)
 
     @classmethod
     def sphere(cls, name: str, radius: float, xyz, role: Role = "obstacle") -> SceneItem:
+        """A sphere of ``radius`` (m) centred at ``xyz`` (m)."""
         return cls(name, role, "sphere", transform(xyz), radius=radius)
 
     @property
     def xyz(self) -> np.ndarray:
+        """The item's centre (3,) m, world frame."""
         return self.pose[:3, 3].copy()
 
     def half_extents_world(self) -> np.ndarray:
@@ -88,6 +91,7 @@ class SceneItem:
         return c - h, c + h
 
     def to_dict(self) -> dict:
+        """The item as the trajectory file's ``scene`` entry (name, role, shape, sizes, xyz, rpy)."""
         d: dict = {"name": self.name, "role": self.role, "shape": self.shape}
         if self.shape == "box":
             d["size"] = [float(v) for v in self.size]
@@ -101,6 +105,7 @@ class SceneItem:
 
     @classmethod
     def from_dict(cls, d: dict) -> SceneItem:
+        """An item from its ``to_dict`` form; a bad entry raises InputError."""
         try:
             pose = transform(d.get("xyz", (0, 0, 0)), d.get("rpy", (0, 0, 0)))
             return cls(str(d["name"]), d["role"], d["shape"], pose, size=tuple(d.get("size", (0.0, 0.0, 0.0))),
@@ -131,16 +136,20 @@ class Scene:
         return any(i.name == name for i in self.items)
 
     def names(self) -> list[str]:
+        """The items' names, in order."""
         return [i.name for i in self.items]
 
     def copy(self) -> Scene:
+        """A deep copy (items and poses)."""
         return copy.deepcopy(self)
 
     def to_dict(self) -> dict:
+        """``{"items": [...]}`` of the items' ``to_dict`` forms."""
         return {"items": [i.to_dict() for i in self.items]}
 
     @classmethod
     def from_dict(cls, d: dict) -> Scene:
+        """A scene from its ``to_dict`` form; a bad one raises InputError."""
         if not isinstance(d, dict) or not isinstance(d.get("items", []), list):
             raise InputError("scene: expected {'items': [...]}")
         return cls([SceneItem.from_dict(i) for i in d.get("items", [])])

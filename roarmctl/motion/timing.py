@@ -31,8 +31,8 @@ from __future__ import annotations
 import functools
 import logging
 import types
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -91,6 +91,7 @@ class TimedPath:
 
     @property
     def duration(self) -> float:
+        """Length in time (s)."""
         return float(self.times[-1])
 
 
@@ -336,7 +337,7 @@ class _Profile:
         self._last: tuple[np.ndarray, tuple] | None = None  # (t, eval(t)) of the last _eval_grid call
         self.jerk_answers: dict = {}  # _jerk_ok's answers for this profile ("path": the path they are for)
 
-    def slowed(self, factor: float) -> "_Profile":
+    def slowed(self, factor: float) -> _Profile:
         """The same profile ``factor`` times slower: path speed / factor at every grid point (times * factor, path
         accelerations / factor**2)."""
         return _Profile(self.grid, self.sd / factor)
@@ -379,8 +380,8 @@ class _Profile:
         if w <= 0:
             _, s, v, a = self.eval(t)
             return s, v, a
-        S1, s1, v1, a1 = self._eval_grid(t)
-        S0, s0, v0, a0 = self.eval(t - w)
+        S1, s1, v1, _ = self._eval_grid(t)
+        S0, s0, v0, _ = self.eval(t - w)
         s = np.clip((S1 - S0) / w, 0.0, self.s_end)
         return s, (s1 - s0) / w, (v1 - v0) / w
 

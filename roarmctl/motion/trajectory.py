@@ -42,6 +42,8 @@ SEGMENT_KINDS = ("free", "cartesian", "gripper", "wait")
 
 @dataclass
 class Event:
+    """Something that happens at a time (s) of a trajectory: ``kind`` grasp/release, a ``label``, the TCP target."""
+
     time: float
     kind: str
     label: str = ""
@@ -50,6 +52,8 @@ class Event:
 
 @dataclass
 class Segment:
+    """A labelled time span (s) of a trajectory: ``kind`` free/cartesian/gripper/wait."""
+
     start: float
     end: float
     kind: str
@@ -82,6 +86,7 @@ class Trajectory:
 
     @property
     def duration(self) -> float:
+        """Length in time (s); 0 for an empty trajectory."""
         return float(self.times[-1]) if len(self.times) else 0.0
 
     def to_dict(self) -> dict[str, Any]:

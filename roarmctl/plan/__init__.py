@@ -1,0 +1,1 @@
+"""Plan files: the schema, bounded YAML reading with line numbers."""

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from roarmctl.errors import PlanFileError, describe_value
-from roarmctl.plan.yamlsrc import LocatedDict, LocatedList, load_located, locate
+from roarmctl.plan.yamlsrc import LocatedDict, load_located, locate
 from roarmctl.robot.model import transform
 
 DICT_NAME = "<plan dict>"  # stands for the file name in errors about a plan given as a dict
@@ -49,6 +49,8 @@ class ItemSpec:
 
 @dataclass
 class PickTask:
+    """A pick: grasp ``object`` from above (heights m, pitch/roll rad, gripper joint values)."""
+
     object: str
     approach_height: float = 0.06
     pitch: float = math.pi / 2
@@ -65,6 +67,8 @@ class PickTask:
 
 @dataclass
 class PlaceTask:
+    """A place: put the held object's centre at ``xyz`` (m)."""
+
     xyz: np.ndarray
     object: str | None = None
     approach_height: float = 0.06
@@ -79,6 +83,8 @@ class PlaceTask:
 
 @dataclass
 class MoveTask:
+    """A move to a named pose, joint values (rad) or a TCP position (m), optionally setting the gripper."""
+
     pose: str | None = None
     joints: np.ndarray | None = None
     xyz: np.ndarray | None = None
@@ -91,6 +97,8 @@ class MoveTask:
 
 @dataclass
 class WaitTask:
+    """A pause of ``seconds`` s."""
+
     seconds: float
     line: int = 0
     kind: str = "wait"
@@ -98,6 +106,8 @@ class WaitTask:
 
 @dataclass
 class Limits:
+    """The plan's ``limits``: scales of the robot's joint limits, TCP speed (m/s), gripper time (s), blending."""
+
     velocity_scale: float = 0.5
     acceleration_scale: float = 0.5
     max_tcp_speed: float | None = None
@@ -107,6 +117,8 @@ class Limits:
 
 @dataclass
 class PlannerConfig:
+    """The plan's ``planner``: OMPL planner name, work and time budgets, seed, singularity margin (m/rad), padding (m)."""
+
     name: str = "RRTConnect"
     time_budget: float = 10.0  # s, wall-clock safety ceiling per planner call (never changes the result)
     simplify_budget: float = 5.0  # s, wall-clock safety ceiling per shortcutting call
@@ -118,6 +130,8 @@ class PlannerConfig:
 
 @dataclass
 class Plan:
+    """A checked plan file: its path and sha256, robot, start, scene, objects, tasks, limits and planner."""
+
     path: Path
     sha256: str
     robot: str

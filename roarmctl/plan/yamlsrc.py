@@ -22,6 +22,7 @@ class LocatedDict(dict):
     lines: dict
 
     def line_of(self, key: Any) -> int:
+        """The line of ``key``'s value (the mapping's own line if unknown)."""
         return self.lines.get(key, self.line)
 
 
@@ -32,6 +33,7 @@ class LocatedList(list):
     lines: list
 
     def line_of(self, index: int) -> int:
+        """The line of item ``index`` (the list's own line if out of range)."""
         return self.lines[index] if 0 <= index < len(self.lines) else self.line
 
 

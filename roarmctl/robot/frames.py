@@ -31,6 +31,7 @@ class Frame:
 
     @property
     def scale(self) -> float:
+        """Frame units per metre (1000 for mm)."""
         return UNITS[self.unit]
 
 

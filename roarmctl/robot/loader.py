@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from roarmctl.errors import DescriptionError, InputError
 from roarmctl.robot import validate as checks
@@ -26,6 +25,7 @@ DEFAULT_JERK_PER_ACCELERATION = 10.0  # 1/s
 
 
 def bundled_dir() -> Path:
+    """The folder of the bundled robot descriptions (package data)."""
     return Path(str(resources.files("roarmctl") / "robots"))
 
 
@@ -121,7 +121,7 @@ def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
         else:
             moving = [robot.joints[j] for j in robot.kin.tcp_chain_joints if robot.joints[j].kind != "fixed"]
             seeds = [moving[-1].child] if moving else [robot.tcp_link]
-        jaws = tuple(dict.fromkeys(l for s in seeds for l in fixed_group(s)))
+        jaws = tuple(dict.fromkeys(link for s in seeds for link in fixed_group(s)))
     robot.jaw_links = jaws
     from roarmctl.robot.ik import IK_FAMILIES
     from roarmctl.robot.singularity import MODELS
@@ -347,9 +347,8 @@ def _origin(elem: ET.Element | None, where: str) -> np.ndarray:
 def _read_urdf(urdf: Path, side: dict, sidecar: Path) -> ET.Element:
     """The URDF's XML root; a ``.xacro`` file is expanded first (``xacro_args`` in the sidecar)."""
     if urdf.suffix.lower() == ".xacro":
-        from roarmctl.robot.xacro_input import expand
-
         from roarmctl.robot.meshes import package_map
+        from roarmctl.robot.xacro_input import expand
 
         text = expand(urdf, side.get("xacro_args"), str(sidecar), package_map(side.get("packages"), sidecar, str(sidecar)))
         try:
@@ -399,7 +398,7 @@ def _moveit(side: dict, sidecar: Path, joints_xml: list, links: dict, actuated: 
 def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     root = _read_urdf(urdf, side, sidecar)
     checks.check_urdf(root, str(urdf))  # a tree with finite numbers before it is walked
-    links = {l.get("name"): l for l in root.findall("link")}
+    links = {el.get("name"): el for el in root.findall("link")}
     joints_xml = root.findall("joint")
     for j in joints_xml:
         for tag in ("parent", "child"):
@@ -462,8 +461,8 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     meshes = {"urdf": urdf, "packages": package_map(side.get("packages"), sidecar, str(sidecar)),
               "modes": mesh_modes(side.get("mesh_collision"), list(links), str(sidecar))}
     inertials, shapes = {}, []
-    for lname, l in links.items():
-        inn = l.find("inertial")
+    for lname, el in links.items():
+        inn = el.find("inertial")
         if inn is not None and inn.find("mass") is not None:
             o = _origin(inn.find("origin"), f"{urdf}: link '{lname}' inertial")
             i = inn.find("inertia")
@@ -473,7 +472,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
                                [g.get("ixz", 0), g.get("iyz", 0), g.get("izz", 0)]])
             r = o[:3, :3]
             inertials[lname] = Inertial(_fattr(inn.find("mass"), "value", 0.0, f"{urdf}: link '{lname}' mass"), o[:3, 3], r @ tensor @ r.T)
-        for k, c in enumerate(l.findall("collision")):
+        for k, c in enumerate(el.findall("collision")):
             shapes.extend(_urdf_shape(lname, c, f"{urdf}: link '{lname}' collision[{k}]", k, meshes))
     tcp = side.get("tcp_link", next((j.child for j in reversed(ordered) if j.mimic is None), ordered[-1].child))
     if tcp not in links:

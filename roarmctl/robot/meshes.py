@@ -44,6 +44,7 @@ class MeshGeometry:
 
     @property
     def half_extents(self) -> np.ndarray:
+        """Half the extent (3,) m of the vertices along each axis, about the origin."""
         return np.max(np.abs(self.vertices), axis=0)
 
     def grown_vertices(self, grow: float) -> np.ndarray:
@@ -144,11 +145,11 @@ def mesh_modes(value, links: list[str], where: str) -> dict[str, str]:
     """The sidecar's ``mesh_collision``: one mode for every link, or ``{link: mode}`` (with an
     optional ``default``). Returns link -> mode for every link."""
     if value is None:
-        return {l: "convex" for l in links}
+        return dict.fromkeys(links, "convex")
     if isinstance(value, str):
         if value not in MESH_MODES:
             raise DescriptionError(f"{where}: mesh_collision: '{value}' is not one of {', '.join(MESH_MODES)}")
-        return {l: value for l in links}
+        return dict.fromkeys(links, value)
     if not isinstance(value, dict):
         raise DescriptionError(f"{where}: mesh_collision: expected 'convex', 'exact' or a mapping link -> mode")
     default = value.get("default", "convex")
@@ -160,8 +161,8 @@ def mesh_modes(value, links: list[str], where: str) -> dict[str, str]:
             raise DescriptionError(f"{where}: mesh_collision.{k}: '{v}' is not one of {', '.join(MESH_MODES)}")
     if default not in MESH_MODES:
         raise DescriptionError(f"{where}: mesh_collision.default: '{default}' is not one of {', '.join(MESH_MODES)}")
-    for l in links:
-        out[l] = value.get(l, default)
+    for link in links:
+        out[link] = value.get(link, default)
     return out
 
 

@@ -131,6 +131,7 @@ class Gripper:
 
     @property
     def has_widths(self) -> bool:
+        """Whether the gripper has a joint-value-to-jaw-width table."""
         return len(self.jaw_q) >= 2
 
     def width(self, q: float) -> float:
@@ -198,10 +199,12 @@ class Robot:
 
     @property
     def arm_dof(self) -> int:
+        """Number of arm joints (actuated, gripper excluded)."""
         return len(self.arm_indices)
 
     @property
     def link_names(self) -> list[str]:
+        """Every link: the root, then each joint's child, in joint order."""
         return [self.root] + [j.child for j in self.joints]
 
     def joints_moved_by(self, name: str) -> list[Joint]:
@@ -209,6 +212,7 @@ class Robot:
         return [j for j in self.joints if name in (j.name, j.mimic)]
 
     def joint_index(self, name: str) -> int:
+        """Index of the actuated joint ``name`` in ``joint_names``."""
         return self.joint_names.index(name)
 
     def full_q(self, q) -> np.ndarray:
@@ -234,5 +238,6 @@ class Robot:
         )
 
     def within_limits(self, q, tol: float = 1e-9) -> bool:
+        """Whether ``q`` (arm or full joint vector, rad) is within the joint limits, up to ``tol``."""
         q = self.full_q(q)
         return bool(np.all(q >= self.lower - tol) and np.all(q <= self.upper + tol))

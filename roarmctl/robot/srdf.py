@@ -184,7 +184,7 @@ def read_joint_limits(path: Path, joints: set[str], where: str) -> dict[str, dic
         if bad:
             raise DescriptionError(f"{loc}: unknown key(s) {sorted(bad)}")
 
-        def num(key: str) -> float:
+        def num(key: str, spec: dict = spec, loc: str = loc) -> float:
             v = spec.get(key)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise DescriptionError(f"{loc}.{key}: expected a number, got {v!r}")
