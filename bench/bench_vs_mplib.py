@@ -135,60 +135,63 @@ def export_model(robot, folder: Path) -> tuple[Path, Path]:
 # --------------------------------------------------------------------------- the roarmctl side
 def capture(plan_name: str, fragment: str):
     """Plan ``plan_name`` and stop at the free motion whose label contains ``fragment``: returns
-    (planner, step, q) there, with the world state (held object, object poses) as the pipeline has it."""
+    (ctx, step, q) there (the planning context, with the world state (held object, object poses) as the
+    pipeline has it)."""
     from roarmctl.motion import pipeline
+    from roarmctl.motion.planning import motions
 
     found = {}
-    original = pipeline.Planner._geometry
+    original = motions.geometry
 
     class Captured(Exception):
         pass
 
-    def hook(self, step, q):
+    def hook(ctx, step, q):
         if step.kind == "free" and fragment in step.label and not found:
-            found.update(planner=self, step=step, q=q.copy())
+            found.update(ctx=ctx, step=step, q=q.copy())
             raise Captured
-        return original(self, step, q)
+        return original(ctx, step, q)
 
-    pipeline.Planner._geometry = hook
+    motions.geometry = hook
     try:
         pipeline.plan_file(ROOT / "plans" / f"{plan_name}.yaml")
     except Captured:
         pass
     finally:
-        pipeline.Planner._geometry = original
+        motions.geometry = original
     if not found:
         raise SystemExit(f"{plan_name}: no free motion labelled '{fragment}'")
-    return found["planner"], found["step"], found["q"]
+    return found["ctx"], found["step"], found["q"]
 
 
-def roarmctl_query(planner, step, q, seed: int):
+def roarmctl_query(ctx, step, q, seed: int):
     """One free motion as the pipeline does it: geometry (OMPL + shortcuts), timing and re-check.
     Returns (wall s, geometry s, motion duration s, waypoints)."""
-    from roarmctl.motion import pipeline
+    from roarmctl.motion.planning import motions
 
-    planner.plan.planner.seed = seed
-    planner.free_count = 0
+    ctx.plan.planner.seed = seed
+    ctx.free_count = 0
     t0 = time.perf_counter()
-    part = pipeline.Planner._geometry(planner, step, q)
+    motion = motions.geometry(ctx, step, q)
     t1 = time.perf_counter()
-    piece = planner._time_chain([part])
-    return time.perf_counter() - t0, t1 - t0, piece.tp.duration, part.wps
+    piece = motions.time_motion(ctx, motion)
+    return time.perf_counter() - t0, t1 - t0, piece.tp.duration, motion.wps
 
 
-def roarmctl_like_mplib(planner, step, q, seed: int):
+def roarmctl_like_mplib(ctx, step, q, seed: int):
     """The same free motion with only the work mplib's plan_qpos does after planning: the geometry as above,
     then one plain TOPP-RA timing under the joint velocity and acceleration limits (no jerk limit, torque
     limit, TCP speed limit or re-check of the timed samples). Returns (wall s, motion duration s)."""
-    from roarmctl.motion import pipeline
+    from roarmctl.motion.planning import motions
+    from roarmctl.motion.planning.pieces import SAMPLE_DT
     from roarmctl.motion.timing import time_parameterise
 
-    planner.plan.planner.seed = seed
-    planner.free_count = 0
-    arm = planner.arm
+    ctx.plan.planner.seed = seed
+    ctx.free_count = 0
+    arm = ctx.arm
     t0 = time.perf_counter()
-    part = pipeline.Planner._geometry(planner, step, q)
-    tp = time_parameterise(part.wps[:, arm], planner.vmax[arm], planner.amax[arm], None, sample_dt=pipeline.SAMPLE_DT)
+    motion = motions.geometry(ctx, step, q)
+    tp = time_parameterise(motion.wps[:, arm], ctx.vmax[arm], ctx.amax[arm], None, sample_dt=SAMPLE_DT)
     return time.perf_counter() - t0, tp.duration
 
 
@@ -212,13 +215,13 @@ def main() -> None:
     arm = robot.arm_indices
     spec = {"urdf": str(urdf), "srdf": str(srdf), "tcp": robot.tcp_link, "joints": list(robot.joint_names),
             "base_links": list(robot.base_links), "queries": {}}  # roarmctl's checker: these never meet the table
-    for name, (planner, step, q) in captured.items():
+    for name, (ctx, step, q) in captured.items():
         goal = step.q_to.copy()
-        goal[planner.gi] = q[planner.gi]
+        goal[ctx.gi] = q[ctx.gi]
         items = [{"name": it.name, "role": it.role, "shape": it.shape, "pose": it.pose.tolist(), "size": list(it.size),
-                  "radius": it.radius, "length": it.length} for it in planner.checker.scene.items if it.name != planner.held]
+                  "radius": it.radius, "length": it.length} for it in ctx.checker.scene.items if it.name != ctx.held]
         spec["queries"][name] = {"start": q.tolist(), "goal": goal.tolist(), "items": items,
-                                 "vmax": planner.vmax[arm].tolist(), "amax": planner.amax[arm].tolist()}
+                                 "vmax": ctx.vmax[arm].tolist(), "amax": ctx.amax[arm].tolist()}
     worker = subprocess.Popen([str(py), "-c", WORKER], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     worker.stdin.write(json.dumps(spec) + "\n")
     worker.stdin.flush()
@@ -240,9 +243,9 @@ def main() -> None:
     like = {k: [] for k in QUERIES if k != "free"}  # our geometry + plain TOPP-RA only (mplib's post-planning work)
     like_dur = {k: [] for k in like}
     for r in range(args.rounds):
-        for name, (planner, step, q) in captured.items():
+        for name, (ctx, step, q) in captured.items():
             try:
-                wall, geo, dur, _ = roarmctl_query(planner, step, q, seed=100 + r)
+                wall, geo, dur, _ = roarmctl_query(ctx, step, q, seed=100 + r)
                 ours[name].append(wall)
                 geometry[name].append(geo)
                 durations[name][0].append(dur)
@@ -250,7 +253,7 @@ def main() -> None:
                 fails[name][0] += 1
                 print(f"  roarmctl {name} round {r}: {exc}", file=sys.stderr)
             if name != "free":
-                wall, dur = roarmctl_like_mplib(planner, step, q, seed=100 + r)
+                wall, dur = roarmctl_like_mplib(ctx, step, q, seed=100 + r)
                 like[name].append(wall)
                 like_dur[name].append(dur)
             res = ask({"op": "plan", "query": name, "seed": 100 + r})
@@ -261,8 +264,8 @@ def main() -> None:
                 path = np.array(res["path"])
                 full = np.repeat(q[None, :], len(path), axis=0)
                 full[:, arm] = path
-                planner._set_state(q[planner.gi], grasp_target=None)
-                padding_hits[name] += planner.checker.first_invalid(full[:, arm]) is not None
+                ctx.set_state(q[ctx.gi], grasp_target=None)
+                padding_hits[name] += ctx.checker.first_invalid(full[:, arm]) is not None
             else:
                 fails[name][1] += 1
 
@@ -287,12 +290,12 @@ def main() -> None:
         print(f"  {name:<6}{a:>8.1f}{a / b:>7.2f}x | {statistics.median(like_dur[name]):.2f}")
 
     # single-state validity, the same random states on both sides
-    planner = captured["wall"][0]
+    ctx = captured["wall"][0]
     rng = np.random.default_rng(0)
     states = rng.uniform(robot.lower, robot.upper, (args.states, robot.dof))
-    states[:, planner.gi] = captured["wall"][2][planner.gi]
+    states[:, ctx.gi] = captured["wall"][2][ctx.gi]
     res = ask({"op": "rate", "query": "wall", "states": states.tolist()})
-    checker = planner.checker
+    checker = ctx.checker
     qa = states[:, arm]
     t0 = time.perf_counter()
     valid = sum(checker.is_valid(s) for s in qa)

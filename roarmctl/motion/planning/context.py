@@ -1,0 +1,110 @@
+"""What every stage of planning one plan shares: ``PlanContext``."""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from roarmctl.motion.planning.pieces import UntimedMotion
+
+if TYPE_CHECKING:
+    from roarmctl.motion.collision import CollisionChecker
+    from roarmctl.motion.scene import SceneItem
+    from roarmctl.plan.schema import ItemSpec, Plan
+    from roarmctl.robot.model import Robot
+
+
+class StageTimer:
+    """Wall time (s) spent per planning stage: ik, ompl, simplify, toppra, recheck, blend."""
+
+    def __init__(self) -> None:
+        self.t: dict[str, float] = dict.fromkeys(("ik", "ompl", "simplify", "toppra", "recheck", "blend"), 0.0)
+
+    def add(self, key: str, since: float) -> None:
+        """Add the time since ``since`` (a ``time.perf_counter()`` value) to stage ``key``."""
+        self.t[key] = self.t.get(key, 0.0) + time.perf_counter() - since
+
+
+class PlanContext:
+    """One plan being planned for one robot: the plan, the robot, its collision checker, the scaled limits,
+    the world as it is at this point of the plan (object poses, the held object, its payload), and what the
+    user is told (``warnings``, ``notes``) with the stage ``timer``.
+
+    Joint limits: ``vmax``/``amax`` (dof,) rad/s, rad/s^2 scaled by the plan; ``jmax`` (dof,) rad/s^3 and
+    ``effort`` (dof,) N m as the robot has them (None: none). ``arm`` indexes the arm joints, ``gi`` the
+    gripper joint (None without a gripper).
+    """
+
+    def __init__(self, plan: Plan, robot: Robot, checker: CollisionChecker) -> None:
+        from roarmctl.robot.ik import takes_pitch
+
+        self.plan, self.robot, self.checker = plan, robot, checker
+        self.timer = StageTimer()
+        self.warnings: list[str] = []
+        self.notes: list[str] = []
+        self.pitch_free = takes_pitch(robot)  # the IK takes a tool pitch (pitch: auto chooses it)
+        self.noted_position_only = False  # "no pitch given" note (generic arms): once per plan
+        self.arm = robot.arm_indices
+        self.gi = robot.joint_index(robot.gripper.joint) if robot.gripper else None
+        self.object_pose = {o.name: o.pose.copy() for o in plan.objects}
+        self.held: str | None = None
+        self.held_offset = np.zeros(3)  # TCP position minus object centre at grasp (world frame)
+        self.pending_pick: tuple[str, np.ndarray] | None = None  # set by a pick, taken by its grasp
+        self.vmax = robot.velocity_limits * plan.limits.velocity_scale
+        self.amax = robot.acceleration_limits * plan.limits.acceleration_scale
+        self.jmax = robot.jerk_limits  # not scaled: the scales slow the motion, the jerk bound keeps it smooth
+        self.effort = robot.effort_limits
+        self.payload: dict | None = None  # link -> Inertial of the held object, from grasp to release
+        self.payload_label = ""
+        self.free_count = 0  # free motions planned so far (each gets its own OMPL seed)
+
+    def set_state(self, gripper: float | None, grasp_target: str | None = None) -> None:
+        """Put the checker in a motion's collision state: the gripper at ``gripper`` (rad; None: as it is) and
+        the object the jaws may touch (none for the held object)."""
+        if gripper is not None:
+            self.checker.set_gripper(float(gripper))
+        # A held object is attached to the hand (the checker ignores its contact with the jaws);
+        # a grasp target is an object in the scene that the jaws may touch.
+        self.checker.set_grasp_target(grasp_target if grasp_target != self.held else None)
+
+    def first_invalid(self, qf: np.ndarray) -> int | None:
+        """First invalid configuration of ``qf`` (M, dof), the gripper as given per sample (grasp target as set).
+
+        One checker call with a gripper value per row (not one call per run of equal gripper values: while
+        the jaws move, that was one call per sample); the checker's own gripper value is left as it was."""
+        if self.gi is None:
+            return self.checker.first_invalid(qf[:, self.arm])
+        return self.checker.first_invalid(qf[:, self.arm], gripper=qf[:, self.gi])
+
+    def target_of(self, motion: UntimedMotion) -> str | None:
+        """The grasp target the checker gets for ``motion`` (``set_state``: none for the held object)."""
+        return motion.step.grasp_target if motion.step.grasp_target != self.held else None
+
+    def set_state_of(self, motion: UntimedMotion) -> None:
+        """The collision state of ``motion``: its gripper value at the start, its grasp target."""
+        self.set_state(motion.wps[0][self.gi] if self.gi is not None else None, grasp_target=motion.step.grasp_target)
+
+
+def robot_spec(plan: Plan) -> str:
+    """The plan's ``robot``: a bundled name as is; any other name is a path relative to the plan file's directory."""
+    from pathlib import Path
+
+    from roarmctl.robot.loader import bundled_robots
+
+    if plan.robot in bundled_robots():
+        return plan.robot
+    candidate = plan.path.parent / Path(plan.robot).expanduser()
+    try:
+        return str(candidate) if candidate.is_file() else plan.robot
+    except (OSError, ValueError):  # a name the OS refuses as a path (too long)
+        return plan.robot
+
+
+def scene_item(spec: ItemSpec) -> SceneItem:
+    """The scene item of a plan's table, obstacle or object (at its start pose)."""
+    from roarmctl.motion.scene import SceneItem
+
+    return SceneItem(name=spec.name, role=spec.role, shape=spec.shape, pose=spec.pose.copy(), size=tuple(spec.size),
+                     radius=spec.radius, length=spec.length)

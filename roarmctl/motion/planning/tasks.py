@@ -1,0 +1,253 @@
+"""Tasks to steps: a pick, place, move or wait of the plan becomes the ``TaskStep``s that do it (free transit,
+straight descent and lift, gripper action), with the IK choice of every target: within the limits,
+collision-free, outside the singularity margin, nearest the previous pose, at the tool pitch the task asks
+(or the nearest valid one with ``pitch: auto``)."""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from roarmctl.errors import InfeasibleError, PlanFileError, UnreachableError
+from roarmctl.motion.planning.grasp import grip_value
+from roarmctl.motion.planning.pieces import TaskStep, with_value
+from roarmctl.motion.trajectory import Event
+from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask, WaitTask
+
+if TYPE_CHECKING:
+    from roarmctl.motion.planning.context import PlanContext
+
+
+def where(task, index: int) -> str:
+    """How messages name a task: ``task 2 (place, line 14)`` (counted from 1)."""
+    return f"task {index + 1} ({task.kind}, line {task.line})"
+
+
+def pitch_label(pitch: float, auto: bool) -> str:
+    """Segment label suffix recording an automatically chosen pitch."""
+    return f" (pitch {math.degrees(pitch):.1f} deg, auto)" if auto else ""
+
+
+def expand(ctx: PlanContext, task, q: np.ndarray, index: int) -> list[TaskStep]:
+    """The steps of ``task`` (the ``index``-th, counted from 0) starting at ``q`` (dof,) rad."""
+    at = where(task, index)
+    if isinstance(task, WaitTask):
+        return [TaskStep("wait", f"{at}: wait {task.seconds:g} s", duration=task.seconds)]
+    if isinstance(task, MoveTask):
+        goal, label = move_goal(ctx, task, q, at)
+        steps = [TaskStep("free", f"{at}: move{label}", q_to=goal)]
+        g = gripper_value(ctx, task.gripper)
+        if g is not None and abs(g - q[ctx.gi]) > 1e-9:
+            word = {"open": "open", "closed": "close"}.get(task.gripper, "set") if isinstance(task.gripper, str) else "set"
+            if np.max(np.abs(goal[ctx.arm] - q[ctx.arm])) < 1e-9:  # the arm is there already
+                steps = [TaskStep("gripper", f"{at}: {word} gripper", gripper_to=g)]
+            else:  # during the move where the jaws are clear (blending), else right after it
+                steps[0].open_to, steps[0].open_label = g, f"{at}: {word} gripper"
+        return steps
+    if isinstance(task, PickTask):
+        return expand_pick(ctx, task, q, at)
+    return expand_place(ctx, task, q, at)
+
+
+def gripper_value(ctx: PlanContext, value: float | str | None) -> float | None:
+    """A move's ``gripper:`` as a joint value (rad), or None (keep it)."""
+    if value is None:
+        return None
+    if ctx.gi is None:
+        raise InfeasibleError(f"{ctx.plan.path}: {ctx.robot.name} has no gripper to open or close")
+    if isinstance(value, str):
+        return float(ctx.robot.gripper.open if value == "open" else ctx.robot.gripper.closed)
+    lo, hi = ctx.robot.lower[ctx.gi], ctx.robot.upper[ctx.gi]
+    if not lo - 1e-9 <= value <= hi + 1e-9:
+        raise InfeasibleError(f"{ctx.plan.path}: gripper {value:.3f} rad is outside [{lo:.3f}, {hi:.3f}]")
+    return float(value)
+
+
+def move_goal(ctx: PlanContext, task: MoveTask, q: np.ndarray, at: str) -> tuple[np.ndarray, str]:
+    """A move's goal configuration (dof,) rad, the gripper as at ``q``, and a label suffix (the pitch chosen)."""
+    label = ""
+    if task.pose is not None:
+        goal = ctx.robot.full_q(ctx.robot.named_poses[task.pose]).copy()
+    elif task.joints is not None:
+        try:
+            goal = ctx.robot.full_q(task.joints).copy()
+        except Exception as exc:  # wrong length
+            raise InfeasibleError(f"{at}: joints: {exc}") from None
+    else:
+        chain, pitch = choose_ik_pitch(ctx, [task.xyz], held_pitch(ctx, task, at), task.pitch_auto, None, q, at)
+        goal = chain[0]
+        label = pitch_label(pitch, task.pitch_auto and pitch is not None)
+    if ctx.gi is not None:
+        goal[ctx.gi] = q[ctx.gi]
+    if not ctx.robot.within_limits(goal):
+        raise InfeasibleError(f"{at}: the goal configuration is outside the joint limits")
+    return goal, label
+
+
+def expand_pick(ctx: PlanContext, task: PickTask, q: np.ndarray, at: str) -> list[TaskStep]:
+    """A pick: transit above the object (the gripper opening on the way), straight descent, grasp, straight lift."""
+    if ctx.held is not None:
+        raise InfeasibleError(f"{at}: picks '{task.object}' while still holding '{ctx.held}'", "place it first")
+    centre = ctx.object_pose[task.object][:3, 3]
+    grasp = centre + np.array([0.0, 0.0, task.grasp_offset])
+    above = grasp + np.array([0.0, 0.0, task.approach_height])
+    g_open = task.gripper_open if task.gripper_open is not None else ctx.robot.gripper.open
+    g_closed = grip_value(ctx, task, g_open, at)
+    ctx.set_state(g_open, grasp_target=task.object)
+    (q_grasp, q_above), pitch = choose_ik_pitch(ctx, [grasp, above], held_pitch(ctx, task, at), task.pitch_auto,
+                                                task.roll, q, at, gripper=g_open)
+    ctx.set_state(q[ctx.gi])
+    lab = pitch_label(pitch, task.pitch_auto and pitch is not None)
+    steps = [TaskStep("free", f"{at}: transit above '{task.object}'{lab}", q_to=with_value(q_above, ctx.gi, q[ctx.gi]),
+                      open_to=g_open if abs(q[ctx.gi] - g_open) > 1e-9 else None, open_label=f"{at}: open gripper")]
+    steps += [
+        TaskStep("cartesian", f"{at}: descend to '{task.object}'{lab}", q_to=q_grasp, line=(above, grasp),
+                 pitch=pitch, roll=task.roll, grasp_target=task.object),
+        TaskStep("gripper", f"{at}: grasp '{task.object}'", gripper_to=g_closed, grasp_target=task.object,
+                 event=Event(0.0, "grasp", f"pick {task.object}", [float(v) for v in grasp])),
+        TaskStep("cartesian", f"{at}: lift '{task.object}'{lab}", q_to=q_above, line=(grasp, above),
+                 pitch=pitch, roll=task.roll, grasp_target=task.object),
+    ]
+    ctx.pending_pick = (task.object, grasp - centre)
+    return steps
+
+
+def expand_place(ctx: PlanContext, task: PlaceTask, q: np.ndarray, at: str) -> list[TaskStep]:
+    """A place: transit above the target, straight lowering, release, straight retreat."""
+    if ctx.held is None:
+        raise InfeasibleError(f"{at}: places an object but nothing is held", "add a pick task before it")
+    name = ctx.held
+    if task.object is not None and task.object != name:
+        raise InfeasibleError(f"{at}: places '{task.object}' but the gripper holds '{name}'")
+    target = np.asarray(task.xyz, dtype=float) + ctx.held_offset
+    above = target + np.array([0.0, 0.0, task.approach_height])
+    g_open = task.gripper_open if task.gripper_open is not None else ctx.robot.gripper.open
+    (q_place, q_above), pitch = choose_ik_pitch(ctx, [target, above], held_pitch(ctx, task, at), task.pitch_auto,
+                                                task.roll, q, at)
+    lab = pitch_label(pitch, task.pitch_auto and pitch is not None)
+    return [
+        TaskStep("free", f"{at}: transit above the place for '{name}'{lab}", q_to=q_above),
+        TaskStep("cartesian", f"{at}: lower '{name}'{lab}", q_to=q_place, line=(above, target), pitch=pitch, roll=task.roll),
+        TaskStep("gripper", f"{at}: release '{name}'", gripper_to=g_open, grasp_target=name,
+                 event=Event(0.0, "release", f"place {name}", [float(v) for v in target])),
+        TaskStep("cartesian", f"{at}: retreat from '{name}'{lab}", q_to=with_value(q_above, ctx.gi, g_open), line=(target, above),
+                 pitch=pitch, roll=task.roll, grasp_target=name),
+    ]
+
+
+def held_pitch(ctx: PlanContext, task: PickTask | PlaceTask | MoveTask, at: str) -> float | None:
+    """The tool pitch (rad) the IK holds for ``task``, or None (position-only IK).
+
+    The RoArm (``ik.takes_pitch``) holds the task's pitch, straight down by default. Other arms hold the
+    pitch (and roll) the plan writes, through the numerical IK's approach-axis target; a task without
+    them is solved for the position only (noted once). A position-only IK family (``roarm3``) refuses
+    a written pitch or roll instead of ignoring it."""
+    from roarmctl.robot.ik import accepts_pitch
+
+    written = getattr(task, "pitch_set", False) or getattr(task, "roll", None) is not None
+    if isinstance(task, MoveTask):
+        written = task.pitch is not None
+    if ctx.pitch_free:
+        return task.pitch if task.pitch is not None else math.pi / 2
+    if not written:
+        if accepts_pitch(ctx.robot) and not isinstance(task, MoveTask) and not ctx.noted_position_only:
+            ctx.noted_position_only = True
+            ctx.notes.append(f"{at}: no pitch given: {ctx.robot.name}'s grasps and placements are solved for the "
+                             f"position only (the tool's approach follows from the IK); write pitch (e.g. "
+                             f"{{deg: 90}}, straight down) to hold one")
+        return None
+    if not accepts_pitch(ctx.robot):
+        raise PlanFileError(f"{at}: pitch/roll: {ctx.robot.name}'s IK is position only (its tool pitch follows "
+                            f"from the shoulder and elbow angles), so the plan's pitch cannot be held",
+                            "leave pitch and roll out for this arm")
+    return task.pitch if task.pitch is not None else math.pi / 2
+
+
+def choose_ik_pitch(ctx: PlanContext, points: list[np.ndarray], pitch: float | None, auto: bool, roll: float | None,
+                    q: np.ndarray, at: str, gripper: float | None = None) -> tuple[list[np.ndarray], float | None]:
+    """``choose_ik`` for points that share one pitch (None: position only); with ``auto`` the pitch nearest
+    to ``pitch`` (1 deg steps, ``ik.pitch_candidates``) at which a chain is valid (limits, collisions, margin)."""
+    from roarmctl.robot.ik import pitch_candidates
+
+    if not auto or pitch is None:  # no pitch to choose
+        return choose_ik(ctx, [(p, pitch, roll) for p in points], q, at, gripper=gripper), pitch
+    first: UnreachableError | None = None
+    for cand in pitch_candidates(pitch):
+        try:
+            chain = choose_ik(ctx, [(p, cand, roll) for p in points], q, at, gripper=gripper)
+        except UnreachableError as exc:
+            first = first or exc
+            continue
+        ctx.notes.append(f"{at}: pitch auto chose {math.degrees(cand):.1f} deg (asked {math.degrees(pitch):.1f} deg)")
+        return chain, cand
+    why = first.message[len(at) + 2:] if first.message.startswith(f"{at}: ") else first.message
+    raise UnreachableError(f"{at}: no tool pitch reaches it validly; at {math.degrees(pitch):.1f} deg: {why}",
+                           first.reason, first.hint)
+
+
+def choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float, float | None]], q: np.ndarray, at: str,
+              gripper: float | None = None) -> list[np.ndarray]:
+    """IK for a chain of targets (position m, pitch, roll rad) on one branch: valid, margin-respecting, nearest
+    to ``q``. Returns one full configuration per target (gripper value of ``q`` unless ``gripper``).
+    """
+    from roarmctl.robot.ik import solve_ik, solve_ik_near
+
+    t0 = time.perf_counter()
+    g = q[ctx.gi] if gripper is None and ctx.gi is not None else gripper
+    if g is not None:  # the chain is checked with the gripper value it carries
+        ctx.checker.set_gripper(float(g))
+    first, pitch, roll = targets[0]
+    try:
+        candidates = solve_ik(ctx.robot, first, pitch=pitch, roll=roll, q_ref=q, all_solutions=True)
+    except UnreachableError as exc:
+        ctx.timer.add("ik", t0)
+        p = first
+        raise UnreachableError(f"{at}: target ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m is unreachable: {exc.message}",
+                               exc.reason, exc.hint) from None
+    reasons: list[str] = []
+    best, best_cost = None, math.inf
+    for cand in candidates:
+        chain = [with_value(cand, ctx.gi, g)]
+        ok = True
+        for p, pt, rl in targets[1:]:
+            try:
+                nxt = solve_ik_near(ctx.robot, p, chain[-1], pitch=pt, roll=rl)
+            except UnreachableError as exc:
+                reasons.append(exc.message)
+                ok = False
+                break
+            chain.append(with_value(nxt, ctx.gi, g))
+        if not ok:
+            continue
+        bad = next((c for c in chain if not ctx.checker.is_valid(c[ctx.arm])), None)
+        if bad is not None:
+            reasons.append(ctx.checker.explain(bad[ctx.arm]))
+            continue
+        cost = float(np.sum(np.abs(chain[-1][ctx.arm] - q[ctx.arm])))
+        if cost < best_cost:
+            best, best_cost = chain, cost
+    ctx.timer.add("ik", t0)
+    if best is None:
+        p = first
+        why = reasons[0] if reasons else "no IK solution"
+        raise UnreachableError(f"{at}: no valid arm configuration reaches ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m: {why}",
+                               "collision" if reasons else "out_of_reach", "move the target or change the approach height or pitch")
+    return best
+
+
+def warn_collinear(ctx: PlanContext, tasks: list) -> None:
+    """Pick and place on opposite sides of the base: the straight way between them passes over the
+    base axis, where the arm is singular (a failure seen in practice on the RoArm)."""
+    picks = [ctx.object_pose[t.object][:3, 3] for t in tasks if isinstance(t, PickTask)]
+    places = [np.asarray(t.xyz) for t in tasks if isinstance(t, PlaceTask)]
+    for a, b in zip(picks, places):
+        if np.hypot(*a[:2]) < 1e-6 or np.hypot(*b[:2]) < 1e-6:
+            continue
+        angle = abs(math.remainder(math.atan2(a[1], a[0]) - math.atan2(b[1], b[0]), 2 * math.pi))
+        if angle > math.radians(170):
+            ctx.warnings.append(
+                f"pick ({a[0]:.2f}, {a[1]:.2f}) and place ({b[0]:.2f}, {b[1]:.2f}) are collinear with the base: a straight "
+                "move would cross the base-axis singularity; the planner keeps the singularity margin and turns the base instead")
