@@ -12,7 +12,7 @@ without. Figures are medians over repeats, in ms, pinned to one core:
               (RoArm: ``LineIK``'s batch over the samples)
   1-by-1      the same samples as one ``solve_ik_near`` each from the previous solution (what
               ``cartesian_line`` did before ``LineIK``; same solutions)
-  batch16 / seq16   ``_dls_batch`` on 16 random starts at once / one start at a time
+  batch16 / seq16   ``dls_batch`` on 16 random starts at once / one start at a time
 ``--plan`` also plans each given plan file (``roarmctl.api.plan``, the kept DLS outcomes dropped before
 each run) and prints the median planning time and its IK stage (e.g. a user's SO-100 plan; its
 description is not bundled).
@@ -37,7 +37,8 @@ import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
 from roarmctl.motion.cartesian import cartesian_line  # noqa: E402
-from roarmctl.robot.ik import _Aim, _dls_batch, pitch_aim, solve_ik, solve_ik_near  # noqa: E402
+from roarmctl.robot.ik import pitch_aim, solve_ik, solve_ik_near  # noqa: E402
+from roarmctl.robot.ik.dls import Aim, dls_batch  # noqa: E402
 from roarmctl.robot.loader import load_robot  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,7 +56,7 @@ def hobby_arm(folder: Path) -> str:
 
 def median_ms(fn, repeats: int, robot=None) -> float:
     """Median wall time of ``fn()`` in ms; ``robot``'s kept DLS outcomes are dropped before each call
-    (a first solve, not a repeat: see ``ik._dls_solve``)."""
+    (a first solve, not a repeat: see ``ik.dls.dls_solve``)."""
     out = []
     for _ in range(repeats):
         if robot is not None:
@@ -108,10 +109,10 @@ def main() -> None:
             continue
         rng = np.random.default_rng(0)
         starts = np.array([r.full_q(rng.uniform(r.lower[arm], r.upper[arm])) for _ in range(16)])
-        aim = pitch_aim(r, p, pitch, None, None) if pitch is not None else _Aim()
+        aim = pitch_aim(r, p, pitch, None, None) if pitch is not None else Aim()
         lo, hi = r.lower[arm], r.upper[arm]
-        b_ms = median_ms(lambda: _dls_batch(r, starts, p, aim, lo, hi), args.repeats)
-        s_ms = median_ms(lambda: [_dls_batch(r, starts[i:i + 1], p, aim, lo, hi) for i in range(16)], args.repeats)
+        b_ms = median_ms(lambda: dls_batch(r, starts, p, aim, lo, hi), args.repeats)
+        s_ms = median_ms(lambda: [dls_batch(r, starts[i:i + 1], p, aim, lo, hi) for i in range(16)], args.repeats)
         print(f"{label:24s} {all_ms:10.1f} {one_ms:10.1f} {line:>10s} {one_by_one:>9s} {b_ms:9.1f} {s_ms:9.1f}")
     if args.plan:
         import roarmctl.api as rc

@@ -11,7 +11,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from roarmctl.errors import InputError, UnreachableError
-from roarmctl.robot.ik import _dls_solve, solve_ik
+from roarmctl.robot.ik import solve_ik
+from roarmctl.robot.ik.dls import dls_solve
+from roarmctl.robot.ik.roarm5 import Roarm5IK
 from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import rpy_from_matrix, transform
 
@@ -236,7 +238,7 @@ def test_ur10_random_round_trip_matches_numerical_count():
         if len(sols) < 8:
             break
         qa = rng.uniform(-np.pi, np.pi, 6)
-    found = _dls_solve(UR10, t[:3, 3], t[:3, :3], None, True, restarts=80)
+    found = dls_solve(UR10, t[:3, 3], t[:3, :3], None, True, restarts=80)
     distinct = []
     for q in found:
         if all(np.max(_wrapdiff(q, o)) > 1e-4 for o in distinct):
@@ -273,7 +275,7 @@ def _planar_xy(r, p):
 def test_dls_ur10_full_pose_and_position_only():
     qa = np.radians([10, 30, 40, -20, 50, 10])
     t = UR10.kin.fk(qa)
-    sols = _dls_solve(UR10, t[:3, 3], t[:3, :3], None, False)
+    sols = dls_solve(UR10, t[:3, 3], t[:3, :3], None, False)
     _check_all(UR10, sols, t[:3, 3], rot=t[:3, :3])
     sols = solve_ik(UR10, t[:3, 3])  # position only -> DLS
     _check_all(UR10, sols, t[:3, 3])
@@ -438,7 +440,7 @@ def test_line_ik_falls_back_where_the_batch_cannot_decide():
     start's are solved one at a time, with solve_ik_near's answer."""
     from roarmctl.robot import ik
 
-    base = ik._RoarmIK(ROARM).base_xy
+    base = Roarm5IK(ROARM).base_xy
     q0 = solve_ik(ROARM, [0.1, 0.0, 0.35], pitch=0.0)[0]
     pts = np.array([[0.05, 0.0, 0.35], [base[0], base[1], 0.35], [0.05, 0.0, 0.35], [0.2, 0.0, 0.8]])
     line = ik.LineIK(ROARM, pts, q0, pitch=0.0, roll=None)

@@ -11,7 +11,8 @@ import yaml
 
 import roarmctl.api as rc
 from roarmctl.errors import PlanFileError, UnreachableError
-from roarmctl.robot.ik import ORI_TOL, POS_TOL, _Aim, _dls_batch, pitch_aim, solve_ik, solve_ik_near
+from roarmctl.robot.ik import ORI_TOL, POS_TOL, pitch_aim, solve_ik, solve_ik_near
+from roarmctl.robot.ik.dls import Aim, dls_batch
 from roarmctl.robot.loader import load_robot
 
 # Pan about z, then shoulder, elbow and wrist pitch about y, wrist roll about x (the approach axis), a
@@ -80,11 +81,11 @@ def test_batched_starts_equal_one_at_a_time(hobby):
         rng = np.random.default_rng(4)
         starts = np.array([robot.full_q(rng.uniform(robot.lower[arm], robot.upper[arm])) for _ in range(12)])
         p = robot.kin.fk(starts[0] * 0.5)[:3, 3]
-        aim = pitch_aim(robot, p, 1.2, None, None) if aimed else _Aim()
+        aim = pitch_aim(robot, p, 1.2, None, None) if aimed else Aim()
         lo, hi = robot.lower[arm], robot.upper[arm]
-        q, ep, eo = _dls_batch(robot, starts, p, aim, lo, hi)
+        q, ep, eo = dls_batch(robot, starts, p, aim, lo, hi)
         for i in range(len(starts)):
-            q1, ep1, eo1 = _dls_batch(robot, starts[i:i + 1], p, aim, lo, hi)
+            q1, ep1, eo1 = dls_batch(robot, starts[i:i + 1], p, aim, lo, hi)
             assert np.allclose(q1[0], q[i], atol=1e-9), i
             assert ep1[0] == pytest.approx(ep[i], abs=1e-12) and eo1[0] == pytest.approx(eo[i], abs=1e-9)
         assert np.sum((ep <= POS_TOL) & (eo <= ORI_TOL)) >= 2  # the batch does find solutions
