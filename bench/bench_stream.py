@@ -43,7 +43,7 @@ def run_inprocess(traj_path: Path, strategy: str, rate: float, speed_scale: floa
     from roarmctl.device.link import Link
     from roarmctl.device.simulator import PtySimulator, SimConfig
     from roarmctl.device.streamer import StreamConfig, Streamer, sample
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import load_trajectory
     from roarmctl.robot.loader import load_robot
 
     traj = load_trajectory(traj_path)
@@ -96,7 +96,7 @@ def main() -> None:
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
     traj_path = args.traj or bundled_trajectory(tmp / "pick_place.traj.json")
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import load_trajectory
 
     traj = load_trajectory(traj_path)
     print(f"trajectory: {traj_path.name}, {traj.duration:.2f} s, peak |qd| "

@@ -40,7 +40,7 @@ def main() -> None:
 
     print(f"import roarmctl.viz.path_figure + workspace_figure (matplotlib): {time.perf_counter() - t0:.2f} s")
 
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import load_trajectory
     from roarmctl.robot.loader import load_robot
     from roarmctl.viz.data import path_data, robot_for
     from roarmctl.viz.path_figure import visualize_trajectory

@@ -69,7 +69,7 @@ def chain_to(link: str, transforms: dict[str, tuple[str, np.ndarray]]) -> np.nda
 
 
 def check_plan_bag(bag: dict[str, list], traj_path: Path) -> None:
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import load_trajectory
     from roarmctl.robot.loader import load_robot
 
     traj = load_trajectory(traj_path)
@@ -187,7 +187,7 @@ def test_demo_execution_log_commanded_and_measured(demo, suffix):
 
 
 def test_csv_of_trajectory_and_log(demo):
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import load_trajectory
 
     d, traj_path, log_path = demo
     traj = load_trajectory(traj_path)
@@ -237,7 +237,7 @@ def test_damaged_log_is_exit_2(demo, tmp_path, capsys):
 
 
 def test_log_with_its_trajectory_adds_planned_states_and_scene(demo, capsys):
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import load_trajectory
 
     d, traj_path, log_path = demo
     out = d / "run_with_plan.mcap"

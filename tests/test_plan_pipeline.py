@@ -17,7 +17,7 @@ import fcl
 import numpy as np
 import pytest
 
-from roarmctl.motion.trajectory import load_trajectory
+from roarmctl.motion.validate import load_trajectory
 from roarmctl.plan.schema import PickTask, PlaceTask, load_plan
 from roarmctl.robot.loader import load_robot
 

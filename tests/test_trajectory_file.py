@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from roarmctl.motion.trajectory import Event, Segment, Trajectory, load_trajectory
+from roarmctl.motion.trajectory import Event, Segment, Trajectory
+from roarmctl.motion.validate import load_trajectory
 
 
 def _traj(sign: float) -> Trajectory:

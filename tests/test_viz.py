@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from roarmctl.errors import InputError, TrajectoryFileError
-from roarmctl.motion.trajectory import load_trajectory
+from roarmctl.motion.validate import load_trajectory
 from roarmctl.robot.loader import load_robot
 
 sys.path.insert(0, str(Path(__file__).parent))

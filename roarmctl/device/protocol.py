@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from roarmctl.robot.model import WIRE_FIELDS
+
 BAUDRATE = 115200
 BYTES_PER_SECOND = BAUDRATE / 10.0  # 8N1: 10 bits per byte on the wire
 STEPS_PER_REV = 4096
@@ -32,7 +34,7 @@ SPD_MAX_REGISTER = 4096
 ACC_MAX_REGISTER = 254
 
 #: T:102 joint fields of the M3 firmware, in the firmware's joint order (1..6 for T:101).
-M3_FIELDS = ("base", "shoulder", "elbow", "wrist", "roll", "hand")
+M3_FIELDS = WIRE_FIELDS
 #: The matching T:1051 feedback keys.
 M3_FEEDBACK_KEYS = ("b", "s", "e", "t", "r", "g")
 #: T:102 joint fields of the RoArm-M2 firmware (waveshare_roarm_sdk roarm_sdk/common.py,

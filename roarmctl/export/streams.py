@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.errors import InputError
+from roarmctl.motion.trajectory import carried_item
 
 if TYPE_CHECKING:
     from roarmctl.motion.trajectory import Trajectory
@@ -66,11 +67,9 @@ def item_tracks(traj: Trajectory, robot: Robot) -> list[ItemTrack]:
     """Scene items with their poses over time; a grasped object follows the TCP until its release.
 
     The object carried from a grasp is the one whose centre is nearest the grasp target (within
-    ``viz.data.GRASP_RADIUS``), as ``visualize-path`` decides; its pose relative to the TCP is fixed
+    ``motion.trajectory.GRASP_RADIUS``), as ``visualize-path`` decides; its pose relative to the TCP is fixed
     at the grasp sample.
     """
-    from roarmctl.viz.data import carried_item
-
     items = [i for i in (traj.scene or {}).get("items", []) if isinstance(i, dict)]
     times = np.asarray(traj.times, dtype=float)
     current = {id(i): item_pose(i) for i in items}

@@ -138,18 +138,21 @@ def _unsigned_zeros(x: Any) -> Any:
     return x
 
 
-def load_trajectory(path: str | Path) -> Trajectory:
-    """Read a ``*.traj.json`` file and check its form; any problem raises ``TrajectoryFileError`` (exit 2).
-
-    The checks against the robot (limits, speeds, steps) are ``roarmctl.motion.validate.validate_trajectory``.
-    """
-    from roarmctl.motion.validate import parse_document, read_document
-
-    return parse_document(read_document(path), str(path))
+GRASP_RADIUS = 0.06  # m: an object whose centre is this close to a grasp target is the one carried
 
 
-def trajectory_from_dict(data: Any, where: str = "trajectory") -> Trajectory:
-    """A parsed trajectory document -> ``Trajectory`` (form only; see ``load_trajectory``)."""
-    from roarmctl.motion.validate import parse_document
-
-    return parse_document(data, where)
+def carried_item(items: list[dict], target: np.ndarray) -> dict | None:
+    """The scene object (``role: object``) of a trajectory's ``scene`` items whose centre is nearest ``target`` (3,) m,
+    within ``GRASP_RADIUS``; else None: the object a grasp at ``target`` carries (``visualize-path`` and ``export``
+    decide it alike)."""
+    carried, best = None, GRASP_RADIUS
+    for item in items:
+        if not isinstance(item, dict) or item.get("role") != "object":
+            continue
+        try:
+            d = float(np.linalg.norm(np.asarray(item.get("xyz", (0, 0, 0)), dtype=float) - target))
+        except (TypeError, ValueError):
+            continue
+        if d <= best:
+            best, carried = d, item
+    return carried

@@ -21,11 +21,14 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from roarmctl.errors import TrajectoryFileError, describe_value
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
 
 MAX_FILE_BYTES = 256 * 1024 * 1024  # a one-hour trajectory at 100 Hz is about 80 MB
 MAX_POINTS = 1_000_000
@@ -413,3 +416,16 @@ def validate_trajectory(traj_or_doc: Any, robot: Any = None, where: str | None =
                                       f"file ({exc})") from None
     check_against_robot(traj, robot, where)
     return traj
+
+
+def load_trajectory(path: str | Path) -> Trajectory:
+    """Read a ``*.traj.json`` file and check its form; any problem raises ``TrajectoryFileError`` (exit 2).
+
+    The checks against the robot (limits, speeds, steps) are ``validate_trajectory``.
+    """
+    return parse_document(read_document(path), str(path))
+
+
+def trajectory_from_dict(data: Any, where: str = "trajectory") -> Trajectory:
+    """A parsed trajectory document -> ``Trajectory`` (form only; see ``load_trajectory``)."""
+    return parse_document(data, where)

@@ -91,6 +91,11 @@ class CollisionShape:
     mesh: object | None = None
 
 
+#: The joint fields of the RoArm firmware's ``T:102`` command, in its joint order (Waveshare RoArm-M3 example
+#: firmware 0.84, json_cmd.h): the names a description's ``wire`` map may give its joints (the M2 uses four).
+WIRE_FIELDS = ("base", "shoulder", "elbow", "wrist", "roll", "hand")
+
+
 @dataclass(frozen=True)
 class WireField:
     """How one joint appears on the device's wire: ``wire = offset + sign * q``, clamped to [lower, upper]."""

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from roarmctl.errors import DescriptionError, describe_value
+from roarmctl.robot.model import WIRE_FIELDS
 
 AXIS_TOL = 1e-3  # |axis| must be 1 within this (URDF axes are unit vectors)
 MAX_VALUE = 1e6  # any length (m), angle (rad), limit or mass in a description
@@ -360,8 +361,6 @@ def _check_geometry(col, where: str, field: str) -> None:
 # --------------------------------------------------------------------------- the loaded robot
 def check_robot(robot, where: str) -> None:
     """Semantic checks of a loaded ``Robot`` (see the module docstring)."""
-    from roarmctl.device import protocol
-
     names = list(robot.joint_names)
     if len(set(names)) != len(names):
         _fail(where, "joints", "a joint is named twice")
@@ -427,7 +426,7 @@ def check_robot(robot, where: str) -> None:
             i = int(bad[0])
             _fail(where, f"named_poses.{pname}", f"{names[i]} = {q[i]:g} is outside its limits [{lo[i]:g}, {hi[i]:g}]")
     if robot.wire:
-        _check_wire(robot, where, set(protocol.M3_FIELDS))
+        _check_wire(robot, where, set(WIRE_FIELDS))
 
 
 def _check_wire(robot, where: str, fields: set[str]) -> None:

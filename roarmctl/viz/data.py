@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from roarmctl.errors import InputError, TrajectoryFileError
+from roarmctl.motion.trajectory import GRASP_RADIUS, carried_item  # noqa: F401  (GRASP_RADIUS re-exported)
 
 if TYPE_CHECKING:
     from roarmctl.motion.trajectory import Trajectory
@@ -82,24 +83,6 @@ class PathData:
     arm_segments: list[tuple[int, int]] = field(default_factory=list)
     scene_items: list[dict] = field(default_factory=list)
     placed_items: list[dict] = field(default_factory=list)
-
-
-GRASP_RADIUS = 0.06  # m: an object whose centre is this close to a grasp target is the one carried
-
-
-def carried_item(items: list[dict], target: np.ndarray) -> dict | None:
-    """The scene object (``role: object``) whose centre is nearest ``target`` (3,) m, within ``GRASP_RADIUS``; else None."""
-    carried, best = None, GRASP_RADIUS
-    for item in items:
-        if not isinstance(item, dict) or item.get("role") != "object":
-            continue
-        try:
-            d = float(np.linalg.norm(np.asarray(item.get("xyz", (0, 0, 0)), dtype=float) - target))
-        except (TypeError, ValueError):
-            continue
-        if d <= best:
-            best, carried = d, item
-    return carried
 
 
 def placed_objects(items: list[dict], events: list[EventMark]) -> list[dict]:

@@ -30,7 +30,7 @@ def m2_traj(tmp_path_factory) -> Path:
 
 
 def test_m2_plan_executes_on_the_m2_simulator(m2_traj, capsys):
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import load_trajectory
 
     traj = load_trajectory(m2_traj)
     robot = load_robot("roarm_m2_s")

@@ -17,7 +17,7 @@ import pytest
 from roarmctl.cli import main
 from roarmctl.device.protocol import WireMap, encode
 from roarmctl.device.simulator import PtySimulator, SimConfig
-from roarmctl.motion.trajectory import load_trajectory
+from roarmctl.motion.validate import load_trajectory
 from roarmctl.robot.ik import solve_ik
 from roarmctl.robot.loader import load_robot
 
