@@ -1,12 +1,16 @@
-"""Atomic file writes: a temporary file in the target's directory, then a rename.
+"""Files in and out, safely: atomic writes, and the one bounded reader every input goes through.
 
-An interrupted run therefore never leaves a half-written trajectory, log or picture.
+Writes: a temporary file in the target's directory, then a rename, so an interrupted run never
+leaves a half-written trajectory, log or picture. Reads (``read_bytes``, ``read_text``): regular
+files only, under a size cap, optionally only inside a description's ``Roots``. Parsing and field
+checks of what was read live in ``roarmctl.validation``.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import stat
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -66,3 +70,133 @@ def _mode_for(target: Path) -> int:
         umask = os.umask(0)
         os.umask(umask)
         return 0o666 & ~umask
+
+
+# --------------------------------------------------------------------------- bounded reading
+#: The largest file any reader takes unless it gives its own cap (bytes).
+DEFAULT_LIMIT = 16 * 1024 * 1024
+_CHUNK = 1024 * 1024
+
+
+class Roots:
+    """The folders a description may read: its own folder and the package folders it declares.
+
+    Every path is resolved (symlinks followed, ``..`` removed) before it is compared, so neither a
+    symlink nor ``package://pkg/../..`` leads out. ``packages`` maps a ROS package name to its folder
+    (``package://NAME/...``, ``$(find NAME)``); each package folder is a root too.
+    """
+
+    def __init__(self, folders: list[Path] | tuple[Path, ...] = (), packages: dict[str, Path] | None = None) -> None:
+        self.packages = {str(k): Path(v).resolve() for k, v in (packages or {}).items()}
+        self.folders = tuple(dict.fromkeys([Path(f).resolve() for f in folders] + list(self.packages.values())))
+
+    def with_folder(self, folder: Path) -> "Roots":
+        """These roots plus ``folder``."""
+        return Roots(self.folders + (Path(folder),), self.packages)
+
+    def contains(self, path: Path) -> bool:
+        """Whether the resolved ``path`` lies inside a root (a root itself counts)."""
+        return any(path == f or f in path.parents for f in self.folders)
+
+    def check(self, path: str | os.PathLike, what: str, error: type[InputError] = InputError,
+              hint: str | None = None) -> Path:
+        """``path`` resolved; raises ``error`` if it resolves outside every root (or in a symlink loop)."""
+        p = Path(path)
+        try:
+            real = p.resolve(strict=False)
+        except (RuntimeError, OSError) as exc:  # a symlink loop: RuntimeError before Python 3.13, OSError after
+            raise error(f"{what}: '{_short(p)}' cannot be resolved ({_reason(exc)})", "remove the symlink loop") from None
+        if not self.contains(real):
+            where = ", ".join(str(f) for f in self.folders) or "none"
+            raise error(f"{what}: '{_short(p)}' lies outside the folders this description may read ({where})",
+                        hint or "keep the files in the description's folder, or give their package with --package-path NAME=DIR")
+        return real
+
+    def __repr__(self) -> str:
+        return f"Roots({[str(f) for f in self.folders]}, packages={sorted(self.packages)})"
+
+
+def _short(p: Path | str, n: int = 120) -> str:
+    s = str(p)
+    return s if len(s) <= n else s[: n - 3] + "..."
+
+
+def _reason(exc: BaseException) -> str:
+    return getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+
+
+def read_bytes(path: str | os.PathLike, what: str | None = None, limit: int = DEFAULT_LIMIT, *,
+               roots: Roots | None = None, error: type[InputError] = InputError, hint: str | None = None) -> bytes:
+    """The bytes of the regular file ``path``, at most ``limit`` of them: the ONE way roarmctl reads an input.
+
+    ``what`` names the field that refers to the file (``"arm.yaml: srdf"``), None for a file named on
+    the command line. Refused with ``error`` (exit 2), naming the file: a missing file, a folder,
+    anything not a regular file (a FIFO or a device is refused before it is opened, so nothing blocks
+    and no serial port is touched), a file over ``limit`` bytes (checked before and while reading: a
+    sparse or growing file stops at the cap), a path outside ``roots`` (after resolving symlinks), a
+    symlink loop, a name the OS refuses.
+    """
+    p = Path(path)
+
+    def fail(text: str, fix: str | None = None):
+        raise error(f"{what}: file '{_short(p)}' {text}" if what else f"{_short(p)}: {text}", hint or fix)
+
+    if roots is not None:
+        p = roots.check(p, what or str(p), error, hint)
+    try:
+        st = os.stat(p)
+        if not stat.S_ISREG(st.st_mode):
+            fail(f"is {_file_kind(st.st_mode)}, not a regular file", "give the path of a file")
+        if st.st_size > limit:
+            fail(f"has {_size(st.st_size)}, more than the {_size(limit)} allowed", "is this the right file?")
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except FileNotFoundError:
+        fail("not found" if what else "no such file", "check the path")
+    except (OSError, ValueError) as exc:  # ELOOP, ENAMETOOLONG, EACCES, a NUL byte in the name
+        fail(f"cannot be read ({_reason(exc)})")
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):  # swapped between stat and open
+            fail(f"is {_file_kind(st.st_mode)}, not a regular file", "give the path of a file")
+        chunks, total = [], 0
+        while True:
+            chunk = os.read(fd, min(_CHUNK, limit + 1 - total))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            total += len(chunk)
+            if total > limit:
+                fail(f"has more than the {_size(limit)} allowed", "is this the right file?")
+        return b"".join(chunks)
+    except OSError as exc:
+        fail(f"cannot be read ({_reason(exc)})")
+        raise  # unreachable: fail raises
+    finally:
+        os.close(fd)
+
+
+def read_text(path: str | os.PathLike, what: str | None = None, limit: int = DEFAULT_LIMIT, *,
+              roots: Roots | None = None, error: type[InputError] = InputError, hint: str | None = None) -> str:
+    """``read_bytes`` decoded as UTF-8 (a byte-order mark is dropped); a bad byte is refused with its line."""
+    data = read_bytes(path, what, limit, roots=roots, error=error, hint=hint)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        where = f"{what}: file '{_short(path)}' line {line}" if what else f"{_short(path)}:{line}"
+        raise error(f"{where}: not UTF-8 text (byte {exc.start})", "save the file as UTF-8") from None
+
+
+def _file_kind(mode: int) -> str:
+    for test, name in ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def _size(n: int) -> str:
+    for unit, scale in (("GiB", 2 ** 30), ("MiB", 2 ** 20), ("KiB", 2 ** 10)):
+        if n >= scale:
+            return f"{n / scale:.0f} {unit}" if n % scale == 0 or n >= 10 * scale else f"{n / scale:.1f} {unit}"
+    return f"{n} bytes"

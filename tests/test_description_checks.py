@@ -71,7 +71,7 @@ URDF_CASES = {
 }
 
 YAML_CASES = {
-    "wire unknown field": ([(WIRE_BASE, WIRE_BASE.replace("field: base,", "field: bass,"))], "wire[0].field"),
+    "wire unknown key": ([(WIRE_BASE, WIRE_BASE.replace("field: base,", "field: bass,"))], "wire[0].field"),
     "wire sign 0": ([(WIRE_BASE, WIRE_BASE.replace("sign: 1,", "sign: 0,"))], "wire[0].sign"),
     "wire reversed clamp": ([(WIRE_ELBOW, WIRE_ELBOW.replace("[-0.7854, 3.1401]", "[3.1401, -0.7854]"))], "wire[2].clamp"),
     "wire missing joint": ([("  - " + WIRE_BASE + "\n", "")], "wire: no entry for joint(s) base_link_to_link1"),
@@ -84,11 +84,11 @@ YAML_CASES = {
     "negative velocity limit": ([("base_link_to_link1: 2.0,", "base_link_to_link1: -2.0,")], "limits.velocity"),
     # a misspelt field used to be ignored: the arm planned without its allowed pairs or limits
     "misspelt top-level field": ([("allowed_collisions:", "allowed_colisions:")],
-                                 "allowed_colisions: unknown field (did you mean 'allowed_collisions'?)"),
+                                 "allowed_colisions: unknown key (did you mean 'allowed_collisions'?)"),
     "misspelt limits field": ([("  velocity:     {", "  velocty:      {")],
-                              "limits.velocty: unknown field (did you mean 'velocity'?)"),
-    "misspelt gripper field": ([("open: 1.5,", "opne: 1.5, open: 1.5,")], "gripper.opne: unknown field"),
-    "DH field in a URDF sidecar": ([("tcp_link: hand_tcp", "tcp_link: hand_tcp\ninertials: []")], "inertials: unknown field"),
+                              "limits.velocty: unknown key (did you mean 'velocity'?)"),
+    "misspelt gripper field": ([("open: 1.5,", "opne: 1.5, open: 1.5,")], "gripper.opne: unknown key"),
+    "DH field in a URDF sidecar": ([("tcp_link: hand_tcp", "tcp_link: hand_tcp\ninertials: []")], "inertials: unknown key"),
 }
 
 DH_CASES = {
@@ -96,9 +96,9 @@ DH_CASES = {
     "inf lower": ([("lower: -110,", "lower: -.inf,")], "dh[0].lower"),
     "length_unit list": ([("convention: standard", "convention: standard\nlength_unit: [mm]")], "length_unit"),
     "lower above upper": ([("lower: -130, upper: 130", "lower: 130, upper: -130")], "dh[1]"),
-    "URDF field in a DH table": ([("convention: standard", "convention: standard\ntcp_link: link2")], "tcp_link: unknown field"),
+    "URDF field in a DH table": ([("convention: standard", "convention: standard\ntcp_link: link2")], "tcp_link: unknown key"),
     "misspelt tool field": ([("convention: standard", "convention: standard\ntool: {xyz: [0, 0, 0.1], rot: [0, 0, 0]}")],
-                            "tool.rot: unknown field"),
+                            "tool.rot: unknown key"),
 }
 
 

@@ -53,7 +53,7 @@ BAD = {
                    + "tasks: [{wait: 1}]\n", "more than 100000 values"),
     "a billion cycles": (HEAD + "cycles: 1000000000\ntasks: [{wait: 1}]\n", ":2: cycles"),
     "max_tcp_speed 1e-6": (HEAD + "limits: {max_tcp_speed: 1.0e-6}\ntasks: [{wait: 1}]\n", ":2: limits.max_tcp_speed"),
-    "100k tasks": (HEAD + "tasks:\n" + "  - wait: 1\n" * 100_000, "larger than 1024 KiB"),
+    "100k tasks": (HEAD + "tasks:\n" + "  - wait: 1\n" * 100_000, "more than the 1 MiB allowed"),
     "2000 tasks": (HEAD + "tasks:\n" + "  - wait: 1\n" * 2000, ":2: tasks: 2000 tasks are more than 1000"),
     "wait with an extra key": (HEAD + "tasks: [{wait: {seconds: 1, extra: 2}}]\n", ":2: task 1: wait.extra"),
     "start with two joints": (HEAD + "start: [0, 0]\ntasks: [{wait: 1}]\n", ":2: start: roarm_m3_pro takes 5"),

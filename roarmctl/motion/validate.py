@@ -18,14 +18,14 @@ Bounds that keep memory and time small (documented in docs/reference.md, "The tr
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roarmctl.errors import TrajectoryFileError, describe_value
+from roarmctl.errors import TrajectoryFileError
+from roarmctl.validation import Checker, load_json
 
 if TYPE_CHECKING:
     from roarmctl.motion.trajectory import Trajectory
@@ -48,88 +48,34 @@ ROLES = ("table", "obstacle", "object")
 SHAPES = ("box", "cylinder", "sphere")
 
 
-def _fail(where: str, field: str, message: str, hint: str | None = None):
-    raise TrajectoryFileError(f"{where}: {field}: {message}", hint)
-
-
-def _kind(v: Any) -> str:
-    return describe_value(v, json=True)
+CHECK = Checker(TrajectoryFileError, json=True, bound=math.inf)
+_fail = CHECK.fail
+_kind = CHECK.kind
 
 
 def _number(v: Any, where: str, field: str, *, lo: float | None = None, hi: float | None = None,
             strict_lo: bool = False) -> float:
     """A finite JSON number (not a bool, not a string) within [lo, hi]."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        _fail(where, field, f"expected a number, got {_kind(v)}")
-    try:
-        x = float(v)
-    except OverflowError:
-        _fail(where, field, "the number is too large")
-    if not math.isfinite(x):
-        _fail(where, field, f"expected a finite number, got {x}")
-    if lo is not None and (x < lo or (strict_lo and x <= lo)):
-        _fail(where, field, f"{x:g} must be {'>' if strict_lo else '>='} {lo:g}")
-    if hi is not None and x > hi:
-        _fail(where, field, f"{x:g} must be <= {hi:g}")
-    return x
+    return CHECK.number(v, where, field, lo=lo, hi=hi, strict_lo=strict_lo)
 
 
 def _numbers(v: Any, n: int, where: str, field: str, *, lo: float | None = None, hi: float | None = None,
              strict_lo: bool = False) -> list[float]:
-    if not isinstance(v, list) or len(v) != n:
-        _fail(where, field, f"expected a list of {n} numbers, got {_kind(v)}")
-    return [_number(x, where, f"{field}[{i}]", lo=lo, hi=hi, strict_lo=strict_lo) for i, x in enumerate(v)]
+    return CHECK.numbers(v, n, where, field, lo=lo, hi=hi, strict_lo=strict_lo)
 
 
 def _name(v: Any, where: str, field: str, *, empty: bool = False) -> str:
-    if not isinstance(v, str) or (not v and not empty):
-        _fail(where, field, f"expected a name, got {_kind(v)}")
-    if len(v) > MAX_NAME:
-        _fail(where, field, f"longer than {MAX_NAME} characters")
-    return v
+    return CHECK.name(v, where, field, empty=empty, max_len=MAX_NAME)
 
 
 def _mapping(v: Any, where: str, field: str) -> dict:
-    if not isinstance(v, dict):
-        _fail(where, field, f"expected an object, got {_kind(v)}")
-    return v
+    return CHECK.mapping(v, where, field)
 
 
 # --------------------------------------------------------------------------- reading
 def read_document(path: str | Path) -> Any:
-    """The JSON of a trajectory file, read within ``MAX_FILE_BYTES`` and the parser's nesting limit."""
-    path = Path(path)
-    try:
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise TrajectoryFileError(f"{path}: {size / 2**20:.0f} MiB is more than the {MAX_FILE_BYTES / 2**20:.0f} MiB "
-                                      "a trajectory file may have", "split the plan into shorter ones")
-        text = path.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise TrajectoryFileError(f"{path}: no such file", "run 'roarmctl plan' first or check the path") from None
-    except IsADirectoryError:
-        raise TrajectoryFileError(f"{path}: is a directory, not a trajectory file") from None
-    except UnicodeDecodeError as exc:
-        raise TrajectoryFileError(f"{path}: not UTF-8 text (byte {exc.start})", "the file is damaged; plan it again") from None
-    except OSError as exc:
-        raise TrajectoryFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    try:
-        return json.loads(text, parse_constant=_reject_constant)
-    except json.JSONDecodeError as exc:
-        raise TrajectoryFileError(f"{path}:{exc.lineno}: not valid JSON ({exc.msg})", "the file is damaged; plan it again") from None
-    except RecursionError:
-        raise TrajectoryFileError(f"{path}: nested too deeply to be a trajectory file") from None
-    except _Constant as exc:
-        raise TrajectoryFileError(f"{path}: '{exc.args[0]}' is not a number JSON allows",
-                                  "every value must be finite") from None
-
-
-class _Constant(ValueError):
-    pass
-
-
-def _reject_constant(name: str) -> float:
-    raise _Constant(name)
+    """The JSON of a trajectory file or execution log, read within ``MAX_FILE_BYTES`` (``roarmctl.validation``)."""
+    return load_json(path, TrajectoryFileError, limit=MAX_FILE_BYTES, hint="the file is damaged; plan it again")
 
 
 # --------------------------------------------------------------------------- the document

@@ -11,13 +11,13 @@ import hashlib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
 from roarmctl.errors import PlanFileError, describe_value
-from roarmctl.plan.yamlsrc import LocatedDict, load_located, locate
 from roarmctl.robot.model import transform
+from roarmctl.validation import Checker, LocatedDict, closest, load_yaml, locate
 
 DICT_NAME = "<plan dict>"  # stands for the file name in errors about a plan given as a dict
 PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
@@ -146,23 +146,23 @@ class Plan:
 
 
 class _Ctx:
-    """Where we are in the file, for error messages."""
+    """Where we are in the file, for error messages; the field checks are ``roarmctl.validation``'s."""
+
+    check = Checker(PlanFileError)
 
     def __init__(self, path: Path) -> None:
         self.path = path
 
-    def fail(self, line: int, field_path: str, message: str, hint: str | None = None):
-        where = DICT_NAME if self.path.name == DICT_NAME else f"{self.path}:{line}"
-        raise PlanFileError(f"{where}: {field_path or 'plan'}: {message}", hint)
+    def where(self, line: int) -> str:
+        return DICT_NAME if self.path.name == DICT_NAME else f"{self.path}:{line}"
+
+    def fail(self, line: int, field_path: str, message: str, hint: str | None = None) -> NoReturn:
+        self.check.fail(self.where(line), field_path or "plan", message, hint)
 
     def mapping(self, value: Any, line: int, where: str, allowed: tuple[str, ...], required: tuple[str, ...] = ()) -> LocatedDict:
-        if not isinstance(value, dict):
-            self.fail(line, where, f"expected a mapping, got {_kind(value)}")
-        for key in value:
-            if key not in allowed:
-                close = _closest(str(key), allowed)
-                self.fail(value.line_of(key), f"{where}.{key}" if where else str(key), "unknown key",
-                          f"did you mean '{close}'?" if close else f"allowed: {', '.join(allowed)}")
+        self.check.mapping(value, self.where(line), where or "plan")
+        self.check.known_keys(value, allowed, self.where(line), where or None,
+                              line_of=lambda key: self.where(value.line_of(key)))
         for key in required:
             if key not in value:
                 self.fail(value.line, where or "plan", f"'{key}' is missing")
@@ -170,20 +170,13 @@ class _Ctx:
 
     def number(self, value: Any, line: int, where: str, *, lo: float | None = None, hi: float | None = None,
                angle: bool = False, strict_lo: bool = False) -> float:
+        what = "a number (or {deg: value})" if angle else "a number"
         if angle and isinstance(value, dict) and set(value) == {"deg"}:
             value = value["deg"]
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                self.fail(line, where, f"expected a number of degrees, got {_kind(value)}")
-            value = math.radians(value)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            self.fail(line, where, f"expected a number, got {_kind(value)}" + (" (or {deg: value})" if angle else ""))
-        value = float(value)
+            deg = self.check.number(value, self.where(line), where, what="a number of degrees", lo=-1e6, hi=1e6)
+            value = math.radians(deg)
         lo, hi = _bounds(where, lo, hi)
-        if lo is not None and (value < lo or (strict_lo and value <= lo)):
-            self.fail(line, where, f"{value:g} is too small (must be {'>' if strict_lo else '>='} {lo:g})")
-        if hi is not None and value > hi:
-            self.fail(line, where, f"{value:g} is too large (must be <= {hi:g})")
-        return value
+        return self.check.number(value, self.where(line), where, lo=lo, hi=hi, strict_lo=strict_lo, what=what)
 
     def vector(self, value: Any, line: int, where: str, n: int, *, angle: bool = False, positive: bool = False) -> np.ndarray:
         if angle and isinstance(value, dict) and set(value) == {"deg"}:
@@ -194,12 +187,7 @@ class _Ctx:
                          for i, v in enumerate(value)])
 
     def string(self, value: Any, line: int, where: str, choices: tuple[str, ...] | None = None) -> str:
-        if not isinstance(value, str) or not value:
-            self.fail(line, where, f"expected a name, got {_kind(value)}")
-        if choices and value not in choices:
-            close = _closest(value, choices)
-            self.fail(line, where, f"'{value}' is not one of {', '.join(choices)}", f"did you mean '{close}'?" if close else None)
-        return value
+        return self.check.name(value, self.where(line), where, choices=choices, max_len=4096)
 
 
 #: Range of every number a plan may give, by field name (the last part of its path), intersected
@@ -261,13 +249,6 @@ def _position(ctx: _Ctx, value: Any, line: int, where: str, frames: dict | None)
 
 
 _kind = describe_value
-
-
-def _closest(word: str, options: tuple[str, ...] | list[str]) -> str | None:
-    import difflib
-
-    match = difflib.get_close_matches(word, list(options), n=1, cutoff=0.6)
-    return match[0] if match else None
 
 
 # ------------------------------------------------------------------ items
@@ -380,7 +361,7 @@ def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpe
             if "pitch" in d:
                 _pitch(ctx, d, w, t)
         return t
-    close = _closest(str(kind), ("pick", "place", "move", "wait"))
+    close = closest(str(kind), ("pick", "place", "move", "wait"))
     ctx.fail(bline, f"{where}", f"unknown task '{kind}'", f"did you mean '{close}'?" if close else "tasks: pick, place, move, wait")
 
 
@@ -434,7 +415,7 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
         canonical = json.dumps(raw, sort_keys=True, default=str).encode()
     else:
         path = Path(source)
-        raw = load_located(path)
+        raw = load_yaml(path, PlanFileError)
         canonical = None
     ctx = _Ctx(path)
     # top-level keys starting with 'x-' are ignored: a place to define YAML anchors for '<<: *name'

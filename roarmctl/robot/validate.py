@@ -22,59 +22,39 @@ from typing import Any
 
 import numpy as np
 
-from roarmctl.errors import DescriptionError, describe_value
+from roarmctl.errors import DescriptionError
 from roarmctl.robot.model import WIRE_FIELDS
+from roarmctl.validation import Checker, load_yaml
 
 AXIS_TOL = 1e-3  # |axis| must be 1 within this (URDF axes are unit vectors)
 MAX_VALUE = 1e6  # any length (m), angle (rad), limit or mass in a description
 
 
-def _fail(where: str, field: str, message: str, hint: str | None = None):
-    raise DescriptionError(f"{where}: {field}: {message}", hint)
-
-
-_kind = describe_value
+CHECK = Checker(DescriptionError, bound=MAX_VALUE)
+_fail = CHECK.fail
+_kind = CHECK.kind
 
 
 # --------------------------------------------------------------------------- YAML
-def read_yaml(path: Path) -> Any:
-    """The description YAML within the plan reader's limits; any problem is a DescriptionError."""
-    from roarmctl.errors import PlanFileError
-    from roarmctl.plan.yamlsrc import load_located
-
-    try:
-        return load_located(path)
-    except PlanFileError as exc:
-        raise DescriptionError(exc.message, exc.hint) from None
-
-
-def _is_num(v: Any) -> bool:
-    return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and abs(v) <= MAX_VALUE
+def read_yaml(path: Path, what: str | None = None, roots=None) -> Any:
+    """A description YAML within the shared limits (``roarmctl.validation.load_yaml``)."""
+    return load_yaml(path, DescriptionError, what=what, roots=roots)
 
 
 def _num(v: Any, where: str, field: str) -> None:
-    if not _is_num(v):
-        _fail(where, field, f"expected a finite number, got {_kind(v)}")
+    CHECK.number(v, where, field, what="a finite number")
 
 
 def _nums(v: Any, where: str, field: str, n: int | None = None) -> None:
-    if not isinstance(v, list) or (n is not None and len(v) != n):
-        _fail(where, field, f"expected a list of {n if n is not None else ''} numbers".replace("  ", " ") + f", got {_kind(v)}")
-    for i, x in enumerate(v):
-        _num(x, where, f"{field}[{i}]")
+    CHECK.numbers(v, n, where, field, what="a finite number")
 
 
 def _str(v: Any, where: str, field: str, choices: tuple[str, ...] | None = None) -> None:
-    if not isinstance(v, str) or not v:
-        _fail(where, field, f"expected a name, got {_kind(v)}")
-    if choices and v not in choices:
-        _fail(where, field, f"'{v}' is not one of {', '.join(choices)}")
+    CHECK.name(v, where, field, choices=choices, max_len=4096)
 
 
 def _map(v: Any, where: str, field: str) -> dict:
-    if not isinstance(v, dict):
-        _fail(where, field, f"expected a mapping, got {_kind(v)}")
-    return v
+    return CHECK.mapping(v, where, field)
 
 
 def _xyz_rpy(v: Any, where: str, field: str) -> None:
@@ -102,13 +82,7 @@ NESTED_KEYS = {
 
 def _known(mapping: dict, allowed: tuple[str, ...], where: str, field: str | None) -> None:
     """Refuse a key of ``mapping`` outside ``allowed``, suggesting the closest allowed one."""
-    import difflib
-
-    for key in mapping:
-        if key not in allowed:
-            close = difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.6)
-            at = f"{field}.{key}" if field else str(key)
-            _fail(where, at, "unknown field", f"did you mean '{close[0]}'?" if close else f"known fields: {', '.join(allowed)}")
+    CHECK.known_keys(mapping, allowed, where, field)
 
 
 def check_keys(data: dict, where: str) -> None:

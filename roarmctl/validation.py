@@ -1,0 +1,342 @@
+"""Documents and fields: the ONE place where an input's text becomes checked values.
+
+Every reader (plans, trajectories, execution logs, robot descriptions, SRDF, joint_limits.yaml,
+xacro's ``load_yaml``) parses through here and checks its fields with these helpers, so each input
+is bounded the same way (size, nesting, number of values, digits of a number, UTF-8, finite values)
+and every refusal is an ``InputError`` subclass (exit 2) naming the file, the line or field, and the
+fix. The bytes come from ``roarmctl.fileio.read_bytes`` (regular files under a size cap, inside the
+roots where the caller gives them).
+
+* ``load_yaml(path, error)``: YAML with line numbers: mappings are ``LocatedDict``, lists
+  ``LocatedList``; both carry ``line_of(key_or_index)`` (1-based).
+* ``load_json(path, error)``: JSON; NaN/Infinity, numbers beyond a float and integers of more than
+  ``MAX_DIGITS`` digits refused.
+* ``Checker(error)``: ``number``, ``numbers``, ``name``, ``mapping``, ``known_keys``, ``required``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any, NoReturn
+
+import yaml
+
+from roarmctl.errors import InputError, PlanFileError, describe_value
+from roarmctl.fileio import Roots, read_bytes
+
+
+# --------------------------------------------------------------------------- located values
+class LocatedDict(dict):
+    """A dict that knows the source line of each key (and its own)."""
+
+    line: int = 0
+    lines: dict
+
+    def line_of(self, key: Any) -> int:
+        """1-based line of ``key`` (the mapping's own line for a key it lacks)."""
+        return self.lines.get(key, self.line)
+
+
+class LocatedList(list):
+    """A list that knows the source line of each item (and its own)."""
+
+    line: int = 0
+    lines: list
+
+    def line_of(self, index: int) -> int:
+        """1-based line of item ``index`` (the list's own line out of range)."""
+        return self.lines[index] if 0 <= index < len(self.lines) else self.line
+
+
+def locate(value: Any) -> Any:
+    """Plain Python values (from a dict built in code) -> located containers with line 0 everywhere."""
+    if isinstance(value, dict):
+        out = LocatedDict((k, locate(v)) for k, v in value.items())
+        out.line, out.lines = 0, {}
+        return out
+    if isinstance(value, (list, tuple)):
+        lst = LocatedList(locate(v) for v in value)
+        lst.line, lst.lines = 0, []
+        return lst
+    if hasattr(value, "tolist"):  # numpy arrays and scalars
+        return locate(value.tolist())
+    return value
+
+
+# --------------------------------------------------------------------------- YAML
+MERGE_TAG = "tag:yaml.org,2002:merge"
+
+#: Limits of a YAML input (docs/reference.md; plan, sidecar, joint_limits.yaml, a file xacro loads): its size in bytes,
+#: how deep its mappings and lists nest, and how many values it expands to (an alias counts again each
+#: time it is used, so a "billion laughs" alias bomb or a recursive alias stops here, not in memory).
+MAX_BYTES = 1024 * 1024
+MAX_DEPTH = 32
+MAX_NODES = 100_000
+#: Integers larger than this are refused (a float carries 53 bits; a bigger integer is a mistake).
+MAX_INT = 2 ** 53
+#: Digits of an integer a JSON file may write (Python refuses beyond 4300 with a ValueError).
+MAX_DIGITS = 30
+
+
+class _Budget:
+    def __init__(self) -> None:
+        self.nodes = 0
+
+
+def _construct(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError], budget: _Budget, depth: int = 0) -> Any:
+    budget.nodes += 1
+    line = node.start_mark.line + 1
+    if budget.nodes > MAX_NODES:
+        raise error(f"{loader.name}:{line}: the file expands to more than {MAX_NODES} values",
+                    "aliases (*name) are expanded each time they are used; write it out plainly")
+    if depth > MAX_DEPTH:
+        raise error(f"{loader.name}:{line}: nested more than {MAX_DEPTH} levels deep (or an alias that contains itself)")
+    if isinstance(node, yaml.MappingNode):
+        out = LocatedDict()
+        out.line, out.lines = line, {}
+        merged: dict[Any, tuple[Any, int]] = {}
+        for key_node, value_node in node.value:
+            if key_node.tag == MERGE_TAG:  # YAML merge key: `<<: *anchor` or `<<: [*a, *b]`
+                sources = value_node.value if isinstance(value_node, yaml.SequenceNode) else [value_node]
+                for src in sources:
+                    if not isinstance(src, yaml.MappingNode):
+                        raise error(f"{loader.name}:{key_node.start_mark.line + 1}: '<<' merges a mapping",
+                                    "write '<<: *name' where '&name' marks a mapping")
+                    sub = _construct(src, loader, error, budget, depth + 1)
+                    for k, v in sub.items():
+                        merged.setdefault(k, (v, sub.line_of(k)))  # the first source wins, as YAML specifies
+                continue
+            if not isinstance(key_node, yaml.ScalarNode):
+                raise error(f"{loader.name}:{key_node.start_mark.line + 1}: a key must be a plain name, not a "
+                            f"{'list' if isinstance(key_node, yaml.SequenceNode) else 'mapping'}")
+            key = _scalar(key_node, loader, error)
+            if key in out:
+                raise error(f"{loader.name}:{key_node.start_mark.line + 1}: '{key}' is given twice")
+            out[key] = _construct(value_node, loader, error, budget, depth + 1)
+            out.lines[key] = key_node.start_mark.line + 1
+        for k, (v, kline) in merged.items():  # keys written here override merged ones
+            if k not in out:
+                out[k] = v
+                out.lines[k] = kline
+        return out
+    if isinstance(node, yaml.SequenceNode):
+        lst = LocatedList(_construct(n, loader, error, budget, depth + 1) for n in node.value)
+        lst.line, lst.lines = line, [n.start_mark.line + 1 for n in node.value]
+        return lst
+    return _scalar(node, loader, error)
+
+
+def _scalar(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError]) -> Any:
+    """One scalar; a tag whose text does not fit (``!!float abc``, ``!!int x``) is refused."""
+    try:
+        value = loader.construct_object(node, deep=True)
+    except yaml.MarkedYAMLError:
+        raise
+    except (ValueError, TypeError, OverflowError) as exc:
+        raise error(f"{loader.name}:{node.start_mark.line + 1}: '{str(node.value)[:40]}' does not fit its "
+                    f"tag {node.tag} ({exc})") from None
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > MAX_INT:
+        raise error(f"{loader.name}:{node.start_mark.line + 1}: the number {str(node.value)[:24]} is too large")
+    return value
+
+
+def parse_yaml(text: str, name: str, error: type[InputError] = PlanFileError) -> Any:
+    """YAML ``text`` (from file ``name``) -> located values within the limits; None for an empty document."""
+    loader = None
+    try:
+        loader = yaml.SafeLoader(text)  # the reader checks the characters here
+        loader.name = name
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        return _construct(node, loader, error, _Budget())
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = f":{mark.line + 1}" if mark else ""
+        raise error(f"{name}{line}: not valid YAML ({exc.problem or exc.context})") from None
+    except yaml.YAMLError as exc:  # the reader's errors (control characters) carry a position, not a mark
+        pos = getattr(exc, "position", None)
+        line = f":{text[:pos].count(chr(10)) + 1}" if isinstance(pos, int) else ""
+        reason = getattr(exc, "reason", None) or str(exc).splitlines()[0]
+        raise error(f"{name}{line}: not valid YAML ({reason})", "remove control characters") from None
+    except RecursionError:
+        raise error(f"{name}: nested too deeply", f"at most {MAX_DEPTH} levels") from None
+    finally:
+        if loader is not None:
+            loader.dispose()
+
+
+def load_yaml(path: str | Path, error: type[InputError] = PlanFileError, *, what: str | None = None,
+              limit: int = MAX_BYTES, roots: Roots | None = None, empty_ok: bool = False) -> Any:
+    """A YAML file -> located values (see ``parse_yaml``), read by ``fileio.read_bytes``.
+
+    ``what``: the field that names the file (None for a file named on the command line); ``roots``:
+    where the file may lie. An empty file is refused unless ``empty_ok`` (then None).
+    """
+    path = Path(path)
+    data = read_bytes(path, what, limit, roots=roots, error=error,
+                      hint=None if limit != MAX_BYTES else None)
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise error(f"{path}:{line}: not UTF-8 text (byte {exc.start})", "save the file as UTF-8") from None
+    value = parse_yaml(text, str(path), error)
+    if value is None and not empty_ok:
+        raise error(f"{path}: the file is empty")
+    return value
+
+
+# --------------------------------------------------------------------------- JSON
+class _Refused(ValueError):
+    pass
+
+
+class HugeNumber:
+    """A JSON integer of more than ``MAX_DIGITS`` digits, kept as text so that the field checker that
+    meets it can refuse it by name (``Checker.number``); no other code takes it for a number."""
+
+    def __init__(self, text: str) -> None:
+        self.text = text
+
+    def __repr__(self) -> str:
+        return f"{self.text[:12]}... ({len(self.text.lstrip('-'))} digits)"
+
+
+def _parse_int(text: str) -> int | HugeNumber:
+    if len(text.lstrip("-")) > MAX_DIGITS:
+        return HugeNumber(text)
+    return int(text)
+
+
+def _parse_float(text: str) -> float:
+    x = float(text)
+    if not math.isfinite(x):
+        raise _Refused(f"the number {text[:24]} is beyond the range of a float")
+    return x
+
+
+def _parse_constant(name: str) -> float:
+    raise _Refused(f"'{name}' is not a number JSON allows")
+
+
+def parse_json(text: str, name: str, error: type[InputError] = InputError, hint: str | None = None) -> Any:
+    """JSON ``text`` (from file ``name``) -> Python values. NaN, Infinity and a number beyond a float are
+    refused, as is nesting beyond the parser's stack; an integer of more than ``MAX_DIGITS`` digits
+    becomes a ``HugeNumber`` that the field's check refuses by name."""
+    try:
+        return json.loads(text, parse_int=_parse_int, parse_float=_parse_float, parse_constant=_parse_constant)
+    except json.JSONDecodeError as exc:
+        raise error(f"{name}:{exc.lineno}: not valid JSON ({exc.msg})", hint) from None
+    except RecursionError:
+        raise error(f"{name}: nested too deeply", hint) from None
+    except _Refused as exc:
+        raise error(f"{name}: {exc}", "every value must be a finite number of ordinary size") from None
+
+
+def load_json(path: str | Path, error: type[InputError] = InputError, *, what: str | None = None, limit: int,
+              hint: str | None = None) -> Any:
+    """A JSON file (``read_bytes`` within ``limit`` bytes, UTF-8) -> Python values (see ``parse_json``)."""
+    path = Path(path)
+    data = read_bytes(path, what, limit, error=error)
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise error(f"{path}:{line}: not UTF-8 text (byte {exc.start})", hint) from None
+    return parse_json(text, str(path), error, hint)
+
+
+# --------------------------------------------------------------------------- fields
+def closest(word: str, options) -> str | None:
+    """The option most like ``word`` (a typo's fix), or None."""
+    import difflib
+
+    match = difflib.get_close_matches(str(word), [str(o) for o in options], n=1, cutoff=0.6)
+    return match[0] if match else None
+
+
+class Checker:
+    """Field checks that raise ``error`` with ``"{where}: {field}: {message}"``.
+
+    ``json``: name values as a JSON reader expects (``an object``, ``null``) in messages. Every
+    number must be finite and within ``bound`` unless a tighter range is given.
+    """
+
+    def __init__(self, error: type[InputError], *, json: bool = False, bound: float = 1e6) -> None:
+        self.error = error
+        self.json = json
+        self.bound = bound
+
+    def kind(self, value: Any) -> str:
+        """How an unexpected value reads in a message."""
+        return describe_value(value, json=self.json)
+
+    def fail(self, where: str, field: str, message: str, hint: str | None = None) -> NoReturn:
+        """Raise the checker's error for ``field`` of ``where``."""
+        raise self.error(f"{where}: {field}: {message}" if field else f"{where}: {message}", hint)
+
+    def number(self, value: Any, where: str, field: str, *, lo: float | None = None, hi: float | None = None,
+               strict_lo: bool = False, what: str = "a number") -> float:
+        """A finite number (not a bool, not a string) within [lo, hi] (default: +-``bound``)."""
+        if isinstance(value, HugeNumber):
+            self.fail(where, field, f"the number {value!r} is too large")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(where, field, f"expected {what}, got {self.kind(value)}")
+        try:
+            x = float(value)
+        except OverflowError:
+            self.fail(where, field, f"the number {str(value)[:12]}... is too large")
+        if not math.isfinite(x):
+            self.fail(where, field, f"expected a finite number, got {x}")
+        lo = -self.bound if lo is None else lo
+        hi = self.bound if hi is None else hi
+        if x < lo or (strict_lo and x <= lo):
+            self.fail(where, field, f"{x:g} is too small (must be {'>' if strict_lo else '>='} {lo:g})")
+        if x > hi:
+            self.fail(where, field, f"{x:g} is too large (must be <= {hi:g})")
+        return x
+
+    def numbers(self, value: Any, n: int | None, where: str, field: str, **bounds: Any) -> list[float]:
+        """A list of ``n`` numbers (any length when None), each checked by ``number``."""
+        if not isinstance(value, list) or (n is not None and len(value) != n):
+            count = f"{n} " if n is not None else ""
+            self.fail(where, field, f"expected a list of {count}numbers, got {self.kind(value)}")
+        return [self.number(x, where, f"{field}[{i}]", **bounds) for i, x in enumerate(value)]
+
+    def name(self, value: Any, where: str, field: str, *, empty: bool = False, max_len: int = 255,
+             choices: tuple[str, ...] | list[str] | None = None) -> str:
+        """A string of at most ``max_len`` characters (non-empty unless ``empty``), one of ``choices`` if given."""
+        if not isinstance(value, str) or (not value and not empty):
+            self.fail(where, field, f"expected a name, got {self.kind(value)}")
+        if len(value) > max_len:
+            self.fail(where, field, f"longer than {max_len} characters")
+        if choices is not None and value not in choices:
+            close = closest(value, choices)
+            self.fail(where, field, f"'{value[:40]}' is not one of {', '.join(choices)}",
+                      f"did you mean '{close}'?" if close else None)
+        return value
+
+    def mapping(self, value: Any, where: str, field: str) -> dict:
+        """A mapping (a JSON object)."""
+        if not isinstance(value, dict):
+            self.fail(where, field, f"expected {'an object' if self.json else 'a mapping'}, got {self.kind(value)}")
+        return value
+
+    def known_keys(self, value: dict, allowed, where: str, field: str | None, line_of=None) -> None:
+        """Refuse a key of ``value`` outside ``allowed``, suggesting the closest; ``line_of(key)`` -> the
+        ``where`` of that key (a file and line), else ``where``."""
+        for key in value:
+            if key not in allowed:
+                close = closest(str(key), allowed)
+                at = f"{field}.{key}" if field else str(key)
+                self.fail(line_of(key) if line_of else where, at, "unknown key",
+                          f"did you mean '{close}'?" if close else f"allowed: {', '.join(allowed)}")
+
+    def required(self, value: dict, keys, where: str, field: str) -> None:
+        """Refuse ``value`` if a key of ``keys`` is missing."""
+        for key in keys:
+            if key not in value:
+                self.fail(where, field, f"'{key}' is missing")
