@@ -8,6 +8,7 @@ checks of what was read live in ``roarmctl.validation``.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import stat
@@ -200,3 +201,115 @@ def _size(n: int) -> str:
         if n >= scale:
             return f"{n / scale:.0f} {unit}" if n % scale == 0 or n >= 10 * scale else f"{n / scale:.1f} {unit}"
     return f"{n} bytes"
+
+
+# --------------------------------------------------------------------------- output folders
+#: The file roarmctl writes into every folder it makes (a ROS 2 bag): proof that replacing the folder
+#: deletes nothing of the user's. Its content names the program; readers of the bag ignore it.
+MARKER = ".roarmctl-output"
+MAX_NAME_BYTES = 200  # of a file or folder name roarmctl writes (the OS allows 255; temporaries add a suffix)
+
+_ON_DISK: list[str] = []  # what an interrupted replacement has left, for the CLI's message after a signal
+
+
+def interrupted_write_state(clear: bool = True) -> str | None:
+    """What is on disk after a signal stopped a folder replacement (``replace_folder``), else None."""
+    state = _ON_DISK[-1] if _ON_DISK else None
+    if clear:
+        _ON_DISK.clear()
+    return state
+
+
+def check_output_folder(path: str | os.PathLike, force: bool = False, made_by_us=None) -> Path:
+    """``path`` as a folder roarmctl may (re)write, else ``InputError`` (exit 2); returns the path.
+
+    Refused: a name longer than ``MAX_NAME_BYTES`` bytes, ``.``/``..``/``/`` or any folder holding the
+    current one, and - unless ``force`` - an existing path that roarmctl did not make: a file, or a
+    folder without ``MARKER`` for which ``made_by_us(folder)`` (an exact match of what roarmctl writes
+    there, for folders written before the marker existed) is not true.
+    """
+    target = Path(path)
+    name = target.name
+    if not name or name in (".", ".."):
+        raise InputError(f"-o {path}: give the name of a new folder, not '{path}'", "e.g. -o out/run1_bag")
+    if len(os.fsencode(name)) > MAX_NAME_BYTES:
+        raise InputError(f"-o {_short(path)}: the name is longer than {MAX_NAME_BYTES} bytes", "give a shorter name")
+    try:
+        real = target.resolve()
+        cwd = Path.cwd().resolve()
+        exists = os.path.lexists(target)
+    except (OSError, RuntimeError, ValueError) as exc:
+        raise InputError(f"-o {_short(path)}: cannot use this path ({_reason(exc)})") from None
+    if real == cwd or real in cwd.parents or real == Path(real.anchor):
+        raise InputError(f"-o {path}: that folder holds the current folder; roarmctl would replace it",
+                         "give the name of a new folder")
+    if not exists or force:
+        return target
+    if target.is_symlink() or not target.is_dir():
+        raise InputError(f"-o {path}: exists and is not a folder roarmctl wrote",
+                         "choose another name, or add --force to replace it")
+    if (target / MARKER).is_file() or (made_by_us is not None and made_by_us(target)):
+        return target
+    raise InputError(f"-o {path}: the folder exists and roarmctl did not write it (no {MARKER} in it); "
+                     "replacing it would delete its files", "choose another name, or add --force to replace it")
+
+
+def new_folder_beside(target: str | os.PathLike) -> Path:
+    """An empty hidden temporary folder next to ``target`` (same file system, for the final rename),
+    holding ``MARKER``."""
+    target = Path(target)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    except OSError as exc:
+        raise InputError(f"cannot write {_short(target)}: {_reason(exc)}", "choose a folder you can write to") from None
+    return tmp
+
+
+def replace_folder(new: str | os.PathLike, target: str | os.PathLike) -> Path:
+    """Move the complete folder ``new`` to ``target``; an existing ``target`` is swapped out in ONE
+    rename (Linux ``renameat2(RENAME_EXCHANGE)``) and deleted only afterwards, so a signal at any
+    moment leaves at ``target`` either the old folder or the new one, whole. ``MARKER`` is written into
+    ``new`` first. After a signal, ``interrupted_write_state()`` says which is on disk."""
+    import shutil
+
+    new, target = Path(new), Path(target)
+    (new / MARKER).write_text("written by roarmctl; replacing this folder deletes nothing else\n")
+    _ON_DISK[:] = [f"{target} is unchanged" if os.path.lexists(target) else "nothing was written"]
+    try:
+        if not os.path.lexists(target):
+            os.replace(new, target)
+            _ON_DISK[:] = [f"{target} is complete"]
+        elif _exchange(new, target):  # new now holds the old folder
+            _ON_DISK[:] = [f"{target} is complete (the new one replaced the old)"]
+            shutil.rmtree(new, ignore_errors=True)
+        else:  # no atomic exchange on this system: two renames, the old folder kept until the new is in place
+            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old.", dir=target.parent))
+            os.replace(target, old / target.name)
+            _ON_DISK[:] = [f"{target} is missing: the old folder is at {old / target.name}, the new one at {new}"]
+            os.replace(new, target)
+            _ON_DISK[:] = [f"{target} is complete (the new one replaced the old)"]
+            shutil.rmtree(old, ignore_errors=True)
+    except OSError as exc:
+        _ON_DISK.clear()
+        raise InputError(f"cannot write {_short(target)}: {_reason(exc)}", "check the disk space and permissions") from None
+    _ON_DISK.clear()  # done; a signal (KeyboardInterrupt) leaves the state for the CLI's message
+    return target
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap the paths ``a`` and ``b`` atomically; False where the system cannot (then nothing changed)."""
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    if renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.ENOTSUP):
+        return False
+    raise OSError(err, os.strerror(err))

@@ -40,8 +40,14 @@ def _root(
     package_path: list[str] = typer.Option(
         [], "--package-path", metavar="NAME=DIR",
         help="Folder of ROS package NAME for package://NAME/... mesh paths in a URDF (repeatable)."),
+    trust_xacro: bool = typer.Option(
+        False, "--trust-xacro",
+        help="Let xacro evaluate the robot description's expressions itself (runs its Python: only for files you trust)."),
 ) -> None:
     common.STATE.debug = debug
+    from roarmctl.robot import xacro_input
+
+    xacro_input.TRUST_ALL = trust_xacro
     if package_path:
         from pathlib import Path
 
@@ -120,6 +126,13 @@ def _stop_line(signum: int) -> str:
     return "interrupted" if signum == 2 else f"terminated by {signal_name(signum)}"
 
 
+def _on_disk() -> str | None:
+    """What an output interrupted while it replaced a folder left on disk (``fileio``), else None."""
+    from roarmctl.fileio import interrupted_write_state
+
+    return interrupted_write_state()
+
+
 def command():
     """The click command behind ``app``, with boolean flags shown as flags in ``--help`` (typer
     would print ``--json <bool>``, which reads as if it took a value)."""
@@ -176,7 +189,7 @@ def _run_command(argv: list[str] | None, guard) -> int:
             code = returned
             if code == 130:
                 signum = guard.first or 2
-                common.error(_stop_line(signum), "nothing was written")
+                common.error(_stop_line(signum), _on_disk() or "nothing was written")
                 code = exit_code(signum)
     except RoarmError as exc:
         guard.live = False
@@ -187,7 +200,7 @@ def _run_command(argv: list[str] | None, guard) -> int:
     except KeyboardInterrupt as exc:
         guard.live = False
         signum = getattr(exc, "signum", None) or guard.first or 2
-        common.error(_stop_line(signum))
+        common.error(_stop_line(signum), _on_disk())
         code = exit_code(signum)
     except SystemExit as exc:  # typer.Exit raised inside a command
         guard.live = False

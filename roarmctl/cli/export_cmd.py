@@ -18,12 +18,14 @@ def register(app: typer.Typer) -> None:
                                     help="NAME.mcap (Foxglove), NAME.csv (spreadsheet), or a folder name without extension (ROS 2 bag)."),
         trajectory: Path | None = typer.Option(None, "--trajectory", "-t",
                                                   help="With an execution log: the trajectory it ran, added as planned joint states and scene."),
+        force: bool = typer.Option(False, "--force", help="Replace an existing bag folder that roarmctl did not write "
+                                   "(deleting everything in it)."),
         json_out: bool = typer.Option(False, "--json", help="Print one JSON object."),
     ) -> None:
         """Export SOURCE for Foxglove, RViz (ros2 bag play) or a spreadsheet; the format follows the -o name."""
         from roarmctl.export import export
 
-        summary = export(source, output, trajectory=trajectory)
+        summary = export(source, output, trajectory=trajectory, force=force)
         if json_out:
             common.print_json({"ok": True, **summary})
             return

@@ -26,7 +26,11 @@ def format_for(path: str | os.PathLike) -> str:
         return "mcap"
     if suffix == ".csv":
         return "csv"
-    if suffix == "" or str(path).endswith(os.sep) or p.is_dir():
+    try:
+        folder = p.is_dir()
+    except (OSError, ValueError):  # a name the OS refuses (too long, NUL byte)
+        folder = False
+    if suffix == "" or str(path).endswith(os.sep) or folder or p.name in ("", ".", ".."):
         return "bag"
     raise InputError(f"-o {path}: unknown export format '{suffix}'",
                      "use NAME.mcap (Foxglove), NAME.csv (spreadsheet) or a folder name without an extension (ROS 2 bag)")
@@ -36,7 +40,7 @@ def load_source(path: str | os.PathLike | Any) -> tuple[str, Any]:
     """Read a ``*.traj.json`` (-> ('trajectory', Trajectory), checked by the one trajectory validator)
     or an execution log (-> ('log', dict))."""
     from roarmctl.motion.trajectory import FORMAT, Trajectory
-    from roarmctl.motion.validate import read_document, validate_trajectory
+    from roarmctl.motion.validate import parse_log, read_document, validate_trajectory
 
     if isinstance(path, Trajectory):  # in memory (the Python API)
         return "trajectory", validate_trajectory(path)
@@ -44,10 +48,7 @@ def load_source(path: str | os.PathLike | Any) -> tuple[str, Any]:
     data = read_document(p)
     kind = data.get("format") if isinstance(data, dict) else None
     if kind == EXECLOG_FORMAT:
-        for key, typ in (("robot", str), ("sent", list), ("received", list)):
-            if not isinstance(data.get(key), typ):
-                raise TrajectoryFileError(f"{p}: {key}: missing or malformed in the execution log", "export a log written by 'roarmctl execute'")
-        return "log", data
+        return "log", parse_log(data, str(p))
     if kind == FORMAT:
         return "trajectory", validate_trajectory(data, where=str(p))
     raise TrajectoryFileError(f"{p}: format {kind!r} is neither '{FORMAT}' nor '{EXECLOG_FORMAT}'",
@@ -75,18 +76,24 @@ def streams_for(source: str | os.PathLike | Any, trajectory: str | os.PathLike |
 
 
 def export(source: str | os.PathLike | Any, path: str | os.PathLike, fmt: str | None = None,
-           trajectory: str | os.PathLike | Any | None = None) -> dict[str, Any]:
+           trajectory: str | os.PathLike | Any | None = None, force: bool = False) -> dict[str, Any]:
     """Export the trajectory or execution log at ``source`` (or a ``Trajectory``) to ``path``; returns a summary
     (``output``, ``format``, ``topics``: message count per topic, or ``rows`` for CSV). For a log,
-    ``trajectory`` adds the executed plan (``planned`` joint states and the scene)."""
+    ``trajectory`` adds the executed plan (``planned`` joint states and the scene). An existing bag
+    folder that roarmctl did not write is replaced only with ``force``."""
     fmt = fmt or format_for(path)
     if fmt not in FORMATS:
         raise InputError(f"--format: '{fmt}' is not one of {', '.join(FORMATS)}")
+    if fmt == "bag":  # refuse before the work
+        from roarmctl.export.ros import is_bag_we_wrote
+        from roarmctl.fileio import check_output_folder
+
+        check_output_folder(path, force, made_by_us=is_bag_we_wrote)
     streams = streams_for(source, trajectory)
-    return write(streams, path, fmt)
+    return write(streams, path, fmt, force)
 
 
-def write(streams, path: str | os.PathLike, fmt: str) -> dict[str, Any]:
+def write(streams, path: str | os.PathLike, fmt: str, force: bool = False) -> dict[str, Any]:
     """Write already-built ``Streams`` in format ``fmt`` ('mcap', 'bag', 'csv'); see ``export``."""
     if fmt == "csv":
         from roarmctl.export.table import csv_text
@@ -97,5 +104,5 @@ def write(streams, path: str | os.PathLike, fmt: str) -> dict[str, Any]:
         return {"output": str(out), "format": fmt, "rows": text.count("\n") - 1}
     from roarmctl.export.ros import write_bag
 
-    out, counts = write_bag(streams, path, "mcap" if fmt == "mcap" else "sqlite3")
+    out, counts = write_bag(streams, path, "mcap" if fmt == "mcap" else "sqlite3", force)
     return {"output": str(out), "format": fmt, "topics": counts}

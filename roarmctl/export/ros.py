@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -184,19 +183,35 @@ def messages(streams: Streams) -> Iterator[tuple[str, str, int, Any]]:
             yield ("/scene", "visualization_msgs/msg/MarkerArray", n, mk.MarkerArray(markers=markers))
 
 
-def write_bag(streams: Streams, path: str | os.PathLike, storage: str) -> tuple[Path, dict[str, int]]:
+def is_bag_we_wrote(folder: Path) -> bool:
+    """Whether ``folder`` holds exactly what ``write_bag`` writes for a bag folder of its name (a bag of
+    an older roarmctl, before the marker file): ``metadata.yaml`` and ``NAME.db3`` or ``NAME.mcap``."""
+    try:
+        names = {p.name for p in folder.iterdir()}
+    except OSError:
+        return False
+    return names in ({"metadata.yaml", f"{folder.name}.db3"}, {"metadata.yaml", f"{folder.name}.mcap"})
+
+
+def write_bag(streams: Streams, path: str | os.PathLike, storage: str, force: bool = False) -> tuple[Path, dict[str, int]]:
     """Write ``streams`` as a ROS 2 bag. ``storage``: 'mcap' -> the single MCAP file ``path``;
-    'sqlite3' -> the bag folder ``path`` (metadata.yaml + .db3). Atomic: built in a temporary folder
-    beside the target, then renamed into place; an existing target is replaced. Returns the path and
-    the number of messages per topic."""
+    'sqlite3' -> the bag folder ``path`` (metadata.yaml + .db3). Built in a temporary folder beside the
+    target, then renamed into place: an existing MCAP file is replaced, an existing bag folder is
+    swapped out and deleted afterwards (``fileio.replace_folder``), and only if roarmctl wrote it
+    (``fileio.check_output_folder``) or ``force``. Returns the path and the number of messages per topic."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
+    from roarmctl.fileio import check_output_folder, new_folder_beside, replace_folder
+
     target = Path(path)
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        tmpdir = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    except OSError as exc:
-        raise InputError(f"cannot write {target}: {exc.strerror or exc}", "choose a directory you can write to") from None
+    if storage == "mcap":
+        if target.is_dir():
+            raise InputError(f"{target} is a folder", "give a file name ending in .mcap")
+        if target.exists() and not target.is_file():
+            raise InputError(f"cannot write {target}: it is not a regular file", "give the path of a file to write")
+    else:
+        check_output_folder(target, force, made_by_us=is_bag_we_wrote)
+    tmpdir = new_folder_beside(target)
     try:
         bag = tmpdir / target.stem
         plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
@@ -210,19 +225,9 @@ def write_bag(streams: Streams, path: str | os.PathLike, storage: str) -> tuple[
                 writer.write(conns[topic], ns, ts.serialize_cdr(msg, msgtype))
                 counts[topic] = counts.get(topic, 0) + 1
         if storage == "mcap":
-            if target.is_dir():
-                raise InputError(f"{target} is a folder", "give a file name ending in .mcap")
-            if target.exists() and not target.is_file():
-                raise InputError(f"cannot write {target}: it is not a regular file", "give the path of a file to write")
             os.replace(bag / f"{bag.name}.mcap", target)
         else:
-            if target.is_dir():
-                if not (target / "metadata.yaml").is_file():
-                    raise InputError(f"{target} is a folder that is not a ROS 2 bag", "choose a new folder name")
-                shutil.rmtree(target)
-            elif target.exists():
-                raise InputError(f"{target} exists and is not a folder", "choose another name for the bag folder")
-            os.replace(bag, target)
+            replace_folder(bag, target)
     except OSError as exc:
         raise InputError(f"cannot write {target}: {exc.strerror or exc}", "check the disk space and permissions") from None
     finally:

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.errors import TrajectoryFileError
-from roarmctl.validation import Checker, load_json
+from roarmctl.validation import Checker, HugeNumber, load_json
 
 if TYPE_CHECKING:
     from roarmctl.motion.trajectory import Trajectory
@@ -267,6 +267,47 @@ def _scene_item(it: Any, where: str, f: str, seen: set) -> None:
             _number(it.get("length"), where, f"{f}.length", lo=0.0, hi=MAX_SIZE, strict_lo=True)
     _numbers(it.get("xyz", [0, 0, 0]), 3, where, f"{f}.xyz", lo=-MAX_COORD, hi=MAX_COORD)
     _numbers(it.get("rpy", [0, 0, 0]), 3, where, f"{f}.rpy", lo=-100.0, hi=100.0)
+
+
+# --------------------------------------------------------------------------- execution logs
+LOG_FORMAT = "roarmctl.execlog/1"
+MAX_LOG_ENTRIES = 10 * MAX_POINTS  # commands sent and lines received
+MIN_SPEED_SCALE = 1e-3  # a run slowed down further would last more than 40 days
+MAX_LOG_TIME = 2 * MAX_DURATION + 600.0  # s, |t| of any entry: the slowest run of the longest trajectory, and its start
+
+
+def parse_log(data: Any, where: str = "execution log") -> dict:
+    """An execution log (``roarmctl.execlog/1``, written by ``roarmctl execute``) checked in the fields
+    an export reads: ``robot``, ``speed_scale`` in (0, 1], ``sent`` and ``received`` lists of entries
+    whose ``t`` (s) are finite, within +-``MAX_LOG_TIME`` and never decreasing, commands and feedback
+    as objects of finite numbers. Returns ``data``; raises ``TrajectoryFileError`` naming the field."""
+    _mapping(data, where, "log")
+    if data.get("format") != LOG_FORMAT:
+        _fail(where, "format", f"expected '{LOG_FORMAT}', got {_kind(data.get('format'))}")
+    _name(data.get("robot"), where, "robot")
+    if data.get("speed_scale") is not None:
+        _number(data["speed_scale"], where, "speed_scale", lo=MIN_SPEED_SCALE, hi=1.0)
+    for key in ("sent", "received"):
+        entries = data.get(key)
+        if not isinstance(entries, list) or len(entries) > MAX_LOG_ENTRIES:
+            _fail(where, key, f"expected a list of at most {MAX_LOG_ENTRIES} entries, got {_kind(entries)}")
+        last = -math.inf
+        inner = "cmd" if key == "sent" else "feedback"
+        for i, e in enumerate(entries):
+            f = f"{key}[{i}]"
+            _mapping(e, where, f)
+            t = _number(e.get("t"), where, f"{f}.t", lo=-MAX_LOG_TIME, hi=MAX_LOG_TIME)
+            if t < last:
+                _fail(where, f"{f}.t", f"{t:g} s is before the entry before it ({last:g} s)", "entries are in time order")
+            last = t
+            body = e.get(inner)
+            if body is None and key == "received":
+                continue
+            _mapping(body, where, f"{f}.{inner}")
+            for k, v in body.items():
+                if isinstance(v, (int, float, HugeNumber)) and not isinstance(v, bool):
+                    _number(v, where, f"{f}.{inner}.{k}", lo=-1e6, hi=1e6)
+    return data
 
 
 # --------------------------------------------------------------------------- against the robot

@@ -6,6 +6,7 @@ Every mistake in a description raises ``DescriptionError`` naming the file and t
 from __future__ import annotations
 
 import math
+import os
 import xml.etree.ElementTree as ET
 from importlib import resources
 from pathlib import Path
@@ -18,6 +19,8 @@ from roarmctl.robot import validate as checks
 from roarmctl.robot.model import CollisionShape, Gripper, Inertial, Joint, Robot, WireField, transform
 
 FORMAT = "roarmctl.robot/1"
+MESH_SCALE = (1e-5, 1e5)  # a mesh's scale factors (a mesh in mm has 0.001); beyond, a link's shape vanishes or explodes
+URDF_BYTES = 16 * 1024 * 1024  # a URDF (or the text xacro makes) may have; published arms have < 1 MiB
 DEFAULT_VELOCITY = 1.0  # rad/s, used only where a description gives none
 DEFAULT_ACCELERATION = 2.0  # rad/s^2
 # Where a description gives no jerk limit: the acceleration may rise from zero to its limit in 0.1 s.
@@ -34,15 +37,25 @@ def bundled_robots() -> list[str]:
     return sorted(p.stem for p in bundled_dir().glob("*.yaml"))
 
 
-_CACHE: dict[str, Robot] = {}
+_CACHE: dict[tuple, Robot] = {}
 
 
-def load_robot(spec: str) -> Robot:
-    """A bundled robot name (``roarm_m3_pro``) or a path to a ``.yaml`` or ``.urdf`` file."""
-    if spec in _CACHE:
-        return _CACHE[spec]
+def load_robot(spec: str, trust_sidecar: bool = True) -> Robot:
+    """A bundled robot name (``roarm_m3_pro``) or a path to a ``.yaml``, ``.urdf`` or ``.xacro`` file.
+
+    A description reads only inside its roots (``meshes.description_roots``: its folder and its
+    packages). ``trust_sidecar``: a sidecar's ``trust: true`` lets xacro evaluate its expressions
+    itself; False when a plan, trajectory or log named the file (only the user's ``--trust-xacro``
+    counts then, see ``roarmctl.robot.xacro_safe``).
+    """
+    from roarmctl.robot.meshes import PACKAGE_PATHS, description_roots
+    from roarmctl.robot.xacro_input import TRUST_ALL
+
+    key = (spec, trust_sidecar, TRUST_ALL, tuple(sorted((k, str(v)) for k, v in PACKAGE_PATHS.items())))
+    if key in _CACHE:
+        return _CACHE[key]
     path = bundled_dir() / f"{spec}.yaml"
-    if not _is_file(path):
+    if "/" in spec or os.sep in spec or not _is_file(path):  # a bundled name is a plain name
         path = Path(spec).expanduser()
         if not _is_file(path):
             raise InputError(
@@ -51,12 +64,14 @@ def load_robot(spec: str) -> Robot:
             )
     data: dict = {}
     if path.suffix.lower() in (".urdf", ".xacro"):
-        robot = _from_urdf(path, {}, path)
+        robot = _from_urdf(path, {"_roots": description_roots({}, path)}, path)
     else:
         data = _read_yaml(path)
         if "dh" in data:
             robot = _from_dh(path, data)
         elif "urdf" in data:
+            data["_roots"] = description_roots(data, path)
+            data["_trusted"] = trust_sidecar and data.get("trust") is True
             urdf = (path.parent / str(data["urdf"])).resolve()
             if not urdf.is_file():
                 raise DescriptionError(f"{path}: urdf: file '{data['urdf']}' not found", "the path is relative to the YAML file")
@@ -75,7 +90,7 @@ def load_robot(spec: str) -> Robot:
     # not checked (MoveIt Setup Assistant's "Adjacent" pairs, Drake's and PyBullet's default).
     robot.allowed_collisions |= {frozenset((j.parent, j.child)) for j in robot.joints}
     checks.check_robot(robot, str(path))
-    _CACHE[spec] = robot
+    _CACHE[key] = robot
     return robot
 
 
@@ -346,17 +361,21 @@ def _origin(elem: ET.Element | None, where: str) -> np.ndarray:
 
 def _read_urdf(urdf: Path, side: dict, sidecar: Path) -> ET.Element:
     """The URDF's XML root; a ``.xacro`` file is expanded first (``xacro_args`` in the sidecar)."""
+    from roarmctl.fileio import read_text
+    from roarmctl.robot.meshes import description_roots
+
+    roots = side.get("_roots") or description_roots(side, sidecar)
     if urdf.suffix.lower() == ".xacro":
-        from roarmctl.robot.meshes import package_map
         from roarmctl.robot.xacro_input import expand
 
-        text = expand(urdf, side.get("xacro_args"), str(sidecar), package_map(side.get("packages"), sidecar, str(sidecar)))
+        text = expand(urdf, side.get("xacro_args"), str(sidecar), roots=roots, trusted=bool(side.get("_trusted")))
         try:
             return ET.fromstring(text)
         except ET.ParseError as exc:
             raise DescriptionError(f"{urdf}: xacro output is not valid XML ({exc})") from None
+    text = read_text(urdf, None, URDF_BYTES, roots=roots, error=DescriptionError)
     try:
-        return ET.parse(urdf).getroot()
+        return ET.fromstring(text)
     except ET.ParseError as exc:
         raise DescriptionError(f"{urdf}: not valid XML ({exc})") from None
 
@@ -368,7 +387,7 @@ def _moveit(side: dict, sidecar: Path, joints_xml: list, links: dict, actuated: 
     side = dict(side)
     jl: dict = {}
     if side.get("joint_limits") is not None:
-        jl = read_joint_limits((sidecar.parent / str(side["joint_limits"])).resolve(), set(actuated), str(sidecar))
+        jl = read_joint_limits(sidecar.parent / str(side["joint_limits"]), set(actuated), str(sidecar), roots=side.get("_roots"))
     if side.get("srdf") is None:
         return side, jl
     jinfo = {j.get("name"): (j.get("type"), j.find("child").get("link")) for j in joints_xml}
@@ -459,7 +478,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     from roarmctl.robot.meshes import mesh_modes, package_map
 
     meshes = {"urdf": urdf, "packages": package_map(side.get("packages"), sidecar, str(sidecar)),
-              "modes": mesh_modes(side.get("mesh_collision"), list(links), str(sidecar))}
+              "modes": mesh_modes(side.get("mesh_collision"), list(links), str(sidecar)), "roots": side.get("_roots")}
     inertials, shapes = {}, []
     for lname, el in links.items():
         inn = el.find("inertial")
@@ -536,10 +555,11 @@ def _urdf_shape(link: str, c: ET.Element, where: str, k: int, meshes: dict) -> l
         scale = np.ones(3)
         if g.get("scale") is not None:
             scale = _floats(g.get("scale"), 3, f"{where} mesh scale")
-            if not np.all(scale > 0):
-                raise DescriptionError(f"{where} mesh scale: expected 3 positive numbers, got '{g.get('scale')}'")
-        path = resolve(g.get("filename"), meshes["urdf"], meshes["packages"], where)
-        mesh, centre = load_mesh(path, scale, meshes["modes"].get(link, "convex") == "exact", where)
+            if not np.all((scale >= MESH_SCALE[0]) & (scale <= MESH_SCALE[1])):
+                raise DescriptionError(f"{where} mesh scale: '{g.get('scale')[:40]}': each factor must be between "
+                                       f"{MESH_SCALE[0]:g} and {MESH_SCALE[1]:g}", "mm to m is 0.001")
+        path = resolve(g.get("filename"), meshes["urdf"], meshes["packages"], where, meshes.get("roots"))
+        mesh, centre = load_mesh(path, scale, meshes["modes"].get(link, "convex") == "exact", where, meshes.get("roots"))
         placed = origin.copy()
         placed[:3, 3] = origin[:3, 3] + origin[:3, :3] @ centre
         return [CollisionShape(link, "mesh", placed, name=name, mesh=mesh)]

@@ -21,11 +21,14 @@ from pathlib import Path
 import numpy as np
 
 from roarmctl.errors import DescriptionError
+from roarmctl.fileio import Roots
 
 #: NAME -> folder for ``package://NAME/...``, filled by the CLI's ``--package-path`` option.
 PACKAGE_PATHS: dict[str, Path] = {}
 
 MESH_MODES = ("convex", "exact")
+MESH_TYPES = ("stl", "obj", "dae", "ply", "off", "glb")  # read from bytes alone (no other file opened)
+MESH_BYTES = 64 * 1024 * 1024  # a mesh file may have (published arms' collision meshes: < 5 MiB)
 
 
 @dataclass(frozen=True)
@@ -71,8 +74,20 @@ class MeshGeometry:
 _LOADED: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
 
 
-def resolve(filename: str, urdf: Path, packages: dict[str, Path], where: str) -> Path:
-    """The file a URDF ``<mesh filename=...>`` names."""
+def description_roots(side: dict, sidecar: Path) -> Roots:
+    """The folders a description may read (``roarmctl.fileio.Roots``): the folder of ``sidecar`` (the
+    YAML, or the URDF/xacro named directly), the folders of the files the sidecar names (``urdf``,
+    ``srdf``, ``joint_limits``), the sidecar's ``packages`` and the command line's ``--package-path``
+    folders (``PACKAGE_PATHS``; the sidecar wins). What those files refer to (meshes, includes,
+    ``load_yaml``) must lie inside these folders."""
+    packages = {**PACKAGE_PATHS, **package_map(side.get("packages"), sidecar, str(sidecar))}
+    named = [Path(sidecar).parent / str(side[k]) for k in ("urdf", "srdf", "joint_limits") if isinstance(side.get(k), str)]
+    return Roots([Path(sidecar).parent] + [p.parent for p in named], packages)
+
+
+def resolve(filename: str, urdf: Path, packages: dict[str, Path], where: str, roots: Roots | None = None) -> Path:
+    """The file a URDF ``<mesh filename=...>`` names; with ``roots``, refused unless it lies inside them
+    (after symlinks: ``package://pkg/../..`` or a symlink out of the folder is refused)."""
     if filename.startswith("package://"):
         rest = filename[len("package://"):]
         name, _, sub = rest.partition("/")
@@ -81,33 +96,53 @@ def resolve(filename: str, urdf: Path, packages: dict[str, Path], where: str) ->
             raise DescriptionError(
                 f"{where} mesh filename: package '{name}' of '{filename}' is unknown",
                 f"map it in the sidecar (packages: {{{name}: path/to/{name}}}) or give --package-path {name}=DIR")
-        return (Path(folder) / sub).resolve()
-    if filename.startswith("file://"):
-        return Path(filename[len("file://"):])
-    if "://" in filename:
+        path = Path(folder) / sub
+    elif filename.startswith("file://"):
+        path = Path(filename[len("file://"):])
+    elif "://" in filename:
         raise DescriptionError(f"{where} mesh filename: '{filename}': only relative paths, file:// and package:// are supported")
-    p = Path(filename).expanduser()
-    return p if p.is_absolute() else (urdf.parent / p).resolve()
+    else:
+        p = Path(filename)
+        path = p if p.is_absolute() else urdf.parent / p
+    if roots is not None:
+        return roots.check(path, f"{where} mesh filename", DescriptionError)
+    try:
+        return path.resolve()
+    except (OSError, RuntimeError) as exc:
+        raise DescriptionError(f"{where} mesh filename: '{filename}' cannot be resolved ({exc})") from None
 
 
-def load_mesh(path: Path, scale: np.ndarray, exact: bool, where: str) -> tuple[MeshGeometry, np.ndarray]:
-    """Read ``path``, scale it, and return (centred geometry, centre (3,) in the element's frame)."""
+def load_mesh(path: Path, scale: np.ndarray, exact: bool, where: str, roots: Roots | None = None) -> tuple[MeshGeometry, np.ndarray]:
+    """Read ``path`` (a regular file of at most ``MESH_BYTES``, inside ``roots`` when given), scale it,
+    and return (centred geometry, centre (3,) in the element's frame). trimesh reads the bytes alone: an
+    OBJ's ``mtllib`` or a COLLADA file's images are never opened."""
+    import io
+
     import trimesh
 
-    if not path.is_file():
-        raise DescriptionError(f"{where} mesh filename: file '{path}' not found",
-                               "check the path (relative to the URDF) or the package folder")
-    key = (str(path.resolve()), path.stat().st_mtime_ns, tuple(scale))
+    from roarmctl.fileio import read_bytes
+
+    kind = path.suffix.lower().lstrip(".")
+    if kind not in MESH_TYPES:
+        raise DescriptionError(f"{where} mesh filename: '{path.name}': .{kind} is not a mesh type roarmctl reads",
+                               f"use one of {', '.join('.' + t for t in MESH_TYPES)}")
+    try:
+        stamp = path.stat().st_mtime_ns
+    except (OSError, ValueError):
+        stamp = 0
+    key = (str(path), stamp, tuple(scale))
     if key not in _LOADED:
+        data = read_bytes(path, f"{where} mesh filename", MESH_BYTES, roots=roots, error=DescriptionError,
+                          hint="check the path (relative to the URDF) or the package folder")
         try:
-            loaded = trimesh.load_mesh(str(path), process=False)
+            loaded = trimesh.load_mesh(io.BytesIO(data), file_type=kind, process=False)
             if isinstance(loaded, trimesh.Scene):  # several meshes (COLLADA, OBJ groups): in the file's frame
                 loaded = loaded.to_mesh() if len(loaded.geometry) else None
             elif isinstance(loaded, list):
                 loaded = trimesh.util.concatenate(loaded) if loaded else None
         except Exception as exc:  # trimesh raises many kinds for unreadable files
-            raise DescriptionError(f"{where} mesh filename: cannot read '{path}' as a mesh ({type(exc).__name__}: {exc})",
-                                   "use an STL, OBJ or DAE file") from None
+            raise DescriptionError(f"{where} mesh filename: cannot read '{path}' as a mesh ({type(exc).__name__}: "
+                                   f"{str(exc)[:100]})", "use an STL, OBJ or DAE file") from None
         if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
             raise DescriptionError(f"{where} mesh filename: '{path}' contains no triangles")
         vertices = np.asarray(loaded.vertices, dtype=float) * scale

@@ -25,9 +25,10 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
-import yaml
 
 from roarmctl.errors import DescriptionError
+from roarmctl.fileio import Roots
+from roarmctl.validation import load_yaml
 
 _KNOWN = {"group", "group_state", "disable_collisions", "end_effector", "virtual_joint", "disable_default_collisions"}
 
@@ -155,14 +156,11 @@ _JL_KEYS = {"has_velocity_limits", "max_velocity", "has_acceleration_limits", "m
             "has_effort_limits", "max_effort", "angle_wraparound"}
 
 
-def read_joint_limits(path: Path, joints: set[str], where: str) -> dict[str, dict[str, float]]:
-    """MoveIt joint_limits.yaml -> {joint: {velocity, acceleration, lower, upper}} (only the limits in force)."""
-    if not path.is_file():
-        raise DescriptionError(f"{where}: joint_limits: file '{path}' not found", "the path is relative to the sidecar YAML")
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise DescriptionError(f"{path}: not valid YAML ({exc})") from None
+def read_joint_limits(path: Path, joints: set[str], where: str, roots: Roots | None = None) -> dict[str, dict[str, float]]:
+    """MoveIt joint_limits.yaml -> {joint: {velocity, acceleration, lower, upper}} (only the limits in force).
+
+    Read by ``roarmctl.validation.load_yaml`` (size, nesting, UTF-8, inside ``roots``)."""
+    data = load_yaml(path, DescriptionError, what=f"{where}: joint_limits", roots=roots, empty_ok=True) or {}
     src = str(path)
     if not isinstance(data, dict):
         raise DescriptionError(f"{src}: expected a mapping at the top level")

@@ -69,7 +69,7 @@ def _xyz_rpy(v: Any, where: str, field: str) -> None:
 COMMON_KEYS = ("format", "name", "source", "description", "limits", "gripper", "named_poses", "wire",
                "allowed_collisions", "singularity_model", "ik", "base_links", "jaw_links", "frames")
 URDF_KEYS = ("urdf", "srdf", "joint_limits", "packages", "xacro_args", "mesh_collision", "joints", "tcp_link",
-             "arm_group", "gripper_group", "tool")
+             "arm_group", "gripper_group", "tool", "trust")
 DH_KEYS = ("dh", "convention", "length_unit", "angle_unit", "base", "tool", "inertials")
 NESTED_KEYS = {
     "limits": ("velocity", "acceleration", "jerk", "effort"),
@@ -117,6 +117,8 @@ def check_document(data: Any, where: str) -> None:
     """Types of every field the loader reads from a sidecar or DH YAML (``where`` names the file)."""
     if not isinstance(data, dict):
         raise DescriptionError(f"{where}: expected a mapping at the top level, got {_kind(data)}")
+    if data.get("trust") is not None and not isinstance(data["trust"], bool):
+        _fail(where, "trust", f"expected true or false, got {_kind(data['trust'])}")
     for key in ("name", "source", "description", "urdf", "tcp_link", "singularity_model", "format"):
         if data.get(key) is not None:
             _str(data[key], where, key)

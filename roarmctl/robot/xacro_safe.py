@@ -1,0 +1,496 @@
+"""xacro as data: what a description's ``${...}`` and ``$(...)`` may do, enforced where xacro evaluates them.
+
+The installed ``xacro`` (2.1.1) evaluates ``${expr}`` with Python's ``eval`` behind a filter on names
+that start with ``__``; a lambda or a comprehension slips past it and runs any code. roarmctl
+therefore never lets xacro's ``eval`` see an expression: ``hooks(...)`` replaces, for the time of one
+expansion, the functions of the ``xacro`` module where it evaluates and reads:
+
+* ``safe_eval`` (every ``${...}``) -> ``evaluate``: an interpreter of an ALLOW-LIST of Python's syntax
+  tree, the part xacro documents for properties and math: numbers, strings, ``True``/``False``,
+  arithmetic (``+ - * / // % **``), comparisons, ``and``/``or``/``not``, ``a if c else b``, property
+  names, lists/tuples/dicts written out, indexing, the math functions and constants xacro exposes
+  (``sin``, ``radians``, ``pi``, also as ``math.sin``), ``abs min max round int float str bool len``,
+  ``xacro.arg(name)`` and ``xacro.load_yaml(file)`` / ``load_yaml(file)`` (a YAML file inside the
+  roots, read by ``roarmctl.validation``). Anything else (attribute access, lambda, comprehension,
+  f-string, a name starting with ``_``, a call of anything not listed) is refused by name.
+* ``eval_extension`` (every ``$(...)``) -> ``$(arg NAME)``, ``$(find PKG)`` (a declared package
+  folder), ``$(dirname)``, ``$(eval EXPR)`` (by ``evaluate``); ``$(optenv VAR default)`` is its
+  default (the environment is not read); ``$(env VAR)`` and ``$(cwd)`` are refused.
+* ``parse`` (the top file and every ``<xacro:include>``) and the include glob: files inside the roots,
+  regular, under ``MAX_FILE_BYTES`` (``roarmctl.fileio.read_bytes``).
+* ``eval_all`` (every element): counted against the ``Budget``, like every expression, every step of
+  an expression and every character produced, so an exponent bomb (``${9**9**9}``), a macro that
+  doubles itself or a property that doubles a string stop with exit 2 after a fixed amount of WORK
+  (the same verdict on any machine), long before a second has passed.
+
+``trusted=True`` (``--trust-xacro``, or ``trust: true`` in a sidecar the user named) leaves
+expressions and ``$(...)`` to xacro itself: only for files whose author you trust.
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+import operator
+import os
+import threading
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
+
+from roarmctl.errors import DescriptionError
+from roarmctl.fileio import Roots, read_text
+
+#: Work one expansion may do (counts, not seconds: the same verdict on a busy machine).
+MAX_ELEMENTS = 100_000  # elements evaluated (macro bodies count each time they are expanded)
+MAX_EXPRESSIONS = 200_000  # ${...} and $(...) evaluated
+MAX_STEPS = 2_000_000  # syntax-tree nodes evaluated, over all expressions
+MAX_CHARS = 32 * 1024 * 1024  # characters produced by expressions and held by the elements evaluated
+MAX_INCLUDES = 1000  # files included (a file including itself stops here)
+MAX_MOVES = 5_000_000  # list operations of replacing a macro call by its body (minidom's are linear in the siblings)
+MAX_FILE_BYTES = 8 * 1024 * 1024  # one xacro file or included file
+#: Values an expression may produce.
+MAX_INT_BITS = 256
+MAX_STR = 1024 * 1024
+MAX_ITEMS = 100_000
+
+MATH_FUNCTIONS = ("acos", "acosh", "asin", "asinh", "atan", "atan2", "atanh", "ceil", "copysign", "cos", "cosh",
+                  "degrees", "dist", "erf", "erfc", "exp", "expm1", "fabs", "floor", "fmod", "hypot", "isclose",
+                  "isfinite", "isinf", "isnan", "ldexp", "log", "log10", "log1p", "log2", "pow", "radians",
+                  "remainder", "sin", "sinh", "sqrt", "tan", "tanh", "trunc")
+MATH_CONSTANTS = {"pi": math.pi, "e": math.e, "tau": math.tau, "inf": math.inf, "nan": math.nan}
+CONSTANTS = {"True": True, "False": False, "None": None, **MATH_CONSTANTS}
+
+
+class Refused(Exception):
+    """An expression or file that a description may not use; the message says what and why."""
+
+
+class Budget:
+    """Counters of one expansion; ``spend`` raises ``Refused`` past a limit."""
+
+    LIMITS = {"elements": MAX_ELEMENTS, "expressions": MAX_EXPRESSIONS, "steps": MAX_STEPS, "characters": MAX_CHARS,
+              "includes": MAX_INCLUDES, "node moves": MAX_MOVES}
+
+    def __init__(self) -> None:
+        self.used = dict.fromkeys(self.LIMITS, 0)
+
+    def spend(self, what: str, n: int = 1) -> None:
+        self.used[what] += n
+        if self.used[what] > self.LIMITS[what]:
+            raise Refused(f"the description needs more than {self.LIMITS[what]:,} {what} to expand "
+                          "(a macro or property that multiplies itself?)")
+
+
+# --------------------------------------------------------------------------- values
+def _checked(value: Any) -> Any:
+    """``value`` if it is a value a description may hold (bounded), else Refused."""
+    if value is None or isinstance(value, (bool, float)):
+        return value
+    if isinstance(value, int):
+        if value.bit_length() > MAX_INT_BITS:
+            raise Refused(f"an integer of more than {MAX_INT_BITS} bits")
+        return value
+    if isinstance(value, str):
+        if len(value) > MAX_STR:
+            raise Refused(f"a string of more than {MAX_STR:,} characters")
+        return value
+    if isinstance(value, (list, tuple, dict)):
+        if len(value) > MAX_ITEMS:
+            raise Refused(f"a list of more than {MAX_ITEMS:,} items")
+        return value
+    raise Refused(f"a value of type {type(value).__name__}")
+
+
+def _int(value: Any = 0) -> int:
+    if isinstance(value, str) and len(value) > 80:
+        raise Refused("int() of a string of more than 80 characters")
+    return int(value)
+
+
+def _float(value: Any = 0.0) -> float:
+    if isinstance(value, str) and len(value) > 80:
+        raise Refused("float() of a string of more than 80 characters")
+    return float(value)
+
+
+FUNCTIONS: dict[str, Callable[..., Any]] = {
+    "abs": abs, "min": min, "max": max, "round": round, "int": _int, "float": _float, "str": str, "bool": bool,
+    "len": len, **{name: getattr(math, name) for name in MATH_FUNCTIONS},
+}
+
+
+def _pow(a: Any, b: Any) -> Any:
+    if isinstance(a, int) and isinstance(b, int) and not isinstance(a, bool) and b > 0 and abs(a) > 1:
+        if b * (abs(a).bit_length() - 1) > MAX_INT_BITS:
+            raise Refused(f"{a} ** {b} is larger than {MAX_INT_BITS} bits")
+    result = operator.pow(a, b)
+    if isinstance(result, complex):
+        raise Refused(f"{a} ** {b} is not a real number")
+    return result
+
+
+def _mul(a: Any, b: Any) -> Any:
+    for seq, n in ((a, b), (b, a)):
+        if isinstance(seq, (str, list, tuple)) and isinstance(n, int) and len(seq) * max(n, 0) > MAX_STR:
+            raise Refused(f"a repetition of more than {MAX_STR:,} items")
+    if isinstance(a, int) and isinstance(b, int) and a.bit_length() + b.bit_length() > 2 * MAX_INT_BITS:
+        raise Refused(f"a product of more than {MAX_INT_BITS} bits")
+    return operator.mul(a, b)
+
+
+def _mod(a: Any, b: Any) -> Any:
+    if isinstance(a, str):
+        raise Refused("string formatting with %")
+    return operator.mod(a, b)
+
+
+BINARY: dict[type, Callable[[Any, Any], Any]] = {
+    ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: _mul, ast.Div: operator.truediv,
+    ast.FloorDiv: operator.floordiv, ast.Mod: _mod, ast.Pow: _pow,
+}
+UNARY: dict[type, Callable[[Any], Any]] = {ast.UAdd: operator.pos, ast.USub: operator.neg, ast.Not: operator.not_}
+COMPARE: dict[type, Callable[[Any, Any], Any]] = {
+    ast.Eq: operator.eq, ast.NotEq: operator.ne, ast.Lt: operator.lt, ast.LtE: operator.le, ast.Gt: operator.gt,
+    ast.GtE: operator.ge, ast.In: lambda a, b: a in b, ast.NotIn: lambda a, b: a not in b,
+}
+
+
+# --------------------------------------------------------------------------- the interpreter
+class Evaluator:
+    """Evaluates one expression's syntax tree node by node; only the node types below exist for it.
+
+    ``lookup(name)``: a property's value (KeyError if there is none); ``load_yaml(file)`` and
+    ``arg(name)`` serve ``xacro.load_yaml`` and ``xacro.arg``; ``namespace(value, attr)``: the value of
+    ``attr`` in an include's namespace or a loaded YAML mapping (KeyError if none).
+    """
+
+    def __init__(self, lookup: Callable[[str], Any], budget: Budget, *, load_yaml: Callable[[str], Any] | None = None,
+                 arg: Callable[[str], Any] | None = None, namespace: Callable[[Any, str], Any] | None = None) -> None:
+        self.lookup = lookup
+        self.budget = budget
+        self.load_yaml = load_yaml
+        self.arg = arg
+        self.namespace = namespace
+
+    def __call__(self, text: str) -> Any:
+        self.budget.spend("expressions")
+        try:
+            tree = ast.parse(text.strip(), mode="eval")
+        except SyntaxError as exc:
+            raise Refused(f"not an expression ({exc.msg})") from None
+        except (ValueError, RecursionError, MemoryError):
+            raise Refused("not an expression (nested too deeply)") from None
+        try:
+            value = self.eval(tree.body)
+        except RecursionError:
+            raise Refused("nested too deeply") from None
+        self.budget.spend("characters", len(value) if isinstance(value, str) else 1)
+        return value
+
+    def eval(self, node: ast.AST) -> Any:
+        self.budget.spend("steps")
+        method = getattr(self, f"_{type(node).__name__}", None)
+        if method is None:
+            raise Refused(f"{_describe(node)} is not allowed in a description (only numbers, strings, arithmetic, "
+                          "comparisons, and/or/not, 'if else', property names and math functions)")
+        return _checked(method(node))
+
+    def _Constant(self, node: ast.Constant) -> Any:
+        return node.value
+
+    def _Name(self, node: ast.Name) -> Any:
+        name = node.id
+        if name.startswith("_"):
+            raise Refused(f"the name '{name}' is not allowed (names starting with '_' are Python's internals)")
+        try:
+            return self.lookup(name)
+        except KeyError:
+            pass
+        if name in CONSTANTS:
+            return CONSTANTS[name]
+        if name in FUNCTIONS or name in ("math", "xacro", "load_yaml"):
+            raise Refused(f"'{name}' can only be called, as in {name}(...)" if name in FUNCTIONS else
+                          f"'{name}' can only be used as in {'math.sin(x)' if name == 'math' else name + '(...)'}")
+        raise Refused(f"name '{name}' is not defined (no property of that name)")
+
+    def _BinOp(self, node: ast.BinOp) -> Any:
+        op = BINARY.get(type(node.op))
+        if op is None:
+            raise Refused(f"the operator {type(node.op).__name__} is not allowed")
+        return op(self.eval(node.left), self.eval(node.right))
+
+    def _UnaryOp(self, node: ast.UnaryOp) -> Any:
+        op = UNARY.get(type(node.op))
+        if op is None:
+            raise Refused(f"the operator {type(node.op).__name__} is not allowed")
+        return op(self.eval(node.operand))
+
+    def _BoolOp(self, node: ast.BoolOp) -> Any:
+        value: Any = None
+        for v in node.values:  # Python's short circuit: and stops at a false value, or at a true one
+            value = self.eval(v)
+            if isinstance(node.op, ast.And) != bool(value):
+                return value
+        return value
+
+    def _Compare(self, node: ast.Compare) -> Any:
+        left = self.eval(node.left)
+        for op_node, right_node in zip(node.ops, node.comparators):
+            op = COMPARE.get(type(op_node))
+            if op is None:
+                raise Refused(f"the comparison {type(op_node).__name__} is not allowed")
+            right = self.eval(right_node)
+            if not op(left, right):
+                return False
+            left = right
+        return True
+
+    def _IfExp(self, node: ast.IfExp) -> Any:
+        return self.eval(node.body) if self.eval(node.test) else self.eval(node.orelse)
+
+    def _List(self, node: ast.List) -> Any:
+        return [self.eval(e) for e in node.elts]
+
+    def _Tuple(self, node: ast.Tuple) -> Any:
+        return tuple(self.eval(e) for e in node.elts)
+
+    def _Dict(self, node: ast.Dict) -> Any:
+        if any(k is None for k in node.keys):
+            raise Refused("'**' in a dict is not allowed")
+        return {self.eval(k): self.eval(v) for k, v in zip(node.keys, node.values)}  # type: ignore[arg-type]
+
+    def _Subscript(self, node: ast.Subscript) -> Any:
+        value = self.eval(node.value)
+        if not isinstance(value, (list, tuple, str, dict)):
+            raise Refused(f"indexing a {type(value).__name__}")
+        if isinstance(node.slice, ast.Slice):
+            parts = [None if p is None else self.eval(p) for p in (node.slice.lower, node.slice.upper, node.slice.step)]
+            if not all(p is None or (isinstance(p, int) and not isinstance(p, bool)) for p in parts):
+                raise Refused("a slice of something other than whole numbers")
+            if isinstance(value, dict):
+                raise Refused("slicing a mapping")
+            return value[slice(*parts)]
+        return value[self.eval(node.slice)]
+
+    def _Attribute(self, node: ast.Attribute) -> Any:
+        if node.attr.startswith("_"):
+            raise Refused(f"the attribute '{node.attr}' is not allowed (names starting with '_' are Python's internals)")
+        if isinstance(node.value, ast.Name) and node.value.id == "math" and not self._is_property("math"):
+            if node.attr in MATH_CONSTANTS:
+                return MATH_CONSTANTS[node.attr]
+            raise Refused(f"math.{node.attr} can only be called" if node.attr in MATH_FUNCTIONS else
+                          f"math.{node.attr} is not one of the math functions a description may use")
+        value = self.eval(node.value)
+        if self.namespace is not None:
+            try:
+                return self.namespace(value, node.attr)
+            except KeyError:
+                pass
+        raise Refused(f"'.{node.attr}' on a {type(value).__name__} is not allowed (only a YAML mapping's keys and "
+                      "an include's namespace)")
+
+    def _Call(self, node: ast.Call) -> Any:
+        if node.keywords or any(isinstance(a, ast.Starred) for a in node.args):
+            raise Refused("keyword or * arguments are not allowed")
+        func = self._function(node.func)
+        args = [self.eval(a) for a in node.args]
+        try:
+            return func(*args)
+        except Refused:
+            raise
+        except (ValueError, TypeError, OverflowError, ZeroDivisionError) as exc:
+            raise Refused(f"{ast.unparse(node.func)}(): {exc}") from None
+
+    def _is_property(self, name: str) -> bool:
+        try:
+            self.lookup(name)
+            return True
+        except KeyError:
+            return False
+
+    def _function(self, node: ast.AST) -> Callable[..., Any]:
+        if isinstance(node, ast.Name) and not self._is_property(node.id):
+            if node.id in FUNCTIONS:
+                return FUNCTIONS[node.id]
+            if node.id == "load_yaml" and self.load_yaml is not None:
+                return self.load_yaml
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and not self._is_property(node.value.id):
+            owner, attr = node.value.id, node.attr
+            if owner == "math" and attr in MATH_FUNCTIONS:
+                return FUNCTIONS[attr]
+            if owner == "xacro" and attr == "load_yaml" and self.load_yaml is not None:
+                return self.load_yaml
+            if owner == "xacro" and attr == "arg" and self.arg is not None:
+                return self.arg
+        raise Refused(f"calling {_describe(node)} is not allowed (functions: math functions, "
+                      f"{', '.join(n for n in FUNCTIONS if n not in MATH_FUNCTIONS)}, xacro.arg, xacro.load_yaml)")
+
+
+def _describe(node: ast.AST) -> str:
+    try:
+        text = ast.unparse(node)
+    except Exception:  # noqa: BLE001 - only for the message
+        text = type(node).__name__
+    kind = {"Lambda": "a lambda", "ListComp": "a list comprehension", "GeneratorExp": "a generator",
+            "DictComp": "a dict comprehension", "SetComp": "a set comprehension", "JoinedStr": "an f-string",
+            "NamedExpr": "':='", "Starred": "'*'", "Set": "a set", "Await": "await", "Yield": "yield"}.get(type(node).__name__)
+    short = text if len(text) <= 40 else text[:37] + "..."
+    return f"{kind} ('{short}')" if kind else f"'{short}'"
+
+
+# --------------------------------------------------------------------------- the hooks into xacro
+_LOCK = threading.RLock()
+
+
+def _xacro_lookup(symbols: Any, name: str) -> Any:
+    """A property of xacro's symbol ``Table`` chain (never xacro's global symbols: Python builtins)."""
+    import xacro
+
+    t = symbols
+    while isinstance(t, xacro.Table):
+        if dict.__contains__(t, name):
+            return t._resolve_(name)
+        t = t.parent
+    raise KeyError(name)
+
+
+@contextmanager
+def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
+    """Within this block the ``xacro`` module evaluates and reads only as described above (see the
+    module docstring); yields the ``Budget`` of the expansion. One expansion at a time (a lock)."""
+    import glob as _glob
+
+    import xacro
+    from xacro import substitution_args
+
+    budget = Budget()
+    originals = {name: getattr(xacro, name) for name in ("safe_eval", "eval_extension", "parse", "eval_all", "glob",
+                                                          "replace_node")}
+    orig_parse, orig_eval_all, orig_replace = originals["parse"], originals["eval_all"], originals["replace_node"]
+    orig_find = substitution_args._eval_find
+
+    def find(pkg: str) -> str:
+        folder = roots.packages.get(pkg)
+        if folder is not None:
+            return str(folder)
+        if trusted:
+            try:
+                return orig_find(pkg)  # ROS's package index, when ROS is installed
+            except (ImportError, LookupError):
+                pass
+        raise DescriptionError(f"{where}: xacro: $(find {pkg}): package '{pkg}' is unknown",
+                               f"map it in the sidecar (packages: {{{pkg}: DIR}}) or give --package-path {pkg}=DIR")
+
+    def parse(inp: Any, filename: str | None = None) -> Any:
+        if inp is None:  # the top file, then each include
+            budget.spend("includes")
+            what = f"{where}: xacro include" if budget.used["includes"] > 1 else None
+            inp = read_text(os.path.join(xacro.root_dir, filename or ""), what, MAX_FILE_BYTES, roots=roots,
+                            error=DescriptionError)
+        return orig_parse(inp, filename)
+
+    def eval_all(node: Any, macros: Any, symbols: Any) -> Any:
+        budget.spend("elements")
+        attrs = getattr(node, "attributes", None)
+        size = sum(len(v) for _, v in attrs.items()) if attrs else 0
+        size += sum(len(c.data) for c in node.childNodes if c.nodeType == c.TEXT_NODE)
+        budget.spend("characters", size)
+        return orig_eval_all(node, macros, symbols)
+
+    def replace_node(node: Any, by: Any, content_only: bool = False) -> Any:
+        parent = node.parentNode
+        siblings = len(parent.childNodes) if parent is not None else 1
+        moved = 1
+        for doc in (by if isinstance(by, list) else [by] if by is not None else []):
+            moved += len(doc.childNodes) if content_only else 1
+        budget.spend("node moves", siblings * moved)
+        return orig_replace(node, by, content_only)
+
+    class _Glob:
+        @staticmethod
+        def glob(pattern: str, *args: Any, **kwargs: Any) -> list[str]:
+            head = pattern
+            while any(c in head for c in "*?["):
+                head = os.path.dirname(head)
+            roots.check(head or ".", f"{where}: xacro include '{pattern}'", DescriptionError)
+            found = sorted(_glob.glob(pattern))
+            if len(found) > MAX_INCLUDES:
+                raise Refused(f"the include pattern '{pattern}' matches more than {MAX_INCLUDES} files")
+            return found
+
+    def load_yaml(filename: Any) -> Any:
+        from roarmctl.validation import load_yaml as load
+
+        if not isinstance(filename, str):
+            raise Refused("load_yaml() takes a file name")
+        path = xacro.abs_filename_spec(filename)
+        return load(path, DescriptionError, what=f"{where}: xacro load_yaml", roots=roots, empty_ok=True)
+
+    def arg(name: Any) -> Any:
+        try:
+            return xacro.substitution_args_context["arg"][name]
+        except (KeyError, TypeError):
+            raise Refused(f"xacro.arg({name!r}): no such argument (give it in the sidecar's xacro_args)") from None
+
+    def namespace(value: Any, attr: str) -> Any:
+        if isinstance(value, xacro.Table):
+            return _xacro_lookup(value, attr)
+        if isinstance(value, dict) and attr in value:
+            return value[attr]
+        raise KeyError(attr)
+
+    def safe_eval(expr: str, globals: Any, locals: Any = None) -> Any:
+        return Evaluator(lambda n: _xacro_lookup(globals, n), budget, load_yaml=load_yaml, arg=arg,
+                         namespace=namespace)(expr)
+
+    def eval_extension(s: str) -> Any:
+        budget.spend("expressions")
+        inner = s[2:-1].strip()
+        command, _, rest = inner.partition(" ")
+        words = rest.split()
+        if command == "arg" and len(words) == 1:
+            try:
+                return xacro.substitution_args_context["arg"][words[0]]
+            except KeyError:
+                raise Refused(f"$(arg {words[0]}): no such argument (give it in the sidecar's xacro_args, or "
+                              "declare it with <xacro:arg name=... default=...>)") from None
+        if command == "find" and len(words) == 1:
+            return find(words[0])
+        if command == "dirname" and not words:
+            return os.path.abspath(os.path.dirname(xacro.filestack[-1] or "."))
+        if command == "optenv" and words:
+            return " ".join(words[1:])  # the environment is not read: the default, as in a clean one
+        if command == "eval" and rest.strip():
+            args = xacro.substitution_args_context.get("arg", {})
+
+            def lookup(name: str) -> Any:
+                return substitution_args.convert_value(args[name], "auto")
+
+            return str(Evaluator(lookup, budget)(rest))
+        if command in ("env", "optenv", "cwd"):
+            raise Refused(f"$({inner[:40]}) is not allowed: a description does not read the environment or the "
+                          "current folder (pass values with xacro_args in the sidecar)")
+        raise Refused(f"$({inner[:40]}) is not allowed (only $(arg NAME), $(find PKG), $(dirname), $(eval EXPR))")
+
+    with _LOCK:
+        try:
+            xacro.parse, xacro.eval_all, xacro.glob, xacro.replace_node = parse, eval_all, _Glob, replace_node
+            substitution_args._eval_find = find
+            if not trusted:
+                xacro.safe_eval, xacro.eval_extension = safe_eval, eval_extension
+            yield budget
+        finally:
+            for name, value in originals.items():
+                setattr(xacro, name, value)
+            substitution_args._eval_find = orig_find
+
+
+def find_refusal(exc: BaseException | None) -> BaseException | None:
+    """The ``Refused`` or ``DescriptionError`` inside the exceptions xacro wraps around it, if any."""
+    seen = 0
+    while exc is not None and seen < 50:
+        if isinstance(exc, (Refused, DescriptionError)):
+            return exc
+        exc = getattr(exc, "exc", None) or exc.__cause__ or exc.__context__
+        seen += 1
+    return None
