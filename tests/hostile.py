@@ -1,0 +1,129 @@
+"""Hostile inputs (issue 19): the corpus that tests/test_trust.py checks case by case and tests/test_fuzz.py
+runs through the CLI. Each builder writes files into a folder and returns the path(s) to hand to roarmctl.
+
+The code-execution payload is real: under ``--trust-xacro`` (xacro's own evaluation) it runs
+``touch MARKER``; everywhere else the marker must never appear.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import yaml
+
+from roarmctl.robot.loader import bundled_dir, load_robot
+
+XACRO_NS = 'xmlns:xacro="http://www.ros.org/wiki/xacro"'
+M3_Q = ["0", "0", "1.57", "0", "0", "0"]
+
+
+def payload(marker: Path) -> str:
+    """A ``${...}`` that runs ``touch marker`` through xacro 2.1.1's ``eval``: the dunder names sit inside
+    the comprehension's own scope, which xacro's filter on names starting with ``__`` does not inspect."""
+    return ("[x for c in [()] for b in [c.__class__.__base__] for s in b.__subclasses__() "
+            "if s.__name__ == 'catch_warnings' "
+            f"for x in [s()._module.__builtins__['__import__']('os').system('touch {marker}')]]")
+
+
+def m3_xacro(folder: Path, name_expr: str = "'roarm_m3_pro'", extra: str = "", file: str = "arm.xacro") -> Path:
+    """The bundled RoArm-M3 Pro URDF as a xacro whose robot name is ``${name_expr}``, with ``extra`` XML
+    (properties, macros, includes) first inside ``<robot>``."""
+    urdf = (bundled_dir() / "roarm_m3_pro.urdf").read_text()
+    urdf = urdf.replace('<robot name="roarm_m3_pro">', f'<robot name="${{{name_expr}}}" {XACRO_NS}>{extra}', 1)
+    path = folder / file
+    path.write_text(urdf)
+    return path
+
+
+def sidecar(folder: Path, urdf: str, **extra) -> Path:
+    """The bundled M3 sidecar pointing at ``urdf`` (relative to ``folder``), with ``extra`` fields."""
+    side = yaml.safe_load((bundled_dir() / "roarm_m3_pro.yaml").read_text())
+    side["urdf"] = urdf
+    side.update(extra)
+    path = folder / "arm.yaml"
+    path.write_text(yaml.safe_dump(side))
+    return path
+
+
+# --------------------------------------------------------------------------- bombs
+POW_BOMB = "9**9**9"
+
+
+def macro_doubling(levels: int = 20) -> str:
+    """Macro k calls macro k-1 twice: 2**levels links from a file of a few kB."""
+    macros = ['<xacro:macro name="m0"><link name="bomb"/></xacro:macro>']
+    macros += [f'<xacro:macro name="m{k}"><xacro:m{k - 1}/><xacro:m{k - 1}/></xacro:macro>' for k in range(1, levels + 1)]
+    return "".join(macros) + f"<xacro:m{levels}/>"
+
+
+def block_doubling(levels: int = 20) -> str:
+    """Block parameters passed on twice per level: a doubling through ``insert_block``."""
+    macros = ['<xacro:macro name="b0" params="*x"><xacro:insert_block name="x"/></xacro:macro>']
+    macros += [f'<xacro:macro name="b{k}" params="*x"><xacro:b{k - 1}><g><xacro:insert_block name="x"/>'
+               f'<xacro:insert_block name="x"/></g></xacro:b{k - 1}></xacro:macro>' for k in range(1, levels + 1)]
+    return "".join(macros) + f'<xacro:b{levels}><link name="blk"/></xacro:b{levels}>'
+
+
+def string_doubling(levels: int = 60) -> str:
+    """Property k is property k-1 twice: a string of 2**levels characters."""
+    props = ['<xacro:property name="p0" value="xxxxxxxx"/>']
+    props += [f'<xacro:property name="p{k}" value="${{p{k - 1}+p{k - 1}}}"/>' for k in range(1, levels + 1)]
+    return "".join(props) + f'<link name="${{p{levels}}}"/>'
+
+
+def self_include(folder: Path) -> Path:
+    """A xacro that includes itself."""
+    path = folder / "loop.xacro"
+    path.write_text(f'<robot name="loop" {XACRO_NS}><xacro:include filename="loop.xacro"/></robot>')
+    return path
+
+
+def fifo(folder: Path, name: str) -> Path:
+    """A named pipe nobody writes to: reading it would block forever."""
+    path = folder / name
+    os.mkfifo(path)
+    return path
+
+
+# --------------------------------------------------------------------------- trajectories and logs
+def trajectory_doc(robot: str = "roarm_m3_pro") -> dict:
+    """A valid ``roarmctl.trajectory/1`` document for the M3: a 0.6 s quintic move within its limits."""
+    q0 = [0.0, 0.0, 1.5708, 0.0, 0.0, 0.0]
+    q1 = [0.2, 0.1, 1.7, 0.0, 0.1, 0.2]
+    dur, n = 0.6, 60
+    pts = []
+    for k in range(n + 1):
+        u = k / n
+        s = 10 * u ** 3 - 15 * u ** 4 + 6 * u ** 5
+        ds = (30 * u ** 2 - 60 * u ** 3 + 30 * u ** 4) / dur
+        dds = (60 * u - 180 * u ** 2 + 120 * u ** 3) / dur ** 2
+        pts.append({"time_from_start": round(u * dur, 9), "positions": [a + s * (b - a) for a, b in zip(q0, q1)],
+                    "velocities": [ds * (b - a) for a, b in zip(q0, q1)],
+                    "accelerations": [dds * (b - a) for a, b in zip(q0, q1)]})
+    return {"format": "roarmctl.trajectory/1", "robot": robot, "joint_names": load_robot("roarm_m3_pro").joint_names,
+            "sample_rate": 100.0, "points": pts,
+            "events": [{"time_from_start": 0.6, "kind": "grasp", "label": "cube", "position": [0.2, 0.0, 0.05]}],
+            "segments": [{"start": 0.0, "end": 0.6, "kind": "free", "label": "move"}],
+            "limits": {"velocity_scale": 0.5},
+            "scene": {"items": [{"name": "cube", "role": "object", "shape": "box", "size": [0.04, 0.04, 0.04],
+                                 "xyz": [0.25, -0.15, 0.02], "rpy": [0, 0, 0]}]},
+            "plan": None, "singularity_margin": None}
+
+
+def execlog_doc(robot: str = "roarm_m3_pro", n: int = 20) -> dict:
+    """A small ``roarmctl.execlog/1`` document: n joint commands and n feedback lines, 20 ms apart."""
+    sent, received = [], []
+    for k in range(n):
+        q = 0.01 * k
+        cmd = {"T": 102, "base": q, "shoulder": 0.0, "elbow": 1.57, "wrist": 0.0, "roll": 0.0, "hand": math.pi - 0.2,
+               "spd": 0, "acc": 10}
+        sent.append({"t": round(0.02 * k, 6), "cmd": cmd})
+        fb = {"T": 1051, "x": 300.0, "y": 0.0, "z": 200.0, "b": q, "s": 0.0, "e": 1.57, "t": 0.0, "r": 0.0,
+              "g": math.pi - 0.2}
+        received.append({"t": round(0.02 * k + 0.01, 6), "line": json.dumps(fb), "feedback": fb})
+    return {"format": "roarmctl.execlog/1", "port": "sim", "firmware": "sim", "robot": robot, "strategy": "stream",
+            "rate": 50.0, "speed_scale": 1.0, "t0_monotonic": 0.0, "duration": 0.02 * n, "summary": {},
+            "notes": [], "tracking": [], "sent": sent, "received": received}
