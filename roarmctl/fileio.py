@@ -26,10 +26,12 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
+    """Write ``text`` as UTF-8 to ``path`` atomically; return the path."""
     return atomic_write_bytes(path, text.encode())
 
 
 def atomic_write_json(path: str | os.PathLike, obj: Any, indent: int | None = 1) -> Path:
+    """Write ``obj`` as JSON (and a newline) to ``path`` atomically; return the path."""
     return atomic_write_text(path, json.dumps(obj, indent=indent) + "\n")
 
 
@@ -91,7 +93,7 @@ class Roots:
         self.packages = {str(k): Path(v).resolve() for k, v in (packages or {}).items()}
         self.folders = tuple(dict.fromkeys([Path(f).resolve() for f in folders] + list(self.packages.values())))
 
-    def with_folder(self, folder: Path) -> "Roots":
+    def with_folder(self, folder: Path) -> Roots:
         """These roots plus ``folder``."""
         return Roots(self.folders + (Path(folder),), self.packages)
 
@@ -117,7 +119,7 @@ class Roots:
         return f"Roots({[str(f) for f in self.folders]}, packages={sorted(self.packages)})"
 
 
-def _short(p: Path | str, n: int = 120) -> str:
+def _short(p: str | os.PathLike, n: int = 120) -> str:
     s = str(p)
     return s if len(s) <= n else s[: n - 3] + "..."
 

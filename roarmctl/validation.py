@@ -176,8 +176,7 @@ def load_yaml(path: str | Path, error: type[InputError] = PlanFileError, *, what
     where the file may lie. An empty file is refused unless ``empty_ok`` (then None).
     """
     path = Path(path)
-    data = read_bytes(path, what, limit, roots=roots, error=error,
-                      hint=None if limit != MAX_BYTES else None)
+    data = read_bytes(path, what, limit, roots=roots, error=error)
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:

@@ -235,7 +235,7 @@ def parse_document(data: Any, where: str = "trajectory"):
         items = []
     if not isinstance(items, list) or len(items) > MAX_SCENE_ITEMS:
         _fail(where, "scene.items", f"expected a list of at most {MAX_SCENE_ITEMS} items, got {_kind(items)}")
-    seen = set()
+    seen: set[str] = set()
     for i, it in enumerate(items):
         _scene_item(it, where, f"scene.items[{i}]", seen)
 

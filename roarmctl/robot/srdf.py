@@ -25,7 +25,6 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
-
 from roarmctl.errors import DescriptionError
 from roarmctl.fileio import Roots
 from roarmctl.validation import load_yaml

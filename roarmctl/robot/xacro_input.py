@@ -63,7 +63,7 @@ def expand(path: Path, args, where: str, packages: dict[str, Path] | None = None
     return text
 
 
-def _expression_of(exc: BaseException) -> str | None:
+def _expression_of(exc: BaseException | None) -> str | None:
     """The '${...}' text xacro names in the suffix of its wrapped exception, cut to one short piece."""
     seen = 0
     while exc is not None and seen < 50:

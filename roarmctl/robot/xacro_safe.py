@@ -34,8 +34,9 @@ import math
 import operator
 import os
 import threading
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any, Callable, Iterator
+from typing import Any, ClassVar
 
 from roarmctl.errors import DescriptionError
 from roarmctl.fileio import Roots, read_text
@@ -68,13 +69,14 @@ class Refused(Exception):
 class Budget:
     """Counters of one expansion; ``spend`` raises ``Refused`` past a limit."""
 
-    LIMITS = {"elements": MAX_ELEMENTS, "expressions": MAX_EXPRESSIONS, "steps": MAX_STEPS, "characters": MAX_CHARS,
+    LIMITS: ClassVar[dict[str, int]] = {"elements": MAX_ELEMENTS, "expressions": MAX_EXPRESSIONS, "steps": MAX_STEPS, "characters": MAX_CHARS,
               "includes": MAX_INCLUDES, "node moves": MAX_MOVES}
 
     def __init__(self) -> None:
         self.used = dict.fromkeys(self.LIMITS, 0)
 
     def spend(self, what: str, n: int = 1) -> None:
+        """Count ``n`` more of ``what``; Refused past its limit."""
         self.used[what] += n
         if self.used[what] > self.LIMITS[what]:
             raise Refused(f"the description needs more than {self.LIMITS[what]:,} {what} to expand "
@@ -173,6 +175,7 @@ class Evaluator:
         self.namespace = namespace
 
     def __call__(self, text: str) -> Any:
+        """The value of the expression ``text`` (the inside of ``${...}``); Refused if it leaves the allow-list."""
         self.budget.spend("expressions")
         try:
             tree = ast.parse(text.strip(), mode="eval")
@@ -188,6 +191,7 @@ class Evaluator:
         return value
 
     def eval(self, node: ast.AST) -> Any:
+        """The value of one syntax-tree node (by its ``_NodeType`` method; none: refused)."""
         self.budget.spend("steps")
         method = getattr(self, f"_{type(node).__name__}", None)
         if method is None:
