@@ -63,10 +63,11 @@ __all__ = [
 def load_robot(spec: PathLike) -> Robot:
     """A bundled robot by name (``roarmctl robots`` lists them) or a description file (URDF sidecar
     ``.yaml`` or DH table). The ``Robot`` offers ``robot.kin.fk(q)`` (4x4 TCP pose), ``robot.kin.jacobian(q)``
-    (6 x arm_dof), ``joint_names``, ``lower``/``upper`` limits (rad) and ``named_poses``."""
+    (6 x arm_dof), ``joint_names``, ``lower``/``upper`` limits (rad) and ``named_poses``. A sidecar's
+    ``trust: true`` counts here: the caller named the file."""
     from roarmctl.robot.loader import load_robot as _load
 
-    return _load(str(spec))
+    return _load(str(spec), trust_sidecar=True)
 
 
 def plan(source: PathLike | Mapping[str, Any], *, seed: int | None = None, base_dir: PathLike | None = None,
@@ -151,9 +152,10 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
     """
     from roarmctl.device.session import run_execution
     from roarmctl.device.streamer import StreamConfig, build_schedule
+    from roarmctl.robot.loader import load_robot as _load  # the trajectory names it: no sidecar trust
 
     t = _trajectory(traj)
-    robot = load_robot(t.robot)
+    robot = _load(t.robot)
     cfg = StreamConfig(rate=rate, speed_scale=speed_scale, max_error=max_error, move_to_start=move_to_start,
                        from_current=from_current)
     build_schedule(t, robot, rate=rate, speed_scale=speed_scale, strategy=cfg.strategy)  # refuse before opening

@@ -211,15 +211,28 @@ def _size(n: int) -> str:
 MARKER = ".roarmctl-output"
 MAX_NAME_BYTES = 200  # of a file or folder name roarmctl writes (the OS allows 255; temporaries add a suffix)
 
-_ON_DISK: list[str] = []  # what an interrupted replacement has left, for the CLI's message after a signal
+_PENDING: list[list] = []  # [target, token in the new MARKER, an old folder was there, where the old one waits]
 
 
 def interrupted_write_state(clear: bool = True) -> str | None:
-    """What is on disk after a signal stopped a folder replacement (``replace_folder``), else None."""
-    state = _ON_DISK[-1] if _ON_DISK else None
+    """What is on disk after a signal stopped a folder replacement (``replace_folder``), read from the
+    disk itself (the new folder's ``MARKER`` carries a token): None when no replacement was under way."""
+    if not _PENDING:
+        return None
+    target, token, existed, old_at = _PENDING[-1]
     if clear:
-        _ON_DISK.clear()
-    return state
+        _PENDING.clear()
+    try:
+        ours = token in (target / MARKER).read_text()
+    except OSError:
+        ours = False
+    if ours:
+        return f"{target} is complete (the new one{' replaced the old' if existed else ''})"
+    if existed and os.path.lexists(target):
+        return f"{target} is unchanged (the old one)"
+    if existed and old_at is not None:
+        return f"{target} is missing: the old folder is at {old_at}"
+    return "nothing was written"
 
 
 def check_output_folder(path: str | os.PathLike, force: bool = False, made_by_us=None) -> Path:
@@ -272,30 +285,29 @@ def replace_folder(new: str | os.PathLike, target: str | os.PathLike) -> Path:
     """Move the complete folder ``new`` to ``target``; an existing ``target`` is swapped out in ONE
     rename (Linux ``renameat2(RENAME_EXCHANGE)``) and deleted only afterwards, so a signal at any
     moment leaves at ``target`` either the old folder or the new one, whole. ``MARKER`` is written into
-    ``new`` first. After a signal, ``interrupted_write_state()`` says which is on disk."""
+    ``new`` first; after a signal ``interrupted_write_state()`` says which folder is at ``target``."""
+    import secrets
     import shutil
 
     new, target = Path(new), Path(target)
-    (new / MARKER).write_text("written by roarmctl; replacing this folder deletes nothing else\n")
-    _ON_DISK[:] = [f"{target} is unchanged" if os.path.lexists(target) else "nothing was written"]
+    token = secrets.token_hex(8)
+    (new / MARKER).write_text(f"written by roarmctl ({token}); replacing this folder deletes nothing else\n")
+    existed = os.path.lexists(target)
+    _PENDING[:] = [[target, token, existed, None]]
     try:
-        if not os.path.lexists(target):
+        if not existed:
             os.replace(new, target)
-            _ON_DISK[:] = [f"{target} is complete"]
         elif _exchange(new, target):  # new now holds the old folder
-            _ON_DISK[:] = [f"{target} is complete (the new one replaced the old)"]
             shutil.rmtree(new, ignore_errors=True)
         else:  # no atomic exchange on this system: two renames, the old folder kept until the new is in place
             old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old.", dir=target.parent))
+            _PENDING[-1][3] = old / target.name
             os.replace(target, old / target.name)
-            _ON_DISK[:] = [f"{target} is missing: the old folder is at {old / target.name}, the new one at {new}"]
             os.replace(new, target)
-            _ON_DISK[:] = [f"{target} is complete (the new one replaced the old)"]
             shutil.rmtree(old, ignore_errors=True)
     except OSError as exc:
-        _ON_DISK.clear()
+        _PENDING.clear()
         raise InputError(f"cannot write {_short(target)}: {_reason(exc)}", "check the disk space and permissions") from None
-    _ON_DISK.clear()  # done; a signal (KeyboardInterrupt) leaves the state for the CLI's message
     return target
 
 

@@ -23,16 +23,18 @@ M3_Q = ["0", "0", "1.57", "0", "0", "0"]
 def payload(marker: Path) -> str:
     """A ``${...}`` that runs ``touch marker`` through xacro 2.1.1's ``eval``: the dunder names sit inside
     the comprehension's own scope, which xacro's filter on names starting with ``__`` does not inspect."""
-    return ("[x for c in [()] for b in [c.__class__.__base__] for s in b.__subclasses__() "
+    return ("str([x for c in [()] for b in [c.__class__.__base__] for s in b.__subclasses__() "
             "if s.__name__ == 'catch_warnings' "
-            f"for x in [s()._module.__builtins__['__import__']('os').system('touch {marker}')]]")
+            f"for x in [s()._module.__builtins__['__import__']('os').system('touch {marker}')]])")
 
 
 def m3_xacro(folder: Path, name_expr: str = "'roarm_m3_pro'", extra: str = "", file: str = "arm.xacro") -> Path:
     """The bundled RoArm-M3 Pro URDF as a xacro whose robot name is ``${name_expr}``, with ``extra`` XML
     (properties, macros, includes) first inside ``<robot>``."""
     urdf = (bundled_dir() / "roarm_m3_pro.urdf").read_text()
-    urdf = urdf.replace('<robot name="roarm_m3_pro">', f'<robot name="${{{name_expr}}}" {XACRO_NS}>{extra}', 1)
+    # the name is set by an element after ``extra``, so that the properties it defines exist by then
+    urdf = urdf.replace('<robot name="roarm_m3_pro">', f'<robot {XACRO_NS}>{extra}<xacro:attribute name="name" '
+                        f'value="${{{name_expr}}}"/>', 1)
     path = folder / file
     path.write_text(urdf)
     return path

@@ -168,6 +168,7 @@ def _json_requested(argv: list[str] | None) -> bool:
 
 def _run(argv: list[str] | None, guard) -> int:
     common.STATE.json_printed, common.STATE.last_error = False, None  # main() may run more than once in a process
+    _on_disk()  # forget an earlier command's interrupted output
     code = _run_command(argv, guard)
     if code != 0 and _json_requested(argv) and not common.STATE.json_printed:
         message, hint = common.STATE.last_error or ("failed", None)

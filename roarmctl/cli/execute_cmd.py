@@ -225,7 +225,7 @@ def sim_device(
         from roarmctl.device.protocol import WireMap
         from roarmctl.robot.loader import load_robot
 
-        kind = WireMap(load_robot(model)).model
+        kind = WireMap(load_robot(model, trust_sidecar=True)).model
         if firmware is not None and (firmware == "m2") != (kind == "m2"):
             raise InputError(f"--firmware {firmware} does not match --model {model} (a RoArm-{kind.upper()})",
                              "give one of them")

@@ -98,7 +98,7 @@ def fk(
     from roarmctl.robot.loader import load_robot
     from roarmctl.robot.model import rpy_from_matrix
 
-    r = load_robot(robot)
+    r = load_robot(robot, trust_sidecar=True)  # the user named it
     fr = get_frame(r, frame)
     qv = r.full_q(common.parse_numbers(q, "joint value", deg))
     if link is not None and link not in r.kin.link_index:
@@ -139,7 +139,7 @@ def jacobian(
     from roarmctl.robot.loader import load_robot
     from roarmctl.robot.singularity import classify_singularity
 
-    r = load_robot(robot)
+    r = load_robot(robot, trust_sidecar=True)  # the user named it
     qv = r.full_q(common.parse_numbers(q, "joint value", deg))
     m = r.kin.manipulability(qv)
     out = {
@@ -227,7 +227,7 @@ def ik(
     )
     from roarmctl.robot.loader import load_robot
 
-    r = load_robot(robot)
+    r = load_robot(robot, trust_sidecar=True)  # the user named it
     fr = get_frame(r, frame)
     conv = (lambda v: float(np.radians(v))) if deg else float
     rpy_rad = None if rpy is None else np.array([conv(v) for v in rpy])
@@ -321,7 +321,7 @@ def dynamics(
     if (q is None) == (not q_args):
         raise InputError("give the joint positions once: after the robot (like kin fk) or as --q",
                          f"e.g. roarmctl kin dynamics {robot} 0 0.5 1.2 0 0")
-    r = load_robot(robot)
+    r = load_robot(robot, trust_sidecar=True)  # the user named it
     qv = _split_numbers(q, "--q", deg) if q is not None else common.parse_numbers(q_args, "joint value", deg)
     n = qv.size
     qdv = _split_numbers(qd, "--qd", deg) if qd is not None else np.zeros(n)

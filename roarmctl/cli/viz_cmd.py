@@ -129,7 +129,7 @@ def workspace(
         raise InputError(f"--samples: {samples} is out of range", "use 1 to 2000000")
     _check_dpi(dpi)
     figsize = parse_size(size, dpi)
-    r = load_robot(robot)
+    r = load_robot(robot, trust_sidecar=True)  # the user named it
     out = output if output is not None else Path(f"{r.name}_workspace.png")
     from roarmctl.viz.formats import picture_format
 

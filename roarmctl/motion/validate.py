@@ -44,6 +44,7 @@ VEL_TOL = 0.02  # relative, on the robot's velocity limits
 ACC_TOL = 0.05  # relative, on the robot's acceleration limits
 TIME_TOL = 1e-6  # s
 SEGMENT_KINDS = ("free", "cartesian", "gripper", "wait")
+EVENT_KINDS = ("grasp", "release")  # what the planner writes; replanning and the pictures act on them
 ROLES = ("table", "obstacle", "object")
 SHAPES = ("box", "cylinder", "sphere")
 
@@ -165,7 +166,8 @@ def parse_document(data: Any, where: str = "trajectory"):
         pos = e.get("position")
         if pos is not None:
             pos = _numbers(pos, 3, where, f"{f}.position", lo=-MAX_COORD, hi=MAX_COORD)
-        events.append(Event(t, _name(e["kind"], where, f"{f}.kind"), _name(e.get("label", ""), where, f"{f}.label", empty=True), pos))
+        kind = CHECK.name(e["kind"], where, f"{f}.kind", choices=EVENT_KINDS)
+        events.append(Event(t, kind, _name(e.get("label", ""), where, f"{f}.label", empty=True), pos))
 
     segments = []
     raw_segments = data.get("segments", [])
@@ -265,7 +267,9 @@ def _scene_item(it: Any, where: str, f: str, seen: set) -> None:
         _number(it.get("radius"), where, f"{f}.radius", lo=0.0, hi=MAX_SIZE, strict_lo=True)
         if shape == "cylinder":
             _number(it.get("length"), where, f"{f}.length", lo=0.0, hi=MAX_SIZE, strict_lo=True)
-    _numbers(it.get("xyz", [0, 0, 0]), 3, where, f"{f}.xyz", lo=-MAX_COORD, hi=MAX_COORD)
+    if "xyz" not in it:
+        _fail(where, f"{f}.xyz", "is missing", "every scene item has a position [x, y, z] in m")
+    _numbers(it["xyz"], 3, where, f"{f}.xyz", lo=-MAX_COORD, hi=MAX_COORD)
     _numbers(it.get("rpy", [0, 0, 0]), 3, where, f"{f}.rpy", lo=-100.0, hi=100.0)
 
 

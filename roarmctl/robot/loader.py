@@ -40,18 +40,23 @@ def bundled_robots() -> list[str]:
 _CACHE: dict[tuple, Robot] = {}
 
 
-def load_robot(spec: str, trust_sidecar: bool = True) -> Robot:
+def load_robot(spec: str, trust_sidecar: bool = False) -> Robot:
     """A bundled robot name (``roarm_m3_pro``) or a path to a ``.yaml``, ``.urdf`` or ``.xacro`` file.
 
     A description reads only inside its roots (``meshes.description_roots``: its folder and its
     packages). ``trust_sidecar``: a sidecar's ``trust: true`` lets xacro evaluate its expressions
-    itself; False when a plan, trajectory or log named the file (only the user's ``--trust-xacro``
-    counts then, see ``roarmctl.robot.xacro_safe``).
+    itself - True only where the user named the file (``kin``, ``api.load_robot``), never where a plan,
+    trajectory or log did (then only the user's ``--trust-xacro`` counts, see ``robot.xacro_safe``).
     """
     from roarmctl.robot.meshes import PACKAGE_PATHS, description_roots
     from roarmctl.robot.xacro_input import TRUST_ALL
 
-    key = (spec, trust_sidecar, TRUST_ALL, tuple(sorted((k, str(v)) for k, v in PACKAGE_PATHS.items())))
+    try:  # a file edited since it was loaded is loaded again
+        st = os.stat(spec)
+        stamp: tuple = (st.st_mtime_ns, st.st_size)
+    except (OSError, ValueError):
+        stamp = ()
+    key = (spec, stamp, trust_sidecar, TRUST_ALL, tuple(sorted((k, str(v)) for k, v in PACKAGE_PATHS.items())))
     if key in _CACHE:
         return _CACHE[key]
     path = bundled_dir() / f"{spec}.yaml"
@@ -73,7 +78,7 @@ def load_robot(spec: str, trust_sidecar: bool = True) -> Robot:
             data["_roots"] = description_roots(data, path)
             data["_trusted"] = trust_sidecar and data.get("trust") is True
             urdf = (path.parent / str(data["urdf"])).resolve()
-            if not urdf.is_file():
+            if not urdf.exists():  # anything else (a FIFO, a folder) is refused by the reader
                 raise DescriptionError(f"{path}: urdf: file '{data['urdf']}' not found", "the path is relative to the YAML file")
             robot = _from_urdf(urdf, data, path)
         else:

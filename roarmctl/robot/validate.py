@@ -388,6 +388,12 @@ def check_robot(robot, where: str) -> None:
             _fail(where, f, f"sizes {dims} must be positive finite numbers")
         if s.kind == "capsule" and not (math.isfinite(s.length) and s.length >= 0):
             _fail(where, f, "a capsule's length must be finite and not negative")
+    known = set(links)
+    for pair in sorted(robot.allowed_collisions, key=sorted):
+        unknown = sorted(set(pair) - known)
+        if unknown:
+            _fail(where, "allowed_collisions", f"pair ({', '.join(sorted(pair))}): '{unknown[0]}' is not a link of "
+                  f"{robot.name}", "name two links of the URDF")
     lo, hi = np.asarray(robot.lower, dtype=float), np.asarray(robot.upper, dtype=float)
     if robot.gripper is not None:
         gi = robot.joint_index(robot.gripper.joint)

@@ -42,11 +42,12 @@ from roarmctl.errors import DescriptionError
 from roarmctl.fileio import Roots, read_text
 
 #: Work one expansion may do (counts, not seconds: the same verdict on a busy machine).
-MAX_ELEMENTS = 100_000  # elements evaluated (macro bodies count each time they are expanded)
+MAX_ELEMENTS = 20_000  # elements evaluated (macro bodies count each time they are expanded)
 MAX_EXPRESSIONS = 200_000  # ${...} and $(...) evaluated
 MAX_STEPS = 2_000_000  # syntax-tree nodes evaluated, over all expressions
 MAX_CHARS = 32 * 1024 * 1024  # characters produced by expressions and held by the elements evaluated
-MAX_INCLUDES = 1000  # files included (a file including itself stops here)
+MAX_INCLUDES = 1000  # files included
+MAX_INCLUDE_DEPTH = 40  # includes within includes (a file including itself stops here)
 MAX_MOVES = 5_000_000  # list operations of replacing a macro call by its body (minidom's are linear in the siblings)
 MAX_FILE_BYTES = 8 * 1024 * 1024  # one xacro file or included file
 #: Values an expression may produce.
@@ -388,6 +389,8 @@ def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
     def parse(inp: Any, filename: str | None = None) -> Any:
         if inp is None:  # the top file, then each include
             budget.spend("includes")
+            if len(xacro.filestack or ()) > MAX_INCLUDE_DEPTH:
+                raise Refused(f"includes nested more than {MAX_INCLUDE_DEPTH} deep (a file that includes itself?)")
             what = f"{where}: xacro include" if budget.used["includes"] > 1 else None
             inp = read_text(os.path.join(xacro.root_dir, filename or ""), what, MAX_FILE_BYTES, roots=roots,
                             error=DescriptionError)
