@@ -11,10 +11,10 @@ import os
 import signal
 from pathlib import Path
 
+import hostile
 import pytest
 import yaml
 
-import hostile
 from roarmctl.cli import run as run_cli
 
 
@@ -94,7 +94,7 @@ def _payload_route(tmp_path: Path, route: str) -> tuple[list[str], Path]:
                                    "trajectory visualize-path", "trajectory export", "execution log"])
 def test_code_in_a_xacro_never_runs(tmp_path, route):
     args, marker = _payload_route(tmp_path, route)
-    code, out, err = cli(args)
+    code, _, err = cli(args)
     assert not marker.exists(), f"the payload ran through {route}"
     assert code == 2, (code, err)
     assert "is not allowed" in err or "not allowed" in err, err
