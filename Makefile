@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: all demo test fuzz bench clean install
+.PHONY: all demo test fuzz lint bench clean install
 
 all: test
 
@@ -20,6 +20,11 @@ install: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
+
+# Lint and types (rules and why: pyproject.toml, docs/design.md "Lint and types").
+lint: $(STAMP)
+	$(BIN)/ruff check roarmctl
+	$(BIN)/mypy
 
 # The fuzz suite's CI profile: 1,000 plan files, 500 trajectories, 300 robot descriptions (about a
 # minute; `make test` runs a tenth of it).

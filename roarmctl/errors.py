@@ -63,6 +63,8 @@ class InfeasibleError(RoarmError):
     """The input is well-formed but cannot be done: unreachable, no path, timing failed (exit 3)."""
 
     exit_code = 3
+    #: set by planning: what was planned before the failure (``roarmctl.motion.pipeline.PartialPlan``), or None
+    partial: Any = None
 
 
 class UnreachableError(InfeasibleError):

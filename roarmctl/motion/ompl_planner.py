@@ -149,20 +149,25 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
     path = _drop_vertices(checker, path, resolution)
     failures = 0
     changed = False
-    seg = cum = rows = None  # of the current path (recomputed only when a shortcut changes it)
+    # of the current path (recomputed only when a shortcut changes it: stale)
+    seg: list[float] = []
+    cum: list[float] = []
+    rows: list[list[float]] = []
+    stale = True
     # The draws of rng.uniform(0.0, c, 2) at each attempt, made at once: uniform is low + (high - low) * next_double,
     # the doubles that random() gives in the same order (the generator is not used afterwards).
-    draws = rng.random(2 * attempts).tolist() if attempts > 0 else []
+    draws = rng.random(2 * attempts).tolist() if attempts > 0 and rng is not None else []
     for k in range(0, 2 * attempts, 2):
         if time.perf_counter() > until:
             raise _ceiling_error("path shortcutting", ceiling, "planner.simplify_budget")
         if len(path) < 3 or failures >= SHORTCUT_PATIENCE:
             break
         failures += 1
-        if seg is None:  # as Python floats: the same numbers, cheaper to pick from (bisect for searchsorted)
+        if stale:  # as Python floats: the same numbers, cheaper to pick from (bisect for searchsorted)
             seg_arr = np.linalg.norm(np.diff(path, axis=0), axis=1)
             seg, cum = seg_arr.tolist(), np.concatenate([[0.0], np.cumsum(seg_arr)]).tolist()
             rows = path.tolist()
+            stale = False
         ta, tb = 0.0 + cum[-1] * draws[k], 0.0 + cum[-1] * draws[k + 1]
         if tb < ta:
             ta, tb = tb, ta
@@ -184,7 +189,7 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
             path = np.vstack([path[:ia + 1], pa, pb, path[ib + 1:]])
             failures = 0
             changed = True
-            seg = None
+            stale = True
     if changed:  # else a second pass would keep every vertex: the first one found each farther one unreachable
         path = _drop_vertices(checker, path, resolution)
     # Remove vertices that coincide (a shortcut ending on a vertex).

@@ -31,7 +31,7 @@ def _plan_for(traj: Trajectory, robot, q_from: np.ndarray, q_to: np.ndarray):
     from roarmctl.plan.schema import ItemSpec, Limits, MoveTask, Plan, PlannerConfig
 
     items = Scene.from_dict(traj.scene or {"items": []}).items
-    specs = [ItemSpec(name=i.name, role=i.role, shape=i.shape, pose=i.pose.copy(), size=tuple(i.size), radius=i.radius,
+    specs = [ItemSpec(name=i.name, role=i.role, shape=i.shape, pose=i.pose.copy(), size=(i.size[0], i.size[1], i.size[2]), radius=i.radius,
                       length=i.length) for i in items]
     lim = traj.limits or {}
     limits = Limits(velocity_scale=float(lim.get("velocity_scale", 0.5)),
@@ -127,7 +127,7 @@ def replan_start(traj: Trajectory, robot, q_measured: np.ndarray, mode: str) -> 
         raise ValueError(f"mode must be one of {MODES}")
     again = _plan_again(traj, q)
     if again is not None:
-        return again, (f"planned '{Path(traj.plan['path']).name}' again from the measured pose: {again.duration:.2f} s "
+        return again, (f"planned '{Path((traj.plan or {})['path']).name}' again from the measured pose: {again.duration:.2f} s "
                        f"(was {traj.duration:.2f} s from its start)")
     free = next((s for s in traj.segments if s.kind == "free"), None)
     if free is None:

@@ -87,9 +87,7 @@ def _bodies(robot: Robot, payload: dict[str, Inertial] | None) -> np.ndarray:
     """The kernel's body table (n_links, 14) of the robot's inertials with ``payload`` combined in; the table
     without payload, and the last few with one, are kept on the robot."""
     kin = robot.kin
-    cache = getattr(robot, "_rnea_bodies", None)
-    if cache is None:
-        cache = robot._rnea_bodies = {}
+    cache = robot.derived.setdefault("rnea_bodies", {})
     key: tuple = ()
     if payload:
         for name, extra in payload.items():

@@ -158,7 +158,7 @@ def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
     if "ur6" in (sm, ik):
         from roarmctl.robot.ik import ur6_params
 
-        robot._ur6_params = ur6_params(robot)  # refuses a table the ur6 model cannot serve
+        robot.derived["ur6_params"] = ur6_params(robot)  # refuses a table the ur6 model cannot serve
     return robot
 
 

@@ -7,7 +7,7 @@ actuated joint in ``Robot.joint_names`` order; where the robot has a gripper, it
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -186,6 +186,8 @@ class Robot:
     base_links: tuple[str, ...] = ()
     #: The DH table the robot was built from: (convention, rows of {a, alpha, d, offset}), SI units.
     dh: tuple[str, list[dict[str, float]]] | None = None
+    #: values derived from the description once per loaded robot (IK solvers, reach bounds, memos)
+    derived: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         from roarmctl.robot.kinematics import Kinematics

@@ -38,9 +38,9 @@ def _ur6(robot: Robot, q: np.ndarray) -> str | None:
     # (zero at the elbow s3 = 0, wrist s5 = 0 and shoulder (wrist centre on the base axis) singularities).
     from roarmctl.robot.ik import ur6_params
 
-    params = getattr(robot, "_ur6_params", None)
+    params = robot.derived.get("ur6_params")
     if params is None:
-        params = robot._ur6_params = ur6_params(robot)
+        params = robot.derived["ur6_params"] = ur6_params(robot)
     _, _, a2, a3, _, d5, _, offs, _ = params
     th = q[robot.arm_indices] + offs
     if abs(np.sin(th[2])) < SIN_TOL:

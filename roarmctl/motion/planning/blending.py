@@ -200,6 +200,7 @@ def corner_move(ctx: PlanContext, ta: TimedPath, tb: TimedPath, ia: int, bounds:
         return None
     otg, traj, inp = Ruckig(len(arm), dt), Trajectory(len(arm)), InputParameter(len(arm))
     inp.duration_discretization = DurationDiscretization.Discrete
+    assert ctx.jmax is not None  # blending is for jerk-limited robots (every loaded robot has jerk limits)
     inp.max_velocity, inp.max_acceleration, inp.max_jerk = list(ctx.vmax[arm]), list(ctx.amax[arm]), list(ctx.jmax[arm])
     qb = tb.q[:, arm] + (ta.q[-1, arm] - tb.q[0, arm])  # tb starts where ta comes to rest (as in splice_corner)
     # the end states as lists, (3, n) per sample: ta's samples i_lo..ia (sa[i - i_lo]), tb's 0..k_hi (sb[k])
@@ -247,6 +248,7 @@ def corner_move(ctx: PlanContext, ta: TimedPath, tb: TimedPath, ia: int, bounds:
     found = ranked(key for key, n in totals.items() if n is not None and key[0] + n - key[1] <= under)[:CORNER_TRIES]
     for i, k in found:
         steps = totals[(i, k)]
+        assert steps is not None  # found holds solved keys only
         set_ends(i, k)
         otg.calculate(inp, traj)
         cand = splice_corner(ta, tb, i, k, steps, traj, arm)
@@ -310,6 +312,7 @@ def first_invalid_under(ctx: PlanContext, motion: UntimedMotion, q: np.ndarray) 
 
 def line_time(ctx: PlanContext, motion: UntimedMotion, tp: TimedPath, span: tuple[float, float], fraction: float) -> float:
     """Time (s, in ``tp``) when the TCP has covered ``fraction`` of the motion's straight line."""
+    assert motion.step.line is not None
     p0, p1 = ctx.robot.kin.fk(motion.wps[0])[:3, 3], motion.step.line[1]
     sel = (tp.times >= span[0] - 1e-9) & (tp.times <= span[1] + 1e-9)
     p = ctx.robot.kin.fk(tp.q[sel])[:, :3, 3]

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -11,7 +11,7 @@ from roarmctl.motion.planning.pieces import UntimedMotion
 
 if TYPE_CHECKING:
     from roarmctl.motion.collision import CollisionChecker
-    from roarmctl.motion.scene import SceneItem
+    from roarmctl.motion.scene import Role, SceneItem, Shape
     from roarmctl.plan.schema import ItemSpec, Plan
     from roarmctl.robot.model import Robot
 
@@ -106,5 +106,6 @@ def scene_item(spec: ItemSpec) -> SceneItem:
     """The scene item of a plan's table, obstacle or object (at its start pose)."""
     from roarmctl.motion.scene import SceneItem
 
-    return SceneItem(name=spec.name, role=spec.role, shape=spec.shape, pose=spec.pose.copy(), size=tuple(spec.size),
-                     radius=spec.radius, length=spec.length)
+    # the plan's schema checked role and shape against the scene's
+    return SceneItem(name=spec.name, role=cast("Role", spec.role), shape=cast("Shape", spec.shape), pose=spec.pose.copy(),
+                     size=cast(tuple[float, float, float], tuple(spec.size)), radius=spec.radius, length=spec.length)

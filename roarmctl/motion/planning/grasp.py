@@ -59,6 +59,7 @@ def grasp_width(spec: ItemSpec) -> float:
 def grip_value(ctx: PlanContext, task: PickTask, g_open: float, where: str) -> float:
     """The gripper value (rad) at the grasp; checks that the open jaws clear the object (jaw widths known)."""
     gr = ctx.robot.gripper
+    assert gr is not None  # a plan with picks needs a gripper (checked by the Planner)
     if not gr.has_widths:
         return task.gripper_closed if task.gripper_closed is not None else gr.closed
     spec = next(o for o in ctx.plan.objects if o.name == task.object)
@@ -99,6 +100,7 @@ def gripper_motion(ctx: PlanContext, q: np.ndarray, target: float, label: str, s
     """The gripper alone from ``start`` (default q[gi]) to ``target`` (rad), the arm held at ``q``: time-optimal under
     the gripper's velocity, acceleration and jerk limits."""
     gi = ctx.gi
+    assert gi is not None
     q = q.copy()
     if start is not None:
         q[gi] = start
@@ -115,6 +117,7 @@ def gripper_motion(ctx: PlanContext, q: np.ndarray, target: float, label: str, s
 def gripper_action(ctx: PlanContext, step: TaskStep, q: np.ndarray, update: bool = True) -> TimedPath:
     """The gripper action ``step`` at rest at ``q``, timed (at least ``gripper_time``) and its jaw sweep checked;
     with ``update`` also its world update (``gripper_event``)."""
+    assert step.gripper_to is not None
     a, b = float(q[ctx.gi]), float(step.gripper_to)
     tp = gripper_motion(ctx, q, b, step.label)
     if tp.duration < ctx.plan.limits.gripper_time:  # the jaws get at least gripper_time to settle
@@ -136,22 +139,25 @@ def gripper_action(ctx: PlanContext, step: TaskStep, q: np.ndarray, update: bool
 def gripper_event(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> None:
     """After the gripper action ``step`` at ``q``: a grasp attaches the object (collision model and payload),
     a release puts it back into the scene; the checker takes the new gripper value."""
+    assert step.gripper_to is not None
     b = float(step.gripper_to)
     tcp = ctx.robot.kin.fk(q)[:3, 3]
     if step.event is not None:
         if step.event.kind == "grasp":
+            assert ctx.pending_pick is not None  # set by the pick this grasp belongs to
             name, offset = ctx.pending_pick
             ctx.set_state(b, grasp_target=name)
             ctx.checker.attach(name, q[ctx.arm])
             ctx.held, ctx.held_offset, ctx.pending_pick = name, offset, None
             attach_payload(ctx, name, q, step.label)
         elif step.event.kind == "release":
-            name = ctx.held
-            ctx.checker.detach(name, q[ctx.arm])
-            ctx.object_pose[name][:3, 3] = tcp - ctx.held_offset
+            released = ctx.held
+            assert released is not None  # a release follows a grasp
+            ctx.checker.detach(released, q[ctx.arm])
+            ctx.object_pose[released][:3, 3] = tcp - ctx.held_offset
             ctx.held, ctx.held_offset = None, np.zeros(3)
             ctx.payload, ctx.payload_label = None, ""
-            ctx.set_state(b, grasp_target=name)
+            ctx.set_state(b, grasp_target=released)
     else:
         ctx.set_state(b)
 
@@ -254,7 +260,7 @@ def overlap_jaw_action(ctx: PlanContext, a: TimedPiece, b: TimedPiece, target: s
         clear = checker.validity_batch(arm_q, gripper=g) if len(ms) else np.zeros(0, dtype=bool)
         m = next((int(k) for k in ms[clear][::-1] if attempt(int(k)) is not None), 0)
         cand = tried.get(m)
-        if m and not jaw_at_pose_samples_ok(ctx, cand, ia + 1 - m, min(ia + 1, len(cand.times) - 1), pose, target):
+        if m and cand is not None and not jaw_at_pose_samples_ok(ctx, cand, ia + 1 - m, min(ia + 1, len(cand.times) - 1), pose, target):
             m, cand = 0, None
     finally:
         checker.set_grasp_target(saved[0], moving_jaw_clear=saved[1])
@@ -262,6 +268,7 @@ def overlap_jaw_action(ctx: PlanContext, a: TimedPiece, b: TimedPiece, target: s
         ctx.timer.add("blend", t0)
     if not m:
         return [a, b]
+    assert cand is not None
     start = ia + 1 - m
     cut = ia + 1 if grasp else start  # where the arm arrives / starts
     first, second = split_at(cand, cut)
@@ -269,10 +276,12 @@ def overlap_jaw_action(ctx: PlanContext, a: TimedPiece, b: TimedPiece, target: s
     if grasp:
         segs = a.segments[:-1] + [Segment(a.segments[-1].start, t_cut, a.segments[-1].kind, a.segments[-1].label)]
         e = b.event
+        assert e is not None  # b is the grasp
         return [TimedPiece(first, segs, a.event, a.blends, a.attach, a.detach),
                 TimedPiece(second, [Segment(0.0, second.duration, sg.kind, sg.label) for sg in b.segments[:1]],
                            Event(second.duration, e.kind, e.label, e.position), b.blends, b.attach, b.detach, b.jaw_target)]
     e = a.event  # released: the jaws are clear of the object when the retreat starts
+    assert e is not None
     return [TimedPiece(first, [Segment(0.0, t_cut, sg.kind, sg.label) for sg in a.segments[:1]],
                        Event(t_cut, e.kind, e.label, e.position), a.blends, a.attach, a.detach, a.jaw_target),
             TimedPiece(second, b.segments, b.event, b.blends, b.attach, b.detach, b.jaw_target)]

@@ -36,6 +36,7 @@ def geometry(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> UntimedMotion:
 
     ctx.set_state(q[ctx.gi] if ctx.gi is not None else None, grasp_target=step.grasp_target)
     if step.kind == "cartesian":
+        assert step.line is not None
         t0 = time.perf_counter()
         wps = cartesian_line(ctx.robot, q, step.line[1], pitch=step.pitch, roll=step.roll, label=step.label)
         ctx.timer.add("ik", t0)
@@ -47,6 +48,7 @@ def free_path(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> np.ndarray:
     """OMPL path from ``q`` to the step's goal: the few vertices (K, dof) of the shortest of a few plans, shortcut."""
     from roarmctl.motion.ompl_planner import plan_joint_path_with_stats, simplify_path
 
+    assert step.q_to is not None
     goal = step.q_to.copy()
     if ctx.gi is not None:
         goal[ctx.gi] = q[ctx.gi]
@@ -65,6 +67,7 @@ def free_path(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> np.ndarray:
             best = (path, stats)
         if stats.direct:  # the straight joint move is valid: nothing shorter exists
             break
+    assert best is not None
     path = best[0]
     if not best[1].direct:  # shortcut only the one we keep
         t0 = time.perf_counter()
@@ -127,6 +130,7 @@ def time_motion(ctx: PlanContext, motion: UntimedMotion) -> TimedPiece:
         finally:
             ctx.timer.add("recheck", t0)
         return TimedPiece(tp, [Segment(0.0, tp.duration, motion.step.kind, label)])
+    assert last_error is not None
     raise last_error
 
 
@@ -146,6 +150,7 @@ def check_motion(ctx: PlanContext, tp: TimedPath, motion: UntimedMotion, label: 
         speed = np.linalg.norm(r.kin.tcp_velocity(tp.q, tp.qd[:, ctx.arm]), axis=1)
         if np.max(speed) > ctx.plan.limits.max_tcp_speed * (1 + 1e-6):
             raise PlanningError(f"{label}: the TCP speed {np.max(speed):.3f} m/s exceeds max_tcp_speed")
+    assert tp.s is not None  # a timed path, not a dwell
     s_bounds = np.array([0.0, float(tp.s[-1])])
     sel = np.flatnonzero((tp.s >= s_bounds[0] - 1e-12) & (tp.s <= s_bounds[1] + 1e-12))
     lo, hi = max(int(sel[0]) - 1, 0), min(int(sel[-1]) + 1, len(tp.times) - 1)  # and the samples either side
@@ -158,6 +163,7 @@ def check_motion(ctx: PlanContext, tp: TimedPath, motion: UntimedMotion, label: 
         raise PlanningError(f"{motion.step.label}: the timed motion is invalid at t = {tp.times[lo] + bad / RECHECK_SUBSTEPS * SAMPLE_DT:.2f} s: "
                             f"{ctx.checker.explain(fine[bad, ctx.arm])}")
     if motion.step.kind == "cartesian":
+        assert motion.step.line is not None
         p0, p1 = r.kin.fk(motion.wps[0])[:3, 3], motion.step.line[1]
         dev = line_deviation(r, tp.q[sel], p0, p1)
         if dev > LINE_TOLERANCE:

@@ -35,7 +35,7 @@ class TaskStep:
     duration: float = 0.0
     event: Event | None = None
     line: tuple[np.ndarray, np.ndarray] | None = None
-    pitch: float = math.pi / 2
+    pitch: float | None = math.pi / 2  # None: position-only IK
     roll: float | None = None
     grasp_target: str | None = None  # the object the jaws may touch during this step
     open_to: float | None = None  # free motion: the gripper opens to this during it (blended) or right after

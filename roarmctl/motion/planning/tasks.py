@@ -26,9 +26,9 @@ def where(task, index: int) -> str:
     return f"task {index + 1} ({task.kind}, line {task.line})"
 
 
-def pitch_label(pitch: float, auto: bool) -> str:
-    """Segment label suffix recording an automatically chosen pitch."""
-    return f" (pitch {math.degrees(pitch):.1f} deg, auto)" if auto else ""
+def pitch_label(pitch: float | None, auto: bool) -> str:
+    """Segment label suffix recording an automatically chosen pitch (none for a pitch not chosen or None)."""
+    return f" (pitch {math.degrees(pitch):.1f} deg, auto)" if auto and pitch is not None else ""
 
 
 def expand(ctx: PlanContext, task, q: np.ndarray, index: int) -> list[TaskStep]:
@@ -59,7 +59,9 @@ def gripper_value(ctx: PlanContext, value: float | str | None) -> float | None:
     if ctx.gi is None:
         raise InfeasibleError(f"{ctx.plan.path}: {ctx.robot.name} has no gripper to open or close")
     if isinstance(value, str):
-        return float(ctx.robot.gripper.open if value == "open" else ctx.robot.gripper.closed)
+        gr = ctx.robot.gripper
+        assert gr is not None  # gi is set
+        return float(gr.open if value == "open" else gr.closed)
     lo, hi = ctx.robot.lower[ctx.gi], ctx.robot.upper[ctx.gi]
     if not lo - 1e-9 <= value <= hi + 1e-9:
         raise InfeasibleError(f"{ctx.plan.path}: gripper {value:.3f} rad is outside [{lo:.3f}, {hi:.3f}]")
@@ -77,6 +79,7 @@ def move_goal(ctx: PlanContext, task: MoveTask, q: np.ndarray, at: str) -> tuple
         except Exception as exc:  # wrong length
             raise InfeasibleError(f"{at}: joints: {exc}") from None
     else:
+        assert task.xyz is not None  # a move names a pose, joints or a position
         chain, pitch = choose_ik_pitch(ctx, [task.xyz], held_pitch(ctx, task, at), task.pitch_auto, None, q, at)
         goal = chain[0]
         label = pitch_label(pitch, task.pitch_auto and pitch is not None)
@@ -91,18 +94,20 @@ def expand_pick(ctx: PlanContext, task: PickTask, q: np.ndarray, at: str) -> lis
     """A pick: transit above the object (the gripper opening on the way), straight descent, grasp, straight lift."""
     if ctx.held is not None:
         raise InfeasibleError(f"{at}: picks '{task.object}' while still holding '{ctx.held}'", "place it first")
+    gi, gr = ctx.gi, ctx.robot.gripper
+    assert gi is not None and gr is not None  # a plan with picks needs a gripper (checked by the Planner)
     centre = ctx.object_pose[task.object][:3, 3]
     grasp = centre + np.array([0.0, 0.0, task.grasp_offset])
     above = grasp + np.array([0.0, 0.0, task.approach_height])
-    g_open = task.gripper_open if task.gripper_open is not None else ctx.robot.gripper.open
+    g_open = task.gripper_open if task.gripper_open is not None else gr.open
     g_closed = grip_value(ctx, task, g_open, at)
     ctx.set_state(g_open, grasp_target=task.object)
     (q_grasp, q_above), pitch = choose_ik_pitch(ctx, [grasp, above], held_pitch(ctx, task, at), task.pitch_auto,
                                                 task.roll, q, at, gripper=g_open)
-    ctx.set_state(q[ctx.gi])
+    ctx.set_state(q[gi])
     lab = pitch_label(pitch, task.pitch_auto and pitch is not None)
-    steps = [TaskStep("free", f"{at}: transit above '{task.object}'{lab}", q_to=with_value(q_above, ctx.gi, q[ctx.gi]),
-                      open_to=g_open if abs(q[ctx.gi] - g_open) > 1e-9 else None, open_label=f"{at}: open gripper")]
+    steps = [TaskStep("free", f"{at}: transit above '{task.object}'{lab}", q_to=with_value(q_above, gi, q[gi]),
+                      open_to=g_open if abs(q[gi] - g_open) > 1e-9 else None, open_label=f"{at}: open gripper")]
     steps += [
         TaskStep("cartesian", f"{at}: descend to '{task.object}'{lab}", q_to=q_grasp, line=(above, grasp),
                  pitch=pitch, roll=task.roll, grasp_target=task.object),
@@ -120,11 +125,13 @@ def expand_place(ctx: PlanContext, task: PlaceTask, q: np.ndarray, at: str) -> l
     if ctx.held is None:
         raise InfeasibleError(f"{at}: places an object but nothing is held", "add a pick task before it")
     name = ctx.held
+    gr = ctx.robot.gripper
+    assert gr is not None  # something is held
     if task.object is not None and task.object != name:
         raise InfeasibleError(f"{at}: places '{task.object}' but the gripper holds '{name}'")
     target = np.asarray(task.xyz, dtype=float) + ctx.held_offset
     above = target + np.array([0.0, 0.0, task.approach_height])
-    g_open = task.gripper_open if task.gripper_open is not None else ctx.robot.gripper.open
+    g_open = task.gripper_open if task.gripper_open is not None else gr.open
     (q_place, q_above), pitch = choose_ik_pitch(ctx, [target, above], held_pitch(ctx, task, at), task.pitch_auto,
                                                 task.roll, q, at)
     lab = pitch_label(pitch, task.pitch_auto and pitch is not None)
@@ -183,12 +190,13 @@ def choose_ik_pitch(ctx: PlanContext, points: list[np.ndarray], pitch: float | N
             continue
         ctx.notes.append(f"{at}: pitch auto chose {math.degrees(cand):.1f} deg (asked {math.degrees(pitch):.1f} deg)")
         return chain, cand
+    assert first is not None  # every candidate pitch failed
     why = first.message[len(at) + 2:] if first.message.startswith(f"{at}: ") else first.message
     raise UnreachableError(f"{at}: no tool pitch reaches it validly; at {math.degrees(pitch):.1f} deg: {why}",
                            first.reason, first.hint)
 
 
-def choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float, float | None]], q: np.ndarray, at: str,
+def choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, float | None]], q: np.ndarray, at: str,
               gripper: float | None = None) -> list[np.ndarray]:
     """IK for a chain of targets (position m, pitch, roll rad) on one branch: valid, margin-respecting, nearest
     to ``q``. Returns one full configuration per target (gripper value of ``q`` unless ``gripper``).

@@ -69,6 +69,12 @@ def gripper_value(robot: Robot, qr: np.ndarray | None) -> float | None:
     return float(qr[gi]) if qr is not None else robot.gripper.closed
 
 
+def gripper_index(robot: Robot) -> int:
+    """The gripper joint's index in the full configuration (for a robot with a gripper)."""
+    assert robot.gripper is not None
+    return robot.joint_index(robot.gripper.joint)
+
+
 def fit_limits(robot: Robot, q: np.ndarray, ref: np.ndarray | None, tol: float = 1e-7) -> np.ndarray | None:
     """Shift revolute joints by multiples of 2 pi into their limits (nearest to ``ref``); None if impossible."""
     out = q.copy()

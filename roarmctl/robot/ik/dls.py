@@ -16,6 +16,7 @@ from roarmctl.robot.ik.common import (
     dedupe,
     default_ref,
     fit_limits,
+    gripper_index,
     gripper_value,
     rot_angle,
     rot_vec,
@@ -71,9 +72,9 @@ class Aim:
 
 def base_point(robot: Robot) -> tuple[np.ndarray, float]:
     """``chain_reach`` once per loaded robot (the point on the first joint's axis, the reach bound)."""
-    got = getattr(robot, "_dls_reach", None)
+    got = robot.derived.get("dls_reach")
     if got is None:
-        got = robot._dls_reach = chain_reach(robot)
+        got = robot.derived["dls_reach"] = chain_reach(robot)
     return got
 
 
@@ -131,11 +132,11 @@ def dls_solve(robot: Robot, p: np.ndarray, rot: np.ndarray | None, qr: np.ndarra
                              robot.full_q(rng.uniform(lo, hi, size=(n_starts, len(arm))))]).astype(float)
     grip = gripper_value(robot, qr)
     if grip is not None:
-        starts[:, robot.joint_index(robot.gripper.joint)] = grip
+        starts[:, gripper_index(robot)] = grip
     # Rows after the reference start do not depend on q_ref (same seed, same random starts), so their
     # outcome is kept per robot: a target asked again from another reference (each candidate of a chain
     # in the planner, each pitch of pitch: auto) costs its reference start only. Same results.
-    memo = robot.__dict__.setdefault("_dls_memo", {})
+    memo = robot.derived.setdefault("dls_memo", {})
     if len(memo) > 2048:
         memo.clear()
     key = (p.tobytes(), seed, n_starts, grip)
@@ -151,7 +152,8 @@ def dls_solve(robot: Robot, p: np.ndarray, rot: np.ndarray | None, qr: np.ndarra
             if mk not in memo:
                 memo[mk] = dls_batch(robot, starts[k:k + size], p, a, *bounds)
             parts.append(memo[mk])
-        return tuple(np.concatenate(x) for x in zip(*parts))
+        q, ep, eo = (np.concatenate(x) for x in zip(*parts))
+        return q, ep, eo
 
     sols: list[np.ndarray] = []
     k = 0
@@ -272,7 +274,7 @@ def dls_batch(robot: Robot, q: np.ndarray, p: np.ndarray, aim: Aim, lo: np.ndarr
         big = m > 0.5
         dq[big] *= (0.5 / m[big])[:, None]
         qa = q[rows][:, arm] + dq
-        if lo is not None:
+        if lo is not None and hi is not None:
             v = wrap_angle(qa[:, wrap])
             qa[:, wrap] = np.where(v < lo[wrap], v + 2 * np.pi, np.where(v > hi[wrap], v - 2 * np.pi, v))
             qa = np.clip(qa, lo, hi)
@@ -301,6 +303,7 @@ def _orientation_error(r: np.ndarray, jac: np.ndarray, aim: Aim) -> tuple[np.nda
         for i in np.flatnonzero(ang > math.pi - 1e-6):  # near pi: the axis from the symmetric part
             w[i] = rot_vec(m[i])
         return w, jac
+    assert aim.axis is not None  # oriented: a rotation or an axis
     a = r[:, :, 0]
     c = cross_rows(a, aim.axis)
     s = np.sqrt(np.einsum("ij,ij->i", c, c))

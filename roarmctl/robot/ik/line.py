@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from roarmctl.robot.ik.common import dedupe, fit_limits, gripper_value
-from roarmctl.robot.ik.roarm5 import Roarm5IK, roarm5_solver
+from roarmctl.robot.ik.roarm5 import roarm5_solver
 from roarmctl.robot.ik.solve import solve_ik_near
 from roarmctl.robot.model import Robot
 
@@ -50,7 +50,8 @@ class LineIK:
         qr = robot.full_q(np.asarray(prev, dtype=float))
         if cands is None or self._key(qr) != self.key:
             return solve_ik_near(robot, p, qr, pitch=self.pitch, roll=self.roll)
-        solver: Roarm5IK = robot._roarm_ik
+        solver = roarm5_solver(robot)
+        assert self.pitch is not None  # the batch is for a held pitch
         out = []
         for q, u_h, done in cands:  # as Roarm5IK.solve: per branch, polished, fitted and FK-checked
             q2 = q if done else solver._verify(fit_limits(robot, q, qr), p, None, u_h, float(self.pitch), True)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from roarmctl.errors import UnreachableError
-from roarmctl.robot.ik.common import POS_TOL, STRETCH_SLACK, dedupe, fit_limits, gripper_value, newton, wrap_angle
+from roarmctl.robot.ik.common import POS_TOL, STRETCH_SLACK, dedupe, fit_limits, gripper_index, gripper_value, newton, wrap_angle
 from roarmctl.robot.model import Robot
 
 
@@ -87,7 +87,7 @@ class Roarm3IK:
                 psi = math.atan2(t[1], t[0]) - math.atan2(v[1], v[0])
                 q = robot.full_q(np.array([base, wrap_angle(self.ss * psi), wrap_angle(self.se * phi)]))
                 if grip is not None:
-                    q[robot.joint_index(robot.gripper.joint)] = grip
+                    q[gripper_index(robot)] = grip
                 raw.append(q)
         if not reach:
             raise UnreachableError(f"{where} is out of reach: the shoulder-to-TCP distance is outside "

@@ -16,6 +16,7 @@ from roarmctl.robot.ik.common import (
     dedupe,
     fit_limits,
     fit_limits_rows,
+    gripper_index,
     gripper_value,
     newton,
     newton_rows,
@@ -31,9 +32,9 @@ PITCH_GRID = 721  # pitch samples over [-pi, pi] when the RoArm pitch is left fr
 
 def roarm5_solver(robot: Robot) -> Roarm5IK:
     """The robot's ``Roarm5IK``, its geometry read once per loaded robot."""
-    solver = getattr(robot, "_roarm_ik", None)
+    solver = robot.derived.get("roarm5_ik")
     if solver is None:
-        solver = robot._roarm_ik = Roarm5IK(robot)
+        solver = robot.derived["roarm5_ik"] = Roarm5IK(robot)
     return solver
 
 
@@ -71,7 +72,7 @@ class Roarm5IK:
         self.reach = self.l2 + self.l3 + self.l4
 
     # -- the planar sub-problem, vectorised over pitch (phi) -------------------------------------
-    def _planar(self, r: float, z: float, phi: np.ndarray, elbow_sign: float):
+    def _planar(self, r: float | np.ndarray, z: float | np.ndarray, phi: np.ndarray, elbow_sign: float | np.ndarray):
         """Shoulder, elbow, wrist (arrays) for TCP at (r, z) in the plane and approach angle phi.
 
         ``r`` is signed (negative: behind the base axis), ``z`` is height above the shoulder axis.
@@ -94,7 +95,7 @@ class Roarm5IK:
         w = phi - self.a0 - s - e
         return s, e, w, ok
 
-    def _branch_q(self, base: float, s, e, w, roll: float, grip: float | None) -> np.ndarray:
+    def _branch_q(self, base: float | np.ndarray, s, e, w, roll: float, grip: float | None) -> np.ndarray:
         n = np.size(s)
         q = np.zeros((n, self.robot.dof))
         q[:, self.arm[0]] = base
@@ -103,7 +104,7 @@ class Roarm5IK:
         q[:, self.arm[3]] = w
         q[:, self.arm[4]] = roll
         if grip is not None:
-            q[:, self.robot.joint_index(self.robot.gripper.joint)] = grip
+            q[:, gripper_index(self.robot)] = grip
         return q
 
     def _in_limits(self, q: np.ndarray) -> np.ndarray:
@@ -211,8 +212,8 @@ class Roarm5IK:
             ok &= self._in_limits(qs)
             cands.extend([(qq, float(pitch))] for qq in qs[ok])
         else:  # pitch free: each branch over the pitch grid
-            for base, r_signed, sign in branches:
-                phi = np.arctan2(sign * np.cos(phis), -np.sin(phis))  # as above, over the pitch grid
+            for base, r_signed, side in branches:
+                phi = np.arctan2(side * np.cos(phis), -np.sin(phis))  # as above, over the pitch grid
                 for elbow in (1.0, -1.0):
                     s, e, w, ok = self._planar(r_signed, z, phi, elbow)
                     qs = self._branch_q(wrap_angle(base), s, e, w, want_roll, grip)
@@ -220,8 +221,8 @@ class Roarm5IK:
                     reachable.append(qs[ok])
                     ok &= self._in_limits(qs)
                     # the preferred pitch itself when this branch can hold it, else a grid sample
-                    exact = self._planar(r_signed, z, np.arctan2(sign * np.cos([pref]), -np.sin([pref])), elbow)
-                    qe = self._branch_q(wrap_angle(base), *exact[:3], want_roll, grip)
+                    exact = self._planar(r_signed, z, np.arctan2(side * np.cos([pref]), -np.sin([pref])), elbow)
+                    qe = self._branch_q(wrap_angle(base), exact[0], exact[1], exact[2], want_roll, grip)
                     alts = [(qe[0], pref)] if exact[3][0] and self._in_limits(qe)[0] else []
                     if ok.any():  # fallback, should the preferred pitch fail the final check
                         k = pick_index(phis, ok, pref)
@@ -367,14 +368,14 @@ class Roarm5IK:
                 i = g[j]
                 passed[i] = self._verify(fit[i], pts[i], None, uh[i], float(pitch), True) is not None
         lists: dict[int, list] = {}
-        for j, o in enumerate(owner):
+        for n, o in enumerate(owner):
             lst = lists.setdefault(int(o), [])
-            if amb[j]:
-                lst.append((pol[j], uh[j], False))
-            elif passed[j]:
-                lst.append((fit[j], uh[j], True))
-        for o in range(m):
-            out[rows[o]] = lists.get(o, [])
+            if amb[n]:
+                lst.append((pol[n], uh[n], False))
+            elif passed[n]:
+                lst.append((fit[n], uh[n], True))
+        for k in range(m):
+            out[rows[k]] = lists.get(k, [])
         return out
 
     def _polish(self, q: np.ndarray, p: np.ndarray, rot: np.ndarray | None, u_h: np.ndarray,
@@ -389,10 +390,10 @@ class Roarm5IK:
                 return np.column_stack([t[:, :3, 3] - p, wrap_angle(approach_pitches(t, u_h) - want),
                                         np.arctan2(m[:, 2, 1] - m[:, 1, 2], m[:, 1, 1] + m[:, 2, 2])])
             return newton(res, q, self.arm)
-        def res(qq):
+        def res_pitch(qq):
             t = kin.fk(qq)
             return np.column_stack([t[:, :3, 3] - p, wrap_angle(approach_pitches(t, u_h) - pitch)])
-        return newton(res, q, self.arm[:4])
+        return newton(res_pitch, q, self.arm[:4])
 
 
 def _first_nonempty(*arrays: np.ndarray) -> np.ndarray:

@@ -5,10 +5,11 @@ that continues a configuration), the pitch search (``solve_ik_auto_pitch``), tar
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.errors import InputError, UnreachableError
 from roarmctl.robot.ik.common import POS_TOL, default_ref, rot_angle, vec3
@@ -25,12 +26,12 @@ IK_FAMILIES = ("roarm5", "roarm3", "ur6")
 
 def solve_ik(
     robot: Robot,
-    position: Sequence[float],
+    position: npt.ArrayLike,
     *,
     pitch: float | None = None,
     roll: float | None = None,
-    rpy: Sequence[float] | None = None,
-    q_ref: Sequence[float] | None = None,
+    rpy: npt.ArrayLike | None = None,
+    q_ref: npt.ArrayLike | None = None,
     all_solutions: bool = False,
 ) -> list[np.ndarray]:
     """Joint configurations that put the TCP at ``position`` (m, root frame).
@@ -87,9 +88,9 @@ def solve_ik(
         if pitch is not None or roll is not None or rot is not None:
             raise InputError(f"{robot.name}: the roarm3 IK is position only (the tool pitch follows from the "
                              f"geometry); leave out pitch, roll and rpy")
-        solver = getattr(robot, "_roarm3_ik", None)
+        solver = robot.derived.get("roarm3_ik")
         if solver is None:  # geometry read once per loaded robot
-            solver = robot._roarm3_ik = Roarm3IK(robot)
+            solver = robot.derived["roarm3_ik"] = Roarm3IK(robot)
         sols = solver.solve(p, qr)
     else:
         aim = None

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from roarmctl.errors import UnreachableError
-from roarmctl.robot.ik.common import ORI_TOL, POS_TOL, dedupe, fit_limits, gripper_value, newton, rot_angle, wrap_angle
+from roarmctl.robot.ik.common import ORI_TOL, POS_TOL, dedupe, fit_limits, gripper_index, gripper_value, newton, rot_angle, wrap_angle
 from roarmctl.robot.model import Robot, transform
 
 WRIST_SINGULAR = 1e-6  # |sin theta5| below this is the UR wrist singularity (theta4, theta6 coupled)
@@ -147,7 +147,7 @@ def ur6_solve(robot: Robot, p: np.ndarray, rot: np.ndarray, qr: np.ndarray | Non
     for qa in raw:
         q = robot.full_q(wrap_angle(qa))
         if grip is not None:
-            q[robot.joint_index(robot.gripper.joint)] = grip
+            q[gripper_index(robot)] = grip
         q = newton(res, q, arm, iters=4)
         q2 = fit_limits(robot, q, qr)
         if q2 is None:
