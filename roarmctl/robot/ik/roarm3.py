@@ -7,7 +7,16 @@ import math
 import numpy as np
 
 from roarmctl.errors import UnreachableError
-from roarmctl.robot.ik.common import POS_TOL, STRETCH_SLACK, dedupe, fit_limits, gripper_index, gripper_value, newton, wrap_angle
+from roarmctl.robot.ik.common import (
+    POS_TOL,
+    STRETCH_SLACK,
+    dedupe,
+    fit_limits,
+    gripper_index,
+    gripper_value,
+    newton,
+    wrap_angle,
+)
 from roarmctl.robot.model import Robot
 
 

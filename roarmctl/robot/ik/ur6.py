@@ -7,7 +7,17 @@ import math
 import numpy as np
 
 from roarmctl.errors import UnreachableError
-from roarmctl.robot.ik.common import ORI_TOL, POS_TOL, dedupe, fit_limits, gripper_index, gripper_value, newton, rot_angle, wrap_angle
+from roarmctl.robot.ik.common import (
+    ORI_TOL,
+    POS_TOL,
+    dedupe,
+    fit_limits,
+    gripper_index,
+    gripper_value,
+    newton,
+    rot_angle,
+    wrap_angle,
+)
 from roarmctl.robot.model import Robot, transform
 
 WRIST_SINGULAR = 1e-6  # |sin theta5| below this is the UR wrist singularity (theta4, theta6 coupled)
