@@ -8,10 +8,11 @@ STAMP  := $(VENV)/.installed
 
 all: test
 
-# The install compiles the C kernels (FK, dynamics and state checker; timing) into the source tree (editable
-# install): a change to the C source needs a new install too.
-$(STAMP): pyproject.toml roarmctl/_kernel.c roarmctl/motion/_timekernel.c
+# The install compiles the C kernel (FK, dynamics and state checker) into the source tree (editable install):
+# a change to the C source needs a new install too.
+$(STAMP): pyproject.toml setup.py roarmctl/_kernel.c
 	$(PYTHON) -m venv $(VENV)
+	rm -f roarmctl/*.so roarmctl/motion/*.so  # an older build's module would shadow the new abi3 one
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'
 	touch $(STAMP)
@@ -46,4 +47,4 @@ demo: $(STAMP)
 	$(BIN)/roarmctl export out/pick_place.exec.json -o out/pick_place_exec_bag
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build *.egg-info roarmctl/*.so roarmctl/motion/*.so

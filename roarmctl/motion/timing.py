@@ -37,7 +37,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from roarmctl.errors import InfeasibleError, PlanningError
-from roarmctl.motion import _timekernel
 
 # Limits handed to TOPP-RA are this fraction of the true ones, so that the sampled (and filtered)
 # trajectory stays inside the true limits; tightened step by step if not.
@@ -393,14 +392,6 @@ def _sample(path, prof: _Profile, times: np.ndarray, w: float) -> tuple[np.ndarr
     return path(s), ps * sd[:, None], ps * sdd[:, None] + path(s, 2) * (sd**2)[:, None], s
 
 
-def _spline_tables(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Breakpoints (m+1,) and the coefficients of the first (3, m, n) and second (2, m, n) derivative of
-    toppra's spline ``path`` (scipy PPoly objects), C-contiguous for ``_timekernel.jerk_ok``."""
-    d1, d2 = path.cspld, path.cspldd
-    return (np.ascontiguousarray(d1.x, dtype=float), np.ascontiguousarray(d1.c, dtype=float),
-            np.ascontiguousarray(d2.c, dtype=float))
-
-
 def _ends_at_rest(samples: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], wp: np.ndarray, s_end: float):
     """``_sample``'s q, qd, qdd, s with the exact end waypoints of ``wp`` (K, n), velocity and acceleration 0 there,
     and the path parameter exactly 0 and ``s_end`` (the filtered s can end an ulp short, after a sample already at
@@ -418,24 +409,17 @@ def _jerk_ok(path, prof: _Profile, w: float, jmax: np.ndarray) -> bool:
     accelerations qdd = q'(s) sddot + q''(s) sdot^2 (as in ``_sample``) change by at most jmax * FINE_DT
     (to 1e-9) from one sample to the next.
 
-    Computed by ``_timekernel.jerk_ok`` (the same operations in C, stopping at the first sample over a
-    limit); ``tau**3`` of the profile's evaluation stays in numpy (its power may be a SIMD routine that C's
-    pow does not reproduce). Answers are kept on ``prof`` per path (the filter search asks again for w0,
-    which the plateau test asked)."""
+    Answers are kept on ``prof`` per path (the filter search asks again for w0, which the plateau test asked)."""
     memo = prof.jerk_answers
     if memo.get("path") is not path:
         memo.clear()
         memo["path"] = path
-        memo["spline"] = _spline_tables(path)
     key = (w, jmax.tobytes())
     if key not in memo:
         t = np.arange(0.0, prof.T + w + FINE_DT, FINE_DT)
-        x = np.concatenate([t, t - w])
-        idx, tau = np.empty(len(x), dtype=np.int64), np.empty(len(x))
-        _timekernel.locate(prof.t, prof.T, x, idx, tau)
-        bx, c1, c2 = memo["spline"]
-        memo[key] = _timekernel.jerk_ok(prof.t, prof.s, prof.sd, prof.sdd, prof.S, prof.T, prof.s_end, x, idx, tau,
-                                        tau**3, float(w), FINE_DT, bx, c1, c2, jmax * (1 + 1e-9))
+        s, sd, sdd = prof.filtered(t, w)
+        qdd = path(s, 1) * sdd[:, None] + path(s, 2) * (sd**2)[:, None]  # as in _sample, without the positions
+        memo[key] = bool(np.all(np.abs(np.diff(qdd, axis=0)) / FINE_DT <= jmax * (1 + 1e-9)))
     return memo[key]
 
 
@@ -471,8 +455,15 @@ def _plateau_cap(prof: _Profile, hold: float) -> float | None:
 
     # 30 bisection steps of c in [0, top] on cruise(c) = sum(frac * ds) / c >= hold, frac the share of each grid
     # interval where sdot^2 > c^2: 1 where x_lo >= c^2, 0 where x_hi <= c^2, else (x_hi - c^2) / span
-    # (_timekernel.plateau_cap: that arithmetic in C, the sum as numpy's pairwise np.sum)
-    lo = _timekernel.plateau_cap(x_lo, x_hi, span, ds, float(hold), top, np.empty(len(ds)))
+    def cruise(c: float) -> float:
+        c2 = c * c
+        frac = np.where(x_lo >= c2, 1.0, np.where(x_hi <= c2, 0.0, (x_hi - c2) / span))
+        return float(np.sum(frac * ds)) / c
+
+    lo, hi = 0.0, top
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if cruise(mid) >= hold else (lo, mid)
     return lo if lo > 0.0 else None
 
 
