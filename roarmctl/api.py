@@ -27,6 +27,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from roarmctl.device.session import run_execution
+from roarmctl.device.streamer import StreamConfig, build_schedule
+from roarmctl.device.streamer import sample as _sample
 from roarmctl.errors import (  # noqa: F401 - re-exported for API users
     DeviceError,
     InfeasibleError,
@@ -36,7 +39,10 @@ from roarmctl.errors import (  # noqa: F401 - re-exported for API users
     RoarmError,
     TrajectoryFileError,
 )
+from roarmctl.export import export as _export
+from roarmctl.export import format_for
 from roarmctl.motion.trajectory import Event, Segment, Trajectory  # noqa: F401
+from roarmctl.viz.formats import picture_format
 
 if TYPE_CHECKING:
     from roarmctl.motion.pipeline import PlanResult
@@ -109,8 +115,6 @@ def sample(traj: Trajectory, t: float | Sequence[float] | np.ndarray) -> np.ndar
     """Joint positions (rad) at time(s) ``t`` (s, clamped to [0, duration]): (dof,) for a scalar,
     (M, dof) for M times. Cubic Hermite interpolation of the samples and their velocities, the
     same interpolation the streamer uses to command the arm."""
-    from roarmctl.device.streamer import sample as _sample
-
     return _sample(traj, t)
 
 
@@ -150,8 +154,6 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
     Writes the execution log to ``log`` when given. Returns the summary: ``outcome``, ``commands``
     (T:102/T:101 lines sent while streaming), ``lateness_ms``, ``tracking_mm``, ``final_error_mm``, ``log``.
     """
-    from roarmctl.device.session import run_execution
-    from roarmctl.device.streamer import StreamConfig, build_schedule
     from roarmctl.robot.loader import load_robot as _load  # the trajectory names it: no sidecar trust
 
     t = _trajectory(traj)
@@ -175,7 +177,6 @@ def draw(traj: TrajectoryLike, output: PathLike, *, view: str = "iso", dpi: floa
     limits, TCP speed and distance from singularity. The format follows ``output``'s extension
     (.png, .svg, .pdf; anything else raises ``InputError``). ``view``: iso, top, front or side;
     ``size`` in inches. Returns the path written."""
-    from roarmctl.viz.formats import picture_format
     from roarmctl.viz.path_figure import VIEWS, visualize_trajectory
 
     picture_format(output)
@@ -190,8 +191,5 @@ def export(source: TrajectoryLike, output: PathLike, *, trajectory: TrajectoryLi
     (ROS 2 messages for Foxglove), ``.csv``, or a name without extension (a ROS 2 bag folder).
     Returns ``{"output", "format", "topics": {topic: count}}`` (CSV: ``"rows"``). For an execution
     log, ``trajectory`` (the one it ran) adds its planned joint states and the scene."""
-    from roarmctl.export import export as _export
-    from roarmctl.export import format_for
-
     format_for(output)  # refuse an unknown extension before any work
     return _export(source, output, trajectory=trajectory)

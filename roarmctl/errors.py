@@ -7,6 +7,7 @@ only ``roarmctl.cli`` turns them into output and exit codes.
 
 from __future__ import annotations
 
+import signal
 from typing import Any
 
 
@@ -117,8 +118,6 @@ class StopRequested(KeyboardInterrupt):
 
 def signal_name(signum: int) -> str:
     """'Ctrl-C' for SIGINT, else the signal's name ('SIGTERM', 'SIGHUP')."""
-    import signal
-
     if signum == signal.SIGINT:
         return "Ctrl-C"
     try:

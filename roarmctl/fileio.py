@@ -8,9 +8,12 @@ checks of what was read live in ``roarmctl.validation``.
 
 from __future__ import annotations
 
+import ctypes
 import errno
 import json
 import os
+import secrets
+import shutil
 import stat
 import tempfile
 from collections.abc import Callable
@@ -286,9 +289,6 @@ def replace_folder(new: str | os.PathLike, target: str | os.PathLike) -> Path:
     rename (Linux ``renameat2(RENAME_EXCHANGE)``) and deleted only afterwards, so a signal at any
     moment leaves at ``target`` either the old folder or the new one, whole. ``MARKER`` is written into
     ``new`` first; after a signal ``interrupted_write_state()`` says which folder is at ``target``."""
-    import secrets
-    import shutil
-
     new, target = Path(new), Path(target)
     token = secrets.token_hex(8)
     (new / MARKER).write_text(f"written by roarmctl ({token}); replacing this folder deletes nothing else\n")
@@ -313,8 +313,6 @@ def replace_folder(new: str | os.PathLike, target: str | os.PathLike) -> Path:
 
 def _exchange(a: Path, b: Path) -> bool:
     """Swap the paths ``a`` and ``b`` atomically; False where the system cannot (then nothing changed)."""
-    import ctypes
-
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         renameat2 = libc.renameat2

@@ -16,6 +16,7 @@ roots where the caller gives them).
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 from pathlib import Path
@@ -283,8 +284,6 @@ def load_json(path: str | Path, error: type[InputError] = InputError, *, what: s
 # --------------------------------------------------------------------------- fields
 def closest(word: str, options) -> str | None:
     """The option most like ``word`` (a typo's fix), or None."""
-    import difflib
-
     match = difflib.get_close_matches(str(word), [str(o) for o in options], n=1, cutoff=0.6)
     return match[0] if match else None
 

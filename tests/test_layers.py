@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import re
+import sys
 from pathlib import Path
 
 import pytest
@@ -162,3 +163,75 @@ def test_an_upward_import_inside_a_function_is_found():
     node = tree.body[0].body[0]
     (target,) = targets_of(node, "roarmctl.robot")
     assert layer_of(target) > layer_of("roarmctl.robot.model")
+
+
+STDLIB = set(sys.stdlib_module_names) | {"__future__"}
+
+
+def _module_level_libraries() -> dict[str, set[str]]:
+    """The third-party libraries each module imports at module level (run time), directly."""
+    out = {}
+    for name, path in MODULES.items():
+        tree = ast.parse(path.read_text(), str(path))
+        skip = _type_checking_nodes(tree) | {id(n) for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
+                                             for n in ast.walk(f) if n is not f}
+        libs = set()
+        for node in ast.walk(tree):
+            if id(node) in skip or not isinstance(node, (ast.Import, ast.ImportFrom)) or getattr(node, "level", 0):
+                continue
+            for m in [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module]:
+                top = m.split(".")[0]
+                if top not in STDLIB and top != "roarmctl":
+                    libs.add(top)
+        out[name] = libs
+    return out
+
+
+def libraries_loaded() -> dict[str, set[str]]:
+    """The third-party libraries importing each module loads: its own module-level ones, its packages' and those
+    of every roarmctl module it imports at module level, transitively."""
+    direct = _module_level_libraries()
+    graph = {m: set() for m in MODULES}
+    for a, b, _, in_function, run_time in EDGES:
+        if not in_function and run_time:
+            graph[a] |= {t for t in [b] + [".".join(b.split(".")[:i]) for i in range(2, b.count(".") + 1)] if t in MODULES and t != a}
+
+    def closure(m: str, seen: set[str]) -> set[str]:
+        if m in seen:
+            return set()
+        seen.add(m)
+        parts = m.split(".")
+        out = set(direct.get(m, ()))
+        for n in [".".join(parts[:i]) for i in range(2, len(parts))] + sorted(graph.get(m, ())):
+            out |= closure(n, seen)
+        return out
+
+    return {m: closure(m, set()) for m in MODULES}
+
+
+def test_imports_inside_functions_are_there_for_start_up_time():
+    """An import sits inside a function only to keep a library out of start-up: it loads a third-party library
+    (directly, or through the roarmctl module it names) that its module does not load at module level."""
+    loaded = libraries_loaded()
+    needless = []
+    for name, path in MODULES.items():
+        tree = ast.parse(path.read_text(), str(path))
+        package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+        fallbacks = {id(n) for t in ast.walk(tree) if isinstance(t, ast.Try)  # try: import a / except ImportError: import b
+                     and any("ImportError" in ast.unparse(h.type or ast.Name("")) for h in t.handlers) for n in ast.walk(t)}
+        for f in ast.walk(tree):
+            if not isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            for node in ast.walk(f):
+                if node is f or not isinstance(node, (ast.Import, ast.ImportFrom)) or id(node) in fallbacks:
+                    continue
+                new = set()
+                for t in targets_of(node, package):
+                    top = t.split(".")[0]
+                    if top == "roarmctl":
+                        new |= loaded.get(t, {"(extension)"} if t in EXTENSIONS else set()) - loaded[name]
+                    elif top not in STDLIB:
+                        new |= {top} - loaded[name]
+                if not new:
+                    needless.append(f"{name}:{node.lineno} {ast.unparse(node)}")
+    assert not needless, "imports inside functions that load no library their module lacks (move them up):\n" + "\n".join(needless)

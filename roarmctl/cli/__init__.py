@@ -10,10 +10,16 @@ import os
 import sys
 import tempfile
 import traceback
+from pathlib import Path
 
 import typer
 
-from roarmctl.cli import common, execute_cmd, export_cmd, kin, plan_cmd, viz_cmd
+from roarmctl import __version__
+from roarmctl.cli import common, execute_cmd, export_cmd, kin, plan_cmd, signals, viz_cmd
+from roarmctl.cli.signals import exit_code
+from roarmctl.errors import InputError, RoarmError, signal_name
+from roarmctl.fileio import interrupted_write_state
+from roarmctl.robot import xacro_input
 
 app = typer.Typer(
     name="roarmctl",
@@ -27,8 +33,6 @@ app = typer.Typer(
 
 def _version(value: bool) -> None:
     if value:
-        from roarmctl import __version__
-
         print(f"roarmctl {__version__}")
         raise typer.Exit()
 
@@ -45,13 +49,9 @@ def _root(
         help="Let xacro evaluate the robot description's expressions itself (runs its Python: only for files you trust)."),
 ) -> None:
     common.STATE.debug = debug
-    from roarmctl.robot import xacro_input
 
     xacro_input.TRUST_ALL = trust_xacro
     if package_path:
-        from pathlib import Path
-
-        from roarmctl.errors import InputError
         from roarmctl.robot.meshes import PACKAGE_PATHS
 
         for item in package_path:
@@ -100,8 +100,6 @@ def run(argv: list[str] | None = None) -> int:
     for the console script. SIGINT, SIGTERM and SIGHUP stop a command cleanly
     (``roarmctl.cli.signals``): exit 130, 143, 129.
     """
-    from roarmctl.cli import signals
-
     # run as the program (no argv): once stopping, stay deaf to further signals until the exit
     with signals.installed(keep_after_stop=argv is None) as guard:
         code = _run(argv, guard)
@@ -121,15 +119,11 @@ def main(argv: list[str] | None = None) -> None:
 
 
 def _stop_line(signum: int) -> str:
-    from roarmctl.errors import signal_name
-
     return "interrupted" if signum == 2 else f"terminated by {signal_name(signum)}"
 
 
 def _on_disk() -> str | None:
     """What an output interrupted while it replaced a folder left on disk (``fileio``), else None."""
-    from roarmctl.fileio import interrupted_write_state
-
     return interrupted_write_state()
 
 
@@ -177,9 +171,6 @@ def _run(argv: list[str] | None, guard) -> int:
 
 
 def _run_command(argv: list[str] | None, guard) -> int:
-    from roarmctl.cli.signals import exit_code
-    from roarmctl.errors import RoarmError
-
     code = 0
     try:
         # Without standalone mode typer *returns* the exit code of typer.Exit, and turns Ctrl-C

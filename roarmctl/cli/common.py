@@ -8,6 +8,8 @@ import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from roarmctl.errors import InputError
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -76,8 +78,6 @@ def warn(message: str) -> None:
 
 def parse_numbers(values: list[str], what: str, deg: bool = False) -> np.ndarray:
     """Numbers from the command line; degrees are converted to radians when ``deg``."""
-    from roarmctl.errors import InputError
-
     out = []
     for v in values:
         try:

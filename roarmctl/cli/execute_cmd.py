@@ -8,7 +8,11 @@ from pathlib import Path
 
 import typer
 
-from roarmctl.cli import common
+from roarmctl.cli import common, signals
+from roarmctl.device.ports import list_ports, port_holders
+from roarmctl.device.session import run_execution
+from roarmctl.errors import InputError
+from roarmctl.fileio import atomic_write_bytes
 
 STRATEGY_HELP = "Streaming strategy: timed (default), timed-shared, timed-acc, dense, dense-ahead (see bench/bench_stream.py)."
 
@@ -51,7 +55,6 @@ def execute(
     line is written to the execution log.
     """
     from roarmctl.device.streamer import STRATEGIES, StreamConfig, build_schedule
-    from roarmctl.errors import InputError
     from roarmctl.motion.validate import validate_trajectory
     from roarmctl.robot.loader import load_robot
 
@@ -91,7 +94,6 @@ def execute(
 
 def _write_output(path: Path, schedule) -> None:
     from roarmctl.device.protocol import encode
-    from roarmctl.fileio import atomic_write_bytes
 
     lines = [b'{"t":' + repr(round(tk.t, 6)).encode() + b',"cmd":' + encode(cmd)[:-1] + b"}\n"
              for tk in schedule for cmd in tk.commands]
@@ -99,9 +101,6 @@ def _write_output(path: Path, schedule) -> None:
 
 
 def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path: Path, json_out: bool) -> None:
-    from roarmctl.cli import signals
-    from roarmctl.device.session import run_execution
-
     err = common.console(stderr=True)
     live = _Display(err, len(robot.joint_names), robot) if (err.is_terminal and not json_out) else None
 
@@ -111,8 +110,6 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
         return typer.confirm(message, default=False, err=True)
 
     if not sim:
-        from roarmctl.device.ports import port_holders
-
         for pid, name in port_holders(port):
             common.warn(f"{port} is also open in process {pid} ({name}); it may swallow the arm's replies "
                         "(stop it, e.g. 'sudo systemctl stop ModemManager')")
@@ -219,7 +216,6 @@ def sim_device(
     roarm_sdk, or a terminal (115200 baud, JSON lines).
     """
     from roarmctl.device.simulator import PtySimulator, SimConfig
-    from roarmctl.errors import InputError
 
     if model is not None:
         from roarmctl.device.protocol import WireMap
@@ -262,8 +258,6 @@ def sim_device(
     except KeyboardInterrupt:
         pass
     finally:
-        from roarmctl.cli import signals
-
         with signals.shielded():
             simulator.stop()
             if made_link and link.is_symlink():
@@ -273,8 +267,6 @@ def sim_device(
 # --------------------------------------------------------------------------- ports
 def ports(json_out: bool = typer.Option(False, "--json", help="Print one JSON object.")) -> None:
     """List serial ports; the likely arm (CP210x 10C4:EA60, CH340 1A86:7523) is marked."""
-    from roarmctl.device.ports import list_ports
-
     found = list_ports()
     if json_out:
         common.print_json({"ports": [p.as_dict() for p in found]})

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from roarmctl.cli import common
+from roarmctl.export import export
 
 
 def register(app: typer.Typer) -> None:
@@ -23,8 +24,6 @@ def register(app: typer.Typer) -> None:
         json_out: bool = typer.Option(False, "--json", help="Print one JSON object."),
     ) -> None:
         """Export SOURCE for Foxglove, RViz (ros2 bag play) or a spreadsheet; the format follows the -o name."""
-        from roarmctl.export import export
-
         summary = export(source, output, trajectory=trajectory, force=force)
         if json_out:
             common.print_json({"ok": True, **summary})

@@ -14,6 +14,7 @@ if TYPE_CHECKING:  # numpy itself is imported where a command runs (start-up tim
     import numpy as np
 
 from roarmctl.cli import common
+from roarmctl.errors import InputError, RoarmError, UnreachableError
 
 kin_app = typer.Typer(help="Kinematics and dynamics: fk, ik, jacobian, dynamics.", no_args_is_help=True)
 
@@ -93,7 +94,6 @@ def fk(
     With --frame firmware (RoArm) the position is the firmware's own end point in its frame (mm):
     what T:1051 x/y/z and roarm-sdk's pose_get() report; tcp_position is the TCP (the tcp_link) in that frame.
     """
-    from roarmctl.errors import InputError
     from roarmctl.robot.frames import device_point, get_frame, to_frame
     from roarmctl.robot.loader import load_robot
     from roarmctl.robot.model import rpy_from_matrix
@@ -214,7 +214,6 @@ def ik(
     """
     import numpy as np
 
-    from roarmctl.errors import RoarmError, UnreachableError
     from roarmctl.robot.frames import device_point, from_frame, get_frame
     from roarmctl.robot.ik import (
         ORI_TOL,
@@ -314,7 +313,6 @@ def dynamics(
     """
     import numpy as np
 
-    from roarmctl.errors import InputError
     from roarmctl.robot.dynamics import coriolis_vector, gravity_vector, inverse_dynamics, mass_matrix
     from roarmctl.robot.loader import load_robot
 

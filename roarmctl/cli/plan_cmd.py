@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from roarmctl.cli import common
+from roarmctl.errors import InputError
 
 
 def default_output(plan_path: Path) -> Path:
@@ -37,8 +38,6 @@ def run_planner(plan: Path, seed: int | None, quiet: bool, current=None):
 
 def arm_reader(port: str | None, sim: bool, notes: list[str]):
     """``current(robot)`` for ``start: current``: reads the arm on ``port`` (or a fresh simulator)."""
-    from roarmctl.errors import InputError
-
     if port is not None and sim:
         raise InputError("give one of --port PORT and --sim, not both")
     if port is None and not sim:

@@ -11,6 +11,8 @@ from pathlib import Path
 import typer
 
 from roarmctl.cli import common
+from roarmctl.errors import InfeasibleError, InputError
+from roarmctl.viz.formats import picture_format
 
 VIEW_NAMES = ("iso", "top", "front", "side")
 PLAN_SUFFIXES = (".yaml", ".yml")
@@ -25,8 +27,6 @@ def register(app: typer.Typer) -> None:
 
 def parse_size(text: str, dpi: float) -> tuple[float, float]:
     """``WxH`` in inches (e.g. ``16x10``) -> (w, h); the PNG is w*dpi x h*dpi pixels."""
-    from roarmctl.errors import InputError
-
     parts = text.lower().replace("×", "x").split("x")
     try:
         w, h = (float(p) for p in parts)
@@ -40,8 +40,6 @@ def parse_size(text: str, dpi: float) -> tuple[float, float]:
 
 
 def _check_dpi(dpi: float) -> None:
-    from roarmctl.errors import InputError
-
     if not (10 <= dpi <= 1200):
         raise InputError(f"--dpi: {dpi:g} is out of range", "use 10 to 1200 (100 gives 1600x1000 px at the default size)")
 
@@ -58,8 +56,6 @@ def default_output(source: Path, suffix: str = ".png") -> Path:
 
 def _load(path: Path):
     """A trajectory from a ``*.traj.json``, or planned from a plan file (``.yaml``/``.yml``)."""
-    from roarmctl.errors import InputError
-
     if path.suffix.lower() in PLAN_SUFFIXES:
         try:
             from roarmctl.motion.pipeline import plan_file
@@ -81,17 +77,13 @@ def visualize_path(
     size: str = typer.Option("16x10", "--size", help="Sheet size WxH in inches (pixels = size x dpi)."),
 ) -> None:
     """Draw a planned trajectory (PNG, SVG or PDF): 3D scene and TCP path, joint curves, TCP speed, manipulability."""
-    from roarmctl.errors import InputError
-
     if view not in VIEW_NAMES:
         raise InputError(f"--view: '{view}' is not one of {', '.join(VIEW_NAMES)}")
     _check_dpi(dpi)
     figsize = parse_size(size, dpi)
     out = output if output is not None else default_output(source)
-    from roarmctl.viz.formats import picture_format
 
     picture_format(out)  # before any work: the extension decides png / svg / pdf
-    from roarmctl.errors import InfeasibleError
     from roarmctl.viz.path_figure import visualize_trajectory
 
     try:
@@ -120,7 +112,6 @@ def workspace(
     size: str = typer.Option("13x6", "--size", help="Sheet size WxH in inches."),
 ) -> None:
     """Draw the reachable workspace (side and top maps of sampled TCP positions, coloured by manipulability)."""
-    from roarmctl.errors import InputError
     from roarmctl.robot.loader import load_robot
 
     if measure not in ("sigma", "w"):
@@ -131,7 +122,6 @@ def workspace(
     figsize = parse_size(size, dpi)
     r = load_robot(robot, trust_sidecar=True)  # the user named it
     out = output if output is not None else Path(f"{r.name}_workspace.png")
-    from roarmctl.viz.formats import picture_format
 
     picture_format(out)
     from roarmctl.viz.workspace_figure import visualize_workspace

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,8 +72,6 @@ def port_holders(port: str) -> list[tuple[int, str]]:
     we may not inspect, the list is empty. For a pseudo-terminal, a process that also holds the
     master side (``/dev/ptmx``) is the device itself (a simulator), not a competitor.
     """
-    import sys
-
     if not sys.platform.startswith("linux") or not os.path.isdir("/proc"):
         return []
     try:

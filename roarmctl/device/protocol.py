@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from roarmctl.errors import DescriptionError
 from roarmctl.robot.model import WIRE_FIELDS
 
 BAUDRATE = 115200
@@ -121,8 +122,6 @@ class WireMap:
     """
 
     def __init__(self, robot) -> None:
-        from roarmctl.errors import DescriptionError
-
         self.robot = robot
         by_field = {w.field: w for w in robot.wire}
         self.model = next((m for m, (fields, _) in MODELS.items() if set(by_field) == set(fields)), None)

@@ -43,6 +43,7 @@ import os
 import select
 import threading
 import time
+import tty
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -459,8 +460,6 @@ class PtySimulator:
     """
 
     def __init__(self, config: SimConfig | None = None, clock: Callable[[], float] = time.monotonic) -> None:
-        import tty
-
         self.clock = clock
         self.config = config or SimConfig()
         self.master, self.slave = os.openpty()

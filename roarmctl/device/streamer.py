@@ -33,6 +33,8 @@ import numpy as np
 from roarmctl.device import protocol
 from roarmctl.device.protocol import WireMap, acc_register, spd_register, wire_seconds
 from roarmctl.errors import DeviceError, InfeasibleError, InputError, Interrupted, signal_name
+from roarmctl.fileio import atomic_write_json
+from roarmctl.robot.frames import device_point, to_frame
 
 MAX_LINK_RATE = 90.0  # T:102 lines/s the 115200 link can carry at all (about 10.4 ms each)
 DEFAULT_RATE = 50.0
@@ -504,7 +506,6 @@ class Streamer:
         """The last measured TCP in the world frame (m) and the robot's other frames (their units)."""
         if self.measured is None:
             return None
-        from roarmctl.robot.frames import device_point, to_frame
 
         out: dict[str, Any] = {"world_m": [round(float(v), 6) for v in self._tcp(self.measured)]}
         for name, fr in (getattr(self.robot, "frames", {}) or {}).items():
@@ -561,6 +562,4 @@ class _Abort(Exception):
 
 def write_log(path: str | Path, log: dict[str, Any]) -> Path:
     """Write an execution log atomically (compact JSON); return its path."""
-    from roarmctl.fileio import atomic_write_json
-
     return atomic_write_json(path, log, indent=None)

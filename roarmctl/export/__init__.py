@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from roarmctl.errors import InputError, TrajectoryFileError
+from roarmctl.fileio import atomic_write_text, check_output_folder
 
 FORMATS = ("mcap", "bag", "csv")
 EXECLOG_FORMAT = "roarmctl.execlog/1"
@@ -86,7 +87,6 @@ def export(source: str | os.PathLike | Any, path: str | os.PathLike, fmt: str | 
         raise InputError(f"--format: '{fmt}' is not one of {', '.join(FORMATS)}")
     if fmt == "bag":  # refuse before the work
         from roarmctl.export.ros import is_bag_we_wrote
-        from roarmctl.fileio import check_output_folder
 
         check_output_folder(path, force, made_by_us=is_bag_we_wrote)
     streams = streams_for(source, trajectory)
@@ -97,7 +97,6 @@ def write(streams, path: str | os.PathLike, fmt: str, force: bool = False) -> di
     """Write already-built ``Streams`` in format ``fmt`` ('mcap', 'bag', 'csv'); see ``export``."""
     if fmt == "csv":
         from roarmctl.export.table import csv_text
-        from roarmctl.fileio import atomic_write_text
 
         text = csv_text(streams)
         out = atomic_write_text(path, text)

@@ -33,6 +33,7 @@ import numpy as np
 
 from roarmctl.errors import InputError
 from roarmctl.export.streams import Streams
+from roarmctl.fileio import check_output_folder, new_folder_beside, replace_folder
 
 TYPESTORE = "ROS2_JAZZY"
 COLORS = {"table": (0.55, 0.45, 0.35, 1.0), "obstacle": (0.85, 0.3, 0.25, 0.8), "object": (0.2, 0.5, 0.9, 1.0)}
@@ -200,8 +201,6 @@ def write_bag(streams: Streams, path: str | os.PathLike, storage: str, force: bo
     swapped out and deleted afterwards (``fileio.replace_folder``), and only if roarmctl wrote it
     (``fileio.check_output_folder``) or ``force``. Returns the path and the number of messages per topic."""
     from rosbags.rosbag2 import StoragePlugin, Writer
-
-    from roarmctl.fileio import check_output_folder, new_folder_beside, replace_folder
 
     target = Path(path)
     if storage == "mcap":

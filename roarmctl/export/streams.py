@@ -12,8 +12,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roarmctl.errors import InputError
+from roarmctl.device.protocol import M3_FIELDS, WireMap, parse_feedback
+from roarmctl.errors import InputError, TrajectoryFileError
 from roarmctl.motion.trajectory import carried_item
+from roarmctl.robot.model import transform
 
 if TYPE_CHECKING:
     from roarmctl.motion.trajectory import Trajectory
@@ -58,8 +60,6 @@ class Streams:
 
 def item_pose(item: dict[str, Any]) -> np.ndarray:
     """World pose (4, 4) of a trajectory-file scene item (``xyz`` m, ``rpy`` rad)."""
-    from roarmctl.robot.model import transform
-
     return transform(item.get("xyz", (0, 0, 0)), item.get("rpy", (0, 0, 0)))
 
 
@@ -121,8 +121,6 @@ def log_streams(log: dict[str, Any], robot: Robot, traj: Trajectory | None = Non
     states and its scene as markers, on the log's clock: plan time / the run's ``speed_scale``
     (the log's time 0 is the first scheduled command, which targets the plan's time 0).
     """
-    from roarmctl.errors import TrajectoryFileError
-
     try:
         streams = _log_streams(log, robot)
         scale = float(log.get("speed_scale", 1.0) or 1.0)
@@ -147,8 +145,6 @@ def _log_streams(log: dict[str, Any], robot: Robot) -> Streams:
     """An execution log (``roarmctl.execlog/1``): commanded joints (every T:102 / T:101 sent) and
     measured joints (every T:1051 feedback received), converted from wire values with the robot's
     wire map. Times are s after the log's start of motion (negative before it)."""
-    from roarmctl.device.protocol import M3_FIELDS, WireMap, parse_feedback
-
     wm = WireMap(robot)
     cmd_t, cmd_q = [], []
     wire: dict[str, float] | None = None

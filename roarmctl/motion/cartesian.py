@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from roarmctl.errors import PlanningError, UnreachableError
+from roarmctl.robot.ik import LineIK
 from roarmctl.robot.model import Robot
 
 MAX_JOINT_STEP = 0.15  # rad between neighbouring samples; more means a branch switch or singularity
@@ -44,8 +45,6 @@ def cartesian_line(
     position-only IK, the pitch follows from the geometry). Each sample is solved from the previous one
     (``solve_ik_near``).
     """
-    from roarmctl.robot.ik import LineIK
-
     q_start = robot.full_q(q_start)
     p0 = robot.kin.fk(q_start)[:3, 3]
     p_goal = np.asarray(p_goal, dtype=float)

@@ -10,6 +10,8 @@ with TOPP-RA (``planning.motions``) -> join the motions without a stop where the
 
 from __future__ import annotations
 
+import signal
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,14 +19,18 @@ from pathlib import Path
 import numpy as np
 
 from roarmctl.errors import DescriptionError, InfeasibleError, InputError, PlanFileError, PlanningError
+from roarmctl.motion import timing
 from roarmctl.motion.planning import blending, motions, tasks
 from roarmctl.motion.planning.assembly import PartialPlan, assemble, partial
 from roarmctl.motion.planning.context import PlanContext, robot_spec, scene_item
 from roarmctl.motion.planning.grasp import gripper_action, gripper_event
 from roarmctl.motion.planning.pieces import SAMPLE_DT, TaskStep, TimedPiece, UntimedMotion, dwell
+from roarmctl.motion.report import motion_peaks
+from roarmctl.motion.scene import Scene
 from roarmctl.motion.timing import TimedPath
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
 from roarmctl.plan.schema import PickTask, PlaceTask, Plan, load_plan
+from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import Robot
 
 __all__ = ["SAMPLE_DT", "PartialPlan", "PlanResult", "Planner", "load_planning_libraries", "plan_file"]
@@ -61,8 +67,6 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
     ``start_here``: start from ``current(robot)`` whatever the plan's ``start`` says (execute
     --from-current plans a trajectory's plan again from the measured pose).
     """
-    from roarmctl.robot.loader import load_robot
-
     path = path if isinstance(path, dict) else Path(path)
     plan = load_plan(path, base_dir=base_dir)  # form first, so typos are reported before anything heavy
     if isinstance(plan.start, str) and plan.start == "current" and current is None:
@@ -86,17 +90,14 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
 
 def load_planning_libraries() -> None:
     """Import toppra (about 0.5 s, mostly scipy), OMPL and FCL up front, so stage timings measure work, not imports
-    (also Ruckig, the blend's corner moves, and RNEA's module: 1-2 ms that a fresh process otherwise counted as
-    blend and toppra time).
+    (also Ruckig, the blend's corner moves: 1-2 ms that a fresh process otherwise counted as blend time; RNEA's
+    module comes with this one's imports).
 
     A stop signal (SIGINT, SIGTERM, SIGHUP) that arrives while these native modules load is noted and raised
     again once they have loaded, for the handler that was in place: a Python handler that raises while a
     nanobind module (OMPL, Ruckig) initialises makes it call C++ terminate, so a Ctrl-C at that moment
     aborted the process instead of stopping it. (Blocking the signals would not do: numpy's BLAS threads
     receive them.)"""
-    import signal
-    import threading
-
     received: list[int] = []
     previous = {}
     if threading.current_thread() is threading.main_thread():
@@ -108,10 +109,7 @@ def load_planning_libraries() -> None:
         import fcl  # noqa: F401
         import ruckig  # noqa: F401
 
-        import roarmctl.robot.dynamics  # noqa: F401
-        from roarmctl.motion.timing import import_toppra
-
-        import_toppra()
+        timing.import_toppra()
         from ompl import base, geometric  # noqa: F401
     finally:
         for s, handler in previous.items():
@@ -126,7 +124,6 @@ class Planner:
 
     def __init__(self, plan: Plan, robot: Robot, progress: ProgressFn | None = None) -> None:
         from roarmctl.motion.collision import CollisionChecker
-        from roarmctl.motion.scene import Scene
 
         if robot.gripper is None:
             needs = [t for t in plan.tasks if isinstance(t, (PickTask, PlaceTask))]
@@ -181,7 +178,6 @@ class Planner:
             raise
         self.progress("done", len(all_tasks), len(all_tasks))
         traj = assemble(ctx, pieces)
-        from roarmctl.motion.report import motion_peaks
 
         return PlanResult(traj, dict(ctx.timer.t), ctx.warnings, len(traj.segments), int(getattr(ctx.checker, "check_count", 0)),
                           motion_peaks(traj, ctx.robot), ctx.notes)

@@ -15,11 +15,13 @@ Three cases, one code path (``plan_between`` then a splice):
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
 import numpy as np
 
 from roarmctl.errors import InfeasibleError
+from roarmctl.motion.scene import Scene
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
 
 MODES = ("gripper", "move_to_start", "from_current")
@@ -27,7 +29,6 @@ MODES = ("gripper", "move_to_start", "from_current")
 
 def _plan_for(traj: Trajectory, robot, q_from: np.ndarray, q_to: np.ndarray):
     """A ``Plan`` with the trajectory's scene, limits and planner: one move from ``q_from`` to ``q_to``."""
-    from roarmctl.motion.scene import Scene
     from roarmctl.plan.schema import ItemSpec, Limits, MoveTask, Plan, PlannerConfig
 
     items = Scene.from_dict(traj.scene or {"items": []}).items
@@ -96,8 +97,6 @@ def tail(traj: Trajectory, t: float) -> Trajectory:
 
 def _plan_again(traj: Trajectory, q: np.ndarray) -> Trajectory | None:
     """The trajectory's plan planned again from ``q`` (same seed), or None when its file is gone or changed."""
-    import hashlib
-
     meta = traj.plan or {}
     path = Path(str(meta.get("path", "")))
     if not meta.get("sha256") or not path.is_file():

@@ -12,11 +12,12 @@ from typing import Any
 
 import numpy as np
 
+from roarmctl.robot.dynamics import inverse_dynamics
+from roarmctl.robot.model import Inertial
+
 
 def payload_bodies(traj) -> list[tuple[float, float, dict]]:
     """The trajectory's payload spans as (start s, end s, {link: Inertial})."""
-    from roarmctl.robot.model import Inertial
-
     out = []
     for p in traj.payloads:
         body = Inertial(float(p["mass"]), np.asarray(p["com"], dtype=float), np.asarray(p["inertia"], dtype=float))
@@ -26,8 +27,6 @@ def payload_bodies(traj) -> list[tuple[float, float, dict]]:
 
 def joint_torques(traj, robot) -> np.ndarray | None:
     """RNEA torques (N, dof) N m at every sample, held objects included; None without inertial data."""
-    from roarmctl.robot.dynamics import inverse_dynamics
-
     if not robot.inertials:
         return None
     tau = inverse_dynamics(robot, traj.positions, traj.velocities, traj.accelerations)

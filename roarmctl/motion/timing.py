@@ -29,7 +29,9 @@ from scaling, or a jerk check), TOPP-RA runs again with limits tightened by ``SA
 from __future__ import annotations
 
 import functools
+import importlib.util
 import logging
+import sys
 import types
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -140,9 +142,6 @@ def import_toppra():
     first use, e.g. by ``visualize-path``, runs it). scipy.interpolate (toppra's splines) is needed
     and imported normally.
     """
-    import importlib.util
-    import sys
-
     def defer(name: str) -> types.ModuleType | None:
         spec = importlib.util.find_spec(name)
         if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):

@@ -24,7 +24,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roarmctl.errors import TrajectoryFileError
+from roarmctl.errors import InputError, TrajectoryFileError
+from roarmctl.motion.trajectory import FORMAT, Event, Segment, Trajectory
+from roarmctl.robot.loader import load_robot
 from roarmctl.validation import Checker, HugeNumber, load_json
 
 if TYPE_CHECKING:
@@ -85,8 +87,6 @@ def parse_document(data: Any, where: str = "trajectory"):
 
     Raises ``TrajectoryFileError`` (exit 2) naming the field; nothing here needs the robot.
     """
-    from roarmctl.motion.trajectory import FORMAT, Event, Segment, Trajectory
-
     if not isinstance(data, dict):
         raise TrajectoryFileError(f"{where}: expected a JSON object, got {_kind(data)}")
     if data.get("format") != FORMAT:
@@ -379,8 +379,6 @@ def validate_trajectory(traj_or_doc: Any, robot: Any = None, where: str | None =
     Raises ``TrajectoryFileError`` (an ``InputError``, exit 2) with the point index, joint, value and
     limit of the first violation; ``DescriptionError``/``InputError`` if the robot cannot be loaded.
     """
-    from roarmctl.motion.trajectory import Trajectory
-
     if isinstance(traj_or_doc, (str, Path)):
         where = where or str(traj_or_doc)
         traj = parse_document(read_document(traj_or_doc), where)
@@ -391,9 +389,6 @@ def validate_trajectory(traj_or_doc: Any, robot: Any = None, where: str | None =
         where = where or "trajectory"
         traj = parse_document(traj_or_doc, where)
     if robot is None or isinstance(robot, str):
-        from roarmctl.errors import InputError
-        from roarmctl.robot.loader import load_robot
-
         spec = robot or traj.robot
         try:
             robot = load_robot(spec)

@@ -8,7 +8,9 @@ Lengths are metres; angles radians, or degrees when written as ``{deg: value}`` 
 from __future__ import annotations
 
 import hashlib
+import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
@@ -16,6 +18,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from roarmctl.errors import PlanFileError, describe_value
+from roarmctl.robot.frames import from_frame
 from roarmctl.robot.model import transform
 from roarmctl.validation import Checker, LocatedDict, closest, load_yaml, locate
 
@@ -222,8 +225,6 @@ MAX_DURATION = 3600.0  # s of motion the plan may need (the trajectory validator
 
 
 def _bounds(where: str, lo: float | None, hi: float | None) -> tuple[float, float]:
-    import re
-
     key = re.split(r"[.:]\s*", re.sub(r"\[\d+\]", "", where))[-1]
     flo, fhi = FIELD_BOUNDS.get(key, (-DEFAULT_BOUND, DEFAULT_BOUND))
     return (flo if lo is None else max(lo, flo)), (fhi if hi is None else min(hi, fhi))
@@ -242,7 +243,6 @@ def _position(ctx: _Ctx, value: Any, line: int, where: str, frames: dict | None)
             return v
         if name not in frames:
             ctx.fail(line, where, f"the robot has no frame '{name}'", f"frames: {', '.join(['world', *frames])}")
-        from roarmctl.robot.frames import from_frame
 
         return from_frame(frames[name], v)
     return ctx.vector(value, line, where, 3)
@@ -408,8 +408,6 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
     ``"current"`` (the caller measures it).
     """
     if isinstance(source, dict):
-        import json
-
         raw = locate(source)
         path = Path(base_dir or ".") / DICT_NAME
         canonical = json.dumps(raw, sort_keys=True, default=str).encode()

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from roarmctl.errors import InputError
+
 UNITS = {"m": 1.0, "mm": 1000.0}
 
 
@@ -37,8 +39,6 @@ class Frame:
 
 def get_frame(robot, name: str) -> Frame:
     """The robot's frame ``name`` ("world" is the identity); InputError names the ones it has."""
-    from roarmctl.errors import InputError
-
     if name == "world":
         return Frame("world", np.zeros(3))
     frames = getattr(robot, "frames", {}) or {}

@@ -15,8 +15,15 @@ from typing import Any
 import numpy as np
 
 from roarmctl.errors import DescriptionError, InputError
+from roarmctl.fileio import read_text
 from roarmctl.robot import validate as checks
+from roarmctl.robot.frames import UNITS, Frame
+from roarmctl.robot.ik import IK_FAMILIES, ur6_params
+from roarmctl.robot.meshes import PACKAGE_PATHS, description_roots, load_mesh, mesh_modes, package_map, resolve
 from roarmctl.robot.model import CollisionShape, Gripper, Inertial, Joint, Robot, WireField, transform
+from roarmctl.robot.singularity import MODELS
+from roarmctl.robot.srdf import read_joint_limits, read_srdf
+from roarmctl.robot.xacro_input import TRUST_ALL, expand
 
 FORMAT = "roarmctl.robot/1"
 MESH_SCALE = (1e-5, 1e5)  # a mesh's scale factors (a mesh in mm has 0.001); beyond, a link's shape vanishes or explodes
@@ -48,9 +55,6 @@ def load_robot(spec: str, trust_sidecar: bool = False) -> Robot:
     itself - True only where the user named the file (``kin``, ``api.load_robot``), never where a plan,
     trajectory or log did (then only the user's ``--trust-xacro`` counts, see ``robot.xacro_safe``).
     """
-    from roarmctl.robot.meshes import PACKAGE_PATHS, description_roots
-    from roarmctl.robot.xacro_input import TRUST_ALL
-
     try:  # a file edited since it was loaded is loaded again
         st = os.stat(spec)
         stamp: tuple = (st.st_mtime_ns, st.st_size)
@@ -143,8 +147,6 @@ def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
             seeds = [moving[-1].child] if moving else [robot.tcp_link]
         jaws = tuple(dict.fromkeys(link for s in seeds for link in fixed_group(s)))
     robot.jaw_links = jaws
-    from roarmctl.robot.ik import IK_FAMILIES
-    from roarmctl.robot.singularity import MODELS
 
     sm = robot.singularity_model
     if sm is not None and sm not in MODELS:
@@ -156,8 +158,6 @@ def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
                                "leave it out for the numerical (damped least squares) IK")
     robot.ik = ik
     if "ur6" in (sm, ik):
-        from roarmctl.robot.ik import ur6_params
-
         robot.derived["ur6_params"] = ur6_params(robot)  # refuses a table the ur6 model cannot serve
     return robot
 
@@ -277,8 +277,6 @@ def _common(data: dict, path: Path, names: list[str], velocity: np.ndarray, acce
 
 def _frames(data: dict, where: str) -> dict:
     """``frames: {name: {origin: [x, y, z] m, unit: m|mm, point: {link, xyz}}}`` -> Frame objects."""
-    from roarmctl.robot.frames import UNITS, Frame
-
     raw = data.get("frames") or {}
     if not isinstance(raw, dict):
         raise DescriptionError(f"{where}: frames: expected a mapping name -> {{origin, unit, point}}")
@@ -366,13 +364,8 @@ def _origin(elem: ET.Element | None, where: str) -> np.ndarray:
 
 def _read_urdf(urdf: Path, side: dict, sidecar: Path) -> ET.Element:
     """The URDF's XML root; a ``.xacro`` file is expanded first (``xacro_args`` in the sidecar)."""
-    from roarmctl.fileio import read_text
-    from roarmctl.robot.meshes import description_roots
-
     roots = side.get("_roots") or description_roots(side, sidecar)
     if urdf.suffix.lower() == ".xacro":
-        from roarmctl.robot.xacro_input import expand
-
         text = expand(urdf, side.get("xacro_args"), str(sidecar), roots=roots, trusted=bool(side.get("_trusted")))
         try:
             return ET.fromstring(text)
@@ -387,8 +380,6 @@ def _read_urdf(urdf: Path, side: dict, sidecar: Path) -> ET.Element:
 
 def _moveit(side: dict, sidecar: Path, joints_xml: list, links: dict, actuated: list[str]) -> tuple[dict, dict]:
     """Merge the SRDF's fields into a copy of the sidecar (the sidecar wins); read joint_limits.yaml."""
-    from roarmctl.robot.srdf import read_joint_limits, read_srdf
-
     side = dict(side)
     jl: dict = {}
     if side.get("joint_limits") is not None:
@@ -480,7 +471,6 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         e = _fattr(lim, "effort", 0.0, f"{urdf}: joint '{n}' limit")
         urdf_eff.append(e if e > 0 else np.inf)  # URDF effort 0 means unset
     by_name = {j.name: j for j in ordered}
-    from roarmctl.robot.meshes import mesh_modes, package_map
 
     meshes = {"urdf": urdf, "packages": package_map(side.get("packages"), sidecar, str(sidecar)),
               "modes": mesh_modes(side.get("mesh_collision"), list(links), str(sidecar)), "roots": side.get("_roots")}
@@ -553,8 +543,6 @@ def _urdf_shape(link: str, c: ET.Element, where: str, k: int, meshes: dict) -> l
     if g.tag == "capsule":  # not URDF 1.0, but common (Gazebo/SDF extension)
         return [CollisionShape(link, "capsule", origin, radius=req("radius"), length=req("length"), name=name)]
     if g.tag == "mesh":
-        from roarmctl.robot.meshes import load_mesh, resolve
-
         if not g.get("filename"):
             raise DescriptionError(f"{where} mesh: missing attribute 'filename'")
         scale = np.ones(3)

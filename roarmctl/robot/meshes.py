@@ -15,13 +15,14 @@ modification time and scale).
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from roarmctl.errors import DescriptionError
-from roarmctl.fileio import Roots
+from roarmctl.fileio import Roots, read_bytes
 
 #: NAME -> folder for ``package://NAME/...``, filled by the CLI's ``--package-path`` option.
 PACKAGE_PATHS: dict[str, Path] = {}
@@ -116,11 +117,7 @@ def load_mesh(path: Path, scale: np.ndarray, exact: bool, where: str, roots: Roo
     """Read ``path`` (a regular file of at most ``MESH_BYTES``, inside ``roots`` when given), scale it,
     and return (centred geometry, centre (3,) in the element's frame). trimesh reads the bytes alone: an
     OBJ's ``mtllib`` or a COLLADA file's images are never opened."""
-    import io
-
     import trimesh
-
-    from roarmctl.fileio import read_bytes
 
     kind = path.suffix.lower().lstrip(".")
     if kind not in MESH_TYPES:

@@ -11,6 +11,9 @@ from typing import Any, Literal
 
 import numpy as np
 
+from roarmctl.errors import InputError
+from roarmctl.robot.kinematics import Kinematics
+
 JointKind = Literal["revolute", "prismatic", "fixed"]
 ShapeKind = Literal["box", "cylinder", "sphere", "capsule", "mesh"]
 
@@ -190,8 +193,6 @@ class Robot:
     derived: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        from roarmctl.robot.kinematics import Kinematics
-
         self.kin = Kinematics(self)
 
     @property
@@ -236,7 +237,6 @@ class Robot:
                 full[..., self.joint_index(self.gripper.joint)] = self.gripper.closed
             full[..., self.arm_indices] = q
             return full
-        from roarmctl.errors import InputError
 
         raise InputError(
             f"{self.name} takes {self.arm_dof} arm joint values"

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from roarmctl.robot.ik import ur6_params
 from roarmctl.robot.model import Robot
 
 SIN_TOL = 0.02  # |sin| of an angle below this counts as aligned (about 1.1 deg)
@@ -36,7 +37,6 @@ def _roarm5(robot: Robot, q: np.ndarray) -> str | None:
 def _ur6(robot: Robot, q: np.ndarray) -> str | None:
     # UR-type 6R: det J = a2 a3 (a2 c2 + a3 c23 - d5 s234) s3 s5, dimensions from the robot's DH table
     # (zero at the elbow s3 = 0, wrist s5 = 0 and shoulder (wrist centre on the base axis) singularities).
-    from roarmctl.robot.ik import ur6_params
 
     params = robot.derived.get("ur6_params")
     if params is None:

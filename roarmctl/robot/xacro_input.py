@@ -14,6 +14,7 @@ from pathlib import Path
 
 from roarmctl.errors import DescriptionError
 from roarmctl.fileio import Roots
+from roarmctl.robot.xacro_safe import Refused, find_refusal, hooks
 
 #: Set by the CLI's ``--trust-xacro``: the user vouches for every xacro file of this command.
 TRUST_ALL = False
@@ -30,7 +31,6 @@ def expand(path: Path, args, where: str, packages: dict[str, Path] | None = None
     import xacro
 
     from roarmctl.robot.meshes import PACKAGE_PATHS
-    from roarmctl.robot.xacro_safe import Refused, find_refusal, hooks
 
     known = {**PACKAGE_PATHS, **(packages or {})}
     if roots is None:

@@ -30,6 +30,7 @@ expressions and ``$(...)`` to xacro itself: only for files whose author you trus
 from __future__ import annotations
 
 import ast
+import glob as _glob
 import math
 import operator
 import os
@@ -363,8 +364,6 @@ def _xacro_lookup(symbols: Any, name: str) -> Any:
 def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
     """Within this block the ``xacro`` module evaluates and reads only as described above (see the
     module docstring); yields the ``Budget`` of the expansion. One expansion at a time (a lock)."""
-    import glob as _glob
-
     import xacro
     from xacro import substitution_args
 

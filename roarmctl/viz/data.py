@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from roarmctl.errors import InputError, TrajectoryFileError
+from roarmctl.motion.report import joint_torques
 from roarmctl.motion.trajectory import GRASP_RADIUS, carried_item  # noqa: F401  (GRASP_RADIUS re-exported)
 
 if TYPE_CHECKING:
@@ -220,8 +221,6 @@ def path_data(traj: Trajectory, robot: Robot) -> PathData:
     key += [(index_at(e.time), e.label or e.kind, e.kind) for e in events]
     key.append((len(times) - 1, "end", "end"))
     key_poses = [KeyPose(float(times[i]), label, kind, i, origins[i].copy()) for i, label, kind in key]
-
-    from roarmctl.motion.report import joint_torques
 
     torque = joint_torques(traj, robot)
     items = (traj.scene or {}).get("items", []) if isinstance(traj.scene, dict) else []

@@ -11,15 +11,22 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+from matplotlib.ticker import FormatStrFormatter
+from mpl_toolkits.mplot3d import proj3d
 from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
-from roarmctl.viz.data import GRASP_RADIUS, PathData
+from roarmctl.fileio import atomic_write_with
+from roarmctl.viz.data import GRASP_RADIUS, EventMark, PathData, path_data, robot_for
+from roarmctl.viz.formats import picture_format
 from roarmctl.viz.shapes import item_extent, item_faces
 
 VIEWS = {"iso": (26.0, -38.0), "top": (90.0, -90.0), "front": (0.0, 0.0), "side": (0.0, -90.0)}
@@ -56,8 +63,6 @@ def place_labels(ax, labels: list[Label]) -> list[tuple[float, float]]:
     then sideways and down; a thin leader line joins a moved label to its anchor. Returns the
     label positions (axes fraction) for tests.
     """
-    from mpl_toolkits.mplot3d import proj3d
-
     fig = ax.figure
     to_pt = 72.0 / fig.dpi
     proj = ax.get_proj()
@@ -284,7 +289,6 @@ def draw_time_plots(axes, data: PathData) -> None:
     ax_a.set_ylabel("acceleration\n(rad/s²)")
     ax_v.set_title(f"dashed: velocity limit × {data.velocity_scale:g}{src}", fontsize=8, loc="right", pad=2)
     ax_a.set_title(f"dashed: acceleration limit × {data.acceleration_scale:g}", fontsize=8, loc="right", pad=2)
-    from matplotlib.patches import Patch
 
     handles, _ = ax_q.get_legend_handles_labels()
     handles.append(Patch(color="0.5", alpha=0.2, label="Cartesian segment (band)"))
@@ -312,7 +316,6 @@ def draw_time_plots(axes, data: PathData) -> None:
     tw.set_ylabel("w = Πσ (m³)", color="0.4", fontsize=8)
     tw.tick_params(labelsize=7, colors="0.4")
     tw.set_ylim(bottom=0.0)
-    from matplotlib.ticker import FormatStrFormatter
 
     tw.yaxis.set_major_formatter(FormatStrFormatter("%.3g"))
     ax_m.set_xlabel("time (s)")
@@ -332,8 +335,6 @@ def draw_time_plots(axes, data: PathData) -> None:
 def render_path(data: PathData, *, view: str = "iso", size: tuple[float, float] = (16.0, 10.0),
                 title: str = "", subtitle: str = "") -> Figure:
     """The whole sheet as a matplotlib ``Figure`` (not yet saved); ``size`` in inches."""
-    import matplotlib
-
     with matplotlib.rc_context(RC):
         fig = Figure(figsize=size)
         FigureCanvasAgg(fig)
@@ -352,7 +353,6 @@ def _draw_right(fig: Figure, gs, data: PathData, norm, cmap, title: str, subtitl
     axes += [fig.add_subplot(right[i, 0], sharex=axes[0]) for i in range(1, 6)]
     draw_time_plots(axes, data)
     cax = fig.add_axes((0.06, 0.055, 0.42, 0.014))
-    from matplotlib.cm import ScalarMappable
 
     cb = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=cax, orientation="horizontal")
     cb.set_label("TCP speed (m/s)", fontsize=8.5)
@@ -367,9 +367,6 @@ def _draw_right(fig: Figure, gs, data: PathData, norm, cmap, title: str, subtitl
 
 def save_png(fig: Figure, path: str | Path, dpi: float) -> Path:
     """Write ``fig`` atomically (temporary file, then rename) as PNG, SVG or PDF, by ``path``'s extension."""
-    from roarmctl.fileio import atomic_write_with
-    from roarmctl.viz.formats import picture_format
-
     fmt = picture_format(path)
     return atomic_write_with(path, lambda f: fig.savefig(f, format=fmt, dpi=dpi))
 
@@ -391,8 +388,6 @@ def visualize_trajectory(traj, out: str | Path, *, view: str = "iso", dpi: float
     ``failure``: a ``motion.pipeline.PartialPlan`` when planning failed: ``traj`` is what was planned
     before the failing task, whose target is marked with a red X and named in the title.
     """
-    from roarmctl.viz.data import EventMark, path_data, robot_for
-
     data = path_data(traj, robot_for(traj))
     title, subtitle = describe(data, name or "trajectory")
     if failure is not None:

@@ -15,7 +15,7 @@ from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from roarmctl.viz.data import WorkspaceData
+from roarmctl.viz.data import WorkspaceData, workspace_data
 
 MEASURES = {"sigma": ("σ_min of J_v (m/rad)", "smallest singular value"), "w": ("w = Πσ of J_v", "Yoshikawa manipulability")}
 
@@ -144,7 +144,6 @@ def render_workspace(data: WorkspaceData, *, measure: str = "sigma", height: flo
 def visualize_workspace(robot, out: str | Path, *, samples: int = 80000, seed: int = 0, measure: str = "sigma",
                         height: float | None = None, dpi: float = 100.0, size: tuple[float, float] = (13.0, 6.0)) -> Path:
     """Sample ``robot``'s workspace and write the PNG ``out``; returns the path written."""
-    from roarmctl.viz.data import workspace_data
     from roarmctl.viz.path_figure import save_png
 
     fig = render_workspace(workspace_data(robot, samples, seed), measure=measure, height=height, size=size)

@@ -13,9 +13,11 @@ from roarmctl.motion.planning.context import robot_spec, scene_item
 from roarmctl.motion.planning.payloads import payload_entry
 from roarmctl.motion.planning.pieces import SAMPLE_DT, TimedPiece
 from roarmctl.motion.planning.tasks import where
+from roarmctl.motion.scene import Scene
 from roarmctl.motion.timing import TimedPath
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
 from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask
+from roarmctl.robot.loader import bundled_robots
 
 if TYPE_CHECKING:
     from roarmctl.motion.planning.context import PlanContext
@@ -33,8 +35,6 @@ class PartialPlan:
 
 def assemble(ctx: PlanContext, pieces: list[TimedPiece]) -> Trajectory:
     """The pieces one after the other (each starts where the previous one ends) as the plan's trajectory."""
-    from roarmctl.robot.loader import bundled_robots
-
     times, qs, qds, qdds = [], [], [], []
     events, segments, blends, payloads = [], [], [], []
     held: tuple[float, dict] | None = None
@@ -94,8 +94,6 @@ def assemble(ctx: PlanContext, pieces: list[TimedPiece]) -> Trajectory:
 
 def initial_scene_dict(ctx: PlanContext) -> dict:
     """The plan's scene with every object at its start pose, as the trajectory file records it."""
-    from roarmctl.motion.scene import Scene
-
     return Scene([scene_item(s) for s in ctx.plan.scene + ctx.plan.objects]).to_dict()
 
 

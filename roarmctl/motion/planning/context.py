@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from roarmctl.motion.planning.pieces import UntimedMotion
+from roarmctl.motion.scene import SceneItem
+from roarmctl.robot.ik import takes_pitch
 
 if TYPE_CHECKING:
     from roarmctl.motion.collision import CollisionChecker
@@ -38,8 +41,6 @@ class PlanContext:
     """
 
     def __init__(self, plan: Plan, robot: Robot, checker: CollisionChecker) -> None:
-        from roarmctl.robot.ik import takes_pitch
-
         self.plan, self.robot, self.checker = plan, robot, checker
         self.timer = StageTimer()
         self.warnings: list[str] = []
@@ -89,8 +90,6 @@ class PlanContext:
 
 def robot_spec(plan: Plan) -> str:
     """The plan's ``robot``: a bundled name as is; any other name is a path relative to the plan file's directory."""
-    from pathlib import Path
-
     from roarmctl.robot.loader import bundled_robots
 
     if plan.robot in bundled_robots():
@@ -104,8 +103,6 @@ def robot_spec(plan: Plan) -> str:
 
 def scene_item(spec: ItemSpec) -> SceneItem:
     """The scene item of a plan's table, obstacle or object (at its start pose)."""
-    from roarmctl.motion.scene import SceneItem
-
     # the plan's schema checked role and shape against the scene's
     return SceneItem(name=spec.name, role=cast("Role", spec.role), shape=cast("Shape", spec.shape), pose=spec.pose.copy(),
                      size=cast(tuple[float, float, float], tuple(spec.size)), radius=spec.radius, length=spec.length)

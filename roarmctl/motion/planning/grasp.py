@@ -26,6 +26,7 @@ from roarmctl.motion.planning.pieces import (
 )
 from roarmctl.motion.timing import TimedPath, time_parameterise
 from roarmctl.motion.trajectory import Event, Segment
+from roarmctl.robot.dynamics import inverse_dynamics
 
 if TYPE_CHECKING:
     from roarmctl.motion.planning.context import PlanContext
@@ -295,8 +296,6 @@ def jaw_moving_samples_ok(ctx: PlanContext, tp: TimedPath, lo: int, hi: int, pos
     the gripper action itself), outside the singularity margin, within the torque limits by RNEA (nothing is held:
     before a grasp, after a release) and, for the gripper joint, within its position, velocity, acceleration
     and jerk limits (the arm's samples are the straight motion's own)."""
-    from roarmctl.robot.dynamics import inverse_dynamics
-
     a, b = max(lo - 1, 0), min(hi + 2, len(tp.times))
     fine = interpolate(tp.q[a:b], RECHECK_SUBSTEPS)
     fine = fine[np.linalg.norm(ctx.robot.kin.fk(fine)[:, :3, 3] - pose, axis=1) > JAW_POSE_TOL]

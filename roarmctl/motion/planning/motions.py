@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from roarmctl.errors import PlanningError
+from roarmctl.motion.cartesian import cartesian_line, line_deviation
 from roarmctl.motion.planning.payloads import torque_model
 from roarmctl.motion.planning.pieces import (
     LIMIT_TOL,
@@ -32,8 +33,6 @@ FREE_MOTION_TRIES = 3
 
 def geometry(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> UntimedMotion:
     """The untimed path of a free or straight motion from ``q`` (OMPL + FCL, or IK along the line)."""
-    from roarmctl.motion.cartesian import cartesian_line
-
     ctx.set_state(q[ctx.gi] if ctx.gi is not None else None, grasp_target=step.grasp_target)
     if step.kind == "cartesian":
         assert step.line is not None
@@ -137,8 +136,6 @@ def time_motion(ctx: PlanContext, motion: UntimedMotion) -> TimedPiece:
 def check_motion(ctx: PlanContext, tp: TimedPath, motion: UntimedMotion, label: str) -> None:
     """Independent check of the sampled motion: limits, TCP speed, collisions (4x finer) and singularity
     margin in the motion's own collision state, a straight motion within LINE_TOLERANCE of its line."""
-    from roarmctl.motion.cartesian import line_deviation
-
     r = ctx.robot
     if np.any(tp.q < r.lower - LIMIT_TOL) or np.any(tp.q > r.upper + LIMIT_TOL):
         raise PlanningError(f"{label}: the timed motion leaves the joint limits")

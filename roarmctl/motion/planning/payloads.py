@@ -6,6 +6,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from roarmctl.motion.timing import TorqueModel, check_holding
+from roarmctl.robot.dynamics import inverse_dynamics, solid_inertia
+from roarmctl.robot.model import Inertial
+
 if TYPE_CHECKING:
     from roarmctl.motion.planning.context import PlanContext
     from roarmctl.motion.timing import TorqueModel
@@ -14,9 +18,6 @@ if TYPE_CHECKING:
 def torque_model(ctx: PlanContext, base: np.ndarray, idx: list[int]) -> TorqueModel | None:
     """Torque limits of the joints ``idx`` for TOPP-RA (RNEA with the held payload, the other joints held at
     ``base`` (dof,) rad); None without limits."""
-    from roarmctl.motion.timing import TorqueModel
-    from roarmctl.robot.dynamics import inverse_dynamics
-
     if ctx.effort is None or not np.any(np.isfinite(ctx.effort[idx])) or not ctx.robot.inertials:
         return None
     robot, payload = ctx.robot, ctx.payload
@@ -35,10 +36,6 @@ def torque_model(ctx: PlanContext, base: np.ndarray, idx: list[int]) -> TorqueMo
 def attach_payload(ctx: PlanContext, name: str, q: np.ndarray, label: str) -> None:
     """The held object ``name``'s mass, COM and inertia become part of the TCP link (from grasp to release);
     a load the arm cannot hold at ``q`` even at rest raises InfeasibleError."""
-    from roarmctl.motion.timing import check_holding
-    from roarmctl.robot.dynamics import solid_inertia
-    from roarmctl.robot.model import Inertial
-
     spec = next(o for o in ctx.plan.objects if o.name == name)
     if not spec.mass:
         return

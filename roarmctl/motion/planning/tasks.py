@@ -16,6 +16,7 @@ from roarmctl.motion.planning.grasp import grip_value
 from roarmctl.motion.planning.pieces import TaskStep, with_value
 from roarmctl.motion.trajectory import Event
 from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask, WaitTask
+from roarmctl.robot.ik import accepts_pitch, pitch_candidates, solve_ik, solve_ik_near
 
 if TYPE_CHECKING:
     from roarmctl.motion.planning.context import PlanContext
@@ -152,8 +153,6 @@ def held_pitch(ctx: PlanContext, task: PickTask | PlaceTask | MoveTask, at: str)
     pitch (and roll) the plan writes, through the numerical IK's approach-axis target; a task without
     them is solved for the position only (noted once). A position-only IK family (``roarm3``) refuses
     a written pitch or roll instead of ignoring it."""
-    from roarmctl.robot.ik import accepts_pitch
-
     written = getattr(task, "pitch_set", False) or getattr(task, "roll", None) is not None
     if isinstance(task, MoveTask):
         written = task.pitch is not None
@@ -177,8 +176,6 @@ def choose_ik_pitch(ctx: PlanContext, points: list[np.ndarray], pitch: float | N
                     q: np.ndarray, at: str, gripper: float | None = None) -> tuple[list[np.ndarray], float | None]:
     """``choose_ik`` for points that share one pitch (None: position only); with ``auto`` the pitch nearest
     to ``pitch`` (1 deg steps, ``ik.pitch_candidates``) at which a chain is valid (limits, collisions, margin)."""
-    from roarmctl.robot.ik import pitch_candidates
-
     if not auto or pitch is None:  # no pitch to choose
         return choose_ik(ctx, [(p, pitch, roll) for p in points], q, at, gripper=gripper), pitch
     first: UnreachableError | None = None
@@ -201,8 +198,6 @@ def choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, fl
     """IK for a chain of targets (position m, pitch, roll rad) on one branch: valid, margin-respecting, nearest
     to ``q``. Returns one full configuration per target (gripper value of ``q`` unless ``gripper``).
     """
-    from roarmctl.robot.ik import solve_ik, solve_ik_near
-
     t0 = time.perf_counter()
     g = q[ctx.gi] if gripper is None and ctx.gi is not None else gripper
     if g is not None:  # the chain is checked with the gripper value it carries

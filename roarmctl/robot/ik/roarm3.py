@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from roarmctl.errors import UnreachableError
+from roarmctl.errors import DescriptionError, UnreachableError
 from roarmctl.robot.ik.common import (
     POS_TOL,
     STRETCH_SLACK,
@@ -30,8 +30,6 @@ class Roarm3IK:
     """
 
     def __init__(self, robot: Robot) -> None:
-        from roarmctl.errors import DescriptionError
-
         self.robot = robot
         self.arm = robot.arm_indices
         if len(self.arm) != 3:

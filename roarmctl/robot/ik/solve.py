@@ -12,6 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from roarmctl.errors import InputError, UnreachableError
+from roarmctl.robot.frames import device_point, from_frame
 from roarmctl.robot.ik.common import POS_TOL, default_ref, rot_angle, vec3
 from roarmctl.robot.ik.dls import dls_solve, pitch_aim
 from roarmctl.robot.ik.pitch import pitch_candidates, tool_pitch
@@ -162,8 +163,6 @@ def solve_ik_frame(robot: Robot, frame, position, **kw) -> list[np.ndarray]:
     The end point's offset from the TCP depends on the base angle and the pitch only (it lies in the
     arm's plane), so a few fixed-point steps with the pitch held settle it to below ``POS_TOL``.
     """
-    from roarmctl.robot.frames import device_point, from_frame
-
     target = from_frame(frame, position)
     if frame.point_link is None:
         return solve_ik(robot, target, **kw)

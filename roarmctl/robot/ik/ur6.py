@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from roarmctl.errors import UnreachableError
+from roarmctl.errors import DescriptionError, UnreachableError
 from roarmctl.robot.ik.common import (
     ORI_TOL,
     POS_TOL,
@@ -34,8 +34,6 @@ def ur6_params(robot: Robot):
     (Rz(pi) Rx(alpha) Tx(a) Rz(pi) = Rx(-alpha) Tx(-a)). Anything else raises ``DescriptionError``.
     Lengths in metres, angles in radians; ``offsets`` (6,) map q to the model's theta = q + offset.
     """
-    from roarmctl.errors import DescriptionError
-
     where = f"{robot.name} (singularity_model/ik: ur6)"
     if robot.dh is None:
         raise DescriptionError(f"{where}: the ur6 model needs a DH table ('dh:' rows), this robot has none",
