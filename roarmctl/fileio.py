@@ -84,6 +84,11 @@ DEFAULT_LIMIT = 16 * 1024 * 1024
 _CHUNK = 1024 * 1024
 
 
+#: The folder ``$(find NAME)`` stands for when package NAME is not declared: expanding a xacro that only
+#: names such a folder in a string works; reading anything under it is refused naming the package.
+UNKNOWN_PACKAGE = "/nonexistent/roarmctl-unknown-package"
+
+
 class Roots:
     """The folders a description may read: its own folder and the package folders it declares.
 
@@ -112,6 +117,10 @@ class Roots:
             real = p.resolve(strict=False)
         except (RuntimeError, OSError) as exc:  # a symlink loop: RuntimeError before Python 3.13, OSError after
             raise error(f"{what}: '{_short(p)}' cannot be resolved ({_reason(exc)})", "remove the symlink loop") from None
+        if str(p).startswith(UNKNOWN_PACKAGE + "/"):
+            name = str(p)[len(UNKNOWN_PACKAGE) + 1:].split("/")[0]
+            raise error(f"{what}: $(find {name}): package '{name}' is unknown",
+                        f"map it in the sidecar (packages: {{{name}: DIR}}) or give --package-path {name}=DIR")
         if not self.contains(real):
             where = ", ".join(str(f) for f in self.folders) or "none"
             raise error(f"{what}: '{_short(p)}' lies outside the folders this description may read ({where})",

@@ -234,6 +234,30 @@ def test_a_mesh_inside_the_package_loads(tmp_path):
     assert code == 0, err
 
 
+def test_an_unknown_package_fails_only_when_something_under_it_is_read(tmp_path):
+    """xArm's xacro names ``$(find xarm_controller)`` in a string it never reads: that expands; an include
+    under an undeclared package is refused naming the package and the fix."""
+    arm = hostile.m3_xacro(tmp_path, "'$(find no_such_pkg)/config.yaml'[-11:]")
+    code, out, err = cli(["kin", "fk", str(arm), *hostile.M3_Q, "--json"])
+    assert code == 0 and json.loads(out)["robot"] == "config.yaml", err
+    arm = hostile.m3_xacro(tmp_path, "'a'", '<xacro:include filename="$(find no_such_pkg)/parts.xacro"/>')
+    refused(["kin", "fk", str(arm), *hostile.M3_Q], "$(find no_such_pkg): package 'no_such_pkg' is unknown",
+            "--package-path no_such_pkg=DIR")
+
+
+def test_a_plan_names_a_description_only_beside_itself(tmp_path, secret):
+    d = _desc_dir(tmp_path)
+    hostile.m3_xacro(secret.parent, "'arm'")
+    (d / "p.yaml").write_text(f"robot: ../outside/arm.xacro\ntasks: [{{wait: 0.2}}]\n")
+    refused(["plan", str(d / "p.yaml"), "-o", str(d / "p.traj.json")], "p.yaml:1: robot:", "lies outside")
+    (d / "p.yaml").write_text(f"robot: {secret.parent / 'arm.xacro'}\ntasks: [{{wait: 0.2}}]\n")
+    refused(["plan", str(d / "p.yaml"), "-o", str(d / "p.traj.json")], "lies outside")
+    (d / "p.yaml").write_text("robot: ../outside/arm.xacro\nstart: [0, 0, 1.57, 0, 0, 0]\n"
+                              "tasks: [{wait: 0.2}]\n")  # the user's word: --package-path
+    code, _, err = cli(["--package-path", f"arms={secret.parent}", "plan", str(d / "p.yaml"), "-o", str(d / "p.traj.json")])
+    assert code == 0, err
+
+
 # --------------------------------------------------------------------------- no limits
 @pytest.mark.parametrize("bomb, needle", [
     (lambda d: hostile.m3_xacro(d, hostile.POW_BOMB), "larger than 256 bits"),

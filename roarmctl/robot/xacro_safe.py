@@ -40,7 +40,7 @@ from contextlib import contextmanager
 from typing import Any, ClassVar
 
 from roarmctl.errors import DescriptionError
-from roarmctl.fileio import Roots, read_text
+from roarmctl.fileio import UNKNOWN_PACKAGE, Roots, read_text
 
 #: Work one expansion may do (counts, not seconds: the same verdict on a busy machine).
 MAX_ELEMENTS = 20_000  # elements evaluated (macro bodies count each time they are expanded)
@@ -382,8 +382,7 @@ def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
                 return orig_find(pkg)  # ROS's package index, when ROS is installed
             except (ImportError, LookupError):
                 pass
-        raise DescriptionError(f"{where}: xacro: $(find {pkg}): package '{pkg}' is unknown",
-                               f"map it in the sidecar (packages: {{{pkg}: DIR}}) or give --package-path {pkg}=DIR")
+        return f"{UNKNOWN_PACKAGE}/{pkg}"  # fails when something under it is read (Roots.check), not before
 
     def parse(inp: Any, filename: str | None = None) -> Any:
         if inp is None:  # the top file, then each include

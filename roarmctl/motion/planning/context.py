@@ -8,9 +8,14 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
+from roarmctl.errors import InputError
+from roarmctl.fileio import Roots
 from roarmctl.motion.planning.pieces import UntimedMotion
 from roarmctl.motion.scene import SceneItem
+from roarmctl.plan.schema import DICT_NAME
 from roarmctl.robot.ik import takes_pitch
+from roarmctl.robot.loader import bundled_robots
+from roarmctl.robot.meshes import PACKAGE_PATHS
 
 if TYPE_CHECKING:
     from roarmctl.motion.collision import CollisionChecker
@@ -89,12 +94,18 @@ class PlanContext:
 
 
 def robot_spec(plan: Plan) -> str:
-    """The plan's ``robot``: a bundled name as is; any other name is a path relative to the plan file's directory."""
-    from roarmctl.robot.loader import bundled_robots
-
+    """The plan's ``robot``: a bundled name as is; any other name is a path relative to the plan file's
+    directory, which it may not leave (a plan reads only beside itself and in ``--package-path`` folders;
+    a plan given as a dict is the caller's own and takes any path)."""
     if plan.robot in bundled_robots():
         return plan.robot
-    candidate = plan.path.parent / Path(plan.robot).expanduser()
+    if plan.path.name == DICT_NAME:
+        candidate = plan.path.parent / Path(plan.robot).expanduser()
+    else:
+        candidate = plan.path.parent / Path(plan.robot)
+        Roots([plan.path.parent], PACKAGE_PATHS).check(
+            candidate, f"'{plan.robot[:80]}'", InputError,
+            "a plan names a description beside it (or under a --package-path folder): copy or link the folder there")
     try:
         return str(candidate) if candidate.is_file() else plan.robot
     except (OSError, ValueError):  # a name the OS refuses as a path (too long)
