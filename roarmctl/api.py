@@ -154,10 +154,10 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
     Writes the execution log to ``log`` when given. Returns the summary: ``outcome``, ``commands``
     (T:102/T:101 lines sent while streaming), ``lateness_ms``, ``tracking_mm``, ``final_error_mm``, ``log``.
     """
-    from roarmctl.robot.loader import load_robot as _load  # the trajectory names it: no sidecar trust
+    from roarmctl.motion.validate import robot_of
 
     t = _trajectory(traj)
-    robot = _load(t.robot)
+    robot = robot_of(t)
     cfg = StreamConfig(rate=rate, speed_scale=speed_scale, max_error=max_error, move_to_start=move_to_start,
                        from_current=from_current)
     build_schedule(t, robot, rate=rate, speed_scale=speed_scale, strategy=cfg.strategy)  # refuse before opening

@@ -467,3 +467,79 @@ def test_allowed_collisions_naming_an_unknown_link_is_refused(tmp_path):
     data["allowed_collisions"] = [["link1", "no_such_link"]]
     side.write_text(yaml.safe_dump(data))
     refused(["kin", "fk", str(side), *hostile.M3_Q[:5]], "allowed_collisions", "no_such_link")
+
+
+# --------------------------------------------------------------------------- the robot a trajectory carries
+def test_a_trajectory_carries_its_description_and_needs_no_file(tmp_path):
+    """Planned for a xacro description with a package mesh: the trajectory holds the expanded URDF and the
+    mesh; with the description's folder gone, every command still reads the same robot (FK, limits, the
+    mesh's vertices compared with the original)."""
+    import shutil
+
+    import numpy as np
+
+    from roarmctl.motion.validate import load_trajectory, robot_of
+    from roarmctl.robot.loader import load_robot
+
+    d = _desc_dir(tmp_path)
+    (d / "pkg").mkdir()
+    _stl(d / "pkg" / "m.stl")
+    urdf = (hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text().replace(
+        '<link name="link3">', '<link name="link3"><collision><geometry><mesh filename="package://pkg/m.stl" '
+        'scale="1 1 1"/></geometry></collision>', 1)
+    urdf = urdf.replace('<robot name="roarm_m3_pro">', f'<robot name="${{\'carried\' + str(1)}}" {hostile.XACRO_NS}>', 1)
+    (d / "arm.xacro").write_text(urdf)
+    side = hostile.sidecar(d, "arm.xacro", packages={"pkg": "pkg"})
+    original = load_robot(str(side))
+    plan = tmp_path / "p.yaml"
+    (d / "p.yaml").write_text("robot: arm.yaml\ntasks: [{move: {joints: [0.3, 0.2, 1.6, 0.1, 0.2]}}]\n")
+    shutil.copy(d / "p.yaml", plan)
+    t = tmp_path / "p.traj.json"
+    code, _, err = cli(["plan", str(d / "p.yaml"), "-o", str(t)])
+    assert code == 0, err
+    doc = json.loads(t.read_text())
+    files = doc["robot_description"]["files"]
+    assert doc["robot"] == original.name and set(files) == {"robot.yaml", "robot.urdf", "meshes/m0.stl"}
+    assert '<robot name="carried1"' in files["robot.urdf"] and "${" not in files["robot.urdf"]  # expanded
+    shutil.rmtree(d)
+    carried = robot_of(load_trajectory(t), str(t))
+    q = np.array([0.3, 0.2, 1.6, 0.1, 0.2, 0.5])
+    assert carried.joint_names == original.joint_names and carried.name == original.name
+    assert np.allclose(carried.kin.fk(q), original.kin.fk(q))
+    assert np.allclose(carried.velocity_limits, original.velocity_limits) and np.allclose(carried.upper, original.upper)
+    mesh = [s for s in carried.collision if s.kind == "mesh"]
+    assert len(mesh) == 1 and np.allclose(mesh[0].mesh.vertices, [s for s in original.collision if s.kind == "mesh"][0].mesh.vertices)
+    for args in (["visualize-path", str(t), "-o", str(tmp_path / "t.png")], ["export", str(t), "-o", str(tmp_path / "t.mcap")],
+                 ["execute", str(t), "--output", str(tmp_path / "c.jsonl")]):
+        code, _, err = cli(args)
+        assert code == 0, (args, err)
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda f: f.update({"../../etc/passwd": "x"}), "not a file a robot description bundle holds"),
+    (lambda f: f.update({"meshes/m0.stl": {"base64": "***"}}), "not valid base64"),
+    (lambda f: f.update({"robot.urdf": 5}), "expected the file's text"),
+    (lambda f: f.pop("robot.yaml"), "'robot.yaml' is missing"),
+    (lambda f: f.update({"robot.urdf": f["robot.urdf"].replace("<robot", "<robto")}), "robot_description"),
+], ids=["path out", "bad base64", "not text", "no sidecar", "broken urdf"])
+def test_a_damaged_carried_description_is_exit_2_naming_the_field(tmp_path, edit, needle):
+    from roarmctl.robot.bundle import make_bundle
+
+    d = _desc_dir(tmp_path)
+    hostile.m3_xacro(d, "'arm'")
+    hostile.sidecar(d, "arm.xacro")
+    doc = hostile.trajectory_doc("arm")
+    doc["robot_description"] = make_bundle(str(d / "arm.yaml"))
+    edit(doc["robot_description"]["files"])
+    t = tmp_path / "t.traj.json"
+    t.write_text(json.dumps(doc))
+    refused(["visualize-path", str(t), "-o", str(tmp_path / "t.png")], "t.traj.json", needle)
+
+
+def test_an_old_trajectory_naming_a_description_file_still_reads_as_data(tmp_path):
+    d = _desc_dir(tmp_path)
+    hostile.m3_xacro(d, "'arm'")
+    t = tmp_path / "t.traj.json"
+    t.write_text(json.dumps(hostile.trajectory_doc(str(hostile.sidecar(d, "arm.xacro")))))
+    code, _, err = cli(["visualize-path", str(t), "-o", str(tmp_path / "t.png")])
+    assert code == 0, err

@@ -55,8 +55,7 @@ def execute(
     line is written to the execution log.
     """
     from roarmctl.device.streamer import STRATEGIES, StreamConfig, build_schedule
-    from roarmctl.motion.validate import validate_trajectory
-    from roarmctl.robot.loader import load_robot
+    from roarmctl.motion.validate import robot_of, validate_trajectory
 
     chosen = [n for n, v in (("--port", port), ("--sim", sim or None), ("--output", output)) if v]
     if len(chosen) != 1:
@@ -67,7 +66,7 @@ def execute(
     if not max_error > 0:
         raise InputError("--max-error: must be positive (mm)")
     traj = validate_trajectory(traj_path)  # limits, speeds and steps: nothing unchecked reaches the port
-    robot = load_robot(traj.robot)
+    robot = robot_of(traj, str(traj_path))
     if move_to_start and from_current:
         raise InputError("give one of --move-to-start and --from-current, not both")
     cfg = StreamConfig(rate=rate, speed_scale=speed_scale, strategy=strategy, max_error=max_error / 1e3,

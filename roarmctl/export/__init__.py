@@ -59,21 +59,27 @@ def load_source(path: str | os.PathLike | Any) -> tuple[str, Any]:
 def streams_for(source: str | os.PathLike | Any, trajectory: str | os.PathLike | Any | None = None):
     """The ``Streams`` of a trajectory or execution-log file (robot loaded by the name in the file).
     ``trajectory`` (logs only): the executed trajectory, exported beside the run as ``planned``."""
+    from types import SimpleNamespace
+
     from roarmctl.export.streams import log_streams, trajectory_streams
-    from roarmctl.robot.loader import load_robot
+    from roarmctl.motion.validate import robot_of
 
     kind, data = load_source(source)
     if kind == "trajectory":
         if trajectory is not None:
             raise InputError("--trajectory goes with an execution log, not with a trajectory",
                              "export the trajectory by itself, or give the .exec.json it produced")
-        return trajectory_streams(data, load_robot(data.robot))
+        return trajectory_streams(data, robot_of(data, str(source)))
     traj = None
     if trajectory is not None:
         tkind, traj = load_source(trajectory)
         if tkind != "trajectory":
             raise InputError(f"--trajectory {trajectory}: not a trajectory file", "give the .traj.json that was executed")
-    return log_streams(data, load_robot(str(data["robot"])), traj)
+    if data.get("robot_description") is None and traj is not None and traj.robot_description is not None:
+        robot = robot_of(traj, str(trajectory))  # a log without its robot: the one of the trajectory it ran
+    else:
+        robot = robot_of(SimpleNamespace(robot=data["robot"], robot_description=data.get("robot_description")), str(source))
+    return log_streams(data, robot, traj)
 
 
 def export(source: str | os.PathLike | Any, path: str | os.PathLike, fmt: str | None = None,

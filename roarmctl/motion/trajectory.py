@@ -83,6 +83,7 @@ class Trajectory:
     scene: dict[str, Any] = field(default_factory=lambda: {"items": []})
     plan: dict[str, Any] | None = None
     sample_rate: float = 100.0
+    robot_description: dict[str, Any] | None = None  # a non-bundled robot, carried (roarmctl.robot.bundle)
 
     @property
     def duration(self) -> float:
@@ -114,7 +115,7 @@ class Trajectory:
             "singularity_margin": _unsigned_zeros(self.singularity_margin),
             "scene": _unsigned_zeros(self.scene),
             "plan": self.plan,
-        }
+        } | ({"robot_description": self.robot_description} if self.robot_description is not None else {})
 
     def save(self, path: str | Path) -> Path:
         """Write the trajectory atomically (temporary file, then rename)."""

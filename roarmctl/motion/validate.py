@@ -26,6 +26,7 @@ import numpy as np
 
 from roarmctl.errors import InputError, TrajectoryFileError
 from roarmctl.motion.trajectory import FORMAT, Event, Segment, Trajectory
+from roarmctl.robot.bundle import trajectory_robot
 from roarmctl.robot.loader import load_robot
 from roarmctl.validation import Checker, HugeNumber, load_json
 
@@ -244,9 +245,12 @@ def parse_document(data: Any, where: str = "trajectory"):
     plan = data.get("plan")
     if plan is not None:
         _mapping(plan, where, "plan")
+    description = data.get("robot_description")  # checked file by file when loaded (robot.bundle)
+    if description is not None:
+        _mapping(description, where, "robot_description")
     return Trajectory(robot=robot, joint_names=names, times=times, events=events, segments=segments, blends=blends, payloads=[dict(p) for p in payloads],
                       limits=dict(limits), singularity_margin=margin, scene={**scene, "items": items}, plan=plan,
-                      sample_rate=rate, **arrays)
+                      sample_rate=rate, robot_description=description, **arrays)
 
 
 def _scene_item(it: Any, where: str, f: str, seen: set) -> None:
@@ -388,20 +392,31 @@ def validate_trajectory(traj_or_doc: Any, robot: Any = None, where: str | None =
     else:
         where = where or "trajectory"
         traj = parse_document(traj_or_doc, where)
-    if robot is None or isinstance(robot, str):
-        spec = robot or traj.robot
-        try:
-            robot = load_robot(spec)
-        except InputError as exc:
-            if robot is not None:
-                raise
-            raise type(exc)(f"{where}: robot: the trajectory was planned for robot '{spec}', which is not installed "
-                            f"here ({exc.message})", exc.hint) from None
-        except (OSError, ValueError) as exc:  # a name the OS refuses as a path (too long, NUL)
-            raise TrajectoryFileError(f"{where}: robot: '{spec[:60]}' is neither a bundled robot nor a readable "
-                                      f"file ({exc})") from None
+    if robot is None:
+        robot = robot_of(traj, where)
+    elif isinstance(robot, str):
+        robot = load_robot(robot)
     check_against_robot(traj, robot, where)
     return traj
+
+
+def robot_of(traj, where: str = "trajectory"):
+    """The ``Robot`` a trajectory (or an execution log's fields) was planned for: its carried
+    ``robot_description``, else the bundled robot it names (``roarmctl.robot.bundle.trajectory_robot``);
+    an unknown robot is an input error naming the file."""
+    spec = str(traj.robot)
+    try:
+        return trajectory_robot(spec, getattr(traj, "robot_description", None), where)
+    except TrajectoryFileError:
+        raise
+    except InputError as exc:
+        if getattr(traj, "robot_description", None) is not None:
+            raise
+        raise type(exc)(f"{where}: robot: the trajectory was planned for robot '{spec[:80]}', which is not installed "
+                        f"here ({exc.message})", exc.hint) from None
+    except (OSError, ValueError) as exc:  # a name the OS refuses as a path (too long, NUL)
+        raise TrajectoryFileError(f"{where}: robot: '{spec[:60]}' is neither a bundled robot nor a readable "
+                                  f"file ({exc})") from None
 
 
 def load_trajectory(path: str | Path) -> Trajectory:

@@ -106,15 +106,9 @@ def placed_objects(items: list[dict], events: list[EventMark]) -> list[dict]:
 
 def robot_for(traj: Trajectory) -> Robot:
     """Load the trajectory's robot; a missing robot or mismatched joints is an input error (exit 2)."""
-    from roarmctl.robot.loader import load_robot
+    from roarmctl.motion.validate import robot_of
 
-    try:
-        robot = load_robot(traj.robot)
-    except InputError as exc:
-        raise InputError(
-            f"the trajectory was planned for robot '{traj.robot}', which is not installed here ({exc.message})",
-            exc.hint,
-        ) from None
+    robot = robot_of(traj)
     if list(traj.joint_names) != list(robot.joint_names):
         raise TrajectoryFileError(
             f"joint_names {traj.joint_names} do not match robot '{traj.robot}' ({robot.joint_names})",

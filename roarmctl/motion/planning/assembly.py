@@ -4,7 +4,6 @@ scene and plan record), and the partial trajectory an infeasible plan reports.""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -17,6 +16,7 @@ from roarmctl.motion.scene import Scene
 from roarmctl.motion.timing import TimedPath
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
 from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask
+from roarmctl.robot.bundle import make_bundle
 from roarmctl.robot.loader import bundled_robots
 
 if TYPE_CHECKING:
@@ -63,7 +63,8 @@ def assemble(ctx: PlanContext, pieces: list[TimedPiece]) -> Trajectory:
     keep = np.concatenate([[True], np.diff(t) > 1e-9])
     p = ctx.plan
     traj = Trajectory(
-        robot=ctx.robot.name if p.robot in bundled_robots() else str(Path(robot_spec(p)).resolve()),
+        robot=ctx.robot.name,
+        robot_description=make_bundle(robot_spec(p)) if p.robot not in bundled_robots() else None,
         joint_names=list(ctx.robot.joint_names),
         times=t[keep],
         positions=np.concatenate(qs)[keep],

@@ -1,0 +1,180 @@
+"""A robot description carried inside a trajectory or an execution log, so that opening one never loads
+a file it names.
+
+A trajectory planned for a bundled robot names it (``"robot": "roarm_m3_pro"``). For any other
+description the planner writes its ``robot_description``: the files the loader read, as data -
+``robot.yaml`` (the sidecar, its file references pointing into the bundle), ``robot.urdf`` (the URDF
+after xacro, checked; visual elements dropped, every collision mesh renamed ``meshes/mK.ext``),
+``robot.srdf`` and ``joint_limits.yaml`` when the sidecar has them, and the mesh files' bytes (base64).
+No xacro is left to evaluate and no path leads outside the bundle.
+
+Reading one (``load_bundle``) checks the form (known file names only, sizes, base64), writes the
+files into a private temporary folder, loads that with the ordinary loader (every check of a
+description applies; the folder is the only root) and removes the folder. Old trajectories that name
+a description by path still load it (``trajectory_robot``), as data: xacro only through the safe
+evaluator, the sidecar's ``trust`` ignored.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import hashlib
+import json
+import re
+import tempfile
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+from roarmctl.errors import DescriptionError, InputError, TrajectoryFileError
+from roarmctl.robot.model import Robot
+
+FORMAT = "roarmctl.robot-bundle/1"
+MAX_BUNDLE_BYTES = 64 * 1024 * 1024  # all files of a bundle together, decoded
+FILE_NAME = re.compile(r"^(robot\.yaml|robot\.urdf|robot\.srdf|joint_limits\.yaml|meshes/m\d{1,5}\.(stl|obj|dae|ply|off|glb))$")
+_LOADED: dict[str, Robot] = {}
+
+
+def _plain(value: Any) -> Any:
+    """Located YAML containers -> plain dicts and lists (for ``yaml.safe_dump``)."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items() if not str(k).startswith("_")}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def make_bundle(spec: str) -> dict[str, Any] | None:
+    """The ``robot_description`` of the description at path ``spec`` (None for a bundled robot's name).
+
+    Reads exactly what loading it reads (inside its roots, bounded); xacro is expanded as loading it
+    from a plan would (the safe evaluator, unless the user's ``--trust-xacro``)."""
+    import yaml
+
+    from roarmctl.fileio import read_bytes, read_text
+    from roarmctl.robot import loader
+    from roarmctl.robot.meshes import MESH_BYTES, description_roots, package_map, resolve
+
+    if spec in loader.bundled_robots():
+        return None
+    path = Path(spec)
+    files: dict[str, Any] = {}
+    if path.suffix.lower() in (".urdf", ".xacro"):
+        side: dict[str, Any] = {}
+        urdf = path
+    else:
+        side = dict(loader._read_yaml(path))
+        if "dh" in side:
+            files["robot.yaml"] = yaml.safe_dump(_plain(side), sort_keys=False)
+            return {"format": FORMAT, "files": files}
+        urdf = (path.parent / str(side["urdf"])).resolve()
+    roots = description_roots(side, path)
+    side["_roots"] = roots
+    root = loader._read_urdf(urdf, side, path)
+    packages = package_map(side.get("packages"), path, str(path))
+    renamed: dict[Path, str] = {}
+    for link in root.findall("link"):
+        for visual in link.findall("visual"):  # not used by roarmctl: not carried
+            link.remove(visual)
+        for k, col in enumerate(link.findall("collision")):
+            mesh = col.find("geometry/mesh")
+            if mesh is None or not mesh.get("filename"):
+                continue
+            where = f"{urdf}: link '{link.get('name')}' collision[{k}]"
+            src = resolve(str(mesh.get("filename")), urdf, packages, where, roots)
+            if src not in renamed:
+                data = read_bytes(src, f"{where} mesh filename", MESH_BYTES, roots=roots, error=DescriptionError)
+                renamed[src] = f"meshes/m{len(renamed)}{src.suffix.lower()}"
+                files[renamed[src]] = {"base64": base64.b64encode(data).decode("ascii")}
+            mesh.set("filename", renamed[src])
+    files["robot.urdf"] = ET.tostring(root, encoding="unicode")
+    out = _plain(side)
+    for key in ("xacro_args", "trust", "packages"):
+        out.pop(key, None)
+    out["urdf"] = "robot.urdf"
+    if side.get("srdf") is not None:
+        srdf = path.parent / str(side["srdf"])
+        if srdf.suffix.lower() == ".xacro":
+            from roarmctl.robot.xacro_input import expand
+
+            files["robot.srdf"] = expand(srdf, side.get("xacro_args"), str(path), roots=roots)
+        else:
+            files["robot.srdf"] = read_text(srdf, f"{path}: srdf", loader.URDF_BYTES, roots=roots, error=DescriptionError)
+        out["srdf"] = "robot.srdf"
+    if side.get("joint_limits") is not None:
+        files["joint_limits.yaml"] = read_text(path.parent / str(side["joint_limits"]), f"{path}: joint_limits",
+                                               loader.URDF_BYTES, roots=roots, error=DescriptionError)
+        out["joint_limits"] = "joint_limits.yaml"
+    files["robot.yaml"] = yaml.safe_dump(out, sort_keys=False)
+    return {"format": FORMAT, "files": files}
+
+
+def _decoded(doc: Any, where: str) -> dict[str, bytes]:
+    """The files of a bundle document, checked: names, types, base64, total size."""
+    from roarmctl.validation import Checker
+
+    check = Checker(TrajectoryFileError, json=True)
+    field = "robot_description"
+    check.mapping(doc, where, field)
+    if doc.get("format") != FORMAT:
+        check.fail(where, f"{field}.format", f"expected '{FORMAT}', got {check.kind(doc.get('format'))}")
+    check.known_keys(doc, ("format", "files"), where, field)
+    files = check.mapping(doc.get("files"), where, f"{field}.files")
+    out: dict[str, bytes] = {}
+    total = 0
+    for name, value in files.items():
+        at = f"{field}.files.{str(name)[:60]}"
+        if not isinstance(name, str) or not FILE_NAME.match(name):
+            check.fail(where, at, "not a file a robot description bundle holds",
+                       "robot.yaml, robot.urdf, robot.srdf, joint_limits.yaml, meshes/mN.EXT")
+        if isinstance(value, str):
+            data = value.encode("utf-8")
+        elif isinstance(value, dict) and set(value) == {"base64"} and isinstance(value["base64"], str):
+            try:
+                data = base64.b64decode(value["base64"], validate=True)
+            except (binascii.Error, ValueError):
+                check.fail(where, f"{at}.base64", "not valid base64")
+        else:
+            check.fail(where, at, f"expected the file's text or {{base64: ...}}, got {check.kind(value)}")
+        total += len(data)
+        if total > MAX_BUNDLE_BYTES:
+            check.fail(where, field, f"its files hold more than {MAX_BUNDLE_BYTES // 2 ** 20} MiB")
+        out[name] = data
+    if "robot.yaml" not in out:
+        check.fail(where, f"{field}.files", "'robot.yaml' is missing")
+    return out
+
+
+def load_bundle(doc: Any, where: str) -> Robot:
+    """The ``Robot`` of a ``robot_description`` (see the module docstring); refusals name ``where``
+    (the trajectory or log file) and the field."""
+    from roarmctl.robot.loader import load_robot
+
+    files = _decoded(doc, where)
+    key = hashlib.sha256(json.dumps({k: hashlib.sha256(v).hexdigest() for k, v in sorted(files.items())}).encode()).hexdigest()
+    if key in _LOADED:
+        return _LOADED[key]
+    with tempfile.TemporaryDirectory(prefix="roarmctl-robot-") as tmp:
+        folder = Path(tmp)
+        for name, data in files.items():
+            (folder / name).parent.mkdir(exist_ok=True)
+            (folder / name).write_bytes(data)
+        try:
+            robot = load_robot(str(folder / "robot.yaml"))
+        except InputError as exc:
+            message = exc.message.replace(str(folder), f"{where}: robot_description")
+            raise type(exc)(message, exc.hint) from None
+    _LOADED[key] = robot
+    return robot
+
+
+def trajectory_robot(name: str, description: Any, where: str) -> Robot:
+    """The robot of a trajectory or execution log: its ``robot_description`` when it carries one, else the
+    bundled robot ``name`` - or, in a file written before bundles, the description at path ``name``,
+    loaded as data (xacro by the safe evaluator, a sidecar's ``trust`` ignored)."""
+    from roarmctl.robot.loader import load_robot
+
+    if description is not None:
+        return load_bundle(description, where)
+    return load_robot(name)
