@@ -248,7 +248,7 @@ def test_an_unknown_package_fails_only_when_something_under_it_is_read(tmp_path)
 def test_a_plan_names_a_description_only_beside_itself(tmp_path, secret):
     d = _desc_dir(tmp_path)
     hostile.m3_xacro(secret.parent, "'arm'")
-    (d / "p.yaml").write_text(f"robot: ../outside/arm.xacro\ntasks: [{{wait: 0.2}}]\n")
+    (d / "p.yaml").write_text("robot: ../outside/arm.xacro\ntasks: [{wait: 0.2}]\n")
     refused(["plan", str(d / "p.yaml"), "-o", str(d / "p.traj.json")], "p.yaml:1: robot:", "lies outside")
     (d / "p.yaml").write_text(f"robot: {secret.parent / 'arm.xacro'}\ntasks: [{{wait: 0.2}}]\n")
     refused(["plan", str(d / "p.yaml"), "-o", str(d / "p.traj.json")], "lies outside")
@@ -508,7 +508,7 @@ def test_a_trajectory_carries_its_description_and_needs_no_file(tmp_path):
     assert np.allclose(carried.kin.fk(q), original.kin.fk(q))
     assert np.allclose(carried.velocity_limits, original.velocity_limits) and np.allclose(carried.upper, original.upper)
     mesh = [s for s in carried.collision if s.kind == "mesh"]
-    assert len(mesh) == 1 and np.allclose(mesh[0].mesh.vertices, [s for s in original.collision if s.kind == "mesh"][0].mesh.vertices)
+    assert len(mesh) == 1 and np.allclose(mesh[0].mesh.vertices, next(s for s in original.collision if s.kind == "mesh").mesh.vertices)
     for args in (["visualize-path", str(t), "-o", str(tmp_path / "t.png")], ["export", str(t), "-o", str(tmp_path / "t.mcap")],
                  ["execute", str(t), "--output", str(tmp_path / "c.jsonl")]):
         code, _, err = cli(args)
