@@ -40,11 +40,7 @@ def atomic_write_json(path: str | os.PathLike, obj: Any, indent: int | None = 1)
 
 def atomic_write_with(path: str | os.PathLike, writer: Callable[[Any], Any]) -> Path:
     """Call ``writer(binary_file)`` on a temporary file next to ``path``, then rename it into place."""
-    target = Path(path)
-    if target.exists() and not target.is_file():
-        # a rename would replace a device (/dev/null, a serial port) or fail on a directory
-        what = "a directory" if target.is_dir() else "not a regular file"
-        raise InputError(f"cannot write {target}: it is {what}", "give the path of a file to write")
+    target = check_output_file(path)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
@@ -65,6 +61,27 @@ def atomic_write_with(path: str | os.PathLike, writer: Callable[[Any], Any]) -> 
         if isinstance(exc, OSError):
             raise InputError(f"cannot write {target}: {exc.strerror or exc}", "check the disk space and permissions") from None
         raise
+    return target
+
+
+def check_output_file(path: str | os.PathLike) -> Path:
+    """``path`` as a file roarmctl may (re)write, else ``InputError`` (exit 2): a name of at most
+    ``MAX_NAME_BYTES`` bytes that is not ``.``/``..``, and nothing there but a regular file (a rename
+    would replace a device such as /dev/null or a serial port, or fail on a folder)."""
+    target = Path(path)
+    if target.name in ("", ".", "..") or str(path).endswith(os.sep):
+        raise InputError(f"cannot write {_short(path)}: it names a folder", "give the path of a file to write")
+    if len(os.fsencode(target.name)) > MAX_NAME_BYTES:
+        raise InputError(f"cannot write {_short(path)}: the name is longer than {MAX_NAME_BYTES} bytes", "give a shorter name")
+    try:
+        st = os.stat(target)
+    except FileNotFoundError:
+        return target
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot write {_short(path)}: {_reason(exc)}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(f"cannot write {_short(path)}: it is {_file_kind(st.st_mode)}, not a regular file",
+                         "give the path of a file to write")
     return target
 
 

@@ -50,6 +50,6 @@ def test_a_device_or_directory_is_never_replaced(tmp_path):
     with pytest.raises(InputError, match="not a regular file"):
         atomic_write_text(fifo, "data")
     assert not fifo.is_file() and fifo.exists()
-    with pytest.raises(InputError, match="a directory"):
+    with pytest.raises(InputError, match="a folder"):
         atomic_write_text(tmp_path, "data")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["device"]

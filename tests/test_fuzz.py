@@ -8,9 +8,14 @@ through the real CLI, in-process (``roarmctl.cli.main``), asserting what a user 
 
 Inputs are valid documents mutated at random (a value replaced by a random one, a key dropped or
 added, the text cut or given control characters, aliases or deep nesting), mostly invalid or short
-so each case is cheap. Profiles: ``ROARMCTL_FUZZ=full`` (``make fuzz``, run by ``.ci/run``) runs
-1,000 plans, 500 trajectories and 300 descriptions; the default ``make test`` runs a tenth of that.
-Hypothesis is derandomized: the same cases every run.
+so each case is cheap, and (issue 19) hostile ones from tests/hostile.py: xacro expressions built from
+allowed and forbidden syntax with code-running payloads, bombs and FIFOs; mesh paths that leave their
+folder, loop or block; mutated SRDF and joint_limits.yaml; export paths onto user folders, ``.``,
+``..`` and long names; damaged execution logs. No case may run code (the payload's marker file never
+appears), delete a file the test made, or leave a temporary file. Profiles: ``ROARMCTL_FUZZ=full``
+(``make fuzz``, run by ``.ci/run``) runs 1,000 plans, 500 trajectories, 300 descriptions, 400 xacro
+files, 200 mesh paths, 200 SRDF, 200 joint_limits.yaml, 200 export paths and 300 logs; the default
+``make test`` runs a tenth of that. Hypothesis is derandomized: the same cases every run.
 """
 
 from __future__ import annotations
@@ -35,8 +40,9 @@ from roarmctl.robot.loader import bundled_dir
 pytestmark = pytest.mark.fuzz
 
 FULL = os.environ.get("ROARMCTL_FUZZ", "") == "full"
-COUNTS = {"plans": 1000, "trajectories": 500, "descriptions": 300} if FULL else \
-    {"plans": 100, "trajectories": 50, "descriptions": 30}
+_FULL_COUNTS = {"plans": 1000, "trajectories": 500, "descriptions": 300, "xacro": 400, "meshes": 200, "srdf": 200,
+                "joint_limits": 200, "export_paths": 200, "logs": 300}
+COUNTS = _FULL_COUNTS if FULL else {k: v // 10 for k, v in _FULL_COUNTS.items()}
 CASE_ALARM = 60  # s, a hang detector only
 
 SETTINGS = dict(deadline=None, derandomize=True, database=None, print_blob=True,
@@ -88,7 +94,9 @@ def run_case(args: list[str], out: Path | None, workdir: Path) -> tuple[int, str
         if out is not None:
             assert not out.exists(), f"partial output after exit {code}"
     assert not list(workdir.glob(".*.tmp")), "temporary file left"
-    tally = TALLY.setdefault(" ".join(args[:2 if args[0] == "kin" else 1]), {})
+    assert not [p for p in workdir.glob(".*") if p.is_dir()], "temporary folder left"
+    words = args[2:] if args[0] == "--package-path" else args  # the command, after a global option
+    tally = TALLY.setdefault(" ".join(words[:2 if words[0] == "kin" else 1]), {})
     tally[code] = tally.get(code, 0) + 1
     return code, text
 
@@ -301,3 +309,252 @@ def test_fuzz_robot_descriptions(tmp_path_factory, data):
         p.write_bytes(text_edit(yaml.safe_dump(doc, allow_unicode=True), data))
         q = ["0.1", "0.2"] if kind == "dh" else ["0", "0", "1.57", "0", "0"]
     run_case(["kin", "fk", str(p), *q], None, work)
+
+
+# ------------------------------------------------------------------ xacro (issue 19)
+import hostile  # noqa: E402  (the corpus of hostile inputs, shared with tests/test_trust.py)
+
+ATOMS = st.sampled_from(["1", "0", "-1", "2.5", "1e308", "10**6", "9**9**9", "'a'", "''", "p0", "p1", "p2", "undefined",
+                         "pi", "e", "True", "None", "math", "xacro", "__class__", "_p", "sin", "load_yaml",
+                         "xacro.arg('a')", "$(arg a)"])
+UNARY = st.sampled_from(["-{}", "not {}", "sin({})", "radians({})", "len({})", "str({})", "int({})", "float({})",
+                         "abs({})", "round({})", "({}).__class__", "({}).real", "[{} for x in [1]]", "(lambda: {})()",
+                         "max(x for x in [{}])", "open({})", "__import__({})", "getattr({}, 'a')", "math.{}", "[{}][0]",
+                         "[{}][5]", "{}[0]", "({})[1:3]", "xacro.load_yaml({})", "python.len({})", "'%s' % {}",
+                         "f'x{}'", "{{'k': {}}}['k']"])
+BINARY = st.sampled_from(["({}) + ({})", "({}) - ({})", "({}) * ({})", "({}) / ({})", "({}) // ({})", "({}) % ({})",
+                          "({}) ** ({})", "({}) == ({})", "({}) &lt; ({})", "({}) and ({})", "({}) or ({})",
+                          "({}) if ({}) else 0", "max({}, {})", "atan2({}, {})", "({}) &lt;&lt; ({})", "({}) in ({})"])
+EXPRESSIONS = st.recursive(ATOMS, lambda inner: st.one_of(
+    st.tuples(UNARY, inner).map(lambda t: t[0].format(t[1])),
+    st.tuples(BINARY, inner, inner).map(lambda t: t[0].format(t[1], t[2]))), max_leaves=6)
+EXTENSIONS = st.sampled_from(["$(env HOME)", "$(optenv HOME dflt)", "$(cwd)", "$(find pkg)", "$(find nopkg)", "$(arg a)",
+                              "$(arg nope)", "$(eval 1+1)", "$(eval __import__('os'))", "$(dirname)", "$(anon x)",
+                              "$(eval 9**9**9)", "$(find pkg)/parts.xacro"])
+
+
+def _xacro_case(work: Path, data) -> Path:
+    """A xacro robot: generated expressions and substitutions, or one of the corpus's hostile builders."""
+    from xml.sax.saxutils import escape
+
+    marker = work / "MARKER"
+    (work / "pkg").mkdir(exist_ok=True)
+    (work / "pkg" / "parts.xacro").write_text(f'<robot {hostile.XACRO_NS}><link name="from_pkg"/></robot>')
+    (work / "cfg.yaml").write_text("a: {b: 1}\n")
+    kind = data.draw(st.sampled_from(["expr", "expr", "expr", "extension", "payload", "corpus"]))
+    props = ('<xacro:arg name="a" default="1"/><xacro:property name="p0" value="0.5"/>'
+             '<xacro:property name="p1" value="${p0 * 2}"/><xacro:property name="p2" value="abc"/>')
+    if kind == "expr":
+        return hostile.m3_xacro(work, escape(data.draw(EXPRESSIONS), {'"': "&quot;"}).replace("&amp;lt;", "&lt;"), props)
+    if kind == "extension":
+        return hostile.m3_xacro(work, f"'{data.draw(EXTENSIONS)}'", props)
+    if kind == "payload":
+        return hostile.m3_xacro(work, escape(hostile.payload(marker), {'"': "&quot;"}), props)
+    corpus = {
+        "pow": lambda: hostile.m3_xacro(work, hostile.POW_BOMB),
+        "macros": lambda: hostile.m3_xacro(work, "'a'", hostile.macro_doubling(data.draw(st.sampled_from([5, 14, 20])))),
+        "blocks": lambda: hostile.m3_xacro(work, "'a'", hostile.block_doubling(data.draw(st.sampled_from([5, 20])))),
+        "strings": lambda: hostile.m3_xacro(work, "'a'", hostile.string_doubling(data.draw(st.sampled_from([10, 60])))),
+        "self include": lambda: hostile.self_include(work),
+        "include fifo": lambda: hostile.m3_xacro(work, "'a'", f'<xacro:include filename="{hostile.fifo(work, "p.xacro")}"/>'),
+        "yaml fifo": lambda: hostile.m3_xacro(work, f"xacro.load_yaml('{hostile.fifo(work, 'p.yaml')}')"),
+        "yaml outside": lambda: hostile.m3_xacro(work, "xacro.load_yaml('/etc/passwd')"),
+        "yaml inside": lambda: hostile.m3_xacro(work, "str(xacro.load_yaml('cfg.yaml').a.b)"),
+        "include outside": lambda: hostile.m3_xacro(work, "'a'", '<xacro:include filename="/etc/hostname"/>'),
+        "include pkg": lambda: hostile.m3_xacro(work, "'a'", '<xacro:include filename="$(find pkg)/parts.xacro"/>'),
+        "include glob": lambda: hostile.m3_xacro(work, "'a'", '<xacro:include filename="/etc/*.conf"/>'),
+    }
+    return corpus[data.draw(st.sampled_from(sorted(corpus)))]()
+
+
+@settings(max_examples=COUNTS["xacro"], **SETTINGS)
+@given(data=st.data())
+def test_fuzz_xacro(tmp_path_factory, data):
+    work = tmp_path_factory.mktemp("xacro", numbered=True)
+    arm = _xacro_case(work, data)
+    run_case(["--package-path", f"pkg={work / 'pkg'}", "kin", "fk", str(arm), *hostile.M3_Q], None, work)
+    assert not (work / "MARKER").exists(), "a xacro expression ran code"
+
+
+# ------------------------------------------------------------------ mesh paths
+MESH_NAMES = st.sampled_from([
+    "m.stl", "pkg/m.stl", "package://pkg/m.stl", "package://pkg/../m.stl", "package://pkg/../../../../etc/hostname",
+    "package://nopkg/m.stl", "package://pkg/link_out.stl", "package://pkg/loop.stl", "package://pkg/fifo.stl",
+    "package://pkg/sparse.stl", "package://pkg/empty.stl", "package://pkg/garbage.stl", "package://pkg/m.obj",
+    "package://pkg/mtl.obj", "file:///etc/hostname", "/etc/hostname", "http://example.com/m.stl", "m.txt", "",
+    "package://", "package://pkg", "package://pkg/", "../desc/m.stl", "m.stl\x00x", "pkg/" + "a" * 300 + ".stl"])
+
+
+def _mesh_folder(work: Path) -> Path:
+    import trimesh
+
+    d = work / "desc"
+    (d / "pkg").mkdir(parents=True)
+    box = trimesh.creation.box((0.02, 0.02, 0.02))
+    box.export(d / "m.stl")
+    box.export(d / "pkg" / "m.stl")
+    (d / "pkg" / "m.obj").write_text(box.export(file_type="obj"))
+    hostile.fifo(d / "pkg", "pipe.mtl")
+    (d / "pkg" / "mtl.obj").write_text("mtllib pipe.mtl\n" + box.export(file_type="obj"))
+    (work / "outside.stl").write_bytes((d / "m.stl").read_bytes())
+    (d / "pkg" / "link_out.stl").symlink_to(work / "outside.stl")
+    (d / "pkg" / "loop.stl").symlink_to(d / "pkg" / "loop2.stl")
+    (d / "pkg" / "loop2.stl").symlink_to(d / "pkg" / "loop.stl")
+    hostile.fifo(d / "pkg", "fifo.stl")
+    with open(d / "pkg" / "sparse.stl", "wb") as f:
+        f.truncate(3 * 2 ** 30)
+    (d / "pkg" / "empty.stl").write_bytes(b"")
+    (d / "pkg" / "garbage.stl").write_bytes(bytes(range(256)) * 4)
+    return d
+
+
+@settings(max_examples=COUNTS["meshes"], **SETTINGS)
+@given(data=st.data())
+def test_fuzz_mesh_paths(tmp_path_factory, data):
+    from xml.sax.saxutils import quoteattr
+
+    work = tmp_path_factory.mktemp("mesh", numbered=True)
+    d = _mesh_folder(work)
+    name = data.draw(MESH_NAMES).replace("\x00", "")
+    scale = data.draw(st.sampled_from(["", ' scale="1 1 1"', ' scale="0.001 0.001 0.001"', ' scale="1e-300 1 1"',
+                                       ' scale="1e300 1 1"', ' scale="nan 1 1"', ' scale="0 1 1"', ' scale="-1 1 1"',
+                                       ' scale="1 1"']))
+    urdf = (bundled_dir() / "roarm_m3_pro.urdf").read_text().replace(
+        '<link name="link3">', f'<link name="link3"><collision><geometry><mesh filename={quoteattr(name)}{scale}/>'
+        '</geometry></collision>', 1)
+    (d / "arm.urdf").write_text(urdf)
+    side = hostile.sidecar(d, "arm.urdf", packages={"pkg": "pkg"},
+                           mesh_collision=data.draw(st.sampled_from(["convex", "exact"])))
+    run_case(["kin", "fk", str(side), *hostile.M3_Q[:5]], None, work)
+
+
+# ------------------------------------------------------------------ SRDF and joint_limits.yaml
+SRDF_VALUES = st.sampled_from(["nan", "inf", "-inf", "1e400", "", "abc", "0", "1.2", "-5", "base_link", "no_link",
+                               "link1", "hand_tcp", "gripper", "arm", "no_group", "link5_to_gripper_link", "no_joint",
+                               "fixed", "planar", "floating"])
+
+
+@settings(max_examples=COUNTS["srdf"], **SETTINGS)
+@given(data=st.data())
+def test_fuzz_srdf(tmp_path_factory, data):
+    import re
+
+    from test_moveit_xacro import SRDF
+
+    work = tmp_path_factory.mktemp("srdf", numbered=True)
+    text = SRDF % data.draw(st.sampled_from(["", '<passive_joint name="x"/>', '<virtual_joint name="v" type="planar"/>',
+                                             '<group name="g2"><chain base_link="nowhere" tip_link="hand_tcp"/></group>',
+                                             '<group name="loop"><group name="loop"/></group>', "<unknown/>",
+                                             '<end_effector name="e" parent_link="nolink" group="gripper"/>']))
+    for _ in range(data.draw(st.integers(0, 3))):
+        spots = list(re.finditer(r'(\w+)="([^"]*)"', text))
+        m = data.draw(st.sampled_from(spots))
+        text = text[: m.start(2)] + data.draw(SRDF_VALUES) + text[m.end(2):]
+    (work / "arm.srdf").write_bytes(text_edit(text, data))
+    side = {"format": "roarmctl.robot/1", "urdf": "arm.urdf", "srdf": "arm.srdf", "ik": "roarm5"}
+    (work / "arm.urdf").write_text((bundled_dir() / "roarm_m3_pro.urdf").read_text())
+    (work / "arm.yaml").write_text(yaml.safe_dump(side))
+    run_case(["kin", "fk", str(work / "arm.yaml"), *hostile.M3_Q[:5]], None, work)
+
+
+JL_KEYS = ["joint_limits", "has_velocity_limits", "max_velocity", "has_acceleration_limits", "max_acceleration",
+           "has_position_limits", "min_position", "max_position", "has_jerk_limits", "default_velocity_scaling_factor",
+           "base_link_to_link1", "no_joint"]
+
+
+@settings(max_examples=COUNTS["joint_limits"], **SETTINGS)
+@given(data=st.data())
+def test_fuzz_joint_limits(tmp_path_factory, data):
+    from test_moveit_xacro import LIMITS
+
+    work = tmp_path_factory.mktemp("jl", numbered=True)
+    doc = mutate(LIMITS, data, JL_KEYS, rounds=3)
+    how = data.draw(st.sampled_from(["yaml", "yaml", "list", "deep", "fifo", "sparse"]))
+    if how == "fifo":
+        hostile.fifo(work, "joint_limits.yaml")
+    elif how == "sparse":
+        with open(work / "joint_limits.yaml", "wb") as f:
+            f.truncate(2 ** 31)
+    elif how == "deep":
+        (work / "joint_limits.yaml").write_bytes(b"joint_limits: " + b"[" * 5000 + b"]" * 5000 + b"\n")
+    else:
+        body = yaml.safe_dump([doc] if how == "list" else doc, allow_unicode=True)
+        (work / "joint_limits.yaml").write_bytes(text_edit(body, data))
+    (work / "arm.urdf").write_text((bundled_dir() / "roarm_m3_pro.urdf").read_text())
+    hostile.sidecar(work, "arm.urdf", joint_limits="joint_limits.yaml")
+    run_case(["kin", "fk", str(work / "arm.yaml"), *hostile.M3_Q[:5]], None, work)
+
+
+# ------------------------------------------------------------------ export paths
+EXPORT_TARGETS = st.sampled_from([".", "..", "/", "", "user", "user/", "userfile", "bag", "bag.mcap", "out.csv",
+                                  "x.png", "x.json", "new/deeper/bag", "a" * 300, "a" * 300 + ".mcap", "userfile/bag",
+                                  "bag\nname", "-", "--force", "user/inner", "ourbag", "ourbag/", "link_to_user", "~",
+                                  "fifo.mcap", "fifo"])
+
+
+@settings(max_examples=COUNTS["export_paths"], **SETTINGS)
+@given(data=st.data())
+def test_fuzz_export_paths(tmp_path_factory, data):
+    """Every output path through ``export``: never a user's file deleted or changed, exit 0 or 2."""
+    work = tmp_path_factory.mktemp("export", numbered=True)
+    traj = work / "t.traj.json"
+    traj.write_text(json.dumps(hostile.trajectory_doc()))
+    (work / "user").mkdir()
+    (work / "user" / "metadata.yaml").write_text("mine: true\n")
+    (work / "user" / "notes.txt").write_text("precious")
+    (work / "userfile").write_text("precious file")
+    (work / "link_to_user").symlink_to(work / "user")
+    hostile.fifo(work, "fifo.mcap")
+    hostile.fifo(work, "fifo")
+    if data.draw(st.booleans()):  # a bag roarmctl wrote before: may be replaced
+        assert main_code(["export", str(traj), "-o", str(work / "ourbag")]) == 0
+    before = {p: p.read_bytes() for p in work.rglob("*") if p.is_file() and not p.is_symlink()
+              and "ourbag" not in p.parts and p != traj}
+    target = data.draw(EXPORT_TARGETS)
+    old = os.getcwd()
+    os.chdir(work)
+    try:
+        run_case(["export", str(traj), "-o", target], None, work)
+    finally:
+        os.chdir(old)
+    for p, content in before.items():
+        assert p.exists() and p.read_bytes() == content, f"export -o {target!r} changed or deleted {p}"
+
+
+def main_code(args: list[str]) -> int:
+    """Exit code of a CLI run in this process, its output swallowed."""
+    from roarmctl.cli import run
+
+    with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+        return run(args)
+
+
+# ------------------------------------------------------------------ execution logs
+LOG_KEYS = ["format", "robot", "speed_scale", "sent", "received", "t", "cmd", "feedback", "T", "base", "b", "line"]
+
+
+@settings(max_examples=COUNTS["logs"], **SETTINGS)
+@given(data=st.data())
+def test_fuzz_execution_logs(tmp_path_factory, data):
+    work = tmp_path_factory.mktemp("log", numbered=True)
+    doc = mutate(hostile.execlog_doc(n=8), data, LOG_KEYS, rounds=3)
+    if data.draw(st.integers(0, 4)) == 0:  # times scaled far out, reversed or squeezed
+        scale = data.draw(st.sampled_from([1e-300, 1e15, 1e308, -1.0, 0.0]))
+        for e in (doc.get("sent") or []) if isinstance(doc.get("sent"), list) else []:
+            if isinstance(e, dict) and isinstance(e.get("t"), (int, float)):
+                e["t"] *= scale
+    raw = json.dumps(doc, allow_nan=True).encode()
+    how = data.draw(st.sampled_from(["none", "none", "truncate", "bigint", "bytes"]))
+    if how == "truncate":
+        raw = raw[: data.draw(st.integers(0, len(raw)))]
+    elif how == "bigint":
+        raw = raw.replace(b'"t": 0.0', b'"t": ' + b"9" * data.draw(st.sampled_from([40, 5000, 200_000])), 1)
+    elif how == "bytes":
+        at = data.draw(st.integers(0, len(raw)))
+        raw = raw[:at] + data.draw(st.binary(min_size=1, max_size=3)) + raw[at:]
+    log = work / f"r{next(_counter)}.exec.json"
+    log.write_bytes(raw)
+    out = work / data.draw(st.sampled_from(["run.mcap", "run.csv", "run_bag"]))
+    code, _ = run_case(["export", str(log), "-o", str(out)], out, work)
+    if code == 0:
+        assert out.exists()

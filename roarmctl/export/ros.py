@@ -33,7 +33,7 @@ import numpy as np
 
 from roarmctl.errors import InputError
 from roarmctl.export.streams import Streams
-from roarmctl.fileio import check_output_folder, new_folder_beside, replace_folder
+from roarmctl.fileio import check_output_file, check_output_folder, new_folder_beside, replace_folder
 
 TYPESTORE = "ROS2_JAZZY"
 COLORS = {"table": (0.55, 0.45, 0.35, 1.0), "obstacle": (0.85, 0.3, 0.25, 0.8), "object": (0.2, 0.5, 0.9, 1.0)}
@@ -204,10 +204,7 @@ def write_bag(streams: Streams, path: str | os.PathLike, storage: str, force: bo
 
     target = Path(path)
     if storage == "mcap":
-        if target.is_dir():
-            raise InputError(f"{target} is a folder", "give a file name ending in .mcap")
-        if target.exists() and not target.is_file():
-            raise InputError(f"cannot write {target}: it is not a regular file", "give the path of a file to write")
+        check_output_file(target)
     else:
         check_output_folder(target, force, made_by_us=is_bag_we_wrote)
     tmpdir = new_folder_beside(target)
