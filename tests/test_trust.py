@@ -543,3 +543,27 @@ def test_an_old_trajectory_naming_a_description_file_still_reads_as_data(tmp_pat
     t.write_text(json.dumps(hostile.trajectory_doc(str(hostile.sidecar(d, "arm.xacro")))))
     code, _, err = cli(["visualize-path", str(t), "-o", str(tmp_path / "t.png")])
     assert code == 0, err
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (lambda t: t.replace('value="2.0"', 'value="nan"'), "group_state 'tucked' joint 'link2_to_link3' value: not a finite number"),
+    (lambda t: t.replace('value="2.0"', 'value="inf"'), "not a finite number"),
+    (lambda t: t.replace("%s", '<group name="other"><chain base_link="nowhere" tip_link="hand_tcp"/></group>'),
+     "group 'other' chain base_link: 'nowhere' is not a link"),
+], ids=["nan", "inf", "unknown chain base"])
+def test_srdf_values_once_accepted_are_refused(tmp_path, edit, needle):
+    from test_moveit_xacro import SRDF
+
+    d = _desc_dir(tmp_path)
+    (d / "arm.srdf").write_text(edit(SRDF).replace("%s", ""))
+    (d / "arm.urdf").write_text((hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text())
+    side = hostile.sidecar(d, "arm.urdf", srdf="arm.srdf")
+    refused(["kin", "fk", str(side), *hostile.M3_Q[:5]], "arm.srdf", needle)
+
+
+def test_an_srdf_that_is_a_fifo_or_outside_is_refused(tmp_path, secret):
+    d = _desc_dir(tmp_path)
+    hostile.fifo(d, "arm.srdf")
+    (d / "arm.urdf").write_text((hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text())
+    side = hostile.sidecar(d, "arm.urdf", srdf="arm.srdf")
+    refused(["kin", "fk", str(side), *hostile.M3_Q[:5]], "srdf", "FIFO")

@@ -29,15 +29,18 @@ from roarmctl.errors import DescriptionError
 from roarmctl.fileio import Roots
 from roarmctl.validation import load_yaml
 
+SRDF_BYTES = 16 * 1024 * 1024  # an SRDF may have (MoveIt's of published arms: < 100 KiB)
 _KNOWN = {"group", "group_state", "disable_collisions", "end_effector", "virtual_joint", "disable_default_collisions"}
 
 
 def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, where: str) -> dict[str, Any]:
     """Sidecar fields from an SRDF. ``joints``: URDF joint name -> (type), ``links``: URDF link names."""
-    if not path.is_file():
-        raise DescriptionError(f"{where}: srdf: file '{path}' not found", "the path is relative to the sidecar YAML")
+    from roarmctl.fileio import read_text
+
+    text = read_text(path, f"{where}: srdf", SRDF_BYTES, roots=side.get("_roots"), error=DescriptionError,
+                     hint="the path is relative to the sidecar YAML")
     try:
-        root = ET.parse(path).getroot()
+        root = ET.fromstring(text)
     except ET.ParseError as exc:
         raise DescriptionError(f"{path}: not valid XML ({exc})") from None
     src = str(path)
@@ -60,6 +63,10 @@ def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, w
             raise DescriptionError(f"{src}: {what}: '{name}' is not a link of the URDF")
         return name
 
+    for gname, g in groups.items():  # every group's chain names links of the URDF, used or not
+        for chain in g.findall("chain"):
+            check_link(chain.get("base_link"), f"group '{gname}' chain base_link")
+            check_link(chain.get("tip_link"), f"group '{gname}' chain tip_link")
     out: dict[str, Any] = {}
     pairs = []
     for el in root.iter("disable_collisions"):
@@ -129,7 +136,10 @@ def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, w
                 values[j.get("name")] = float(j.get("value"))
             except (TypeError, ValueError):
                 raise DescriptionError(f"{src}: group_state '{name}' joint '{j.get('name')}' value: not a number: "
-                                       f"{j.get('value')!r}") from None
+                                       f"{str(j.get('value'))[:40]!r}") from None
+            if not math.isfinite(values[j.get("name")]):
+                raise DescriptionError(f"{src}: group_state '{name}' joint '{j.get('name')}' value: not a finite number: "
+                                       f"{j.get('value')!r}")
         if group == grip_group and gripper_joint is not None:
             grip_states[name] = values.get(gripper_joint, math.nan)
         elif group == arm_group:
