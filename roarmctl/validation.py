@@ -19,6 +19,7 @@ from __future__ import annotations
 import difflib
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -82,8 +83,9 @@ MAX_DIGITS = 30
 
 
 class _Budget:
-    def __init__(self) -> None:
+    def __init__(self, tags: dict[str, Callable[[str], Any]] | None = None) -> None:
         self.nodes = 0
+        self.tags = tags or {}
 
 
 def _construct(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError], budget: _Budget, depth: int = 0) -> Any:
@@ -126,6 +128,13 @@ def _construct(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError]
         lst = LocatedList(_construct(n, loader, error, budget, depth + 1) for n in node.value)
         lst.line, lst.lines = line, [n.start_mark.line + 1 for n in node.value]
         return lst
+    if isinstance(node, yaml.ScalarNode) and node.tag in budget.tags:
+        try:
+            return budget.tags[node.tag](str(node.value))
+        except InputError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - the tag's reader says what was wrong
+            raise error(f"{loader.name}:{line}: {node.tag} {str(node.value)[:40]!r}: {exc}") from None
     return _scalar(node, loader, error)
 
 
@@ -172,8 +181,12 @@ def _flow_depth_line(text: str) -> int:
     return 0
 
 
-def parse_yaml(text: str, name: str, error: type[InputError] = PlanFileError) -> Any:
-    """YAML ``text`` (from file ``name``) -> located values within the limits; None for an empty document."""
+def parse_yaml(text: str, name: str, error: type[InputError] = PlanFileError,
+               tags: dict[str, Callable[[str], Any]] | None = None) -> Any:
+    """YAML ``text`` (from file ``name``) -> located values within the limits; None for an empty document.
+
+    ``tags``: readers of local tags (``"!degrees"`` -> a function of the scalar's text), for the YAML
+    files xacro loads."""
     deep = _flow_depth_line(text)
     if deep:
         raise error(f"{name}:{deep}: nested more than {MAX_DEPTH} levels deep")
@@ -184,7 +197,7 @@ def parse_yaml(text: str, name: str, error: type[InputError] = PlanFileError) ->
         node = loader.get_single_node()
         if node is None:
             return None
-        return _construct(node, loader, error, _Budget())
+        return _construct(node, loader, error, _Budget(tags))
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = f":{mark.line + 1}" if mark else ""
@@ -202,7 +215,8 @@ def parse_yaml(text: str, name: str, error: type[InputError] = PlanFileError) ->
 
 
 def load_yaml(path: str | Path, error: type[InputError] = PlanFileError, *, what: str | None = None,
-              limit: int = MAX_BYTES, roots: Roots | None = None, empty_ok: bool = False) -> Any:
+              limit: int = MAX_BYTES, roots: Roots | None = None, empty_ok: bool = False,
+              tags: dict[str, Callable[[str], Any]] | None = None) -> Any:
     """A YAML file -> located values (see ``parse_yaml``), read by ``fileio.read_bytes``.
 
     ``what``: the field that names the file (None for a file named on the command line); ``roots``:
@@ -215,7 +229,7 @@ def load_yaml(path: str | Path, error: type[InputError] = PlanFileError, *, what
     except UnicodeDecodeError as exc:
         line = data[: exc.start].count(b"\n") + 1
         raise error(f"{path}:{line}: not UTF-8 text (byte {exc.start})", "save the file as UTF-8") from None
-    value = parse_yaml(text, str(path), error)
+    value = parse_yaml(text, str(path), error, tags)
     if value is None and not empty_ok:
         raise error(f"{path}: the file is empty")
     return value

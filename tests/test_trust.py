@@ -567,3 +567,22 @@ def test_an_srdf_that_is_a_fifo_or_outside_is_refused(tmp_path, secret):
     (d / "arm.urdf").write_text((hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text())
     side = hostile.sidecar(d, "arm.urdf", srdf="arm.srdf")
     refused(["kin", "fk", str(side), *hostile.M3_Q[:5]], "srdf", "FIFO")
+
+
+def test_string_methods_and_yaml_unit_tags_as_published_descriptions_use_them(tmp_path):
+    """Franka's xacro splits an "x y z" string (``xyz.split(' ')``); UR's joint_limits.yaml, loaded with
+    ``xacro.load_yaml``, writes ``!degrees 180`` (xacro's ConstructUnits: the value times pi/180)."""
+    import math
+
+    d = _desc_dir(tmp_path)
+    (d / "lim.yaml").write_text("a: !degrees 180\nb: !millimeters 2 * 5\nc: !radians pi / 2\n")
+    extra = '<xacro:property name="xyz" value="0.1 0.2 0.3"/><xacro:property name="lim" value="${xacro.load_yaml(\'lim.yaml\')}"/>'
+    expr = "xyz.split(' ')[1] + '|' + str(lim.a) + '|' + str(lim['b']) + '|' + str(lim.c) + '|' + '-'.join(['p', 'q']).upper()"
+    arm = hostile.m3_xacro(d, expr, extra)
+    code, out, err = cli(["kin", "fk", str(arm), *hostile.M3_Q, "--json"])
+    assert code == 0, err
+    assert json.loads(out)["robot"] == f"0.2|{math.pi}|0.01|{math.pi / 2}|P-Q"
+    arm = hostile.m3_xacro(d, "('a' * 1000).replace('a', 'a' * 10000)", extra)
+    refused(["kin", "fk", str(arm), *hostile.M3_Q], "a string of more than")
+    arm = hostile.m3_xacro(d, "'x'.format(1)", extra)
+    refused(["kin", "fk", str(arm), *hostile.M3_Q], "calling")

@@ -62,6 +62,12 @@ MATH_FUNCTIONS = ("acos", "acosh", "asin", "asinh", "atan", "atan2", "atanh", "c
                   "remainder", "sin", "sinh", "sqrt", "tan", "tanh", "trunc")
 MATH_CONSTANTS = {"pi": math.pi, "e": math.e, "tau": math.tau, "inf": math.inf, "nan": math.nan}
 CONSTANTS = {"True": True, "False": False, "None": None, **MATH_CONSTANTS}
+#: xacro's YAML unit tags (``xacro.ConstructUnits``): the scalar is an expression, times the factor.
+YAML_UNITS = {"!radians": 1.0, "!degrees": math.pi / 180.0, "!meters": 1.0, "!millimeters": 0.001, "!foot": 0.3048,
+              "!inches": 0.0254}
+#: String methods an expression may call (``'a b'.split(' ')``); their results are bounded like any value.
+STR_METHODS = ("split", "rsplit", "strip", "lstrip", "rstrip", "lower", "upper", "title", "capitalize", "replace",
+               "startswith", "endswith", "join", "find", "count", "isdigit")
 
 
 class Refused(Exception):
@@ -315,6 +321,11 @@ class Evaluator:
             return False
 
     def _function(self, node: ast.AST) -> Callable[..., Any]:
+        if isinstance(node, ast.Attribute) and node.attr in STR_METHODS and not (
+                isinstance(node.value, ast.Name) and node.value.id in ("math", "xacro") and not self._is_property(node.value.id)):
+            owner = self.eval(node.value)
+            if isinstance(owner, str):
+                return _str_method(owner, node.attr)
         if isinstance(node, ast.Name) and not self._is_property(node.id):
             if node.id in FUNCTIONS:
                 return FUNCTIONS[node.id]
@@ -330,6 +341,36 @@ class Evaluator:
                 return self.arg
         raise Refused(f"calling {_describe(node)} is not allowed (functions: math functions, "
                       f"{', '.join(n for n in FUNCTIONS if n not in MATH_FUNCTIONS)}, xacro.arg, xacro.load_yaml)")
+
+
+def _no_properties(name: str) -> Any:
+    """The lookup of an evaluation without properties (a YAML unit tag's expression)."""
+    raise KeyError(name)
+
+
+def _str_method(text: str, name: str) -> Callable[..., Any]:
+    """``text.name`` with its result's size checked BEFORE it is built (``replace`` and ``join`` can grow)."""
+    method = getattr(text, name)
+    if name == "replace":
+        def replace(old: Any, new: Any, count: int = -1) -> str:
+            if not isinstance(old, str) or not isinstance(new, str):
+                raise Refused("str.replace() takes strings")
+            n = text.count(old) if old else len(text) + 1
+            if count >= 0:
+                n = min(n, count)
+            if len(text) + n * (len(new) - len(old)) > MAX_STR:
+                raise Refused(f"a string of more than {MAX_STR:,} characters")
+            return text.replace(old, new, count)
+        return replace
+    if name == "join":
+        def join(items: Any) -> str:
+            if not isinstance(items, (list, tuple)) or not all(isinstance(i, str) for i in items):
+                raise Refused("str.join() takes a list of strings")
+            if sum(map(len, items)) + len(text) * max(len(items) - 1, 0) > MAX_STR:
+                raise Refused(f"a string of more than {MAX_STR:,} characters")
+            return text.join(items)
+        return join
+    return method
 
 
 def _describe(node: ast.AST) -> str:
@@ -429,7 +470,12 @@ def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
         if not isinstance(filename, str):
             raise Refused("load_yaml() takes a file name")
         path = xacro.abs_filename_spec(filename)
-        return load(path, DescriptionError, what=f"{where}: xacro load_yaml", roots=roots, empty_ok=True)
+
+        def unit(factor: float) -> Callable[[str], float]:
+            return lambda text: float(Evaluator(_no_properties, budget)(text)) * factor
+
+        tags = {tag: unit(factor) for tag, factor in YAML_UNITS.items()}
+        return load(path, DescriptionError, what=f"{where}: xacro load_yaml", roots=roots, empty_ok=True, tags=tags)
 
     def arg(name: Any) -> Any:
         try:
