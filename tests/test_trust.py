@@ -586,3 +586,17 @@ def test_string_methods_and_yaml_unit_tags_as_published_descriptions_use_them(tm
     refused(["kin", "fk", str(arm), *hostile.M3_Q], "a string of more than")
     arm = hostile.m3_xacro(d, "'x'.format(1)", extra)
     refused(["kin", "fk", str(arm), *hostile.M3_Q], "calling")
+
+
+@pytest.mark.parametrize("plan, field", [
+    ({"path": "p.yaml", "sha256": "x" * 64, "seed": 0}, "plan.sha256"),
+    ({"path": "p.yaml", "seed": "abc"}, "plan.seed"),
+    ({"path": "p.yaml", "padding": 1e9}, "plan.padding"),
+    ({"path": "p.yaml", "planner": "rm -rf"}, "plan.planner"),
+], ids=["sha256", "seed", "padding", "planner"])
+def test_a_trajectory_plan_record_is_checked_before_replanning_uses_it(tmp_path, plan, field):
+    doc = hostile.trajectory_doc()
+    doc["plan"] = plan
+    t = tmp_path / "t.traj.json"
+    t.write_text(json.dumps(doc))
+    refused(["execute", str(t), "--output", str(tmp_path / "c.jsonl")], field)

@@ -20,9 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from roarmctl.errors import InfeasibleError
+from roarmctl.errors import InfeasibleError, InputError
+from roarmctl.fileio import read_bytes
 from roarmctl.motion.scene import Scene
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
+from roarmctl.validation import MAX_BYTES
 
 MODES = ("gripper", "move_to_start", "from_current")
 
@@ -101,7 +103,11 @@ def _plan_again(traj: Trajectory, q: np.ndarray) -> Trajectory | None:
     path = Path(str(meta.get("path", "")))
     if not meta.get("sha256") or not path.is_file():
         return None
-    if hashlib.sha256(path.read_bytes()).hexdigest() != meta["sha256"]:
+    try:  # the trajectory names this file: read it like a plan (bounded), and only if its hash matches
+        data = read_bytes(path, None, MAX_BYTES)
+    except InputError:
+        return None
+    if hashlib.sha256(data).hexdigest() != meta["sha256"]:
         return None
     from roarmctl.motion.pipeline import plan_file
 

@@ -244,13 +244,34 @@ def parse_document(data: Any, where: str = "trajectory"):
 
     plan = data.get("plan")
     if plan is not None:
-        _mapping(plan, where, "plan")
+        _plan_meta(plan, where)
     description = data.get("robot_description")  # checked file by file when loaded (robot.bundle)
     if description is not None:
         _mapping(description, where, "robot_description")
     return Trajectory(robot=robot, joint_names=names, times=times, events=events, segments=segments, blends=blends, payloads=[dict(p) for p in payloads],
                       limits=dict(limits), singularity_margin=margin, scene={**scene, "items": items}, plan=plan,
                       sample_rate=rate, robot_description=description, **arrays)
+
+
+def _plan_meta(plan: Any, where: str) -> None:
+    """The ``plan`` a trajectory came from (``execute --from-current`` plans it again): ``path``,
+    ``sha256`` (64 hex digits), ``planner`` (one OMPL planner roarmctl offers), ``seed``, ``padding``."""
+    from roarmctl.plan.schema import PLANNERS
+
+    _mapping(plan, where, "plan")
+    if plan.get("path") is not None:
+        CHECK.name(plan["path"], where, "plan.path", max_len=4096)
+    sha = plan.get("sha256")
+    if sha is not None and not (isinstance(sha, str) and len(sha) == 64 and all(c in "0123456789abcdef" for c in sha)):
+        _fail(where, "plan.sha256", f"expected 64 hex digits, got {_kind(sha)}")
+    if plan.get("planner") is not None:
+        CHECK.name(plan["planner"], where, "plan.planner", choices=PLANNERS)
+    if plan.get("seed") is not None:
+        seed = plan["seed"]
+        if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2 ** 63:
+            _fail(where, "plan.seed", f"expected a whole number from 0 to 2**63 - 1, got {_kind(seed)}")
+    if plan.get("padding") is not None:
+        _number(plan["padding"], where, "plan.padding", lo=0.0, hi=0.05)
 
 
 def _scene_item(it: Any, where: str, f: str, seen: set) -> None:
