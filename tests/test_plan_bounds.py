@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from roarmctl.cli import run as run_cli
 from roarmctl.motion.validate import validate_trajectory
@@ -88,8 +89,10 @@ def test_relative_robot_path_without_suffix_is_relative_to_the_plan(tmp_path, ca
     monkeypatch.chdir(elsewhere)
     rc, err, _, _ = plan_text(tmp_path, "robot: robots/myscara\nstart: [0.3, 0.5]\ntasks:\n  - move: {joints: [0.5, 0.2]}\n", capsys)
     assert rc == 0, err
-    robot = json.loads((tmp_path / "p.traj.json").read_text())["robot"]
-    assert Path(robot).resolve() == (tmp_path / "robots" / "myscara").resolve()
+    doc = json.loads((tmp_path / "p.traj.json").read_text())
+    # the trajectory carries the description it was planned for (issue 19): the file beside the plan
+    carried = yaml.safe_load(doc["robot_description"]["files"]["robot.yaml"])
+    assert doc["robot"] == "scara_2r" and carried == yaml.safe_load((tmp_path / "robots" / "myscara").read_text())
 
 
 def test_short_waits_are_sampled_at_the_declared_rate(tmp_path, capsys):
