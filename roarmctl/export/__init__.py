@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 from roarmctl.errors import InputError, TrajectoryFileError
@@ -59,8 +60,6 @@ def load_source(path: str | os.PathLike | Any) -> tuple[str, Any]:
 def streams_for(source: str | os.PathLike | Any, trajectory: str | os.PathLike | Any | None = None):
     """The ``Streams`` of a trajectory or execution-log file (robot loaded by the name in the file).
     ``trajectory`` (logs only): the executed trajectory, exported beside the run as ``planned``."""
-    from types import SimpleNamespace
-
     from roarmctl.export.streams import log_streams, trajectory_streams
     from roarmctl.motion.validate import robot_of
 

@@ -24,7 +24,6 @@ from roarmctl.errors import InfeasibleError, InputError
 from roarmctl.fileio import read_bytes
 from roarmctl.motion.scene import Scene
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
-from roarmctl.validation import MAX_BYTES
 
 MODES = ("gripper", "move_to_start", "from_current")
 
@@ -103,6 +102,8 @@ def _plan_again(traj: Trajectory, q: np.ndarray) -> Trajectory | None:
     path = Path(str(meta.get("path", "")))
     if not meta.get("sha256") or not path.is_file():
         return None
+    from roarmctl.validation import MAX_BYTES
+
     try:  # the trajectory names this file: read it like a plan (bounded), and only if its hash matches
         data = read_bytes(path, None, MAX_BYTES)
     except InputError:

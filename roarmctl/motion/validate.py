@@ -26,6 +26,7 @@ import numpy as np
 
 from roarmctl.errors import InputError, TrajectoryFileError
 from roarmctl.motion.trajectory import FORMAT, Event, Segment, Trajectory
+from roarmctl.plan.schema import PLANNERS
 from roarmctl.robot.bundle import trajectory_robot
 from roarmctl.robot.loader import load_robot
 from roarmctl.validation import Checker, HugeNumber, load_json
@@ -256,8 +257,6 @@ def parse_document(data: Any, where: str = "trajectory"):
 def _plan_meta(plan: Any, where: str) -> None:
     """The ``plan`` a trajectory came from (``execute --from-current`` plans it again): ``path``,
     ``sha256`` (64 hex digits), ``planner`` (one OMPL planner roarmctl offers), ``seed``, ``padding``."""
-    from roarmctl.plan.schema import PLANNERS
-
     _mapping(plan, where, "plan")
     if plan.get("path") is not None:
         CHECK.name(plan["path"], where, "plan.path", max_len=4096)

@@ -28,7 +28,10 @@ from pathlib import Path
 from typing import Any
 
 from roarmctl.errors import DescriptionError, InputError, TrajectoryFileError
+from roarmctl.fileio import read_bytes, read_text
+from roarmctl.robot.meshes import MESH_BYTES, description_roots, package_map, resolve
 from roarmctl.robot.model import Robot
+from roarmctl.robot.xacro_input import expand
 
 FORMAT = "roarmctl.robot-bundle/1"
 MAX_BUNDLE_BYTES = 64 * 1024 * 1024  # all files of a bundle together, decoded
@@ -52,9 +55,7 @@ def make_bundle(spec: str) -> dict[str, Any] | None:
     from a plan would (the safe evaluator, unless the user's ``--trust-xacro``)."""
     import yaml
 
-    from roarmctl.fileio import read_bytes, read_text
     from roarmctl.robot import loader
-    from roarmctl.robot.meshes import MESH_BYTES, description_roots, package_map, resolve
 
     if spec in loader.bundled_robots():
         return None
@@ -96,8 +97,6 @@ def make_bundle(spec: str) -> dict[str, Any] | None:
     if side.get("srdf") is not None:
         srdf = path.parent / str(side["srdf"])
         if srdf.suffix.lower() == ".xacro":
-            from roarmctl.robot.xacro_input import expand
-
             files["robot.srdf"] = expand(srdf, side.get("xacro_args"), str(path), roots=roots)
         else:
             files["robot.srdf"] = read_text(srdf, f"{path}: srdf", loader.URDF_BYTES, roots=roots, error=DescriptionError)

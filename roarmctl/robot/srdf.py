@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from roarmctl.errors import DescriptionError
-from roarmctl.fileio import Roots
+from roarmctl.fileio import Roots, read_text
 from roarmctl.validation import load_yaml
 
 SRDF_BYTES = 16 * 1024 * 1024  # an SRDF may have (MoveIt's of published arms: < 100 KiB)
@@ -35,8 +35,6 @@ _KNOWN = {"group", "group_state", "disable_collisions", "end_effector", "virtual
 
 def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, where: str) -> dict[str, Any]:
     """Sidecar fields from an SRDF. ``joints``: URDF joint name -> (type), ``links``: URDF link names."""
-    from roarmctl.fileio import read_text
-
     text = read_text(path, f"{where}: srdf", SRDF_BYTES, roots=side.get("_roots"), error=DescriptionError,
                      hint="the path is relative to the sidecar YAML")
     try:
