@@ -250,8 +250,8 @@ def sim_device(
             arm = "RoArm-M2" if firmware == "m2" else "RoArm-M3"
             common.console(stderr=True).print(f"simulating {arm} firmware {firmware} on {simulator.path}; Ctrl-C to stop")
         sys.stdout.flush()
-        while simulator._thread.is_alive():
-            simulator._thread.join(0.5)
+        while simulator.alive():
+            simulator.join(0.5)
         if simulator.error is not None:
             raise simulator.error
     except KeyboardInterrupt:

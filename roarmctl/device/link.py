@@ -1,45 +1,88 @@
-"""The serial link to the arm: open safely, wait out a reboot, handshake, send lines, read feedback.
+"""The serial link to the arm: open it without a reset, connect as the firmware expects, send lines,
+read feedback.
 
 Every failure a user meets becomes one ``DeviceError`` line naming the cause and the fix (exit 4):
-no such port, port busy, permission denied, device silent, wrong firmware, link lost.
+no such port, port busy, permission denied, device silent, wrong firmware, torque off, supply out of
+range, link lost. What ``connect()`` sends and why is in ``docs/guide.md`` ("Talking to the
+firmware"); the facts come from Waveshare's RoArm-M3 example firmware (public copy
+github.com/jhacksman/RoArm-M3, 0.84 build under ``leader_follower_mode/firmware/esp32/
+RoArm-M3_example-250108/RoArm-M3_example/``; line numbers below are of that copy).
 """
 
 from __future__ import annotations
 
 import errno
+import statistics
 import sys
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, Callable
 
 from roarmctl.device import protocol
-from roarmctl.device.protocol import Feedback, LineBuffer, encode, parse_feedback, parse_json_line
+from roarmctl.device.protocol import Feedback, LineBuffer, encode, parse_feedback_report, wire_seconds
 from roarmctl.errors import DeviceError
 
 DIALOUT_HINT = "on Linux: sudo usermod -aG dialout $USER, then log out and back in"
+LOST_HINT = "check the USB cable and the arm's power; the arm may have rebooted"
+BUILD_NAMES = {"m3-0.84": "RoArm-M3 0.84 build (RoArm-M3_example-250108)",
+               "m3-2026": "RoArm-M3 20260701 build (RoArm-M3_example_20260701)",
+               "m2": "RoArm-M2 firmware"}
 
 
 @dataclass
 class LinkTimings:
-    """Handshake timing (s). A silent device is reported after about ``settle + silent_after``."""
+    """Connection timing (s)."""
 
-    read_timeout: float = 0.02
+    read_timeout: float = 0.01
     write_timeout: float = 1.0
-    settle: float = 0.3  # listen this long after opening for a boot banner
-    boot_quiet: float = 1.0  # after banner text, wait until the device has been quiet this long
-    boot_timeout: float = 15.0  # the longest a reboot (boot moves included) may take
-    silent_after: float = 2.5  # no T:1051 answer to T:105 requests within this -> device silent
-    poll_interval: float = 0.25  # between T:105 requests during the handshake
+    listen: float = 0.3  # first look after opening: feedback frames, boot text or silence
+    silent_window: float = 1.5  # setup() starts with delay(1200) + 500 ms of silence (I:53, I:81): wait it out
+    boot_timeout: float = 20.0  # the longest a start-up (boot moves, Wi-Fi, boot mission) may take
+    boot_quiet: float = 4.0  # boot text and then this long with no feedback frame: probe
+    quiet_confirm: float = 0.15  # T:605 took effect when no unsolicited frame came for this long
+    silent_after: float = 2.0  # no answer to T:105 probes within this -> device silent
 
 
 @dataclass
 class Received:
-    """A line from the device: when it arrived (s, link clock), its text, and its parsed feedback if any."""
+    """One line read: host time (s), its text, and the parsed T:1051 (None for other lines)."""
 
     t: float
     line: str
     feedback: Feedback | None = None
+
+
+@dataclass
+class DeviceInfo:
+    """What ``connect()`` learned. Times in s."""
+
+    firmware: str  # "m3-0.84", "m3-2026", "m2"
+    rtt: float  # median T:105 -> T:1051 round trip
+    line_time: float  # time the firmware takes per command line beyond the wire (0.84: ~0; 20260701: a loop pass)
+    queued: bool  # the firmware runs one line per loop pass
+    streamed: bool  # it was streaming feedback unasked (InfoPrint 2) when we came
+    booted: bool  # it was starting up when we came (boot text seen)
+    first: Feedback
+    voltage: float | None = None  # V, builds that report it
+    torque: dict[str, int] | None = None  # torque-enable flag per joint, builds that report it
+    sent: list[str] = field(default_factory=list)  # what connect() sent, in order
+
+    @property
+    def build(self) -> str:
+        return BUILD_NAMES.get(self.firmware, self.firmware)
+
+    def describe(self) -> str:
+        """One line for the display and the log."""
+        pace = (f"one command per loop pass, {self.line_time * 1e3:.1f} ms each" if self.queued
+                else "all waiting commands each loop pass")
+        extra = f"; supply {self.voltage:.2f} V, torque on" if self.voltage is not None else \
+            "; this build reports neither torque nor supply voltage"
+        return f"{self.build}: round trip {self.rtt * 1e3:.0f} ms, {pace}{extra}"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"firmware": self.firmware, "build": self.build, "rtt_s": round(self.rtt, 5),
+                "line_time_s": round(self.line_time, 5), "queued": self.queued, "streamed_unasked": self.streamed,
+                "was_booting": self.booted, "voltage_v": self.voltage, "torque": self.torque, "sent": self.sent}
 
 
 class Link:
@@ -54,17 +97,29 @@ class Link:
         self.ser: Any = None
         self.lines = LineBuffer()
         self.firmware: str | None = None
-        #: The protocol model the trajectory is for ("m3" or "m2", ``WireMap.model``); the handshake
+        self.info: DeviceInfo | None = None
+        #: The protocol model the trajectory is for ("m3" or "m2", ``WireMap.model``); connect()
         #: refuses a device that answers like the other one.
         self.expect = "m3"
+        #: Refuse to connect when torque is off (False for teach, which wants the arm limp).
+        self.require_torque = True
         self.boot_text: list[str] = []
         self.received: list[Received] = []  # every line read, in order (the execution log)
         self.sent: list[tuple[float, dict[str, Any]]] = []
         self.closed = False
+        self._restore_info_print: int | None = None
 
     # ------------------------------------------------------------------ open
-    def open(self) -> Link:
-        """Open with DTR and RTS low *before* opening (no ESP32 reset where the driver allows), exclusive."""
+    def open(self) -> "Link":
+        """Open the port as Waveshare's roarm-sdk does (roarm_sdk/roarm.py: ``rts = False`` set
+        before ``open()``, DTR left asserted), exclusive.
+
+        pyserial applies DTR and then RTS right after the operating system opened the port with
+        both asserted (serialposix.py lines 334-338). With DTR asserted and RTS released the lines
+        never pass through DTR released + RTS asserted, the reset state of the usual ESP32
+        auto-program circuit (the one esptool drives to reset the chip), so opening never reboots
+        the arm. Clearing both before ``open()`` would: pyserial releases DTR while RTS is still up.
+        """
         import serial
 
         t = self.timings
@@ -73,7 +128,7 @@ class Link:
             ser.baudrate = protocol.BAUDRATE
             ser.timeout = t.read_timeout
             ser.write_timeout = t.write_timeout
-            ser.dtr = False
+            ser.dtr = True
             ser.rts = False
             if hasattr(ser, "exclusive"):
                 ser.exclusive = True
@@ -105,15 +160,21 @@ class Link:
         return DeviceError(f"cannot open serial port {self.port}: {text}")
 
     def close(self) -> None:
-        """Close the port (once; later calls do nothing)."""
+        """Give the firmware its feedback stream back (when it had one) and close the port."""
         if self.ser is not None and not self.closed:
+            if self._restore_info_print is not None:
+                try:
+                    self.send({"T": 605, "cmd": self._restore_info_print})
+                    self.ser.flush()
+                except Exception:  # noqa: BLE001 - a dead port: nothing to restore
+                    pass
             self.closed = True
             try:
                 self.ser.close()
             except Exception:  # noqa: BLE001 - closing a dead port must not mask the real error
                 pass
 
-    def __enter__(self) -> Link:
+    def __enter__(self) -> "Link":
         return self.open()
 
     def __exit__(self, *exc) -> None:
@@ -133,11 +194,9 @@ class Link:
         try:
             self.ser.write(data)
         except serial.SerialTimeoutException:
-            raise DeviceError(f"link lost: writing to {self.port} timed out",
-                              "check the USB cable and the arm's power; the arm may have rebooted") from None
+            raise DeviceError(f"link lost: writing to {self.port} timed out", LOST_HINT) from None
         except (serial.SerialException, OSError) as exc:
-            raise DeviceError(f"link lost: cannot write to {self.port} ({exc})",
-                              "check the USB cable and the arm's power; the arm may have rebooted") from None
+            raise DeviceError(f"link lost: cannot write to {self.port} ({exc})", LOST_HINT) from None
         self.sent.append((t, cmd))
         return t
 
@@ -149,8 +208,7 @@ class Link:
             n = self.ser.in_waiting
             data = self.ser.read(n) if n else b""
         except (serial.SerialException, OSError) as exc:
-            raise DeviceError(f"link lost: cannot read from {self.port} ({exc})",
-                              "check the USB cable and the arm's power; the arm may have rebooted") from None
+            raise DeviceError(f"link lost: cannot read from {self.port} ({exc})", LOST_HINT) from None
         return self._lines(data)
 
     def read_for(self, seconds: float) -> list[Received]:
@@ -163,8 +221,7 @@ class Link:
             try:
                 data = self.ser.read(max(1, self.ser.in_waiting))
             except (serial.SerialException, OSError) as exc:
-                raise DeviceError(f"link lost: cannot read from {self.port} ({exc})",
-                                  "check the USB cable and the arm's power") from None
+                raise DeviceError(f"link lost: cannot read from {self.port} ({exc})", LOST_HINT) from None
             out += self._lines(data)
         return out
 
@@ -175,55 +232,182 @@ class Link:
         out = []
         for raw in self.lines.feed(data):
             text = raw.decode("utf-8", errors="replace")
-            r = Received(t, text, parse_feedback(raw))
-            out.append(r)
+            out.append(Received(t, text, parse_feedback_report(raw)))
         self.received += out
         return out
 
     def discard_input(self) -> None:
-        """Drop whatever the device sent that has not been read yet."""
         try:
             self.ser.reset_input_buffer()
         except Exception:  # noqa: BLE001
             pass
         self.lines.clear()
 
-    # ------------------------------------------------------------------ handshake
-    def handshake(self) -> Feedback:
-        """Wait out a reboot, silence unsolicited output, and require a valid M3 ``T:1051``.
+    def request_feedback(self, timeout: float = 0.3) -> Feedback | None:
+        """Send ``T:105`` and wait for the next ``T:1051``; None on timeout."""
+        r = self.request(timeout)
+        return None if r is None else r.feedback
 
-        Returns the first feedback. Raises DeviceError when the device is silent or is not an M3.
+    def request(self, timeout: float = 0.3) -> Received | None:
+        """Send ``T:105`` and wait for the next ``T:1051`` line (its time and text too); None on timeout."""
+        self.send(protocol.feedback_request())
+        end = self.clock() + timeout
+        while self.clock() < end:
+            for r in self.read_for(min(0.02, max(0.0, end - self.clock()))):
+                if r.feedback is not None:
+                    return r
+        return None
+
+    # ------------------------------------------------------------------ connect
+    def handshake(self) -> Feedback:
+        """``connect()``, returning its first feedback (kept for callers of the old name)."""
+        return self.connect().first
+
+    def connect(self) -> DeviceInfo:
+        """Meet the firmware where it is, without disturbing a start-up, and make it a quiet,
+        local, measured link:
+
+        1. listen: unasked T:1051 frames mean the loop runs with InfoPrint 2 (factory default);
+           text means it is starting up: wait for its first frame (nothing is sent during setup(),
+           where any input aborts the boot mission, A:8-15); silence: wait out setup()'s silent
+           stretch before the first probe;
+        2. ``{"T":605,"cmd":0}`` and confirm it (no unasked frame for ``quiet_confirm``);
+        3. ``{"T":301,"mode":0}``: leave ESP-NOW follower mode (the default, C:16), so no leader arm
+           nearby can drive this one during the run;
+        4. measure the T:105 round trip and the firmware's time per command line, and tell the build
+           from its answers (the 20260701 build adds torque flags and supply voltage to T:1051 and
+           queues one line per loop pass);
+        5. where the build reports them: refuse when torque is off or the supply is out of range.
+        Raises DeviceError (device silent, wrong firmware, torque off, supply out of range).
         """
         t = self.timings
         start = self.clock()
-        got = self.read_for(t.settle)
-        booting = any(parse_json_line(r.line) is None and r.line.strip() for r in got)
-        if booting:  # banner text: the ESP32 rebooted on open; wait until it has been quiet
-            self.boot_text += [r.line for r in got]
-            quiet_since = self.clock()
-            while self.clock() - quiet_since < t.boot_quiet and self.clock() - start < t.boot_timeout:
-                more = [r for r in self.read_for(0.1) if r.feedback is None]
-                if more:
-                    self.boot_text += [r.line for r in more]
-                    quiet_since = self.clock()
-        self.send(protocol.quiet_command())
-        self.read_for(0.05)
-        self.discard_input()
-        deadline = self.clock() + t.silent_after + (t.boot_timeout if booting else 0.0)
+        got = self.read_for(t.listen)
+        frames = [r for r in got if r.feedback is not None]
+        text = [r.line for r in got if r.feedback is None and r.line.strip()]
+        booted = bool(text) and not frames
+        self.boot_text += text
+        if booted:
+            frames = self._wait_for_boot(start)
+        elif not frames:  # silent: the loop runs quietly, or setup() is in its silent stretch
+            while not frames and self.clock() - start < t.silent_window:
+                more = self.read_for(0.05)
+                frames = [r for r in more if r.feedback is not None]
+                text = [r.line for r in more if r.feedback is None and r.line.strip()]
+                if text and not frames:
+                    self.boot_text += text
+                    booted = True
+                    frames = self._wait_for_boot(start)
+                    break
+        streamed = bool(frames)
+        sent: list[str] = []
+        if streamed:
+            self._quiet(sent)
+            self._restore_info_print = 2
+        else:
+            self.send(protocol.quiet_command())
+            sent.append("T:605 cmd 0")
+        first = self._probe()
+        self._check_model(first.feedback)
+        self.send({"T": 301, "mode": 0})
+        sent.append("T:301 mode 0")
+        rtt, line_time = self._measure()
+        sent.append("T:105 x3, T:605 x6 + T:105 (timing)")
+        last = self._probe()
+        fb = last.feedback
+        self._check_model(fb)
+        queued = fb.firmware == "m3-2026" or line_time > 0.002
+        voltage = torque = None
+        if "v" in fb.raw:
+            v = protocol.number(fb.raw.get("v"))
+            voltage = None if v is None else v / 100.0
+            torque = {k: int(protocol.number(fb.raw.get(k)) or 0) for k in fb.raw if k.startswith("torswitch")}
+        info = DeviceInfo(fb.firmware, rtt, line_time, queued, streamed, booted, fb, voltage, torque, sent)
+        self.info = info
+        self.firmware = fb.firmware
+        self._check_power(info)
+        return info
+
+    def _wait_for_boot(self, start: float) -> list[Received]:
+        """Start-up text seen: wait for the loop's first unasked frame (InfoPrint 2), sending nothing."""
+        t = self.timings
+        quiet_since = self.clock()
+        while self.clock() - start < t.boot_timeout:
+            more = self.read_for(0.1)
+            frames = [r for r in more if r.feedback is not None]
+            if frames:
+                return frames
+            text = [r.line for r in more if r.line.strip()]
+            if text:
+                self.boot_text += text
+                quiet_since = self.clock()
+            elif self.clock() - quiet_since > t.boot_quiet:
+                return []  # started without streaming (InfoPrint changed by its boot mission): probe
+        last = f"; last text: {self.boot_text[-1][:60]!r}" if self.boot_text else ""
+        raise DeviceError(f"{self.port}: the arm was starting up and sent no feedback within {t.boot_timeout:.0f} s{last}",
+                          "check the arm's 12 V supply and the servo cables, then retry")
+
+    def _quiet(self, sent: list[str]) -> None:
+        """T:605 cmd 0, confirmed by a window without unasked frames (up to three tries)."""
+        t = self.timings
+        for _ in range(3):
+            self.send(protocol.quiet_command())
+            sent.append("T:605 cmd 0")
+            last_frame = self.clock()
+            end = self.clock() + 1.0
+            while self.clock() < end:
+                if any(r.feedback is not None for r in self.read_for(0.02)):
+                    last_frame = self.clock()
+                elif self.clock() - last_frame >= t.quiet_confirm:
+                    return
+        raise DeviceError(f"{self.port} keeps streaming feedback after {{\"T\":605,\"cmd\":0}} (sent 3 times)",
+                          "another program may be switching it back on (close the web page or other clients), then retry")
+
+    def _probe(self) -> Received:
+        """A T:1051 answer to T:105, or DeviceError (device silent)."""
+        t = self.timings
+        deadline = self.clock() + t.silent_after
         last_other: str | None = None
         while self.clock() < deadline:
-            self.send(protocol.feedback_request())
-            for r in self.read_for(t.poll_interval):
-                if r.feedback is not None:
-                    return self._check_firmware(r.feedback)
-                if r.line.strip():
-                    last_other = r.line.strip()
+            r = self.request(min(0.5, max(0.05, deadline - self.clock())))
+            if r is not None:
+                return r
+            others = [x.line.strip() for x in self.received[-5:] if x.feedback is None and x.line.strip()]
+            last_other = others[-1] if others else last_other
         hint = "check that the arm is powered (12 V) and on, that this is its serial port, and that the baud rate is 115200"
         extra = f"; last line: {last_other[:60]!r}" if last_other else ""
         raise DeviceError(f"device silent: no feedback from {self.port} within {t.silent_after:.1f} s{extra}", hint)
 
-    def _check_firmware(self, fb: Feedback) -> Feedback:
-        self.firmware = fb.firmware
+    def _measure(self) -> tuple[float, float]:
+        """(median T:105 round trip, firmware time per command line beyond the wire), s.
+
+        Six harmless lines (``{"T":605,"cmd":0}`` again) ahead of a T:105: a firmware that runs
+        every waiting line in one pass answers one round trip (plus their wire time) later, one that
+        runs a line per loop pass six passes later.
+        """
+        rtts = []
+        for _ in range(3):
+            t0 = self.clock()
+            r = self.request(0.5)
+            if r is not None:
+                rtts.append(r.t - t0)
+        if not rtts:
+            raise DeviceError(f"device silent: {self.port} stopped answering T:105", LOST_HINT)
+        rtt = statistics.median(rtts)
+        filler = protocol.quiet_command()
+        k = 6
+        t0 = self.clock()
+        for _ in range(k):
+            self.send(filler)
+        r = self.request(0.5 + k * 0.05)
+        if r is None:
+            return rtt, 0.0
+        wire = wire_seconds(k * len(encode(filler)))
+        return rtt, max(0.0, (r.t - t0 - rtt - wire) / k)
+
+    def _check_model(self, fb: Feedback | None) -> None:
+        if fb is None:
+            return
         if fb.firmware == "m2" and self.expect != "m2":
             raise DeviceError(f"{self.port} answers like RoArm-M2 firmware (feedback has b s e t, no wrist/roll), "
                               f"but the trajectory is for a RoArm-M3",
@@ -231,19 +415,21 @@ class Link:
         if fb.firmware.startswith("m3") and self.expect == "m2":
             raise DeviceError(f"{self.port} answers like RoArm-M3 firmware ({fb.firmware}), but the trajectory is for a "
                               f"RoArm-M2", "plan for the M3 (robot: roarm_m3_pro) or connect the M2")
-        if fb.firmware == "m2":
-            return fb
-        if not fb.firmware.startswith("m3"):
-            raise DeviceError(f"{self.port} sent feedback this tool does not recognise: {fb.raw}",
-                              "expected RoArm-M3 firmware 0.84 T:1051 frames")
-        return fb
+        if fb.firmware not in BUILD_NAMES:
+            raise DeviceError(f"{self.port} sent feedback this tool does not recognise: {str(fb.raw)[:80]}",
+                              "expected RoArm-M3 firmware (0.84 or 20260701 build) T:1051 frames")
 
-    def request_feedback(self, timeout: float = 0.3) -> Feedback | None:
-        """Send ``T:105`` and wait for the next ``T:1051``; None on timeout."""
-        self.send(protocol.feedback_request())
-        end = self.clock() + timeout
-        while self.clock() < end:
-            for r in self.read_for(min(0.02, max(0.0, end - self.clock()))):
-                if r.feedback is not None:
-                    return r.feedback
-        return None
+    def _check_power(self, info: DeviceInfo) -> None:
+        from roarmctl.device.feedback import MAX_SUPPLY_V, MIN_SUPPLY_V
+
+        if info.voltage is not None and not MIN_SUPPLY_V < info.voltage < MAX_SUPPLY_V:
+            raise DeviceError(f"{self.port}: the arm's supply reads {info.voltage:.2f} V, outside "
+                              f"{MIN_SUPPLY_V:.2f}-{MAX_SUPPLY_V:.2f} V (the firmware's own alarm range)",
+                              "connect the arm's 12 V supply and switch it on, then retry")
+        off = [k[len("torswitch"):] for k, v in (info.torque or {}).items() if v == 0]
+        if off and self.require_torque:
+            names = dict(zip("BSETRG", ("base", "shoulder", "elbow", "wrist", "roll", "gripper")))
+            raise DeviceError(f"{self.port}: torque is off on {', '.join(names.get(x, x) for x in off)} "
+                              "(torque flags in the feedback)",
+                              "the arm would not hold a pose: switch torque on where the arm stands (roarmctl teach "
+                              "does it safely), or check the servo power, then retry")

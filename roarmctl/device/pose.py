@@ -1,4 +1,5 @@
-"""Where the arm is: open the port, handshake, read one ``T:1051`` and turn it into a joint vector.
+"""Where the arm is: open the port, connect, read validated ``T:1051`` frames and turn them into a
+joint vector.
 
 Used by ``plan --port/--sim`` for ``start: current``. The arm does not move.
 """
@@ -7,39 +8,43 @@ from __future__ import annotations
 
 import numpy as np
 
+from roarmctl.device.feedback import FeedbackValidator, read_valid
 from roarmctl.device.link import Link
 from roarmctl.device.protocol import Feedback, WireMap
-from roarmctl.errors import DeviceError
 
 COUNT = 2 * np.pi / 4096  # one servo step (rad)
 
 
-def configuration_from_feedback(robot, fb: Feedback) -> np.ndarray:
-    """(dof,) rad in the robot's convention (URDF; gripper included) from a parsed ``T:1051``.
-
-    A reading up to two servo counts beyond a joint limit (the 2047 middle reads 0 as one count
-    off; the 6-decimal rounding of pi) is taken as the limit itself.
-    """
-    q = WireMap(robot).from_wire(fb.joints)
+def within_limits(robot, q: np.ndarray) -> np.ndarray:
+    """(dof,) rad: a reading up to two servo counts beyond a joint limit (the 2047 middle reads 0
+    as one count off; the 6-decimal rounding of pi) taken as the limit itself; anything further is
+    left as it is (the planner then refuses a start outside the limits, naming the joint)."""
     lo, hi = robot.lower, robot.upper
     near = (q >= lo - 2 * COUNT) & (q <= hi + 2 * COUNT)
     return np.where(near, np.clip(q, lo, hi), q)
 
 
-def read_configuration(port: str, robot) -> tuple[np.ndarray, Feedback]:
-    """Open ``port``, handshake (M3 firmware required) and return (configuration (dof,) rad, feedback).
+def configuration_from_feedback(robot, fb: Feedback) -> np.ndarray:
+    """(dof,) rad in the robot's convention (URDF; gripper included) from a parsed ``T:1051``
+    already accepted by the validator, with ``within_limits``."""
+    return within_limits(robot, WireMap(robot).from_wire(fb.joints))
 
-    Raises DeviceError (exit 4) for a missing, busy, silent or wrong-firmware port; the port is always closed.
+
+def read_configuration(port: str, robot) -> tuple[np.ndarray, Feedback]:
+    """Open ``port``, connect, and return (configuration (dof,) rad, feedback) from two consecutive
+    frames the validator accepted (torque may be off: the arm is not moved).
+
+    Raises DeviceError (exit 4) for a missing, busy, silent or wrong-firmware port and for feedback
+    that is refused (the message names the joint and the value); the port is always closed.
     """
     link = Link(port)
     link.expect = WireMap(robot).model  # the firmware the description's wire fields speak (M3 or M2)
+    link.require_torque = False
     try:
         link.open()
-        fb = link.handshake()
-        newer = link.request_feedback(0.5)  # the handshake's frame may predate the quiet command
-        fb = newer or fb
-        if not fb.joints:
-            raise DeviceError(f"{port}: the feedback has no joint values", "expected RoArm-M3 firmware")
-        return configuration_from_feedback(robot, fb), fb
+        link.connect()
+        validator = FeedbackValidator(robot, firmware=link.firmware, expect_torque=None)
+        reading = read_valid(link, validator, n=2)
+        return within_limits(robot, reading.q), reading.feedback
     finally:
         link.close()

@@ -171,21 +171,57 @@ class WireMap:
 
 
 # ----------------------------------------------------------------------------- feedback
+#: Longest line taken as feedback: a real 20260701 T:1051 line is about 324 bytes.
+MAX_FEEDBACK_LINE = 2048
+#: Largest magnitude a T:1051 number may have (x/y/z are mm within about 600, loads +-1000, v centivolts).
+MAX_FEEDBACK_NUMBER = 1e5
+_MAX_DIGITS = 15
+
+
 @dataclass
 class Feedback:
-    """One parsed ``T:1051`` line. ``joints``: firmware radians by field name (``M3_FIELDS``);
-    ``xyz``: firmware FK end point in mm (origin at the shoulder-axis height); ``firmware``: see
-    ``identify_firmware``."""
+    """One parsed ``T:1051`` line. ``joints``: firmware radians by field name (``M3_FIELDS``;
+    ``M2_FIELDS`` for M2 frames); ``xyz``: firmware FK end point in mm (origin at the shoulder-axis
+    height); ``firmware``: see ``identify_firmware``; ``problems``: why a value could not be taken
+    (a joint named there is missing from ``joints``)."""
 
     raw: dict[str, Any]
     joints: dict[str, float]
     xyz: tuple[float, float, float]
     firmware: str
     extra: dict[str, Any] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+
+
+class _Unsane(str):
+    """A number token too long to be a sane value, kept as its text (never turned into a number;
+    a log that records it stays valid JSON)."""
+
+    def short(self) -> str:
+        return f"{self[:12]}... ({len(self)} characters)" if len(self) > 16 else str(self)
+
+
+def _bounded_int(text: str) -> Any:
+    return _Unsane(text) if len(text.lstrip("-")) > _MAX_DIGITS else int(text)
+
+
+def _bounded_float(text: str) -> Any:
+    v = float(text) if len(text) <= 40 else math.inf
+    return v if math.isfinite(v) else _Unsane(text)
+
+
+def _no_constant(text: str) -> Any:
+    return _Unsane(text)  # NaN, Infinity, -Infinity: not numbers here
 
 
 def parse_json_line(line: bytes | str) -> dict[str, Any] | None:
-    """A complete line -> JSON object, or None for anything else (boot text, partial, garbage)."""
+    """A complete line -> JSON object, or None for anything else (boot text, partial, garbage, too long).
+
+    Numbers are bounded while parsing: an integer of more than 15 digits, a float token over 40
+    characters and NaN/Infinity become opaque values that no numeric check accepts.
+    """
+    if len(line) > MAX_FEEDBACK_LINE:
+        return None
     if isinstance(line, bytes):
         try:
             line = line.decode("utf-8")
@@ -195,15 +231,16 @@ def parse_json_line(line: bytes | str) -> dict[str, Any] | None:
     if not (line.startswith("{") and line.endswith("}")):
         return None
     try:
-        obj = json.loads(line)
-    except (json.JSONDecodeError, RecursionError):
+        obj = json.loads(line, parse_int=_bounded_int, parse_float=_bounded_float, parse_constant=_no_constant)
+    except (ValueError, RecursionError):
         return None
     return obj if isinstance(obj, dict) else None
 
 
 def identify_firmware(obj: dict[str, Any]) -> str:
-    """Tell firmware builds apart by their T:1051 fields (``RoArmM3_infoFeedback`` in RoArm-M3_module.h;
-    the M2 keys from roarm_sdk/common.py).
+    """Tell firmware builds apart by their T:1051 fields (``RoArmM3_infoFeedback`` in RoArm-M3_module.h
+    lines 596-621 of the 0.84 build; the 20260701 build adds ``torswitch*`` and ``v``; the M2 keys
+    from roarm_sdk/common.py).
 
     ``"m3-0.84"`` (b s e t r g, tit), ``"m3-2026"`` (adds torswitch* and v), ``"m2"`` (b s e t
     only, torB..), ``"unknown"`` otherwise.
@@ -218,34 +255,52 @@ def identify_firmware(obj: dict[str, Any]) -> str:
     return "unknown"
 
 
-def _num(v: Any) -> float | None:
+def number(v: Any) -> float | None:
+    """A JSON value as a finite float of sane size (|v| <= MAX_FEEDBACK_NUMBER), else None."""
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         return None
     v = float(v)
-    return v if math.isfinite(v) else None
+    return v if math.isfinite(v) and abs(v) <= MAX_FEEDBACK_NUMBER else None
 
 
-def parse_feedback(line: bytes | str | dict[str, Any]) -> Feedback | None:
-    """A ``"T":1051`` line -> Feedback; None for any other line or a frame with bad numbers.
+_num = number
 
-    For M2 frames ``joints`` holds base, shoulder, elbow and hand (the M2's ``t`` is its gripper).
-    """
+
+def describe(v: Any) -> str:
+    """A short text of a bad value for an error message."""
+    return v.short() if isinstance(v, _Unsane) else (f"{v!r}"[:20])
+
+
+def parse_feedback_report(line: bytes | str | dict[str, Any]) -> Feedback | None:
+    """A ``"T":1051`` line -> Feedback (with ``problems`` for values that are not finite numbers of
+    sane size); None for any other line."""
     obj = line if isinstance(line, dict) else parse_json_line(line)
     if obj is None or obj.get("T") != 1051:
         return None
     fw = identify_firmware(obj)
     joints: dict[str, float] = {}
+    problems: list[str] = []
     if fw.startswith("m3") or fw == "m2":
         fields, keys = MODELS["m2" if fw == "m2" else "m3"]
         for f, k in zip(fields, keys):
-            v = _num(obj.get(k))
+            v = number(obj.get(k))
             if v is None:
-                return None
-            joints[f] = v
-    xyz = tuple(_num(obj.get(k)) or 0.0 for k in ("x", "y", "z"))
+                problems.append(f"{f} read {describe(obj.get(k))}: not a finite number of sane size")
+            else:
+                joints[f] = v
+    else:
+        problems.append("a T:1051 line without the joint keys b s e t r g")
+    xyz = tuple(number(obj.get(k)) or 0.0 for k in ("x", "y", "z"))
     used = set(M2_FEEDBACK_KEYS if fw == "m2" else M3_FEEDBACK_KEYS)
     extra = {k: v for k, v in obj.items() if k not in used | {"T", "x", "y", "z"}}
-    return Feedback(raw=obj, joints=joints, xyz=xyz, firmware=fw, extra=extra)  # type: ignore[arg-type]
+    return Feedback(raw=obj, joints=joints, xyz=xyz, firmware=fw, extra=extra, problems=problems)  # type: ignore[arg-type]
+
+
+def parse_feedback(line: bytes | str | dict[str, Any]) -> Feedback | None:
+    """A ``"T":1051`` line whose joint values are all finite numbers of sane size -> Feedback; None
+    for any other line (``parse_feedback_report`` says why)."""
+    fb = parse_feedback_report(line)
+    return fb if fb is not None and not fb.problems else None
 
 
 class LineBuffer:

@@ -9,14 +9,10 @@ differ only in how they ask for confirmation and show progress.
 from __future__ import annotations
 
 import contextlib
-import math
-import sys
 import warnings
-from collections.abc import Callable
-from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, ContextManager
 
 from roarmctl.errors import InputError, RoarmError, signal_name
 
@@ -37,8 +33,9 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
                   log_path: str | Path | None = None, confirm: Callable[[str], bool],
                   on_status: Callable | None = None, on_start: Callable | None = None,
                   on_note: Callable[[str], None] | None = None, on_end: Callable[[], None] | None = None,
-                  shield: Callable[[], AbstractContextManager] = contextlib.nullcontext,
-                  on_log_error: Callable[[Path, Exception], None] | None = None) -> Execution:
+                  shield: Callable[[], ContextManager] = contextlib.nullcontext,
+                  on_log_error: Callable[[Path, Exception], None] | None = None,
+                  on_info: Callable[[str], None] | None = None) -> Execution:
     """Stream ``traj`` (a validated ``Trajectory`` for ``robot``) with ``cfg`` (``StreamConfig``).
 
     Exactly one of ``port`` (a serial port name or pyserial URL) and ``sim=True`` (the firmware
@@ -48,7 +45,8 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
     uninterruptible (the CLI passes its signal shield). ``log_path``: where the execution log goes,
     written on every way out once the port has opened (a port that never opened exchanged nothing
     and leaves an existing log alone); a log that cannot be written calls ``on_log_error(path, exc)`` (default: a ``RuntimeWarning``)
-    instead of hiding the run's own outcome. Errors propagate after the log is written; the stream
+    instead of hiding the run's own outcome. ``on_info(line)`` hears what connecting learned (the
+    firmware build, round trip, pacing) and the link budget. Errors propagate after the log is written; the stream
     result of a failed run is the exception's ``result`` attribute when it has one.
     """
     from roarmctl.device.link import Link
@@ -59,13 +57,12 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
         raise InputError("execute: give exactly one of a port or the simulator")
     model = WireMap(robot).model
     simulator = None
-    switch = sys.getswitchinterval()
     if sim:
         from roarmctl.device.simulator import PtySimulator, SimConfig
 
-        sys.setswitchinterval(0.0005)  # the simulator thread shares the GIL with the real-time loop
-        # the simulated arm is the kind the trajectory is for (an M2 trajectory gets the M2 protocol)
-        simulator = PtySimulator(SimConfig(firmware="m2" if model == "m2" else "m3-0.84")).start()
+        # the simulated arm is the kind the trajectory is for (an M2 trajectory gets the M2 protocol);
+        # its firmware runs in a process of its own, with its own time, as the ESP32 does
+        simulator = PtySimulator(SimConfig(firmware="m2" if model == "m2" else "m3-0.84"), process=True).start()
         port = simulator.path
 
     def replan(q, mode: str):
@@ -77,14 +74,21 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
     link.expect = model
     # Built before the port opens (the schedule is pure), so that every way out has a log.
     streamer = Streamer(link, robot, traj, cfg, on_status=on_status, confirm=confirm, on_start=on_start,
-                        replan=replan, on_note=on_note)
+                        replan=replan, on_note=on_note,
+                        extra_lateness=simulator.recent_lateness if simulator is not None else None)
     result = None
     tracking = None
     opened = False
     try:
         link.open()
         opened = True
-        link.handshake()
+        info = link.connect()
+        if on_info is not None:
+            from roarmctl.device.schedule import link_budget
+
+            on_info(f"firmware: {info.describe()}")
+            budget = link_budget(streamer.schedule, cfg.feedback_rate, line_time=info.line_time if info.queued else None)
+            on_info(budget.describe())
         try:
             result = streamer.run()
         finally:
@@ -108,7 +112,6 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
                 tracking = simulator_tracking(simulator, robot, streamer.traj, cfg, result)
                 result.log["simulator"] = tracking
                 simulator.stop()
-                sys.setswitchinterval(switch)
             # a port that never opened exchanged nothing: keep the previous run's log rather than
             # replace it with an empty one (the error itself says what went wrong)
             if log_path is not None and opened:
@@ -123,31 +126,12 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
 
 
 def simulator_tracking(simulator, robot, traj, cfg, result) -> dict[str, Any]:
-    """TCP error (mm) of the simulator's true servo positions against the plan, over the motion.
-
-    ``simulator.recording()`` gives times (s, the streamer's clock), firmware joint values (N, 6,
-    rad, hand as pi - q) and torque flags; the plan is sampled at the same times, scaled by
-    ``cfg.speed_scale``, and both go through the robot's FK.
-    """
+    """TCP error (mm) of the simulator's true servo positions against the plan, over the motion:
+    raw, and aligned within the lateness measured on both sides (``roarmctl.device.tracking``)."""
     import numpy as np
 
-    from roarmctl.device.protocol import WireMap
-    from roarmctl.device.simulator import JOINTS
-    from roarmctl.device.streamer import sample
+    from roarmctl.device.tracking import true_tracking
 
-    ts, q, torque = simulator.recording()
-    tt = ts - result.t0
-    m = (tt >= 0) & (tt <= traj.duration / cfg.speed_scale)
-    out = {"rms_mm": None, "max_mm": None, "samples": int(m.sum()), "torque_always_on": bool(torque.all())}
-    if m.any() and not math.isnan(result.t0):
-        plan = sample(traj, tt[m] * cfg.speed_scale)
-        wm = WireMap(robot)
-        fw = q[m].copy()
-        fw[:, 5] = math.pi - fw[:, 5]  # the recording's view (hand = pi - q) back to firmware radians
-        cols = [JOINTS.index(f) for f in wm.field_names]
-        q_joint = np.zeros((len(fw), robot.dof))
-        for w, i, c in zip(wm.fields, wm.index, cols):
-            q_joint[:, i] = (fw[:, c] - w.offset) / w.sign
-        e = np.linalg.norm(robot.kin.fk(q_joint)[:, :3, 3] - robot.kin.fk(plan)[:, :3, 3], axis=1) * 1e3
-        out |= {"rms_mm": float(np.sqrt(np.mean(e ** 2))), "max_mm": float(e.max())}
-    return out
+    host = np.array([[e["t"], e["lateness"]] for e in result.log.get("sent", []) if "tick" in e]).reshape(-1, 2)
+    return true_tracking(robot, traj, simulator.recording(), result.t0, cfg.speed_scale, host_late=host,
+                         device_late=simulator.lateness())

@@ -40,8 +40,10 @@ def test_reply_timing_follows_the_byte_rate():
     f.advance(1.05)
     (t_done, line), = f.out
     t_in = 1.0 + 10 * BYTE
-    # executed at the first loop tick after the line is in, then len(line) bytes on the wire
-    assert t_in <= t_done - len(line) * BYTE <= t_in + f.cfg.loop_period + 1e-9
+    # run by the first loop pass after the line is in (a pass reads six servos), the T:105 reads the
+    # six servos again, then len(line) bytes on the wire
+    one_pass = 6 * f.cfg.read_time + f.overhead
+    assert t_in + 6 * f.cfg.read_time <= t_done - len(line) * BYTE <= t_in + 2 * one_pass + 1e-9
     assert line.endswith(b"}\r\n")
 
 
@@ -54,9 +56,9 @@ def test_trapezoid_with_speed_and_acceleration():
     expected = abs(d) / v + v / a  # cruise + ramps (time of a trapezoid)
     t_start = 120 * BYTE
     f.advance(t_start + expected - 0.05)
-    assert f.pos[0] != 2047 + d
+    assert f.servos.pos[0] != 2047 + d
     f.advance(t_start + expected + 0.03)
-    assert f.pos[0] == 2047 + d
+    assert f.servos.pos[0] == 2047 + d
 
 
 def test_malformed_lines_dropped_and_missing_keys_read_as_zero():
@@ -77,9 +79,9 @@ def test_emergency_stop_drops_torque_and_blocks_for_10s_scaled():
     f.receive(b'{"T":0}\n', 0.0)
     f.receive(b'{"T":105}\n', 0.01)
     f.advance(0.5)
-    assert not f.torque and f.pop_output(0.5) == b""  # blocked
+    assert not f.servos.torque().any() and f.pop_output(0.5) == b""  # blocked
     f.advance(1.2)
-    assert f.torque and b'"T":1051' in f.pop_output(1.2)
+    assert f.servos.torque().all() and b'"T":1051' in f.pop_output(1.2)
     _, _, torque = f.recording()
     assert not torque.all()
 
@@ -115,7 +117,7 @@ def test_newer_build_queues_one_command_per_loop_and_fast_stop_matches_compact_b
     assert not f2.stop_flag
     f2.receive(b'{"T":0}\n', 1.01)
     f2.advance(1.06)  # the next pass of the slow loop
-    assert f2.stop_flag and not f2._queue and f2.torque  # flushed, torque stays on
+    assert f2.stop_flag and not f2._queue and f2.servos.torque().all()  # flushed, torque stays on
 
 
 def test_a_fresh_line_after_a_torn_write_still_executes():
@@ -132,7 +134,7 @@ def test_t122_degrees_set_persistent_speed_that_t1041_uses_and_t102_clears():
     # 90 deg/s -> calculatePosByDeg = 1024 steps/s; acc 10 -> 114 (100 steps/s^2 units)
     f.receive(encode({"T": 122, "b": 30, "s": -10, "e": 80, "t": 20, "r": -45, "h": 150, "spd": 90, "acc": 10}), 0.0)
     f.advance(0.02)
-    assert f.spd[0] == 1024 and f.acc[0] == 114
+    assert f.servos.spd[0] == 1024 and f.servos.acc[0] == 114
     assert (f.move_spd, f.move_acc) == (1024, 114)
     f.advance(3.0)
     fb = feedback(f, 3.0)
@@ -142,7 +144,7 @@ def test_t122_degrees_set_persistent_speed_that_t1041_uses_and_t102_clears():
     # T:1041 moves with the stored moveSpd/moveAcc, not at full speed
     f.receive(b'{"T":1041,"x":300,"y":50,"z":150,"t":0.2,"r":0,"g":3.14}\n', 3.1)
     f.advance(3.2)
-    assert f.spd[0] == 1024 and f.acc[0] == 114
+    assert f.servos.spd[0] == 1024 and f.servos.acc[0] == 114
     f.advance(6.0)
     assert feedback(f, 6.0).xyz == pytest.approx((300, 50, 150), abs=2.0)
     # a T:102 zeroes them: the next T:1041 runs at spd 0 (the servo maximum)
@@ -152,26 +154,26 @@ def test_t122_degrees_set_persistent_speed_that_t1041_uses_and_t102_clears():
     assert (f.move_spd, f.move_acc) == (0, 0)
     f.receive(b'{"T":1041,"x":300,"y":0,"z":200,"t":0,"r":0,"g":3.14}\n', 9.0)
     f.advance(9.1)
-    assert f.spd[0] == 0 and f.acc[0] == 0
+    assert f.servos.spd[0] == 0 and f.servos.acc[0] == 0
 
 
 def test_t121_moves_one_joint_in_degrees_and_acc_register_wraps_like_a_byte():
     f = fw()
     f.receive(b'{"T":121,"joint":4,"angle":-30,"spd":45,"acc":30}\n', 0.0)
     f.advance(0.02)
-    assert f.spd[3] == 512
-    assert f.acc[3] == round(30 / 360 * 4096) % 256  # 341 -> 85: the u8 register overflows above 22.4
+    assert f.servos.spd[3] == 512
+    assert f.servos.acc[3] == round(30 / 360 * 4096) % 256  # 341 -> 85: the u8 register overflows above 22.4
     f.advance(2.0)
     assert feedback(f, 2.0).joints["wrist"] == pytest.approx(math.radians(-30), abs=2 * 2 * math.pi / 4096)
 
 
 def test_codes_that_do_not_move_are_accepted_and_ignored():
     f = fw()
-    before = f.goal.copy()
+    before = f.servos.goal.copy()
     for line in (b'{"T":114,"led":255}', b'{"T":112,"mode":1,"b":60,"s":110,"e":50,"t":50,"r":50,"h":50}',
                  b'{"T":502,"id":254}', b'{"T":222,"name":"boot","step":"{\\"T\\":1,\\"mode\\":0}"}', b'{"T":401,"cmd":3}',
                  b'{"T":12345}'):
         f.receive(line + b"\n", 0.0)
     f.advance(0.5)
-    assert (f.goal == before).all() and f.torque
+    assert (f.servos.goal == before).all() and f.servos.torque().all()
     assert f.pop_output(0.5) == b""

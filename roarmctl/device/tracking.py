@@ -1,0 +1,88 @@
+"""How well the simulated arm followed the plan: the TCP error of its true servo positions (the
+simulator's recording) against the trajectory, raw and with the lateness that was measured.
+
+On a busy machine the host may send a command late and the simulated firmware may wake late; both
+delay the arm by a measured amount. ``aligned`` errors compare each sample with the plan anywhere in
+the window of that measured delay (so they equal the raw error when nothing was late); ``lag`` is
+the time shift of the plan that fits the executed path best.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from roarmctl.device.protocol import WireMap
+from roarmctl.device.schedule import sample
+from roarmctl.device.servos import JOINTS
+
+WINDOW = 0.25  # s: lateness this far back still delays the arm
+
+
+def recorded_joints(robot, q_rec: np.ndarray) -> np.ndarray:
+    """The simulator's recording (N, 6; firmware joints in the M3's URDF view, hand = pi - q) as
+    joint vectors (N, dof) of ``robot``, through its wire map."""
+    wm = WireMap(robot)
+    fw = np.array(q_rec, dtype=float).copy()
+    fw[:, 5] = math.pi - fw[:, 5]  # back to firmware radians
+    cols = [JOINTS.index(f) for f in wm.field_names]
+    q = np.zeros((len(fw), robot.dof))
+    for w, i, c in zip(wm.fields, wm.index, cols):
+        q[:, i] = (fw[:, c] - w.offset) / w.sign
+    return q
+
+
+def lateness_at(t: np.ndarray, events: np.ndarray) -> np.ndarray:
+    """(N,) s: the largest lateness among ``events`` ((M, 2): time, lateness) in [t - WINDOW, t]."""
+    out = np.zeros(len(t))
+    for te, late in np.asarray(events, dtype=float).reshape(-1, 2):
+        m = (t >= te) & (t <= te + WINDOW)
+        out[m] = np.maximum(out[m], late)
+    return out
+
+
+def true_tracking(robot, traj, recording, t0: float, speed_scale: float = 1.0,
+                  host_late: np.ndarray | None = None, device_late: np.ndarray | None = None,
+                  lag: bool = False) -> dict[str, Any]:
+    """TCP error (mm) of the recorded motion against ``traj`` over the motion's span.
+
+    ``recording``: (times s, joints (N, 6), torque (N,)) as ``PtySimulator.recording()`` gives;
+    ``t0``: the stream's start on the same clock; ``host_late``: (K, 2) (s after t0, lateness s) of
+    the commands sent; ``device_late``: (M, 2) (s on the recording's clock, lateness s) of the
+    simulated firmware's wake-ups. Returns rms/max raw and aligned, the lateness used, the sample
+    count, whether torque stayed on, and with ``lag`` the best-fitting delay (s).
+    """
+    ts, q_rec, torque = recording
+    tt = np.asarray(ts) - t0
+    m = (tt >= 0) & (tt <= traj.duration / speed_scale)
+    out: dict[str, Any] = {"rms_mm": None, "max_mm": None, "samples": int(m.sum()),
+                           "torque_always_on": bool(np.asarray(torque).all())}
+    if not m.any() or math.isnan(t0):
+        return out
+    tt = tt[m]
+    q = recorded_joints(robot, np.asarray(q_rec)[m])
+    p = robot.kin.fk(q)[:, :3, 3]
+    e = np.linalg.norm(p - robot.kin.fk(sample(traj, tt * speed_scale))[:, :3, 3], axis=1)
+    late = np.zeros(len(tt))
+    if host_late is not None and len(host_late):
+        late = np.maximum(late, lateness_at(tt, host_late))
+    if device_late is not None and len(device_late):
+        dl = np.asarray(device_late, dtype=float).reshape(-1, 2).copy()
+        dl[:, 0] -= t0
+        late = np.maximum(late, lateness_at(tt, dl))
+    aligned = e.copy()
+    for frac in np.linspace(0.0, 1.0, 6)[1:]:
+        shifted = np.maximum(tt - frac * (late + 0.002), 0.0)
+        ep = np.linalg.norm(p - robot.kin.fk(sample(traj, shifted * speed_scale))[:, :3, 3], axis=1)
+        aligned = np.minimum(aligned, ep)
+    out |= {"rms_mm": float(np.sqrt(np.mean(e ** 2))) * 1e3, "max_mm": float(e.max()) * 1e3,
+            "rms_aligned_mm": float(np.sqrt(np.mean(aligned ** 2))) * 1e3, "max_aligned_mm": float(aligned.max()) * 1e3,
+            "lateness_max_ms": float(late.max()) * 1e3}
+    if lag:
+        shifts = np.arange(0.0, 0.1501, 0.002)
+        rms = [float(np.sqrt(np.mean(np.linalg.norm(
+            p - robot.kin.fk(sample(traj, np.maximum(tt - s, 0.0) * speed_scale))[:, :3, 3], axis=1) ** 2))) for s in shifts]
+        out["lag_s"] = float(shifts[int(np.argmin(rms))])
+    return out
