@@ -14,7 +14,8 @@ from roarmctl.device.session import run_execution
 from roarmctl.errors import InputError
 from roarmctl.fileio import atomic_write_bytes
 
-STRATEGY_HELP = "Streaming strategy: timed (default), timed-shared, timed-acc, dense, dense-ahead (see bench/bench_stream.py)."
+STRATEGY_HELP = ("Streaming strategy: timed (default), timed-acc, per-joint, timed-shared, dense, dense-ahead "
+                 "(compared in docs/benchmarks.md).")
 
 
 def register(app: typer.Typer) -> None:
@@ -120,10 +121,14 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
     def log_error(path: Path, exc: Exception) -> None:
         common.warn(f"could not write the execution log {path} ({getattr(exc, 'strerror', None) or exc}); pass --log FILE")
 
+    def info(line: str) -> None:  # what connecting learned: part of the display (a terminal), always in the log
+        if live is not None:
+            err.print(line, highlight=False, soft_wrap=True)
+
     run = run_execution(traj, robot, cfg, port=port, sim=sim, log_path=log_path, confirm=confirm,
                         on_status=live.update if live else None, on_start=live.start if live else None,
                         on_note=note, on_end=live.stop if live else None, shield=signals.shielded,
-                        on_log_error=log_error)
+                        on_log_error=log_error, on_info=info)
     result, port = run.result, run.port
     summary = result.summary() | {"log": str(log_path), "notes": result.log.get("notes", []),
                                   "final_pose": result.log.get("final_pose")}
@@ -205,14 +210,31 @@ def sim_device(
     model: str | None = typer.Option(None, "--model", help="Imitate this robot's firmware, from its description's wire map "
                                         "(e.g. roarm_m2_s -> m2, roarm_m3_pro -> m3-0.84)."),
     info_print: int = typer.Option(2, "--info-print", help="InfoPrint level at start (factory 2 = continuous feedback)."),
-    boot: bool = typer.Option(True, "--boot/--no-boot", help="Print the boot banner and do the boot move at start."),
+    boot: bool = typer.Option(True, "--boot/--no-boot", help="Start like a powered-on arm: boot text, silence, boot moves."),
     link: Path | None = typer.Option(None, "--link", help="Also make this symlink to the pseudo-terminal (e.g. /tmp/ttyROARM)."),
     json_out: bool = typer.Option(False, "--json", help="Print {\"port\": PATH} as JSON."),
+    fail_reads: list[str] = typer.Option([], "--fail-reads", metavar="JOINT=P", help="Fault: each read of JOINT's servo fails "
+                                         "with probability P (it then keeps its old value, 0 steps if it never read; 100 ms lost). Repeatable."),
+    unpowered: bool = typer.Option(False, "--unpowered", help="Fault: servo supply off (every read fails; 20260701: v = 0, torque flags 0)."),
+    voltage: float = typer.Option(12.0, "--voltage", help="Fault: supply voltage (V); the 20260701 build warns outside 6.00-12.90 V."),
+    torque_off: bool = typer.Option(False, "--torque-off", help="Fault: the servos start limp (20260701 reports torque flags 0)."),
+    esp_now_leader: bool = typer.Option(False, "--esp-now-leader", help="Fault: a leader arm nearby broadcasts its pose; "
+                                        "this arm obeys while in ESP-NOW follower mode (the default)."),
+    bogus: list[str] = typer.Option([], "--bogus", metavar="KEY=VALUE[@N[xM]]", help="Fault: print T:1051 key KEY as the raw "
+                                    "text VALUE, from the first frame after N motion commands, for M frames (0 = all; "
+                                    "default 1). E.g. e=2.9@40x5, b=4.0, g=0. Repeatable."),
+    mute_after: int | None = typer.Option(None, "--mute-after", metavar="N", help="Fault: print nothing after N motion commands."),
+    stuck: list[str] = typer.Option([], "--stuck", metavar="JOINT", help="Fault: JOINT's servo is blocked and never moves. Repeatable."),
+    deaf: bool = typer.Option(False, "--deaf", help="Fault: nothing sent to the arm arrives."),
+    silent: bool = typer.Option(False, "--silent", help="Fault: the arm never says anything."),
+    boot_mission: list[str] = typer.Option([], "--boot-mission", metavar="JSON", help="A line of the flash mission 'boot' "
+                                           "(run at start-up unless serial input is waiting). Repeatable."),
 ) -> None:
     """Start the firmware simulator on a pseudo-terminal, print its path, and serve until Ctrl-C.
 
     Any program can open the path like the arm's /dev/ttyUSB0: roarmctl itself, Waveshare's
-    roarm_sdk, or a terminal (115200 baud, JSON lines).
+    roarm_sdk, or a terminal (115200 baud, JSON lines). The fault options rehearse what a real arm
+    can do to its host.
     """
     from roarmctl.device.simulator import PtySimulator, SimConfig
 
@@ -230,7 +252,14 @@ def sim_device(
         raise InputError(f"--firmware: unknown '{firmware}'", "choose m3-0.84, m3-2026 or m2")
     if info_print not in (0, 1, 2):
         raise InputError("--info-print: must be 0, 1 or 2")
-    simulator = PtySimulator(SimConfig(firmware=firmware, info_print=info_print, boot=boot)).start()
+    config = SimConfig(firmware=firmware, info_print=info_print, boot=boot, unpowered=unpowered, voltage=voltage,
+                       torque_off=torque_off, esp_now_leader=esp_now_leader, mute_after=mute_after, deaf=deaf,
+                       silent=silent, fail_reads=_joint_values("--fail-reads", fail_reads),
+                       bogus=tuple(_bogus(b) for b in bogus), stuck=tuple(_joint("--stuck", j) for j in stuck),
+                       boot_mission=tuple(boot_mission))
+    if not 0 < voltage < 100:
+        raise InputError(f"--voltage: {voltage:g} V is not a supply voltage")
+    simulator = PtySimulator(config).start()
     made_link = False
     try:  # Ctrl-C, SIGTERM and SIGHUP (roarmctl.cli.signals) end it the same way: exit 0, link removed
         path = simulator.path
@@ -261,6 +290,43 @@ def sim_device(
             simulator.stop()
             if made_link and link.is_symlink():
                 link.unlink()
+
+
+def _joint(option: str, name: str) -> str:
+    from roarmctl.device.servos import JOINTS
+    from roarmctl.errors import InputError
+
+    if name not in JOINTS:
+        raise InputError(f"{option}: unknown joint '{name}'", f"one of {', '.join(JOINTS)}")
+    return name
+
+
+def _joint_values(option: str, items: list[str]) -> dict[str, float]:
+    from roarmctl.errors import InputError
+
+    out = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        try:
+            p = float(value)
+        except ValueError:
+            raise InputError(f"{option}: '{item}' is not JOINT=P", "e.g. --fail-reads base=0.05") from None
+        if not 0 <= p <= 1:
+            raise InputError(f"{option}: probability {p:g} is outside [0, 1]")
+        out[_joint(option, name)] = p
+    return out
+
+
+def _bogus(text: str):
+    import re
+
+    from roarmctl.device.simulator import Bogus
+    from roarmctl.errors import InputError
+
+    m = re.fullmatch(r"([A-Za-z]+)=([^@]+)(?:@(\d+)(?:x(\d+))?)?", text)
+    if m is None:
+        raise InputError(f"--bogus: '{text[:40]}' is not KEY=VALUE[@N[xM]]", "e.g. --bogus e=2.9@40x5")
+    return Bogus(m.group(1), m.group(2), int(m.group(3) or 0), int(m.group(4)) if m.group(4) is not None else 1)
 
 
 # --------------------------------------------------------------------------- ports

@@ -105,6 +105,7 @@ class FeedbackValidator:
         self.accepted = 0
         self.refused = 0
         self.run = 0
+        self.refused_since: float | None = None  # time of the first refused frame since the last accepted one
         self.refusals: deque[Refusal] = deque(maxlen=keep)
 
     # ------------------------------------------------------------------ ranges
@@ -145,7 +146,11 @@ class FeedbackValidator:
                     after = "" if before is None else f" after {before:.3f}"
                     return None, Refusal(t, f, f"{f} read +{math.pi:.3f} rad (servo step 0){after}: a failed servo read?")
         if last is not None:
-            dt = max(t - last.t, wire_seconds(len(line) + 2) if line else 0.0) + self.slack
+            # after a refused frame the arm's time to move stops at that frame: what came since was
+            # impossible, so a later frame must come back near the last accepted one, not merely be
+            # reachable from it in the time that has passed (a value that jumped and stayed is refused)
+            seen = t if self.refused_since is None else min(t, self.refused_since)
+            dt = max(seen - last.t, wire_seconds(len(line) + 2) if line else 0.0) + self.slack
             for f, v in wire.items():
                 allowed = self.max_speed * dt + 4 * COUNT
                 if abs(v - last.wire[f]) > allowed:
@@ -176,11 +181,14 @@ class FeedbackValidator:
         if reading is not None:
             self.accepted += 1
             self.run = 0
+            self.refused_since = None
             self.last = reading
             return reading
         assert refusal is not None
         self.refused += 1
         self.run += 1
+        if self.refused_since is None:
+            self.refused_since = t
         self.refusals.append(refusal)
         if self.run >= self.run_limit:
             raise FeedbackRefused(f"feedback refused {self.run} times in a row: {refusal.reason}",

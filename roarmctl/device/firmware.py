@@ -116,6 +116,7 @@ class SimConfig:
     leader_pose: tuple[float, ...] = (0.6, 0.2, 1.3, 0.3, 0.0, 3.0)  # firmware radians the leader sends
     bogus: tuple[Bogus, ...] = ()
     mute_after: int | None = None  # stop printing anything after this many motion commands
+    stuck: tuple[str, ...] = ()  # joints whose servo cannot move (blocked): their goal writes have no effect
     boot_mission: tuple[str, ...] = ()  # JSON lines of the flash mission "boot"
     seed: int = 0
     record_limit: int = 2_000_000
@@ -151,6 +152,9 @@ class Firmware:
         self.stop_flag = False
         self.move_spd, self.move_acc = 0.0, 20.0
         self.read_pos = np.round(self.servos.positions())  # servoFeedback[].pos
+        for name, p in cfg.fail_reads.items():
+            if p >= 1.0:  # never read since power-up: the struct's zero (M:23, M:90-95)
+                self.read_pos[JOINTS.index(name)] = 0.0
         self.read_torque = self.servos.torque().astype(int)
         self.read_load = np.zeros(6)
         self.overhead = cfg.pass_overhead if cfg.pass_overhead is not None else (0.002 if self.queued_build else 0.0003)
@@ -170,7 +174,7 @@ class Firmware:
         self._after_block: Callable[[], None] | None = None
         self._serial_task_from = t0  # [fw26] the serial task exists from the end of setup()
         self.motion_count = 0
-        self._bogus_left = {i: b.frames for i, b in enumerate(cfg.bogus)}
+        self._bogus_left = {i: (b.frames if b.frames > 0 else -1) for i, b in enumerate(cfg.bogus)}  # -1: no end
         self._leader_next = t0
         self.boot_mission_aborted: bool | None = None
         self.booting_until = t0
@@ -201,10 +205,13 @@ class Firmware:
                 self._rx_partial.append(b)
         self._rx_free = start + len(data) * dt
 
+    def muted(self) -> bool:
+        return self.cfg.mute_after is not None and self.motion_count >= self.cfg.mute_after
+
     def println(self, text: str, t: float) -> float:
         """``Serial.println`` at ``t``: queue ``text\\r\\n`` for the wire; return when the call returns
         (once at most ``tx_fifo`` bytes of it are still waiting)."""
-        if self.cfg.silent:
+        if self.cfg.silent or self.muted():
             return t
         data = text.encode() + b"\r\n"
         done = max(t, self._tx_free) + len(data) / self.cfg.byte_rate
@@ -385,11 +392,12 @@ class Firmware:
             for i, bog in enumerate(self.cfg.bogus):
                 if self.motion_count >= bog.after and self._bogus_left[i] != 0 and bog.key in text:
                     text[bog.key] = bog.value
-                    self._bogus_left[i] -= 1 if bog.frames else 0
+                    if self._bogus_left[i] > 0:
+                        self._bogus_left[i] -= 1
         return "{" + ",".join(f'"{k}":{v}' for k, v in text.items()) + "}"
 
     def _print_feedback(self, c: float) -> float:
-        if self.cfg.mute_after is not None and self.motion_count >= self.cfg.mute_after:
+        if self.muted():
             return c
         if self.queued_build:
             c += 0.0008  # inaDataUpdate(): the INA219 over I2C
@@ -486,7 +494,9 @@ class Firmware:
         self._set_goals_steps(joints, goals, spd, acc)
 
     def _set_goals_steps(self, joints, goals, spd: float, acc: float) -> None:
-        joints = list(joints)
+        stuck = [JOINTS.index(name) for name in self.cfg.stuck]
+        pairs = [(j, g) for j, g in zip(joints, goals) if j not in stuck]
+        joints, goals = [j for j, _ in pairs], [g for _, g in pairs]
         s = float(max(0.0, min(spd, 65535.0)))
         a = float(max(0.0, min(acc, 255.0)))
         self.servos.command(joints, [float(g) for g in goals], [s] * len(joints), [a] * len(joints))

@@ -140,7 +140,8 @@ def _query(fw: Firmware, server: _Server, kind: str) -> Any:
         return {"now": fw.now, "torque": fw.servos.torque().tolist(), "info_print": fw.info_print,
                 "esp_now_mode": fw.esp_now_mode, "stop_flag": fw.stop_flag, "motion_count": fw.motion_count,
                 "boot_mission_aborted": fw.boot_mission_aborted, "rx_dropped": fw._rx_dropped,
-                "queue": len(fw._queue), "positions": fw.servos.positions().tolist(),
+                "queue": len(fw._queue), "positions": fw.servos.positions().tolist(), "move_spd": fw.move_spd,
+                "spd": [float(x) for x in getattr(fw.servos, "spd", [])],
                 "passes_ms": (np.array(fw.passes) * 1e3).tolist()[-2000:]}
     raise ValueError(kind)
 
@@ -161,6 +162,7 @@ class PtySimulator:
         self.process = process
         self.error: BaseException | None = None
         self._stopped = False
+        self._final: dict[str, Any] = {}  # process mode: what the child knew when it stopped
         if process:
             import multiprocessing as mp
 
@@ -205,8 +207,12 @@ class PtySimulator:
     def stop(self) -> None:
         if self._stopped:
             return
-        self._stopped = True
         if self.process:
+            try:
+                self._final = {k: self._ask(k) for k in ("recording", "executed", "lateness", "state")}
+            except (OSError, EOFError, BrokenPipeError):
+                self._final = {}
+            self._stopped = True
             try:
                 with self._lock:
                     self._conn.send(("stop",))
@@ -219,6 +225,7 @@ class PtySimulator:
                 self._proc.join(1.0)
             self._conn.close()
             return
+        self._stopped = True
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=2.0)
@@ -243,6 +250,8 @@ class PtySimulator:
         if not self.process:
             return _query(self.firmware, self._server, kind)
         if self._stopped:
+            if kind in self._final:
+                return self._final[kind]
             raise RuntimeError(f"the simulator has stopped; ask for {kind!r} before stop()")
         with self._lock:
             self._conn.send((kind,))

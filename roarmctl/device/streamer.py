@@ -164,6 +164,8 @@ class Streamer:
         self.skipped = {"late": 0, "behind": 0}
         self.hold_info: dict[str, Any] | None = None
         self.refused_lines: dict[int, str] = {}  # id(Received) -> reason, for the log
+        self._tick_of: dict[int, int] = {}  # id(first command sent for a tick) -> tick
+        self._asked_at: dict[int, float] = {}  # id(Reading) -> when its T:105 was sent
 
     def _schedule(self, traj) -> list[Tick]:
         return build_schedule(traj, self.robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale,
@@ -173,13 +175,16 @@ class Streamer:
     def _tcp(self, q: np.ndarray) -> np.ndarray:
         return self.robot.kin.fk(self.robot.full_q(q))[:3, 3]
 
-    def _judge(self, received) -> list[Reading]:
-        """Every T:1051 of ``received`` through the validator (raises FeedbackRefused on a run)."""
+    def _judge(self, received, asked: dict[int, float] | None = None) -> list[Reading]:
+        """Every T:1051 of ``received`` through the validator (raises FeedbackRefused on a run).
+        ``asked``: id(Received) -> when the T:105 it answers was sent (its servo reads are dated from that)."""
         out = []
         for r in received:
             if r.feedback is None:
                 continue
             reading = self.validator.check(r.feedback, r.t, r.line)
+            if reading is not None and asked and id(r) in asked:
+                self._asked_at[id(reading)] = asked[id(r)]
             if reading is None:
                 self.refused_lines[id(r)] = self.validator.refusals[-1].reason
                 continue
@@ -269,8 +274,10 @@ class Streamer:
             outcome, message, cause = "aborted", str(exc), "tracking"
             exc_out = DeviceError(message, "the arm holds where it was; check for a collision or a stalled joint")
         except FeedbackRefused as exc:
-            outcome, message = ("aborted" if self.sent_lateness else "failed"), f"{exc.message} {self._progress()}"
-            exc_out = DeviceError(message, exc.hint)
+            moving = bool(self.sent_lateness)
+            outcome, message = ("aborted" if moving else "failed"), f"{exc.message} {self._progress()}"
+            exc_out = DeviceError(message, (exc.hint or "") if moving else
+                                  "the arm did not move; check the servo power (12 V) and cables, then the log's refused frames")
         except DeviceError as exc:
             outcome, message = ("link_lost" if self.sent_lateness else "failed"), exc.message
             exc_out = DeviceError(exc.message, exc.hint)
@@ -298,12 +305,20 @@ class Streamer:
         here: the host's own lateness on the ticks of the last 0.25 s, plus the device's."""
         recent = [x for k, x in self.sent_lateness[-40:] if t_meas - 0.25 <= self.schedule[k].t <= t_meas + 0.02]
         late = max(recent, default=0.0)
-        return max(0.0, late) + (self.extra_lateness() if self.extra_lateness is not None else 0.0)
+        return max(0.0, late) + self._device_late()
+
+    def _device_late(self) -> float:
+        return self.extra_lateness() if self.extra_lateness is not None else 0.0
 
     def _track(self, reading: Reading) -> tuple[float, float] | None:
         """(TCP error against the plan at the frame's measurement time, the same with the plan
         allowed to be up to the measured lateness later), m; None outside the motion."""
         t_meas = reading.t - wire_seconds(reading.nbytes) - READ_BEFORE_PRINT - self.t0
+        asked = self._asked_at.pop(id(reading), None)
+        if asked is not None:  # read one round trip after the question, less the answer's wire time
+            info = getattr(self.link, "info", None)
+            rtt = info.rtt if info is not None else 0.03
+            t_meas = min(t_meas, asked + rtt - wire_seconds(reading.nbytes) - READ_BEFORE_PRINT / 2 - self.t0)
         if not 0.0 <= t_meas <= self.schedule[-1].t:
             return None
         s = self.cfg.speed_scale
@@ -342,12 +357,13 @@ class Streamer:
                 self.skipped["late"] += 1  # overdue and the next is due too: the next carries on
                 send = False
             elif k + 1 < n and (lines - confirmed > cfg.max_unconfirmed
-                                or (polls and now - polls[0][0] > rtt + cfg.behind_after)):
+                                or (polls and now - polls[0][0] > rtt + cfg.behind_after + self._device_late())):
                 self.skipped["behind"] += 1  # the firmware has not caught up: add nothing to its backlog
                 send = False
             if send:
                 cmds = tick.commands if (last_sent_k == k - 1 or last_wire is None) else catch_up(tick, last_wire, dt, self.wm)
                 t_sent = link.send(cmds[0])
+                self._tick_of[id(cmds[0])] = k
                 for extra in cmds[1:]:
                     link.send(extra)
                 lines += len(cmds)
@@ -357,10 +373,12 @@ class Streamer:
                     polls.append((link.send(protocol.feedback_request()), lines + 1))
                     lines += 1
             new = link.poll()
+            asked: dict[int, float] = {}
             for r in new:
                 if r.feedback is not None and polls:
-                    confirmed = polls.popleft()[1]
-            readings = self._judge(new)
+                    t_poll, confirmed = polls.popleft()
+                    asked[id(r)] = t_poll
+            readings = self._judge(new, asked)
             if any(r.feedback is not None for r in new):
                 last_fb_t = self.clock()
             elif self.clock() - last_fb_t > cfg.stale_after + self._lateness_window(self.clock() - self.t0):
@@ -502,7 +520,7 @@ class Streamer:
         """The execution log: every command sent and every line received, times in s after t0."""
         t0 = res.t0 if not math.isnan(res.t0) else (self.link.sent[0][0] if self.link.sent else 0.0)
         lateness = {k: x for k, x in self.sent_lateness}
-        sched_idx = {id(tk.cmd): k for k, tk in enumerate(self.schedule)}
+        sched_idx = self._tick_of
         sent = []
         for t, cmd in self.link.sent:
             entry: dict[str, Any] = {"t": round(t - t0, 6), "cmd": cmd}

@@ -34,10 +34,10 @@ def test_m2_plan_executes_on_the_m2_simulator(m2_traj, capsys):
 
     traj = load_trajectory(m2_traj)
     robot = load_robot("roarm_m2_s")
-    with PtySimulator(SimConfig(firmware="m2")) as sim:
+    with PtySimulator(SimConfig(firmware="m2"), process=True) as sim:
         rc = run_cli(["execute", str(m2_traj), "--port", sim.path, "--yes", "--json"])
         out = json.loads(capsys.readouterr().out)
-        received = [c for _, c in sim.firmware.received]
+        received = [c for _, c in sim.received()]
         _, rec, _ = sim.recording()
     assert rc == 0 and out["outcome"] == "completed"
     moves = [c for c in received if c.get("T") == 102]
@@ -53,9 +53,9 @@ def test_m2_plan_executes_on_the_m2_simulator(m2_traj, capsys):
 
 
 def test_m2_trajectory_is_refused_by_m3_firmware(m2_traj, capsys):
-    with PtySimulator(SimConfig(firmware="m3-0.84")) as sim:
+    with PtySimulator(SimConfig(firmware="m3-0.84"), process=True) as sim:
         rc = run_cli(["execute", str(m2_traj), "--port", sim.path, "--yes"])
-        moved = [c for _, c in sim.firmware.received if c.get("T") in (101, 102, 104)]
+        moved = [c for _, c in sim.received() if c.get("T") in (101, 102, 104)]
     err = capsys.readouterr().err
     assert rc == 4 and "RoArm-M3 firmware" in err and "for a RoArm-M2" in err and not moved
 

@@ -25,7 +25,7 @@ HOLDER = ("import os, sys, time\n"
 def test_execute_warns_with_the_holders_name(tmp_path):
     p = tmp_path / "s.traj.json"
     min_jerk([HOME, [0.2, 0.1, 1.7, 0.0, 0.0, 0.0]], [0.5]).save(p)
-    with PtySimulator(SimConfig()) as sim:
+    with PtySimulator(SimConfig(), process=True) as sim:
         assert port_holders(sim.path) == []  # the simulator holds the master side: it is the device
         holder = subprocess.Popen([sys.executable, "-c", HOLDER, sim.path], stdout=subprocess.PIPE, text=True)
         try:

@@ -15,7 +15,7 @@ COUNT = 2 * math.pi / 4096
 
 @pytest.fixture
 def arm():
-    with PtySimulator(SimConfig()) as sim:  # factory InfoPrint 2: the SDK copes with the stream
+    with PtySimulator(SimConfig(), process=True) as sim:  # factory InfoPrint 2: the SDK copes with the stream
         client = roarm_mod.roarm(roarm_type="roarm_m3", port=sim.path, baudrate=115200)
         try:
             yield client, sim
@@ -48,7 +48,7 @@ def test_sdk_joint_commands_move_the_simulated_arm(arm):
     time.sleep(0.5)
     assert client.joints_radian_get()[3] == pytest.approx(-0.2, abs=2 * COUNT)
     # the simulator saw the SDK's own (spaced) JSON and executed it
-    codes = [c["T"] for _, c in sim.firmware.received]
+    codes = [c["T"] for _, c in sim.received()]
     assert 102 in codes and 101 in codes and 605 in codes
 
 
@@ -67,14 +67,14 @@ def _settle(client, want, index, tol, timeout=4.0):
 def test_every_sdk_call_the_readme_lists(arm):
     """The SDK calls named in docs/guide.md, each against what the simulated servos did."""
     client, sim = arm
-    fw = sim.firmware
     client.echo_set(0)  # T:605
     client.led_ctrl(led=128)  # T:114: accepted, nothing moves
     client.dynamic_adaptation_set(mode=0, torques=[500] * 6)  # T:112: accepted, nothing moves
     # joints_angle_ctrl: T:122 in degrees; the SDK turns speed (steps/s) into deg/s, the firmware back
     client.joints_angle_ctrl(angles=[20, -10, 80, 15, -30, 40], speed=1200, acc=0)
     time.sleep(0.1)
-    assert fw.spd[0] == 1200 and fw.move_spd == 1200  # persistent, as the firmware's moveSpd
+    st = sim.state()
+    assert st["spd"][0] == 1200 and st["move_spd"] == 1200  # persistent, as the firmware's moveSpd
     got = _settle(client, [math.radians(v) for v in (20, -10, 80, 15, -30, 40)], range(4, 10), 2 * COUNT)
     assert client.joints_angle_get() == pytest.approx([20, -10, 80, 15, -30, 40], abs=math.degrees(2 * COUNT))
     # joint_angle_ctrl: T:121, one joint in degrees
@@ -97,13 +97,14 @@ def test_every_sdk_call_the_readme_lists(arm):
     # torque_set: T:210 off, the arm goes limp (the SDK then waits for feedback), on again
     client.torque_set(cmd=0)
     time.sleep(0.1)
-    assert not fw.torque
+    assert not any(sim.state()["torque"])
     client.torque_set(cmd=1)
     time.sleep(0.1)
-    assert fw.torque
+    assert all(sim.state()["torque"])
     # move_init: a T:102 to the SDK's home pose at speed 100
     client.move_init()
     time.sleep(0.1)
-    assert fw.spd[2] == 100 and fw.move_spd == 0  # a T:102 zeroes the shared moveSpd
-    codes = {c["T"] for _, c in fw.received}
+    st = sim.state()
+    assert st["spd"][2] == 100 and st["move_spd"] == 0  # a T:102 zeroes the shared moveSpd
+    codes = {c["T"] for _, c in sim.received()}
     assert {605, 114, 112, 122, 121, 101, 1041, 105, 210, 102} <= codes

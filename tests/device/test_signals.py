@@ -35,7 +35,7 @@ def tcp(q):
 
 
 def motion_commands(sim) -> int:
-    return sum(c.get("T") == 102 for _, c in sim.firmware.received)
+    return sum(c.get("T") == 102 for _, c in sim.received())
 
 
 def stop_mid_motion(tmp_path: Path, signals: list[tuple[int, float]]):
@@ -44,7 +44,7 @@ def stop_mid_motion(tmp_path: Path, signals: list[tuple[int, float]]):
     p = tmp_path / "t.traj.json"
     traj.save(p)
     log = tmp_path / "t.exec.json"
-    with PtySimulator(SimConfig()) as sim:
+    with PtySimulator(SimConfig(), process=True) as sim:
         proc = spawn(["execute", str(p), "--port", sim.path, "--yes"])
         deadline = time.monotonic() + 20
         while time.monotonic() < deadline and motion_commands(sim) < 40:
@@ -62,8 +62,9 @@ def stop_mid_motion(tmp_path: Path, signals: list[tuple[int, float]]):
 def assert_held(data, traj, rec, tmp_path):
     ts, q, torque, t_sig = rec
     assert torque.all()  # never torque off
-    hold = data["sent"][-1]["cmd"]
-    assert hold["T"] == 102 and hold["spd"] > 0
+    hold = [s["cmd"] for s in data["sent"] if s["cmd"]["T"] == 102][-1]
+    assert hold["spd"] > 0 and data["hold"]["kind"] == "path"
+    assert not [s for s in data["sent"] if s["cmd"]["T"] in (0, 210)]
     later = q[ts > ts[-1] - 0.3]
     assert np.ptp(later, axis=0).max() < 1e-6  # it stopped moving
     at_sig = q[np.searchsorted(ts, t_sig)]
@@ -102,10 +103,10 @@ def test_ctrl_c_then_sigterm_keeps_the_first_reason(tmp_path):
 def test_failed_handshake_writes_a_log(tmp_path):
     p = tmp_path / "s.traj.json"
     min_jerk([HOME, [0.2, 0.1, 1.7, 0.0, 0.0, 0.0]], [0.5]).save(p)
-    with PtySimulator(SimConfig(firmware="m2")) as sim:
+    with PtySimulator(SimConfig(firmware="m2"), process=True) as sim:
         proc = spawn(["execute", str(p), "--port", sim.path, "--yes"])
         _, err = proc.communicate(timeout=20)
-        moved = [c for _, c in sim.firmware.received if c.get("T") in (101, 102, 104)]
+        moved = [c for _, c in sim.received() if c.get("T") in (101, 102, 104)]
     assert proc.returncode == 4 and not moved, err
     data = json.loads((tmp_path / "s.exec.json").read_text())
     assert data["summary"]["outcome"] == "failed" and "M2" in data["summary"]["message"]

@@ -8,7 +8,7 @@ import pytest
 
 from devtraj import HOME, min_jerk
 from roarmctl.device.link import Received
-from roarmctl.device.protocol import WireMap, parse_feedback
+from roarmctl.device.protocol import WireMap, parse_feedback_report
 from roarmctl.device.protocol import encode
 from roarmctl.device.simulator import Firmware, SimConfig
 from roarmctl.device.streamer import StreamConfig, Streamer, build_schedule
@@ -54,11 +54,11 @@ class FakeLink:
         out = []
         for raw in self.fw.pop_output(self.clock()).split(b"\r\n"):
             if raw:
-                out.append(Received(self.clock(), raw.decode(), parse_feedback(raw)))
+                out.append(Received(self.clock(), raw.decode(), parse_feedback_report(raw)))
         self.received += out
         return out
 
-    def request_feedback(self, timeout: float = 0.3):
+    def request(self, timeout: float = 0.3):
         from roarmctl.device.protocol import feedback_request
 
         self.send(feedback_request())
@@ -67,7 +67,7 @@ class FakeLink:
             self.clock.now += 0.005
             for r in self.poll():
                 if r.feedback is not None:
-                    return r.feedback
+                    return r
         return None
 
 
@@ -96,7 +96,7 @@ def test_speed_scale_doubles_times_and_halves_speeds():
     assert np.allclose(slow[-1].target, fast[-1].target)
 
 
-def test_interrupt_at_tick_k_sends_a_hold_at_the_measured_pose_and_never_torque_off():
+def test_interrupt_at_tick_k_holds_on_the_planned_path_never_beyond_the_last_set_point_and_never_torque_off():
     clock = FakeClock()
     link = FakeLink(clock)
 
@@ -104,18 +104,27 @@ def test_interrupt_at_tick_k_sends_a_hold_at_the_measured_pose_and_never_torque_
         if k == 20:
             raise KeyboardInterrupt
 
-    st = Streamer(link, ROBOT, traj(), StreamConfig(rate=50), clock=clock, sleep=clock.sleep, hook=hook)
+    t = traj()
+    st = Streamer(link, ROBOT, t, StreamConfig(rate=50), clock=clock, sleep=clock.sleep, hook=hook)
     with pytest.raises(Interrupted) as info:
         st.run()
     res = info.value.result
     assert res.outcome == "interrupted" and res.n_sent == 20
-    last = link.sent[-1][1]
-    assert last["T"] == 102 and last["spd"] > 0
-    assert not [c for _, c in link.sent if c["T"] in (0, 210)]
-    held = WireMap(ROBOT).from_wire({k: last[k] for k in ("base", "shoulder", "elbow", "wrist", "roll", "hand")})
-    assert np.allclose(held[:5], st.measured[:5], atol=1e-4)  # the arm joints hold where measured
-    assert last["hand"] == st.schedule[19].cmd["hand"]  # the gripper keeps its last command (keeps a grip)
+    hold = [c for _, c in link.sent if c["T"] == 102][-1]
+    assert hold is not st.schedule[19].cmd and hold["spd"] > 0 and hold["acc"] == 0
+    assert not [c for _, c in link.sent if c["T"] in (0, 210)]  # never torque off (0.84: T:0 is torque off)
+    held = WireMap(ROBOT).from_wire({k: hold[k] for k in ("base", "shoulder", "elbow", "wrist", "roll", "hand")})
+    # on the planned path (every joint, the gripper included), at a time no later than the last set-point's
+    from roarmctl.device.streamer import sample
+    taus = np.linspace(0.0, t.duration, 20001)
+    path = sample(t, taus)
+    i = int(np.argmin(np.max(np.abs(path - held), axis=1)))
+    assert np.max(np.abs(path[i] - held)) < 2e-4
+    last_target = st.schedule[19].t + 0.02 + 0.0124  # the last tick targets one interval + latency ahead
+    assert taus[i] <= last_target + 1e-3
+    assert taus[i] >= st.schedule[19].t - 0.02  # and not behind where the arm was sent
     assert res.log["summary"]["outcome"] == "interrupted" and len(res.log["sent"]) == len(link.sent)
+    assert res.log["hold"]["kind"] == "path"
 
 
 def test_stalled_arm_aborts_on_tracking_error():

@@ -38,9 +38,9 @@ def three_points() -> dict:
 def test_limit_breaking_file_sends_nothing_to_the_simulator(tmp_path, capsys):
     p = tmp_path / "bad.traj.json"
     p.write_text(json.dumps(three_points()))
-    with PtySimulator(SimConfig()) as sim:
+    with PtySimulator(SimConfig(), process=True) as sim:
         rc = run_cli(["execute", str(p), "--port", sim.path, "--yes"])
-        received = list(sim.firmware.received)
+        received = sim.received()
     err = capsys.readouterr().err
     assert rc == 2 and err.count("\n") == 1
     # point index, joint, value and limit

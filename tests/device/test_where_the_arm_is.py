@@ -67,7 +67,7 @@ def test_start_current_after_the_arm_was_moved_by_hand(tmp_path, capsys):
     plan.write_text(plan_text(start="current"))
     q_hand = R.full_q(np.array([-0.6, 0.3, 1.3, 0.4, 0.2]))
     q_hand[GI] = 0.7
-    with PtySimulator(SimConfig()) as sim:
+    with PtySimulator(SimConfig(), process=True) as sim:
         hand_move(sim, q_hand)
         out = tmp_path / "here.traj.json"
         rc = run_cli(["plan", str(plan), "--port", sim.path, "-o", str(out), "--json"])
@@ -87,7 +87,7 @@ def test_the_demo_trajectory_runs_twice_in_a_row(tmp_path, capsys):
     assert run_cli(["plan", str(ROOT / "plans" / "pick_place.yaml"), "-o", str(out), "--json"]) == 0
     capsys.readouterr()
     traj = load_trajectory(out)
-    with PtySimulator(SimConfig()) as sim:
+    with PtySimulator(SimConfig(), process=True) as sim:
         for run in range(2):
             rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--json"])
             res = json.loads(capsys.readouterr().out)
@@ -98,7 +98,7 @@ def test_the_demo_trajectory_runs_twice_in_a_row(tmp_path, capsys):
             at = measured(sim)
             assert at[ARM] == pytest.approx(traj.positions[-1][ARM], abs=0.01)
             assert abs(at[GI] - traj.positions[-1][GI]) < 0.35  # the streamer's gripper start tolerance
-        grips = [c for _, c in sim.firmware.received if c.get("T") == 101 and c.get("joint") == 6]
+        grips = [c for _, c in sim.received() if c.get("T") == 101 and c.get("joint") == 6]
         assert grips  # the gripper really moved in the runs
 
 
@@ -110,7 +110,7 @@ def test_only_the_gripper_differs_it_is_opened_or_closed_first(tmp_path, capsys)
     capsys.readouterr()
     traj = load_trajectory(out)
     assert abs(traj.positions[-1][GI] - traj.positions[0][GI]) > 1.0
-    with PtySimulator(SimConfig()) as sim:
+    with PtySimulator(SimConfig(), process=True) as sim:
         assert run_cli(["execute", str(out), "--port", sim.path, "--yes", "--json"]) == 0
         capsys.readouterr()
         rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--json"])
@@ -138,9 +138,9 @@ def test_move_to_start_goes_around_an_obstacle(tmp_path, capsys):
     q_away = solve_ik(R, [0.3 * math.cos(1.2), 0.3 * math.sin(1.2), 0.06], pitch=math.pi / 2)[0]
     straight = np.linspace(q_away, traj.positions[0], 200)
     assert strict.first_invalid(straight[:, ARM]) is not None
-    with PtySimulator(SimConfig()) as sim:
+    with PtySimulator(SimConfig(), process=True) as sim:
         hand_move(sim, q_away)
-        t_start = sim.firmware.now
+        t_start = sim.state()["now"]
         rc = run_cli(["execute", str(out), "--port", sim.path, "--yes"])
         assert rc == 3 and "--move-to-start" in capsys.readouterr().err
         rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--move-to-start", "--json"])
@@ -153,7 +153,7 @@ def test_move_to_start_goes_around_an_obstacle(tmp_path, capsys):
     assert arrived > 100  # it did travel from the far side to the start
     # what the servos really did on the way to the start never touched the post (or the table)
     assert strict.first_invalid(moving[:arrived:2, :][:, ARM]) is None
-    assert not any(c.get("spd") == 300 and c.get("acc") == 10 for _, c in sim.firmware.received)  # no bare T:102
+    assert not any(c.get("spd") == 300 and c.get("acc") == 10 for _, c in sim.received())  # no bare T:102
 
 
 def test_from_current_replans_the_first_free_motion(tmp_path, capsys):
@@ -162,7 +162,7 @@ def test_from_current_replans_the_first_free_motion(tmp_path, capsys):
     capsys.readouterr()
     traj = load_trajectory(out)
     q_away = R.full_q(np.array([0.4, 0.1, 1.4, 0.2, 0.0]))
-    with PtySimulator(SimConfig()) as sim:
+    with PtySimulator(SimConfig(), process=True) as sim:
         hand_move(sim, q_away)
         rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--from-current", "--json"])
         res = json.loads(capsys.readouterr().out)
@@ -184,7 +184,7 @@ def test_from_current_without_the_plan_file_replaces_the_first_free_motion(tmp_p
     traj = load_trajectory(out)
     free = next(s for s in traj.segments if s.kind == "free")
     q_away = R.full_q(np.array([-0.5, 0.1, 1.4, 0.2, 0.0]))
-    with PtySimulator(SimConfig()) as sim:
+    with PtySimulator(SimConfig(), process=True) as sim:
         hand_move(sim, q_away)
         rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--from-current", "--json"])
         res = json.loads(capsys.readouterr().out)

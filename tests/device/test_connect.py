@@ -1,0 +1,137 @@
+"""Connecting like the vendor: nothing sent during the firmware's start-up, feedback quieted and the
+quiet confirmed, ESP-NOW follower mode left, the build told apart and shown, torque and supply
+checked where the build reports them. The simulated firmware is the witness."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from devtraj import HOME, min_jerk
+from roarmctl.cli import run as run_cli
+from roarmctl.device.link import Link
+from roarmctl.device.simulator import PtySimulator, SimConfig
+
+MOTION = (101, 102, 104, 1041, 121, 122)
+
+
+@pytest.fixture
+def short(tmp_path) -> Path:
+    p = tmp_path / "s.traj.json"
+    min_jerk([HOME, [0.2, 0.1, 1.7, 0.0, 0.0, 0.0]], [0.5]).save(p)
+    return p
+
+
+def test_a_starting_arm_gets_no_line_before_its_setup_ends_and_its_boot_mission_runs():
+    mission = ('{"T":114,"led":64}',)
+    cfg = SimConfig(boot=True, time_factor=0.5, boot_mission=mission)
+    with PtySimulator(cfg, process=True) as sim:
+        link = Link(sim.path).open()
+        t_open = time.monotonic()
+        info = link.connect()
+        st = sim.state()
+        first = min(t for t, _, _ in sim.executed() if _ is not None) if sim.executed() else None
+        link.close()
+    assert info.booted and info.streamed and info.firmware == "m3-0.84"
+    assert st["boot_mission_aborted"] is False  # the mission ran: nothing was waiting in the buffer
+    executed = [c for _, _, c in sim.executed()]
+    assert executed[0] == json.loads(mission[0])  # the boot mission's own line came first
+    ours = [t for t, _, c in sim.executed() if c.get("T") in (605, 105, 301)]
+    # the first of our lines reached the UART after setup had ended (about 3.4 s at time factor 0.5)
+    assert ours and min(ours) - t_open > 3.0, min(ours) - t_open
+    assert first is not None
+
+
+def test_input_during_setup_would_abort_the_boot_mission():
+    """What the waiting protects: a line sent during setup() aborts the boot mission (A:8-15)."""
+    import serial
+
+    cfg = SimConfig(boot=True, time_factor=0.5, boot_mission=('{"T":114,"led":64}',))
+    with PtySimulator(cfg, process=True) as sim:
+        with serial.Serial(sim.path, 115200, timeout=0.1) as s:
+            time.sleep(0.3)
+            s.write(b'{"T":105}\n')
+            time.sleep(4.0)
+        st = sim.state()
+    assert st["boot_mission_aborted"] is True
+
+
+def test_quiet_confirmed_esp_now_left_build_measured_and_feedback_restored():
+    with PtySimulator(SimConfig(), process=True) as sim:
+        link = Link(sim.path).open()
+        info = link.connect()
+        during = sim.state()
+        time.sleep(0.2)
+        frames = sum(r.feedback is not None for r in link.read_for(0.2))
+        link.close()
+        time.sleep(0.1)
+        after = sim.state()
+    assert info.streamed and during["info_print"] == 0 and frames == 0  # quiet, and quiet it stayed
+    assert during["esp_now_mode"] == 0
+    assert after["info_print"] == 2  # the firmware got its factory feedback stream back
+    assert not info.queued and info.line_time < 0.002
+    # the round trip: a T:105 in, one loop pass, six servo reads, a ~230-byte line out (~20 ms of wire)
+    assert 0.02 < info.rtt < 0.06
+    assert info.voltage is None and "reports neither torque nor supply voltage" in info.describe()
+
+
+def test_the_newer_build_is_told_apart_by_its_answers_and_its_pace():
+    with PtySimulator(SimConfig(firmware="m3-2026"), process=True) as sim:
+        link = Link(sim.path).open()
+        info = link.connect()
+        passes = np.median(sim.state()["passes_ms"]) / 1e3
+        link.close()
+    assert info.firmware == "m3-2026" and info.queued
+    assert info.line_time == pytest.approx(passes, rel=0.5)  # one command per loop pass
+    assert info.voltage == pytest.approx(12.0) and set(info.torque.values()) == {1}
+    assert "20260701 build" in info.describe()
+
+
+def test_the_display_and_the_log_name_the_build(short, capsys, monkeypatch):
+    import io
+
+    from rich.console import Console
+
+    from roarmctl.cli import common
+
+    screen = io.StringIO()
+    terminal = Console(file=screen, force_terminal=True, width=200)
+    monkeypatch.setattr(common, "console", lambda stderr=False: terminal if stderr else Console(file=io.StringIO()))
+    with PtySimulator(SimConfig(firmware="m3-2026"), process=True) as sim:
+        rc = run_cli(["execute", str(short), "--port", sim.path, "--yes"])
+    shown = screen.getvalue()
+    assert rc == 0 and "firmware: RoArm-M3 20260701 build" in shown and "link budget:" in shown
+    log = json.loads(short.with_name("s.exec.json").read_text())
+    assert log["device"]["firmware"] == "m3-2026" and log["device"]["queued"] is True
+
+
+def test_a_leader_arm_cannot_drive_this_one_once_connected():
+    with PtySimulator(SimConfig(esp_now_leader=True), process=True) as sim:
+        time.sleep(0.5)
+        before = np.array(sim.state()["positions"])
+        link = Link(sim.path).open()
+        link.connect()
+        # put the arm elsewhere; a follower would be dragged back to the leader's pose every 50 ms
+        link.send({"T": 102, "base": -0.3, "shoulder": 0, "elbow": 1.5708, "wrist": 0, "roll": 0, "hand": 3.1416,
+                   "spd": 0, "acc": 0})
+        time.sleep(0.6)
+        after = np.array(sim.state()["positions"])
+        link.close()
+    leader_base = 2047 - round(0.6 / (2 * np.pi) * 4096)
+    assert before[0] == pytest.approx(leader_base, abs=1)  # it did follow the leader before we came
+    assert after[0] == pytest.approx(2047 + round(0.3 / (2 * np.pi) * 4096), abs=1)  # and not after
+
+
+@pytest.mark.parametrize("fault,words", [({"torque_off": True}, "torque is off on base"),
+                                         ({"voltage": 5.2}, "supply reads 5.20 V"),
+                                         ({"unpowered": True}, "supply reads 0.00 V")])
+def test_torque_off_or_supply_out_of_range_is_refused_before_any_motion(short, capsys, fault, words):
+    with PtySimulator(SimConfig(firmware="m3-2026", **fault), process=True) as sim:
+        rc = run_cli(["execute", str(short), "--port", sim.path, "--yes"])
+        moved = [c for _, c in sim.received() if c.get("T") in MOTION]
+    err = capsys.readouterr().err
+    assert rc == 4 and words in err and err.count("\n") == 1 and not moved
