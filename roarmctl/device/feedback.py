@@ -26,8 +26,9 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -48,7 +49,7 @@ TORQUE_KEYS = {"base": "torswitchB", "shoulder": "torswitchS", "elbow": "torswit
 class FeedbackRefused(DeviceError):
     """Too many refused frames in a row (exit 4): the arm must hold; ``refusals`` are the run."""
 
-    def __init__(self, message: str, hint: str | None = None, refusals: list["Refusal"] | None = None) -> None:
+    def __init__(self, message: str, hint: str | None = None, refusals: list[Refusal] | None = None) -> None:
         super().__init__(message, hint)
         self.refusals = refusals or []
 

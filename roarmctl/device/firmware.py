@@ -55,13 +55,21 @@ import math
 import random
 import threading
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from roarmctl.device.fwmath import (INIT_RAD, command_to_goal, deg_register, firmware_fk, firmware_ik,
-                                    position_to_rad, urdf_from_firmware)
+from roarmctl.device.fwmath import (
+    INIT_RAD,
+    command_to_goal,
+    deg_register,
+    firmware_fk,
+    firmware_ik,
+    position_to_rad,
+    urdf_from_firmware,
+)
 from roarmctl.device.protocol import BYTES_PER_SECOND, MIDDLE
 from roarmctl.device.servos import JOINTS, ST3235_MAX_SPEED, KinematicServos, ServoModel
 
@@ -206,6 +214,7 @@ class Firmware:
         self._rx_free = start + len(data) * dt
 
     def muted(self) -> bool:
+        """Whether the mute fault has silenced the output (after ``mute_after`` motion commands)."""
         return self.cfg.mute_after is not None and self.motion_count >= self.cfg.mute_after
 
     def println(self, text: str, t: float) -> float:
@@ -277,7 +286,7 @@ class Firmware:
         """Lines complete by ``s``. Bytes nobody read (setup, a blocking command, a slow pass) wait
         in the receive buffer; what does not fit is lost (the newest bytes). [fw26] the serial task
         then queues each line (or flushes the queue)."""
-        waiting, kept = 0, deque()
+        waiting, kept = 0, deque[tuple[float, bytes]]()
         while self._rx_lines and self._rx_lines[0][0] <= s:
             t_line, line = self._rx_lines.popleft()
             waiting += len(line) + 1
@@ -549,7 +558,7 @@ class Firmware:
             self.println(text, t0)
         t = t0 + 1.7 * k
         self.println("Bus servos status check: failed." if self.cfg.unpowered else "All bus servos status checked.", t)
-        events: list[tuple[float, Callable[[], None]]] = []
+        events: list[tuple[float, Callable[[], object]]] = []
         moves = t + 0.05 * k
         events.append((moves, lambda: self._set_goals_steps(range(6), (MIDDLE,) * 6, 600, 20)))
         t_moved = moves + 2.2 * k + 1.5 * k  # waitMove2Goal x2, delay(1200), delay(1000)

@@ -15,8 +15,9 @@ import errno
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 from roarmctl.device import protocol
 from roarmctl.device.protocol import Feedback, LineBuffer, encode, parse_feedback_report, wire_seconds
@@ -69,6 +70,7 @@ class DeviceInfo:
 
     @property
     def build(self) -> str:
+        """The build's name as Waveshare ships it."""
         return BUILD_NAMES.get(self.firmware, self.firmware)
 
     def describe(self) -> str:
@@ -80,6 +82,7 @@ class DeviceInfo:
         return f"{self.build}: round trip {self.rtt * 1e3:.0f} ms, {pace}{extra}"
 
     def as_dict(self) -> dict[str, Any]:
+        """The facts as a JSON-ready dict (the execution log's ``device``)."""
         return {"firmware": self.firmware, "build": self.build, "rtt_s": round(self.rtt, 5),
                 "line_time_s": round(self.line_time, 5), "queued": self.queued, "streamed_unasked": self.streamed,
                 "was_booting": self.booted, "voltage_v": self.voltage, "torque": self.torque, "sent": self.sent}
@@ -110,7 +113,7 @@ class Link:
         self._restore_info_print: int | None = None
 
     # ------------------------------------------------------------------ open
-    def open(self) -> "Link":
+    def open(self) -> Link:
         """Open the port as Waveshare's roarm-sdk does (roarm_sdk/roarm.py: ``rts = False`` set
         before ``open()``, DTR left asserted), exclusive.
 
@@ -174,7 +177,7 @@ class Link:
             except Exception:  # noqa: BLE001 - closing a dead port must not mask the real error
                 pass
 
-    def __enter__(self) -> "Link":
+    def __enter__(self) -> Link:
         return self.open()
 
     def __exit__(self, *exc) -> None:
@@ -237,6 +240,7 @@ class Link:
         return out
 
     def discard_input(self) -> None:
+        """Drop whatever the device sent that has not been read yet."""
         try:
             self.ser.reset_input_buffer()
         except Exception:  # noqa: BLE001
@@ -315,6 +319,7 @@ class Link:
         sent.append("T:105 x3, T:605 x6 + T:105 (timing)")
         last = self._probe()
         fb = last.feedback
+        assert fb is not None  # _probe returns a T:1051 line
         self._check_model(fb)
         queued = fb.firmware == "m3-2026" or line_time > 0.002
         voltage = torque = None

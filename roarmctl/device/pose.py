@@ -38,7 +38,7 @@ def read_configuration(port: str, robot) -> tuple[np.ndarray, Feedback]:
     that is refused (the message names the joint and the value); the port is always closed.
     """
     link = Link(port)
-    link.expect = WireMap(robot).model  # the firmware the description's wire fields speak (M3 or M2)
+    link.expect = WireMap(robot).model or "m3"  # the firmware the description's wire fields speak (M3 or M2)
     link.require_torque = False
     try:
         link.open()

@@ -112,10 +112,12 @@ class Tick:
 
     @property
     def commands(self) -> list[dict[str, Any]]:
+        """The lines this tick sends, in order."""
         return [self.cmd, *self.extra]
 
 
 def strategy_rate(strategy: str | Strategy, rate: float) -> float:
+    """The tick rate (Hz) a stream of ``strategy`` runs at when ``rate`` is asked for."""
     strat = STRATEGIES[strategy] if isinstance(strategy, str) else strategy
     return strat.rate if strat.rate is not None else rate
 
@@ -238,18 +240,22 @@ class LinkBudget:
 
     @property
     def up_share(self) -> float:
+        """Share of the 11520 B/s host -> arm direction."""
         return self.up_bytes / protocol.BYTES_PER_SECOND
 
     @property
     def down_share(self) -> float:
+        """Share of the 11520 B/s arm -> host direction."""
         return self.down_bytes / protocol.BYTES_PER_SECOND
 
     def describe(self) -> str:
+        """One line for the display."""
         fw = f", {self.firmware_share:.0%} of the firmware's line rate" if self.firmware_share is not None else ""
         return (f"link budget: {self.lines:.0f} lines/s, {self.up_bytes / 1000:.1f} kB/s = {self.up_share:.0%} of "
                 f"11.5 kB/s to the arm, {self.down_bytes / 1000:.1f} kB/s = {self.down_share:.0%} back{fw}")
 
     def as_dict(self) -> dict[str, Any]:
+        """The budget as a JSON-ready dict (the execution log's ``link_budget``)."""
         return {"lines_per_s": round(self.lines, 2), "up_bytes_per_s": round(self.up_bytes, 1),
                 "up_share": round(self.up_share, 4), "down_bytes_per_s": round(self.down_bytes, 1),
                 "down_share": round(self.down_share, 4), "firmware_share": None if self.firmware_share is None

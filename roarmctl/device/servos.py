@@ -21,7 +21,8 @@ SCServo examples: "A=50 (50*100 steps/s^2)"), load in the firmware's ``ReadLoad`
 from __future__ import annotations
 
 import math
-from typing import Protocol, Sequence, runtime_checkable
+from collections.abc import Sequence
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -96,6 +97,7 @@ class KinematicServos:
 
     # ------------------------------------------------------------------ ServoModel
     def command(self, joints, goal, spd, acc) -> None:
+        """See ``ServoModel.command``."""
         for j, g, s, a in zip(joints, goal, spd, acc):
             self._goal[j] = float(g)
             self._spd[j] = float(s)
@@ -103,11 +105,13 @@ class KinematicServos:
             self._on[j] = True
 
     def set_torque(self, on: bool, joints=None) -> None:
+        """See ``ServoModel.set_torque``."""
         for j in (range(N_JOINTS) if joints is None else joints):
             self._on[j] = bool(on)
             self._vel[j] = 0.0
 
     def advance(self, t: float) -> None:
+        """See ``ServoModel.advance``: each servo's trapezoid, solved in closed form."""
         dt = t - self.t
         if dt <= 0:
             return
@@ -122,12 +126,15 @@ class KinematicServos:
         self.t = float(t)
 
     def positions(self) -> np.ndarray:
+        """See ``ServoModel.positions``."""
         return np.array(self._pos)
 
     def torque(self) -> np.ndarray:
+        """See ``ServoModel.torque``."""
         return np.array(self._on)
 
     def loads(self) -> np.ndarray:
+        """No load on ideal servos: zeros."""
         return np.zeros(N_JOINTS)
 
 

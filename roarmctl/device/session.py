@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import contextlib
 import warnings
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, ContextManager
+from typing import Any
 
 from roarmctl.errors import InputError, RoarmError, signal_name
 
@@ -33,7 +35,7 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
                   log_path: str | Path | None = None, confirm: Callable[[str], bool],
                   on_status: Callable | None = None, on_start: Callable | None = None,
                   on_note: Callable[[str], None] | None = None, on_end: Callable[[], None] | None = None,
-                  shield: Callable[[], ContextManager] = contextlib.nullcontext,
+                  shield: Callable[[], AbstractContextManager] = contextlib.nullcontext,
                   on_log_error: Callable[[Path, Exception], None] | None = None,
                   on_info: Callable[[str], None] | None = None) -> Execution:
     """Stream ``traj`` (a validated ``Trajectory`` for ``robot``) with ``cfg`` (``StreamConfig``).
@@ -71,7 +73,7 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
         return replan_start(traj, robot, q, mode)
 
     link = Link(str(port))
-    link.expect = model
+    link.expect = model or "m3"
     # Built before the port opens (the schedule is pure), so that every way out has a log.
     streamer = Streamer(link, robot, traj, cfg, on_status=on_status, confirm=confirm, on_start=on_start,
                         replan=replan, on_note=on_note,

@@ -22,18 +22,41 @@ import sys
 import threading
 import time
 from collections import deque
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from roarmctl.device.firmware import Bogus, Firmware, SimConfig
-from roarmctl.device.fwmath import (INIT_RAD, command_to_goal, deg_register, firmware_fk, firmware_ik,
-                                    position_to_rad, steps, urdf_from_firmware)
+from roarmctl.device.fwmath import (
+    INIT_RAD,
+    command_to_goal,
+    deg_register,
+    firmware_fk,
+    firmware_ik,
+    position_to_rad,
+    steps,
+    urdf_from_firmware,
+)
 from roarmctl.device.servos import JOINTS, KinematicServos, ServoModel
 
-__all__ = ["PtySimulator", "Firmware", "SimConfig", "Bogus", "ServoModel", "KinematicServos", "JOINTS", "INIT_RAD",
-           "command_to_goal", "deg_register", "firmware_fk", "firmware_ik", "position_to_rad", "steps",
-           "urdf_from_firmware"]
+__all__ = [
+    "INIT_RAD",
+    "JOINTS",
+    "Bogus",
+    "Firmware",
+    "KinematicServos",
+    "PtySimulator",
+    "ServoModel",
+    "SimConfig",
+    "command_to_goal",
+    "deg_register",
+    "firmware_fk",
+    "firmware_ik",
+    "position_to_rad",
+    "steps",
+    "urdf_from_firmware",
+]
 
 LATE = 0.002  # a wake-up this much after the firmware's next event counts as lateness (s)
 RECENT = 0.25  # s over which recent_lateness() takes its maximum
@@ -166,7 +189,7 @@ class PtySimulator:
         if process:
             import multiprocessing as mp
 
-            ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
+            ctx: Any = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
             self._conn, child_conn = ctx.Pipe()
             self._recent = ctx.Value("d", 0.0, lock=False)
             self._proc = ctx.Process(target=_child, args=(self.config, servos, child_conn, self._recent),
@@ -181,7 +204,8 @@ class PtySimulator:
             self._thread = threading.Thread(target=self._run, name="roarm-sim", daemon=True)
 
     # ------------------------------------------------------------------ life
-    def start(self) -> "PtySimulator":
+    def start(self) -> PtySimulator:
+        """Start serving (thread or child process); return self."""
         if self.process:
             self._proc.start()
             if not self._conn.poll(10.0):
@@ -192,19 +216,22 @@ class PtySimulator:
             self._thread.start()
         return self
 
-    def __enter__(self) -> "PtySimulator":
+    def __enter__(self) -> PtySimulator:
         return self.start()
 
     def __exit__(self, *exc) -> None:
         self.stop()
 
     def alive(self) -> bool:
+        """Whether it still serves."""
         return self._proc.is_alive() if self.process else self._thread.is_alive()
 
     def join(self, timeout: float) -> None:
+        """Wait up to ``timeout`` s for it to end."""
         (self._proc if self.process else self._thread).join(timeout)
 
     def stop(self) -> None:
+        """Stop serving and close the pseudo-terminal (process mode keeps what the child knew for the accessors)."""
         if self._stopped:
             return
         if self.process:

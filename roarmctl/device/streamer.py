@@ -26,22 +26,50 @@ import math
 import signal
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from roarmctl.device import protocol
 from roarmctl.device.feedback import FeedbackRefused, FeedbackValidator, Reading
 from roarmctl.device.protocol import WireMap, wire_seconds
-from roarmctl.device.schedule import (DEFAULT_RATE, DEFAULT_STRATEGY, FEEDBACK_RATE, MAX_LINK_RATE, STRATEGIES,
-                                      Strategy, Tick, build_schedule, catch_up, default_latency, link_budget,
-                                      sample, strategy_rate)
+from roarmctl.device.schedule import (
+    DEFAULT_RATE,
+    DEFAULT_STRATEGY,
+    FEEDBACK_RATE,
+    MAX_LINK_RATE,
+    STRATEGIES,
+    Strategy,
+    Tick,
+    build_schedule,
+    catch_up,
+    default_latency,
+    link_budget,
+    sample,
+    strategy_rate,
+)
 from roarmctl.errors import DeviceError, InfeasibleError, Interrupted, signal_name
 
-__all__ = ["Streamer", "StreamConfig", "Status", "Result", "write_log", "build_schedule", "sample", "STRATEGIES",
-           "Strategy", "Tick", "default_latency", "MAX_LINK_RATE", "DEFAULT_RATE", "FEEDBACK_RATE", "HOLD_SPD"]
+__all__ = [
+    "DEFAULT_RATE",
+    "FEEDBACK_RATE",
+    "HOLD_SPD",
+    "MAX_LINK_RATE",
+    "STRATEGIES",
+    "Result",
+    "Status",
+    "Strategy",
+    "StreamConfig",
+    "Streamer",
+    "Tick",
+    "build_schedule",
+    "default_latency",
+    "sample",
+    "write_log",
+]
 
 HOLD_SPD = 600  # the firmware's own ARM_SERVO_INIT_SPEED, steps/s: the least speed of a hold
 HOLD_MODES = ("auto", "path", "setpoint", "measured")
@@ -86,6 +114,8 @@ class Status:
 
 @dataclass
 class Result:
+    """How a run ended (``outcome``, ``message``), what was sent, its lateness and tracking, and its log."""
+
     outcome: str  # "completed" | "interrupted" | "terminated" | "aborted" | "link_lost" | "failed"
     message: str
     n_sent: int
@@ -96,6 +126,7 @@ class Result:
     log: dict[str, Any] = field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
+        """The log's ``summary``: outcome, counts, lateness p50/p99 (ms), tracking RMS/max (mm) and what connecting and pacing learned."""
         lat = self.lateness * 1e3
         trk = self.tracking * 1e3
         pct = lambda a, p: float(np.percentile(a, p)) if len(a) else None  # noqa: E731
@@ -248,7 +279,8 @@ class Streamer:
         Any ``KeyboardInterrupt`` (Ctrl-C, or SIGTERM/SIGHUP as ``StopRequested``) from the start
         check on, including a move to the start, makes the arm hold before ``Interrupted`` is raised.
         """
-        outcome, message, exc_out, cause = "completed", "", None, "stop"
+        outcome, message, cause = "completed", "", "stop"
+        exc_out: Exception | None = None
         gc_was_enabled = gc.isenabled()
         try:
             self._check_start()
@@ -507,6 +539,7 @@ class Streamer:
         return out
 
     def result(self, outcome: str, message: str) -> Result:
+        """The run's Result with its log, as it stands now."""
         lat = np.array([x for _, x in self.sent_lateness])
         trk = np.array([e for _, e in self.tracking])
         final = None
@@ -558,6 +591,7 @@ class Streamer:
 
 
 def write_log(path: str | Path, log: dict[str, Any]) -> Path:
+    """Write the execution log atomically (JSON)."""
     from roarmctl.fileio import atomic_write_json
 
     return atomic_write_json(path, log, indent=None)
