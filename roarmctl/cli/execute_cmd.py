@@ -3,8 +3,10 @@
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -159,7 +161,7 @@ class _Display:
         self.console = console
         self.dof = dof
         self.robot = robot
-        self.live = None
+        self.live: Any = None
         self._n = 0
 
     def start(self) -> None:
@@ -244,7 +246,7 @@ def sim_device(
 
         kind = WireMap(load_robot(model, trust_sidecar=True)).model
         if firmware is not None and (firmware == "m2") != (kind == "m2"):
-            raise InputError(f"--firmware {firmware} does not match --model {model} (a RoArm-{kind.upper()})",
+            raise InputError(f"--firmware {firmware} does not match --model {model} (a RoArm-{(kind or 'm3').upper()})",
                              "give one of them")
         firmware = firmware or ("m2" if kind == "m2" else "m3-0.84")
     firmware = firmware or "m3-0.84"
@@ -288,13 +290,12 @@ def sim_device(
     finally:
         with signals.shielded():
             simulator.stop()
-            if made_link and link.is_symlink():
+            if made_link and link is not None and link.is_symlink():
                 link.unlink()
 
 
 def _joint(option: str, name: str) -> str:
     from roarmctl.device.servos import JOINTS
-    from roarmctl.errors import InputError
 
     if name not in JOINTS:
         raise InputError(f"{option}: unknown joint '{name}'", f"one of {', '.join(JOINTS)}")
@@ -302,8 +303,6 @@ def _joint(option: str, name: str) -> str:
 
 
 def _joint_values(option: str, items: list[str]) -> dict[str, float]:
-    from roarmctl.errors import InputError
-
     out = {}
     for item in items:
         name, _, value = item.partition("=")
@@ -318,10 +317,7 @@ def _joint_values(option: str, items: list[str]) -> dict[str, float]:
 
 
 def _bogus(text: str):
-    import re
-
     from roarmctl.device.simulator import Bogus
-    from roarmctl.errors import InputError
 
     m = re.fullmatch(r"([A-Za-z]+)=([^@]+)(?:@(\d+)(?:x(\d+))?)?", text)
     if m is None:

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from roarmctl.device import protocol
+from roarmctl.device.feedback import MAX_SUPPLY_V, MIN_SUPPLY_V
 from roarmctl.device.protocol import Feedback, LineBuffer, encode, parse_feedback_report, wire_seconds
 from roarmctl.errors import DeviceError
 
@@ -425,8 +426,6 @@ class Link:
                               "expected RoArm-M3 firmware (0.84 or 20260701 build) T:1051 frames")
 
     def _check_power(self, info: DeviceInfo) -> None:
-        from roarmctl.device.feedback import MAX_SUPPLY_V, MIN_SUPPLY_V
-
         if info.voltage is not None and not MIN_SUPPLY_V < info.voltage < MAX_SUPPLY_V:
             raise DeviceError(f"{self.port}: the arm's supply reads {info.voltage:.2f} V, outside "
                               f"{MIN_SUPPLY_V:.2f}-{MAX_SUPPLY_V:.2f} V (the firmware's own alarm range)",

@@ -15,12 +15,14 @@ the motion with the plan.
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import os
 import select
 import signal
 import sys
 import threading
 import time
+import tty
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -110,8 +112,6 @@ class _Server:
 
 
 def _open_pty() -> tuple[int, int, str]:
-    import tty
-
     master, slave = os.openpty()
     tty.setraw(slave)
     tty.setraw(master)
@@ -187,8 +187,6 @@ class PtySimulator:
         self._stopped = False
         self._final: dict[str, Any] = {}  # process mode: what the child knew when it stopped
         if process:
-            import multiprocessing as mp
-
             ctx: Any = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
             self._conn, child_conn = ctx.Pipe()
             self._recent = ctx.Value("d", 0.0, lock=False)

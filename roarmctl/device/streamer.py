@@ -34,7 +34,8 @@ from typing import Any
 import numpy as np
 
 from roarmctl.device import protocol
-from roarmctl.device.feedback import FeedbackRefused, FeedbackValidator, Reading
+from roarmctl.device.feedback import FeedbackRefused, FeedbackValidator, Reading, read_valid
+from roarmctl.device.pose import within_limits
 from roarmctl.device.protocol import WireMap, wire_seconds
 from roarmctl.device.schedule import (
     DEFAULT_RATE,
@@ -52,6 +53,8 @@ from roarmctl.device.schedule import (
     strategy_rate,
 )
 from roarmctl.errors import DeviceError, InfeasibleError, Interrupted, signal_name
+from roarmctl.fileio import atomic_write_json
+from roarmctl.robot.frames import device_point, to_frame
 
 __all__ = [
     "DEFAULT_RATE",
@@ -225,8 +228,6 @@ class Streamer:
 
     def _read_frames(self, n: int) -> Reading:
         """``n`` accepted frames in a row; the last (refused ones are marked in the log)."""
-        from roarmctl.device.feedback import read_valid
-
         reading = read_valid(self.link, self.validator, n,
                              on_refused=lambda r, why: self.refused_lines.__setitem__(id(r), why.reason))
         self.measured = reading.q
@@ -251,8 +252,6 @@ class Streamer:
                                   "--from-current (plan the first free motion again from here)")
         if self.replan is None:
             raise InfeasibleError(f"the arm is not at the trajectory's start: {diff}", "move it there first")
-        from roarmctl.device.pose import within_limits
-
         traj, sentence = self.replan(within_limits(self.robot, reading.q), mode)
         self.traj = traj
         self.schedule = self._schedule(traj)
@@ -531,8 +530,6 @@ class Streamer:
         """The last measured TCP in the world frame (m) and the robot's other frames (their units)."""
         if self.measured is None:
             return None
-        from roarmctl.robot.frames import device_point, to_frame
-
         out: dict[str, Any] = {"world_m": [round(float(v), 6) for v in self._tcp(self.measured)]}
         for name, fr in (getattr(self.robot, "frames", {}) or {}).items():
             out[f"{name}_{fr.unit}"] = [round(float(v), 3) for v in to_frame(fr, device_point(self.robot, fr, self.measured))]
@@ -592,6 +589,4 @@ class Streamer:
 
 def write_log(path: str | Path, log: dict[str, Any]) -> Path:
     """Write the execution log atomically (JSON)."""
-    from roarmctl.fileio import atomic_write_json
-
     return atomic_write_json(path, log, indent=None)

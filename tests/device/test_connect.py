@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from devtraj import HOME, min_jerk
+
 from roarmctl.cli import run as run_cli
 from roarmctl.device.link import Link
 from roarmctl.device.simulator import PtySimulator, SimConfig

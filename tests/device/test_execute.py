@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from devtraj import HOME, min_jerk, pick_place
+
 from roarmctl.cli import run as run_cli
 from roarmctl.device.protocol import encode
 from roarmctl.device.simulator import PtySimulator, SimConfig

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from devtraj import min_jerk, pick_place
 
-from devtraj import HOME, min_jerk, pick_place
 from roarmctl.cli import run as run_cli
 from roarmctl.device.simulator import Bogus, PtySimulator, SimConfig
 

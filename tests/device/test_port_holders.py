@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
-import time
 
 import pytest
-
 from devtraj import HOME, min_jerk
+
 from roarmctl.device.ports import port_holders
 from roarmctl.device.simulator import PtySimulator, SimConfig
 

@@ -67,7 +67,8 @@ def test_line_buffer_handles_partial_lines_and_crlf():
     assert lb.feed(b"51}\n") == [b'{"T":1051}']
 
 
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 
 @settings(max_examples=200, deadline=None)

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from devtraj import HOME, min_jerk
+
 from roarmctl.device.simulator import PtySimulator, SimConfig
 from roarmctl.robot.loader import load_robot
 

@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from devtraj import HOME, min_jerk
+
 from roarmctl.device.link import Received
-from roarmctl.device.protocol import WireMap, parse_feedback_report
-from roarmctl.device.protocol import encode
+from roarmctl.device.protocol import WireMap, encode, parse_feedback_report
 from roarmctl.device.simulator import Firmware, SimConfig
 from roarmctl.device.streamer import StreamConfig, Streamer, build_schedule
 from roarmctl.errors import DeviceError, InfeasibleError, Interrupted

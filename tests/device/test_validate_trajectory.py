@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 import pytest
-
 from devtraj import HOME, min_jerk
+
 from roarmctl.cli import run as run_cli
 from roarmctl.device.simulator import PtySimulator, SimConfig
 from roarmctl.errors import TrajectoryFileError
