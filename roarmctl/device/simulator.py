@@ -73,6 +73,7 @@ class _Server:
         self.clock = clock
         self.late: deque[tuple[float, float]] = deque(maxlen=100_000)  # (when, how late) above LATE
         self.recent = recent  # a shared double: the largest lateness of the last RECENT s
+        self.priority = "normal"  # how the serving process is scheduled
         self._recent: deque[tuple[float, float]] = deque()
 
     def _note_late(self, now: float, late: float) -> None:
@@ -119,14 +120,32 @@ def _open_pty() -> tuple[int, int, str]:
     return master, slave, os.ttyname(slave)
 
 
+def _raise_priority() -> str:
+    """Let the simulated firmware run when it is due, as an ESP32 would, where the system allows it:
+    the lowest real-time priority (it sleeps most of the time: a few % of a core), else a better
+    nice value, else nothing. Returns what it got."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+        return "SCHED_FIFO 1"
+    except (OSError, AttributeError):
+        pass
+    try:
+        os.nice(-5)
+        return "nice -5"
+    except OSError:
+        return "normal"
+
+
 def _child(config: SimConfig, servos: ServoModel | Callable[[], ServoModel] | None, conn, recent) -> None:
     """The simulated firmware's own process: serve until told to stop or the parent is gone."""
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)  # the parent's Ctrl-C must not kill the arm before its hold
+    priority = _raise_priority()
     master, slave, path = _open_pty()
     model = servos() if callable(servos) and not isinstance(servos, ServoModel) else servos
     fw = Firmware(config, t0=time.monotonic(), servos=model)
     server = _Server(fw, master, time.monotonic, recent)
+    server.priority = priority
     conn.send(path)
     state = {"stop": False}
 
@@ -165,7 +184,7 @@ def _query(fw: Firmware, server: _Server, kind: str) -> Any:
                 "boot_mission_aborted": fw.boot_mission_aborted, "rx_dropped": fw._rx_dropped,
                 "queue": len(fw._queue), "positions": fw.servos.positions().tolist(), "move_spd": fw.move_spd,
                 "spd": [float(x) for x in getattr(fw.servos, "spd", [])],
-                "passes_ms": (np.array(fw.passes) * 1e3).tolist()[-2000:]}
+                "passes_ms": (np.array(fw.passes) * 1e3).tolist()[-2000:], "priority": server.priority}
     raise ValueError(kind)
 
 

@@ -200,6 +200,7 @@ class Streamer:
         self.refused_lines: dict[int, str] = {}  # id(Received) -> reason, for the log
         self._tick_of: dict[int, int] = {}  # id(first command sent for a tick) -> tick
         self._asked_at: dict[int, float] = {}  # id(Reading) -> when its T:105 was sent
+        self.device_late: deque[tuple[float, float]] = deque(maxlen=1000)  # (when seen, how late) of poll answers
 
     def _schedule(self, traj) -> list[Tick]:
         return build_schedule(traj, self.robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale,
@@ -339,7 +340,14 @@ class Streamer:
         return max(0.0, late) + self._device_late()
 
     def _device_late(self) -> float:
-        return self.extra_lateness() if self.extra_lateness is not None else 0.0
+        """How late the device itself has been lately (s): its answers to T:105 that came later than the
+        round trip measured at connect (a lower bound: the last read before they were there), or what
+        ``extra_lateness`` reports (the simulator measures its own)."""
+        now = self.clock()
+        while self.device_late and self.device_late[0][0] < now - 0.3:
+            self.device_late.popleft()
+        seen = max((x for _, x in self.device_late), default=0.0)
+        return max(seen, self.extra_lateness() if self.extra_lateness is not None else 0.0)
 
     def _track(self, reading: Reading) -> tuple[float, float] | None:
         """(TCP error against the plan at the frame's measurement time, the same with the plan
@@ -375,6 +383,7 @@ class Streamer:
         lines, confirmed = 0, 0
         polls: deque[tuple[float, int]] = deque()  # (sent at, lines sent up to and including it)
         last_sent_k, last_wire = -1, None
+        polled = self.clock()
         for k, tick in enumerate(sched):
             if self.hook is not None:
                 self.hook(k)
@@ -403,12 +412,17 @@ class Streamer:
                 if (k % poll_every == 0 or not polls) and len(polls) < 2:
                     polls.append((link.send(protocol.feedback_request()), lines + 1))
                     lines += 1
+            polled_before, polled = polled, self.clock()
             new = link.poll()
             asked: dict[int, float] = {}
             for r in new:
                 if r.feedback is not None and polls:
                     t_poll, confirmed = polls.popleft()
                     asked[id(r)] = t_poll
+                    # the answer was not there yet at the previous read: it is late by at least this much
+                    late = polled_before - t_poll - rtt
+                    if late > 0.002:
+                        self.device_late.append((polled, late))
             readings = self._judge(new, asked)
             if any(r.feedback is not None for r in new):
                 last_fb_t = self.clock()
