@@ -600,3 +600,11 @@ def test_a_trajectory_plan_record_is_checked_before_replanning_uses_it(tmp_path,
     t = tmp_path / "t.traj.json"
     t.write_text(json.dumps(doc))
     refused(["execute", str(t), "--output", str(tmp_path / "c.jsonl")], field)
+
+
+@pytest.mark.parametrize("args", [["plan", "{f}", "-o", "{d}/o.traj.json"], ["visualize-path", "{f}", "-o", "{d}/o.png"],
+                                  ["execute", "{f}", "--output", "{d}/o.jsonl"], ["export", "{f}", "-o", "{d}/o.mcap"]],
+                         ids=["plan", "visualize-path", "execute", "export"])
+def test_a_fifo_given_as_the_input_file_is_refused_at_once(tmp_path, args):
+    f = hostile.fifo(tmp_path, "in.yaml" if args[0] == "plan" else "in.json")
+    refused([a.format(f=f, d=tmp_path) for a in args], "FIFO")
