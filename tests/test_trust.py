@@ -608,3 +608,21 @@ def test_a_trajectory_plan_record_is_checked_before_replanning_uses_it(tmp_path,
 def test_a_fifo_given_as_the_input_file_is_refused_at_once(tmp_path, args):
     f = hostile.fifo(tmp_path, "in.yaml" if args[0] == "plan" else "in.json")
     refused([a.format(f=f, d=tmp_path) for a in args], "FIFO")
+
+
+def test_the_execution_log_of_a_carried_robot_exports_by_itself(tmp_path):
+    """Run on the simulator: the log carries the robot the trajectory carried, so `export LOG` needs no file."""
+    import shutil
+
+    d = _desc_dir(tmp_path)
+    hostile.m3_xacro(d, "'arm'")
+    hostile.sidecar(d, "arm.xacro")
+    (d / "p.yaml").write_text("robot: arm.yaml\ntasks: [{move: {joints: [0.3, 0.2, 1.6, 0.1, 0.2]}}]\n")
+    t, log = tmp_path / "p.traj.json", tmp_path / "p.exec.json"
+    assert cli(["plan", str(d / "p.yaml"), "-o", str(t)])[0] == 0
+    shutil.rmtree(d)
+    code, _, err = cli(["execute", str(t), "--sim", "--yes", "--log", str(log)])
+    assert code == 0, err
+    assert json.loads(log.read_text())["robot_description"] == json.loads(t.read_text())["robot_description"]
+    code, _, err = cli(["export", str(log), "-o", str(tmp_path / "run.mcap")])
+    assert code == 0, err

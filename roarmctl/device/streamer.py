@@ -598,7 +598,8 @@ class Streamer:
             "hold": hold, "summary": res.summary(), "notes": self.notes, "final_pose": self.pose_in_frames(),
             "tracking": [{"t": round(t, 6), "error_m": round(e, 6)} for t, e in self.tracking],
             "sent": sent, "received": received,
-        }
+        } | ({"robot_description": self.traj.robot_description}  # a robot not bundled, carried (robot.bundle)
+             if getattr(self.traj, "robot_description", None) is not None else {})
 
 
 def write_log(path: str | Path, log: dict[str, Any]) -> Path:
