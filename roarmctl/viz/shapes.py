@@ -1,6 +1,8 @@
-"""Scene items (box, cylinder, sphere) as polygon meshes in world coordinates, for 3D drawing.
+"""Scene items (box, cylinder, sphere) and robot collision shapes as polygon meshes, for 3D drawing.
 
-Only numpy: each function returns a list of faces, each face an (k, 3) array of vertices in m.
+Only numpy: each function returns a list of faces, each face an (k, 3) array of vertices in m (convex
+polygons; their winding is not consistent, so draw them two-sided); ``triangles`` fans them into triangles for the
+browser view. The PNG (``path_figure``) and the browser view (``viz.web``) draw from these same faces.
 """
 
 from __future__ import annotations
@@ -47,6 +49,51 @@ def sphere_faces(radius: float, pose: np.ndarray, n: int = 12) -> list[np.ndarra
     return [np.array([pts[i, j], pts[i, j + 1], pts[i + 1, j + 1], pts[i + 1, j]]) for i in range(n) for j in range(2 * n)]
 
 
+def capsule_faces(radius: float, length: float, pose: np.ndarray, n: int = 16) -> list[np.ndarray]:
+    """A capsule along its local z: a cylinder of ``length`` (m, without the caps) and two half spheres."""
+    sides = cylinder_faces(radius, length, pose, n)[:-2]
+    half = n // 2
+    th = np.linspace(0.0, 0.5 * np.pi, half + 1)
+    ph = np.linspace(0.0, 2 * np.pi, n + 1)
+    out = sides
+    for sign in (1.0, -1.0):
+        pts = np.stack([radius * np.outer(np.sin(th), np.cos(ph)), radius * np.outer(np.sin(th), np.sin(ph)),
+                        np.outer(sign * (radius * np.cos(th)) + sign * 0.5 * length, np.ones_like(ph))], axis=-1)
+        pts = _place(pts.reshape(-1, 3), pose).reshape(half + 1, n + 1, 3)
+        for i in range(half):
+            for j in range(n):
+                out.append(np.array([pts[i, j], pts[i, j + 1], pts[i + 1, j + 1], pts[i + 1, j]]))
+    return out
+
+
+def robot_shape_faces(shape) -> list[np.ndarray]:
+    """Faces of one robot collision shape (``robot.model.CollisionShape``) in its link's frame, as the checker
+    sees it: box, cylinder, sphere, capsule, or the mesh the checker uses (its convex hull, or the triangles)."""
+    pose = np.asarray(shape.origin, dtype=float)
+    if shape.kind == "box":
+        return box_faces(shape.size, pose)
+    if shape.kind == "cylinder":
+        return cylinder_faces(shape.radius, shape.length, pose)
+    if shape.kind == "sphere":
+        return sphere_faces(shape.radius, pose)
+    if shape.kind == "capsule":
+        return capsule_faces(shape.radius, shape.length, pose)
+    if shape.kind == "mesh":
+        v = _place(np.asarray(shape.mesh.vertices, dtype=float), pose)
+        return list(v[np.asarray(shape.mesh.faces)])
+    raise ValueError(f"collision shape kind '{shape.kind}' cannot be drawn")
+
+
+def triangles(faces: list[np.ndarray]) -> np.ndarray:
+    """Convex polygons -> triangles (T, 3, 3) m, each polygon fanned from its first vertex; degenerate triangles (zero area, e.g. at a sphere's poles) dropped."""
+    tris = [np.stack([f[0], f[k], f[k + 1]]) for f in faces for k in range(1, len(f) - 1)]
+    if not tris:
+        return np.zeros((0, 3, 3))
+    t = np.asarray(tris, dtype=float)
+    area = np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    return t[area > 1e-14]
+
+
 def item_pose(item: dict, where: str) -> np.ndarray:
     """A scene item's 4x4 pose from its ``xyz`` (m) and ``rpy`` (rad); ``where`` names it in errors."""
     try:
@@ -59,12 +106,15 @@ def item_pose(item: dict, where: str) -> np.ndarray:
     return transform(xyz, rpy)
 
 
-def item_faces(item: dict, index: int = 0) -> list[np.ndarray]:
-    """Faces of one scene item (``{"shape", "size" | "radius" [, "length"], "xyz", "rpy"}``)."""
+def item_faces(item: dict, index: int = 0, local: bool = False) -> list[np.ndarray]:
+    """Faces of one scene item (``{"shape", "size" | "radius" [, "length"], "xyz", "rpy"}``), in the world
+    frame, or in the item's own frame when ``local`` (to be placed by ``item_pose``)."""
     if not isinstance(item, dict):
         raise TrajectoryFileError(f"scene.items[{index}]: expected an object")
     where = f"scene.items[{index}] ('{item.get('name', '?')}')"
     pose = item_pose(item, where)
+    if local:
+        pose = np.eye(4)
     shape = item.get("shape")
     try:
         if shape == "box":
