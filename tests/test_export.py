@@ -181,9 +181,12 @@ def test_demo_execution_log_commanded_and_measured(demo, suffix):
     r = fb[len(fb) // 2]["feedback"]
     m = meas[len(fb) // 2][2]
     assert np.allclose(m.position, [r["b"], r["s"], r["e"], r["t"], r["r"], math.pi - r["g"]])
-    # same order and spacing in time as the log (shifted so that nothing is negative)
-    t0 = min(min(x["t"] for x in sent), min(x["t"] for x in fb))
+    # same order and spacing in time as the log (shifted so that nothing is negative); a measured state is stamped
+    # when the servos were read: before its reply crossed the wire (115200 baud 8N1: 11520 B/s) and ~4 ms of firmware work
+    read = np.array([x["t"] - (len(x["line"]) + 2) / 11520 - 0.004 for x in fb])
+    t0 = min(min(x["t"] for x in sent), read.min())
     assert np.allclose(np.array([c[0] for c in cmd]) * 1e-9, np.array([x["t"] for x in sent]) - t0, atol=1e-6)
+    assert np.allclose(np.array([m[0] for m in meas]) * 1e-9, read - t0, atol=1e-6)
 
 
 def test_csv_of_trajectory_and_log(demo):

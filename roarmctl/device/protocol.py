@@ -332,3 +332,13 @@ class LineBuffer:
 def wire_seconds(nbytes: int) -> float:
     """Time (s) ``nbytes`` take on the 115200 8N1 link."""
     return nbytes / BYTES_PER_SECOND
+
+
+READ_BEFORE_PRINT = 0.004  # s: from the firmware's servo reads to the first byte of its T:1051 line (an estimate)
+
+
+def feedback_read_time(t_received: float, line: str | bytes) -> float:
+    """When the firmware read the servos for a feedback ``line`` received complete at ``t_received`` (s, same
+    clock): the reply's wire time (the line and its ``\r\n``) and ``READ_BEFORE_PRINT`` earlier. (The streamer
+    narrows this further with the time it asked, which a log does not keep.)"""
+    return t_received - wire_seconds(len(line) + 2) - READ_BEFORE_PRINT

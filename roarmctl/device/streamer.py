@@ -76,7 +76,7 @@ __all__ = [
 
 HOLD_SPD = 600  # the firmware's own ARM_SERVO_INIT_SPEED, steps/s: the least speed of a hold
 HOLD_MODES = ("auto", "path", "setpoint", "measured")
-READ_BEFORE_PRINT = 0.004  # s between the firmware's servo reads and the start of its T:1051 line
+READ_BEFORE_PRINT = protocol.READ_BEFORE_PRINT  # s between the firmware's servo reads and the start of its T:1051 line
 
 
 @dataclass

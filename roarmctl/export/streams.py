@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roarmctl.device.protocol import M3_FIELDS, WireMap, parse_feedback
+from roarmctl.device.protocol import M3_FIELDS, WireMap, feedback_read_time, parse_feedback
 from roarmctl.errors import InputError, TrajectoryFileError
 from roarmctl.motion.trajectory import carried_item
 from roarmctl.robot.model import transform
@@ -36,12 +36,15 @@ class ItemTrack:
     """One scene item and where it is: ``poses`` (K, 4, 4) world poses valid from ``times`` (K,) s on.
 
     Items that never move have one pose at time 0; a carried object gets one pose per sample while
-    it is held (it moves with the TCP) and keeps its release pose afterwards.
+    it is held (it moves with the TCP) and keeps its release pose afterwards. ``held``: the (grasp,
+    release) time spans in s during which it moves with the TCP (the end is the last sample when it is
+    never released).
     """
 
     item: dict[str, Any]
     times: np.ndarray
     poses: np.ndarray
+    held: list[tuple[float, float]] = field(default_factory=list)
 
 
 @dataclass
@@ -74,6 +77,7 @@ def item_tracks(traj: Trajectory, robot: Robot) -> list[ItemTrack]:
     times = np.asarray(traj.times, dtype=float)
     current = {id(i): item_pose(i) for i in items}
     tracks = {id(i): ([0.0], [current[id(i)]]) for i in items}
+    spans: dict[int, list[tuple[float, float]]] = {id(i): [] for i in items}
     events = sorted(traj.events, key=lambda e: e.time)
     tcp = robot.kin.fk(np.asarray(traj.positions, dtype=float))  # (N, 4, 4)
     held: tuple[dict, np.ndarray, int] | None = None  # (item, pose in TCP frame, grasp index)
@@ -97,6 +101,7 @@ def item_tracks(traj: Trajectory, robot: Robot) -> list[ItemTrack]:
                 ts.append(float(times[k]))
                 ps.append(tcp[k] @ rel)
             current[id(item)] = ps[-1]
+            spans[id(item)].append((float(times[i0]), float(times[i])))
             held = None
     if held is not None:  # never released: carried to the end
         item, rel, i0 = held
@@ -104,7 +109,8 @@ def item_tracks(traj: Trajectory, robot: Robot) -> list[ItemTrack]:
         for k in range(i0 + 1, len(times)):
             ts.append(float(times[k]))
             ps.append(tcp[k] @ rel)
-    return [ItemTrack(i, np.array(tracks[id(i)][0]), np.array(tracks[id(i)][1])) for i in items]
+        spans[id(item)].append((float(times[i0]), float(times[-1])))
+    return [ItemTrack(i, np.array(tracks[id(i)][0]), np.array(tracks[id(i)][1]), spans[id(i)]) for i in items]
 
 
 def trajectory_streams(traj: Trajectory, robot: Robot) -> Streams:
@@ -137,14 +143,16 @@ def log_streams(log: dict[str, Any], robot: Robot, traj: Trajectory | None = Non
         streams.joint_states["planned"] = JointStates(t, np.asarray(traj.positions, dtype=float),
                                                       np.asarray(traj.velocities, dtype=float) * scale)
         streams.trajectory = None  # no /joint_trajectory: the log's topics are about the run
-        streams.items = [ItemTrack(tr.item, tr.times / scale, tr.poses) for tr in item_tracks(traj, robot)]
+        streams.items = [ItemTrack(tr.item, tr.times / scale, tr.poses, [(a / scale, b / scale) for a, b in tr.held])
+                         for tr in item_tracks(traj, robot)]
     return streams
 
 
 def _log_streams(log: dict[str, Any], robot: Robot) -> Streams:
     """An execution log (``roarmctl.execlog/1``): commanded joints (every T:102 / T:101 sent) and
     measured joints (every T:1051 feedback received), converted from wire values with the robot's
-    wire map. Times are s after the log's start of motion (negative before it)."""
+    wire map. Times are s after the log's start of motion (negative before it); a measured state's time is
+    when the firmware read the servos (``device.protocol.feedback_read_time``), not when its line arrived."""
     wm = WireMap(robot)
     cmd_t, cmd_q = [], []
     wire: dict[str, float] | None = None
@@ -165,7 +173,8 @@ def _log_streams(log: dict[str, Any], robot: Robot) -> Streams:
         fb = parse_feedback(entry["feedback"]) if isinstance(entry, dict) and isinstance(entry.get("feedback"), dict) else None
         if fb is None or not fb.joints:
             continue
-        meas_t.append(float(entry["t"]))
+        line = entry.get("line")
+        meas_t.append(feedback_read_time(float(entry["t"]), line) if isinstance(line, str) else float(entry["t"]))
         meas_q.append(wm.from_wire(fb.joints))
     if not cmd_t and not meas_t:
         raise InputError("the execution log holds no joint commands and no feedback", "export a log of a run that moved the arm")
