@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: all demo test fuzz lint bench clean install
+.PHONY: all demo test fuzz lint bench clean install browser
 
 all: test
 
@@ -26,6 +26,13 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check roarmctl
 	$(BIN)/mypy
+
+# Chromium from the system's packages, for the browser-view tests (tests/test_view.py: Playwright drives
+# /usr/bin/chromium; nothing is downloaded by Playwright). Installs with apt-get when missing (needs root, as
+# CI has); on your own machine: sudo apt-get install chromium (Debian/Ubuntu), or set ROARMCTL_CHROMIUM.
+browser:
+	@if command -v chromium >/dev/null 2>&1; then echo "chromium: $$(command -v chromium)"; \
+	else apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; fi
 
 # The fuzz suite's CI profile: 1,000 plan files, 500 trajectories, 300 robot descriptions (about a
 # minute; `make test` runs a tenth of it).

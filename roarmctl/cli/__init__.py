@@ -15,7 +15,7 @@ from pathlib import Path
 import typer
 
 from roarmctl import __version__
-from roarmctl.cli import common, execute_cmd, export_cmd, kin, plan_cmd, signals, viz_cmd
+from roarmctl.cli import common, execute_cmd, export_cmd, kin, plan_cmd, signals, view_cmd, viz_cmd
 from roarmctl.cli.signals import exit_code
 from roarmctl.errors import InputError, RoarmError, signal_name
 from roarmctl.fileio import interrupted_write_state
@@ -89,6 +89,7 @@ kin.register(app)
 plan_cmd.register(app)
 execute_cmd.register(app)
 viz_cmd.register(app)
+view_cmd.register(app)
 export_cmd.register(app)
 
 

@@ -15,7 +15,6 @@ from roarmctl.errors import InfeasibleError, InputError
 from roarmctl.viz.formats import picture_format
 
 VIEW_NAMES = ("iso", "top", "front", "side")
-PLAN_SUFFIXES = (".yaml", ".yml")
 MAX_PIXELS = 12000  # per side; beyond this a PNG is a mistake, not a picture
 
 
@@ -54,40 +53,32 @@ def default_output(source: Path, suffix: str = ".png") -> Path:
     return source.with_name((name or source.name) + suffix)
 
 
-def _load(path: Path):
-    """A trajectory from a ``*.traj.json``, or planned from a plan file (``.yaml``/``.yml``)."""
-    if path.suffix.lower() in PLAN_SUFFIXES:
-        try:
-            from roarmctl.motion.pipeline import plan_file
-        except ImportError:
-            raise InputError(f"{path}: planning from a plan file is not available in this build",
-                             "plan it with 'roarmctl plan' and pass the .traj.json") from None
-        return plan_file(path, seed=None).trajectory
-    from roarmctl.motion.validate import validate_trajectory
-
-    return validate_trajectory(path)
-
-
 def visualize_path(
     source: Path = typer.Argument(..., help="Trajectory file (*.traj.json), or a plan file (.yaml) to plan first.",
                                   show_default=False),
-    output: Path | None = typer.Option(None, "-o", "--output", help="Picture to write: .png, .svg or .pdf (default: next to SOURCE, same name, .png)."),
+    output: Path | None = typer.Option(None, "-o", "--output",
+                                       help="Picture to write: .png, .svg or .pdf, or .html for the interactive 3D page (default: next to SOURCE, same name, .png)."),
     view: str = typer.Option("iso", "--view", help="3D view: iso, top, front or side."),
     dpi: float = typer.Option(100.0, "--dpi", help="Pixels per inch of the PNG."),
     size: str = typer.Option("16x10", "--size", help="Sheet size WxH in inches (pixels = size x dpi)."),
 ) -> None:
-    """Draw a planned trajectory (PNG, SVG or PDF): 3D scene and TCP path, joint curves, TCP speed, manipulability."""
+    """Draw a planned trajectory (PNG, SVG or PDF): 3D scene and TCP path, joint curves, TCP speed, manipulability.
+    With -o NAME.html: the interactive 3D view as one self-contained page (no server, no network)."""
+    out = output if output is not None else default_output(source)
+    if out.suffix.lower() == ".html":
+        _write_html(source, out)
+        return
     if view not in VIEW_NAMES:
         raise InputError(f"--view: '{view}' is not one of {', '.join(VIEW_NAMES)}")
     _check_dpi(dpi)
     figsize = parse_size(size, dpi)
-    out = output if output is not None else default_output(source)
 
     picture_format(out)  # before any work: the extension decides png / svg / pdf
     from roarmctl.viz.path_figure import visualize_trajectory
+    from roarmctl.viz.web.sources import trajectory_or_plan
 
     try:
-        traj = _load(source)
+        traj = trajectory_or_plan(source)
     except InfeasibleError as exc:
         partial = getattr(exc, "partial", None)
         if partial is None:
@@ -99,6 +90,21 @@ def visualize_path(
     written = visualize_trajectory(traj, out, view=view, dpi=dpi, size=figsize, name=source.name)
     w, h = round(figsize[0] * dpi), round(figsize[1] * dpi)
     common.console().print(f"wrote {written} ({w} x {h} px)")
+
+
+def _write_html(source: Path, out: Path) -> None:
+    """``visualize-path SOURCE -o out.html``: the browser view as one file; a failing plan is drawn up to the
+    failure, then reported (exit 3) as for a picture."""
+    from roarmctl.viz.web.page import write_page
+    from roarmctl.viz.web.sources import load_view_source, source_document
+
+    src = load_view_source(source)
+    written = write_page(source_document(src), out)
+    if src.error is not None:
+        exc = src.error
+        exc.hint = (f"{exc.hint}; " if exc.hint else "") + f"drawn up to the failure in {written}"
+        raise exc
+    common.console().print(f"wrote {written} ({written.stat().st_size / 1e6:.2f} MB; open it in a web browser)", soft_wrap=True)
 
 
 def workspace(

@@ -1,0 +1,50 @@
+"""``roarmctl view``: the interactive 3D view of a plan, a trajectory or a run, served on 127.0.0.1.
+
+The page is the one ``visualize-path -o NAME.html`` writes (``roarmctl.viz.web``); the server holds it in
+memory and answers only on the loopback interface. Ctrl-C stops it (exit 130, as every command).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+import typer
+
+from roarmctl.cli import common
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``view`` to ``app``."""
+    app.command("view")(view)
+
+
+def view(
+    source: Path = typer.Argument(..., help="Trajectory (.traj.json), plan file (.yaml, planned first) or execution log (.exec.json).",
+                                  show_default=False),
+    trajectory: Path | None = typer.Option(None, "--trajectory", "-t",
+                                        help="With an execution log: the trajectory it ran (its scene, marks and commanded arm)."),
+    port: int = typer.Option(0, "--port", help="TCP port on 127.0.0.1 (0: a free one)."),
+    open_browser: bool = typer.Option(False, "--open", help="Also open the page in the default web browser."),
+) -> None:
+    """Serve an interactive 3D view (robot, scene, TCP path, timeline) at http://127.0.0.1:PORT/ until Ctrl-C."""
+    from roarmctl.viz.web.page import render_page
+    from roarmctl.viz.web.server import ViewServer
+    from roarmctl.viz.web.sources import load_view_source, source_document
+
+    src = load_view_source(source, trajectory)
+    page = render_page(source_document(src)).encode("utf-8")
+    server = ViewServer(page, port)
+    try:
+        if src.error is not None:
+            common.warn(f"{src.error.message}; the view shows the path up to the failure")
+        out = common.console()
+        out.print(f"view of {source.name} at [bold]{server.url}[/] ({len(page) / 1e6:.1f} MB page; Ctrl-C to stop)", soft_wrap=True)
+        import sys
+
+        sys.stdout.flush()
+        if open_browser:
+            import webbrowser
+
+            webbrowser.open(server.url)
+        server.serve_forever()
+    finally:
+        server.close()

@@ -1,0 +1,228 @@
+"""The numbers of the browser view: one JSON-able dict that the page's script reads (``roarmctl.view/1``).
+
+Per sample (N after thinning to at most ``MAX_SAMPLES``): time, joint values, the world pose of every link
+that carries geometry (from the library's one FK), the TCP position, TCP speed and its colour, the smallest
+singular value of the translational Jacobian, the clearance to the nearest scene item (FCL, without the
+padding) and the segment kind; the pose of every object while it is carried; and, for a run, the measured
+arm (the "ghost"). Geometry (the checker's collision shapes per link, the scene items) is triangles in the
+link's or the item's own frame. Large arrays are base64 of little-endian float32 (``_f32``), so a bundled
+plan's page stays well under a megabyte of data.
+
+Only numpy and the library here (matplotlib only for the speed colour map, the same as the PNG's).
+"""
+
+from __future__ import annotations
+
+import base64
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from roarmctl.viz.data import PathData, path_data, robot_for
+from roarmctl.viz.shapes import item_extent, item_faces, item_pose, robot_shape_faces, triangles
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.model import Robot
+
+FORMAT = "roarmctl.view/1"
+MAX_SAMPLES = 4000  # per page; a longer motion is thinned evenly (events, blends and the ends are kept)
+COLOR_STOPS = 11  # of the speed colour bar
+
+
+@dataclass
+class Ghost:
+    """A second arm drawn beside the commanded one (e.g. the measured joints of a run).
+
+    ``times`` (K,) s on the view's clock, increasing; ``positions`` (K, dof) rad in the robot's joint order.
+    """
+
+    label: str
+    times: np.ndarray
+    positions: np.ndarray
+
+
+def _f32(a: np.ndarray) -> str:
+    """base64 of the array as little-endian float32, row-major."""
+    return base64.b64encode(np.ascontiguousarray(a, dtype="<f4").tobytes()).decode("ascii")
+
+
+def _pose12(m: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) -> (..., 12): the top three rows, row-major."""
+    return np.asarray(m)[..., :3, :4].reshape(*np.shape(m)[:-2], 12)
+
+
+def _thin(times: np.ndarray, keep: list[int], max_samples: int) -> np.ndarray:
+    """Sample indices: every k-th sample so that at most about ``max_samples`` remain, plus ``keep`` and both ends."""
+    n = len(times)
+    stride = max(1, -(-n // max(max_samples, 2)))
+    idx = set(range(0, n, stride)) | {n - 1} | {int(k) for k in keep if 0 <= k < n}
+    return np.array(sorted(idx), dtype=int)
+
+
+def _speed_colors(speed: np.ndarray, vmax: float) -> tuple[np.ndarray, list[str]]:
+    """(N, 3) uint8 colours of ``speed`` on the PNG's colour map over [0, vmax], and the colour bar's stops."""
+    from matplotlib import colormaps
+
+    from roarmctl.viz.path_figure import PATH_CMAP
+
+    cmap = colormaps[PATH_CMAP]
+    rgb = (np.asarray(cmap(np.clip(speed / vmax, 0.0, 1.0)))[:, :3] * 255).round().astype(np.uint8)
+    stops = [cmap(x) for x in np.linspace(0.0, 1.0, COLOR_STOPS)]
+    return rgb, ["#%02x%02x%02x" % tuple(int(round(255 * c)) for c in s[:3]) for s in stops]
+
+
+def _links(robot: Robot) -> tuple[list[int], list[dict[str, Any]]]:
+    """Links that carry collision geometry: their kinematic indices and their triangles in the link frame."""
+    by_link: dict[int, list[np.ndarray]] = {}
+    names: dict[int, list[str]] = {}
+    for shape in robot.collision:
+        k = robot.kin.link_index[shape.link]
+        by_link.setdefault(k, []).append(triangles(robot_shape_faces(shape)))
+        names.setdefault(k, []).append(shape.name or shape.link)
+    order = sorted(by_link)
+    links = [{"name": robot.kin.link_names[k], "shapes": names[k], "collision": _f32(np.concatenate(by_link[k]))}
+             for k in order]
+    return order, links
+
+
+def _item_tracks(traj: Trajectory, robot: Robot, times: np.ndarray) -> tuple[list[dict], np.ndarray, np.ndarray]:
+    """The scene items' tracks (``export.streams.item_tracks``: a carried object follows the TCP) at ``times``:
+    the items, their poses (N, M, 4, 4) and whether each is carried at each time (N, M)."""
+    from roarmctl.export.streams import item_tracks
+
+    tracks = item_tracks(traj, robot)
+    n = len(times)
+    poses = np.zeros((n, len(tracks), 4, 4))
+    carried = np.zeros((n, len(tracks)), dtype=bool)
+    for k, tr in enumerate(tracks):
+        j = np.clip(np.searchsorted(tr.times, times + 1e-9, side="right") - 1, 0, len(tr.times) - 1)
+        poses[:, k] = tr.poses[j]
+        for a, b in tr.held:
+            carried[:, k] |= (times > a + 1e-9) & (times <= b + 1e-9)
+    return [tr.item for tr in tracks], poses, carried
+
+
+def _bounds(data: PathData, link_origins: np.ndarray, items: list[dict], extra: list[np.ndarray]) -> np.ndarray:
+    """(2, 3) corners (m) of everything drawn: TCP path, link origins, items, marked targets."""
+    pts = [data.tcp, link_origins.reshape(-1, 3)] + [p.reshape(-1, 3) for p in extra]
+    pts += [item_extent(it, i) for i, it in enumerate(items) if it.get("role") != "table"]
+    allp = np.vstack(pts)
+    return np.stack([allp.min(axis=0), allp.max(axis=0)])
+
+
+def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "trajectory", failure=None,
+                  ghost: Ghost | None = None, max_samples: int = MAX_SAMPLES, notes: list[str] | None = None) -> dict[str, Any]:
+    """Everything the page shows of ``traj`` (see the module doc).
+
+    ``failure``: a ``motion.pipeline.PartialPlan`` (``traj`` is what was planned before it): its target is
+    marked and its label named. ``ghost``: a second arm (e.g. measured), interpolated to the samples.
+    ``notes``: lines shown under the title (e.g. what a run's log says).
+    """
+    from roarmctl.motion.clearance import clearance
+    from roarmctl.motion.scene import SceneItem
+    from roarmctl.viz.path_figure import EVENT_COLOR, ROLE_STYLE, describe
+
+    robot = robot if robot is not None else robot_for(traj)
+    data = path_data(traj, robot)
+    times_all = data.times
+
+    def index_at(t: float) -> int:
+        return int(np.clip(np.searchsorted(times_all, t - 1e-9), 0, len(times_all) - 1))
+
+    keep = [index_at(e.time) for e in data.events] + [index_at(b) for b in data.blends]
+    idx = _thin(times_all, keep, max_samples)
+    times = times_all[idx]
+    q = data.positions[idx]
+    n = len(idx)
+
+    link_ids, links = _links(robot)
+    frames = robot.kin.link_frames(q)  # (n, L, 4, 4)
+    items, item_poses, carried = _item_tracks(traj, robot, times)
+    scene_items = [SceneItem.from_dict(it) for it in items]
+    clear = clearance(robot, scene_items, q, item_poses, carried)
+
+    speed = data.tcp_speed[idx]
+    vmax = max(float(data.tcp_speed.max()) if len(data.tcp_speed) else 0.0, data.max_tcp_speed or 0.0, 1e-6)
+    colors, stops = _speed_colors(speed, vmax)
+    seg = np.append(data.segment_kind, data.segment_kind[-1:] if len(data.segment_kind) else [""])[idx]
+    seg_kinds = sorted({str(s) for s in seg})
+
+    def sample_of(t: float) -> int:  # index in the thinned samples of the sample nearest at or after t
+        return int(np.clip(np.searchsorted(idx, index_at(t)), 0, n - 1))
+
+    events = [{"time": float(e.time), "kind": e.kind, "label": e.label or e.kind, "index": sample_of(e.time),
+               "target": [float(v) for v in e.target], "color": EVENT_COLOR.get(e.kind, "#333333")} for e in data.events]
+    fail = None
+    if failure is not None:
+        fail = {"label": str(failure.label), "color": EVENT_COLOR["failed"],
+                "target": None if failure.target is None else [float(v) for v in np.asarray(failure.target, dtype=float)]}
+    doc_items = []
+    for k, it in enumerate(items):
+        tris = triangles(item_faces(it, k, local=True))
+        moves = bool(carried[:, k].any()) or not np.allclose(item_poses[:, k], item_poses[:1, k])
+        style = ROLE_STYLE.get(str(it.get("role")), ROLE_STYLE["obstacle"])
+        doc_items.append({"name": str(it.get("name", f"item {k}")), "role": str(it.get("role", "obstacle")),
+                          "color": "#%02x%02x%02x" % tuple(int(round(255 * c)) for c in style["facecolor"][:3]),
+                          "triangles": _f32(tris), "pose": _pose12(item_pose(it, f"scene.items[{k}]")).tolist(),
+                          "track": _f32(_pose12(item_poses[:, k])) if moves else None})
+
+    ghost_doc = None
+    extra = [np.array([e["target"] for e in events]).reshape(-1, 3)]
+    if fail is not None and fail["target"] is not None:
+        extra.append(np.array(fail["target"]))
+    if ghost is not None:
+        gq = np.column_stack([np.interp(times, ghost.times, ghost.positions[:, j]) for j in range(robot.dof)])
+        gframes = robot.kin.link_frames(gq)
+        gtcp = gframes[:, robot.kin.tcp_index, :3, 3]
+        ghost_doc = {"label": ghost.label, "poses": _f32(_pose12(gframes[:, link_ids])), "q": _f32(gq), "tcp": _f32(gtcp),
+                     "error": _f32(np.linalg.norm(gtcp - data.tcp[idx], axis=1)),
+                     "span": [float(ghost.times[0]), float(ghost.times[-1])]}
+        extra.append(gtcp)
+    lo, hi = _bounds(data, frames[:, link_ids, :3, 3], items, extra)
+
+    title, subtitle = describe(data, name)
+    if failure is not None:
+        title += f" — PLANNING FAILED at {failure.label}"
+    nearest = np.where(np.isfinite(clear.distance), clear.distance, -1.0)
+    return {
+        "format": FORMAT,
+        "title": title,
+        "subtitle": subtitle,
+        "notes": list(notes or []),
+        "robot": robot.name,
+        "joint_names": list(traj.joint_names),
+        "joint_units": ["m" if robot.joints[_joint_of(robot, j)].kind == "prismatic" else "rad" for j in traj.joint_names],
+        "n": n,
+        "duration": float(times[-1]) if n else 0.0,
+        "times": _f32(times),
+        "q": _f32(q),
+        "tcp": _f32(data.tcp[idx]),
+        "speed": _f32(speed),
+        "speed_max": vmax,
+        "colors": base64.b64encode(colors.tobytes()).decode("ascii"),
+        "color_stops": stops,
+        "sigma_min": _f32(data.sigma_min[idx]),
+        "clearance": _f32(nearest),
+        "nearest_item": [int(v) for v in clear.item],
+        "nearest_part": [int(v) for v in clear.part],
+        "parts": clear.parts,
+        "segment": [seg_kinds.index(str(s)) for s in seg],
+        "segment_kinds": seg_kinds,
+        "links": links,
+        "poses": _f32(_pose12(frames[:, link_ids])),
+        "tcp_link": robot.tcp_link,
+        "items": doc_items,
+        "events": events,
+        "blends": [{"time": float(b), "index": sample_of(b)} for b in data.blends],
+        "failure": fail,
+        "limits": {"max_tcp_speed": data.max_tcp_speed, "min_singular_value": data.min_singular_value},
+        "ghost": ghost_doc,
+        "bounds": [lo.tolist(), hi.tolist()],
+    }
+
+
+def _joint_of(robot: Robot, name: str) -> int:
+    """Index in ``robot.joints`` of the actuated joint ``name``."""
+    return next(i for i, j in enumerate(robot.joints) if j.name == name)

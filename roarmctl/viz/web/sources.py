@@ -1,0 +1,149 @@
+"""What a view shows, from the file the user names: a trajectory, a plan file (planned first), or an
+execution log (its commanded joints, the measured arm as a ghost, and, given the trajectory it ran, that
+trajectory's scene and marks on the log's clock).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from roarmctl.errors import InfeasibleError, InputError, TrajectoryFileError
+from roarmctl.viz.web.document import Ghost
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.model import Robot
+
+PLAN_SUFFIXES = (".yaml", ".yml")
+
+
+@dataclass
+class ViewSource:
+    """A trajectory to show and what goes with it.
+
+    ``failure``: the planner's ``PartialPlan`` when planning a plan file failed (``traj`` is what was
+    planned before it) and ``error`` the ``InfeasibleError`` to report after showing it; ``ghost``: the
+    measured arm of a run; ``notes``: lines for the page's header.
+    """
+
+    traj: Trajectory
+    robot: Robot
+    name: str
+    failure: Any = None
+    error: InfeasibleError | None = None
+    ghost: Ghost | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+def trajectory_or_plan(path: str | os.PathLike) -> Trajectory:
+    """A trajectory from a ``*.traj.json``, or planned from a plan file (``.yaml``/``.yml``).
+
+    A plan that fails raises the planner's ``InfeasibleError`` (with ``.partial`` when part was planned)."""
+    path = Path(path)
+    if path.suffix.lower() in PLAN_SUFFIXES:
+        from roarmctl.motion.pipeline import plan_file
+
+        return plan_file(path, seed=None).trajectory
+    from roarmctl.motion.validate import validate_trajectory
+
+    return validate_trajectory(path)
+
+
+def slowed(traj: Trajectory, scale: float) -> Trajectory:
+    """``traj`` run at ``scale`` (0 < scale <= 1) of its speed, as ``execute --speed-scale`` runs it:
+    times divided by ``scale``, velocities times it, accelerations times its square."""
+    if scale == 1.0:
+        return traj
+    return dataclasses.replace(
+        traj, times=np.asarray(traj.times) / scale, velocities=np.asarray(traj.velocities) * scale,
+        accelerations=np.asarray(traj.accelerations) * scale**2,
+        events=[dataclasses.replace(e, time=e.time / scale) for e in traj.events],
+        segments=[dataclasses.replace(s, start=s.start / scale, end=s.end / scale) for s in traj.segments],
+        blends=[b / scale for b in traj.blends],
+        payloads=[dict(p, start=p["start"] / scale, end=p["end"] / scale) if {"start", "end"} <= set(p) else p
+                  for p in traj.payloads])
+
+
+def _states_trajectory(robot: Robot, times: np.ndarray, q: np.ndarray) -> Trajectory:
+    """Timed joint states (e.g. the commands of a log) as a trajectory without scene or marks; velocities by
+    finite differences (for the TCP speed shown)."""
+    from roarmctl.motion.trajectory import Trajectory
+
+    keep = np.append(np.diff(times) > 1e-9, True)  # strictly increasing: the last command of equal times wins
+    t, p = times[keep], q[keep]
+    v = np.gradient(p, t, axis=0) if len(t) > 1 else np.zeros_like(p)
+    return Trajectory(robot.name, list(robot.joint_names), t, p, v, np.zeros_like(p))
+
+
+def load_view_source(path: str | os.PathLike, trajectory: str | os.PathLike | None = None) -> ViewSource:
+    """Read ``path`` (trajectory, plan file or execution log) for the view; ``trajectory``: for a log, the
+    trajectory it ran (its scene and marks are shown, and it is the commanded arm)."""
+    from roarmctl.viz.data import robot_for
+
+    path = Path(path)
+    name = path.name
+    if path.suffix.lower() in PLAN_SUFFIXES:
+        if trajectory is not None:
+            raise InputError("--trajectory goes with an execution log", "give the plan file alone")
+        try:
+            traj = trajectory_or_plan(path)
+        except InfeasibleError as exc:
+            partial = getattr(exc, "partial", None)
+            if partial is None:
+                raise
+            return ViewSource(partial.trajectory, robot_for(partial.trajectory), name, failure=partial, error=exc,
+                              notes=[f"planning failed: {exc.message}"])
+        return ViewSource(traj, robot_for(traj), name)
+
+    from roarmctl.export import load_source
+
+    kind, data = load_source(path)
+    if kind == "trajectory":
+        if trajectory is not None:
+            raise InputError("--trajectory goes with an execution log, not with a trajectory", "give the trajectory alone")
+        return ViewSource(data, robot_for(data), name)
+    return _log_source(data, path, trajectory)
+
+
+def _log_source(log: dict[str, Any], path: Path, trajectory: str | os.PathLike | None) -> ViewSource:
+    from roarmctl.export import load_source
+    from roarmctl.export.streams import log_streams
+    from roarmctl.robot.loader import load_robot
+
+    robot = load_robot(str(log["robot"]))
+    traj = None
+    if trajectory is not None:
+        tkind, traj = load_source(trajectory)
+        if tkind != "trajectory":
+            raise InputError(f"--trajectory {trajectory}: not a trajectory file", "give the .traj.json that was executed")
+    streams = log_streams(log, robot, traj)
+    measured = streams.joint_states["measured"]
+    notes = [f"execution log {path.name}: {len(streams.joint_states['commanded'].times)} commands, {len(measured.times)} feedback frames"]
+    if traj is not None:
+        scale = float(log.get("speed_scale", 1.0) or 1.0)
+        main = slowed(traj, scale)
+        if scale != 1.0:
+            notes.append(f"run at speed scale {scale:g}: times are the run's")
+    else:
+        cmd = streams.joint_states["commanded"]
+        if not len(cmd.times):
+            raise TrajectoryFileError(f"{path}: the log holds no joint commands", "view a log of a run that moved the arm")
+        main = _states_trajectory(robot, cmd.times, cmd.positions)
+        notes.append("no scene: give --trajectory with the .traj.json this run executed")
+    ghost = Ghost("measured", measured.times, measured.positions) if len(measured.times) else None
+    if ghost is None:
+        notes.append("no feedback in the log: only the commanded arm is shown")
+    return ViewSource(main, robot, path.name, ghost=ghost, notes=notes)
+
+
+def source_document(src: ViewSource) -> dict[str, Any]:
+    """The view document (``document.view_document``) of ``src``."""
+    from roarmctl.viz.web.document import view_document
+
+    return view_document(src.traj, src.robot, name=src.name, failure=src.failure, ghost=src.ghost, notes=src.notes)

@@ -1,0 +1,387 @@
+// roarmctl's browser view: places what the page's data says (roarmctl.view/1, written by
+// roarmctl/viz/web/document.py); every number shown was computed in Python with the library's FK,
+// Jacobian and FCL. Text from the data is only ever set as textContent, never parsed as HTML.
+(function () {
+  'use strict';
+  const started = performance.now();
+  const D = JSON.parse(document.getElementById('roarm-view-data').textContent);
+  const $ = (id) => document.getElementById(id);
+
+  function bytes(b64) {
+    const bin = atob(b64 || '');
+    const out = new Uint8Array(bin.length);
+    for (let i = 0; i < bin.length; i++) out[i] = bin.charCodeAt(i);
+    return out;
+  }
+  const f32 = (b64) => new Float32Array(bytes(b64).buffer);
+
+  const N = D.n;
+  const T = f32(D.times), Q = f32(D.q), TCP = f32(D.tcp), SPEED = f32(D.speed), SIGMA = f32(D.sigma_min);
+  const CLEAR = f32(D.clearance), POSES = f32(D.poses), COLORS = bytes(D.colors);
+  const L = D.links.length, DOF = D.joint_names.length;
+  const GHOST = D.ghost ? { poses: f32(D.ghost.poses), q: f32(D.ghost.q), error: f32(D.ghost.error), tcp: f32(D.ghost.tcp) } : null;
+
+  // ------------------------------------------------------------------ renderer, camera, lights
+  const canvas = $('canvas3d');
+  const renderer = new THREE.WebGLRenderer({ canvas: canvas, antialias: true });
+  renderer.setPixelRatio(window.devicePixelRatio || 1);
+  const scene = new THREE.Scene();
+  scene.background = new THREE.Color(0xf7f8fa);
+  const camera = new THREE.PerspectiveCamera(35, 1, 0.002, 100);
+  camera.up.set(0, 0, 1);
+  const controls = new THREE.OrbitControls(camera, canvas);
+  scene.add(new THREE.HemisphereLight(0xffffff, 0x8d8d8d, 0.75));
+  const sun = new THREE.DirectionalLight(0xffffff, 0.65);
+  sun.position.set(1.0, -0.6, 2.0);
+  scene.add(sun);
+
+  const lo = new THREE.Vector3().fromArray(D.bounds[0]), hi = new THREE.Vector3().fromArray(D.bounds[1]);
+  const centre = lo.clone().add(hi).multiplyScalar(0.5);
+  const span = Math.max(hi.clone().sub(lo).length(), 0.05);
+
+  function homeCamera() {
+    // the PNG's iso view: elevation 26 deg, azimuth -38 deg
+    const e = 26 * Math.PI / 180, a = -38 * Math.PI / 180;
+    const dir = new THREE.Vector3(Math.cos(e) * Math.cos(a), Math.cos(e) * Math.sin(a), Math.sin(e));
+    const dist = 0.5 * span / Math.tan(0.5 * camera.fov * Math.PI / 180) * 0.9;
+    camera.position.copy(centre).addScaledVector(dir, dist);
+    controls.target.copy(centre);
+    controls.update();
+  }
+
+  const grid = new THREE.GridHelper(Math.ceil(span * 20) / 10, Math.ceil(span * 20), 0xc8ccd2, 0xe2e5e9);
+  grid.rotation.x = Math.PI / 2;  // three.js grids lie in x-z; the world's floor is x-y
+  grid.position.set(centre.x, centre.y, 0);
+  scene.add(grid);
+  scene.add(new THREE.AxesHelper(0.05));
+
+  function matrixOf(arr, offset) {  // 12 floats (3x4, row-major) -> Matrix4
+    const a = arr, o = offset || 0;
+    return new THREE.Matrix4().set(a[o], a[o + 1], a[o + 2], a[o + 3], a[o + 4], a[o + 5], a[o + 6], a[o + 7],
+      a[o + 8], a[o + 9], a[o + 10], a[o + 11], 0, 0, 0, 1);
+  }
+
+  // One kind of surface material for everything: each shader program costs a compile (slow in software GL).
+  function surface(color, opacity) {
+    const o = opacity === undefined ? 1 : opacity;
+    return new THREE.MeshLambertMaterial({ color: color, side: THREE.DoubleSide, transparent: o < 1, opacity: o, depthWrite: o >= 1 });
+  }
+
+  function solid(triangles, color, opacity, edges) {
+    const geom = new THREE.BufferGeometry();
+    geom.setAttribute('position', new THREE.BufferAttribute(triangles, 3));
+    geom.computeVertexNormals();
+    const mat = surface(color, opacity);
+    const group = new THREE.Group();
+    group.add(new THREE.Mesh(geom, mat));
+    if (edges) {
+      const lines = new THREE.LineSegments(new THREE.EdgesGeometry(geom, 25),
+        new THREE.LineBasicMaterial({ color: edges, transparent: true, opacity: 0.6 }));
+      group.add(lines);
+    }
+    return group;
+  }
+
+  function placed(object) { object.matrixAutoUpdate = false; scene.add(object); return object; }
+
+  // ------------------------------------------------------------------ robot (the checker's shapes) and ghost
+  const linkGroups = D.links.map((link) => placed(solid(f32(link.collision), 0x9aa3ae, 1.0, 0x39414b)));
+  let ghostGroups = [];
+  if (GHOST) {
+    ghostGroups = D.links.map((link) => {
+      const geom = new THREE.BufferGeometry();
+      geom.setAttribute('position', new THREE.BufferAttribute(f32(link.collision), 3));
+      const g = new THREE.LineSegments(new THREE.EdgesGeometry(geom, 25),
+        new THREE.LineBasicMaterial({ color: 0xe67e22, transparent: true, opacity: 0.9 }));
+      return placed(g);
+    });
+    $('ghost-toggle').hidden = false;  // (its TCP dot is added with the commanded one below)
+    $('ghost-name').textContent = D.ghost.label;
+    $('r-ghost-row').hidden = false;
+    $('r-ghost-name').textContent = D.ghost.label + ' vs commanded TCP';
+  }
+
+  // ------------------------------------------------------------------ scene items
+  const ROLE_OPACITY = { table: 0.45, obstacle: 0.55, object: 0.9 };
+  const items = D.items.map((item) => {
+    const g = placed(solid(f32(item.triangles), item.color, ROLE_OPACITY[item.role] || 0.55, 0x444444));
+    g.matrix.copy(matrixOf(item.pose));
+    return { group: g, track: item.track ? f32(item.track) : null };
+  });
+
+  // ------------------------------------------------------------------ TCP path, marks
+  const path = new THREE.Group();
+  scene.add(path);
+  const lineMaterials = [];
+  function fatLine(positions, colors, width, segments) {
+    const geom = segments ? new THREE.LineSegmentsGeometry() : new THREE.LineGeometry();
+    geom.setPositions(positions);
+    geom.setColors(colors);
+    const mat = new THREE.LineMaterial({ linewidth: width, vertexColors: true });
+    lineMaterials.push(mat);
+    const line = segments ? new THREE.LineSegments2(geom, mat) : new THREE.Line2(geom, mat);
+    line.computeLineDistances();
+    return line;
+  }
+  const pathColors = Array.from(COLORS, (c) => c / 255);
+  if (N > 1) {
+    path.add(fatLine(Array.from(TCP), pathColors, 2.5, false));
+    const cart = D.segment_kinds.indexOf('cartesian');
+    const pos = [], col = [];
+    for (let i = 0; i + 1 < N; i++) {
+      if (D.segment[i] !== cart) continue;
+      for (const k of [i, i + 1]) {
+        pos.push(TCP[3 * k], TCP[3 * k + 1], TCP[3 * k + 2]);
+        col.push(pathColors[3 * k], pathColors[3 * k + 1], pathColors[3 * k + 2]);
+      }
+    }
+    if (pos.length) path.add(fatLine(pos, col, 6, true));
+  }
+
+  const labels = [];
+  function label(text, color, anchor) {
+    const div = document.createElement('div');
+    div.className = 'label';
+    div.textContent = text;
+    div.style.color = color;
+    $('labels').appendChild(div);
+    labels.push({ div: div, anchor: new THREE.Vector3().fromArray(anchor) });
+  }
+  function ball(at, color, radius) {
+    const m = new THREE.Mesh(new THREE.SphereGeometry(radius, 16, 12), surface(color));
+    m.position.fromArray(at);
+    path.add(m);
+    return m;
+  }
+  const tcpAt = (i) => [TCP[3 * i], TCP[3 * i + 1], TCP[3 * i + 2]];
+  const mark = Math.max(0.004, 0.012 * span);
+  ball(tcpAt(0), 0x2ca02c, 0.6 * mark);
+  const end = new THREE.Mesh(new THREE.BoxGeometry(mark, mark, mark), surface(0xd62728));
+  end.position.fromArray(tcpAt(N - 1));
+  path.add(end);
+  for (const e of D.events) {
+    ball(e.target, e.color, 0.55 * mark);
+    label(e.label, e.color, [e.target[0], e.target[1], e.target[2] + mark]);
+  }
+  for (const b of D.blends) {
+    const m = new THREE.Mesh(new THREE.OctahedronGeometry(0.45 * mark), surface(0xff7f0e));
+    m.position.fromArray(tcpAt(b.index));
+    path.add(m);
+  }
+  if (D.failure && D.failure.target) {
+    const x = new THREE.Group();
+    for (const s of [1, -1]) {
+      const bar = new THREE.Mesh(new THREE.BoxGeometry(3 * mark, 0.5 * mark, 0.5 * mark),
+        surface(D.failure.color));
+      bar.rotation.y = s * Math.PI / 4;
+      x.add(bar);
+    }
+    x.position.fromArray(D.failure.target);
+    path.add(x);
+    label('failed: ' + D.failure.label, D.failure.color, [D.failure.target[0], D.failure.target[1], D.failure.target[2] + 2 * mark]);
+  }
+
+  // The TCP at the cursor: a round dot of fixed size in pixels, drawn over everything (tests find it on screen).
+  const dotCanvas = document.createElement('canvas');
+  dotCanvas.width = dotCanvas.height = 64;
+  const ctx = dotCanvas.getContext('2d');
+  ctx.fillStyle = '#ffffff';
+  ctx.beginPath(); ctx.arc(32, 32, 30, 0, 2 * Math.PI); ctx.fill();
+  const tcpGeom = new THREE.BufferGeometry();
+  tcpGeom.setAttribute('position', new THREE.BufferAttribute(new Float32Array(3), 3));
+  const tcpDot = new THREE.Points(tcpGeom, new THREE.PointsMaterial({ color: 0xff00ff, size: 11, sizeAttenuation: false,
+    map: new THREE.CanvasTexture(dotCanvas), alphaTest: 0.5, depthTest: false, depthWrite: false, transparent: true }));
+  // transparent: drawn in the last pass, after the translucent scene items, so nothing covers it
+  tcpDot.renderOrder = 10;
+  tcpDot.frustumCulled = false;
+  scene.add(tcpDot);
+  let ghostDot = null;
+  if (GHOST) {  // the measured TCP: a smaller orange dot
+    const g = new THREE.BufferGeometry();
+    g.setAttribute('position', new THREE.BufferAttribute(new Float32Array(3), 3));
+    ghostDot = new THREE.Points(g, new THREE.PointsMaterial({ color: 0xe67e22, size: 8, sizeAttenuation: false,
+      map: tcpDot.material.map, alphaTest: 0.5, depthTest: false, depthWrite: false, transparent: true }));
+    ghostDot.renderOrder = 9;
+    ghostDot.frustumCulled = false;
+    scene.add(ghostDot);
+  }
+
+  // ------------------------------------------------------------------ panel
+  $('title').textContent = D.title;
+  $('subtitle').textContent = D.subtitle;
+  $('notes').textContent = (D.notes || []).join(' · ');
+  document.title = D.title;
+  $('speed-bar').style.background = 'linear-gradient(to right, ' + D.color_stops.join(', ') + ')';
+  $('speed-max').textContent = D.speed_max.toFixed(3);
+  const marks = [['start', '#2ca02c'], ['end', '#d62728'], ['TCP now', '#ff00ff']];
+  if (D.blends.length) marks.push(['blended join (no stop)', '#ff7f0e']);
+  for (const e of D.events) if (!marks.some((m) => m[0] === e.kind + ' target')) marks.push([e.kind + ' target', e.color]);
+  if (GHOST) marks.push([D.ghost.label + ' arm (outline)', '#e67e22']);
+  if (D.failure) marks.push(['failed target: ' + D.failure.label, D.failure.color]);
+  for (const [text, color] of marks) {
+    const li = document.createElement('li');
+    li.textContent = text;
+    li.style.setProperty('--c', color);
+    $('marks').appendChild(li);
+  }
+  const jointCells = D.joint_names.map((name, j) => {
+    const tr = document.createElement('tr');
+    const cells = [0, 1, 2].map(() => document.createElement('td'));
+    cells[0].textContent = name;
+    for (const c of cells) tr.appendChild(c);
+    $('joints').tBodies[0].appendChild(tr);
+    return cells;
+  });
+
+  // ------------------------------------------------------------------ time
+  const scrub = $('scrub');
+  scrub.max = String(Math.max(N - 1, 0));
+  let index = 0, playing = false, playTime = 0, lastFrame = 0;
+
+  function sampleAt(t) {  // the last sample at or before t
+    let a = 0, b = N - 1;
+    if (t >= T[b]) return b;
+    while (b - a > 1) { const m = (a + b) >> 1; if (T[m] <= t) a = m; else b = m; }
+    return a;
+  }
+
+  function fmt(v, digits) { return Number.isFinite(v) ? v.toFixed(digits) : '—'; }
+
+  function showReadout(i) {
+    $('r-time').textContent = fmt(T[i], 3) + ' s of ' + fmt(D.duration, 3) + ' s (sample ' + (i + 1) + '/' + N + ')';
+    $('clock').textContent = fmt(T[i], 2) + ' / ' + fmt(D.duration, 2) + ' s';
+    $('r-segment').textContent = D.segment_kinds[D.segment[i]] || '—';
+    const vmax = D.limits.max_tcp_speed;
+    $('r-speed').textContent = fmt(SPEED[i], 3) + ' m/s' + (vmax ? ' (limit ' + vmax + ')' : '');
+    const margin = D.limits.min_singular_value;
+    $('r-sigma').textContent = fmt(SIGMA[i], 4) + ' m/rad' + (margin ? ' (margin ' + margin + ')' : '');
+    $('r-sigma').className = margin && SIGMA[i] < margin ? 'warn' : '';
+    const c = CLEAR[i], item = D.nearest_item[i], part = D.nearest_part[i];
+    $('r-clearance').textContent = c < 0 ? 'no scene item' :
+      (c * 1000).toFixed(1) + ' mm: ' + D.parts[part] + ' to ' + D.items[item].name;
+    $('r-clearance').className = c >= 0 && c < 0.005 ? 'warn' : '';
+    if (GHOST) $('r-ghost').textContent = (GHOST.error[i] * 1000).toFixed(1) + ' mm';
+    for (let j = 0; j < DOF; j++) {
+      const v = Q[i * DOF + j], cells = jointCells[j];
+      if (D.joint_units[j] === 'm') { cells[1].textContent = (v * 1000).toFixed(1) + ' mm'; cells[2].textContent = ''; }
+      else { cells[1].textContent = v.toFixed(4) + ' rad'; cells[2].textContent = (v * 180 / Math.PI).toFixed(1) + '°'; }
+    }
+  }
+
+  function setIndex(i) {
+    index = Math.max(0, Math.min(N - 1, Math.round(i)));
+    for (let k = 0; k < L; k++) linkGroups[k].matrix.copy(matrixOf(POSES, (index * L + k) * 12));
+    for (let k = 0; k < ghostGroups.length; k++) ghostGroups[k].matrix.copy(matrixOf(GHOST.poses, (index * L + k) * 12));
+    for (const it of items) if (it.track) it.group.matrix.copy(matrixOf(it.track, index * 12));
+    const p = tcpGeom.attributes.position;
+    p.setXYZ(0, TCP[3 * index], TCP[3 * index + 1], TCP[3 * index + 2]);
+    p.needsUpdate = true;
+    if (ghostDot) {
+      const g = ghostDot.geometry.attributes.position;
+      g.setXYZ(0, GHOST.tcp[3 * index], GHOST.tcp[3 * index + 1], GHOST.tcp[3 * index + 2]);
+      g.needsUpdate = true;
+    }
+    scrub.value = String(index);
+    showReadout(index);
+    render();
+  }
+
+  function render() {
+    renderer.render(scene, camera);
+    const w = canvas.clientWidth, h = canvas.clientHeight, v = new THREE.Vector3();
+    for (const l of labels) {
+      v.copy(l.anchor).project(camera);
+      const visible = $('show-labels').checked && v.z > -1 && v.z < 1;
+      l.div.style.display = visible ? '' : 'none';
+      if (visible) { l.div.style.left = ((v.x + 1) / 2 * w) + 'px'; l.div.style.top = ((1 - v.y) / 2 * h) + 'px'; }
+    }
+  }
+
+  function resize() {
+    const w = canvas.parentElement.clientWidth, h = canvas.parentElement.clientHeight;
+    renderer.setSize(w, h, false);
+    camera.aspect = w / Math.max(h, 1);
+    camera.updateProjectionMatrix();
+    for (const m of lineMaterials) m.resolution.set(w, h);
+    render();
+  }
+
+  function setPlaying(on) {
+    playing = on && N > 1;
+    $('play').textContent = playing ? '❚❚' : '▶';
+    if (playing) {
+      if (index >= N - 1) setIndex(0);
+      playTime = T[index];
+      lastFrame = performance.now();
+      requestAnimationFrame(step);
+    }
+  }
+
+  function step(now) {
+    if (!playing) return;
+    playTime += (now - lastFrame) / 1000 * Number($('rate').value);
+    lastFrame = now;
+    setIndex(sampleAt(playTime));
+    if (index >= N - 1) { setPlaying(false); return; }
+    requestAnimationFrame(step);
+  }
+
+  // event and blend ticks above the time slider: a click jumps to that moment
+  for (const [list, cls] of [[D.blends, 'blend'], [D.events, 'event']]) {
+    for (const e of list) {
+      const b = document.createElement('button');
+      b.type = 'button';
+      b.className = 'tick ' + cls;
+      b.dataset.kind = cls === 'blend' ? 'blend' : e.kind;
+      b.style.left = (N > 1 ? 100 * e.index / (N - 1) : 0) + '%';
+      b.style.setProperty('--c', cls === 'blend' ? '#ff7f0e' : e.color);
+      b.title = (cls === 'blend' ? 'blended join' : e.label) + ' at ' + e.time.toFixed(3) + ' s';
+      b.addEventListener('click', () => { setPlaying(false); setIndex(e.index); });
+      $('ticks').appendChild(b);
+    }
+  }
+
+  scrub.addEventListener('input', () => { setPlaying(false); setIndex(Number(scrub.value)); });
+  $('play').addEventListener('click', () => setPlaying(!playing));
+  $('reset-camera').addEventListener('click', () => { homeCamera(); render(); });
+  $('show-collision').addEventListener('change', (ev) => { for (const g of linkGroups) g.visible = ev.target.checked; render(); });
+  $('show-path').addEventListener('change', (ev) => { path.visible = ev.target.checked; render(); });
+  $('show-labels').addEventListener('change', render);
+  $('show-ghost').addEventListener('change', (ev) => {
+    for (const g of ghostGroups) g.visible = ev.target.checked;
+    if (ghostDot) ghostDot.visible = ev.target.checked;
+    render();
+  });
+  controls.addEventListener('change', render);
+  window.addEventListener('resize', resize);
+  document.addEventListener('keydown', (ev) => {
+    if (ev.target instanceof HTMLInputElement || ev.target instanceof HTMLSelectElement) return;
+    if (ev.key === ' ') { ev.preventDefault(); setPlaying(!playing); }
+    else if (ev.key === 'ArrowRight') setIndex(index + 1);
+    else if (ev.key === 'ArrowLeft') setIndex(index - 1);
+  });
+
+  homeCamera();
+  resize();
+  setIndex(0);
+
+  // For scripts and tests: the state of the view, and the camera that drew it (column-major, as three.js keeps it).
+  window.roarmView = {
+    ready: true,
+    timing: { scriptStart: started, ready: performance.now() },  // ms since navigation start
+    data: D,
+    setIndex: setIndex,
+    setPlaying: setPlaying,
+    state: function () {
+      const rect = canvas.getBoundingClientRect();
+      camera.updateMatrixWorld();
+      return {
+        index: index, time: T[index], playing: playing,
+        tcp: tcpAt(index),
+        projection: Array.from(camera.projectionMatrix.elements),
+        view: Array.from(camera.matrixWorldInverse.elements),
+        canvas: { left: rect.left, top: rect.top, width: rect.width, height: rect.height },
+      };
+    },
+  };
+})();
