@@ -109,6 +109,21 @@ def test_readme_command(cmd, workdir):
             proc.communicate(timeout=30)
         assert proc.returncode == 0
         return
+    if cmd.startswith("roarmctl view"):  # serves until Ctrl-C: its first line names the URL, which answers with the page
+        proc = subprocess.Popen([sys.executable, "-m", "roarmctl", *cmd.split()[1:]], cwd=workdir, text=True,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        try:
+            url = re.search(r"http://127\.0\.0\.1:\d+/", proc.stdout.readline())
+            assert url, "no URL printed"
+            import urllib.request
+
+            with urllib.request.urlopen(url.group(0), timeout=60) as page:
+                assert page.status == 200 and b"roarm-view-data" in page.read()
+        finally:
+            proc.send_signal(signal.SIGINT)
+            proc.communicate(timeout=30)
+        assert proc.returncode == 130
+        return
     if "pick_place.exec.json" in cmd and not (workdir / "pick_place.exec.json").exists():
         assert run("roarmctl execute pick_place.traj.json --sim --yes", workdir).returncode == 0
     r = run(cmd, workdir)

@@ -15,15 +15,14 @@ import re
 import signal
 import subprocess
 import sys
-import time
 import urllib.error
 import urllib.request
 from pathlib import Path
 
+import browser as br
 import numpy as np
 import pytest
 
-import browser as br
 from roarmctl.cli import run as run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -312,6 +311,7 @@ def test_view_serves_the_page_on_loopback_until_ctrl_c(chromium, planned, tmp_pa
     answers nothing else, and Ctrl-C ends it with exit 130."""
     f, _ = planned["pick_place"]
     code, out = write_html(tmp_path, f)
+    assert code == 0
     proc = subprocess.Popen([sys.executable, "-m", "roarmctl", "view", str(f)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:

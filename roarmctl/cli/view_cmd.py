@@ -7,6 +7,7 @@ memory and answers only on the loopback interface. Ctrl-C stops it (exit 130, as
 from __future__ import annotations
 
 from pathlib import Path
+
 import typer
 
 from roarmctl.cli import common

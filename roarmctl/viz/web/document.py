@@ -61,6 +61,12 @@ def _thin(times: np.ndarray, keep: list[int], max_samples: int) -> np.ndarray:
     return np.array(sorted(idx), dtype=int)
 
 
+def hex_color(rgba) -> str:
+    """'#rrggbb' of an RGB(A) colour with components in [0, 1] (alpha dropped)."""
+    r, g, b = (int(round(255 * float(c))) for c in rgba[:3])
+    return f"#{r:02x}{g:02x}{b:02x}"
+
+
 def _speed_colors(speed: np.ndarray, vmax: float) -> tuple[np.ndarray, list[str]]:
     """(N, 3) uint8 colours of ``speed`` on the PNG's colour map over [0, vmax], and the colour bar's stops."""
     from matplotlib import colormaps
@@ -70,7 +76,7 @@ def _speed_colors(speed: np.ndarray, vmax: float) -> tuple[np.ndarray, list[str]
     cmap = colormaps[PATH_CMAP]
     rgb = (np.asarray(cmap(np.clip(speed / vmax, 0.0, 1.0)))[:, :3] * 255).round().astype(np.uint8)
     stops = [cmap(x) for x in np.linspace(0.0, 1.0, COLOR_STOPS)]
-    return rgb, ["#%02x%02x%02x" % tuple(int(round(255 * c)) for c in s[:3]) for s in stops]
+    return rgb, [hex_color(s) for s in stops]
 
 
 def _links(robot: Robot) -> tuple[list[int], list[dict[str, Any]]]:
@@ -164,7 +170,7 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         moves = bool(carried[:, k].any()) or not np.allclose(item_poses[:, k], item_poses[:1, k])
         style = ROLE_STYLE.get(str(it.get("role")), ROLE_STYLE["obstacle"])
         doc_items.append({"name": str(it.get("name", f"item {k}")), "role": str(it.get("role", "obstacle")),
-                          "color": "#%02x%02x%02x" % tuple(int(round(255 * c)) for c in style["facecolor"][:3]),
+                          "color": hex_color(style["facecolor"]),
                           "triangles": _f32(tris), "pose": _pose12(item_pose(it, f"scene.items[{k}]")).tolist(),
                           "track": _f32(_pose12(item_poses[:, k])) if moves else None})
 

@@ -64,13 +64,16 @@ class ViewServer:
 
     @property
     def port(self) -> int:
+        """The TCP port it listens on."""
         return int(self.httpd.server_address[1])
 
     @property
     def url(self) -> str:
+        """``http://127.0.0.1:PORT/``."""
         return f"http://{HOST}:{self.port}/"
 
     def serve_forever(self) -> None:
+        """Answer requests until ``close()`` or an exception (Ctrl-C) in this thread."""
         self.httpd.serve_forever(poll_interval=0.2)
 
     def close(self) -> None:

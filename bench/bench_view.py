@@ -1,0 +1,84 @@
+"""The browser view's page per bundled plan: its size, the time to build it, and its load time in headless Chromium.
+
+    .venv/bin/python bench/bench_view.py [--loads N] [--screenshot docs/view.png]
+
+Each bundled plan is planned once (not timed). "build" is ``view_document`` + ``render_page`` in this process
+(median of 3; the speed colours' matplotlib import is paid before). "load" opens the written file
+(``file://``, no server, no network) in the system's Chromium (``make browser``) driven by Playwright, one
+browser for the whole run and a new page per load, and reports the median over ``--loads`` of: "ready" =
+navigation start to the end of the page's own script (data decoded, scene built, first frame drawn, from
+``roarmView.timing``), and "load event" = navigation start to the window's load event (the browser has
+finished with the page, its first frame rendered by the GPU process, here SwiftShader's software GL).
+The machine's load average is printed: on a shared 2-core machine the figures move with it.
+
+``--screenshot PATH`` also writes the README's picture: pick_place at its grasp, 1200 x 760 px.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))  # the Chromium driver shared with the browser tests
+
+import browser as br  # noqa: E402
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--loads", type=int, default=5)
+    ap.add_argument("--screenshot", type=Path, default=None)
+    args = ap.parse_args()
+    if br.chromium_path() is None:
+        sys.exit("bench_view: Chromium not found (make browser, or set ROARMCTL_CHROMIUM)")
+
+    import matplotlib  # noqa: F401  (paid once, not per page)
+
+    from roarmctl.motion.pipeline import plan_file
+    from roarmctl.viz.web.document import view_document
+    from roarmctl.viz.web.page import render_page, write_page
+
+    plans = sorted((ROOT / "plans").glob("*.yaml"))
+    print(f"load average {os.getloadavg()[0]:.2f} (2 cores); {args.loads} loads per page, medians")
+    print(f"{'plan':<16} {'samples':>7} {'page MB':>8} {'build s':>8} {'ready ms':>9} {'load event ms':>14}")
+    from playwright.sync_api import sync_playwright
+
+    with tempfile.TemporaryDirectory() as tmp, sync_playwright() as pw:
+        chromium = br.launch(pw)
+        for p in plans:
+            traj = plan_file(p, seed=None).trajectory
+            builds = []
+            for _ in range(3):
+                t0 = time.perf_counter()
+                doc = view_document(traj, name=p.name)
+                render_page(doc)
+                builds.append(time.perf_counter() - t0)
+            out = write_page(doc, Path(tmp) / f"{p.stem}.html")
+            ready, loaded = [], []
+            for _ in range(args.loads):
+                page, watch = br.open_page(chromium, out.as_uri())
+                page.wait_for_function("() => document.readyState === 'complete'")
+                ready.append(page.evaluate("window.roarmView.timing.ready"))
+                loaded.append(page.evaluate("performance.timing.loadEventEnd - performance.timing.navigationStart"))
+                if watch.errors:
+                    sys.exit(f"bench_view: {p.name}: errors on the page: {watch.errors}")
+                if args.screenshot is not None and p.stem == "pick_place" and len(ready) == 1:
+                    page.click(".tick.event[data-kind=grasp]")
+                    args.screenshot.parent.mkdir(parents=True, exist_ok=True)
+                    page.screenshot(path=str(args.screenshot))
+                page.close()
+            print(f"{p.stem:<16} {doc['n']:>7} {out.stat().st_size / 1e6:>8.2f} {statistics.median(builds):>8.2f} "
+                  f"{statistics.median(ready):>9.0f} {statistics.median(loaded):>14.0f}")
+        chromium.close()
+    if args.screenshot is not None:
+        print(f"wrote {args.screenshot}")
+
+
+if __name__ == "__main__":
+    main()
