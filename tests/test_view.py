@@ -174,6 +174,25 @@ def test_long_motion_is_thinned_but_keeps_its_marks(planned):
         assert times[e["index"]] == pytest.approx(traj.times[np.searchsorted(traj.times, e["time"] - 1e-9)], abs=1e-5)
 
 
+def test_a_robot_without_collision_geometry_is_drawn_as_its_stick_arm():
+    """A DH arm has no shapes: the page still draws it, joint origin to joint origin, ending at the TCP (FK)."""
+    import base64
+
+    import viz_fixtures
+
+    from roarmctl.viz.data import robot_for
+    from roarmctl.viz.web.document import view_document
+
+    traj = viz_fixtures.planar_trajectory()
+    robot = robot_for(traj)
+    doc = view_document(traj)
+    assert doc["links"] == [] and doc["bones"]
+    pts = np.frombuffer(base64.b64decode(doc["bone_points"]), dtype="<f4").reshape(doc["n"], -1, 3)
+    end = pts[:, doc["bones"][-1][1]]
+    assert np.allclose(end, robot.kin.fk(traj.positions)[:, :3, 3], atol=1e-6)
+    assert np.allclose(pts[:, doc["bones"][0][0]], 0.0, atol=1e-7)  # the base stays at the origin
+
+
 def test_page_is_one_file_with_no_outside_reference(planned, tmp_path):
     code, out = write_html(tmp_path, planned["pick_place"][0])
     assert code == 0

@@ -145,6 +145,8 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
 
     link_ids, links = _links(robot)
     frames = robot.kin.link_frames(q)  # (n, L, 4, 4)
+    bone_links = sorted({k for pair in data.arm_segments for k in pair})  # the PNG's stick arm: joint to joint
+    bones = [[bone_links.index(a), bone_links.index(b)] for a, b in data.arm_segments]
     items, item_poses, carried = _item_tracks(traj, robot, times)
     scene_items = [SceneItem.from_dict(it) for it in items]
     clear = clearance(robot, scene_items, q, item_poses, carried)
@@ -186,7 +188,7 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
                      "error": _f32(np.linalg.norm(gtcp - data.tcp[idx], axis=1)),
                      "span": [float(ghost.times[0]), float(ghost.times[-1])]}
         extra.append(gtcp)
-    lo, hi = _bounds(data, frames[:, link_ids, :3, 3], items, extra)
+    lo, hi = _bounds(data, frames[:, link_ids + bone_links][..., :3, 3], items, extra)
 
     title, subtitle = describe(data, name)
     if failure is not None:
@@ -218,6 +220,8 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         "segment_kinds": seg_kinds,
         "links": links,
         "poses": _f32(_pose12(frames[:, link_ids])),
+        "bones": bones,
+        "bone_points": _f32(frames[:, bone_links][..., :3, 3]),
         "tcp_link": robot.tcp_link,
         "items": doc_items,
         "events": events,

@@ -86,6 +86,13 @@
 
   // ------------------------------------------------------------------ robot (the checker's shapes) and ghost
   const linkGroups = D.links.map((link) => placed(solid(f32(link.collision), 0x9aa3ae, 1.0, 0x39414b)));
+  // the stick arm (joint origin to joint origin, as in the PNG): the whole arm of a robot without geometry
+  const BONES = f32(D.bone_points), NB = D.bones.length ? BONES.length / (3 * N) : 0;
+  const boneGeom = new THREE.BufferGeometry();
+  boneGeom.setAttribute('position', new THREE.BufferAttribute(new Float32Array(6 * D.bones.length), 3));
+  const skeleton = new THREE.LineSegments(boneGeom, new THREE.LineBasicMaterial({ color: L ? 0x1f2a36 : 0x4a5866 }));
+  skeleton.frustumCulled = false;
+  scene.add(skeleton);
   let ghostGroups = [];
   if (GHOST) {
     ghostGroups = D.links.map((link) => {
@@ -273,6 +280,14 @@
     for (let k = 0; k < L; k++) linkGroups[k].matrix.copy(matrixOf(POSES, (index * L + k) * 12));
     for (let k = 0; k < ghostGroups.length; k++) ghostGroups[k].matrix.copy(matrixOf(GHOST.poses, (index * L + k) * 12));
     for (const it of items) if (it.track) it.group.matrix.copy(matrixOf(it.track, index * 12));
+    const bp = boneGeom.attributes.position;
+    D.bones.forEach((pair, k) => {
+      for (let e = 0; e < 2; e++) {
+        const o = 3 * (index * NB + pair[e]);
+        bp.setXYZ(2 * k + e, BONES[o], BONES[o + 1], BONES[o + 2]);
+      }
+    });
+    bp.needsUpdate = true;
     const p = tcpGeom.attributes.position;
     p.setXYZ(0, TCP[3 * index], TCP[3 * index + 1], TCP[3 * index + 2]);
     p.needsUpdate = true;
