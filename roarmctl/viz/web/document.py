@@ -14,7 +14,7 @@ Only numpy and the library here (matplotlib only for the speed colour map, the s
 from __future__ import annotations
 
 import base64
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -41,6 +41,9 @@ class Ghost:
     label: str
     times: np.ndarray
     positions: np.ndarray
+    #: name -> (times (K,) s, positions (K, 3) m, quaternions (K, 4) w-x-y-z): where the run had the scene's
+    #: objects (a physics run tracks them), drawn as outlines of the items of those names.
+    objects: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
 
 
 def _f32(a: np.ndarray) -> str:
@@ -186,7 +189,8 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         gtcp = gframes[:, robot.kin.tcp_index, :3, 3]
         ghost_doc = {"label": ghost.label, "poses": _f32(_pose12(gframes[:, link_ids])), "q": _f32(gq), "tcp": _f32(gtcp),
                      "error": _f32(np.linalg.norm(gtcp - data.tcp[idx], axis=1)),
-                     "span": [float(ghost.times[0]), float(ghost.times[-1])]}
+                     "span": [float(ghost.times[0]), float(ghost.times[-1])],
+                     "items": _ghost_items(ghost, items, times)}
         extra.append(gtcp)
     lo, hi = _bounds(data, frames[:, link_ids + bone_links][..., :3, 3], items, extra)
 
@@ -231,6 +235,31 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         "ghost": ghost_doc,
         "bounds": [lo.tolist(), hi.tolist()],
     }
+
+
+def _quat_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (K, 3, 3) of unit quaternions (K, 4) in w, x, y, z order."""
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+                     np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+                     np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], 1)
+
+
+def _ghost_items(ghost: Ghost, items: list[dict], times: np.ndarray) -> list[dict[str, Any]]:
+    """The run's objects at ``times``: for each tracked name that is a scene item, its index and poses (N, 12);
+    positions interpolated, the orientation of the last track sample at or before each time."""
+    out = []
+    names = [str(it.get("name")) for it in items]
+    for name, (t, xyz, quat) in ghost.objects.items():
+        if name not in names or len(t) == 0:
+            continue
+        pose = np.zeros((len(times), 3, 4))
+        pose[:, :, 3] = np.column_stack([np.interp(times, t, xyz[:, k]) for k in range(3)])
+        j = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 1)
+        pose[:, :, :3] = _quat_matrix(quat)[j]
+        out.append({"item": names.index(name), "track": _f32(pose.reshape(len(times), 12))})
+    return out
 
 
 def _joint_of(robot: Robot, name: str) -> int:

@@ -136,10 +136,35 @@ def _log_source(log: dict[str, Any], path: Path, trajectory: str | os.PathLike |
             raise TrajectoryFileError(f"{path}: the log holds no joint commands", "view a log of a run that moved the arm")
         main = _states_trajectory(robot, cmd.times, cmd.positions)
         notes.append("no scene: give --trajectory with the .traj.json this run executed")
-    ghost = Ghost("measured", measured.times, measured.positions) if len(measured.times) else None
+    ghost = _physics_ghost(log, robot, path)
+    if ghost is None and len(measured.times):
+        ghost = Ghost("measured", measured.times, measured.positions)
     if ghost is None:
         notes.append("no feedback in the log: only the commanded arm is shown")
     return ViewSource(main, robot, path.name, ghost=ghost, notes=notes)
+
+
+def _physics_ghost(log: dict[str, Any], robot: Robot, path: Path) -> Ghost | None:
+    """A physics run's (``roarmctl simulate``) simulated arm and objects, from its ``physics.tracks``
+    (``t`` s on the run's clock, ``q`` rad per joint, ``objects``: name -> ``t``, ``xyz`` m, ``quat`` w-x-y-z);
+    None when the log has none."""
+    tracks = log.get("physics", {}).get("tracks") if isinstance(log.get("physics"), dict) else None
+    if not isinstance(tracks, dict) or "t" not in tracks or "q" not in tracks:
+        return None
+    try:
+        t = np.asarray(tracks["t"], dtype=float)
+        q = np.asarray(tracks["q"], dtype=float).reshape(len(t), robot.dof)
+        objects = {}
+        for name, o in (tracks.get("objects") or {}).items():
+            ot = np.asarray(o["t"], dtype=float)
+            objects[str(name)] = (ot, np.asarray(o["xyz"], dtype=float).reshape(len(ot), 3),
+                                  np.asarray(o["quat"], dtype=float).reshape(len(ot), 4))
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise TrajectoryFileError(f"{path}: physics.tracks: malformed ({type(exc).__name__}: {exc})",
+                                  "view a run file written by 'roarmctl simulate'") from None
+    if len(t) < 1 or not np.all(np.isfinite(t)) or not np.all(np.isfinite(q)) or np.any(np.diff(t) <= 0):
+        raise TrajectoryFileError(f"{path}: physics.tracks: times must be finite and increasing, joints finite")
+    return Ghost("simulated", t, q, objects)
 
 
 def source_document(src: ViewSource) -> dict[str, Any]:

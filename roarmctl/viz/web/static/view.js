@@ -90,7 +90,8 @@
   const BONES = f32(D.bone_points), NB = D.bones.length ? BONES.length / (3 * N) : 0;
   const boneGeom = new THREE.BufferGeometry();
   boneGeom.setAttribute('position', new THREE.BufferAttribute(new Float32Array(6 * D.bones.length), 3));
-  const skeleton = new THREE.LineSegments(boneGeom, new THREE.LineBasicMaterial({ color: L ? 0x1f2a36 : 0x4a5866 }));
+  const skeleton = new THREE.LineSegments(boneGeom, new THREE.LineBasicMaterial({ color: 0x4a5866 }));
+  skeleton.visible = L === 0;  // with collision shapes it would only cut across them
   skeleton.frustumCulled = false;
   scene.add(skeleton);
   let ghostGroups = [];
@@ -115,6 +116,15 @@
     g.matrix.copy(matrixOf(item.pose));
     return { group: g, track: item.track ? f32(item.track) : null };
   });
+
+  // where the run had the objects (a physics run): orange outlines following their tracks
+  const ghostItems = GHOST ? (D.ghost.items || []).map((g) => {
+    const geom = new THREE.BufferGeometry();
+    geom.setAttribute('position', new THREE.BufferAttribute(f32(D.items[g.item].triangles), 3));
+    const outline = placed(new THREE.LineSegments(new THREE.EdgesGeometry(geom, 25),
+      new THREE.LineBasicMaterial({ color: 0xe67e22 })));
+    return { group: outline, track: f32(g.track) };
+  }) : [];
 
   // ------------------------------------------------------------------ TCP path, marks
   const path = new THREE.Group();
@@ -223,7 +233,7 @@
   const marks = [['start', '#2ca02c'], ['end', '#d62728'], ['TCP now', '#ff00ff']];
   if (D.blends.length) marks.push(['blended join (no stop)', '#ff7f0e']);
   for (const e of D.events) if (!marks.some((m) => m[0] === e.kind + ' target')) marks.push([e.kind + ' target', e.color]);
-  if (GHOST) marks.push([D.ghost.label + ' arm (outline)', '#e67e22']);
+  if (GHOST) marks.push([D.ghost.label + ' arm' + (D.ghost.items.length ? ' and objects' : '') + ' (outline)', '#e67e22']);
   if (D.failure) marks.push(['failed target: ' + D.failure.label, D.failure.color]);
   for (const [text, color] of marks) {
     const li = document.createElement('li');
@@ -280,6 +290,7 @@
     for (let k = 0; k < L; k++) linkGroups[k].matrix.copy(matrixOf(POSES, (index * L + k) * 12));
     for (let k = 0; k < ghostGroups.length; k++) ghostGroups[k].matrix.copy(matrixOf(GHOST.poses, (index * L + k) * 12));
     for (const it of items) if (it.track) it.group.matrix.copy(matrixOf(it.track, index * 12));
+    for (const it of ghostItems) it.group.matrix.copy(matrixOf(it.track, index * 12));
     const bp = boneGeom.attributes.position;
     D.bones.forEach((pair, k) => {
       for (let e = 0; e < 2; e++) {
@@ -364,6 +375,7 @@
   $('show-labels').addEventListener('change', render);
   $('show-ghost').addEventListener('change', (ev) => {
     for (const g of ghostGroups) g.visible = ev.target.checked;
+    for (const g of ghostItems) g.group.visible = ev.target.checked;
     if (ghostDot) ghostDot.visible = ev.target.checked;
     render();
   });
