@@ -6,11 +6,15 @@ memory and answers only on the loopback interface. Ctrl-C stops it (exit 130, as
 
 from __future__ import annotations
 
+import sys
+import webbrowser
 from pathlib import Path
 
 import typer
 
 from roarmctl.cli import common
+from roarmctl.viz.web.page import render_page
+from roarmctl.viz.web.server import ViewServer
 
 
 def register(app: typer.Typer) -> None:
@@ -27,8 +31,6 @@ def view(
     open_browser: bool = typer.Option(False, "--open", help="Also open the page in the default web browser."),
 ) -> None:
     """Serve an interactive 3D view (robot, scene, TCP path, timeline) at http://127.0.0.1:PORT/ until Ctrl-C."""
-    from roarmctl.viz.web.page import render_page
-    from roarmctl.viz.web.server import ViewServer
     from roarmctl.viz.web.sources import load_view_source, source_document
 
     src = load_view_source(source, trajectory)
@@ -39,12 +41,8 @@ def view(
             common.warn(f"{src.error.message}; the view shows the path up to the failure")
         out = common.console()
         out.print(f"view of {source.name} at [bold]{server.url}[/] ({len(page) / 1e6:.1f} MB page; Ctrl-C to stop)", soft_wrap=True)
-        import sys
-
         sys.stdout.flush()
         if open_browser:
-            import webbrowser
-
             webbrowser.open(server.url)
         server.serve_forever()
     finally:

@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from roarmctl.export.streams import item_tracks
+from roarmctl.motion.scene import SceneItem
 from roarmctl.viz.data import PathData, path_data, robot_for
 from roarmctl.viz.shapes import item_extent, item_faces, item_pose, robot_shape_faces, triangles
 
@@ -99,8 +101,6 @@ def _links(robot: Robot) -> tuple[list[int], list[dict[str, Any]]]:
 def _item_tracks(traj: Trajectory, robot: Robot, times: np.ndarray) -> tuple[list[dict], np.ndarray, np.ndarray]:
     """The scene items' tracks (``export.streams.item_tracks``: a carried object follows the TCP) at ``times``:
     the items, their poses (N, M, 4, 4) and whether each is carried at each time (N, M)."""
-    from roarmctl.export.streams import item_tracks
-
     tracks = item_tracks(traj, robot)
     n = len(times)
     poses = np.zeros((n, len(tracks), 4, 4))
@@ -130,7 +130,6 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
     ``notes``: lines shown under the title (e.g. what a run's log says).
     """
     from roarmctl.motion.clearance import clearance
-    from roarmctl.motion.scene import SceneItem
     from roarmctl.viz.path_figure import EVENT_COLOR, ROLE_STYLE, describe
 
     robot = robot if robot is not None else robot_for(traj)

@@ -16,7 +16,9 @@ from pathlib import Path
 from string import Template
 from typing import Any
 
+from roarmctl import __version__
 from roarmctl.errors import InputError
+from roarmctl.fileio import atomic_write_bytes
 
 THREE_PACKAGE = "jupyter_threejs_sage"
 THREE_RELEASE = "r130"
@@ -44,8 +46,6 @@ def data_json(doc: dict[str, Any]) -> str:
 
 def render_page(doc: dict[str, Any]) -> str:
     """The whole page as text (UTF-8 when written)."""
-    from roarmctl import __version__
-
     return Template(_static("page.html")).substitute(
         version=html.escape(__version__), title=html.escape(str(doc.get("title", "roarmctl view"))),
         css=_static("view.css"), data=data_json(doc), three=three_js(), app=_static("view.js"))
@@ -53,6 +53,4 @@ def render_page(doc: dict[str, Any]) -> str:
 
 def write_page(doc: dict[str, Any], path: str | Path) -> Path:
     """Write the page atomically (temporary file, then rename); returns the path written."""
-    from roarmctl.fileio import atomic_write_bytes
-
     return atomic_write_bytes(path, render_page(doc).encode("utf-8"))

@@ -14,10 +14,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.errors import InfeasibleError, InputError, TrajectoryFileError
-from roarmctl.viz.web.document import Ghost
+from roarmctl.export import load_source
+from roarmctl.export.streams import log_streams
+from roarmctl.motion.trajectory import Trajectory
+from roarmctl.viz.data import robot_for
+from roarmctl.viz.web.document import Ghost, view_document
 
 if TYPE_CHECKING:
-    from roarmctl.motion.trajectory import Trajectory
     from roarmctl.robot.model import Robot
 
 PLAN_SUFFIXES = (".yaml", ".yml")
@@ -73,8 +76,6 @@ def slowed(traj: Trajectory, scale: float) -> Trajectory:
 def _states_trajectory(robot: Robot, times: np.ndarray, q: np.ndarray) -> Trajectory:
     """Timed joint states (e.g. the commands of a log) as a trajectory without scene or marks; velocities by
     finite differences (for the TCP speed shown)."""
-    from roarmctl.motion.trajectory import Trajectory
-
     keep = np.append(np.diff(times) > 1e-9, True)  # strictly increasing: the last command of equal times wins
     t, p = times[keep], q[keep]
     v = np.gradient(p, t, axis=0) if len(t) > 1 else np.zeros_like(p)
@@ -84,8 +85,6 @@ def _states_trajectory(robot: Robot, times: np.ndarray, q: np.ndarray) -> Trajec
 def load_view_source(path: str | os.PathLike, trajectory: str | os.PathLike | None = None) -> ViewSource:
     """Read ``path`` (trajectory, plan file or execution log) for the view; ``trajectory``: for a log, the
     trajectory it ran (its scene and marks are shown, and it is the commanded arm)."""
-    from roarmctl.viz.data import robot_for
-
     path = Path(path)
     name = path.name
     if path.suffix.lower() in PLAN_SUFFIXES:
@@ -101,8 +100,6 @@ def load_view_source(path: str | os.PathLike, trajectory: str | os.PathLike | No
                               notes=[f"planning failed: {exc.message}"])
         return ViewSource(traj, robot_for(traj), name)
 
-    from roarmctl.export import load_source
-
     kind, data = load_source(path)
     if kind == "trajectory":
         if trajectory is not None:
@@ -112,8 +109,6 @@ def load_view_source(path: str | os.PathLike, trajectory: str | os.PathLike | No
 
 
 def _log_source(log: dict[str, Any], path: Path, trajectory: str | os.PathLike | None) -> ViewSource:
-    from roarmctl.export import load_source
-    from roarmctl.export.streams import log_streams
     from roarmctl.robot.loader import load_robot
 
     robot = load_robot(str(log["robot"]))
@@ -169,6 +164,4 @@ def _physics_ghost(log: dict[str, Any], robot: Robot, path: Path) -> Ghost | Non
 
 def source_document(src: ViewSource) -> dict[str, Any]:
     """The view document (``document.view_document``) of ``src``."""
-    from roarmctl.viz.web.document import view_document
-
     return view_document(src.traj, src.robot, name=src.name, failure=src.failure, ghost=src.ghost, notes=src.notes)
