@@ -74,11 +74,17 @@ def streams_for(source: str | os.PathLike | Any, trajectory: str | os.PathLike |
         tkind, traj = load_source(trajectory)
         if tkind != "trajectory":
             raise InputError(f"--trajectory {trajectory}: not a trajectory file", "give the .traj.json that was executed")
-    if data.get("robot_description") is None and traj is not None and traj.robot_description is not None:
-        robot = robot_of(traj, str(trajectory))  # a log without its robot: the one of the trajectory it ran
-    else:
-        robot = robot_of(SimpleNamespace(robot=data["robot"], robot_description=data.get("robot_description")), str(source))
-    return log_streams(data, robot, traj)
+    return log_streams(data, log_robot(data, str(source), traj, str(trajectory)), traj)
+
+
+def log_robot(log: dict[str, Any], where: str, traj: Any = None, traj_where: str = "trajectory"):
+    """The ``Robot`` of an execution log: the description it carries, else the one of the trajectory it ran
+    (``traj``) when that carries one, else the bundled robot the log names."""
+    from roarmctl.motion.validate import robot_of
+
+    if log.get("robot_description") is None and traj is not None and traj.robot_description is not None:
+        return robot_of(traj, traj_where)  # a log without its robot: the one of the trajectory it ran
+    return robot_of(SimpleNamespace(robot=log["robot"], robot_description=log.get("robot_description")), where)
 
 
 def export(source: str | os.PathLike | Any, path: str | os.PathLike, fmt: str | None = None,

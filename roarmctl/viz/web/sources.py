@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.errors import InfeasibleError, InputError, TrajectoryFileError
-from roarmctl.export import load_source
+from roarmctl.export import load_source, log_robot
 from roarmctl.export.streams import log_streams
 from roarmctl.motion.trajectory import Trajectory
 from roarmctl.viz.data import robot_for
@@ -109,14 +109,12 @@ def load_view_source(path: str | os.PathLike, trajectory: str | os.PathLike | No
 
 
 def _log_source(log: dict[str, Any], path: Path, trajectory: str | os.PathLike | None) -> ViewSource:
-    from roarmctl.robot.loader import load_robot
-
-    robot = load_robot(str(log["robot"]))
     traj = None
     if trajectory is not None:
         tkind, traj = load_source(trajectory)
         if tkind != "trajectory":
             raise InputError(f"--trajectory {trajectory}: not a trajectory file", "give the .traj.json that was executed")
+    robot = log_robot(log, str(path), traj, str(trajectory))
     streams = log_streams(log, robot, traj)
     measured = streams.joint_states["measured"]
     notes = [f"execution log {path.name}: {len(streams.joint_states['commanded'].times)} commands, {len(measured.times)} feedback frames"]
