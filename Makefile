@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: all demo test fuzz lint bench clean install browser
+.PHONY: all demo test test-fast fuzz lint bench clean install browser
 
 all: test
 
@@ -19,8 +19,14 @@ $(STAMP): pyproject.toml setup.py roarmctl/_kernel.c
 
 install: $(STAMP)
 
+# The whole suite on every core (pytest-xdist; the simulated-arm tests share one worker: tests/conftest.py).
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto --dist loadgroup
+
+# The inner loop: everything but the tests marked slow (real-time runs on the simulated arm, fresh
+# interpreters, CPU-heavy sweeps); under a minute.
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -n auto --dist loadgroup -m "not slow"
 
 # Lint and types (rules and why: pyproject.toml, docs/design.md "Lint and types").
 lint: $(STAMP)

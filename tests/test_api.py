@@ -83,6 +83,7 @@ def test_examples_are_numbered_one_concept_each():
     assert names == [f"{i:02d}" for i in range(1, len(EXAMPLES) + 1)] and len(EXAMPLES) >= 4
 
 
+@pytest.mark.slow  # each example in a fresh interpreter; 03 runs on the simulated arm in real time
 @pytest.mark.parametrize("script", EXAMPLES, ids=lambda p: p.name)
 def test_example_runs(script, short_traj, tmp_path):
     """Every example runs as `python examples/NN_x.py`, on the short trajectory where it takes one."""

@@ -268,6 +268,7 @@ def _states_near_items(checker: CollisionChecker, seed: int, n: int) -> np.ndarr
     return q[:n]
 
 
+@pytest.mark.slow  # a CPU-heavy sweep against FCL's distances
 @pytest.mark.parametrize("attached", [False, True])
 def test_a_state_that_is_not_near_is_clear_for_its_whole_sweep(attached):
     """The "near" flag is what segment_valid's proof rests on: a state not near at sweep s (m) must stay valid for
@@ -308,6 +309,7 @@ def test_a_state_that_is_not_near_is_clear_for_its_whole_sweep(attached):
     assert checked > 20000 and box_cleared > 300 and pairs > 300, (checked, box_cleared, pairs)
 
 
+@pytest.mark.slow  # a CPU-heavy sweep: dense re-checks of many segments
 @pytest.mark.parametrize("attached", [False, True])
 def test_valid_segments_have_no_colliding_state_at_eight_times_the_resolution(attached):
     """segment_valid's verdict against a dense re-check (validity_batch, FCL on every candidate) of 1500 random

@@ -9,40 +9,23 @@ import sys
 from pathlib import Path
 
 import pytest
+from clirun import roarmctl
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def roarmctl(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
+def process(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    """The console script in a new interpreter (shell completion is the program's, not run()'s)."""
     import os
 
     e = dict(os.environ, COLUMNS="80", **(env or {}))
     return subprocess.run([sys.executable, "-m", "roarmctl", *args], capture_output=True, text=True, timeout=180, env=e)
 
 
-class Result:
-    def __init__(self, returncode: int, stdout: str, stderr: str) -> None:
-        self.returncode, self.stdout, self.stderr = returncode, stdout, stderr
-
-
 @pytest.fixture
-def cli(capsys, monkeypatch):
+def cli():
     """The CLI in this process (no interpreter start-up per call), 80 columns wide."""
-    from roarmctl.cli import main
-
-    monkeypatch.setenv("COLUMNS", "80")
-
-    def call(*args: str) -> Result:
-        capsys.readouterr()
-        try:
-            main(list(args))
-            code = 0
-        except SystemExit as exc:
-            code = int(exc.code or 0)
-        out = capsys.readouterr()
-        return Result(code, out.out, out.err)
-
-    return call
+    return roarmctl
 
 
 @pytest.fixture(scope="module")
@@ -110,9 +93,9 @@ def test_flags_are_shown_as_flags_and_take_no_value(cli):
 
 
 def test_shell_completion():
-    r = roarmctl("--show-completion", "bash")
+    r = process("--show-completion", "bash")
     assert r.returncode == 0 and "_roarmctl_completion" in r.stdout
-    r = roarmctl(env={"_ROARMCTL_COMPLETE": "complete_bash", "COMP_WORDS": "roarmctl ex", "COMP_CWORD": "1"})
+    r = process(env={"_ROARMCTL_COMPLETE": "complete_bash", "COMP_WORDS": "roarmctl ex", "COMP_CWORD": "1"})
     assert r.returncode == 0 and r.stdout.split() == ["execute", "export"]
 
 
@@ -129,8 +112,7 @@ def test_shell_completion():
 ])
 def test_json_commands_print_a_json_object_on_failure(args, code, words, traj, far_plan, tmp_path):
     args = [str(traj) if a == "TRAJ" else str(far_plan) if a == "FAR" else a for a in args]
-    r = subprocess.run([sys.executable, "-m", "roarmctl", *args, "--json"], capture_output=True, text=True, timeout=180,
-                       cwd=tmp_path)
+    r = roarmctl(*args, "--json", cwd=tmp_path)
     assert r.returncode == code
     out = json.loads(r.stdout)  # exactly one JSON object on stdout
     assert out["ok"] is False and out["exit_code"] == code and words in out["error"] and "hint" in out
@@ -176,6 +158,7 @@ def test_units_and_singularity_are_spelled_out(cli):
     assert "None" not in text and "none (no known singular configuration)" in text
 
 
+@pytest.mark.slow  # includes a run on the simulated arm (real time)
 def test_commands_mean_the_same_in_output_json_text_and_sim(tmp_path):
     plan = tmp_path / "short.yaml"
     plan.write_text("robot: roarm_m3_pro\ntasks:\n  - move: {joints: [0.4, 0.1, 1.4, 0.1, 0.0]}\n  - move: {pose: home}\n"

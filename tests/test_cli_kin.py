@@ -4,17 +4,12 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from clirun import roarmctl as run
 
 from roarmctl.robot.loader import load_robot
-
-
-def run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "roarmctl", *args], capture_output=True, text=True, timeout=60)
 
 
 def run_json(*args: str) -> dict:

@@ -13,6 +13,8 @@ import pytest
 
 from roarmctl.cli import run as run_cli
 
+pytestmark = pytest.mark.slow  # the demo run on the simulated arm (real time) is exported
+
 ROOT = Path(__file__).resolve().parents[1]
 PLAN = ROOT / "plans" / "pick_place.yaml"
 PLACE_XYZ = (0.25, 0.15, 0.02)  # plans/pick_place.yaml: where the cube's centre goes

@@ -44,6 +44,7 @@ def test_matches_the_firmware_fk_formula_everywhere_in_the_workspace():
     assert np.median(err) < 0.5  # the firmware's own end point, not hand_tcp (2-3 mm away)
 
 
+@pytest.mark.slow  # the firmware model moved through the workspace
 def test_matches_the_simulators_t1051_within_3_mm():
     f = Firmware(SimConfig(info_print=0), t0=0.0)
     t = 0.0

@@ -50,6 +50,7 @@ def module_name(path: Path) -> str:
 
 
 MODULES = {module_name(p): p for p in sorted(PKG.rglob("*.py"))}
+TREES = {name: ast.parse(path.read_text(), str(path)) for name, path in MODULES.items()}  # each file parsed once
 EXTENSIONS = {module_name(p).split(".cpython")[0] for p in PKG.rglob("*.c")}
 
 
@@ -80,7 +81,7 @@ def imports() -> list[tuple[str, str, int, bool, bool]]:
     """(importer, imported module, line, inside a function, run time) for every import of a roarmctl module."""
     edges = []
     for name, path in MODULES.items():
-        tree = ast.parse(path.read_text(), str(path))
+        tree = TREES[name]
         package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
         in_function = {id(n) for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
                        for n in ast.walk(f) if n is not f}
@@ -172,7 +173,7 @@ def _module_level_libraries() -> dict[str, set[str]]:
     """The third-party libraries each module imports at module level (run time), directly."""
     out = {}
     for name, path in MODULES.items():
-        tree = ast.parse(path.read_text(), str(path))
+        tree = TREES[name]
         skip = _type_checking_nodes(tree) | {id(n) for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
                                              for n in ast.walk(f) if n is not f}
         libs = set()
@@ -215,7 +216,7 @@ def test_imports_inside_functions_are_there_for_start_up_time():
     loaded = libraries_loaded()
     needless = []
     for name, path in MODULES.items():
-        tree = ast.parse(path.read_text(), str(path))
+        tree = TREES[name]
         package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
         fallbacks = {id(n) for t in ast.walk(tree) if isinstance(t, ast.Try)  # try: import a / except ImportError: import b
                      and any("ImportError" in ast.unparse(h.type or ast.Name("")) for h in t.handlers) for n in ast.walk(t)}

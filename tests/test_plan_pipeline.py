@@ -25,8 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PLANS = sorted((ROOT / "plans").glob("*.yaml"))
 
 
-def roarmctl(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "roarmctl", *args], capture_output=True, text=True, timeout=timeout)
+from clirun import Result, roarmctl  # noqa: E402  (in-process; the tests of the process itself start one)
 
 
 @pytest.fixture(scope="module")
@@ -196,6 +195,7 @@ def test_same_seed_same_file_and_seed_option(tmp_path):
     assert data["plan"]["seed"] == 5 and data["plan"]["sha256"]
 
 
+@pytest.mark.slow  # a fresh interpreter beside a CPU hog on every core
 def test_same_seed_same_bytes_with_every_core_busy(planned, tmp_path):
     """Budgets count work, not seconds: a CPU hog on every core (and a niced planner) must not change
     a single byte of the file planned on the idle machine (same plan, same seed)."""
@@ -537,7 +537,7 @@ def test_a_gripper_action_that_swings_the_jaw_into_an_obstacle_is_refused(tmp_pa
     assert min(clearance(-0.06, g) for g in sweep) < padding
     assert min(clearance(-0.16, g) for g in sweep) > padding
 
-    def plan(y: float) -> tuple[subprocess.CompletedProcess, Path]:
+    def plan(y: float) -> tuple[Result, Path]:
         src = tmp_path / f"jaw_{-y:.2f}.yaml"
         src.write_text("robot: roarm_m3_pro\nstart: home\nscene:\n  obstacles:\n"
                        f"    - {{name: post, shape: box, size: [0.01, 0.01, 0.01], xyz: [0.30, {y}, 0.344]}}\n"

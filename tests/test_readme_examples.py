@@ -91,6 +91,7 @@ def test_the_readme_shows_the_main_commands():
     assert {"plan", "visualize-path", "execute", "kin", "export", "ports", "sim-device", "workspace", "robots"} <= verbs
 
 
+@pytest.mark.slow  # each command in a fresh interpreter, as a user types it; execute --sim runs in real time
 @pytest.mark.parametrize("cmd", COMMANDS)
 def test_readme_command(cmd, workdir):
     if "--port /dev/ttyUSB0" in cmd:  # no arm here: a clean one-line device error (exit 4) after the checks

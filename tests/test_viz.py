@@ -7,7 +7,6 @@ The checks read the drawn artists' data (by gid) and compare it with values deri
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 from pathlib import Path
 
@@ -32,8 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PLANS = sorted((ROOT / "plans").glob("*.yaml"))
 
 
-def roarmctl(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "roarmctl", *args], capture_output=True, text=True, timeout=120)
+from clirun import roarmctl  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -26,6 +26,8 @@ from roarmctl.device.simulator import PtySimulator, SimConfig
 from roarmctl.device.streamer import default_latency, sample
 from roarmctl.robot.loader import load_robot
 
+pytestmark = pytest.mark.slow  # real time: trajectories streamed to the simulated arm
+
 ROBOT = load_robot("roarm_m3_pro")
 
 

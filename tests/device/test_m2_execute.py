@@ -17,6 +17,8 @@ from roarmctl.cli import run as run_cli
 from roarmctl.device.simulator import PtySimulator, SimConfig
 from roarmctl.robot.loader import load_robot
 
+pytestmark = pytest.mark.slow  # real time: a plan run on the simulated M2 arm
+
 ROOT = Path(__file__).resolve().parents[2]
 
 

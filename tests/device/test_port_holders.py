@@ -11,7 +11,8 @@ from devtraj import HOME, min_jerk
 from roarmctl.device.ports import port_holders
 from roarmctl.device.simulator import PtySimulator, SimConfig
 
-pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc scan is Linux-only")
+pytestmark = [pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc scan is Linux-only"),
+              pytest.mark.slow]  # real time: execute on the simulated arm with a second holder
 
 HOLDER = ("import os, sys, time\n"
           "open('/proc/self/comm', 'w').write('ModemManager')\n"

@@ -8,6 +8,8 @@ import pytest
 
 from roarmctl.device.simulator import PtySimulator, SimConfig
 
+pytestmark = pytest.mark.slow  # real time: the SDK drives the simulated arm
+
 roarm_mod = pytest.importorskip("roarm_sdk.roarm")
 
 COUNT = 2 * math.pi / 4096

@@ -21,6 +21,8 @@ from devtraj import HOME, min_jerk
 from roarmctl.device.simulator import PtySimulator, SimConfig
 from roarmctl.robot.loader import load_robot
 
+pytestmark = pytest.mark.slow  # real time: signals sent to commands streaming to the simulated arm
+
 ROBOT = load_robot("roarm_m3_pro")
 
 

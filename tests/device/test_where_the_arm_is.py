@@ -21,6 +21,8 @@ from roarmctl.motion.validate import load_trajectory
 from roarmctl.robot.ik import solve_ik
 from roarmctl.robot.loader import load_robot
 
+pytestmark = pytest.mark.slow  # real time: whole trajectories run on the simulated arm
+
 R = load_robot("roarm_m3_pro")
 ARM = R.arm_indices
 GI = R.joint_index(R.gripper.joint)

@@ -1,0 +1,49 @@
+"""The command line run in this process, as a shell sees it: exit code, stdout and stderr.
+
+``roarmctl.cli.run`` is what the console script runs (``launch.main`` adds only the interpreter's start-up and
+``sys.exit``), so a test of what a command prints and returns needs no new interpreter per call: this saves
+about a second of imports (numpy, OMPL, TOPP-RA, matplotlib) per command. Tests of the process itself (signals,
+start-up, the console script, busy cores) start a real one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass
+class Result:
+    """What ``subprocess.run(..., capture_output=True, text=True)`` gives, for an in-process run."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def roarmctl(*args: str, env: dict[str, str] | None = None, cwd: str | Path | None = None) -> Result:
+    """Run ``roarmctl ARGS`` in this process (80 columns wide, as the subprocess helpers set it), with ``env``
+    added to the environment and ``cwd`` as the working directory for the call."""
+    from roarmctl.cli import run
+
+    extra = {"COLUMNS": "80", **(env or {})}
+    saved = {k: os.environ.get(k) for k in extra}
+    out, err = io.StringIO(), io.StringIO()
+    try:
+        os.environ.update(extra)
+        with contextlib.ExitStack() as stack:
+            if cwd is not None:
+                stack.enter_context(contextlib.chdir(cwd))
+            stack.enter_context(contextlib.redirect_stdout(out))
+            stack.enter_context(contextlib.redirect_stderr(err))
+            code = run(list(args))
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    return Result(code, out.getvalue(), err.getvalue())
