@@ -190,10 +190,10 @@ def _run_command(argv: list[str] | None, guard) -> int:
             traceback.print_exc()
         common.error(exc.message, exc.hint)
         code = exc.exit_code
-    except KeyboardInterrupt as exc:
+    except KeyboardInterrupt as exc:  # before the command started (typer turns one inside it into Exit(130))
         guard.live = False
         signum = getattr(exc, "signum", None) or guard.first or 2
-        common.error(_stop_line(signum), _on_disk())
+        common.error(_stop_line(signum), _on_disk() or "nothing was written")
         code = exit_code(signum)
     except SystemExit as exc:  # typer.Exit raised inside a command
         guard.live = False
