@@ -236,3 +236,9 @@ def test_imports_inside_functions_are_there_for_start_up_time():
                 if not new:
                     needless.append(f"{name}:{node.lineno} {ast.unparse(node)}")
     assert not needless, "imports inside functions that load no library their module lacks (move them up):\n" + "\n".join(needless)
+
+
+def test_no_module_is_over_800_lines():
+    """Small modules with one job: a module that grows past 800 lines is split along its jobs."""
+    long = {name: n for name, path in MODULES.items() if (n := len(path.read_text().splitlines())) > 800}
+    assert not long, long
