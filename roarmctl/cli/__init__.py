@@ -11,6 +11,7 @@ import sys
 import tempfile
 import traceback
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -68,7 +69,7 @@ def robots(json_out: bool = typer.Option(False, "--json", help="Print one JSON o
     """List the bundled robots (name, joints, source)."""
     from roarmctl.robot.loader import bundled_robots, load_robot
 
-    rows = []
+    rows: list[dict[str, Any]] = []
     for name in bundled_robots():
         r = load_robot(name)
         rows.append({"name": name, "joints": r.joint_names, "dof": r.dof, "source": r.source, "description": r.description})

@@ -6,7 +6,7 @@ stdout, nothing else); without ``--json`` a readable table is printed.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import typer
 
@@ -142,7 +142,7 @@ def jacobian(
     r = load_robot(robot, trust_sidecar=True)  # the user named it
     qv = r.full_q(common.parse_numbers(q, "joint value", deg))
     m = r.kin.manipulability(qv)
-    out = {
+    out: dict[str, Any] = {
         "robot": r.name,
         "q": _angles_out(qv, deg),
         "jacobian": m.jacobian,
@@ -259,7 +259,7 @@ def ik(
         if c.position_error > POS_TOL or (c.orientation_error is not None and c.orientation_error > ORI_TOL):
             raise RoarmError(f"internal error: IK solution {np.round(q, 6).tolist()} misses the target by "
                              f"{c.position_error:.2e} m; please report this")
-    out = {
+    out: dict[str, Any] = {
         "robot": r.name,
         "joint_names": r.joint_names,
         "target": {"position": list(xyz), "pitch": pitch, "roll": roll, "rpy": None if rpy is None else list(rpy)},
@@ -320,13 +320,15 @@ def dynamics(
         raise InputError("give the joint positions once: after the robot (like kin fk) or as --q",
                          f"e.g. roarmctl kin dynamics {robot} 0 0.5 1.2 0 0")
     r = load_robot(robot, trust_sidecar=True)  # the user named it
-    qv = _split_numbers(q, "--q", deg) if q is not None else common.parse_numbers(q_args, "joint value", deg)
+    qv = _split_numbers(q, "--q", deg) if q is not None else common.parse_numbers(q_args or [], "joint value", deg)
+    assert qv is not None  # a string gives an array
     n = qv.size
     qdv = _split_numbers(qd, "--qd", deg) if qd is not None else np.zeros(n)
     qddv = _split_numbers(qdd, "--qdd", deg) if qdd is not None else np.zeros(n)
+    assert qdv is not None and qddv is not None
     tau = inverse_dynamics(r, qv, qdv, qddv)
     full = r.full_q(qv)
-    out = {
+    out: dict[str, Any] = {
         "robot": r.name,
         "joint_names": r.joint_names,
         "q": _angles_out(full, deg),

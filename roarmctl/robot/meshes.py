@@ -185,7 +185,7 @@ def mesh_modes(value, links: list[str], where: str) -> dict[str, str]:
     if not isinstance(value, dict):
         raise DescriptionError(f"{where}: mesh_collision: expected 'convex', 'exact' or a mapping link -> mode")
     default = value.get("default", "convex")
-    out = {}
+    out: dict[str, str] = {}
     for k, v in value.items():
         if k != "default" and k not in links:
             raise DescriptionError(f"{where}: mesh_collision: '{k}' is not a link")
@@ -194,7 +194,7 @@ def mesh_modes(value, links: list[str], where: str) -> dict[str, str]:
     if default not in MESH_MODES:
         raise DescriptionError(f"{where}: mesh_collision.default: '{default}' is not one of {', '.join(MESH_MODES)}")
     for link in links:
-        out[link] = value.get(link, default)
+        out[link] = str(value.get(link, default))  # each value checked against MESH_MODES above
     return out
 
 

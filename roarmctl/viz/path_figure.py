@@ -10,13 +10,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 import numpy as np
 from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.cm import ScalarMappable
-from matplotlib.colors import Normalize
+from matplotlib.colors import Colormap, Normalize
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
@@ -35,7 +36,7 @@ ROLE_STYLE = {
     "obstacle": dict(facecolor=(0.85, 0.20, 0.15, 0.22), edgecolor=(0.65, 0.10, 0.08, 0.8), linewidth=0.7),
     "object": dict(facecolor=(0.15, 0.45, 0.85, 0.55), edgecolor=(0.05, 0.25, 0.60, 0.9), linewidth=0.7),
 }
-RC = {"grid.linewidth": 0.5, "grid.color": "0.88", "axes3d.grid": True}
+RC: dict[Any, Any] = {"grid.linewidth": 0.5, "grid.color": "0.88", "axes3d.grid": True}
 EVENT_COLOR = {"grasp": "#1b9e3a", "release": "#8e44ad", "failed": "#d62728"}
 EVENT_MARKER = {"grasp": "v", "release": "^", "failed": "X"}
 PLACED_STYLE = dict(facecolor=(0.15, 0.45, 0.85, 0.10), edgecolor=(0.05, 0.25, 0.60, 0.8), linewidth=0.8, linestyle="--")
@@ -119,8 +120,9 @@ def _segments(points: np.ndarray) -> np.ndarray:
     return np.stack([points[:-1], points[1:]], axis=1)
 
 
-def draw_scene_3d(ax, data: PathData, view: str) -> None:
-    """The 3D panel: scene items, arm at key moments, TCP path coloured by speed, targets."""
+def draw_scene_3d(ax, data: PathData, view: str) -> tuple[Normalize, Colormap]:
+    """The 3D panel: scene items, arm at key moments, TCP path coloured by speed, targets; returns the speed
+    colouring (norm, colormap) for the colour bar."""
     ax.computed_zorder = False  # draw in our order: scene, arm, path, markers (path stays visible)
     ax.set_proj_type("ortho")
     labels: list[Label] = []
@@ -161,8 +163,8 @@ def draw_scene_3d(ax, data: PathData, view: str) -> None:
         ax.add_collection3d(path)
 
     if data.blends:  # where one segment flows into the next without stopping
-        k = np.clip(np.searchsorted(data.times, data.blends), 0, len(data.times) - 1)
-        ax.scatter(*data.tcp[k].T, s=28, marker="D", color="#ff7f0e", edgecolor="k", linewidth=0.4, depthshade=False,
+        at = np.clip(np.searchsorted(data.times, data.blends), 0, len(data.times) - 1)
+        ax.scatter(*data.tcp[at].T, s=28, marker="D", color="#ff7f0e", edgecolor="k", linewidth=0.4, depthshade=False,
                    zorder=8, gid="blend3d")
     ax.scatter(*data.tcp[0], s=130, marker="o", color="#2ca02c", edgecolor="k", linewidth=0.6, depthshade=False, zorder=8, label="start")
     ax.scatter(*data.tcp[-1], s=40, marker="s", color="#d62728", edgecolor="k", linewidth=0.6, depthshade=False, zorder=8, label="end")
