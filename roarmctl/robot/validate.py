@@ -179,8 +179,8 @@ def check_document(data: Any, where: str) -> None:
         for i, p in enumerate(pairs):
             if not isinstance(p, list) or len(p) != 2:
                 _fail(where, f"allowed_collisions[{i}]", f"expected a pair of link names, got {_kind(p)}")
-            for k, link in enumerate(p):
-                _str(link, where, f"allowed_collisions[{i}][{k}]")
+            for j, link in enumerate(p):
+                _str(link, where, f"allowed_collisions[{i}][{j}]")
     for key in ("base", "tool"):
         if data.get(key) is not None:
             _xyz_rpy(data[key], where, key)
