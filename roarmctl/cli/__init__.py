@@ -124,6 +124,18 @@ def _stop_line(signum: int) -> str:
     return "interrupted" if signum == 2 else f"terminated by {signal_name(signum)}"
 
 
+def _stop_inside(exc: BaseException) -> BaseException | None:
+    """The ``KeyboardInterrupt`` (a stop signal) that ``exc`` wraps as its cause or context, if any."""
+    seen = 0
+    cur: BaseException | None = exc
+    while cur is not None and seen < 20:
+        if isinstance(cur, KeyboardInterrupt):
+            return cur
+        cur = cur.__cause__ or cur.__context__
+        seen += 1
+    return None
+
+
 def _on_disk() -> str | None:
     """What an output interrupted while it replaced a folder left on disk (``fileio``), else None."""
     return interrupted_write_state()
@@ -215,6 +227,12 @@ def _run_command(argv: list[str] | None, guard) -> int:
         elif isinstance(exc, typer.Abort):
             common.error("aborted")
             code = 130
+        elif _stop_inside(exc) is not None:
+            # the stop signal's exception raised where Python wraps it (e.g. __set_name__ during an import
+            # turns it into a RuntimeError): a stop, not a bug
+            signum = getattr(_stop_inside(exc), "signum", None) or guard.first or 2
+            common.error(_stop_line(signum), _on_disk())
+            code = exit_code(signum)
         else:
             fd, log = tempfile.mkstemp(prefix="roarmctl-traceback-", suffix=".txt")
             with os.fdopen(fd, "w") as f:

@@ -14,7 +14,7 @@ from types import SimpleNamespace
 from typing import Any
 
 from roarmctl.errors import InputError, TrajectoryFileError
-from roarmctl.fileio import atomic_write_text, check_output_folder
+from roarmctl.fileio import atomic_write_text, check_output_folder, note_output_folder
 
 FORMATS = ("mcap", "bag", "csv")
 EXECLOG_FORMAT = "roarmctl.execlog/1"
@@ -100,6 +100,7 @@ def export(source: str | os.PathLike | Any, path: str | os.PathLike, fmt: str | 
         from roarmctl.export.ros import is_bag_we_wrote
 
         check_output_folder(path, force, made_by_us=is_bag_we_wrote)
+        note_output_folder(path)  # a signal from here on is reported with what is at `path`
     streams = streams_for(source, trajectory)
     return write(streams, path, fmt, force)
 

@@ -33,7 +33,13 @@ import numpy as np
 
 from roarmctl.errors import InputError
 from roarmctl.export.streams import Streams
-from roarmctl.fileio import check_output_file, check_output_folder, new_folder_beside, replace_folder
+from roarmctl.fileio import (
+    check_output_file,
+    check_output_folder,
+    new_folder_beside,
+    note_output_folder,
+    replace_folder,
+)
 
 TYPESTORE = "ROS2_JAZZY"
 COLORS = {"table": (0.55, 0.45, 0.35, 1.0), "obstacle": (0.85, 0.3, 0.25, 0.8), "object": (0.2, 0.5, 0.9, 1.0)}
@@ -207,6 +213,7 @@ def write_bag(streams: Streams, path: str | os.PathLike, storage: str, force: bo
         check_output_file(target)
     else:
         check_output_folder(target, force, made_by_us=is_bag_we_wrote)
+        note_output_folder(target)
     tmpdir = new_folder_beside(target)
     try:
         bag = tmpdir / target.stem
