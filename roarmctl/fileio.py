@@ -313,8 +313,6 @@ def new_folder_beside(target: str | os.PathLike) -> Path:
 def note_output_folder(target: str | os.PathLike) -> None:
     """Say that a folder is being written to ``target`` (before the work starts), so that a signal
     until ``replace_folder`` finishes is reported with what is at ``target`` (``interrupted_write_state``)."""
-    import secrets
-
     target = Path(target)
     _PENDING[:] = [[target, secrets.token_hex(8), os.path.lexists(target), None]]
 
