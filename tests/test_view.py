@@ -193,6 +193,97 @@ def test_a_robot_without_collision_geometry_is_drawn_as_its_stick_arm():
     assert np.allclose(pts[:, doc["bones"][0][0]], 0.0, atol=1e-7)  # the base stays at the origin
 
 
+def visual_robot(tmp_path: Path) -> Path:
+    """The bundled M3 with visuals: link3 an L-shaped STL in orange (inline colour), base_link a box in a named
+    material, and one visual whose mesh file is missing. Returns the sidecar."""
+    import trimesh
+    import yaml
+
+    from roarmctl.robot.loader import bundled_dir
+    from roarmctl.robot.model import transform
+
+    bar = trimesh.creation.box((0.02, 0.12, 0.02), transform((0, -0.06, 0)))
+    foot = trimesh.creation.box((0.08, 0.02, 0.02), transform((0.03, -0.11, 0)))
+    trimesh.util.concatenate([bar, foot]).export(tmp_path / "forearm.stl")
+    urdf = (bundled_dir() / "roarm_m3_pro.urdf").read_text()
+    urdf = urdf.replace('<link name="link3">', '<link name="link3"><visual><origin xyz="0 0 0.01"/><geometry>'
+                        '<mesh filename="forearm.stl"/></geometry><material name="o"><color rgba="1 0.5 0 1"/></material>'
+                        '</visual><visual><geometry><mesh filename="missing.stl"/></geometry></visual>', 1)
+    urdf = urdf.replace('<link name="base_link">', '<link name="base_link"><visual><geometry><box size="0.1 0.1 0.02"/>'
+                        '</geometry><material name="teal"/></visual>', 1)
+    urdf = urdf.replace("</robot>", '<material name="teal"><color rgba="0 0.5 0.5 1"/></material></robot>')
+    (tmp_path / "arm.urdf").write_text(urdf)
+    side = yaml.safe_load((bundled_dir() / "roarm_m3_pro.yaml").read_text())
+    side["urdf"] = "arm.urdf"
+    (tmp_path / "arm.yaml").write_text(yaml.safe_dump(side))
+    return tmp_path / "arm.yaml"
+
+
+def visual_document(tmp_path: Path) -> dict:
+    """The view document of the visual robot at home (three samples)."""
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.loader import load_robot
+    from roarmctl.viz.web.document import view_document
+
+    robot = load_robot(str(visual_robot(tmp_path)))
+    q = np.tile(robot.full_q(robot.named_poses["home"]), (3, 1))
+    traj = Trajectory(str(tmp_path / "arm.yaml"), list(robot.joint_names), np.array([0.0, 0.1, 0.2]), q,
+                      np.zeros_like(q), np.zeros_like(q))
+    return view_document(traj, robot)
+
+
+def test_visual_meshes_are_drawn_where_the_description_has_them(tmp_path):
+    """Visuals are read only when drawn; a mesh keeps its triangles (placed where the file puts them), colours
+    come inline or by name, a missing visual file is left out and said; the planning geometry is unchanged."""
+    import base64
+
+    import trimesh
+
+    from roarmctl.robot.loader import load_robot
+    from roarmctl.robot.visuals import visual_shapes
+
+    robot = load_robot(str(visual_robot(tmp_path)))
+    bundled = load_robot("roarm_m3_pro")
+    assert [(c.link, c.kind, c.size) for c in robot.collision] == [(c.link, c.kind, c.size) for c in bundled.collision]
+    visuals, notes = visual_shapes(robot)
+    assert [(v.shape.link, v.shape.kind) for v in visuals] == [("base_link", "box"), ("link3", "mesh")]
+    assert visuals[0].rgba == (0.0, 0.5, 0.5, 1.0) and visuals[1].rgba == (1.0, 0.5, 0.0, 1.0)
+    assert len(notes) == 1 and "missing.stl" in notes[0] and "link3" in notes[0]
+    src = trimesh.load_mesh(tmp_path / "forearm.stl")
+    mesh = visuals[1].shape
+    assert len(mesh.mesh.faces) == len(src.faces)  # every triangle, not a hull
+    placed = mesh.mesh.vertices @ mesh.origin[:3, :3].T + mesh.origin[:3, 3]
+    uniq = lambda v: np.unique(np.round(v, 9), axis=0)  # noqa: E731  (an STL repeats each corner per face)
+    assert np.allclose(uniq(placed), uniq(src.vertices + [0, 0, 0.01]), atol=1e-9)
+
+    doc = visual_document(tmp_path)
+    link3 = next(link for link in doc["links"] if link["name"] == "link3")
+    (part,) = link3["visual"]
+    assert part["color"] == "#ff8000"
+    assert np.frombuffer(base64.b64decode(part["triangles"]), dtype="<f4").size == len(src.faces) * 9
+    assert any("missing.stl" in n for n in doc["notes"])
+
+
+def test_page_with_visual_meshes_shows_them(chromium, tmp_path):
+    from roarmctl.viz.web.page import write_page
+
+    out = write_page(visual_document(tmp_path), tmp_path / "visual.html")
+    page, watch = br.open_page(chromium, out.as_uri())
+
+    def orange() -> int:  # pixels of the orange forearm (shaded: red high, green about half of it, no blue)
+        c = page.evaluate("window.roarmView.state().canvas")
+        shot = br.screenshot(page).astype(int)[int(c["top"]):int(c["top"] + c["height"]), int(c["left"]):int(c["left"] + c["width"])]
+        return int(((shot[..., 0] > 120) & (np.abs(shot[..., 1] * 2 - shot[..., 0]) < 40) & (shot[..., 2] < 40)).sum())
+
+    try:
+        assert watch.errors == [] and page.is_visible("#visual-toggle")
+        assert orange() > 200
+        page.uncheck("#show-visual")
+        assert orange() < 5
+    finally:
+        page.close()
+
+
 def test_page_is_one_file_with_no_outside_reference(planned, tmp_path):
     code, out = write_html(tmp_path, planned["pick_place"][0])
     assert code == 0

@@ -17,6 +17,7 @@ import numpy as np
 from roarmctl.errors import DescriptionError, InputError
 from roarmctl.fileio import read_text
 from roarmctl.robot import validate as checks
+from roarmctl.robot import visuals
 from roarmctl.robot.frames import UNITS, Frame
 from roarmctl.robot.ik import IK_FAMILIES, ur6_params
 from roarmctl.robot.meshes import PACKAGE_PATHS, description_roots, load_mesh, mesh_modes, package_map, resolve
@@ -508,6 +509,8 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         upper=np.array([jl.get(n, {}).get("upper", by_name[n].upper) for n in names]),
         inertials=inertials,
         collision=shapes,
+        visual_source=visuals.source_of(((n, k, v) for n, e in links.items() for k, v in enumerate(e.findall("visual"))),
+                                        meshes, root, _urdf_shape),
         **common,
     )
 

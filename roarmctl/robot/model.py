@@ -191,6 +191,8 @@ class Robot:
     dh: tuple[str, list[dict[str, float]]] | None = None
     #: values derived from the description once per loaded robot (IK solvers, reach bounds, memos)
     derived: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    #: The URDF's ``<visual>`` elements, read only for pictures (``roarmctl.robot.visuals``); None without any.
+    visual_source: Any = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.kin = Kinematics(self)

@@ -21,6 +21,7 @@ import numpy as np
 
 from roarmctl.export.streams import item_tracks
 from roarmctl.motion.scene import SceneItem
+from roarmctl.robot.visuals import visual_shapes
 from roarmctl.viz.data import PathData, path_data, robot_for
 from roarmctl.viz.shapes import item_extent, item_faces, item_pose, robot_shape_faces, triangles
 
@@ -84,18 +85,27 @@ def _speed_colors(speed: np.ndarray, vmax: float) -> tuple[np.ndarray, list[str]
     return rgb, [hex_color(s) for s in stops]
 
 
-def _links(robot: Robot) -> tuple[list[int], list[dict[str, Any]]]:
-    """Links that carry collision geometry: their kinematic indices and their triangles in the link frame."""
-    by_link: dict[int, list[np.ndarray]] = {}
+def _links(robot: Robot) -> tuple[list[int], list[dict[str, Any]], list[str]]:
+    """Links that carry geometry: their kinematic indices; per link its collision shapes' triangles (as the
+    checker sees them) and its visual shapes' triangles and colours (``robot.visuals``), in the link frame; and
+    notes on visuals left out."""
+    collision: dict[int, list[np.ndarray]] = {}
     names: dict[int, list[str]] = {}
     for shape in robot.collision:
         k = robot.kin.link_index[shape.link]
-        by_link.setdefault(k, []).append(triangles(robot_shape_faces(shape)))
+        collision.setdefault(k, []).append(triangles(robot_shape_faces(shape)))
         names.setdefault(k, []).append(shape.name or shape.link)
-    order = sorted(by_link)
-    links = [{"name": robot.kin.link_names[k], "shapes": names[k], "collision": _f32(np.concatenate(by_link[k]))}
-             for k in order]
-    return order, links
+    visuals, notes = visual_shapes(robot)
+    visual: dict[int, list[dict[str, Any]]] = {}
+    for v in visuals:
+        k = robot.kin.link_index[v.shape.link]
+        visual.setdefault(k, []).append({"triangles": _f32(triangles(robot_shape_faces(v.shape))),
+                                         "color": hex_color(v.rgba) if v.rgba is not None else None})
+    order = sorted(set(collision) | set(visual))
+    links = [{"name": robot.kin.link_names[k], "shapes": names.get(k, []),
+              "collision": _f32(np.concatenate(collision[k])) if k in collision else None,
+              "visual": visual.get(k, [])} for k in order]
+    return order, links, notes
 
 
 def _item_tracks(traj: Trajectory, robot: Robot, times: np.ndarray) -> tuple[list[dict], np.ndarray, np.ndarray]:
@@ -145,7 +155,7 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
     q = data.positions[idx]
     n = len(idx)
 
-    link_ids, links = _links(robot)
+    link_ids, links, visual_notes = _links(robot)
     frames = robot.kin.link_frames(q)  # (n, L, 4, 4)
     bone_links = sorted({k for pair in data.arm_segments for k in pair})  # the PNG's stick arm: joint to joint
     bones = [[bone_links.index(a), bone_links.index(b)] for a, b in data.arm_segments]
@@ -201,7 +211,8 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         "format": FORMAT,
         "title": title,
         "subtitle": subtitle,
-        "notes": list(notes or []),
+        "notes": list(notes or []) + visual_notes[:3] + ([f"... and {len(visual_notes) - 3} more visuals left out"]
+                                                          if len(visual_notes) > 3 else []),
         "robot": robot.name,
         "joint_names": list(traj.joint_names),
         "joint_units": ["m" if robot.joints[_joint_of(robot, j)].kind == "prismatic" else "rad" for j in traj.joint_names],

@@ -85,7 +85,22 @@
   function placed(object) { object.matrixAutoUpdate = false; scene.add(object); return object; }
 
   // ------------------------------------------------------------------ robot (the checker's shapes) and ghost
-  const linkGroups = D.links.map((link) => placed(solid(f32(link.collision), 0x9aa3ae, 1.0, 0x39414b)));
+  // Per link: the checker's shapes (opaque, or see-through over the visual meshes where the description has them)
+  // and the visual meshes in their colours.
+  const HAS_VISUAL = D.links.some((link) => link.visual.length);
+  const linkGroups = [], visualGroups = [], collisionGroups = [];
+  for (const link of D.links) {
+    const g = placed(new THREE.Group());
+    const c = link.collision ? solid(f32(link.collision), 0x9aa3ae, HAS_VISUAL ? 0.35 : 1.0, 0x39414b) : new THREE.Group();
+    g.add(c);
+    collisionGroups.push(c);
+    const v = new THREE.Group();
+    for (const part of link.visual) v.add(solid(f32(part.triangles), part.color || '#b8bec6', 1.0, null));
+    g.add(v);
+    linkGroups.push(g);
+    visualGroups.push(v);
+  }
+  if (HAS_VISUAL) $('visual-toggle').hidden = false;
   // the stick arm (joint origin to joint origin, as in the PNG): the whole arm of a robot without geometry
   const BONES = f32(D.bone_points), NB = D.bones.length ? BONES.length / (3 * N) : 0;
   const boneGeom = new THREE.BufferGeometry();
@@ -98,7 +113,7 @@
   if (GHOST) {
     ghostGroups = D.links.map((link) => {
       const geom = new THREE.BufferGeometry();
-      geom.setAttribute('position', new THREE.BufferAttribute(f32(link.collision), 3));
+      geom.setAttribute('position', new THREE.BufferAttribute(f32(link.collision || (link.visual[0] || {}).triangles), 3));
       const g = new THREE.LineSegments(new THREE.EdgesGeometry(geom, 25),
         new THREE.LineBasicMaterial({ color: 0xe67e22, transparent: true, opacity: 0.9 }));
       return placed(g);
@@ -370,7 +385,11 @@
   scrub.addEventListener('input', () => { setPlaying(false); setIndex(Number(scrub.value)); });
   $('play').addEventListener('click', () => setPlaying(!playing));
   $('reset-camera').addEventListener('click', () => { homeCamera(); render(); });
-  $('show-collision').addEventListener('change', (ev) => { for (const g of linkGroups) g.visible = ev.target.checked; render(); });
+  $('show-collision').addEventListener('change', (ev) => {
+    for (const c of collisionGroups) c.visible = ev.target.checked;
+    render();
+  });
+  $('show-visual').addEventListener('change', (ev) => { for (const v of visualGroups) v.visible = ev.target.checked; render(); });
   $('show-path').addEventListener('change', (ev) => { path.visible = ev.target.checked; render(); });
   $('show-labels').addEventListener('change', render);
   $('show-ghost').addEventListener('change', (ev) => {
