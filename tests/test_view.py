@@ -27,6 +27,9 @@ from roarmctl.cli import run as run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANS = sorted((ROOT / "plans").glob("*.yaml"))
+# one xdist worker runs this module: one browser and one planning of the bundled plans for all its tests
+pytestmark = pytest.mark.xdist_group("browser-view")
+
 MAX_PAGE = 5_000_000  # bytes: the limit for a bundled plan's page
 PIXELS = 3.0  # how far the drawn TCP may lie from its FK projection
 
