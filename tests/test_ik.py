@@ -7,7 +7,7 @@ import re
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from roarmctl.errors import InputError, UnreachableError
@@ -84,6 +84,9 @@ def test_roarm_round_trip_full_orientation():
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.floats(0.0, 1.0), min_size=5, max_size=5))
+# base, shoulder and wrist at their limits with the elbow 1e-3 rad from stretched: the ideal-geometry closed form
+# is a few mrad off there, beyond the old 1 mrad slack of the limit test before the polish (found by hypothesis)
+@example([0.0, 0.0, 0.04236325667801056, 1.0, 0.75])
 def test_roarm_round_trip_hypothesis(u):
     qa = ROARM.lower[:5] + np.array(u) * (ROARM.upper[:5] - ROARM.lower[:5])
     if abs(qa[2] - STRETCHED) < 1e-3:

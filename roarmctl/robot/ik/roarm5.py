@@ -26,7 +26,7 @@ from roarmctl.robot.ik.common import (
 from roarmctl.robot.ik.pitch import approach_pitches, pick_index, pitch_of, pitch_of_rot
 from roarmctl.robot.model import Robot
 
-LIMIT_SLACK = 1e-3  # rad: closed-form candidates this far outside a limit are polished, then re-checked
+LIMIT_SLACK = 1e-2  # rad: closed-form candidates this far outside a limit are polished, then re-checked
 PITCH_GRID = 721  # pitch samples over [-pi, pi] when the RoArm pitch is left free (0.5 deg)
 
 
