@@ -39,6 +39,8 @@ from pathlib import Path
 
 from peers import peer_python, urdf_origin
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/scenes.py
+
 ROOT = Path(__file__).resolve().parents[1]
 MPLIB = "mplib==0.2.1"
 QUERIES = {  # name -> (plan, label fragment of the free motion)
@@ -54,26 +56,67 @@ import json, sys, time
 import numpy as np
 import mplib
 from mplib import Planner, Pose
-from mplib.collision_detection.fcl import Box, Cylinder, CollisionObject, FCLObject
+from mplib.collision_detection.fcl import Box, Cylinder, Sphere, CollisionObject, FCLObject
 
 spec = json.loads(sys.stdin.readline())
-planners = {}
-for name, q in spec["queries"].items():
-    p = Planner(urdf=spec["urdf"], srdf=spec["srdf"], move_group=spec["tcp"], user_joint_names=spec["joints"],
-                joint_vel_limits=q["vmax"], joint_acc_limits=q["amax"])
-    for it in q["items"]:
-        geom = Box(np.array(it["size"])) if it["shape"] == "box" else Cylinder(it["radius"], it["length"])
-        obj = FCLObject(it["name"], Pose(np.array(it["pose"])), [CollisionObject(geom)], [Pose()])
+grow = spec["padding"]  # roarmctl pads the arm; mplib cannot, so its scene is grown by the same amount
+
+
+def geometry(it):
+    if it["shape"] == "box":
+        return Box(np.array(it["size"]) + 2 * grow)
+    if it["shape"] == "cylinder":
+        return Cylinder(it["radius"] + grow, it["length"] + 2 * grow)
+    return Sphere(it["radius"] + grow)
+
+
+def add_items(p, items):
+    for it in items:
+        obj = FCLObject(it["name"], Pose(np.array(it["pose"])), [CollisionObject(geometry(it))], [Pose()])
         p.planning_world.add_object(obj)
         if it["role"] == "table":
             p.planning_world.get_allowed_collision_matrix().set_entry(it["name"], spec["base_links"], True)
+
+
+def new_planner(q):
+    return Planner(urdf=spec["urdf"], srdf=spec["srdf"], move_group=spec["tcp"], user_joint_names=spec["joints"],
+                   joint_vel_limits=q["vmax"], joint_acc_limits=q["amax"])
+
+
+planners = {}
+for name, q in spec["queries"].items():
+    p = new_planner(q)
+    add_items(p, q["items"])
+    if q.get("held"):  # the held object, attached to the TCP link as roarmctl carries it
+        h = q["held"]
+        p.update_attached_box(np.array(h["size"]), Pose(np.array(h["pose"])), link_id=spec["tcp_index"])
     planners[name] = p
+api_planners = {name: new_planner(q) for name, q in spec["api"].items()}  # robot loaded once, as a user would
 print("ready", flush=True)
 for line in sys.stdin:
     cmd = json.loads(line)
-    p = planners[cmd["query"]]
-    q = spec["queries"][cmd["query"]]
-    if cmd["op"] == "plan":
+    if cmd["op"] == "api":  # the public API: the scene set up, the query planned (and timed), the scene taken down
+        q = spec["api"][cmd["query"]]
+        p = api_planners[cmd["query"]]
+        mplib.set_global_seed(cmd["seed"])
+        t0 = time.perf_counter()
+        add_items(p, q["items"])
+        if q.get("cloud") is not None:
+            p.update_point_cloud(np.array(q["cloud"]), resolution=q["resolution"])
+            p.planning_world.get_allowed_collision_matrix().set_entry("scene_pcd", spec["base_links"], True)
+        t1 = time.perf_counter()
+        res = p.plan_qpos([np.array(q["goal"])], np.array(q["start"]), time_step=0.01, planning_time=1.0)
+        wall = time.perf_counter() - t0
+        for it in q["items"]:
+            p.remove_object(it["name"])
+        if q.get("cloud") is not None:
+            p.remove_point_cloud()
+        ok = res["status"] == "Success"
+        out = {"ok": ok, "wall": wall, "setup": t1 - t0, "duration": float(res["duration"]) if ok else None,
+               "path": res["position"].tolist() if ok else None}
+    elif cmd["op"] == "plan":
+        p = planners[cmd["query"]]
+        q = spec["queries"][cmd["query"]]
         mplib.set_global_seed(cmd["seed"])
         t0 = time.perf_counter()
         res = p.plan_qpos([np.array(q["goal"])], np.array(q["start"]), time_step=0.01, planning_time=1.0)
@@ -82,6 +125,7 @@ for line in sys.stdin:
         out = {"ok": ok, "wall": wall, "duration": float(res["duration"]) if ok else None,
                "path": res["position"].tolist() if ok else None}
     else:  # single-state rate
+        p = planners[cmd["query"]]
         states = np.array(cmd["states"])
         world, robot = p.planning_world, p.robot
         t0 = time.perf_counter()
@@ -195,6 +239,90 @@ def roarmctl_like_mplib(ctx, step, q, seed: int):
     return time.perf_counter() - t0, tp.duration
 
 
+# --------------------------------------------------------------------------- one metric for both sides' paths
+def clearance(robot, items, q_full, cap: float = 0.03) -> float:
+    """Smallest FCL distance (m, at most ``cap``) over the states ``q_full`` (K, dof) between the arm's collision
+    shapes as the description gives them (no padding) and the scene ``items`` as they are (no growth), the table
+    left out for the base links (as both checkers do). A path whose clearance is below the padding entered it."""
+    import fcl
+    import numpy as np
+
+    from roarmctl.motion.geometry import fcl_geometry, item_parts
+
+    kin = robot.kin
+    shapes = [(kin.link_index[c.link], c.origin, fcl.CollisionObject(fcl_geometry(c.kind, c.size, c.radius, c.length, mesh=c.mesh)),
+               float(np.linalg.norm(c.size)) / 2 + c.radius + c.length / 2, c.link in robot.base_links) for c in robot.collision]
+    parts = [(p, p.item.role == "table", p.centre, np.abs(p.rot) @ p.half) for it in items for p in item_parts(it)]
+    req, best = fcl.DistanceRequest(), cap
+    for q in np.asarray(q_full, dtype=float):
+        f = kin.frames4(q[None])[0]
+        for link, origin, obj, reach, base in shapes:
+            pose = f[link] @ origin
+            obj.setRotation(pose[:3, :3])
+            obj.setTranslation(pose[:3, 3])
+            for part, table, centre, half in parts:
+                if (table and base) or np.any(np.abs(pose[:3, 3] - centre) > half + reach + best):
+                    continue
+                d = fcl.distance(obj, part.obj, req, fcl.DistanceResult())
+                best = min(best, max(d, 0.0))
+    return best
+
+
+def item_dict(it) -> dict:
+    """A primitive scene item as the mplib worker takes it (world pose 4 x 4)."""
+    return {"name": it.name, "role": it.role, "shape": it.shape, "pose": it.pose.tolist(), "size": list(it.size),
+            "radius": it.radius, "length": it.length}
+
+
+API_FROM = {"a": "free", "b": "wall", "c": "post", "b200": "wall", "desk": "free"}  # API query -> captured query
+DESK_RESOLUTION = 0.005  # m: the desk cloud's cells (both sides)
+
+
+def api_queries(captured: dict, goals: dict, folder: Path) -> tuple[dict, dict]:
+    """The public-API queries: name -> (plan dict for roarmctl.api.plan, primitive items for mplib, cloud points
+    for mplib or None), and name -> the roarmctl SceneItems of its scene (for the clearance metric). a, b, c: the
+    captured motions in their plans' scenes (nothing held: a plan starts with empty hands); b200: b with 200
+    boxes off the path; desk: a in a 100,000-point cloud of a cluttered desk (bench/scenes.py), the table's place."""
+    import numpy as np
+    import yaml
+    from scenes import boxes_off_path, desk_cloud
+
+    from roarmctl.motion.octree import cells_of
+    from roarmctl.motion.planning.context import scene_item
+    from roarmctl.plan.schema import load_plan
+
+    out, scenes = {}, {}
+    points = desk_cloud()
+    np.save(folder / "desk.npy", points)
+    for name, source in API_FROM.items():
+        ctx, _, q = captured[source]
+        plan_doc = yaml.safe_load((ROOT / "plans" / f"{QUERIES[source][0]}.yaml").read_text())
+        scene = dict(plan_doc.get("scene") or {})
+        cloud = None
+        if name == "b200":
+            scene["obstacles"] = list(scene.get("obstacles") or []) + boxes_off_path(200)
+        if name == "desk":
+            scene = {"table": {"shape": "cloud", "file": "desk.npy", "resolution": DESK_RESOLUTION, "xyz": [0, 0, 0]}}
+            # mplib's octree gets the centres of the same cells grown by the padding (whole cells: one here)
+            cells = cells_of(points, DESK_RESOLUTION)
+            grow = int(np.ceil(ctx.plan.planner.padding / DESK_RESOLUTION))
+            steps = np.array([[i, j, k] for i in range(-grow, grow + 1) for j in range(-grow, grow + 1) for k in range(-grow, grow + 1)])
+            grown = np.unique((cells[:, None, :] + steps[None]).reshape(-1, 3), axis=0)
+            cloud = ((grown + 0.5) * DESK_RESOLUTION).tolist()
+        doc = api_query(q, goals[source], scene, plan_doc.get("objects") or [], plan_doc)
+        specs = load_plan(doc, base_dir=folder)
+        items = [scene_item(s) for s in specs.scene + specs.objects]
+        scenes[name] = items
+        out[name] = (doc, [item_dict(it) for it in items if it.shape in ("box", "cylinder", "sphere")], cloud)
+    return out, scenes
+
+
+def api_query(start, goal, scene: dict, objects: list, plan: dict) -> dict:
+    """A one-motion plan dict for ``roarmctl.api.plan``: from ``start`` to ``goal`` (full configurations, rad)."""
+    return {"robot": "roarm_m3_pro", "start": [float(v) for v in start], "scene": scene, "objects": objects,
+            "tasks": [{"move": {"joints": [float(v) for v in goal]}}], "planner": plan["planner"], "limits": plan["limits"]}
+
+
 def main() -> None:
     import numpy as np
 
@@ -204,6 +332,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=20)
     parser.add_argument("--venv", type=Path, default=Path(tempfile.gettempdir()) / "roarmctl-bench-mplib")
     parser.add_argument("--states", type=int, default=3000)
+    parser.add_argument("--metric-rounds", type=int, default=5, help="rounds whose paths get the clearance metric")
     args = parser.parse_args()
     py = peer_python(args.venv, [MPLIB, "numpy<2"], f"{MPLIB} and numpy<2")
     load_planning_libraries()
@@ -213,15 +342,29 @@ def main() -> None:
     robot = captured["free"][0].robot
     urdf, srdf = export_model(robot, folder)
     arm = robot.arm_indices
+    padding = captured["free"][0].plan.planner.padding
     spec = {"urdf": str(urdf), "srdf": str(srdf), "tcp": robot.tcp_link, "joints": list(robot.joint_names),
-            "base_links": list(robot.base_links), "queries": {}}  # roarmctl's checker: these never meet the table
+            "base_links": list(robot.base_links), "queries": {}, "api": {}, "padding": padding,
+            "tcp_index": -1}  # roarmctl's checker: the base links never meet the table
+    goals = {}
     for name, (ctx, step, q) in captured.items():
         goal = step.q_to.copy()
         goal[ctx.gi] = q[ctx.gi]
-        items = [{"name": it.name, "role": it.role, "shape": it.shape, "pose": it.pose.tolist(), "size": list(it.size),
-                  "radius": it.radius, "length": it.length} for it in ctx.checker.scene.items if it.name != ctx.held]
-        spec["queries"][name] = {"start": q.tolist(), "goal": goal.tolist(), "items": items,
+        goals[name] = goal
+        items = [item_dict(it) for it in ctx.checker.scene.items]
+        held = None
+        if ctx.held:  # roarmctl's held object is shrunk by the contact tolerance and not padded: so is mplib's
+            item, rel = ctx.checker._attached[ctx.held]
+            shrink = 2 * (padding + ctx.checker.contact_tolerance)
+            held = {"size": (np.asarray(item.size) - shrink).tolist(), "pose": rel.tolist()}
+        spec["queries"][name] = {"start": q.tolist(), "goal": goal.tolist(), "items": items, "held": held,
                                  "vmax": ctx.vmax[arm].tolist(), "amax": ctx.amax[arm].tolist()}
+    api, api_scenes = api_queries(captured, goals, folder)
+    for name, (doc, items, cloud) in api.items():
+        source = captured[API_FROM[name]][0]
+        spec["api"][name] = {"start": doc["start"], "goal": doc["tasks"][0]["move"]["joints"], "items": items,
+                             "cloud": cloud, "resolution": DESK_RESOLUTION,
+                             "vmax": source.vmax[arm].tolist(), "amax": source.amax[arm].tolist()}
     worker = subprocess.Popen([str(py), "-c", WORKER], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     worker.stdin.write(json.dumps(spec) + "\n")
     worker.stdin.flush()
@@ -242,10 +385,54 @@ def main() -> None:
     fails = {k: [0, 0] for k in QUERIES}
     like = {k: [] for k in QUERIES if k != "free"}  # our geometry + plain TOPP-RA only (mplib's post-planning work)
     like_dur = {k: [] for k in like}
+    clear = {k: ([], []) for k in QUERIES}  # clearance (m) of each side's path, arm vs the unpadded scene
+    import roarmctl.api as rc
+    from roarmctl.motion import pipeline
+    from roarmctl.motion.collision import densify
+
+    run_times: list[float] = []
+    plain_run = pipeline.Planner.run
+
+    def timed_run(self):  # the planner's own time inside api.plan
+        t = time.perf_counter()
+        try:
+            return plain_run(self)
+        finally:
+            run_times.append(time.perf_counter() - t)
+
+    pipeline.Planner.run = timed_run
+    api_ours = {k: ([], []) for k in api}  # (api.plan wall, Planner.run wall)
+    api_theirs = {k: ([], []) for k in api}  # (set-up + plan_qpos wall, set-up wall)
+    api_clear = {k: ([], []) for k in api}
+    api_fails = {k: [0, 0] for k in api}
     for r in range(args.rounds):
+        for name, (doc, _, _) in api.items():
+            try:
+                t0 = time.perf_counter()
+                result = rc.plan(doc, seed=100 + r, base_dir=folder)
+                api_ours[name][0].append(time.perf_counter() - t0)
+                api_ours[name][1].append(run_times[-1])
+                if r < args.metric_rounds:
+                    api_clear[name][0].append(clearance(robot, api_scenes[name], result.trajectory.positions))
+            except Exception as exc:  # noqa: BLE001 (a bench counts failures)
+                api_fails[name][0] += 1
+                print(f"  roarmctl api {name} round {r}: {exc}", file=sys.stderr)
+            res = ask({"op": "api", "query": name, "seed": 100 + r})
+            if res["ok"]:
+                api_theirs[name][0].append(res["wall"])
+                api_theirs[name][1].append(res["setup"])
+                if r < args.metric_rounds:
+                    path = np.array(res["path"])
+                    full = np.repeat(np.array(doc["start"])[None, :], len(path), axis=0)
+                    full[:, arm] = path[:, :len(arm)]
+                    api_clear[name][1].append(clearance(robot, api_scenes[name], full))
+            else:
+                api_fails[name][1] += 1
         for name, (ctx, step, q) in captured.items():
             try:
-                wall, geo, dur, _ = roarmctl_query(ctx, step, q, seed=100 + r)
+                wall, geo, dur, wps = roarmctl_query(ctx, step, q, seed=100 + r)
+                if r < args.metric_rounds:
+                    clear[name][0].append(clearance(robot, ctx.checker.scene.items, densify(wps, 0.01)))
                 ours[name].append(wall)
                 geometry[name].append(geo)
                 durations[name][0].append(dur)
@@ -264,6 +451,8 @@ def main() -> None:
                 path = np.array(res["path"])
                 full = np.repeat(q[None, :], len(path), axis=0)
                 full[:, arm] = path
+                if r < args.metric_rounds:
+                    clear[name][1].append(clearance(robot, ctx.checker.scene.items, full))
                 ctx.set_state(q[ctx.gi], grasp_target=None)
                 padding_hits[name] += ctx.checker.first_invalid(full[:, arm]) is not None
             else:
@@ -277,6 +466,23 @@ def main() -> None:
         da, db = statistics.median(durations[name][0]), statistics.median(durations[name][1])
         print(f"{name:<6}{a:>10.1f}{b:>10.1f}{a / b:>7.2f}x   {da:.2f} / {db:.2f}"
               f"{'':>22}{padding_hits[name]:>3} of {len(theirs[name])}{'':>28}{fails[name][0]}/{fails[name][1]}")
+    print(f"one metric for both (first {args.metric_rounds} rounds): the arm's smallest FCL distance to the unpadded scene "
+          f"along the path; paths closer than the padding ({padding * 1000:.0f} mm), ours / mplib; median clearance (mm)")
+    for name in QUERIES:
+        a, b = clear[name]
+        print(f"  {name:<6} {sum(c < padding - 1e-6 for c in a)} of {len(a)} / {sum(c < padding - 1e-6 for c in b)} of {len(b)}"
+              f"   {statistics.median(a) * 1000:.1f} / {statistics.median(b) * 1000:.1f}")
+    print("\nthe public API, medians (ms): roarmctl.api.plan (plan dict -> checked, timed trajectory) against mplib "
+          "(scene set up + plan_qpos); a plan starts with empty hands, so nothing is held here")
+    print(f"{'query':<6}{'api.plan':>10}{'Planner.run':>13}{'api/run':>9}{'mplib':>10}{'its set-up':>12}{'ratio':>8}"
+          "   paths inside the padding ours / mplib   failures ours/mplib")
+    for name in api:
+        a, run = (statistics.median(v) * 1000 for v in api_ours[name])
+        b, setup = (statistics.median(v) * 1000 for v in api_theirs[name])
+        ca, cb = api_clear[name]
+        print(f"{name:<6}{a:>10.1f}{run:>13.1f}{a / run:>8.2f}x{b:>10.1f}{setup:>12.1f}{a / b:>7.2f}x"
+              f"   {sum(c < padding - 1e-6 for c in ca)} of {len(ca)} / {sum(c < padding - 1e-6 for c in cb)} of {len(cb)}"
+              f"{'':>16}{api_fails[name][0]}/{api_fails[name][1]}")
     print("roarmctl's part, medians (ms): geometry (OMPL tries + shortcutting) | timing + re-check (TOPP-RA etc.)")
     for name in QUERIES:
         g = statistics.median(geometry[name]) * 1000

@@ -17,6 +17,7 @@ roots where the caller gives them).
 from __future__ import annotations
 
 import difflib
+import hashlib
 import json
 import math
 from collections.abc import Callable
@@ -181,6 +182,11 @@ def _flow_depth_line(text: str) -> int:
     return 0
 
 
+#: PyYAML's safe loader on libyaml (its C parser, about 10x faster) where PyYAML was built with it, else its own
+#: Python one: the same nodes with the same line marks, the same safe constructors.
+SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
 def parse_yaml(text: str, name: str, error: type[InputError] = PlanFileError,
                tags: dict[str, Callable[[str], Any]] | None = None) -> Any:
     """YAML ``text`` (from file ``name``) -> located values within the limits; None for an empty document.
@@ -192,7 +198,7 @@ def parse_yaml(text: str, name: str, error: type[InputError] = PlanFileError,
         raise error(f"{name}:{deep}: nested more than {MAX_DEPTH} levels deep")
     loader = None
     try:
-        loader = yaml.SafeLoader(text)  # the reader checks the characters here
+        loader = SAFE_LOADER(text)  # the reader checks the characters here
         loader.name = name
         node = loader.get_single_node()
         if node is None:
@@ -216,11 +222,12 @@ def parse_yaml(text: str, name: str, error: type[InputError] = PlanFileError,
 
 def load_yaml(path: str | Path, error: type[InputError] = PlanFileError, *, what: str | None = None,
               limit: int = MAX_BYTES, roots: Roots | None = None, empty_ok: bool = False,
-              tags: dict[str, Callable[[str], Any]] | None = None) -> Any:
+              tags: dict[str, Callable[[str], Any]] | None = None, digest: bool = False) -> Any:
     """A YAML file -> located values (see ``parse_yaml``), read by ``fileio.read_bytes``.
 
     ``what``: the field that names the file (None for a file named on the command line); ``roots``:
-    where the file may lie. An empty file is refused unless ``empty_ok`` (then None).
+    where the file may lie. An empty file is refused unless ``empty_ok`` (then None). With ``digest``:
+    (values, sha256 hex of the bytes parsed), the file read once.
     """
     path = Path(path)
     data = read_bytes(path, what, limit, roots=roots, error=error)
@@ -232,6 +239,8 @@ def load_yaml(path: str | Path, error: type[InputError] = PlanFileError, *, what
     value = parse_yaml(text, str(path), error, tags)
     if value is None and not empty_ok:
         raise error(f"{path}: the file is empty")
+    if digest:
+        return value, hashlib.sha256(data).hexdigest()
     return value
 
 

@@ -123,7 +123,19 @@ class _Messages:
     def marker(self, ns: int, frame: str, marker_id: int, item: dict[str, Any], pose: np.ndarray):
         M = self.Marker
         shape = item.get("shape")
-        if shape == "box":
+        points: list = []
+        if shape == "mesh":  # its triangles, item frame (RViz and Foxglove draw a TRIANGLE_LIST in the marker's pose)
+            kind, scale = M.TRIANGLE_LIST, [1.0, 1.0, 1.0]
+            for piece in item["pieces"]:
+                v = np.asarray(piece["vertices"], dtype=float).reshape(-1, 3)
+                points += [self.PointMsg(x=float(x), y=float(y), z=float(z))
+                           for x, y, z in v[np.asarray(piece["faces"], dtype=np.int64).reshape(-1)]]
+        elif shape == "cloud":  # one cube per occupied cell, at its centre (item frame)
+            r = float(item["resolution"])
+            kind, scale = M.CUBE_LIST, [r, r, r]
+            centres = (np.asarray(item["cells"], dtype=float).reshape(-1, 3) + 0.5) * r
+            points = [self.PointMsg(x=float(x), y=float(y), z=float(z)) for x, y, z in centres]
+        elif shape == "box":
             kind, scale = M.CUBE, [float(v) for v in item["size"]]
         elif shape == "cylinder":
             d = 2.0 * float(item["radius"])
@@ -137,7 +149,7 @@ class _Messages:
                  pose=self.Pose(position=self.PointMsg(x=float(pose[0, 3]), y=float(pose[1, 3]), z=float(pose[2, 3])),
                                 orientation=self.Quaternion(x=x, y=y, z=z, w=w)),
                  scale=self.Vector3(x=scale[0], y=scale[1], z=scale[2]), color=self.ColorRGBA(r=r, g=g, b=b, a=a),
-                 lifetime=self.duration(0.0), frame_locked=False, points=[], colors=[], texture_resource="",
+                 lifetime=self.duration(0.0), frame_locked=False, points=points, colors=[], texture_resource="",
                  texture=self.CompressedImage(header=self.header(0), format="", data=np.zeros(0, dtype=np.uint8)),
                  uv_coordinates=[], text=str(item.get("name", "")), mesh_resource="",
                  mesh_file=self.MeshFile(filename="", data=np.zeros(0, dtype=np.uint8)), mesh_use_embedded_materials=False)

@@ -45,6 +45,10 @@ import numpy as np
 
 from roarmctl import _kernel
 from roarmctl.errors import InputError
+from roarmctl.motion.geometry import fcl_geometry as _geometry
+from roarmctl.motion.geometry import half_extents as _half_extents
+from roarmctl.motion.geometry import item_parts
+from roarmctl.motion.geometry import second_box as _second_box  # noqa: F401 (tests reach it here)
 from roarmctl.motion.scene import Scene, SceneItem
 from roarmctl.robot.model import Robot
 
@@ -54,70 +58,13 @@ _NO_IDX = np.zeros(0, dtype=np.int64)
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
 _STATE_CACHE = 8  # collision states whose tables a checker keeps
 # What _build_tables sets: the kept tables of one collision state.
-_TABLES = ("_items", "_item_objs", "_item_lo", "_item_hi", "_item_c", "_item_h", "_moving_shapes", "_mv_link", "_mv_rot",
+_TABLES = ("_parts", "_items", "_item_objs", "_item_lo", "_item_hi", "_item_c", "_item_h", "_moving_shapes", "_mv_link", "_mv_rot",
            "_mv_pos", "_mv_half", "_mv_half_self", "_mv_radius", "_scene_mask", "_active", "_active_mask", "_active_r2",
            "_pairs", "_pair_r2", "_ki", "_kf", "_q_template", "_kfm", "_kim")
 
 
-def _geometry(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0, mesh=None):
-    """An FCL geometry, every surface moved outwards by ``grow`` (m; negative shrinks).
-
-    A mesh (``MeshGeometry``) becomes an FCL convex polytope (its hull), or a BVH of its triangles
-    when ``mesh.exact``; ``grow`` > 0 moves its vertices out along their normals.
-    """
-    if kind == "mesh":
-        v = mesh.grown_vertices(max(grow, 0.0))
-        f = mesh.faces
-        if mesh.exact:
-            bvh = fcl.BVHModel()
-            bvh.beginModel(len(v), len(f))
-            bvh.addSubModel(v, f)
-            bvh.endModel()
-            return bvh
-        return fcl.Convex(v, len(f), np.hstack([np.full((len(f), 1), 3), f]).ravel())
-    if kind == "box":
-        return fcl.Box(*[max(float(s) + 2 * grow, 1e-6) for s in size])
-    if kind == "cylinder":
-        return fcl.Cylinder(max(radius + grow, 1e-6), max(length + 2 * grow, 1e-6))
-    if kind == "sphere":
-        return fcl.Sphere(max(radius + grow, 1e-6))
-    if kind == "capsule":
-        return fcl.Capsule(max(radius + grow, 1e-6), max(length, 1e-6))
-    raise InputError(f"collision shape kind '{kind}' is not supported")
-
-
-def _half_extents(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0, mesh=None) -> np.ndarray:
-    """Half extents (3,) of the shape's local bounding box, grown by ``grow``."""
-    if kind == "mesh":
-        h = np.max(np.abs(mesh.grown_vertices(max(grow, 0.0))), axis=0)
-        return np.maximum(h, 1e-6)
-    if kind == "box":
-        h = np.asarray(size, dtype=float) / 2
-    elif kind == "cylinder":
-        h = np.array([radius, radius, length / 2])
-    elif kind == "sphere":
-        h = np.full(3, radius)
-    else:  # capsule
-        h = np.array([radius, radius, length / 2 + radius])
-    return np.maximum(h + grow, 1e-6)
-
-
 _FCL_REQUEST = fcl.CollisionRequest()  # FCL's defaults (what fcl.collide makes when given none), made once
-_BOX2_GROW = 1e-5  # m: the second box of a cylinder stands off it, far beyond FCL's own tolerances
-
-
-def _second_box(item: SceneItem) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """For a cylinder item: a second box that holds it, its own box turned 45 degrees about the axis and grown by
-    ``_BOX2_GROW`` (rotation (9,) row-major, centre (3,), half extents (3,), as ``_kernel.apart`` takes them).
-    The two boxes meet in an octagonal prism around the cylinder, so a shape whose box is apart from this one is
-    apart from the cylinder even where it overlaps the first box (near its corners); None for other items."""
-    if item.shape != "cylinder":
-        return None
-    c = s = np.sqrt(0.5)
-    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    half = np.array([item.radius, item.radius, item.length / 2]) + _BOX2_GROW
-    return (np.ascontiguousarray((item.pose[:3, :3] @ turn).ravel()), np.ascontiguousarray(item.pose[:3, 3], dtype=float),
-            np.ascontiguousarray(half))
+_SWEEP_GAINS: dict[tuple, tuple[Robot, float]] = {}  # see CollisionChecker._cached_sweep_gain
 
 
 @dataclass
@@ -275,7 +222,8 @@ class CollisionChecker:
 
     def _state_key(self) -> tuple:
         """What the tables of ``_build_tables`` are made from, besides the robot (fixed per checker)."""
-        items = tuple((it.name, it.role, it.shape, it.size, it.radius, it.length, it.pose.tobytes()) for it in self.scene.items)
+        items = tuple((it.name, it.role, it.shape, it.size, it.radius, it.length, id(it.mesh or it.cloud), it.pose.tobytes())
+                      for it in self.scene.items)
         attached = tuple((name, item.shape, item.size, item.radius, item.length, rel.tobytes())
                          for name, (item, rel) in self._attached.items())
         return (self._grasp_target, self._jaw_strict, self.padding, self.singularity_margin, self.contact_tolerance,
@@ -299,23 +247,27 @@ class CollisionChecker:
             for name, value in tables.items():
                 setattr(self, name, value)
             self._q_template[:] = template  # a view into the kept kernel table
-            self._items = list(self.scene.items)
+            by_name = {it.name: it for it in self.scene.items}
+            self._items = [by_name[it.name] for it in self._items]  # the scene's own item objects, one per part
             self._bufs = {}
         key = tuple((name, rel.tobytes()) for name, (_, rel) in self._attached.items())  # moving shapes only
         if getattr(self, "_sweep_key", None) != key:
-            self.sweep_gain = self._sweep_gain()
+            self.sweep_gain = self._cached_sweep_gain()
             self._sweep_key = key
 
     def _build_tables(self) -> None:
-        self._items = list(self.scene.items)
-        self._item_objs = []
-        for it in self._items:
-            obj = fcl.CollisionObject(_geometry(it.shape, it.size, it.radius, it.length),
-                                      fcl.Transform(it.pose[:3, :3], it.pose[:3, 3]))
-            self._item_objs.append(obj)
-        m = len(self._items)
-        lo = np.array([it.aabb()[0] for it in self._items]).reshape(m, 3)
-        hi = np.array([it.aabb()[1] for it in self._items]).reshape(m, 3)
+        parts = [part for it in self.scene.items for part in item_parts(it)]
+        self._parts = parts
+        self._items = [part.item for part in parts]  # one entry per part: the item it belongs to
+        self._item_objs = [part.obj for part in parts]
+        m = len(parts)
+        lo, hi = np.zeros((m, 3)), np.zeros((m, 3))
+        for k, part in enumerate(parts):
+            if part.kind in ("box", "cylinder", "sphere"):  # the item's own (a cylinder's is tighter than its box's)
+                lo[k], hi[k] = part.item.aabb()
+            else:
+                h = np.abs(part.rot) @ part.half
+                lo[k], hi[k] = part.centre - h, part.centre + h
         self._item_lo, self._item_hi = lo, hi
         self._item_c, self._item_h = (lo + hi) / 2, (hi - lo) / 2
 
@@ -339,15 +291,16 @@ class CollisionChecker:
 
         # Shape vs item mask: which pairs are checked at all.
         mask = np.ones((s, m), dtype=bool)
+        is_table = np.array([it.role == "table" for it in self._items], dtype=bool)
+        is_target = np.array([it.name == self._grasp_target for it in self._items], dtype=bool)
         for a, mv in enumerate(moving):
             lname = link_names[mv.link] if not mv.attached else None
-            for k, it in enumerate(self._items):
-                if it.role == "table" and lname in base_links:
-                    mask[a, k] = False
-                if it.name == self._grasp_target and lname in touching:
-                    mask[a, k] = False
-                if moving_jaw and lname not in moving_jaw:  # moving_jaw_clear: only the moving jaw is checked
-                    mask[a, k] = False
+            if lname in base_links:
+                mask[a] &= ~is_table
+            if lname in touching:
+                mask[a] &= ~is_target
+            if moving_jaw and lname not in moving_jaw:  # moving_jaw_clear: only the moving jaw is checked
+                mask[a] = False
         self._scene_mask = mask
         # Shapes that are checked against at least one item take part in the scene pre-filter.
         self._active = np.flatnonzero(mask.any(axis=1)) if m else np.zeros(0, dtype=int)
@@ -390,14 +343,15 @@ class CollisionChecker:
         shapes = np.hstack([self._mv_rot.reshape(s, 9), self._mv_pos, self._mv_half, self._mv_half_self,
                             self._mv_radius[:, None]]) if s else np.zeros((0, 19))
         items = np.zeros((m, 37))
-        for k, it in enumerate(self._items):
-            local = {"box": np.asarray(it.size, dtype=float) / 2, "sphere": np.full(3, it.radius),
-                     "cylinder": np.array([it.radius, it.radius, it.length / 2])}[it.shape]
-            items[k, :3], items[k, 3:6] = self._item_c[k], self._item_h[k]
-            items[k, 6:15], items[k, 15:18], items[k, 18:21] = it.pose[:3, :3].ravel(), it.pose[:3, 3], local
-            box2 = _second_box(it)
-            if box2 is not None:
-                items[k, 24], items[k, 25:34], items[k, 34:37] = 1.0, box2[0], box2[2]
+        if m:
+            parts = self._parts
+            items[:, :3], items[:, 3:6] = self._item_c, self._item_h
+            items[:, 6:15] = np.array([p.rot for p in parts]).reshape(m, 9)
+            items[:, 15:18] = np.array([p.centre for p in parts])
+            items[:, 18:21] = np.array([p.half for p in parts])
+            for k, part in enumerate(parts):
+                if part.box2 is not None:
+                    items[k, 24], items[k, 25:34], items[k, 34:37] = 1.0, part.box2[0], part.box2[1]
         # Sphere centres (link, centre in the link frame), each listed once: the kernel makes each world centre once
         # per state, for every group and link pair that has it (a link's group and link-pair spheres are the same
         # sphere when all its shapes take part in the scene test).
@@ -459,6 +413,20 @@ class CollisionChecker:
         self._q_template = self._kf[off:off + len(self._q_template)]  # set_gripper writes the kernel's table
         self._kfm, self._kim = memoryview(self._kf), memoryview(self._ki)  # cheaper to pass than the arrays
         self._bufs = {}
+
+    def _cached_sweep_gain(self) -> float:
+        """``_sweep_gain()``, computed once per process for the same robot, shapes and joint template (a plan and every
+        query of a scene build checkers for the same arm again and again; 512 FK samples cost a few ms)."""
+        key = (id(self.robot), self._q_template.tobytes(), self._mv_link.tobytes(), self._mv_pos.tobytes(),
+               self._mv_radius.tobytes(), self._lower.tobytes(), self._upper.tobytes())
+        hit = _SWEEP_GAINS.get(key)
+        if hit is not None and hit[0] is self.robot:
+            return hit[1]
+        gain = self._sweep_gain()
+        if len(_SWEEP_GAINS) >= 64:
+            _SWEEP_GAINS.pop(next(iter(_SWEEP_GAINS)))
+        _SWEEP_GAINS[key] = (self.robot, gain)
+        return gain
 
     def _sweep_gain(self) -> float:
         """Bound (m per rad) on how far any point of a moving shape moves for a joint step of

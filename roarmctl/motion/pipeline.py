@@ -79,7 +79,7 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
         raise
     except InputError as exc:  # unknown robot: name the plan's line
         raise PlanFileError(f"{plan.path}:{plan.lines.get('robot', 1)}: robot: {exc.message}", exc.hint) from None
-    plan = load_plan(path, named_poses=list(robot.named_poses), base_dir=base_dir, frames=robot.frames)
+    plan = load_plan(path, named_poses=list(robot.named_poses), base_dir=base_dir, frames=robot.frames, parsed=plan)
     if start_here or (isinstance(plan.start, str) and plan.start == "current"):
         assert current is not None  # checked above for start: current; start_here comes with it
         plan.start = np.asarray(current(robot), dtype=float)

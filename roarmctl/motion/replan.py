@@ -33,8 +33,8 @@ def _plan_for(traj: Trajectory, robot, q_from: np.ndarray, q_to: np.ndarray):
     from roarmctl.plan.schema import ItemSpec, Limits, MoveTask, Plan, PlannerConfig
 
     items = Scene.from_dict(traj.scene or {"items": []}).items
-    specs = [ItemSpec(name=i.name, role=i.role, shape=i.shape, pose=i.pose.copy(), size=(i.size[0], i.size[1], i.size[2]), radius=i.radius,
-                      length=i.length) for i in items]
+    specs = [ItemSpec(name=i.name, role=i.role, shape=i.shape, pose=i.pose.copy(), size=(i.size[0], i.size[1], i.size[2]),
+                      radius=i.radius, length=i.length, data=i.mesh or i.cloud) for i in items]
     lim = traj.limits or {}
     limits = Limits(velocity_scale=float(lim.get("velocity_scale", 0.5)),
                     acceleration_scale=float(lim.get("acceleration_scale", 0.5)),

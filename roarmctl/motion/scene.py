@@ -1,10 +1,16 @@
 """The world the arm moves in: a table (or floor), obstacles and graspable objects.
 
-Every item is a primitive shape with a pose in the world frame (the robot's root frame; for the
-RoArm z = 0 is the desk surface under the base). Units: metres and radians.
+Every item has a pose in the world frame (the robot's root frame; for the RoArm z = 0 is the desk surface
+under the base) and a shape: a primitive (box, cylinder, sphere), a triangle mesh (``mesh``: convex pieces or
+the exact triangles, from an STL, OBJ, PLY or DAE file or from arrays) or the occupied cells of a point cloud
+(``cloud``: cubic cells of a stated resolution, from a PLY, PCD or .npy file or an array; FCL checks them as an
+octree). Units: metres and radians.
 
 ``Scene.to_dict()`` is the form that goes into the trajectory file (the visualizer reads it):
-``{"items": [{"name", "role", "shape", "size" | "radius" (+ "length"), "xyz", "rpy"}]}``.
+``{"items": [{"name", "role", "shape", "size" | "radius" (+ "length"), "xyz", "rpy"}]}``; a mesh adds
+``"pieces": [{"vertices": [[x, y, z], ...], "faces": [[i, j, k], ...]}]`` (item frame, m), ``"collision"``
+(convex | exact) and ``"source"``; a cloud adds ``"resolution"`` (m), ``"cells": [[i, j, k], ...]`` (cell i
+spans [i r, (i + 1) r) along x in the item frame, and so on) and ``"source"``.
 """
 
 from __future__ import annotations
@@ -16,20 +22,24 @@ from typing import Literal
 import numpy as np
 
 from roarmctl.errors import InputError
+from roarmctl.motion.scenefiles import CloudData, MeshData
 from roarmctl.robot.model import rpy_from_matrix, transform
 
 Role = Literal["table", "obstacle", "object"]
-Shape = Literal["box", "cylinder", "sphere"]
+Shape = Literal["box", "cylinder", "sphere", "mesh", "cloud"]
 ROLES = ("table", "obstacle", "object")
-SHAPES = ("box", "cylinder", "sphere")
+PRIMITIVES = ("box", "cylinder", "sphere")
+SHAPES = PRIMITIVES + ("mesh", "cloud")
 
 
 @dataclass
 class SceneItem:
-    """One primitive in the world.
+    """One shape in the world.
 
-    ``pose`` (4, 4) places the shape's centre in the world frame. Box: ``size`` = full edge lengths
-    (x, y, z) in m. Cylinder: ``radius`` and ``length`` (m) along the local z axis. Sphere: ``radius``.
+    ``pose`` (4, 4) places the shape's centre (a mesh's or a cloud's own frame) in the world frame. Box:
+    ``size`` = full edge lengths (x, y, z) in m. Cylinder: ``radius`` and ``length`` (m) along the local z axis.
+    Sphere: ``radius``. Mesh: ``mesh`` (``MeshData``). Cloud: ``cloud`` (``CloudData``). Only primitives can be
+    objects (grasped and carried).
     """
 
     name: str
@@ -39,6 +49,8 @@ class SceneItem:
     size: tuple[float, float, float] = (0.0, 0.0, 0.0)
     radius: float = 0.0
     length: float = 0.0
+    mesh: MeshData | None = None
+    cloud: CloudData | None = None
 
     def __post_init__(self) -> None:
         if self.role not in ROLES:
@@ -50,6 +62,16 @@ class SceneItem:
             raise InputError(f"scene item '{self.name}': pose must be a 4x4 transform")
         self.size = tuple(float(v) for v in self.size)  # type: ignore[assignment]
         self.radius, self.length = float(self.radius), float(self.length)
+        if self.shape in ("mesh", "cloud"):
+            data = self.mesh if self.shape == "mesh" else self.cloud
+            if data is None or (self.shape == "mesh" and not self.mesh.pieces) or (  # type: ignore[union-attr]
+                    self.shape == "cloud" and len(self.cloud.cells) == 0):  # type: ignore[union-attr]
+                raise InputError(f"scene item '{self.name}': a {self.shape} item needs its "
+                                 f"{'triangles' if self.shape == 'mesh' else 'occupied cells'}")
+            if self.role == "object":
+                raise InputError(f"scene item '{self.name}': a {self.shape} cannot be an object (grasped)",
+                                 "objects are boxes, cylinders or spheres; make it an obstacle")
+            return
         dims = {"box": self.size, "cylinder": (self.radius, self.length), "sphere": (self.radius,)}[self.shape]
         if len(dims) != (3 if self.shape == "box" else len(dims)) or min(dims) <= 0:
             raise InputError(f"scene item '{self.name}': {self.shape} dimensions must be positive, got {dims}")
@@ -69,6 +91,42 @@ class SceneItem:
         """A sphere of ``radius`` (m) centred at ``xyz`` (m)."""
         return cls(name, role, "sphere", transform(xyz), radius=radius)
 
+    @classmethod
+    def from_mesh(cls, name: str, vertices, faces, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *, exact: bool = False,
+                  role: Role = "obstacle", source: str = "") -> SceneItem:
+        """A mesh from triangles: ``vertices`` (V, 3) m in the item frame, ``faces`` (F, 3) vertex indices; placed at
+        ``xyz`` (m) with URDF ``rpy`` (rad). ``exact`` False: the convex hulls of its connected parts (what FCL
+        checks fastest); True: the triangles as they are (a BVH: hollows and holes stay open)."""
+        from roarmctl.motion.scenefiles import mesh_data
+
+        return cls(name, role, "mesh", transform(xyz, rpy), mesh=mesh_data(vertices, faces, exact, source, f"scene item '{name}'"))
+
+    @classmethod
+    def mesh_file(cls, name: str, path, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *, scale=1.0, exact: bool = False,
+                  role: Role = "obstacle") -> SceneItem:
+        """A mesh read from an STL, OBJ, PLY or DAE file (its units times ``scale``, a number or (3,)); see ``from_mesh``."""
+        from roarmctl.motion.scenefiles import read_mesh_item
+
+        return cls(name, role, "mesh", transform(xyz, rpy), mesh=read_mesh_item(path, scale, exact, f"scene item '{name}'"))
+
+    @classmethod
+    def from_points(cls, name: str, points, resolution: float, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *,
+                    role: Role = "obstacle", source: str = "") -> SceneItem:
+        """A point cloud: ``points`` (N, 3) m in the item frame (e.g. a camera's), each occupying the cubic cell of
+        edge ``resolution`` (m) it falls in; placed at ``xyz`` (m) with URDF ``rpy`` (rad). Role "table" keeps it
+        from being checked against the robot's base links (a scan of the desk under the arm)."""
+        from roarmctl.motion.scenefiles import cloud_data
+
+        return cls(name, role, "cloud", transform(xyz, rpy), cloud=cloud_data(points, resolution, source, f"scene item '{name}'"))
+
+    @classmethod
+    def cloud_file(cls, name: str, path, resolution: float, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *,
+                   role: Role = "obstacle") -> SceneItem:
+        """A point cloud read from a PLY, PCD or .npy file (m); see ``from_points``."""
+        from roarmctl.motion.scenefiles import read_cloud_item
+
+        return cls(name, role, "cloud", transform(xyz, rpy), cloud=read_cloud_item(path, resolution, f"scene item '{name}'"))
+
     @property
     def xyz(self) -> np.ndarray:
         """The item's centre (3,) m, world frame."""
@@ -77,6 +135,9 @@ class SceneItem:
     def half_extents_world(self) -> np.ndarray:
         """Half edge lengths (3,) of the item's world-axis-aligned bounding box (m)."""
         rot = self.pose[:3, :3]
+        data = self.mesh if self.shape == "mesh" else self.cloud if self.shape == "cloud" else None
+        if data is not None:
+            return np.abs(rot) @ data.local_box()[1]
         if self.shape == "box":
             return np.abs(rot) @ (np.asarray(self.size) / 2)
         if self.shape == "sphere":
@@ -88,12 +149,23 @@ class SceneItem:
         """(lower, upper) corners (3,) of the world-axis-aligned bounding box (m)."""
         h = self.half_extents_world()
         c = self.pose[:3, 3]
+        data = self.mesh if self.shape == "mesh" else self.cloud if self.shape == "cloud" else None
+        if data is not None:
+            c = c + self.pose[:3, :3] @ data.local_box()[0]
         return c - h, c + h
 
     def to_dict(self) -> dict:
         """The item as the trajectory file's ``scene`` entry (name, role, shape, sizes, xyz, rpy)."""
         d: dict = {"name": self.name, "role": self.role, "shape": self.shape}
-        if self.shape == "box":
+        if self.mesh is not None:
+            d["collision"] = "exact" if self.mesh.exact else "convex"
+            d["source"] = self.mesh.source
+            d["pieces"] = self.mesh.as_lists
+        elif self.cloud is not None:
+            d["resolution"] = self.cloud.resolution
+            d["source"] = self.cloud.source
+            d["cells"] = self.cloud.as_lists
+        elif self.shape == "box":
             d["size"] = [float(v) for v in self.size]
         else:
             d["radius"] = float(self.radius)
@@ -108,6 +180,15 @@ class SceneItem:
         """An item from its ``to_dict`` form; a bad entry raises InputError."""
         try:
             pose = transform(d.get("xyz", (0, 0, 0)), d.get("rpy", (0, 0, 0)))
+            if d.get("shape") == "mesh":
+                pieces = tuple((np.asarray(p["vertices"], dtype=float).reshape(-1, 3), np.asarray(p["faces"], dtype=np.int64).reshape(-1, 3))
+                               for p in d["pieces"])
+                mesh = MeshData(pieces, d.get("collision") == "exact", str(d.get("source", "")))
+                return cls(str(d["name"]), d["role"], "mesh", pose, mesh=mesh)
+            if d.get("shape") == "cloud":
+                cells = np.asarray(d["cells"], dtype=np.int64).reshape(-1, 3)
+                cloud = CloudData(cells, float(d["resolution"]), 0, str(d.get("source", "")))
+                return cls(str(d["name"]), d["role"], "cloud", pose, cloud=cloud)
             return cls(str(d["name"]), d["role"], d["shape"], pose, size=tuple(d.get("size", (0.0, 0.0, 0.0))),
                        radius=float(d.get("radius", 0.0)), length=float(d.get("length", 0.0)))
         except (KeyError, TypeError, ValueError) as exc:
@@ -121,8 +202,8 @@ class Scene:
     items: list[SceneItem] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        names = [i.name for i in self.items]
-        dup = sorted({n for n in names if names.count(n) > 1})
+        seen: set[str] = set()
+        dup = sorted({i.name for i in self.items if i.name in seen or seen.add(i.name)})  # type: ignore[func-returns-value]
         if dup:
             raise InputError(f"scene: duplicate item name(s) {', '.join(dup)}")
 
@@ -140,8 +221,13 @@ class Scene:
         return [i.name for i in self.items]
 
     def copy(self) -> Scene:
-        """A deep copy (items and poses)."""
-        return copy.deepcopy(self)
+        """A copy whose items can be moved (poses copied); mesh and cloud data (read-only) are shared."""
+        items = []
+        for item in self.items:
+            twin = copy.copy(item)
+            twin.pose = item.pose.copy()
+            items.append(twin)
+        return Scene(items)
 
     def to_dict(self) -> dict:
         """``{"items": [...]}`` of the items' ``to_dict`` forms."""

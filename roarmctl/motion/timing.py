@@ -29,10 +29,7 @@ from scaling, or a jerk check), TOPP-RA runs again with limits tightened by ``SA
 from __future__ import annotations
 
 import functools
-import importlib.util
 import logging
-import sys
-import types
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -120,43 +117,15 @@ def dedupe(waypoints: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     return waypoints[keep]
 
 
-class _Deferred(types.ModuleType):
-    """A module whose code runs on the first access of a name it does not have yet (its ``__spec__``,
-    ``__name__`` and the like exist from the start, so the import system's own checks do not load
-    it; the standard ``importlib.util.LazyLoader`` loads on those and so gains nothing here)."""
-
-    def __getattr__(self, name: str):
-        self.__class__ = types.ModuleType
-        self.__spec__.loader.exec_module(self)
-        return getattr(self, name)
-
-
 def import_toppra():
-    """``import toppra`` without paying for ``matplotlib.pyplot`` (returns the module).
+    """``import toppra`` (returns the module), with the submodules timing uses.
 
-    toppra imports pyplot at module level, for plotting helpers that planning never calls; pyplot
-    is about half of toppra's 1.4 s import (figure, axes, 3-D projections, backends). If pyplot is
-    not loaded yet, it is registered first as a deferred module: the real module runs on first use,
-    so anything that does use it (toppra's ``plot`` methods, a user's script) gets the genuine
-    pyplot. The matplotlib package is deferred the same way when nothing has loaded it yet (its
-    first use, e.g. by ``visualize-path``, runs it). scipy.interpolate (toppra's splines) is needed
-    and imported normally.
+    What it costs in a fresh process (bench/bench_startup.py): toppra's package ``__init__`` imports all of
+    toppra: its interpolators (scipy.interpolate, which timing needs for the spline through the waypoints),
+    its solver wrappers (scipy.sparse) and ``toppra.algorithm``, which imports ``matplotlib.pyplot`` at module
+    level for plotting methods that planning never calls. None of that can be left out by ordinary means: a
+    submodule's import runs its package's ``__init__`` first.
     """
-    def defer(name: str) -> types.ModuleType | None:
-        spec = importlib.util.find_spec(name)
-        if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
-            return None
-        module = importlib.util.module_from_spec(spec)
-        module.__class__ = _Deferred
-        sys.modules[name] = module
-        return module
-
-    if "toppra" not in sys.modules and "matplotlib.pyplot" not in sys.modules:
-        if "matplotlib" not in sys.modules:
-            defer("matplotlib")
-        pyplot = defer("matplotlib.pyplot")
-        if pyplot is not None:
-            sys.modules["matplotlib"].__dict__["pyplot"] = pyplot  # no attribute access: stays deferred
     import toppra
     import toppra.algorithm  # noqa: F401
     import toppra.constraint  # noqa: F401

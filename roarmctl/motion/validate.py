@@ -50,7 +50,9 @@ TIME_TOL = 1e-6  # s
 SEGMENT_KINDS = ("free", "cartesian", "gripper", "wait")
 EVENT_KINDS = ("grasp", "release")  # what the planner writes; replanning and the pictures act on them
 ROLES = ("table", "obstacle", "object")
-SHAPES = ("box", "cylinder", "sphere")
+SHAPES = ("box", "cylinder", "sphere", "mesh", "cloud")
+MAX_MESH_PIECES, MAX_MESH_VERTICES = 256, 2_000_000  # a scene mesh item: convex pieces, vertices of all pieces
+MAX_CLOUD_CELLS = 2_000_000  # a scene cloud item's occupied cells
 
 
 CHECK = Checker(TrajectoryFileError, json=True, bound=math.inf)
@@ -285,7 +287,12 @@ def _scene_item(it: Any, where: str, f: str, seen: set) -> None:
     shape = it.get("shape")
     if shape not in SHAPES:
         _fail(where, f"{f}.shape", f"expected one of {', '.join(SHAPES)}, got {_kind(shape)}")
-    if shape == "box":
+    if shape == "mesh":
+        _mesh_pieces(it.get("pieces"), where, f"{f}.pieces")
+    elif shape == "cloud":
+        _number(it.get("resolution"), where, f"{f}.resolution", lo=1e-4, hi=1.0)
+        _int_rows(it.get("cells"), where, f"{f}.cells", MAX_CLOUD_CELLS, -2 ** 15, 2 ** 15 - 1)
+    elif shape == "box":
         _numbers(it.get("size"), 3, where, f"{f}.size", lo=0.0, hi=MAX_SIZE, strict_lo=True)
     else:
         _number(it.get("radius"), where, f"{f}.radius", lo=0.0, hi=MAX_SIZE, strict_lo=True)
@@ -295,6 +302,43 @@ def _scene_item(it: Any, where: str, f: str, seen: set) -> None:
         _fail(where, f"{f}.xyz", "is missing", "every scene item has a position [x, y, z] in m")
     _numbers(it["xyz"], 3, where, f"{f}.xyz", lo=-MAX_COORD, hi=MAX_COORD)
     _numbers(it.get("rpy", [0, 0, 0]), 3, where, f"{f}.rpy", lo=-100.0, hi=100.0)
+
+
+def _int_rows(v: Any, where: str, f: str, most: int, lo: int, hi: int) -> np.ndarray:
+    """A list of at most ``most`` rows of 3 whole numbers in [lo, hi], as an (N, 3) int64 array."""
+    if not isinstance(v, list) or not 0 < len(v) <= most:
+        _fail(where, f, f"expected a list of 1 to {most} rows [i, j, k], got {_kind(v)}")
+    try:
+        a = np.array(v, dtype=object)
+        if a.ndim != 2 or a.shape[1] != 3 or any(isinstance(x, bool) or not isinstance(x, int) for x in a.ravel()):
+            raise ValueError
+        rows = a.astype(np.int64)
+    except (ValueError, TypeError, OverflowError):
+        _fail(where, f, "expected rows of 3 whole numbers")
+    if rows.min() < lo or rows.max() > hi:
+        _fail(where, f, f"a value lies outside {lo} .. {hi}")
+    return rows
+
+
+def _mesh_pieces(v: Any, where: str, f: str) -> None:
+    """A mesh item's ``pieces``: [{"vertices": [[x, y, z], ...] (m), "faces": [[i, j, k], ...]}], each face naming
+    vertices of its piece."""
+    if not isinstance(v, list) or not 0 < len(v) <= MAX_MESH_PIECES:
+        _fail(where, f, f"expected a list of 1 to {MAX_MESH_PIECES} pieces, got {_kind(v)}")
+    total = 0
+    for i, piece in enumerate(v):
+        _mapping(piece, where, f"{f}[{i}]")
+        verts = piece.get("vertices")
+        if not isinstance(verts, list) or not 0 < len(verts) <= MAX_MESH_VERTICES - total:
+            _fail(where, f"{f}[{i}].vertices", f"expected a list of vertices, at most {MAX_MESH_VERTICES} in all")
+        total += len(verts)
+        try:
+            arr = np.array(verts, dtype=float)
+        except (ValueError, TypeError):
+            _fail(where, f"{f}[{i}].vertices", "expected rows [x, y, z] of numbers")
+        if arr.ndim != 2 or arr.shape[1] != 3 or not np.all(np.abs(arr) <= MAX_COORD):
+            _fail(where, f"{f}[{i}].vertices", f"expected rows [x, y, z] of finite numbers within {MAX_COORD:g} m")
+        _int_rows(piece.get("faces"), where, f"{f}[{i}].faces", 4 * MAX_MESH_VERTICES, 0, len(verts) - 1)
 
 
 # --------------------------------------------------------------------------- execution logs

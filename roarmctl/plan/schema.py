@@ -10,7 +10,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
@@ -24,7 +23,9 @@ from roarmctl.validation import Checker, LocatedDict, closest, load_yaml, locate
 
 DICT_NAME = "<plan dict>"  # stands for the file name in errors about a plan given as a dict
 PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
-SHAPES = ("box", "cylinder", "sphere")
+SHAPES = ("box", "cylinder", "sphere")  # of objects (grasped): primitives
+SCENE_SHAPES = SHAPES + ("mesh", "cloud")  # of the table and obstacles: also meshes and point clouds from files
+MESH_COLLISION = ("convex", "exact")
 
 
 @dataclass
@@ -43,6 +44,12 @@ class ItemSpec:
     inertia: np.ndarray | None = None  # (3, 3) kg m^2 about the COM, object axes; None: uniform solid
     grasp_width: float | None = None  # m across the jaws; default: the shape's narrowest horizontal extent
     line: int = 0
+    file: Path | None = None  # mesh or cloud: the file, resolved (inside the plan's folder)
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)  # mesh: the file's units times this are m
+    exact: bool = False  # mesh: its triangles as they are (else the convex hulls of its connected parts)
+    resolution: float = 0.0  # cloud: the edge of its occupied cells (m)
+    where: str = ""  # "plan.yaml:12: scene.obstacles[0]": names the item in errors about its file
+    data: Any = None  # mesh or cloud already read (``motion.scene.MeshData`` / ``CloudData``): a trajectory's scene
 
     @property
     def height(self) -> float:
@@ -146,6 +153,8 @@ class Plan:
     limits: Limits = field(default_factory=Limits)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     lines: dict[str, int] = field(default_factory=dict)  # top-level key -> line, for later messages
+    document: Any = None  # the parsed file (located containers): ``load_plan(..., parsed=plan)`` reads it again
+    item_specs: dict = field(default_factory=dict, repr=False)  # id(raw item) -> its ItemSpec, when no frame is used
 
 
 class _Ctx:
@@ -155,6 +164,8 @@ class _Ctx:
 
     def __init__(self, path: Path) -> None:
         self.path = path
+        self.known: dict = {}  # id(raw item) -> ItemSpec validated before (a frame-free item is the same again)
+        self.specs: dict = {}  # what this reading validated, for the next
 
     def where(self, line: int) -> str:
         return DICT_NAME if self.path.name == DICT_NAME else f"{self.path}:{line}"
@@ -186,6 +197,9 @@ class _Ctx:
             return np.radians(self.vector(value["deg"], line, where, n, positive=positive))
         if not isinstance(value, list) or len(value) != n:
             self.fail(line, where, f"expected a list of {n} numbers, got {_kind(value)}")
+        lo, hi = _bounds(where, 0.0 if positive else None, None)
+        if all(type(v) in (int, float) and lo <= v <= hi and (not positive or v > lo) and math.isfinite(v) for v in value):
+            return np.array(value, dtype=float)  # every number fits: the checks below would pass (they name the bad one)
         return np.array([self.number(v, line, f"{where}[{i}]", lo=0.0 if positive else None, strict_lo=positive)
                          for i, v in enumerate(value)])
 
@@ -216,6 +230,8 @@ FIELD_BOUNDS: dict[str, tuple[float, float]] = {
     "velocity_scale": (0.01, 1.0),
     "acceleration_scale": (0.01, 1.0),
     "max_tcp_speed": (0.001, 5.0),
+    "scale": (0.0, 1e6),
+    "resolution": (1e-4, 1.0),
 }
 DEFAULT_BOUND = 1e6  # any other number, unless its reader gives a tighter range
 MAX_TASKS = 1000  # tasks in the file, and tasks x cycles
@@ -225,9 +241,19 @@ MAX_DURATION = 3600.0  # s of motion the plan may need (the trajectory validator
 
 
 def _bounds(where: str, lo: float | None, hi: float | None) -> tuple[float, float]:
-    key = re.split(r"[.:]\s*", re.sub(r"\[\d+\]", "", where))[-1]
+    key = _field_name(where)
     flo, fhi = FIELD_BOUNDS.get(key, (-DEFAULT_BOUND, DEFAULT_BOUND))
     return (flo if lo is None else max(lo, flo)), (fhi if hi is None else min(hi, fhi))
+
+
+def _field_name(where: str) -> str:
+    """The field a path names, for ``FIELD_BOUNDS``: "scene.obstacles[3].xyz[0]" -> "xyz", "task 2: wait" -> "wait"
+    (its last part after a '.' or ':', index brackets left out)."""
+    key = where
+    while key.endswith("]"):
+        key = key[:key.rfind("[")]
+    key = key[key.rfind(".") + 1:]
+    return key[key.rfind(":") + 1:].strip()
 
 
 def _position(ctx: _Ctx, value: Any, line: int, where: str, frames: dict | None) -> np.ndarray:
@@ -253,12 +279,33 @@ _kind = describe_value
 
 # ------------------------------------------------------------------ items
 def _item(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: dict | None = None) -> ItemSpec:
-    keys = ("name", "shape", "size", "radius", "length", "xyz", "rpy", "mass", "com", "inertia", "grasp_width")
+    known = ctx.known.get(id(raw))
+    if known is not None and known.role == role:
+        ctx.specs[id(raw)] = known
+        return known
+    spec = _item_spec(ctx, raw, line, where, role, frames)
+    if not (isinstance(raw, dict) and isinstance(raw.get("xyz"), dict)):  # no position in a robot frame
+        ctx.specs[id(raw)] = spec
+    return spec
+
+
+def _item_spec(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: dict | None = None) -> ItemSpec:
+    keys = ("name", "shape", "size", "radius", "length", "xyz", "rpy", "mass", "com", "inertia", "grasp_width",
+            "file", "scale", "collision", "resolution")
     d = ctx.mapping(raw, line, where, keys, required=("shape", "xyz") + (("name",) if role != "table" else ()))
-    shape = ctx.string(d["shape"], d.line_of("shape"), f"{where}.shape", SHAPES)
+    shape = ctx.string(d["shape"], d.line_of("shape"), f"{where}.shape", SHAPES if role == "object" else SCENE_SHAPES)
     xyz = _position(ctx, d["xyz"], d.line_of("xyz"), f"{where}.xyz", frames)
     rpy = ctx.vector(d.get("rpy", [0, 0, 0]), d.line_of("rpy"), f"{where}.rpy", 3, angle=True)
     spec = ItemSpec(name=str(d.get("name", "table")), role=role, shape=shape, pose=transform(xyz, rpy), line=d.line)
+    spec.where = f"{DICT_NAME if ctx.path.name == DICT_NAME else f'{ctx.path}:{d.line}'}: {where}"
+    own = {"box": ("size",), "cylinder": ("radius", "length"), "sphere": ("radius",), "mesh": ("file", "scale", "collision"),
+           "cloud": ("file", "resolution")}[shape]
+    for key in ("size", "radius", "length", "file", "scale", "collision", "resolution"):
+        if key in d and key not in own:
+            ctx.fail(d.line_of(key), f"{where}.{key}", f"does not apply to a {shape}")
+    if shape in ("mesh", "cloud"):
+        _file_item(ctx, d, where, spec)
+        return spec
     if shape == "box":
         if "size" not in d:
             ctx.fail(d.line, where, "a box needs 'size: [x, y, z]' (m)")
@@ -271,10 +318,6 @@ def _item(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: dict | 
             if "length" not in d:
                 ctx.fail(d.line, where, "a cylinder needs 'length' (m, along its local z)")
             spec.length = ctx.number(d["length"], d.line_of("length"), f"{where}.length", lo=0, strict_lo=True)
-    extra = {"box": ("radius", "length"), "sphere": ("size", "length"), "cylinder": ("size",)}[shape]
-    for key in extra:
-        if key in d:
-            ctx.fail(d.line_of(key), f"{where}.{key}", f"does not apply to a {shape}")
     if "mass" in d:
         if role != "object":
             ctx.fail(d.line_of("mass"), f"{where}.mass", "only objects have a mass")
@@ -293,6 +336,34 @@ def _item(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: dict | 
             ctx.fail(d.line_of("grasp_width"), f"{where}.grasp_width", "only objects are grasped")
         spec.grasp_width = ctx.number(d["grasp_width"], d.line_of("grasp_width"), f"{where}.grasp_width", lo=0, strict_lo=True)
     return spec
+
+
+def _file_item(ctx: _Ctx, d: LocatedDict, where: str, spec: ItemSpec) -> None:
+    """A mesh's or a point cloud's keys: ``file`` (relative to the plan's folder, and inside it), a mesh's
+    ``scale`` (a number or [x, y, z]) and ``collision`` (convex | exact), a cloud's ``resolution`` (m)."""
+    if "file" not in d:
+        ctx.fail(d.line, where, f"a {spec.shape} needs 'file: PATH' (relative to the plan's folder)")
+    name = ctx.string(d["file"], d.line_of("file"), f"{where}.file")
+    root = ctx.path.parent.resolve()
+    path = (root / Path(name)).resolve()
+    if not path.is_relative_to(root):
+        ctx.fail(d.line_of("file"), f"{where}.file", f"'{name}' lies outside the plan's folder {root}",
+                 "put the file in the plan's folder or a folder below it")
+    spec.file = path
+    if spec.shape == "mesh":
+        if "scale" in d:
+            v = d["scale"]
+            if isinstance(v, list):
+                spec.scale = tuple(ctx.vector(v, d.line_of("scale"), f"{where}.scale", 3, positive=True))
+            else:
+                k = ctx.number(v, d.line_of("scale"), f"{where}.scale", lo=0.0, strict_lo=True)
+                spec.scale = (k, k, k)
+        if "collision" in d:
+            spec.exact = ctx.string(d["collision"], d.line_of("collision"), f"{where}.collision", MESH_COLLISION) == "exact"
+    else:
+        if "resolution" not in d:
+            ctx.fail(d.line, where, "a cloud needs 'resolution' (m, the edge of its occupied cells, e.g. 0.005)")
+        spec.resolution = ctx.number(d["resolution"], d.line_of("resolution"), f"{where}.resolution", lo=1e-4, hi=1.0)
 
 
 # ------------------------------------------------------------------ tasks
@@ -397,7 +468,7 @@ TOP_KEYS = ("robot", "start", "scene", "objects", "tasks", "cycles", "limits", "
 
 
 def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, base_dir: str | Path | None = None,
-              frames: dict | None = None) -> Plan:
+              frames: dict | None = None, parsed: Plan | None = None) -> Plan:
     """Read and validate a plan: a YAML file path, or a dict of the same form (built in code).
 
     ``named_poses``, when given, are the robot's pose names (for checking ``start`` and
@@ -405,17 +476,20 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
     ``<plan dict>`` instead of a file and line, and a relative ``robot`` path is taken from
     ``base_dir`` (default: the current directory). ``frames``: the robot's frames (positions written
     as ``{FRAME: [x, y, z]}`` are converted to the world frame). ``start: current`` stays the string
-    ``"current"`` (the caller measures it).
+    ``"current"`` (the caller measures it). ``parsed``: a ``Plan`` this function returned for the same
+    ``source``; its parsed document is validated again (with ``named_poses`` and ``frames``), not read again.
     """
-    if isinstance(source, dict):
+    if parsed is not None and parsed.document is not None:
+        raw, path, digest = parsed.document, parsed.path, parsed.sha256
+    elif isinstance(source, dict):
         raw = locate(source)
         path = Path(base_dir or ".") / DICT_NAME
-        canonical = json.dumps(raw, sort_keys=True, default=str).encode()
+        digest = hashlib.sha256(json.dumps(raw, sort_keys=True, default=str).encode()).hexdigest()
     else:
         path = Path(source)
-        raw = load_yaml(path, PlanFileError)
-        canonical = None
+        raw, digest = load_yaml(path, PlanFileError, digest=True)
     ctx = _Ctx(path)
+    ctx.known = parsed.item_specs if parsed is not None and parsed.document is raw else {}
     # top-level keys starting with 'x-' are ignored: a place to define YAML anchors for '<<: *name'
     extensions = tuple(k for k in raw if isinstance(k, str) and k.startswith("x-")) if isinstance(raw, dict) else ()
     top = ctx.mapping(raw, getattr(raw, "line", 1), "", TOP_KEYS + extensions, required=("robot", "tasks"))
@@ -522,9 +596,8 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
                  f"the plan needs at least {least:.0f} s of motion ({least * 100:.0f} samples at 100 Hz), "
                  f"more than the {MAX_DURATION:.0f} s a trajectory may last", "split it, or shorten the waits")
 
-    sha = hashlib.sha256(canonical if canonical is not None else path.read_bytes()).hexdigest()
-    return Plan(path=path, sha256=sha, robot=robot, start=start, scene=scene, objects=objects, tasks=tasks,
-                cycles=cycles, limits=limits, planner=planner, lines=dict(top.lines))
+    return Plan(path=path, sha256=digest, robot=robot, start=start, scene=scene, objects=objects, tasks=tasks,
+                cycles=cycles, limits=limits, planner=planner, lines=dict(top.lines), document=raw, item_specs=ctx.specs)
 
 
 def _least_duration(task: Any, limits: Limits) -> float:

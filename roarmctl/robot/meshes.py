@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from roarmctl.errors import DescriptionError
+from roarmctl.errors import DescriptionError, InputError
 from roarmctl.fileio import Roots, read_bytes
 
 #: NAME -> folder for ``package://NAME/...``, filled by the CLI's ``--package-path`` option.
@@ -30,6 +30,8 @@ PACKAGE_PATHS: dict[str, Path] = {}
 MESH_MODES = ("convex", "exact")
 MESH_TYPES = ("stl", "obj", "dae", "ply", "off", "glb")  # read from bytes alone (no other file opened)
 MESH_BYTES = 64 * 1024 * 1024  # a mesh file may have (published arms' collision meshes: < 5 MiB)
+SCENE_MESH_BYTES = 256 * 1024 * 1024  # a scene item's mesh file (a CAD export of a workcell)
+MAX_TRIANGLES = 2_000_000  # triangles of one mesh file
 
 
 @dataclass(frozen=True)
@@ -117,20 +119,41 @@ def load_mesh(path: Path, scale: np.ndarray, exact: bool, where: str, roots: Roo
     """Read ``path`` (a regular file of at most ``MESH_BYTES``, inside ``roots`` when given), scale it,
     and return (centred geometry, centre (3,) in the element's frame). trimesh reads the bytes alone: an
     OBJ's ``mtllib`` or a COLLADA file's images are never opened."""
+    vertices, faces = read_triangles(path, scale, f"{where} mesh filename", roots=roots,
+                                     hint="check the path (relative to the URDF) or the package folder")
+    if not exact:
+        vertices, faces = convex_hull(vertices, f"{where} mesh '{path}'")
+    return centred(vertices, faces, exact, str(path))
+
+
+def centred(vertices: np.ndarray, faces: np.ndarray, exact: bool, source: str) -> tuple[MeshGeometry, np.ndarray]:
+    """(geometry centred on its bounding box, that centre (3,)) of triangles ``vertices`` (V, 3) m, ``faces`` (F, 3)."""
+    centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+    return MeshGeometry(vertices - centre, faces, exact, source), centre
+
+
+def read_triangles(path: Path, scale, what: str, *, roots: Roots | None = None, error: type[InputError] = DescriptionError,
+                   hint: str | None = None, limit: int = MESH_BYTES) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles of the mesh file ``path`` (``MESH_TYPES``), vertices times ``scale`` (a number or (3,)):
+    (vertices (V, 3) m, faces (F, 3) int64), every mesh of the file concatenated in its frame. The one mesh
+    reader of robots and scenes: through ``fileio.read_bytes`` (regular file, at most ``limit`` bytes, inside
+    ``roots``), read once per process (keyed by path, modification time and scale). Errors are ``error`` naming
+    ``what`` (the field that names the file)."""
+
     import trimesh
 
     kind = path.suffix.lower().lstrip(".")
     if kind not in MESH_TYPES:
-        raise DescriptionError(f"{where} mesh filename: '{path.name}': .{kind} is not a mesh type roarmctl reads",
-                               f"use one of {', '.join('.' + t for t in MESH_TYPES)}")
+        raise error(f"{what}: '{path.name}': .{kind} is not a mesh type roarmctl reads",
+                    f"use one of {', '.join('.' + t for t in MESH_TYPES)}")
     try:
         stamp = path.stat().st_mtime_ns
     except (OSError, ValueError):
         stamp = 0
-    key = (str(path), stamp, tuple(scale))
+    scale3 = tuple(float(s) for s in np.broadcast_to(np.asarray(scale, dtype=float), 3))
+    key = (str(path), stamp, scale3)
     if key not in _LOADED:
-        data = read_bytes(path, f"{where} mesh filename", MESH_BYTES, roots=roots, error=DescriptionError,
-                          hint="check the path (relative to the URDF) or the package folder")
+        data = read_bytes(path, what, limit, roots=roots, error=error, hint=hint)
         try:
             loaded = trimesh.load_mesh(io.BytesIO(data), file_type=kind, process=False)
             if isinstance(loaded, trimesh.Scene):  # several meshes (COLLADA, OBJ groups): in the file's frame
@@ -138,22 +161,21 @@ def load_mesh(path: Path, scale: np.ndarray, exact: bool, where: str, roots: Roo
             elif isinstance(loaded, list):
                 loaded = trimesh.util.concatenate(loaded) if loaded else None
         except Exception as exc:  # trimesh raises many kinds for unreadable files
-            raise DescriptionError(f"{where} mesh filename: cannot read '{path}' as a mesh ({type(exc).__name__}: "
-                                   f"{str(exc)[:100]})", "use an STL, OBJ or DAE file") from None
+            raise error(f"{what}: cannot read '{path}' as a mesh ({type(exc).__name__}: {str(exc)[:100]})",
+                        "use an STL, OBJ, PLY or DAE file") from None
         if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
-            raise DescriptionError(f"{where} mesh filename: '{path}' contains no triangles")
-        vertices = np.asarray(loaded.vertices, dtype=float) * scale
+            raise error(f"{what}: '{path}' contains no triangles")
+        if len(loaded.faces) > MAX_TRIANGLES:
+            raise error(f"{what}: '{path}' has {len(loaded.faces)} triangles, more than {MAX_TRIANGLES}",
+                        "simplify the mesh (a collision model needs far fewer)")
+        vertices = np.asarray(loaded.vertices, dtype=float) * np.array(scale3)
         if not np.all(np.isfinite(vertices)):
-            raise DescriptionError(f"{where} mesh filename: '{path}' has non-finite vertex coordinates")
+            raise error(f"{what}: '{path}' has non-finite vertex coordinates")
         _LOADED[key] = (vertices, np.asarray(loaded.faces, dtype=np.int64))
-    vertices, faces = _LOADED[key]
-    if not exact:
-        vertices, faces = convex_hull(vertices, f"{where} mesh '{path}'")
-    centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
-    return MeshGeometry(vertices - centre, faces, exact, str(path)), centre
+    return _LOADED[key]
 
 
-def convex_hull(vertices: np.ndarray, where: str) -> tuple[np.ndarray, np.ndarray]:
+def convex_hull(vertices: np.ndarray, where: str, error: type[InputError] = DescriptionError) -> tuple[np.ndarray, np.ndarray]:
     """Convex hull (vertices (H, 3), outward-wound faces (K, 3)) of a point set, by qhull (scipy)."""
     from scipy.spatial import ConvexHull, QhullError
 
@@ -161,7 +183,8 @@ def convex_hull(vertices: np.ndarray, where: str) -> tuple[np.ndarray, np.ndarra
         hull = ConvexHull(vertices)
     except (QhullError, ValueError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise DescriptionError(f"{where}: no convex hull (flat or degenerate mesh?): {first}") from None
+        raise error(f"{where}: no convex hull (flat or degenerate mesh?): {first}",
+                    None if error is DescriptionError else "give collision: exact (its triangles as they are)") from None
     used = np.unique(hull.simplices)
     remap = np.full(len(vertices), -1)
     remap[used] = np.arange(len(used))

@@ -6,6 +6,7 @@ actuated joint in ``Robot.joint_names`` order; where the robot has a gripper, it
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -24,6 +25,12 @@ def transform(xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
     URDF convention: R = Rz(yaw) @ Ry(pitch) @ Rx(roll).
     """
     r, p, y = (float(v) for v in rpy)
+    if r == p == y == 0.0 and math.copysign(1.0, r) + math.copysign(1.0, p) + math.copysign(1.0, y) == 3.0:
+        # most scene items (+0.0 everywhere): the matrix below, bit for bit (-sin 0 is -0.0)
+        t = np.eye(4)
+        t[2, 0] = -0.0
+        t[:3, 3] = [float(v) for v in xyz]
+        return t
     cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
     t = np.eye(4)
     t[:3, :3] = [

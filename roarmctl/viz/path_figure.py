@@ -90,10 +90,19 @@ def place_labels(ax, labels: list[Label]) -> list[tuple[float, float]]:
     return out
 
 
+MAX_CLOUD_MARKS = 20_000  # points drawn of a cloud item (every n-th cell beyond)
+
+
 def _add_solid(ax, item: dict, index: int, zorder: int, gid: str, style: dict) -> None:
     """One scene item as translucent faces; curved sides without edges (only the cap rims are outlined)."""
     faces = item_faces(item, index)
-    if item.get("shape") == "box":
+    if item.get("shape") == "cloud":  # its occupied cells as small squares, at most MAX_CLOUD_MARKS of them
+        pts = faces[0][:: max(1, -(-len(faces[0]) // MAX_CLOUD_MARKS))]
+        marks = ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], s=2.0, marker="s", color=style["edgecolor"],
+                           alpha=0.6, linewidths=0, depthshade=False, zorder=zorder)
+        marks.set_gid(gid)
+        return
+    if item.get("shape") in ("box", "mesh"):
         poly = Poly3DCollection(faces, zorder=zorder, **style)
     else:
         plain = dict(style, linewidth=0.0, edgecolor="none")

@@ -1,4 +1,5 @@
-"""Scene items (box, cylinder, sphere) and robot collision shapes as polygon meshes, for 3D drawing.
+"""Scene items (box, cylinder, sphere, mesh) and robot collision shapes as polygon meshes, for 3D drawing; a
+point cloud's occupied cells as points (their centres, ``cell_centres``).
 
 Only numpy: each function returns a list of faces, each face an (k, 3) array of vertices in m (convex
 polygons; their winding is not consistent, so draw them two-sided); ``triangles`` fans them into triangles for the
@@ -12,7 +13,7 @@ import numpy as np
 from roarmctl.errors import TrajectoryFileError
 from roarmctl.robot.model import transform
 
-SHAPES = ("box", "cylinder", "sphere")
+SHAPES = ("box", "cylinder", "sphere", "mesh", "cloud")
 ROLES = ("table", "obstacle", "object")
 
 
@@ -126,12 +127,35 @@ def item_faces(item: dict, index: int = 0, local: bool = False) -> list[np.ndarr
             return cylinder_faces(float(item["radius"]), float(item["length"]), pose)
         if shape == "sphere":
             return sphere_faces(float(item["radius"]), pose)
-    except (KeyError, TypeError, ValueError):
+        if shape == "mesh":
+            out: list[np.ndarray] = []
+            for piece in item["pieces"]:
+                v = _place(np.asarray(piece["vertices"], dtype=float).reshape(-1, 3), pose)
+                out.extend(v[np.asarray(piece["faces"], dtype=np.int64).reshape(-1, 3)])
+            return out
+        if shape == "cloud":
+            return [cell_centres(item, index)]
+    except (KeyError, TypeError, ValueError, IndexError):
         raise TrajectoryFileError(f"{where}: '{shape}' needs size [x, y, z] (box), radius and length (cylinder) or radius (sphere)") from None
     raise TrajectoryFileError(f"{where}: shape: expected one of {', '.join(SHAPES)}, got {shape!r}")
 
 
+def cell_centres(item: dict, index: int = 0) -> np.ndarray:
+    """World centres (K, 3) m of a cloud item's occupied cells (``resolution``, ``cells`` [[i, j, k], ...])."""
+    where = f"scene.items[{index}] ('{item.get('name', '?')}')"
+    try:
+        r = float(item["resolution"])
+        cells = np.asarray(item["cells"], dtype=float).reshape(-1, 3)
+    except (KeyError, TypeError, ValueError):
+        raise TrajectoryFileError(f"{where}: a cloud needs resolution and cells [[i, j, k], ...]") from None
+    return _place((cells + 0.5) * r, item_pose(item, where))
+
+
 def item_extent(item: dict, index: int = 0) -> np.ndarray:
-    """(2, 3) lower and upper corners of the item's axis-aligned bounding box, m."""
+    """(2, 3) lower and upper corners of the item's axis-aligned bounding box, m (a cloud's: of its cell centres,
+    grown by half a cell)."""
     pts = np.vstack(item_faces(item, index))
+    if item.get("shape") == "cloud":
+        half = 0.5 * float(item["resolution"])
+        return np.stack([pts.min(axis=0) - half, pts.max(axis=0) + half])
     return np.stack([pts.min(axis=0), pts.max(axis=0)])

@@ -8,11 +8,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from roarmctl.motion.planning.context import robot_spec, scene_item
+from roarmctl.motion.planning.context import robot_spec
 from roarmctl.motion.planning.payloads import payload_entry
 from roarmctl.motion.planning.pieces import SAMPLE_DT, TimedPiece
 from roarmctl.motion.planning.tasks import where
-from roarmctl.motion.scene import Scene
 from roarmctl.motion.timing import TimedPath
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
 from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask
@@ -95,7 +94,7 @@ def assemble(ctx: PlanContext, pieces: list[TimedPiece]) -> Trajectory:
 
 def initial_scene_dict(ctx: PlanContext) -> dict:
     """The plan's scene with every object at its start pose, as the trajectory file records it."""
-    return Scene([scene_item(s) for s in ctx.plan.scene + ctx.plan.objects]).to_dict()
+    return ctx.initial_scene.to_dict()
 
 
 def partial(ctx: PlanContext, pieces: list[TimedPiece], q: np.ndarray, task, index: int) -> PartialPlan:

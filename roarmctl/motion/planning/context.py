@@ -8,10 +8,11 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
-from roarmctl.errors import InputError
+from roarmctl.errors import InputError, PlanFileError
 from roarmctl.fileio import Roots
 from roarmctl.motion.planning.pieces import UntimedMotion
 from roarmctl.motion.scene import SceneItem
+from roarmctl.motion.scenefiles import read_cloud_item, read_mesh_item
 from roarmctl.plan.schema import DICT_NAME
 from roarmctl.robot.ik import takes_pitch
 from roarmctl.robot.loader import bundled_robots
@@ -47,6 +48,7 @@ class PlanContext:
 
     def __init__(self, plan: Plan, robot: Robot, checker: CollisionChecker) -> None:
         self.plan, self.robot, self.checker = plan, robot, checker
+        self.initial_scene = checker.scene.copy()  # the plan's scene before anything moved (the trajectory records it)
         self.timer = StageTimer()
         self.warnings: list[str] = []
         self.notes: list[str] = []
@@ -113,7 +115,16 @@ def robot_spec(plan: Plan) -> str:
 
 
 def scene_item(spec: ItemSpec) -> SceneItem:
-    """The scene item of a plan's table, obstacle or object (at its start pose)."""
+    """The scene item of a plan's table, obstacle or object (at its start pose): a primitive as written; a mesh
+    or point cloud from the data it carries (a trajectory's scene) or else read from its file
+    (``roarmctl.motion.scenefiles``; errors are ``PlanFileError`` naming the plan's line)."""
     # the plan's schema checked role and shape against the scene's
-    return SceneItem(name=spec.name, role=cast("Role", spec.role), shape=cast("Shape", spec.shape), pose=spec.pose.copy(),
+    role, pose = cast("Role", spec.role), spec.pose.copy()
+    if spec.shape == "mesh":
+        mesh = spec.data or read_mesh_item(spec.file, spec.scale, spec.exact, f"{spec.where}.file", PlanFileError)
+        return SceneItem(name=spec.name, role=role, shape="mesh", pose=pose, mesh=mesh)
+    if spec.shape == "cloud":
+        cloud = spec.data or read_cloud_item(spec.file, spec.resolution, f"{spec.where}.file", PlanFileError)
+        return SceneItem(name=spec.name, role=role, shape="cloud", pose=pose, cloud=cloud)
+    return SceneItem(name=spec.name, role=role, shape=cast("Shape", spec.shape), pose=pose,
                      size=cast(tuple[float, float, float], tuple(spec.size)), radius=spec.radius, length=spec.length)
