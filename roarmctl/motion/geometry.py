@@ -17,8 +17,10 @@ import fcl
 import numpy as np
 
 from roarmctl.errors import InputError
+from roarmctl.motion.octree import blocks, fcl_octree
 from roarmctl.motion.scene import SceneItem
 from roarmctl.motion.scenefiles import CloudData, MeshData
+from roarmctl.robot.meshes import centred
 
 
 def fcl_geometry(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0, mesh=None):
@@ -110,14 +112,10 @@ def _local_geometry(data: MeshData | CloudData) -> list:
         return hit[1]
     out = []
     if isinstance(data, MeshData):
-        from roarmctl.robot.meshes import centred
-
         for v, f in data.pieces:
             mesh, centre = centred(v, f, data.exact, data.source)
             out.append((centre, mesh.half_extents + _SLACK, fcl_geometry("mesh", mesh=mesh)))
     else:
-        from roarmctl.motion.octree import blocks, fcl_octree
-
         r = data.resolution
         for idx in blocks(data.cells):
             cells = data.cells[idx]

@@ -22,7 +22,7 @@ from typing import Literal
 import numpy as np
 
 from roarmctl.errors import InputError
-from roarmctl.motion.scenefiles import CloudData, MeshData
+from roarmctl.motion.scenefiles import CloudData, MeshData, cloud_data, mesh_data, read_cloud_item, read_mesh_item
 from roarmctl.robot.model import rpy_from_matrix, transform
 
 Role = Literal["table", "obstacle", "object"]
@@ -97,16 +97,12 @@ class SceneItem:
         """A mesh from triangles: ``vertices`` (V, 3) m in the item frame, ``faces`` (F, 3) vertex indices; placed at
         ``xyz`` (m) with URDF ``rpy`` (rad). ``exact`` False: the convex hulls of its connected parts (what FCL
         checks fastest); True: the triangles as they are (a BVH: hollows and holes stay open)."""
-        from roarmctl.motion.scenefiles import mesh_data
-
         return cls(name, role, "mesh", transform(xyz, rpy), mesh=mesh_data(vertices, faces, exact, source, f"scene item '{name}'"))
 
     @classmethod
     def mesh_file(cls, name: str, path, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *, scale=1.0, exact: bool = False,
                   role: Role = "obstacle") -> SceneItem:
         """A mesh read from an STL, OBJ, PLY or DAE file (its units times ``scale``, a number or (3,)); see ``from_mesh``."""
-        from roarmctl.motion.scenefiles import read_mesh_item
-
         return cls(name, role, "mesh", transform(xyz, rpy), mesh=read_mesh_item(path, scale, exact, f"scene item '{name}'"))
 
     @classmethod
@@ -115,16 +111,12 @@ class SceneItem:
         """A point cloud: ``points`` (N, 3) m in the item frame (e.g. a camera's), each occupying the cubic cell of
         edge ``resolution`` (m) it falls in; placed at ``xyz`` (m) with URDF ``rpy`` (rad). Role "table" keeps it
         from being checked against the robot's base links (a scan of the desk under the arm)."""
-        from roarmctl.motion.scenefiles import cloud_data
-
         return cls(name, role, "cloud", transform(xyz, rpy), cloud=cloud_data(points, resolution, source, f"scene item '{name}'"))
 
     @classmethod
     def cloud_file(cls, name: str, path, resolution: float, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *,
                    role: Role = "obstacle") -> SceneItem:
         """A point cloud read from a PLY, PCD or .npy file (m); see ``from_points``."""
-        from roarmctl.motion.scenefiles import read_cloud_item
-
         return cls(name, role, "cloud", transform(xyz, rpy), cloud=read_cloud_item(path, resolution, f"scene item '{name}'"))
 
     @property

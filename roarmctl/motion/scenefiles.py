@@ -20,6 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from roarmctl.errors import InputError
+from roarmctl.fileio import read_bytes
+from roarmctl.motion.octree import cells_of, in_range
+from roarmctl.robot.meshes import SCENE_MESH_BYTES, convex_hull, read_triangles
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,8 +95,6 @@ def _remember(key: tuple, value):
 def mesh_data(vertices, faces, exact: bool, source: str, where: str, error: type[InputError] = InputError) -> MeshData:
     """``MeshData`` of triangles ``vertices`` (V, 3) m, ``faces`` (F, 3): the triangles as they are when ``exact``,
     else the convex hull of each connected part (at most ``MAX_PIECES``)."""
-    from roarmctl.robot.meshes import convex_hull
-
     v = np.asarray(vertices, dtype=float)
     f = np.asarray(faces, dtype=np.int64)
     if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
@@ -123,8 +124,6 @@ def mesh_data(vertices, faces, exact: bool, source: str, where: str, error: type
 
 def read_mesh_item(path, scale, exact: bool, where: str, error: type[InputError] = InputError) -> MeshData:
     """``MeshData`` of the mesh file ``path`` (its units times ``scale``, a number or (3,)), see ``mesh_data``."""
-    from roarmctl.robot.meshes import SCENE_MESH_BYTES, read_triangles
-
     path = Path(path)
     scale3 = tuple(float(s) for s in np.broadcast_to(np.asarray(scale, dtype=float), 3))
     if not all(np.isfinite(scale3)) or min(abs(s) for s in scale3) == 0:
@@ -140,8 +139,6 @@ def read_mesh_item(path, scale, exact: bool, where: str, error: type[InputError]
 def cloud_data(points, resolution: float, source: str, where: str, error: type[InputError] = InputError) -> CloudData:
     """``CloudData`` of ``points`` (N, 3) m at cells of edge ``resolution`` (m); points with a NaN or infinite
     coordinate (a depth camera's missing returns) are dropped."""
-    from roarmctl.motion.octree import cells_of, in_range
-
     p = np.asarray(points, dtype=float)
     if p.ndim != 2 or p.shape[1] < 3:
         raise error(f"{where}: a point cloud is an array (N, 3) of x, y, z in m, got shape {p.shape}")
@@ -165,8 +162,6 @@ def cloud_data(points, resolution: float, source: str, where: str, error: type[I
 
 def read_points(path, where: str, error: type[InputError] = InputError) -> np.ndarray:
     """Points (N, 3) m of a PLY (vertices, with or without faces), PCD (fields x, y, z) or .npy (N, 3) file."""
-    from roarmctl.fileio import read_bytes
-
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in CLOUD_SUFFIXES:
@@ -178,7 +173,7 @@ def read_points(path, where: str, error: type[InputError] = InputError) -> np.nd
         elif suffix == ".pcd":
             from pypcd4 import PointCloud
 
-            pc = PointCloud.from_fileobj(io.BytesIO(data))
+            pc = PointCloud.from_fileobj(io.BytesIO(data))  # type: ignore[arg-type]  # any binary file object reads
             missing = [c for c in "xyz" if c not in pc.fields]
             if missing:
                 raise ValueError(f"no field {', '.join(missing)} (fields: {', '.join(pc.fields)})")
