@@ -108,6 +108,31 @@ def test_clearance_of_a_sphere_is_the_closed_form_distance_to_the_nearest_box():
             assert c.item[i] == 0
 
 
+def test_clearance_to_a_mesh_and_a_cloud_agrees_with_the_same_box():
+    """The same 6 x 4 x 10 cm block as a box, as a (rotated, offset) mesh, and as a point cloud of 5 mm cells:
+    the arm's clearance to the mesh is the box's; to the cloud within a cell's half-diagonal of it."""
+    import trimesh
+
+    from roarmctl.motion.clearance import clearance
+    from roarmctl.motion.scene import SceneItem
+    from roarmctl.robot.loader import load_robot
+
+    robot = load_robot("roarm_m3_pro")
+    qs = np.array([robot.full_q(robot.named_poses[n]) for n in ("home", "observe", "ready")])
+    centre, size = np.array([0.30, -0.08, 0.10]), np.array([0.06, 0.04, 0.10])
+    box = SceneItem.box("block", size, centre)
+    tm = trimesh.creation.box(size)
+    mesh = SceneItem.from_mesh("block", tm.vertices @ np.diag([1, 1, 1]), tm.faces, xyz=centre)
+    r = 0.005
+    grid = np.stack(np.meshgrid(*[np.arange(-h + r / 2, h, r) for h in size / 2], indexing="ij"), -1).reshape(-1, 3)
+    cloud = SceneItem.from_points("block", grid, r, xyz=centre)
+    d_box = clearance(robot, [box], qs).distance
+    assert np.all(d_box > 0.01)
+    assert np.allclose(clearance(robot, [mesh], qs).distance, d_box, atol=1e-6)
+    d_cloud = clearance(robot, [cloud], qs).distance
+    assert np.all(np.abs(d_cloud - d_box) <= r * np.sqrt(3) / 2 + 1e-6), (d_cloud, d_box)
+
+
 def test_clearance_rules_base_on_the_table_and_a_carried_object():
     """The base standing on the table is not a clearance of 0 (the checker's base_links rule); an object carried
     at a sample is measured against the other items, and the arm is not measured against it."""

@@ -1,11 +1,12 @@
 """How far the arm is from the scene: the smallest distance between the arm (and what it carries) and the
 scene items, at each sample of a motion, by FCL's distance query on the checker's own geometry.
 
-The geometry is the collision checker's (``collision._geometry``: the description's boxes, cylinders,
-spheres, capsules and mesh hulls, and the scene items' primitives), *without* the checker's padding: the
-number is the true gap, from which the padding was kept. As in the checker, links listed in the
-description's ``base_links`` are not measured against items of role "table" (they stand on it). An object
-carried at a sample is a moving part at that sample (measured against the other items), not an item.
+The geometry is the collision checker's: the description's boxes, cylinders, spheres, capsules and mesh hulls
+(``geometry.fcl_geometry``) and each scene item's collision parts (``geometry.item_parts``: a primitive, a
+mesh's convex pieces or triangles, a point cloud's octree blocks), *without* the checker's padding: the number
+is the true gap, from which the padding was kept. As in the checker, links listed in the description's
+``base_links`` are not measured against items of role "table" (they stand on it). An object carried at a
+sample is a moving part at that sample (measured against the other items), not an item.
 
 Cost: per sample, pairs are visited in the order of a cheap lower bound (centre distance minus both
 bounding-sphere radii) and the FCL calls stop once that bound exceeds the best distance found, so a
@@ -19,7 +20,7 @@ from dataclasses import dataclass
 import fcl
 import numpy as np
 
-from roarmctl.motion.collision import _geometry, _half_extents
+from roarmctl.motion.geometry import fcl_geometry, half_extents, item_parts
 from roarmctl.motion.scene import SceneItem
 from roarmctl.robot.model import Robot
 
@@ -37,11 +38,39 @@ class Clearance:
     parts: list[str]
 
 
-def _radius(kind: str, size=(0.0, 0.0, 0.0), radius: float = 0.0, length: float = 0.0, mesh=None) -> float:
+@dataclass
+class _Solid:
+    """One FCL object of an item or a robot shape: ``rel`` (4, 4) its pose in the item's (link's) frame, ``centre``
+    (3,) the centre of its bounding sphere in that frame, ``radius`` m, ``owner`` the item index (or moving part)."""
+
+    obj: fcl.CollisionObject
+    rel: np.ndarray
+    centre: np.ndarray
+    radius: float
+    owner: int
+
+
+def _pose(rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = rot, pos
+    return m
+
+
+def _item_solids(item: SceneItem, owner: int) -> list[_Solid]:
+    """An item's collision parts, each placed relative to the item's own pose."""
+    inv = np.linalg.inv(item.pose)
+    out = []
+    for p in item_parts(item):
+        rel = inv @ _pose(p.obj.getRotation(), p.obj.getTranslation())
+        out.append(_Solid(p.obj, rel, (inv @ np.append(p.centre, 1.0))[:3], float(np.linalg.norm(p.half)), owner))
+    return out
+
+
+def _shape_radius(shape) -> float:
     """Radius (m) of a sphere about the shape's origin that holds the shape."""
-    if mesh is not None:
-        return float(np.max(np.linalg.norm(mesh.vertices, axis=1)))
-    return float(np.linalg.norm(_half_extents(kind, size, radius, length)))
+    if shape.mesh is not None:
+        return float(np.max(np.linalg.norm(shape.mesh.vertices, axis=1)))
+    return float(np.linalg.norm(half_extents(shape.kind, shape.size, shape.radius, shape.length)))
 
 
 def clearance(robot: Robot, items: list[SceneItem], q: np.ndarray, item_poses: np.ndarray | None = None,
@@ -59,59 +88,65 @@ def clearance(robot: Robot, items: list[SceneItem], q: np.ndarray, item_poses: n
         carried = np.zeros((n, m), dtype=bool)
     kin = robot.kin
     shapes = list(robot.collision)
-    s = len(shapes)
     frames = kin.link_frames(q)  # (N, L, 4, 4): the library's one FK
-    link_of = np.array([kin.link_index[sh.link] for sh in shapes], dtype=int)
-    origins = np.array([sh.origin for sh in shapes]).reshape(s, 4, 4)
-    shape_pose = frames[:, link_of] @ origins  # (N, S, 4, 4)
     carried_idx = [k for k in range(m) if carried[:, k].any()]
     parts = [sh.name or sh.link for sh in shapes] + [items[k].name for k in carried_idx]
 
-    part_obj = [fcl.CollisionObject(_geometry(sh.kind, sh.size, sh.radius, sh.length, 0.0, sh.mesh)) for sh in shapes]
-    item_obj = [fcl.CollisionObject(_geometry(it.shape, it.size, it.radius, it.length)) for it in items]
-    part_obj += [fcl.CollisionObject(_geometry(items[k].shape, items[k].size, items[k].radius, items[k].length))
-                 for k in carried_idx]
-    part_r = np.array([_radius(sh.kind, sh.size, sh.radius, sh.length, sh.mesh) for sh in shapes]
-                      + [_radius(items[k].shape, items[k].size, items[k].radius, items[k].length) for k in carried_idx])
-    item_r = np.array([_radius(it.shape, it.size, it.radius, it.length) for it in items])
-    part_pose = np.concatenate([shape_pose, item_poses[:, carried_idx]], axis=1) if carried_idx else shape_pose
-
-    base = set(robot.base_links)
-    skip = np.zeros((len(parts), m), dtype=bool)  # pairs never measured
-    for a, sh in enumerate(shapes):
-        for k, it in enumerate(items):
-            skip[a, k] = it.role == "table" and sh.link in base
+    # moving solids: a robot shape rides its link; a carried item's parts ride the item's pose
+    moving = [_Solid(fcl.CollisionObject(fcl_geometry(sh.kind, sh.size, sh.radius, sh.length, 0.0, sh.mesh)),
+                     np.asarray(sh.origin, dtype=float), np.asarray(sh.origin, dtype=float)[:3, 3], _shape_radius(sh), a)
+              for a, sh in enumerate(shapes)]
+    moving_frame = [kin.link_index[sh.link] for sh in shapes]  # -1 - k: carried item k
     for j, k in enumerate(carried_idx):
-        skip[s + j, k] = True
+        for solid in _item_solids(items[k], len(shapes) + j):  # objects of their own, apart from the fixed ones
+            moving.append(solid)
+            moving_frame.append(-1 - k)
+    fixed = [s for k, it in enumerate(items) for s in _item_solids(it, k)]
 
     dist = np.full(n, np.inf)
     best_item = np.full(n, -1, dtype=int)
     best_part = np.full(n, -1, dtype=int)
-    if not parts or not m:
+    if not moving or not fixed:
         return Clearance(dist, best_item, best_part, parts)
-    gap = (np.linalg.norm(part_pose[:, :, None, :3, 3] - item_poses[:, None, :, :3, 3], axis=-1)
-           - part_r[None, :, None] - item_r[None, None, :])  # (N, P, M) lower bounds
+    base = set(robot.base_links)
+    owner_m = np.array([s.owner for s in moving])
+    owner_f = np.array([s.owner for s in fixed])
+    skip = np.zeros((len(moving), len(fixed)), dtype=bool)  # pairs never measured
+    for a, s in enumerate(moving):
+        if s.owner < len(shapes):
+            skip[a] = [shapes[s.owner].link in base and items[k].role == "table" for k in owner_f]
+        else:
+            skip[a] = owner_f == carried_idx[s.owner - len(shapes)]
+
+    # world poses of every solid at every sample, and the lower bounds of every pair
+    mframe = np.stack([frames[:, f] if f >= 0 else item_poses[:, -1 - f] for f in moving_frame], axis=1)  # (N, A, 4, 4)
+    mpose = mframe @ np.array([s.rel for s in moving])
+    mcentre = np.einsum("naij,aj->nai", mframe[..., :3, :], np.array([np.append(s.centre, 1.0) for s in moving]))
+    fpose = item_poses[:, owner_f] @ np.array([s.rel for s in fixed])
+    fcentre = np.einsum("nbij,bj->nbi", item_poses[:, owner_f, :3, :], np.array([np.append(s.centre, 1.0) for s in fixed]))
+    gap = (np.linalg.norm(mcentre[:, :, None] - fcentre[:, None], axis=-1)
+           - np.array([s.radius for s in moving])[None, :, None] - np.array([s.radius for s in fixed])[None, None, :])
+    nf = len(fixed)
     request = fcl.DistanceRequest()
     for i in range(n):
-        active = ~skip & ~carried[i][None, :]
-        if carried_idx:
-            active[s:] &= carried[i, carried_idx][:, None]  # a carried part only while it is carried
+        active = ~skip & ~carried[i][owner_f][None, :]
+        for a in range(len(moving)):  # a carried item's parts are moving parts only while it is carried
+            if owner_m[a] >= len(shapes) and not carried[i, carried_idx[owner_m[a] - len(shapes)]]:
+                active[a] = False
         cand = np.flatnonzero(active.ravel())
         if not len(cand):
             continue
         order = cand[np.argsort(gap[i].ravel()[cand], kind="stable")]
         best, ba, bk = np.inf, -1, -1
-        for k in range(m):
-            item_obj[k].setTransform(fcl.Transform(item_poses[i, k, :3, :3], item_poses[i, k, :3, 3]))
         for flat in order:
-            a, k = divmod(int(flat), m)
-            if gap[i, a, k] >= best:
+            a, b = divmod(int(flat), nf)
+            if gap[i, a, b] >= best:
                 break
-            part_obj[a].setTransform(fcl.Transform(part_pose[i, a, :3, :3], part_pose[i, a, :3, 3]))
-            d = fcl.distance(part_obj[a], item_obj[k], request, fcl.DistanceResult())
-            d = max(float(d), 0.0)
+            moving[a].obj.setTransform(fcl.Transform(mpose[i, a, :3, :3], mpose[i, a, :3, 3]))
+            fixed[b].obj.setTransform(fcl.Transform(fpose[i, b, :3, :3], fpose[i, b, :3, 3]))
+            d = max(float(fcl.distance(moving[a].obj, fixed[b].obj, request, fcl.DistanceResult())), 0.0)
             if d < best:
-                best, ba, bk = d, a, k
+                best, ba, bk = d, int(owner_m[a]), int(owner_f[b])
             if best == 0.0:
                 break
         dist[i], best_part[i], best_item[i] = best, ba, bk

@@ -134,21 +134,22 @@ def item_faces(item: dict, index: int = 0, local: bool = False) -> list[np.ndarr
                 out.extend(v[np.asarray(piece["faces"], dtype=np.int64).reshape(-1, 3)])
             return out
         if shape == "cloud":
-            return [cell_centres(item, index)]
+            return [cell_centres(item, index, local)]
     except (KeyError, TypeError, ValueError, IndexError):
         raise TrajectoryFileError(f"{where}: '{shape}' needs size [x, y, z] (box), radius and length (cylinder) or radius (sphere)") from None
     raise TrajectoryFileError(f"{where}: shape: expected one of {', '.join(SHAPES)}, got {shape!r}")
 
 
-def cell_centres(item: dict, index: int = 0) -> np.ndarray:
-    """World centres (K, 3) m of a cloud item's occupied cells (``resolution``, ``cells`` [[i, j, k], ...])."""
+def cell_centres(item: dict, index: int = 0, local: bool = False) -> np.ndarray:
+    """World centres (K, 3) m of a cloud item's occupied cells (``resolution``, ``cells`` [[i, j, k], ...]), or in
+    the item's own frame when ``local``."""
     where = f"scene.items[{index}] ('{item.get('name', '?')}')"
     try:
         r = float(item["resolution"])
         cells = np.asarray(item["cells"], dtype=float).reshape(-1, 3)
     except (KeyError, TypeError, ValueError):
         raise TrajectoryFileError(f"{where}: a cloud needs resolution and cells [[i, j, k], ...]") from None
-    return _place((cells + 0.5) * r, item_pose(item, where))
+    return _place((cells + 0.5) * r, np.eye(4) if local else item_pose(item, where))
 
 
 def item_extent(item: dict, index: int = 0) -> np.ndarray:

@@ -161,10 +161,7 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
     bones = [[bone_links.index(a), bone_links.index(b)] for a, b in data.arm_segments]
     items, item_poses, carried = _item_tracks(traj, robot, times)
     scene_items = [SceneItem.from_dict(it) for it in items]
-    # the clearance is measured to the primitives (a mesh's or a cloud's distance is left out: issue 25's items)
-    prim = [k for k, it in enumerate(scene_items) if it.shape in ("box", "cylinder", "sphere")]
-    clear = clearance(robot, [scene_items[k] for k in prim], q, item_poses[:, prim], carried[:, prim])
-    clear.item = np.where(clear.item >= 0, np.array(prim + [-1], dtype=int)[clear.item], -1)  # back to item indices
+    clear = clearance(robot, scene_items, q, item_poses, carried)
 
     speed = data.tcp_speed[idx]
     vmax = max(float(data.tcp_speed.max()) if len(data.tcp_speed) else 0.0, data.max_tcp_speed or 0.0, 1e-6)
@@ -183,13 +180,16 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
                 "target": None if failure.target is None else [float(v) for v in np.asarray(failure.target, dtype=float)]}
     doc_items = []
     for k, it in enumerate(items):
-        # a cloud is drawn by its cells' centres in the PNG; here (triangles only) it is left out for now
-        tris = triangles(item_faces(it, k, local=True)) if it.get("shape") != "cloud" else np.zeros((0, 3, 3))
+        cloud = it.get("shape") == "cloud"  # occupied cells: drawn as points a cell wide
+        faces = item_faces(it, k, local=True)
         moves = bool(carried[:, k].any()) or not np.allclose(item_poses[:, k], item_poses[:1, k])
         style = ROLE_STYLE.get(str(it.get("role")), ROLE_STYLE["obstacle"])
         doc_items.append({"name": str(it.get("name", f"item {k}")), "role": str(it.get("role", "obstacle")),
                           "color": hex_color(style["facecolor"]),
-                          "triangles": _f32(tris), "pose": _pose12(item_pose(it, f"scene.items[{k}]")).tolist(),
+                          "triangles": None if cloud else _f32(triangles(faces)),
+                          "points": _f32(faces[0]) if cloud else None,
+                          "point_size": float(it["resolution"]) if cloud else None,
+                          "pose": _pose12(item_pose(it, f"scene.items[{k}]")).tolist(),
                           "track": _f32(_pose12(item_poses[:, k])) if moves else None})
 
     ghost_doc = None

@@ -127,7 +127,14 @@
   // ------------------------------------------------------------------ scene items
   const ROLE_OPACITY = { table: 0.45, obstacle: 0.55, object: 0.9 };
   const items = D.items.map((item) => {
-    const g = placed(solid(f32(item.triangles), item.color, ROLE_OPACITY[item.role] || 0.55, 0x444444));
+    let g;
+    if (item.points) {  // a point cloud's occupied cells, each a square a cell wide
+      const geom = new THREE.BufferGeometry();
+      geom.setAttribute('position', new THREE.BufferAttribute(f32(item.points), 3));
+      g = placed(new THREE.Points(geom, new THREE.PointsMaterial({ color: item.color, size: item.point_size })));
+    } else {
+      g = placed(solid(f32(item.triangles), item.color, ROLE_OPACITY[item.role] || 0.55, 0x444444));
+    }
     g.matrix.copy(matrixOf(item.pose));
     return { group: g, track: item.track ? f32(item.track) : null };
   });
@@ -135,7 +142,7 @@
   // where the run had the objects (a physics run): orange outlines following their tracks
   const ghostItems = GHOST ? (D.ghost.items || []).map((g) => {
     const geom = new THREE.BufferGeometry();
-    geom.setAttribute('position', new THREE.BufferAttribute(f32(D.items[g.item].triangles), 3));
+    geom.setAttribute('position', new THREE.BufferAttribute(f32(D.items[g.item].triangles || D.items[g.item].points), 3));
     const outline = placed(new THREE.LineSegments(new THREE.EdgesGeometry(geom, 25),
       new THREE.LineBasicMaterial({ color: 0xe67e22 })));
     return { group: outline, track: f32(g.track) };
