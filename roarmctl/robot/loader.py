@@ -21,7 +21,7 @@ from roarmctl.robot import visuals
 from roarmctl.robot.frames import UNITS, Frame
 from roarmctl.robot.ik import IK_FAMILIES, ur6_params
 from roarmctl.robot.meshes import PACKAGE_PATHS, description_roots, load_mesh, mesh_modes, package_map, resolve
-from roarmctl.robot.model import CollisionShape, Gripper, Inertial, Joint, Robot, WireField, transform
+from roarmctl.robot.model import CollisionShape, FixedJaw, Gripper, Inertial, Joint, Robot, WireField, transform
 from roarmctl.robot.singularity import MODELS
 from roarmctl.robot.srdf import read_joint_limits, read_srdf
 from roarmctl.robot.xacro_input import TRUST_ALL, expand
@@ -88,6 +88,9 @@ def load_robot(spec: str, trust_sidecar: bool = False) -> Robot:
             robot = _from_urdf(urdf, data, path)
         else:
             raise DescriptionError(f"{path}: needs either a 'dh' table or a 'urdf' file reference")
+    jaw = robot.gripper.fixed_jaw if robot.gripper is not None else None
+    if jaw is not None and jaw.link not in robot.link_names:
+        raise DescriptionError(f"{path}: gripper.fixed_jaw.link: '{jaw.link}' is not a link of {robot.name}")
     for f in robot.frames.values():
         if f.point_link is not None and f.point_link not in robot.link_names:
             raise DescriptionError(f"{path}: frames.{f.name}.point.link: '{f.point_link}' is not a link of {robot.name}")
@@ -195,6 +198,19 @@ def _vec(value: Any, n: int, where: str) -> np.ndarray:
     return np.array([_num(v, f"{where}[{i}]") for i, v in enumerate(value)])
 
 
+def _fixed_jaw(value: Any, where: str) -> FixedJaw:
+    """``{link, point: [x, y, z] m, normal: [x, y, z]}`` -> FixedJaw (normal made unit; the link is checked
+    once the robot is built)."""
+    if not isinstance(value, dict) or not isinstance(value.get("link"), str):
+        raise DescriptionError(f"{where}: expected {{link, point: [x, y, z], normal: [x, y, z]}}")
+    point = _vec(value.get("point"), 3, f"{where}.point")
+    normal = _vec(value.get("normal"), 3, f"{where}.normal")
+    norm = float(np.linalg.norm(normal))
+    if not norm > 1e-9 or not np.all(np.isfinite(point)):
+        raise DescriptionError(f"{where}.normal: must be a non-zero vector")
+    return FixedJaw(value["link"], tuple(float(v) for v in point), tuple(float(v) / norm for v in normal))
+
+
 def _per_joint(data: dict, key: str, names: list[str], default: np.ndarray, where: str) -> np.ndarray:
     """A per-joint value given as a list (in joint order) or a {joint: value} mapping."""
     value = data.get(key)
@@ -248,6 +264,8 @@ def _common(data: dict, path: Path, names: list[str], velocity: np.ndarray, acce
             if n < 2 or np.any(np.diff(jq) <= 0) or np.any(np.diff(jw) <= 0):
                 raise DescriptionError(f"{where}: gripper.jaw_width: needs 2+ points, q and mm both increasing")
         extra = {k: _num(g[k], f"{where}: gripper.{k}") for k in ("squeeze", "clearance") if g.get(k) is not None}
+        if g.get("fixed_jaw") is not None:
+            extra["fixed_jaw"] = _fixed_jaw(g["fixed_jaw"], f"{where}: gripper.fixed_jaw")
         gripper = Gripper(g["joint"], _num(g.get("open"), f"{where}: gripper.open"), _num(g.get("closed"), f"{where}: gripper.closed"),
                           jq, jw, **extra)
     poses = {}

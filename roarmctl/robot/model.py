@@ -127,13 +127,25 @@ class WireField:
 
 
 @dataclass(frozen=True)
+class FixedJaw:
+    """The face of a gripper's fixed jaw: the plane through ``point`` (m) with unit ``normal`` pointing
+    toward the moving jaw, both in ``link``'s frame. A grasped object rests against this face, so its
+    centre lies half its width along ``normal`` from the plane (``roarmctl.motion.planning.fixed_jaw``)."""
+
+    link: str
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
 class Gripper:
     """Which actuated joint is the gripper, and its open and closed values (rad).
 
     ``jaw_q`` (K,) rad increasing and ``jaw_width`` (K,) m: the opening between the jaws at those
     joint values (interpolated linearly, monotonic), when the description gives it. ``squeeze`` (m):
     how far below an object's width a pick closes by default; ``clearance`` (m): how much wider than
-    the object the open jaws must be.
+    the object the open jaws must be. ``fixed_jaw``: the face of a jaw that does not move (a claw
+    gripper such as the RoArm's), when the description gives it: picks then put the object against it.
     """
 
     joint: str
@@ -143,6 +155,7 @@ class Gripper:
     jaw_width: tuple[float, ...] = ()
     squeeze: float = 0.002
     clearance: float = 0.004
+    fixed_jaw: FixedJaw | None = None
 
     @property
     def has_widths(self) -> bool:

@@ -73,8 +73,9 @@ URDF_KEYS = ("urdf", "srdf", "joint_limits", "packages", "xacro_args", "mesh_col
 DH_KEYS = ("dh", "convention", "length_unit", "angle_unit", "base", "tool", "inertials")
 NESTED_KEYS = {
     "limits": ("velocity", "acceleration", "jerk", "effort"),
-    "gripper": ("joint", "open", "closed", "jaw_width", "squeeze", "clearance"),
+    "gripper": ("joint", "open", "closed", "jaw_width", "squeeze", "clearance", "fixed_jaw"),
     "gripper.jaw_width": ("q", "mm"),
+    "gripper.fixed_jaw": ("link", "point", "normal"),
     "tool": ("xyz", "rpy"),
     "base": ("xyz", "rpy"),
 }

@@ -60,6 +60,7 @@ class PlanContext:
         self.held: str | None = None
         self.held_offset = np.zeros(3)  # TCP position minus object centre at grasp (world frame)
         self.pending_pick: tuple[str, np.ndarray] | None = None  # set by a pick, taken by its grasp
+        self.held_local: np.ndarray | None = None  # object centre in the TCP frame while held against a fixed jaw
         self.vmax = robot.velocity_limits * plan.limits.velocity_scale
         self.amax = robot.acceleration_limits * plan.limits.acceleration_scale
         self.jmax = robot.jerk_limits  # not scaled: the scales slow the motion, the jerk bound keeps it smooth

@@ -154,8 +154,12 @@ def gripper_event(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> None:
         elif step.event.kind == "release":
             released = ctx.held
             assert released is not None  # a release follows a grasp
-            ctx.checker.detach(released, q[ctx.arm])
-            ctx.object_pose[released][:3, 3] = tcp - ctx.held_offset
+            item = ctx.checker.detach(released, q[ctx.arm])
+            if ctx.held_local is not None:  # carried against the fixed jaw: where the jaws put it, turned with them
+                ctx.object_pose[released] = item.pose.copy()
+                ctx.held_local = None
+            else:
+                ctx.object_pose[released][:3, 3] = tcp - ctx.held_offset
             ctx.held, ctx.held_offset = None, np.zeros(3)
             ctx.payload, ctx.payload_label = None, ""
             ctx.set_state(b, grasp_target=released)

@@ -105,20 +105,61 @@ def expand_pick(ctx: PlanContext, task: PickTask, q: np.ndarray, at: str) -> lis
     ctx.set_state(g_open, grasp_target=task.object)
     (q_grasp, q_above), pitch = choose_ik_pitch(ctx, [grasp, above], held_pitch(ctx, task, at), task.pitch_auto,
                                                 task.roll, q, at, gripper=g_open)
+    roll = task.roll
+    if jaw_fixed(ctx, task.object):
+        q_grasp, q_above, grasp, above, roll = against_fixed_jaw(ctx, task, centre, q_grasp, pitch, q, at, g_open)
     ctx.set_state(q[gi])
     lab = pitch_label(pitch, task.pitch_auto and pitch is not None)
     steps = [TaskStep("free", f"{at}: transit above '{task.object}'{lab}", q_to=with_value(q_above, gi, q[gi]),
                       open_to=g_open if abs(q[gi] - g_open) > 1e-9 else None, open_label=f"{at}: open gripper")]
     steps += [
         TaskStep("cartesian", f"{at}: descend to '{task.object}'{lab}", q_to=q_grasp, line=(above, grasp),
-                 pitch=pitch, roll=task.roll, grasp_target=task.object),
+                 pitch=pitch, roll=roll, grasp_target=task.object),
         TaskStep("gripper", f"{at}: grasp '{task.object}'", gripper_to=g_closed, grasp_target=task.object,
                  event=Event(0.0, "grasp", f"pick {task.object}", [float(v) for v in grasp])),
         TaskStep("cartesian", f"{at}: lift '{task.object}'{lab}", q_to=q_above, line=(grasp, above),
-                 pitch=pitch, roll=task.roll, grasp_target=task.object),
+                 pitch=pitch, roll=roll, grasp_target=task.object),
     ]
     ctx.pending_pick = (task.object, grasp - centre)
+    if jaw_fixed(ctx, task.object):  # the object's centre in the TCP frame, carried to the place
+        ctx.held_local = ctx.robot.kin.fk(q_grasp)[:3, :3].T @ (centre - grasp)
     return steps
+
+
+def jaw_fixed(ctx: PlanContext, name: str) -> bool:
+    """Picks of this robot put the object against a fixed jaw (the description gives its face)."""
+    gr = ctx.robot.gripper
+    return gr is not None and gr.fixed_jaw is not None and any(o.name == name for o in ctx.plan.objects)
+
+
+def against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_grasp: np.ndarray, pitch: float | None,
+                      q: np.ndarray, at: str, g_open: float):
+    """The grasp and approach configurations (and points) that put the object's side ``fixed_jaw.MARGIN`` from
+    the fixed jaw's face, the jaws closing across a box's narrow side (``roarmctl.motion.planning.fixed_jaw``):
+    (q_grasp, q_above, grasp point, above point, roll)."""
+    from roarmctl.motion.planning import fixed_jaw as jaws
+    from roarmctl.motion.planning.grasp import grasp_width
+    from roarmctl.robot.ik import takes_pitch
+
+    spec = next(o for o in ctx.plan.objects if o.name == task.object)
+    width = grasp_width(spec)
+    pose = ctx.object_pose[task.object]
+    roll = task.roll
+    lift = np.array([0.0, 0.0, task.grasp_offset])
+    up = np.array([0.0, 0.0, task.approach_height])
+    grasp = centre + lift
+    roll_index = ctx.arm[-1] if takes_pitch(ctx.robot) else None
+    for _ in range(jaws.ITERATIONS):
+        if task.roll is None and roll_index is not None and spec.shape == "box":
+            aligned = jaws.aligned_roll(ctx.robot, q_grasp, roll_index, pose[:3, :3], spec.size, width)
+            roll = aligned if aligned is not None else roll
+            if roll is not None:
+                roll = math.remainder(roll, 2 * math.pi)
+        grasp = centre + lift - jaws.object_offset(ctx.robot, q_grasp, width)
+        (q_grasp, q_above), _ = choose_ik_pitch(ctx, [grasp, grasp + up], pitch, False, roll, q, at, gripper=g_open)
+    ctx.notes.append(f"{at}: '{task.object}' against the fixed jaw: TCP {np.linalg.norm(grasp - centre - lift) * 1e3:.1f} mm "
+                     f"from its centre" + (f", roll {math.degrees(roll):.1f} deg" if roll is not None else ""))
+    return q_grasp, q_above, grasp, grasp + up, roll
 
 
 def expand_place(ctx: PlanContext, task: PlaceTask, q: np.ndarray, at: str) -> list[TaskStep]:
@@ -130,11 +171,29 @@ def expand_place(ctx: PlanContext, task: PlaceTask, q: np.ndarray, at: str) -> l
     assert gr is not None  # something is held
     if task.object is not None and task.object != name:
         raise InfeasibleError(f"{at}: places '{task.object}' but the gripper holds '{name}'")
-    target = np.asarray(task.xyz, dtype=float) + ctx.held_offset
+    if ctx.held_local is None:
+        target = np.asarray(task.xyz, dtype=float) + ctx.held_offset
+    else:  # held against a fixed jaw, the object's centre turns with the TCP: start from the TCP's turn now
+        target = np.asarray(task.xyz, dtype=float) - ctx.robot.kin.fk(q)[:3, :3] @ ctx.held_local
     above = target + np.array([0.0, 0.0, task.approach_height])
     g_open = task.gripper_open if task.gripper_open is not None else gr.open
-    (q_place, q_above), pitch = choose_ik_pitch(ctx, [target, above], held_pitch(ctx, task, at), task.pitch_auto,
-                                                task.roll, q, at)
+    try:
+        (q_place, q_above), pitch = choose_ik_pitch(ctx, [target, above], held_pitch(ctx, task, at), task.pitch_auto,
+                                                    task.roll, q, at)
+    except UnreachableError as exc:
+        if ctx.held_local is None:
+            raise
+        xyz = ", ".join(f"{v:.3f}" for v in task.xyz)
+        raise UnreachableError(f"{at}: '{name}' placed at ({xyz}) m: {exc.message.removeprefix(at + ': ')}",
+                               exc.reason, exc.hint) from None
+    if ctx.held_local is not None:
+        from roarmctl.motion.planning import fixed_jaw as jaws
+
+        up = np.array([0.0, 0.0, task.approach_height])
+        for _ in range(jaws.ITERATIONS):
+            target = np.asarray(task.xyz, dtype=float) - ctx.robot.kin.fk(q_place)[:3, :3] @ ctx.held_local
+            (q_place, q_above), _ = choose_ik_pitch(ctx, [target, target + up], pitch, False, task.roll, q, at)
+        above = target + up
     lab = pitch_label(pitch, task.pitch_auto and pitch is not None)
     return [
         TaskStep("free", f"{at}: transit above the place for '{name}'{lab}", q_to=q_above),
