@@ -1,0 +1,255 @@
+"""``simulate``: a trajectory played open loop into the physics model, faster than real time.
+
+For a RoArm the servos get exactly what ``execute`` would send: the streamer's schedule
+(``roarmctl.device.streamer.build_schedule``: the same rate, strategy, speed scale and ``T:102``/``T:101``
+commands), each applied at its tick time plus the link latency the schedule assumes
+(``default_latency``), turned into servo goals by the firmware's own arithmetic
+(``roarmctl.device.simulator.command_to_goal``: its clamps, rounding to steps and joint signs). Other
+robots' generic drives follow the planned motion itself. After the last command the model runs
+``Options.settle`` seconds more, so that what the arm and the objects come to rest at is measured.
+
+Every physics step records the joint values and speeds and each servo's duty; contacts go through
+``roarmctl.physics.contacts`` (only unintended ones are kept, as episodes); objects' poses are
+sampled at ``Options.track_rate``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from roarmctl.physics.actuation import Actuation, for_robot
+from roarmctl.physics.contacts import Episode, Episodes, Hold, Policy, holds_from
+from roarmctl.physics.world import World
+from roarmctl.robot.model import Robot
+
+MATCH_TOLERANCE = 0.005  # m: a payload's centre at its grasp names the object within this distance
+
+
+@dataclass
+class Options:
+    """How to run: the streamer's ``rate`` (Hz), ``strategy`` and ``speed_scale``; ``settle`` (s) after the
+    last command; ``tolerance`` (m) of a placement; ``track_rate`` (Hz) of the run file's tracks and
+    ``feedback_rate`` (Hz) of its feedback lines."""
+
+    rate: float = 50.0
+    strategy: str = "timed"
+    speed_scale: float = 1.0
+    settle: float = 1.0
+    tolerance: float = 0.010
+    track_rate: float = 50.0
+    feedback_rate: float = 25.0
+
+
+@dataclass
+class Recording:
+    """What a run recorded. Physics times (s) from the start of the motion; ``t``/``q``/``qd`` (N, dof)
+    every physics step, ``duty`` (N, channels); ``track_t`` (M,) and ``objects``: name -> (xyz (M, 3) m,
+    quat (M, 4) w x y z) at the track rate; ``commands``: (time, command dict, tick) applied; ``episodes``:
+    unintended contacts; ``wall`` s the run took."""
+
+    dt: float
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    duty: np.ndarray
+    track_t: np.ndarray
+    objects: dict[str, tuple[np.ndarray, np.ndarray]]
+    commands: list[tuple[float, dict[str, Any], int]]
+    episodes: list[Episode]
+    wall: float = 0.0
+
+
+@dataclass
+class Setup:
+    """A built simulation: the world, its servos, the holds of the trajectory and the notes made."""
+
+    world: World
+    actuation: Actuation
+    holds: list[Hold]
+    objects_of_payloads: list[str | None]
+    notes: list[str] = field(default_factory=list)
+
+
+def payload_objects(traj, robot: Robot, scene) -> list[str | None]:
+    """The object each payload of ``traj`` carries: the scene object whose centre lies where the payload's
+    centre of mass is at its grasp (planned pose), or None."""
+    from roarmctl.device.streamer import sample
+
+    objects = [i for i in scene.items if i.role == "object"]
+    out: list[str | None] = []
+    for p in traj.payloads:
+        q = sample(traj, float(p["start"]))
+        t = robot.kin.fk(robot.full_q(q), p["link"])
+        c = t[:3, :3] @ np.asarray(p["com"], dtype=float) + t[:3, 3]
+        best = min(objects, key=lambda i: float(np.linalg.norm(i.xyz - c)), default=None)
+        out.append(best.name if best is not None and np.linalg.norm(best.xyz - c) <= MATCH_TOLERANCE else None)
+    return out
+
+
+def build(traj, robot: Robot, options: Options | None = None, *, masses: dict[str, float] | None = None) -> Setup:
+    """The physics model of ``traj``'s robot and scene, its servos, and the trajectory's holds."""
+    from roarmctl.motion.scene import Scene
+
+    options = options or Options()
+    scene = Scene.from_dict(traj.scene)
+    names = payload_objects(traj, robot, scene)
+    given = {n: float(p["mass"]) for n, p in zip(names, traj.payloads) if n is not None}
+    given.update(masses or {})
+    act = for_robot(robot, traj)
+    world = World(robot, scene, given, act.dynamics(robot))
+    notes = list(world.doc.notes) + list(act.notes)
+    for k, n in enumerate(names):
+        if n is None:
+            notes.append(f"payload {k + 1} (grasp at {traj.payloads[k]['start']:.2f} s) matches no object of the scene")
+    return Setup(world, act, holds_from(traj, names), names, notes)
+
+
+def simulate(traj, robot: Robot, options: Options | None = None, *, setup: Setup | None = None,
+             progress: Callable[[float, float], None] | None = None) -> tuple[Setup, Recording]:
+    """Run ``traj`` on the physics model of ``robot``; ``progress(done_s, total_s)`` is called about every
+    0.1 s of simulated time. Returns the setup and what was recorded."""
+    options = options or Options()
+    setup = setup or build(traj, robot, options)
+    world, act = setup.world, setup.actuation
+    scene_roles = {o[1]: r for o, r in _roles(traj).items()}
+    policy = Policy(robot.jaw_links, scene_roles, setup.holds, 1.0 / options.speed_scale)
+    rec = _Recorder(world, act, policy, options)
+    t_wall = time.perf_counter()
+    if act.streamed:
+        _drive_streamed(traj, robot, setup, options, rec, progress)
+    else:
+        _drive_generic(traj, robot, setup, options, rec, progress)
+    out = rec.result()
+    out.wall = time.perf_counter() - t_wall
+    return setup, out
+
+
+def _roles(traj) -> dict[tuple[str, str], str]:
+    return {("item", str(i["name"])): str(i["role"]) for i in traj.scene.get("items", [])}
+
+
+class _Recorder:
+    """Called after every physics step: joint state, duty, contacts, object tracks."""
+
+    def __init__(self, world: World, act: Actuation, policy: Policy, options: Options) -> None:
+        self.world = world
+        self.act = act
+        self.episodes = Episodes(policy)
+        self.t: list[float] = []
+        self.q: list[np.ndarray] = []
+        self.qd: list[np.ndarray] = []
+        self.duty: list[list[float]] = []
+        self.track_every = max(1, int(round(1.0 / (options.track_rate * world.model.opt.timestep))))
+        self.track_t: list[float] = []
+        self.tracks: dict[str, tuple[list, list]] = {n: ([], []) for n in world.objects}
+        self.commands: list[tuple[float, dict[str, Any], int]] = []
+        self._n = 0
+
+    def __call__(self, _servos=None) -> None:
+        w = self.world
+        t = w.time
+        self.t.append(t)
+        self.q.append(w.data.qpos[w.qpos_adr] - w.offset)
+        self.qd.append(w.data.qvel[w.dof_adr].copy())
+        self.duty.append(list(self.act.bank.duty))
+        if w.data.ncon:
+            self.episodes.add(t, w.contacts())
+        if self._n % self.track_every == 0:
+            self.track_t.append(t)
+            for name, (xs, qs) in self.tracks.items():
+                p, r = w.object_pose(name)
+                xs.append(p)
+                qs.append(r)
+        self._n += 1
+
+    def result(self) -> Recording:
+        dof = len(self.world.robot.joint_names)
+        return Recording(
+            float(self.world.model.opt.timestep), np.array(self.t), np.array(self.q).reshape(-1, dof),
+            np.array(self.qd).reshape(-1, dof), np.array(self.duty).reshape(len(self.t), -1), np.array(self.track_t),
+            {n: (np.array(xs).reshape(-1, 3), np.array(qs).reshape(-1, 4)) for n, (xs, qs) in self.tracks.items()},
+            self.commands, self.episodes.result())
+
+
+def _progress_every(total: float, progress, done: float, last: list[float]) -> None:
+    if progress is not None and done - last[0] >= 0.1:
+        last[0] = done
+        progress(done, total)
+
+
+def _drive_streamed(traj, robot: Robot, setup: Setup, options: Options, rec: _Recorder, progress) -> None:
+    from roarmctl.device.protocol import M3_FIELDS
+    from roarmctl.device.simulator import command_to_goal
+    from roarmctl.device.streamer import build_schedule, default_latency
+    from roarmctl.physics.servo_backend import PhysicsServos
+
+    schedule = build_schedule(traj, robot, rate=options.rate, speed_scale=options.speed_scale, strategy=options.strategy)
+    latency = default_latency(options.rate)
+    servos = PhysicsServos(setup.world, setup.actuation, traj.positions[0], recorder=rec)
+    rec()  # the state at time 0
+    total = schedule[-1].t + latency + options.settle
+    last = [0.0]
+    for k, tick in enumerate(schedule):
+        t_apply = tick.t + latency
+        _advance(servos, t_apply, total, progress, last)
+        for cmd in tick.commands:
+            _apply(servos, cmd, M3_FIELDS, command_to_goal)
+            rec.commands.append((tick.t, cmd, k))
+    _advance(servos, total, total, progress, last)
+    if progress is not None:
+        progress(total, total)
+
+
+def _advance(servos, t: float, total: float, progress, last: list[float]) -> None:
+    """``servos.advance(t)`` in slices of 0.1 s so that progress is reported."""
+    w = servos.world
+    while w.time + 1e-9 < t - servos.dt * 0.5:
+        servos.advance(min(t, w.time + 0.1))
+        _progress_every(total, progress, w.time, last)
+
+
+def _apply(servos, cmd: dict[str, Any], fields, to_goal) -> None:
+    """One T:102 (every field given) or T:101 (one joint, 1-based) as the firmware writes it to the servos."""
+    code = cmd.get("T")
+    if code == 102:
+        ks = [k for k, f in enumerate(fields) if f in cmd]
+        servos.command(ks, [float(to_goal(k, float(cmd[fields[k]]))) for k in ks], [float(cmd.get("spd", 0))] * len(ks),
+                       [float(cmd.get("acc", 0))] * len(ks))
+    elif code == 101:
+        k = int(cmd["joint"]) - 1
+        servos.command([k], [float(to_goal(k, float(cmd["rad"])))], [float(cmd.get("spd", 0))], [float(cmd.get("acc", 0))])
+
+
+def _drive_generic(traj, robot: Robot, setup: Setup, options: Options, rec: _Recorder, progress) -> None:
+    """Generic drives: the reference is the planned position and speed at every physics step."""
+    from roarmctl.device.streamer import sample
+    from roarmctl.physics.servo_backend import physics_step
+
+    w, bank = setup.world, setup.actuation.bank
+    q0 = traj.positions[0]
+    w.set_q(q0)
+    bank.reset(q0)
+    w.model.dof_damping[w.dof_adr[bank.joint]] = bank.joint_damping()
+    rec()
+    dt = float(w.model.opt.timestep)
+    t_end = traj.duration / options.speed_scale
+    total = t_end + options.settle
+    n = int(math.ceil(total / dt - 1e-9))
+    times = np.minimum(np.arange(1, n + 1) * dt, t_end) * options.speed_scale
+    q_ref = sample(traj, times)
+    qd_ref = np.column_stack([np.interp(times, traj.times, traj.velocities[:, j]) for j in range(robot.dof)])
+    qd_ref *= options.speed_scale
+    last = [0.0]
+    for k in range(n):
+        bank.follow(q_ref[k], qd_ref[k])
+        physics_step(w, bank, dt, profile=False)
+        rec()
+        _progress_every(total, progress, w.time, last)
+    if progress is not None:
+        progress(total, total)

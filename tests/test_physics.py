@@ -1,0 +1,298 @@
+"""Physics (issue 23): the MuJoCo model against the description, the servo model against hand-derived
+figures, and `roarmctl simulate` against what must happen to the objects.
+
+Independent references: the project's own FK and RNEA (another implementation of the same description)
+for the model; the Feetech move-time formula ``(P1 - P0) / V + V / (A * 100)`` (Feetech's SCServo
+examples, e.g. ftservo/FTServo_stm32HAL examples/SMS_STS/WritePos.c) for the profile; statics of a
+pendulum (torque = m g L, error = torque / stiffness) and the DC motor line (no-load speed, stall torque)
+for the servo; the placement and contacts for simulate.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from roarmctl.cli import run as cli
+from roarmctl.motion.scene import Scene
+from roarmctl.physics import servo as sv
+from roarmctl.physics.servo import ST3235, ServoBank, profile_step
+from roarmctl.physics.world import World
+from roarmctl.robot.dynamics import gravity_vector
+from roarmctl.robot.loader import load_robot
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _plan(plan: Path, out: Path) -> Path:
+    from roarmctl.motion.pipeline import plan_file
+
+    plan_file(plan, seed=None).trajectory.save(out)
+    return out
+
+
+def _simulate(capsys, *args: str) -> tuple[int, dict]:
+    code = cli(["simulate", *args, "--json"])
+    return code, json.loads(capsys.readouterr().out)
+
+
+# ----------------------------------------------------------------------------- the model
+@pytest.mark.parametrize("name", ["roarm_m3_pro", "roarm_m2_s", "ur10", "planar_2r"])
+def test_model_has_the_descriptions_frames_and_gravity(name):
+    robot = load_robot(name)
+    world = World(robot, Scene([]))
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        q = rng.uniform(np.maximum(robot.lower, -3.0), np.minimum(robot.upper, 3.0))
+        world.set_q(q)
+        for link in world.link_body:
+            assert np.allclose(world.link_pose(link), robot.kin.fk(q, link), atol=1e-9), link
+        # MuJoCo's bias force at rest is gravity: the project's RNEA gives the same torques
+        assert np.allclose(world.actuator_free_bias(), gravity_vector(robot, q), atol=1e-8)
+
+
+def test_a_link_without_inertia_gets_a_mass_and_a_note():
+    robot = load_robot("scara_2r")  # no inertials in the description
+    world = World(robot, Scene([]))
+    assert any("no inertia" in n or "neither inertia" in n for n in world.doc.notes)
+    assert all(world.model.body_mass[world.link_body[j.child]] > 0 for j in robot.joints if j.kind != "fixed")
+
+
+# ----------------------------------------------------------------------------- the servo
+def _move_time(d: float, spd: float, acc: float) -> float:
+    """Time (s) the servo's profile needs for ``d`` steps at speed register ``spd`` and acc register ``acc``."""
+    pos, vel, t, dt = 0.0, 0.0, 0.0, 1e-4
+    vmax = sv.quantise_speed(spd, ST3235.speed_quantum) or math.inf
+    amax = acc * sv.ACC_UNIT if acc > 0 else math.inf
+    while pos < d:
+        pos, vel = profile_step(pos, vel, d, vmax, amax, dt)
+        t += dt
+    return t
+
+
+def test_profile_follows_feetechs_move_time_formula():
+    # Feetech's examples: WritePosEx(ID, P1, V=2400, A=50) takes [(P1 - P0) / V] + [V / (A * 100)] seconds
+    # (their own delays add 50 ms for error; the stepped profile arrives within 0.5 %)
+    assert _move_time(4095, 2400, 50) == pytest.approx(4095 / 2400 + 2400 / (50 * 100), rel=0.005)
+    assert _move_time(1000, 600, 20) == pytest.approx(1000 / 600 + 600 / 2000, rel=0.005)
+    assert _move_time(1000, 600, 0) == pytest.approx(1000 / 600, abs=2e-3)  # acc 0: no ramp
+    assert _move_time(1000, 0, 0) < 0.01  # spd 0 and acc 0: the goal at once (the motor sets the pace)
+    assert sv.quantise_speed(37, 50) == 50 and sv.quantise_speed(130, 50) == 150  # 0.732 rpm steps
+
+
+def _pendulum(tmp_path: Path, mass: float, length: float, axis_horizontal: bool = True):
+    """One revolute joint, a point mass ``mass`` (kg) ``length`` (m) from it, swinging in a vertical plane
+    (or a horizontal one)."""
+    import yaml
+
+    doc = {"format": "roarmctl.robot/1", "name": "pendulum", "convention": "standard",
+           "base": {"xyz": [0, 0, 0.5], "rpy": [math.pi / 2 if axis_horizontal else 0, 0, 0]},
+           "dh": [{"name": "j", "a": length, "alpha": 0, "d": 0, "lower": -3.1, "upper": 3.1}],
+           "limits": {"velocity": [4.0], "acceleration": [10.0]},
+           "inertials": [{"link": "link1", "mass": mass, "com": [0, 0, 0], "inertia": [1e-6, 1e-6, 1e-6]}]}
+    path = tmp_path / f"pendulum_{mass:g}_{length:g}_{int(axis_horizontal)}.yaml"  # load_robot caches by path
+    path.write_text(yaml.safe_dump(doc))
+    robot = load_robot(str(path))
+    bank = ServoBank([0], [ST3235], [1], [1.0], [2047.0])
+    from roarmctl.physics.mjcf import JointDynamics
+
+    world = World(robot, Scene([]), dynamics={"j": JointDynamics(ST3235.armature, ST3235.damping)})
+    world.set_q([0.0])
+    bank.reset(np.zeros(1))
+    return robot, bank, world
+
+
+def _run(world, bank, seconds: float) -> None:
+    from roarmctl.physics.servo_backend import physics_step
+
+    for _ in range(int(round(seconds / world.model.opt.timestep))):
+        physics_step(world, bank, world.model.opt.timestep)
+
+
+def test_servo_holds_a_load_off_its_goal_by_torque_over_stiffness(tmp_path):
+    _, bank, world = _pendulum(tmp_path, 0.5, 0.1)
+    _run(world, bank, 1.5)
+    torque = 0.5 * 9.81 * 0.1 * math.cos(world.q()[0])  # the link stands (nearly) horizontal
+    error_steps = -world.q()[0] * ST3235.steps_per_rad
+    # the P loop's duty balances gravity: kp * error * stall = torque (kp: P = 16 of the firmware)
+    assert error_steps == pytest.approx(torque / (ST3235.stall_torque * 16 * sv.KP_PER_P), abs=0.5)
+    assert 20 < error_steps < 30  # ~2 deg: the sag the report calls sag
+
+
+def test_servo_runs_at_no_load_speed_and_stalls_at_its_stall_torque(tmp_path):
+    _, bank, world = _pendulum(tmp_path, 0.05, 0.1, axis_horizontal=False)  # swings in the horizontal plane
+    bank.command([0], [2047.0 + 2000.0], [0.0], [0.0])  # far away, spd 0 / acc 0: full duty
+    _run(world, bank, 0.4)
+    assert world.qd()[0] == pytest.approx(ST3235.no_load_speed, rel=0.01)  # 0.222 s / 60 deg at 12 V
+    _, bank, world = _pendulum(tmp_path, 4.0, 0.1)  # 3.9 N m of gravity: more than the 2.94 N m stall
+    bank.command([0], [2047.0 + 300.0], [0.0], [0.0])
+    _run(world, bank, 1.0)
+    assert bank.duty[0] == pytest.approx(1.0)
+    assert world.qd()[0] < 0  # it cannot hold the load up: it sinks
+    # the motor's torque at the joint while it sinks slowly is the stall torque (plus the back-EMF share)
+    tau = ST3235.stall_torque * (bank.duty[0] - world.qd()[0] / ST3235.no_load_speed)
+    assert tau == pytest.approx(4.0 * 9.81 * 0.1 * math.cos(world.q()[0]), rel=0.05)
+
+
+# ----------------------------------------------------------------------------- simulate
+@pytest.fixture(scope="module")
+def trajs(tmp_path_factory) -> dict[str, Path]:
+    tmp = tmp_path_factory.mktemp("phys")
+    return {name: _plan(ROOT / "plans" / f"{name}.yaml", tmp / f"{name}.traj.json") for name in ("pick_place", "payload")}
+
+
+def test_pick_place_places_the_cube_and_writes_a_run_file_export_reads(trajs, tmp_path, capsys):
+    run = tmp_path / "pp.run.json"
+    code, rep = _simulate(capsys, str(trajs["pick_place"]), "-o", str(run))
+    assert code == 0 and rep["ok"] and rep["contacts"] == []
+    (cube,) = rep["objects"]
+    assert cube["name"] == "cube" and cube["lifted"] and cube["placed"] and cube["error_mm"] < 10
+    assert {j["name"] for j in rep["joints"]} == set(load_robot("roarm_m3_pro").joint_names)
+    shoulder = next(j for j in rep["joints"] if j["name"] == "link1_to_link2")
+    assert shoulder["stall_nm"] == pytest.approx(2 * 2.942, abs=0.01) and not shoulder["at_stall"]  # two servos
+    assert 0 < rep["tcp"]["rms_mm"] < rep["tcp"]["max_mm"] < 40 and rep["tcp"]["sag_mm"] < 5
+    log = json.loads(run.read_text())
+    assert log["format"] == "roarmctl.execlog/1" and log["physics"]["objects"][0]["name"] == "cube"
+    assert sum(1 for s in log["sent"] if s["cmd"]["T"] == 102) == rep["run"]["commands"] - sum(
+        1 for s in log["sent"] if s["cmd"]["T"] == 101)
+    assert cli(["export", str(run), "-o", str(tmp_path / "run.csv")]) == 0  # the run file is an execution log
+
+
+def test_the_0_2_kg_weight_holds_and_its_sag_is_reported(trajs, capsys):
+    _, rep = _simulate(capsys, str(trajs["payload"]))
+    (weight,) = rep["objects"]
+    assert weight["mass_kg"] == 0.2 and weight["lifted"] and weight["lift_mm"] > 40
+    rests = {r["label"]: r for r in rep["tcp"]["rests"]}
+    held = next(r for label, r in rests.items() if "wait" in label or "hold" in label)
+    free = next(r for label, r in rests.items() if "open gripper" in label)
+    assert held["below_mm"] > free["below_mm"] + 1.0  # the load pulls the TCP down
+    assert rep["tcp"]["sag_mm"] >= held["error_mm"]
+
+
+def test_2_kg_is_over_the_shoulders_stall_and_is_not_lifted(trajs, tmp_path, capsys):
+    """The planner refuses 2 kg (the shoulder's 2.94 N m planning limit): the trajectory's payload is edited
+    instead (a test-only route). The plan then needs more of the shoulder's two servos than their 5.88 N m
+    stall (statics: 2 kg at about 0.4 m is 7.8 N m alone), the weight stays on the table, exit 3."""
+    doc = json.loads(trajs["payload"].read_text())
+    doc["payloads"][0]["mass"] = 2.0
+    heavy = tmp_path / "heavy.traj.json"
+    heavy.write_text(json.dumps(doc))
+    code, rep = _simulate(capsys, str(heavy))
+    assert code == 3 and not rep["ok"]
+    shoulder = next(j for j in rep["joints"] if j["name"] == "link1_to_link2")
+    assert shoulder["over_stall"] and shoulder["needed_nm"] > 2.0 * 9.81 * 0.35 > shoulder["stall_nm"]
+    assert shoulder["peak_torque_nm"] < shoulder["stall_nm"]  # what the servos gave: they never lift it
+    (weight,) = rep["objects"]
+    assert weight["mass_kg"] == 2.0 and not weight["lifted"] and not weight["placed"]
+    _, light = _simulate(capsys, str(trajs["payload"]))
+    assert not next(j for j in light["joints"] if j["name"] == "link1_to_link2")["over_stall"]
+
+
+def _grasp_q(traj_path: Path) -> np.ndarray:
+    from roarmctl.motion.trajectory import load_trajectory
+
+    traj = load_trajectory(traj_path)
+    grasp = next(e for e in traj.events if e.kind == "grasp")
+    return traj.positions[int(np.argmin(np.abs(traj.times - grasp.time)))]
+
+
+def test_jaws_closing_5_mm_short_of_a_30_mm_cube_do_not_lift_it(tmp_path, capsys):
+    import mujoco
+
+    text = (ROOT / "plans" / "pick_place.yaml").read_text().replace("size: [0.04, 0.04, 0.04], xyz: [0.25, -0.15, 0.02]",
+                                                                  "size: [0.03, 0.03, 0.03], xyz: [0.25, -0.15, 0.015]")
+    text = text.replace("xyz: [0.25, 0.15, 0.02]", "xyz: [0.25, 0.15, 0.015]")
+    assert "0.03, 0.03, 0.03" in text
+    plan = tmp_path / "p.yaml"
+    plan.write_text(text)
+    first = _plan(plan, tmp_path / "first.traj.json")
+    # where the moving jaw stops 5 mm from the cube, measured on the physics model's own shapes
+    from roarmctl.motion.trajectory import load_trajectory
+
+    traj = load_trajectory(first)
+    robot = load_robot(traj.robot)
+    world = World(robot, Scene.from_dict(traj.scene))
+    q = _grasp_q(first)
+    gi = robot.joint_index(robot.gripper.joint)
+    cube = mujoco.mj_name2id(world.model, mujoco.mjtObj.mjOBJ_GEOM, "item:cube")
+    jaws = [mujoco.mj_name2id(world.model, mujoco.mjtObj.mjOBJ_GEOM, n) for n, o in world.doc.geom_owner.items()
+            if o == ("link", "gripper_link")]
+
+    def gap(g: float) -> float:
+        world.set_q(np.where(np.arange(len(q)) == gi, g, q))
+        return min(mujoco.mj_geomDistance(world.model, world.data, j, cube, 0.05, None) for j in jaws)
+
+    lo, hi = 0.0, 1.0  # gap grows with the opening
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if gap(mid) < 0.005 else (lo, mid)
+    short = tmp_path / "short.yaml"
+    short.write_text(text.replace("gripper_open: 1.0, gripper_closed: 0.6}", f"gripper_open: 1.0, gripper_closed: {hi:.4f}}}"))
+    assert f"gripper_closed: {hi:.4f}" in short.read_text()
+    traj_short = _plan(short, tmp_path / "short.traj.json")
+    assert np.allclose(_grasp_q(traj_short)[:gi], q[:gi])  # the same grasp pose, only the jaws stop short
+    code, rep = _simulate(capsys, str(traj_short))
+    assert code == 3 and not rep["ok"]
+    (c,) = rep["objects"]
+    assert not c["lifted"] and not c["placed"] and c["lift_mm"] < 5
+
+
+def test_a_box_the_checker_saw_lower_than_it_is_is_hit_by_the_held_cube(trajs, tmp_path, capsys):
+    """A thin plate across the carry path whose top the checker saw (clearance + 1 mm) lower than it is: the
+    held cube, carried over it as planned, drags through its top 1 mm; simulate reports that contact."""
+    from roarmctl.device.streamer import sample
+    from roarmctl.motion.trajectory import load_trajectory
+
+    traj = load_trajectory(trajs["pick_place"])
+    robot = load_robot(traj.robot)
+    p = traj.payloads[0]
+    t = np.linspace(p["start"], p["end"], 400)
+    tcp = robot.kin.fk(sample(traj, t))
+    centre = np.einsum("nij,j->ni", tcp[:, :3, :3], p["com"]) + tcp[:, :3, 3]
+    cross = int(np.argmin(np.abs(centre[:, 1])))  # the carried cube crosses y = 0 (between pick and place)
+    bottom = centre[cross, 2] - 0.02  # the cube's lowest point there (it is carried upright)
+    plate = {"name": "plate", "role": "obstacle", "shape": "box", "size": [0.2, 0.002, bottom + 0.001],
+             "xyz": [float(centre[cross, 0]), 0.0, (bottom + 0.001) / 2], "rpy": [0, 0, 0]}
+    doc = json.loads(trajs["pick_place"].read_text())
+    doc["scene"]["items"].append(plate)
+    hit = tmp_path / "plate.traj.json"
+    hit.write_text(json.dumps(doc))
+    code, rep = _simulate(capsys, str(hit))
+    assert code == 3 and not rep["ok"]
+    plate_contacts = [c for c in rep["contacts"] if "plate" in (c.get("item"), c["with"])]
+    assert plate_contacts and all({c.get("item"), c["with"]} == {"cube", "plate"} for c in plate_contacts)
+    c = plate_contacts[0]
+    assert 0.05 < c["depth_mm"] < 5 and traj.payloads[0]["start"] < c["start_s"] < traj.payloads[0]["end"] + 0.5
+
+
+VENDOR = next((d / "shared" / "reference" / "roarm_m3" / "m2s_roarm_ws_em0" for d in (ROOT.parent, ROOT.parent.parent)
+               if (d / "shared" / "reference" / "roarm_m3" / "m2s_roarm_ws_em0").is_dir()), None)
+
+
+@pytest.mark.skipif(VENDOR is None, reason="Waveshare's M2-S package (../shared) is not beside the clone")
+def test_m2s_with_waveshares_meshes_builds_and_simulates_its_plan(tmp_path, capsys):
+    import yaml
+
+    traj = _plan(ROOT / "plans" / "m2s_pick_place.yaml", tmp_path / "m2s.traj.json")
+    side = tmp_path / "m2s.yaml"  # Waveshare's package as it is, plus what MoveIt lacks (as tests/test_m2s.py does)
+    side.write_text(yaml.safe_dump({
+        "format": "roarmctl.robot/1", "name": "m2s_moveit", "urdf": str(VENDOR / "urdf" / "roarm_description.urdf"),
+        "srdf": str(VENDOR / "config" / "roarm_description.srdf"), "joint_limits": str(VENDOR / "config" / "joint_limits.yaml"),
+        "packages": {"roarm_description": str(VENDOR)}, "ik": "roarm3", "base_links": ["base_link", "link1"],
+        "limits": {"velocity": [2.0, 1.5, 1.8, 2.5], "acceleration": [5.0, 4.0, 5.0, 6.0]},
+        "wire": [{"joint": "base_link_to_link1", "field": "base", "sign": -1},
+                 {"joint": "link1_to_link2", "field": "shoulder", "sign": -1},
+                 {"joint": "link2_to_link3", "field": "elbow"},
+                 {"joint": "link3_to_gripper_link", "field": "hand", "sign": -1, "offset": 3.1415926}]}))
+    robot = load_robot(str(side))
+    world = World(robot, Scene([]))
+    assert world.model.nmesh == 5  # the five STL meshes, as convex hulls
+    _, rep = _simulate(capsys, str(traj), "--robot", str(side))
+    (cube,) = rep["objects"]
+    assert cube["lifted"] and rep["run"]["steps"] > 1000
+    code_b, rep_b = _simulate(capsys, str(traj))  # the bundled M2-S (boxes)
+    assert code_b == 0 and rep_b["objects"][0]["placed"]
