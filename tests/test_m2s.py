@@ -107,10 +107,16 @@ def test_bundled_m2s_plans_its_example():
     robot = load_robot("roarm_m2_s")
     assert traj.joint_names == robot.joint_names
     assert [e.kind for e in traj.events] == ["grasp", "release"]
-    # the TCP is at the cube's centre at the grasp and at the place target at the release
-    for ev, xyz in zip(traj.events, ([0.22, -0.10, 0.015], [0.22, 0.10, 0.015])):
-        k = int(np.argmin(np.abs(traj.times - ev.time)))
-        assert np.linalg.norm(robot.kin.fk(traj.positions[k])[:3, 3] - xyz) < 2e-3
+    # the cube rests against the fixed jaw (its face 9.2 mm from the TCP, link3 z = +0.0092): its centre lies
+    # 15 + 1 - 9.2 = 6.8 mm from the TCP along the face's normal; carried with the TCP it reaches the place
+    jaw = robot.gripper.fixed_jaw
+    (kg, kr) = (int(np.argmin(np.abs(traj.times - ev.time))) for ev in traj.events)
+    tg, tr = robot.kin.fk(traj.positions[kg]), robot.kin.fk(traj.positions[kr])
+    n = robot.kin.fk(traj.positions[kg], jaw.link)[:3, :3] @ np.asarray(jaw.normal)
+    centre = np.array([0.22, -0.10, 0.015])
+    assert np.allclose(centre - tg[:3, 3], 0.0068 * n, atol=5e-4)
+    carried = tr[:3, :3] @ (tg[:3, :3].T @ (centre - tg[:3, 3])) + tr[:3, 3]
+    assert np.linalg.norm(carried - [0.22, 0.10, 0.015]) < 2e-3
 
 
 @needs_vendor
