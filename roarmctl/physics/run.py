@@ -127,6 +127,7 @@ def simulate(traj, robot: Robot, options: Options | None = None, *, setup: Setup
         _drive_generic(traj, robot, setup, options, rec, progress)
     out = rec.result()
     out.wall = time.perf_counter() - t_wall
+    setup.notes.extend(w for w in world.warnings() if w not in setup.notes)
     return setup, out
 
 

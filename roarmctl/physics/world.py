@@ -23,6 +23,16 @@ from roarmctl.physics.mjcf import (
 )
 from roarmctl.robot.model import Robot
 
+#: MuJoCo's own warning texts (it would otherwise append them to MUJOCO_LOG.TXT in the working directory).
+MESSAGES: list[str] = []
+
+
+def _quiet_warnings(mujoco) -> None:
+    """Keep MuJoCo's warnings in ``MESSAGES`` instead of a file in the user's working directory."""
+    if mujoco.get_mju_user_warning() is None:
+        mujoco.set_mju_user_warning(lambda text: MESSAGES.append(str(text)) if len(MESSAGES) < 100 else None)
+
+
 MIN_DEPTH = 5e-5  # m: shapes that overlap less than this only touch (MuJoCo's soft contacts always overlap a little)
 
 
@@ -61,6 +71,7 @@ class World:
                                    "check the description's inertias and meshes") from None
         self.data = mujoco.MjData(self.model)
         self._mujoco = mujoco
+        _quiet_warnings(mujoco)
         m = self.model
         jid = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, joint_name(n)) for n in robot.joint_names]
         self.qpos_adr = np.array([m.jnt_qposadr[j] for j in jid], dtype=int)
@@ -150,6 +161,16 @@ class World:
             if oa < 0 or ob < 0:
                 continue
             out.append(Contact(self.owners[oa], self.owners[ob], float(-dist[k]), np.array(c.pos[k])))
+        return out
+
+    def warnings(self) -> list[str]:
+        """MuJoCo's warnings of this run (instability, too many contacts, ...), one sentence each."""
+        out = []
+        kinds = {int(v): k.removeprefix("mjWARN_") for k, v in vars(self._mujoco.mjtWarning).items() if k.startswith("mjWARN_")}
+        for k, name in sorted(kinds.items()):
+            stat = self.data.warning[k]
+            if stat.number:
+                out.append(f"MuJoCo warned {stat.number} time(s): {name} (info {stat.lastinfo})")
         return out
 
     def actuator_free_bias(self) -> np.ndarray:
