@@ -193,7 +193,7 @@ def test_2_kg_is_over_the_shoulders_stall_and_is_not_lifted(trajs, tmp_path, cap
 
 
 def _grasp_q(traj_path: Path) -> np.ndarray:
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import load_trajectory
 
     traj = load_trajectory(traj_path)
     grasp = next(e for e in traj.events if e.kind == "grasp")
@@ -211,7 +211,7 @@ def test_jaws_closing_5_mm_short_of_a_30_mm_cube_do_not_lift_it(tmp_path, capsys
     plan.write_text(text)
     first = _plan(plan, tmp_path / "first.traj.json")
     # where the moving jaw stops 5 mm from the cube, measured on the physics model's own shapes
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import load_trajectory
 
     traj = load_trajectory(first)
     robot = load_robot(traj.robot)
@@ -245,7 +245,7 @@ def test_a_box_the_checker_saw_lower_than_it_is_is_hit_by_the_held_cube(trajs, t
     """A thin plate across the carry path whose top the checker saw (clearance + 1 mm) lower than it is: the
     held cube, carried over it as planned, drags through its top 1 mm; simulate reports that contact."""
     from roarmctl.device.streamer import sample
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import load_trajectory
 
     traj = load_trajectory(trajs["pick_place"])
     robot = load_robot(traj.robot)

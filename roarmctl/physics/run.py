@@ -8,9 +8,9 @@ commands), each applied at its tick time plus the link latency the schedule assu
 robots' generic drives follow the planned motion itself. After the last command the model runs
 ``Options.settle`` seconds more, so that what the arm and the objects come to rest at is measured.
 
-Every physics step records the joint values and speeds and each servo's duty; contacts go through
-``roarmctl.physics.contacts`` (only unintended ones are kept, as episodes); objects' poses are
-sampled at ``Options.track_rate``.
+Every physics step records the joint values and speeds and each servo's duty; contacts, every
+``CONTACT_EVERY`` steps, go through ``roarmctl.physics.contacts`` (only unintended ones are kept, as
+episodes); objects' poses are sampled at ``Options.track_rate``.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from roarmctl.physics.world import World
 from roarmctl.robot.model import Robot
 
 MATCH_TOLERANCE = 0.005  # m: a payload's centre at its grasp names the object within this distance
+CONTACT_EVERY = 2  # physics steps between two looks at the contacts (2 ms: an episode shorter than that is missed)
 
 
 @dataclass
@@ -159,7 +160,7 @@ class _Recorder:
         self.q.append(w.data.qpos[w.qpos_adr] - w.offset)
         self.qd.append(w.data.qvel[w.dof_adr].copy())
         self.duty.append(list(self.act.bank.duty))
-        if w.data.ncon:
+        if w.data.ncon and self._n % CONTACT_EVERY == 0:
             self.episodes.add(t, w.contacts())
         if self._n % self.track_every == 0:
             self.track_t.append(t)

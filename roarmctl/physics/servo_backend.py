@@ -28,16 +28,16 @@ N_FIRMWARE_JOINTS = 6
 class PhysicsServos:
     """Six firmware joints on a MuJoCo ``World`` driven by ``actuation`` (a streamed RoArm).
 
-    ``t0`` is the firmware clock (s) that corresponds to the world's time 0; ``q0`` (dof,) the arm's
-    pose at that time (torque on, at rest).
+    ``t0`` is the firmware clock (s) that corresponds to the world's time 0 (None: the time of the first
+    ``advance``); ``q0`` (dof,) the arm's pose at that time (torque on, at rest).
     """
 
-    def __init__(self, world: World, actuation: Actuation, q0, t0: float = 0.0,
+    def __init__(self, world: World, actuation: Actuation, q0, t0: float | None = 0.0,
                  recorder: Callable[[PhysicsServos], None] | None = None) -> None:
         self.world = world
         self.act = actuation
         self.bank = actuation.bank
-        self.t0 = float(t0)
+        self.t0 = t0  # None: the firmware clock of the first call
         self.recorder = recorder
         self.dt = float(world.model.opt.timestep)
         self.channel = np.full(N_FIRMWARE_JOINTS, -1, dtype=int)
@@ -90,6 +90,8 @@ class PhysicsServos:
 
     def advance(self, t: float) -> None:
         """Step the physics until its time reaches ``t - t0`` (whole steps: at most one step short)."""
+        if self.t0 is None:
+            self.t0 = float(t)
         w = self.world
         target = t - self.t0
         while w.data.time + 0.5 * self.dt <= target:
@@ -148,3 +150,30 @@ def physics_step(world: World, bank: ServoBank, dt: float, profile: bool = True)
     for j, t in zip(bank.joint, tau):
         applied[world.dof_adr[j]] += t
     world.step()
+
+
+def for_firmware(robot, traj=None) -> Callable[[], PhysicsServos]:
+    """A zero-argument factory of physics servos for the firmware simulator (``roarmctl.device``'s
+    ``PtySimulator(servos=...)``; called in its process): ``robot`` in ``traj``'s scene with its payload
+    masses (an empty world without ``traj``), standing at the firmware's boot pose (``INIT_RAD``: elbow
+    pi/2, gripper closed), its clock starting at the firmware's first call."""
+
+    def make() -> PhysicsServos:
+        from roarmctl.device.protocol import M3_FIELDS, WireMap
+        from roarmctl.device.simulator import INIT_RAD
+        from roarmctl.motion.scene import Scene
+        from roarmctl.physics.actuation import for_robot
+
+        if traj is not None:
+            from roarmctl.physics.run import build
+
+            setup = build(traj, robot)
+            world, act = setup.world, setup.actuation
+        else:
+            act = for_robot(robot)
+            world = World(robot, Scene([]), None, act.dynamics(robot))
+        wm = WireMap(robot)
+        q0 = wm.from_wire({f: INIT_RAD[M3_FIELDS.index(f)] for f in wm.field_names})
+        return PhysicsServos(world, act, q0, t0=None)
+
+    return make
