@@ -13,8 +13,8 @@
   still, the TCP error over its last ``REST_WINDOW`` s and how far below the plan, mm; ``sag_mm`` the
   largest) and the final error after settling;
 * ``contacts``: the unintended contacts (``roarmctl.physics.contacts``);
-* ``objects``: per picked object, whether it was lifted (it rose at least half the planned lift
-  while held), where it came to rest against its place pose (the plan's: where the jaws put it at the
+* ``objects``: per picked object, whether it was lifted (while held it rose at least half as high as
+  the plan carries it), where it came to rest against its place pose (the plan's: where the jaws put it at the
   release, turned with them), ``error_mm``/``error_deg``, and ``placed`` (within the tolerance);
 * ``ok``: every picked object placed and no unintended contact.
 
@@ -200,9 +200,10 @@ def _objects(traj, robot: Robot, setup: Setup, rec: Recording, options: Options)
         t_g = robot.kin.fk(robot.full_q(sample(traj, tg)), link)
         t_r = robot.kin.fk(robot.full_q(sample(traj, tr)), link)
         planned = t_r @ np.linalg.inv(t_g) @ start
-        hold = next(h for h in setup.holds if h.name == name and abs(h.grasp - tg) < 1e-9)
-        t_carry = robot.kin.fk(robot.full_q(sample(traj, hold.carry)), link)
-        planned_lift = float((t_carry @ np.linalg.inv(t_g) @ start)[2, 3] - start[2, 3])
+        held = (traj.times >= tg) & (traj.times <= tr)  # the planned object, carried rigidly: its highest rise
+        rel = np.linalg.inv(t_g) @ start
+        tl = robot.kin.fk(traj.positions[held], link)
+        planned_lift = float(np.max(tl[:, 2, :3] @ rel[:3, 3] + tl[:, 2, 3]) - start[2, 3]) if np.any(held) else 0.0
         xs, qs = rec.objects[name]
         k = (rec.track_t >= tg / scale) & (rec.track_t <= tr / scale)
         rise = float(np.max(xs[k, 2]) - start[2, 3]) if np.any(k) else 0.0
