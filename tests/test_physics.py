@@ -244,7 +244,7 @@ def test_jaws_closing_5_mm_short_of_a_30_mm_cube_do_not_lift_it(tmp_path, capsys
 def test_a_box_the_checker_saw_lower_than_it_is_is_hit_by_the_held_cube(trajs, tmp_path, capsys):
     """A thin plate across the carry path whose top the checker saw (clearance + 1 mm) lower than it is: the
     held cube, carried over it as planned, drags through its top 1 mm; simulate reports that contact."""
-    from roarmctl.device.streamer import sample
+    from roarmctl.device.schedule import sample
     from roarmctl.motion.validate import load_trajectory
 
     traj = load_trajectory(trajs["pick_place"])

@@ -8,8 +8,9 @@ from pathlib import Path
 import typer
 
 from roarmctl.cli import common
-
-STRATEGY_HELP = "Streaming strategy, as for execute: timed (default), timed-shared, timed-acc, dense, dense-ahead."
+from roarmctl.cli.execute_cmd import STRATEGY_HELP
+from roarmctl.errors import InfeasibleError, InputError
+from roarmctl.fileio import atomic_write_json
 
 
 def register(app: typer.Typer) -> None:
@@ -42,9 +43,8 @@ def simulate(
     not intend, and whether each picked object was lifted and placed. Exit 3 when an object is not
     placed within --tolerance or an unintended contact happens.
     """
-    from roarmctl.device.streamer import STRATEGIES
-    from roarmctl.errors import InfeasibleError, InputError
-    from roarmctl.motion.validate import validate_trajectory
+    from roarmctl.device.schedule import STRATEGIES
+    from roarmctl.motion.validate import robot_of, validate_trajectory
     from roarmctl.robot.loader import load_robot
 
     if strategy not in STRATEGIES:
@@ -54,7 +54,7 @@ def simulate(
     if not 0.0 <= settle <= 60.0:
         raise InputError(f"--settle: {settle:g} s is out of range", "use 0 to 60 s")
     traj = validate_trajectory(traj_path)
-    robot = load_robot(robot_desc if robot_desc is not None else traj.robot)
+    robot = load_robot(robot_desc) if robot_desc is not None else robot_of(traj, str(traj_path))
     if robot_desc is not None:
         if list(robot.joint_names) != list(traj.joint_names):
             raise InputError(f"--robot {robot_desc}: its joints ({', '.join(robot.joint_names)}) are not the trajectory's "
@@ -63,22 +63,22 @@ def simulate(
 
         check_against_robot(traj, robot, str(traj_path))
     from roarmctl.physics.report import measure, run_log
-    from roarmctl.physics.run import Options, build
+    from roarmctl.physics.run import Options
     from roarmctl.physics.run import simulate as run
+    from roarmctl.physics.setup import build
 
     options = Options(rate=rate, strategy=strategy, speed_scale=speed_scale, settle=settle, tolerance=tolerance / 1e3)
     if robot.wire:
-        from roarmctl.device.streamer import build_schedule
+        from roarmctl.device.schedule import build_schedule
 
         build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy)  # its input errors first
-    setup = build(traj, robot, options)
+    setup = build(traj, robot)
     setup, rec = _with_progress(lambda progress: run(traj, robot, options, setup=setup, progress=progress),
                                 traj.duration / speed_scale + settle, json_out)
     report = measure(traj, robot, setup, rec, options)
     if output is not None:
-        from roarmctl.fileio import atomic_write_json
 
-        atomic_write_json(output, run_log(traj, robot, setup, rec, options, report), indent=None)
+        atomic_write_json(output, run_log(traj, robot, setup, rec, options, report, source=robot_desc), indent=None)
     if json_out:
         common.print_json({k: report[k] for k in ("ok", "joints", "tcp", "contacts", "objects", "run", "model")}
                           | ({"run_file": str(output)} if output is not None else {}))

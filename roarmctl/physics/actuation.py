@@ -18,8 +18,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from roarmctl.device.fwmath import position_to_rad
+from roarmctl.device.protocol import M3_FIELDS, WireMap
+from roarmctl.errors import DescriptionError, RoarmError
 from roarmctl.physics.mjcf import JointDynamics
 from roarmctl.physics.servo import ST3235, ServoBank, ServoSpec, generic_spec
+from roarmctl.robot.dynamics import inverse_dynamics
 from roarmctl.robot.model import Robot
 
 #: Servos per firmware joint field (the shoulder's two: IDs 12 and 13).
@@ -56,7 +60,6 @@ class Actuation:
 
 def _feedback_line(index: int) -> tuple[float, float]:
     """(alpha, beta) of the firmware's feedback formula rad = alpha + beta * steps for joint ``index``."""
-    from roarmctl.device.simulator import position_to_rad
 
     a = position_to_rad(index, 0.0)
     return a, position_to_rad(index, 1.0) - a
@@ -64,8 +67,6 @@ def _feedback_line(index: int) -> tuple[float, float]:
 
 def for_robot(robot: Robot, traj=None) -> Actuation:
     """The servos of ``robot``; ``traj`` (optional) sizes generic drives without effort limits."""
-    from roarmctl.device.protocol import M3_FIELDS, WireMap
-    from roarmctl.errors import DescriptionError
 
     try:
         wm = WireMap(robot) if robot.wire else None
@@ -114,8 +115,6 @@ def _needed_torque(robot: Robot, traj) -> np.ndarray:
     """Largest |torque| (dof,) N m of the planned motion (zeros without a trajectory or inertias)."""
     if traj is None:
         return np.zeros(robot.dof)
-    from roarmctl.errors import RoarmError
-    from roarmctl.robot.dynamics import inverse_dynamics
 
     try:
         tau = inverse_dynamics(robot, traj.positions, traj.velocities, traj.accelerations)

@@ -31,8 +31,17 @@ from typing import Any
 
 import numpy as np
 
-from roarmctl.physics.run import Options, Recording, Setup
-from roarmctl.robot.model import Robot
+from roarmctl.device.fwmath import firmware_fk, position_to_rad
+from roarmctl.device.protocol import M3_FEEDBACK_KEYS, M3_FIELDS, WireMap
+from roarmctl.device.schedule import sample
+from roarmctl.errors import RoarmError
+from roarmctl.motion.scene import Scene
+from roarmctl.physics.mjcf import quat
+from roarmctl.physics.run import Options, Recording
+from roarmctl.physics.setup import Setup
+from roarmctl.robot.bundle import make_bundle
+from roarmctl.robot.dynamics import inverse_dynamics
+from roarmctl.robot.model import Inertial, Robot
 
 REST_MIN = 0.3  # s: a rest shorter than this is not measured
 REST_WINDOW = 0.1  # s at the end of a rest over which its error is averaged
@@ -46,7 +55,6 @@ def _r(x: float, n: int = 3) -> float:
 
 
 def _plan_at(traj, t_physics: np.ndarray, scale: float) -> np.ndarray:
-    from roarmctl.device.streamer import sample
 
     return sample(traj, np.clip(t_physics * scale, 0.0, traj.duration))
 
@@ -81,9 +89,6 @@ def _needed(traj, robot: Robot, setup: Setup) -> np.ndarray | None:
     """Peak |torque| (dof,) N m the plan asks of each joint with the masses the physics carries (RNEA of the
     planned motion; a payload from its grasp to its release, with the mass the model gives its object), or
     None without inertias."""
-    from roarmctl.errors import RoarmError
-    from roarmctl.robot.dynamics import inverse_dynamics
-    from roarmctl.robot.model import Inertial
 
     need = np.zeros(robot.dof)
     held = np.zeros(len(traj.times), dtype=bool)
@@ -185,8 +190,6 @@ def _rests(traj, robot: Robot) -> list[tuple[float, float, str]]:
 
 
 def _objects(traj, robot: Robot, setup: Setup, rec: Recording, options: Options) -> list[dict[str, Any]]:
-    from roarmctl.device.streamer import sample
-    from roarmctl.motion.scene import Scene
 
     scene = Scene.from_dict(traj.scene)
     scale = options.speed_scale
@@ -219,7 +222,6 @@ def _objects(traj, robot: Robot, setup: Setup, rec: Recording, options: Options)
 
 def _angle(quat_wxyz, rot: np.ndarray) -> float:
     """Angle (deg) between the rotation of a unit quaternion (w, x, y, z) and a rotation matrix."""
-    from roarmctl.physics.mjcf import quat
 
     q2 = np.array(quat(rot))
     d = abs(float(np.dot(np.asarray(quat_wxyz, dtype=float), q2)))
@@ -241,7 +243,8 @@ def run_log(traj, robot: Robot, setup: Setup, rec: Recording, options: Options, 
                               "quat": [[_r(v, 6) for v in q] for q in qs]} for n, (xs, qs) in rec.objects.items()}}
     log = {
         "format": "roarmctl.execlog/1",
-        "port": "physics", "firmware": "physics", "robot": robot.name if source is None else source,
+        "port": "physics", "firmware": "physics", "robot": robot.name,
+        **_description(traj, source),
         "strategy": options.strategy, "rate": options.rate, "speed_scale": options.speed_scale,
         "t0_monotonic": 0.0, "duration": _r(traj.duration / options.speed_scale, 6),
         "summary": {"outcome": "completed" if report["ok"] else "failed",
@@ -257,6 +260,18 @@ def run_log(traj, robot: Robot, setup: Setup, rec: Recording, options: Options, 
     }
     json.dumps(log, allow_nan=False)  # a NaN in a report is a bug: fail here, not in the reader
     return log
+
+
+def _description(traj, source: str | None) -> dict[str, Any]:
+    """The run file's ``robot_description`` (``roarmctl.robot.bundle``): the trajectory's, or the bundle of the
+    description ``source`` that the run used instead (``simulate --robot``), so that ``export`` reads the run
+    by itself; nothing for a bundled robot."""
+    from roarmctl.robot.loader import bundled_robots
+
+    if source is not None:
+        return {} if source in bundled_robots() else {"robot_description": make_bundle(source)}
+    desc = getattr(traj, "robot_description", None)
+    return {} if desc is None else {"robot_description": desc}
 
 
 def _failure(report: dict[str, Any]) -> str:
@@ -285,8 +300,6 @@ def _feedback(robot: Robot, setup: Setup, rec: Recording, options: Options) -> l
     act = setup.actuation
     if not act.streamed:
         return []
-    from roarmctl.device.protocol import M3_FEEDBACK_KEYS, M3_FIELDS, WireMap
-    from roarmctl.device.simulator import firmware_fk, position_to_rad
 
     wm = WireMap(robot)
     keys = dict(zip(M3_FIELDS, M3_FEEDBACK_KEYS))

@@ -4,7 +4,7 @@ For a RoArm the servos get exactly what ``execute`` would send: the streamer's s
 (``roarmctl.device.streamer.build_schedule``: the same rate, strategy, speed scale and ``T:102``/``T:101``
 commands), each applied at its tick time plus the link latency the schedule assumes
 (``default_latency``), turned into servo goals by the firmware's own arithmetic
-(``roarmctl.device.simulator.command_to_goal``: its clamps, rounding to steps and joint signs). Other
+(``roarmctl.device.fwmath.command_to_goal``: its clamps, rounding to steps and joint signs). Other
 robots' generic drives follow the planned motion itself. After the last command the model runs
 ``Options.settle`` seconds more, so that what the arm and the objects come to rest at is measured.
 
@@ -18,17 +18,21 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from roarmctl.physics.actuation import Actuation, for_robot
-from roarmctl.physics.contacts import Episode, Episodes, Hold, Policy, holds_from
+from roarmctl.device.fwmath import command_to_goal
+from roarmctl.device.protocol import M3_FIELDS
+from roarmctl.device.schedule import build_schedule, default_latency, sample
+from roarmctl.physics.actuation import Actuation
+from roarmctl.physics.contacts import Episode, Episodes, Policy
+from roarmctl.physics.servo_backend import PhysicsServos, physics_step
+from roarmctl.physics.setup import Setup, build
 from roarmctl.physics.world import World
 from roarmctl.robot.model import Robot
 
-MATCH_TOLERANCE = 0.005  # m: a payload's centre at its grasp names the object within this distance
 CONTACT_EVERY = 2  # physics steps between two looks at the contacts (2 ms: an episode shorter than that is missed)
 
 
@@ -38,8 +42,8 @@ class Options:
     last command; ``tolerance`` (m) of a placement; ``track_rate`` (Hz) of the run file's tracks and
     ``feedback_rate`` (Hz) of its feedback lines."""
 
-    rate: float = 50.0
-    strategy: str = "timed"
+    rate: float = 50.0  # roarmctl.device.schedule.DEFAULT_RATE
+    strategy: str = "timed"  # roarmctl.device.schedule.DEFAULT_STRATEGY
     speed_scale: float = 1.0
     settle: float = 1.0
     tolerance: float = 0.010
@@ -66,57 +70,12 @@ class Recording:
     wall: float = 0.0
 
 
-@dataclass
-class Setup:
-    """A built simulation: the world, its servos, the holds of the trajectory and the notes made."""
-
-    world: World
-    actuation: Actuation
-    holds: list[Hold]
-    objects_of_payloads: list[str | None]
-    notes: list[str] = field(default_factory=list)
-
-
-def payload_objects(traj, robot: Robot, scene) -> list[str | None]:
-    """The object each payload of ``traj`` carries: the scene object whose centre lies where the payload's
-    centre of mass is at its grasp (planned pose), or None."""
-    from roarmctl.device.streamer import sample
-
-    objects = [i for i in scene.items if i.role == "object"]
-    out: list[str | None] = []
-    for p in traj.payloads:
-        q = sample(traj, float(p["start"]))
-        t = robot.kin.fk(robot.full_q(q), p["link"])
-        c = t[:3, :3] @ np.asarray(p["com"], dtype=float) + t[:3, 3]
-        best = min(objects, key=lambda i: float(np.linalg.norm(i.xyz - c)), default=None)
-        out.append(best.name if best is not None and np.linalg.norm(best.xyz - c) <= MATCH_TOLERANCE else None)
-    return out
-
-
-def build(traj, robot: Robot, options: Options | None = None, *, masses: dict[str, float] | None = None) -> Setup:
-    """The physics model of ``traj``'s robot and scene, its servos, and the trajectory's holds."""
-    from roarmctl.motion.scene import Scene
-
-    options = options or Options()
-    scene = Scene.from_dict(traj.scene)
-    names = payload_objects(traj, robot, scene)
-    given = {n: float(p["mass"]) for n, p in zip(names, traj.payloads) if n is not None}
-    given.update(masses or {})
-    act = for_robot(robot, traj)
-    world = World(robot, scene, given, act.dynamics(robot))
-    notes = list(world.doc.notes) + list(act.notes)
-    for k, n in enumerate(names):
-        if n is None:
-            notes.append(f"payload {k + 1} (grasp at {traj.payloads[k]['start']:.2f} s) matches no object of the scene")
-    return Setup(world, act, holds_from(traj, names), names, notes)
-
-
 def simulate(traj, robot: Robot, options: Options | None = None, *, setup: Setup | None = None,
              progress: Callable[[float, float], None] | None = None) -> tuple[Setup, Recording]:
     """Run ``traj`` on the physics model of ``robot``; ``progress(done_s, total_s)`` is called about every
     0.1 s of simulated time. Returns the setup and what was recorded."""
     options = options or Options()
-    setup = setup or build(traj, robot, options)
+    setup = setup or build(traj, robot)
     world, act = setup.world, setup.actuation
     scene_roles = {o[1]: r for o, r in _roles(traj).items()}
     policy = Policy(robot.jaw_links, scene_roles, setup.holds, 1.0 / options.speed_scale)
@@ -186,10 +145,6 @@ def _progress_every(total: float, progress, done: float, last: list[float]) -> N
 
 
 def _drive_streamed(traj, robot: Robot, setup: Setup, options: Options, rec: _Recorder, progress) -> None:
-    from roarmctl.device.protocol import M3_FIELDS
-    from roarmctl.device.simulator import command_to_goal
-    from roarmctl.device.streamer import build_schedule, default_latency
-    from roarmctl.physics.servo_backend import PhysicsServos
 
     schedule = build_schedule(traj, robot, rate=options.rate, speed_scale=options.speed_scale, strategy=options.strategy)
     latency = default_latency(options.rate)
@@ -230,8 +185,6 @@ def _apply(servos, cmd: dict[str, Any], fields, to_goal) -> None:
 
 def _drive_generic(traj, robot: Robot, setup: Setup, options: Options, rec: _Recorder, progress) -> None:
     """Generic drives: the reference is the planned position and speed at every physics step."""
-    from roarmctl.device.streamer import sample
-    from roarmctl.physics.servo_backend import physics_step
 
     w, bank = setup.world, setup.actuation.bank
     q0 = traj.positions[0]

@@ -18,8 +18,12 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from roarmctl.physics.actuation import Actuation
+from roarmctl.device.fwmath import INIT_RAD
+from roarmctl.device.protocol import M3_FIELDS, WireMap
+from roarmctl.motion.scene import Scene
+from roarmctl.physics.actuation import Actuation, for_robot
 from roarmctl.physics.servo import ACC_UNIT, ST3235, ServoBank, profile_step, quantise_speed
+from roarmctl.physics.setup import build
 from roarmctl.physics.world import World
 
 N_FIRMWARE_JOINTS = 6
@@ -159,13 +163,8 @@ def for_firmware(robot, traj=None) -> Callable[[], PhysicsServos]:
     pi/2, gripper closed), its clock starting at the firmware's first call."""
 
     def make() -> PhysicsServos:
-        from roarmctl.device.protocol import M3_FIELDS, WireMap
-        from roarmctl.device.simulator import INIT_RAD
-        from roarmctl.motion.scene import Scene
-        from roarmctl.physics.actuation import for_robot
 
         if traj is not None:
-            from roarmctl.physics.run import build
 
             setup = build(traj, robot)
             world, act = setup.world, setup.actuation

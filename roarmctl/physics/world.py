@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from roarmctl.errors import DescriptionError
 from roarmctl.physics.mjcf import (
     TIMESTEP,
     BuiltDocument,
@@ -58,7 +59,6 @@ class World:
                  dynamics: dict[str, JointDynamics] | None = None, *, timestep: float | None = None) -> None:
         import mujoco
 
-        from roarmctl.errors import DescriptionError
 
         self.robot = robot
         self.doc: BuiltDocument = build_document(robot, scene, masses, dynamics,

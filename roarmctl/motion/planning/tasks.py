@@ -12,11 +12,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from roarmctl.errors import InfeasibleError, PlanFileError, UnreachableError
-from roarmctl.motion.planning.grasp import grip_value
+from roarmctl.motion.planning import fixed_jaw as jaws
+from roarmctl.motion.planning.grasp import grasp_width, grip_value
 from roarmctl.motion.planning.pieces import TaskStep, with_value
 from roarmctl.motion.trajectory import Event
 from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask, WaitTask
-from roarmctl.robot.ik import accepts_pitch, pitch_candidates, solve_ik, solve_ik_near
+from roarmctl.robot.ik import accepts_pitch, pitch_candidates, solve_ik, solve_ik_near, takes_pitch
 
 if TYPE_CHECKING:
     from roarmctl.motion.planning.context import PlanContext
@@ -137,9 +138,6 @@ def against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_gr
     """The grasp and approach configurations (and points) that put the object's side ``fixed_jaw.MARGIN`` from
     the fixed jaw's face, the jaws closing across a box's narrow side (``roarmctl.motion.planning.fixed_jaw``):
     (q_grasp, q_above, grasp point, above point, roll)."""
-    from roarmctl.motion.planning import fixed_jaw as jaws
-    from roarmctl.motion.planning.grasp import grasp_width
-    from roarmctl.robot.ik import takes_pitch
 
     spec = next(o for o in ctx.plan.objects if o.name == task.object)
     width = grasp_width(spec)
@@ -187,7 +185,6 @@ def expand_place(ctx: PlanContext, task: PlaceTask, q: np.ndarray, at: str) -> l
         raise UnreachableError(f"{at}: '{name}' placed at ({xyz}) m: {exc.message.removeprefix(at + ': ')}",
                                exc.reason, exc.hint) from None
     if ctx.held_local is not None:
-        from roarmctl.motion.planning import fixed_jaw as jaws
 
         up = np.array([0.0, 0.0, task.approach_height])
         for _ in range(jaws.ITERATIONS):
