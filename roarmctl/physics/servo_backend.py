@@ -176,3 +176,11 @@ def for_firmware(robot, traj=None) -> Callable[[], PhysicsServos]:
         return PhysicsServos(world, act, q0, t0=None)
 
     return make
+
+
+def roarm_m3_pro() -> PhysicsServos:
+    """Physics servos of the bundled RoArm-M3 Pro in an empty world: a zero-argument factory for
+    ``bench/bench_stream.py --servos roarmctl.physics.servo_backend:roarm_m3_pro``."""
+    from roarmctl.robot.loader import load_robot
+
+    return for_firmware(load_robot("roarm_m3_pro"))()
