@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from roarmctl.cli import run as cli
+from roarmctl.device import st3235
 from roarmctl.motion.scene import Scene
 from roarmctl.physics import servo as sv
 from roarmctl.physics.servo import ST3235, ServoBank, profile_step
@@ -119,7 +120,7 @@ def test_servo_holds_a_load_off_its_goal_by_torque_over_stiffness(tmp_path):
     torque = 0.5 * 9.81 * 0.1 * math.cos(world.q()[0])  # the link stands (nearly) horizontal
     error_steps = -world.q()[0] * ST3235.steps_per_rad
     # the P loop's duty balances gravity: kp * error * stall = torque (kp: P = 16 of the firmware)
-    assert error_steps == pytest.approx(torque / (ST3235.stall_torque * 16 * sv.KP_PER_P), abs=0.5)
+    assert error_steps == pytest.approx(torque / (ST3235.stall_torque * 16 * st3235.KP_PER_P), abs=0.5)
     assert 20 < error_steps < 30  # ~2 deg: the sag the report calls sag
 
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from roarmctl.device import st3235
 from roarmctl.device.fwmath import position_to_rad
 from roarmctl.device.protocol import M3_FIELDS, WireMap
 from roarmctl.errors import DescriptionError, RoarmError
@@ -25,11 +26,6 @@ from roarmctl.physics.mjcf import JointDynamics
 from roarmctl.physics.servo import ST3235, ServoBank, ServoSpec, generic_spec
 from roarmctl.robot.dynamics import inverse_dynamics
 from roarmctl.robot.model import Robot
-
-#: Servos per firmware joint field (the shoulder's two: IDs 12 and 13).
-SERVOS_PER_FIELD = {"shoulder": 2}
-#: Torque limit per field at boot, 0..1 (the gripper at 300 of 1000; the others at 1000).
-TORQUE_LIMIT = {"hand": 0.3}
 
 
 @dataclass
@@ -80,10 +76,10 @@ def for_robot(robot: Robot, traj=None) -> Actuation:
             # steps = (wire - alpha) / beta with wire = offset + sign * q
             joint.append(i)
             spec.append(ST3235)
-            count.append(SERVOS_PER_FIELD.get(w.field, 1))
+            count.append(st3235.SERVOS_PER_FIELD.get(w.field, 1))
             sign.append(math.copysign(1.0, w.sign / beta))
             zero.append((w.offset - alpha) / beta)
-            limit.append(TORQUE_LIMIT.get(w.field, 1.0))
+            limit.append(st3235.TORQUE_LIMIT.get(w.field, 1.0))
             fields.append(w.field)
             fw.append(k)
         bank = ServoBank(joint, spec, count, sign, zero, limit)

@@ -13,33 +13,20 @@ profile. Per servo, at every physics step (``TIMESTEP`` of ``roarmctl.physics.mj
    back-EMF braking; the physics applies it as the joint's viscous damping ``n * stall / no_load_speed``
    (integrated implicitly by MuJoCo), the duty part as an applied torque.
 
-The numbers of the Feetech ST3235 (``ST3235``), each with its source:
+The numbers of the Feetech ST3235 (``ST3235``) and their sources are in ``roarmctl.device.st3235`` (the
+schedule's sag compensation uses the same ones). What this module adds:
 
-* stall torque 30 kg cm = 2.94 N m at 12 V: Feetech's ST-3235-C001 page (github.com/ftservo/ftservo-wiki,
-  docs/en/products/models/st-3235-c001/main.md @ 9340fa0, "Stall torque 30 kg·cm@12V");
-* no-load speed 0.222 s per 60 deg at 12 V = 4.72 rad/s: Waveshare's ST3235 page (as quoted in
-  github.com/jhacksman/RoArm-M3 research/hardware/servos/ST3235_Metal_Shell_Servo.md);
-* 4096 steps per turn (RoArm-M3_config.h ARM_SERVO_POS_RANGE, Waveshare RoArm-M3 example firmware 0.84);
-* speed register (address 46) in 0.0146 rpm = 1 step/s, "0 means the maximum speed"; acceleration
-  register (address 41) in 8.7 deg/s^2 = 100 steps/s^2, "0 means maximum acceleration"; dead band
-  (addresses 26/27) 1 step by default; torque limit (address 48) in 0.1 % of the duty: Feetech's STS
-  memory table (ftservo/ftservo-wiki docs/en/reference/parameter/memory-sts.md @ 9522ce1). The same
-  table says that with the 0.0146 rpm unit "its precision is also 0.732 rpm" (50 steps/s): we read
-  that as the profile's speed being a multiple of 50 steps/s (``speed_quantum``; our reading);
-* position-loop P = 16, I = 0, written to every servo at boot by the firmware (RoArm-M3_module.h
-  lines 976-983, ``RoArmM3_resetPID``); the gripper's torque limit 300 (30 %), set in ``setup()``
-  (``RoArmM3_handTorqueCtrl(300)``, RoArm-M3_example.ino);
-* the loop's stiffness, **calibrated** on the one public measurement we found: an STS3215 (same
-  family, same 30 kg cm stall) held 1.5 kg on a 10 cm lever at 45 deg (1.04 N m, 35 % of stall) 20-30
-  steps off its goal (TheRobotStudio/SO-ARM100 issue #134, "Positional Error Under Load"), with the
-  factory P = 32 (huggingface/lerobot src/lerobot/robots/so100_follower/so100_follower.py @ 973b2f2:
-  "Default is 32"): 0.354 duty / 25 steps / 32 = ``KP_PER_P`` = 4.4e-4 duty per step per unit of P.
-  **Assumed**: the duty is proportional to P (so P = 16 gives full duty at 141 steps, 12 deg); no
-  velocity feed-forward; the profile continues from its own reference when a new goal arrives (it does
-  not restart from the measured position). The servo's firmware is closed;
+* the speed register (address 46) counts steps/s, "0 means the maximum speed"; the acceleration register
+  (address 41) counts 100 steps/s^2, "0 means maximum acceleration"; the dead band (addresses 26/27) is
+  1 step by default; the torque limit (address 48) caps the duty: Feetech's STS memory table
+  (ftservo/ftservo-wiki docs/en/reference/parameter/memory-sts.md @ 9522ce1). The same table says that with
+  the 0.0146 rpm unit "its precision is also 0.732 rpm" (50 steps/s): we read that as the profile's speed
+  being a multiple of 50 steps/s (``speed_quantum``; our reading);
+* **assumed**: no velocity feed-forward in the loop; the profile continues from its own reference when a
+  new goal arrives (it does not restart from the measured position);
 * **assumed**: the rotor's inertia seen at the output is ``MECH_TIME_CONSTANT * stall / no_load_speed``
   (a 10 ms mechanical time constant, typical of small DC motors: 6.2e-3 kg m^2 for the ST3235);
-  no gearbox friction.
+  no gearbox friction or backlash.
 
 For robots without servo data, ``generic_spec`` builds the same model from the description's effort
 and velocity limits (assumptions stated there), and ``Servos`` then follows the planned motion with
@@ -56,12 +43,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-STEPS_PER_RAD = 4096 / (2 * math.pi)  # RoArm-M3_config.h: ARM_SERVO_POS_RANGE 4096
+from roarmctl.device import st3235
+
 ACC_UNIT = 100.0  # steps/s^2 per acceleration register count (Feetech STS memory table, address 41)
-KGCM = 0.0980665  # N m per kg cm
 MECH_TIME_CONSTANT = 0.010  # s, assumed (see the module doc)
-KP_PER_P = (1.04 / 2.94) / 25.0 / 32.0  # duty per step per unit of the P register (calibrated, module doc)
-FIRMWARE_P = 16  # RoArmM3_resetPID (RoArm-M3_module.h 976-983): P = 16, I = 0 on every servo
 
 
 @dataclass(frozen=True)
@@ -78,8 +63,8 @@ class ServoSpec:
     name: str
     stall_torque: float
     no_load_speed: float
-    steps_per_rad: float = STEPS_PER_RAD
-    kp: float = FIRMWARE_P * KP_PER_P
+    steps_per_rad: float = st3235.STEPS_PER_RAD
+    kp: float = st3235.KP
     deadband: float = 1.0
     speed_quantum: float = 50.0
     max_speed: float = math.inf
@@ -93,8 +78,7 @@ class ServoSpec:
 
 
 def _st3235() -> ServoSpec:
-    stall = 30.0 * KGCM
-    no_load = math.radians(60.0) / 0.222
+    stall, no_load = st3235.STALL_TORQUE, st3235.NO_LOAD_SPEED
     return ServoSpec("ST3235", stall, no_load, armature=MECH_TIME_CONSTANT * stall / no_load)
 
 
