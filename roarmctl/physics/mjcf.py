@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from roarmctl.errors import InputError
 from roarmctl.robot.model import Robot
 
 GRAVITY = 9.81  # m/s^2, the same value as roarmctl.robot.dynamics.GRAVITY
@@ -138,8 +139,8 @@ def _geom_shape(el: ET.Element, kind: str, size=(0.0, 0.0, 0.0), radius: float =
     elif kind == "sphere":
         el.set("type", "sphere")
         el.set("size", _f((radius,)))
-    else:  # pragma: no cover - callers pass only these kinds
-        raise ValueError(kind)
+    else:
+        raise InputError(f"physics: a '{kind}' shape has no physics model yet", "use boxes, cylinders, spheres or meshes")
 
 
 def build_document(robot: Robot, scene, masses: dict[str, float] | None = None,
