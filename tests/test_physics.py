@@ -297,3 +297,22 @@ def test_m2s_with_waveshares_meshes_builds_and_simulates_its_plan(tmp_path, caps
     assert cube["lifted"] and rep["run"]["steps"] > 1000
     code_b, rep_b = _simulate(capsys, str(traj))  # the bundled M2-S (boxes)
     assert code_b == 0 and rep_b["objects"][0]["placed"]
+
+
+def test_contact_policy_follows_the_plans_windows():
+    from roarmctl.physics.contacts import LAG, Hold, Policy
+
+    hold = Hold("cube", reach=1.0, grasp=2.0, carry=2.5, lower=4.0, release=4.5, leave=5.0)
+    roles = {"table": "table", "wall": "obstacle", "cube": "object", "can": "object"}
+    p = Policy(("link5", "gripper_link"), roles, [hold])
+    jaw, arm, table, wall = ("link", "gripper_link"), ("link", "link3"), ("item", "table"), ("item", "wall")
+    cube, can = ("item", "cube"), ("item", "can")
+    assert p.intended(jaw, cube, 1.5) and p.intended(cube, jaw, 5.0 + LAG - 0.01)  # descent .. retreat (+ lag)
+    assert not p.intended(jaw, cube, 0.5) and not p.intended(jaw, can, 3.0)  # before the pick; another object
+    assert not p.intended(arm, cube, 3.0) and not p.intended(arm, table, 0.1) and not p.intended(jaw, wall, 3.0)
+    assert p.intended(cube, table, 0.5) and p.intended(cube, table, 4.2)  # at rest; being placed
+    assert not p.intended(cube, table, 3.0) and not p.intended(cube, wall, 0.5)  # carried over the table; an obstacle
+    assert not p.intended(cube, can, 3.0) and p.intended(can, cube, 6.0)  # carried into another object; both at rest
+    assert not p.intended(arm, ("link", "link1"), 1.0)  # two links (MuJoCo leaves out the allowed pairs)
+    slow = Policy(("gripper_link",), roles, [hold], time_scale=2.0)  # --speed-scale 0.5: physics time is twice
+    assert slow.intended(jaw, cube, 3.0) and not slow.intended(jaw, cube, 1.5)
