@@ -16,6 +16,8 @@ from roarmctl.device.session import run_execution
 from roarmctl.errors import InputError
 from roarmctl.fileio import atomic_write_bytes
 
+SAG_HELP = ("Offset each goal by the servos' sag under gravity and the held payload (the ST3235's P-only loop; "
+            "see docs/physics.md).")
 STRATEGY_HELP = ("Streaming strategy: timed (default), timed-acc, per-joint, timed-shared, dense, dense-ahead "
                  "(compared in docs/benchmarks.md).")
 
@@ -47,6 +49,7 @@ def execute(
     move_to_start: bool = typer.Option(False, "--move-to-start", help="If the arm is not at the first point, plan a collision-checked, timed motion there first (the trajectory's scene, limits and planner)."),
     from_current: bool = typer.Option(False, "--from-current", help="If the arm is not at the first point, plan the first free motion again from where it is."),
     max_error: float = typer.Option(30.0, "--max-error", help="Abort (and hold) when the TCP tracking error exceeds this (mm)."),
+    sag: bool = typer.Option(False, "--sag/--no-sag", help=SAG_HELP + " (Not with --sim: its ideal servos do not sag.)"),
     log: Path | None = typer.Option(None, "--log", help="Execution log (JSON); default: next to TRAJ as NAME.exec.json."),
     json_out: bool = typer.Option(False, "--json", help="Print one JSON summary object on stdout, nothing else."),
 ) -> None:
@@ -73,9 +76,9 @@ def execute(
     if move_to_start and from_current:
         raise InputError("give one of --move-to-start and --from-current, not both")
     cfg = StreamConfig(rate=rate, speed_scale=speed_scale, strategy=strategy, max_error=max_error / 1e3,
-                       move_to_start=move_to_start, from_current=from_current)
+                       move_to_start=move_to_start, from_current=from_current, sag=sag)
     if output is not None:
-        schedule = build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy)
+        schedule = build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy, sag=sag)
         _write_output(output, schedule)
         # "commands" means the same everywhere (--port, --sim, --output, the log's summary): the
         # motion commands, one T:102 per tick; gripper T:101 lines sent beside them are counted apart
@@ -88,7 +91,7 @@ def execute(
             extra = f" + {gripper} gripper commands" if gripper else ""
             common.console(stderr=True).print(f"wrote {info['commands']} motion commands{extra} ({schedule[-1].t:.2f} s at {rate:g} Hz) to {output}")
         return
-    build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy)  # validate before opening
+    build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy, sag=sag)  # validate before opening
     if port is not None and not yes and not sys.stdin.isatty():
         raise InputError("refusing to ask for confirmation: stdin is not a terminal", "pass --yes to execute without asking")
     _run(traj, traj_path, robot, cfg, port, sim, yes, log or default_log_path(traj_path), json_out)

@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 
 from roarmctl.cli import common
-from roarmctl.cli.execute_cmd import STRATEGY_HELP
+from roarmctl.cli.execute_cmd import SAG_HELP, STRATEGY_HELP
 from roarmctl.errors import InfeasibleError, InputError
 from roarmctl.fileio import atomic_write_json
 
@@ -33,6 +33,7 @@ def simulate(
     rate: float = typer.Option(50.0, "--rate", help="Commands per second, as execute would send them."),
     speed_scale: float = typer.Option(1.0, "--speed-scale", help="Slow the motion down, as execute would: 0.5 = half speed."),
     strategy: str = typer.Option("timed", "--strategy", help=STRATEGY_HELP),
+    sag: bool = typer.Option(False, "--sag/--no-sag", help=SAG_HELP + " As execute --sag."),
     settle: float = typer.Option(1.0, "--settle", help="Seconds simulated after the last command (the arm and objects come to rest)."),
     robot_desc: str | None = typer.Option(None, "--robot", help="Simulate on this description instead of the trajectory's robot (same joint names), e.g. one with its CAD meshes."),
 ) -> None:
@@ -67,11 +68,11 @@ def simulate(
     from roarmctl.physics.run import simulate as run
     from roarmctl.physics.setup import build
 
-    options = Options(rate=rate, strategy=strategy, speed_scale=speed_scale, settle=settle, tolerance=tolerance / 1e3)
+    options = Options(rate=rate, strategy=strategy, speed_scale=speed_scale, settle=settle, tolerance=tolerance / 1e3, sag=sag)
     if robot.wire:
         from roarmctl.device.schedule import build_schedule
 
-        build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy)  # its input errors first
+        build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy, sag=sag)  # its input errors first
     setup = build(traj, robot)
     setup, rec = _with_progress(lambda progress: run(traj, robot, options, setup=setup, progress=progress),
                                 traj.duration / speed_scale + settle, json_out)

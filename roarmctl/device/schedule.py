@@ -20,6 +20,7 @@ import numpy as np
 
 from roarmctl.device import protocol
 from roarmctl.device.protocol import WireMap, acc_register, spd_register, wire_seconds
+from roarmctl.device.sag import offsets as sag_offsets
 from roarmctl.errors import InputError
 
 MAX_LINK_RATE = 90.0  # T:102 lines/s the 115200 link can carry at all (about 10.4 ms each)
@@ -123,11 +124,15 @@ def strategy_rate(strategy: str | Strategy, rate: float) -> float:
 
 
 def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: float = 1.0,
-                   strategy: str | Strategy = DEFAULT_STRATEGY, latency: float | None = None) -> list[Tick]:
+                   strategy: str | Strategy = DEFAULT_STRATEGY, latency: float | None = None,
+                   sag: bool = False) -> list[Tick]:
     """Every command the streamer will send for ``traj``, with its time (s from the start).
 
     ``speed_scale`` < 1 slows the whole motion down (times divided by it, speeds multiplied).
-    A strategy with its own ``rate`` (per-joint) uses that instead of ``rate``.
+    A strategy with its own ``rate`` (per-joint) uses that instead of ``rate``. ``sag``: each goal is
+    offset by the servos' sag under gravity and the held payload at its planned pose
+    (``roarmctl.device.sag``), so that a P-only servo loop stands where the plan is; a tick's
+    ``target`` stays the plan's.
     """
     strat = STRATEGIES[strategy] if isinstance(strategy, str) else strategy
     if not 0 < rate <= MAX_LINK_RATE:
@@ -147,8 +152,11 @@ def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: floa
     # plan times (un-scaled) of where each interval starts and ends, shifted by the link latency
     t_from = np.minimum(ts + lat, t_end) * speed_scale
     t_to = np.minimum(ts + ahead + lat, t_end) * speed_scale
-    q_to = sample(traj, t_to)
-    w_to, w_from = wm.to_wire_array(q_to), wm.to_wire_array(sample(traj, t_from))
+    q_to, q_from = sample(traj, t_to), sample(traj, t_from)
+    c_to, c_from = q_to, q_from  # what is commanded: the plan, offset by the sag when compensated
+    if sag:
+        c_to, c_from = q_to + sag_offsets(robot, traj, t_to, q_to), q_from + sag_offsets(robot, traj, t_from, q_from)
+    w_to, w_from = wm.to_wire_array(c_to), wm.to_wire_array(c_from)
     nf = len(wm.fields)
     g = [k for k, w in enumerate(wm.fields) if robot.gripper is not None and w.joint == robot.gripper.joint]
     # the gripper gets its own T:101 when it needs more speed than the arm: one shared spd would
@@ -185,7 +193,7 @@ def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: floa
             dv = abs(spd / protocol.STEPS_PER_RAD - prev_speed) / dt
             acc = acc_register(max(a, dv) * 1.5, minimum=5)
             prev_speed = spd / protocol.STEPS_PER_RAD
-        ticks.append(Tick(float(ts[k]), wm.command(q_to[k], spd, acc), q_to[k], extra, w_to[k]))
+        ticks.append(Tick(float(ts[k]), wm.command(c_to[k], spd, acc), q_to[k], extra, w_to[k]))
     return ticks
 
 

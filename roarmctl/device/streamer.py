@@ -99,6 +99,7 @@ class StreamConfig:
     feedback_rate: float = FEEDBACK_RATE
     max_unconfirmed: int = 12  # command lines sent but not yet confirmed by a poll answer
     behind_after: float = 0.04  # a poll answered this much later than the round trip: the firmware is behind
+    sag: bool = False  # goals offset by the servos' sag under gravity and payload (roarmctl.device.sag)
 
 
 @dataclass
@@ -203,7 +204,7 @@ class Streamer:
         self.device_late: deque[tuple[float, float]] = deque(maxlen=1000)  # (when seen, how late) of poll answers
 
     def _schedule(self, traj) -> list[Tick]:
-        return build_schedule(traj, self.robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale,
+        return build_schedule(traj, self.robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale, sag=self.cfg.sag,
                               strategy=self.cfg.strategy)
 
     # ------------------------------------------------------------------ helpers

@@ -49,6 +49,7 @@ class Options:
     tolerance: float = 0.010
     track_rate: float = 50.0
     feedback_rate: float = 25.0
+    sag: bool = False  # the schedule's sag compensation (roarmctl.device.sag), as execute --sag sends it
 
 
 @dataclass
@@ -146,7 +147,8 @@ def _progress_every(total: float, progress, done: float, last: list[float]) -> N
 
 def _drive_streamed(traj, robot: Robot, setup: Setup, options: Options, rec: _Recorder, progress) -> None:
 
-    schedule = build_schedule(traj, robot, rate=options.rate, speed_scale=options.speed_scale, strategy=options.strategy)
+    schedule = build_schedule(traj, robot, rate=options.rate, speed_scale=options.speed_scale, strategy=options.strategy,
+                              sag=options.sag)
     latency = default_latency(options.rate)
     servos = PhysicsServos(setup.world, setup.actuation, traj.positions[0], recorder=rec)
     rec()  # the state at time 0
