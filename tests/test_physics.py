@@ -322,3 +322,19 @@ def test_contact_policy_follows_the_plans_windows():
     assert not p.intended(arm, ("link", "link1"), 1.0)  # two links (MuJoCo leaves out the allowed pairs)
     slow = Policy(("gripper_link",), roles, [hold], time_scale=2.0)  # --speed-scale 0.5: physics time is twice
     assert slow.intended(jaw, cube, 3.0) and not slow.intended(jaw, cube, 1.5)
+
+
+def test_a_robot_without_servo_data_gets_generic_drives_that_follow_its_plan(tmp_path, capsys):
+    """The planar 2R arm (1 m links, 1 kg point masses, no effort limits): a generic drive per joint
+    (stall twice the plan's peak torque, velocity and torque feed-forward) follows the plan closely, and
+    the report says what it assumed."""
+    plan = tmp_path / "p2r.yaml"
+    plan.write_text("robot: planar_2r\nstart: [0.3, 0.6]\ntasks:\n  - move: {joints: [1.0, 0.5]}\n"
+                    "  - move: {joints: [0.2, 0.9]}\nlimits: {velocity_scale: 0.5, acceleration_scale: 0.5}\n"
+                    "planner: {name: RRTConnect, time_budget: 10.0, seed: 1}\n")
+    traj = _plan(plan, tmp_path / "p2r.traj.json")
+    code, rep = _simulate(capsys, str(traj))
+    assert code == 0 and rep["ok"] and rep["objects"] == [] and rep["contacts"] == []
+    assert rep["tcp"]["max_mm"] < 5.0  # 1 m links: 5 mm is 0.3 deg
+    assert all(0.2 < j["peak_share_of_stall"] < 1.0 for j in rep["joints"])  # stall = twice the plan's peak torque
+    assert any("generic position drives" in n for n in rep["model"]["notes"])

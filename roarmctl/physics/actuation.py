@@ -101,7 +101,7 @@ def _generic(robot: Robot, traj) -> Actuation:
                          "(twice the planned motion's peak torque, at least 1 N m; assumed)")
         specs.append(generic_spec(robot.joint_names[i], e, float(robot.velocity_limits[i])))
     notes.append(f"{robot.name}: generic position drives (stall = effort limit, no-load speed = twice the velocity "
-                 "limit, full torque at 0.05 rad of error, velocity feed-forward; assumed) follow the planned motion")
+                 "limit, full torque at 0.05 rad of error, velocity and torque feed-forward; assumed) follow the planned motion")
     n = len(actuated)
     bank = ServoBank(actuated, specs, np.ones(n), np.ones(n), np.zeros(n))
     return Actuation(bank, [None] * n, [-1] * n, streamed=False, notes=notes)

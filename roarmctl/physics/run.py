@@ -26,11 +26,13 @@ import numpy as np
 from roarmctl.device.fwmath import command_to_goal
 from roarmctl.device.protocol import M3_FIELDS
 from roarmctl.device.schedule import build_schedule, default_latency, sample
+from roarmctl.errors import RoarmError
 from roarmctl.physics.actuation import Actuation
 from roarmctl.physics.contacts import Episode, Episodes, Policy
 from roarmctl.physics.servo_backend import PhysicsServos, physics_step
 from roarmctl.physics.setup import Setup, build
 from roarmctl.physics.world import World
+from roarmctl.robot.dynamics import inverse_dynamics
 from roarmctl.robot.model import Robot
 
 CONTACT_EVERY = 2  # physics steps between two looks at the contacts (2 ms: an episode shorter than that is missed)
@@ -201,10 +203,16 @@ def _drive_generic(traj, robot: Robot, setup: Setup, options: Options, rec: _Rec
     times = np.minimum(np.arange(1, n + 1) * dt, t_end) * options.speed_scale
     q_ref = sample(traj, times)
     qd_ref = np.column_stack([np.interp(times, traj.times, traj.velocities[:, j]) for j in range(robot.dof)])
+    qdd_ref = np.column_stack([np.interp(times, traj.times, traj.accelerations[:, j]) for j in range(robot.dof)])
     qd_ref *= options.speed_scale
+    qdd_ref *= options.speed_scale ** 2
+    try:  # the torque the planned motion needs, fed forward (robots without inertias: none)
+        tau_ref = inverse_dynamics(robot, q_ref, qd_ref, qdd_ref)
+    except RoarmError:
+        tau_ref = np.zeros_like(q_ref)
     last = [0.0]
     for k in range(n):
-        bank.follow(q_ref[k], qd_ref[k])
+        bank.follow(q_ref[k], qd_ref[k], tau_ref[k])
         physics_step(w, bank, dt, profile=False)
         rec()
         _progress_every(total, progress, w.time, last)

@@ -88,8 +88,9 @@ ST3235 = _st3235()
 def generic_spec(name: str, effort: float, velocity: float, *, error_at_full: float = 0.05) -> ServoSpec:
     """A position servo for a joint with effort limit ``effort`` (N m) and velocity limit ``velocity``
     (rad/s). **Assumed**: stall torque = the effort limit, no-load speed twice the velocity limit,
-    full torque at ``error_at_full`` rad of error, a 10 ms mechanical time constant, velocity
-    feed-forward, no dead band; positions in rad (``steps_per_rad`` 1)."""
+    full torque at ``error_at_full`` rad of error, a 10 ms mechanical time constant, velocity and torque
+    feed-forward (the planned motion's inverse dynamics, as an industrial drive's model-based control),
+    no dead band; positions in rad (``steps_per_rad`` 1)."""
     no_load = 2.0 * velocity
     return ServoSpec(f"generic {effort:g} N m", float(effort), float(no_load), steps_per_rad=1.0, kp=1.0 / error_at_full,
                      deadband=0.0, speed_quantum=0.0, armature=MECH_TIME_CONSTANT * effort / no_load, feedforward=True)
@@ -159,6 +160,7 @@ class ServoBank:
         # per channel: steps per joint unit with the sign, and the torque per unit of duty at the joint
         self._ks = [s.steps_per_rad * g for s, g in zip(self.spec, self.sign)]
         self._tau = [g * c * s.stall_torque for s, g, c in zip(self.spec, self.sign, self.count)]
+        self._ff = [0.0] * n  # feed-forward duty (generic drives)
 
     @property
     def n(self) -> int:
@@ -214,12 +216,14 @@ class ServoBank:
             self._vmax[c] = v if v > 0 else s.max_speed
             self._amax[c] = self.acc[c] * ACC_UNIT if self.acc[c] > 0 else math.inf
 
-    def follow(self, q_ref, qd_ref) -> None:
-        """Generic drives: the reference is the planned motion itself (positions (dof,) rad, speeds rad/s)."""
+    def follow(self, q_ref, qd_ref, tau_ref=None) -> None:
+        """Generic drives: the reference is the planned motion itself (positions (dof,) rad, speeds rad/s) and,
+        with ``tau_ref`` (dof,) N m, the torque it needs (fed forward)."""
         for c, j in enumerate(self.joint):
             self.ref[c] = self.zero[c] + self._ks[c] * float(q_ref[j])
             self.ref_vel[c] = self._ks[c] * float(qd_ref[j])
             self.goal[c] = self.ref[c]
+            self._ff[c] = 0.0 if tau_ref is None else float(tau_ref[j]) / (self.sign[c] * self.count[c] * self.spec[c].stall_torque)
 
     def torques(self, q: list[float], dt: float, profile: bool = True) -> list[float]:
         """Advance the profiles by ``dt`` (s) and return the duty torque (n,) N m at each channel's joint
@@ -237,7 +241,7 @@ class ServoBank:
                 err = 0.0
             duty = spec.kp * err
             if spec.feedforward:
-                duty += self.ref_vel[c] / (spec.steps_per_rad * spec.no_load_speed)
+                duty += self.ref_vel[c] / (spec.steps_per_rad * spec.no_load_speed) + self._ff[c]
             lim = self.limit[c]
             duty = lim if duty > lim else (-lim if duty < -lim else duty)
             self.duty[c] = duty
