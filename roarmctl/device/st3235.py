@@ -31,6 +31,9 @@ STEPS_PER_RAD = 4096 / (2 * math.pi)
 KP_PER_P = (1.04 / 2.94) / 25.0 / 32.0  # duty per step per unit of the P register (calibrated, see above)
 FIRMWARE_P = 16
 KP = FIRMWARE_P * KP_PER_P  # duty per step of position error, as the RoArm's firmware sets the loop
+#: Time (s) a joint lags a goal moving at constant speed: the P loop needs ``speed / no_load`` of full duty,
+#: i.e. ``speed / (no_load * kp * steps per rad)`` of error (no velocity feed-forward; 46 ms for P = 16).
+LOOP_LAG = 1.0 / (NO_LOAD_SPEED * KP * STEPS_PER_RAD)
 #: Servos per firmware joint field (the shoulder's two: IDs 12 and 13).
 SERVOS_PER_FIELD = {"shoulder": 2}
 #: Torque limit per field at boot, 0..1 (the gripper at 300 of 1000; the others at 1000).
