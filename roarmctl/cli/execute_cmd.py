@@ -16,6 +16,8 @@ from roarmctl.device.session import run_execution
 from roarmctl.errors import InputError
 from roarmctl.fileio import atomic_write_bytes
 
+SERVOS_HELP = ("The simulated servos: physics (default: MuJoCo, the ST3235 model with lag, gravity and torque limits; "
+               "docs/physics.md) or ideal (each servo runs its trapezoid exactly, no lag, no gravity).")
 SAG_HELP = ("Offset each goal by the servos' sag under gravity and the held payload (the ST3235's P-only loop; "
             "see docs/physics.md).")
 STRATEGY_HELP = ("Streaming strategy: timed (default), timed-acc, per-joint, timed-shared, dense, dense-ahead "
@@ -212,6 +214,7 @@ class _Display:
 # --------------------------------------------------------------------------- sim-device
 def sim_device(
     firmware: str | None = typer.Option(None, "--firmware", help="Which firmware to imitate: m3-0.84 (default), m3-2026, m2."),
+    servos: str = typer.Option("physics", "--servos", help=SERVOS_HELP),
     model: str | None = typer.Option(None, "--model", help="Imitate this robot's firmware, from its description's wire map "
                                         "(e.g. roarm_m2_s -> m2, roarm_m3_pro -> m3-0.84)."),
     info_print: int = typer.Option(2, "--info-print", help="InfoPrint level at start (factory 2 = continuous feedback)."),
@@ -264,7 +267,16 @@ def sim_device(
                        boot_mission=tuple(boot_mission))
     if not 0 < voltage < 100:
         raise InputError(f"--voltage: {voltage:g} V is not a supply voltage")
-    simulator = PtySimulator(config).start()
+    if servos not in ("physics", "ideal"):
+        raise InputError(f"--servos: '{servos}' is not physics or ideal")
+    factory = None
+    if servos == "physics":
+        from roarmctl.physics.servo_backend import for_firmware
+        from roarmctl.robot.loader import load_robot
+
+        arm = load_robot(model, trust_sidecar=True) if model is not None else load_robot("roarm_m2_s" if firmware == "m2" else "roarm_m3_pro")
+        factory = for_firmware(arm)
+    simulator = PtySimulator(config, servos=factory).start()
     made_link = False
     try:  # Ctrl-C, SIGTERM and SIGHUP (roarmctl.cli.signals) end it the same way: exit 0, link removed
         path = simulator.path
