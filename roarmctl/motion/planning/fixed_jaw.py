@@ -3,8 +3,8 @@
 A claw gripper such as the RoArm's has one fixed jaw and one jaw that swings toward it; the
 description gives the fixed jaw's face (``Gripper.fixed_jaw``). The moving jaw pushes the object
 against that face, so the object's centre ends up half its width (plus ``MARGIN``) from it, whatever
-point the TCP names. On the RoArm-M3 Waveshare's ``hand_tcp`` is 10 mm from the fixed face
-(link5 x = -0.0100 m, computed from Waveshare's link5.stl): a 40 mm cube centred on it would overlap
+point the TCP names. On the RoArm-M3 Waveshare's TCP is 10 mm from the fixed face (the
+description's ``gripper.fixed_jaw``, from Waveshare's CAD): a 40 mm cube centred on it would overlap
 the fixed jaw by 10 mm, which a plan may not ask of a real arm (the physics run shows it at once).
 
 * ``object_offset``: the vector from the TCP to the centre of an object of a given width resting
