@@ -20,7 +20,7 @@
 
 ``run_log`` is the run file: an execution log like ``execute``'s (``roarmctl.execlog/1``: every
 command with its time, feedback lines as the firmware would print them at ``feedback_rate``) with a
-``physics`` block (the report, and tracks of the joints and objects for viewers).
+``physics`` block (the report, tracks of the joints and objects, and the scene the run had, for viewers).
 """
 
 from __future__ import annotations
@@ -256,7 +256,7 @@ def run_log(traj, robot: Robot, setup: Setup, rec: Recording, options: Options, 
         "notes": list(setup.notes),
         "final_pose": {"world_m": [_r(v, 6) for v in robot.kin.fk(rec.q[-1])[:3, 3]]},
         "tracking": tracking, "sent": sent, "received": received,
-        "physics": report | {"tracks": tracks},
+        "physics": report | {"tracks": tracks, "scene": traj.scene},
     }
     json.dumps(log, allow_nan=False)  # a NaN in a report is a bug: fail here, not in the reader
     return log
