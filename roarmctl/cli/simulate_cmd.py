@@ -10,7 +10,7 @@ import typer
 from roarmctl.cli import common
 from roarmctl.cli.execute_cmd import SAG_HELP, STRATEGY_HELP
 from roarmctl.errors import InfeasibleError, InputError
-from roarmctl.fileio import atomic_write_json
+from roarmctl.fileio import atomic_write_json, check_output_file
 
 
 def register(app: typer.Typer) -> None:
@@ -54,6 +54,8 @@ def simulate(
         raise InputError(f"--tolerance: {tolerance:g} mm is out of range", "use 0.1 to 1000 mm")
     if not 0.0 <= settle <= 60.0:
         raise InputError(f"--settle: {settle:g} s is out of range", "use 0 to 60 s")
+    if output is not None:
+        check_output_file(output)  # before the run: a path that cannot be written fails at once
     traj = validate_trajectory(traj_path)
     robot = load_robot(robot_desc) if robot_desc is not None else robot_of(traj, str(traj_path))
     if robot_desc is not None:
