@@ -530,3 +530,24 @@ def test_execution_log_shows_the_measured_arm_as_a_ghost(chromium, planned, tmp_
         assert "no scene" in page.inner_text("#notes")
     finally:
         page.close()
+
+
+@pytest.mark.slow
+def test_physics_run_shows_the_simulated_arm_and_where_the_cube_went(planned, tmp_path):
+    """`roarmctl simulate`'s run file: the ghost is the simulated arm, and the simulated cube's outline ends where
+    plans/pick_place.yaml places it (within the run's own 10 mm placing tolerance)."""
+    import base64
+
+    from roarmctl.viz.web.sources import load_view_source, source_document
+
+    f, _ = planned["pick_place"]
+    run = tmp_path / "pick_place.run.json"
+    assert run_cli(["simulate", str(f), "-o", str(run)]) == 0
+    doc = source_document(load_view_source(run, f))
+    ghost = doc["ghost"]
+    assert ghost["label"] == "simulated"
+    (cube,) = ghost["items"]
+    assert doc["items"][cube["item"]]["name"] == "cube"
+    track = np.frombuffer(base64.b64decode(cube["track"]), dtype="<f4").reshape(doc["n"], 3, 4)
+    assert np.linalg.norm(track[-1, :, 3] - [0.25, 0.15, 0.02]) < 0.010
+    assert np.linalg.norm(track[0, :, 3] - [0.25, -0.15, 0.02]) < 0.002  # it started where it stood
