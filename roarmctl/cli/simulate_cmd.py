@@ -131,7 +131,8 @@ def _render(report: dict, output: Path | None) -> None:
                   "[bold red]yes[/]" if j.get("at_stall") else "no", need)
     out.print(t)
     tcp = report["tcp"]
-    out.print(f"TCP error: RMS {tcp['rms_mm']:.1f} mm, max {tcp['max_mm']:.1f} mm; final {tcp['final_mm']:.1f} mm"
+    out.print(f"TCP error: RMS {tcp['rms_mm']:.1f} mm, max {tcp['max_mm']:.1f} mm (against the plan {tcp['lag_ms']:.0f} ms "
+              f"late: RMS {tcp['rms_after_lag_mm']:.1f} mm); final {tcp['final_mm']:.1f} mm"
               + (f"; sag at rest up to {tcp['sag_mm']:.1f} mm" if tcp["sag_mm"] is not None else ""))
     for r in tcp["rests"]:
         out.print(f"  at rest {r['start_s']:.2f}-{r['end_s']:.2f} s ({r['label']}): {r['error_mm']:.1f} mm off, "

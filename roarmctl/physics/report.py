@@ -9,6 +9,7 @@
   the peak torque the plan needs there with the masses carried (``needed_nm``, RNEA of the planned
   motion; ``over_stall`` when it exceeds what the servos can give: the arm cannot follow the plan);
 * ``tcp``: the TCP error (our FK of the simulated joints against the FK of the plan; RMS, max, mm),
+  the lag that explains it best (``lag_ms``, and the RMS error against the plan delayed by it),
   the sag at rest (``rests``: for each stretch of at least ``REST_MIN`` s where the plan holds the arm
   still, the TCP error over its last ``REST_WINDOW`` s and how far below the plan, mm; ``sag_mm`` the
   largest) and the final error after settling;
@@ -47,6 +48,7 @@ REST_MIN = 0.3  # s: a rest shorter than this is not measured
 REST_WINDOW = 0.1  # s at the end of a rest over which its error is averaged
 STALL_TIME = 0.2  # s at the duty limit while nearly still: at stall
 STILL = 0.05  # rad/s: "nearly still"
+MAX_LAG = 0.2  # s: the longest lag looked for
 LIFTED_SHARE = 0.5  # of the planned lift
 
 
@@ -171,8 +173,22 @@ def _tcp(traj, robot: Robot, rec: Recording, plan: np.ndarray, moving: np.ndarra
         rests.append({"start_s": _r(a), "end_s": _r(b), "label": s[2], "error_mm": _r(float(np.linalg.norm(d)) * 1e3, 2),
                       "below_mm": _r(-d[2] * 1e3, 2)})
     final = float(np.linalg.norm(robot.kin.fk(rec.q[-1])[:3, 3] - robot.kin.fk(traj.positions[-1])[:3, 3]) * 1e3)
+    lag, lagged = _lag(traj, robot, rec.t[idx], sim, scale)
     return {"rms_mm": _r(np.sqrt(np.mean(e ** 2)), 2) if len(e) else None, "max_mm": _r(np.max(e), 2) if len(e) else None,
+            "lag_ms": lag, "rms_after_lag_mm": lagged,
             "sag_mm": max((float(r["error_mm"]) for r in rests), default=None), "final_mm": _r(final, 2), "rests": rests}
+
+
+def _lag(traj, robot: Robot, t: np.ndarray, sim: np.ndarray, scale: float) -> tuple[float | None, float | None]:
+    """The time (ms, 0-``MAX_LAG``) by which the simulated TCP follows the plan best, and the RMS error (mm)
+    against the plan delayed by it: how much of the tracking error is lag along the path."""
+    if len(t) < 2:
+        return None, None
+    shifts = np.arange(0.0, MAX_LAG + 1e-9, 0.002)
+    rms = [float(np.sqrt(np.mean(np.sum((sim - robot.kin.fk(_plan_at(traj, t - d, scale))[:, :3, 3]) ** 2, axis=1))))
+           for d in shifts]
+    k = int(np.argmin(rms))
+    return _r(shifts[k] * 1e3, 1), _r(rms[k] * 1e3, 2)
 
 
 def _rests(traj, robot: Robot) -> list[tuple[float, float, str]]:
