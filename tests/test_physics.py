@@ -156,6 +156,8 @@ def test_pick_place_places_the_cube_and_writes_a_run_file_export_reads(trajs, tm
     shoulder = next(j for j in rep["joints"] if j["name"] == "link1_to_link2")
     assert shoulder["stall_nm"] == pytest.approx(2 * 2.942, abs=0.01) and not shoulder["at_stall"]  # two servos
     assert 0 < rep["tcp"]["rms_mm"] < rep["tcp"]["max_mm"] < 40 and rep["tcp"]["sag_mm"] < 5
+    # the error is mostly lag along the path: about the P loop's 1 / (kp * steps/rad * no-load speed) = 46 ms
+    assert abs(rep["tcp"]["lag_ms"] - 1e3 * st3235.LOOP_LAG) < 15 and rep["tcp"]["rms_after_lag_mm"] < rep["tcp"]["rms_mm"] / 2
     log = json.loads(run.read_text())
     assert log["format"] == "roarmctl.execlog/1" and log["physics"]["objects"][0]["name"] == "cube"
     assert sum(1 for s in log["sent"] if s["cmd"]["T"] == 102) == rep["run"]["commands"] - sum(
