@@ -39,7 +39,8 @@
 #define KHEADER 7
 #define STEPI 5    /* kind (0 fixed, 1 revolute about local z, 2 revolute about another axis, 3 prismatic),
                       parent link, child link, q index, has post */
-#define STEPF 65   /* offset, A (16), B (16), C (16), post (16); see fk() */
+#define STEPF 66   /* offset, A (16), B (16), C (16), post (16), multiplier; see fk(). The joint value is
+                      multiplier * q + offset (1 for every joint but a URDF mimic joint's) */
 #define CHAINI 2   /* parent link, kind (0 revolute, 1 prismatic) */
 #define CHAINF 6   /* joint axis (3) and joint origin point (3), both in the parent link's frame */
 #define JOINTI 6   /* kind (0 fixed, 1 revolute, 2 prismatic), parent link, child link, q index or -1,
@@ -120,10 +121,10 @@ static inline const double *step_matrix(const Kin *m, int64_t s, double qv, doub
     if (kind == 0) {           /* fixed */
         return C;
     } else if (kind == 1) {    /* revolute about local z: origin @ Rz(q) = cos A + sin B + C */
-        double ang = qv + sf[0], c = cos(ang), sn = sin(ang);
+        double ang = sf[65] * qv + sf[0], c = cos(ang), sn = sin(ang);
         for (int k = 0; k < 12; k++) mm[k] = c * A[k] + sn * B[k] + C[k];  /* mat4mul reads no bottom row */
     } else if (kind == 2) {    /* revolute about the unit axis A[0..2]: origin @ Rodrigues */
-        double ang = qv + sf[0], c = cos(ang), sn = sin(ang), v = 1.0 - c;
+        double ang = sf[65] * qv + sf[0], c = cos(ang), sn = sin(ang), v = 1.0 - c;
         double x = A[0], y = A[1], z = A[2], r[16] = {0};
         r[0] = c + x * x * v;     r[1] = x * y * v - z * sn; r[2] = x * z * v + y * sn;
         r[4] = y * x * v + z * sn; r[5] = c + y * y * v;     r[6] = y * z * v - x * sn;
@@ -131,7 +132,7 @@ static inline const double *step_matrix(const Kin *m, int64_t s, double qv, doub
         r[15] = 1.0;
         mat4mul(C, r, mm);
     } else {                   /* prismatic: origin, moved by d along origin_rot @ axis (in A) */
-        double d = qv + sf[0];
+        double d = sf[65] * qv + sf[0];
         memcpy(mm, C, 16 * sizeof(double));
         mm[3] += d * A[0]; mm[7] += d * A[1]; mm[11] += d * A[2];
     }

@@ -216,15 +216,15 @@ def naive_link_frames(robot, q: np.ndarray) -> np.ndarray:
     frames = {names[0]: np.eye(4)}
     for joint in robot.joints:
         motion = np.eye(4)
-        # a mimic joint moves with the joint it follows (the loader folds its multiplier, +-1, into the axis)
+        # a mimic joint moves with the joint it follows: multiplier * q + offset (URDF <mimic>)
         qi = robot.joint_names.index(joint.mimic or joint.name) if joint.kind != "fixed" else None
         if joint.kind == "revolute":
             k = np.asarray(joint.axis, dtype=float)
             kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-            ang = q[qi] + joint.offset
+            ang = joint.multiplier * q[qi] + joint.offset
             motion[:3, :3] = np.eye(3) + math.sin(ang) * kx + (1 - math.cos(ang)) * kx @ kx
         elif joint.kind == "prismatic":
-            motion[:3, 3] = (q[qi] + joint.offset) * np.asarray(joint.axis, dtype=float)
+            motion[:3, 3] = (joint.multiplier * q[qi] + joint.offset) * np.asarray(joint.axis, dtype=float)
         frames[joint.child] = frames[joint.parent] @ joint.origin @ motion @ joint.post
     return np.array([frames[n] for n in names])
 

@@ -226,12 +226,13 @@ LIFT = """<robot name="lift">
 </robot>"""
 
 
-@pytest.mark.parametrize("mult", [1, -1])
+@pytest.mark.parametrize("mult", [1, -1, 0.5, -0.676])
 def test_mimic_joints_follow_their_joint(tmp_path, mult):
     """URDF <mimic>: the mimicking joints are not actuated; FK puts their links where multiplier x q +
     offset does (by hand), and RNEA adds their load to the joint they follow: holding the 2 kg
-    carriage with the 0.5 kg counterweight mimicking it needs (2 + 0.5) g N with multiplier 1 and
-    (2 - 0.5) g N with -1 (virtual work: the counterweight moves the other way)."""
+    carriage with the 0.5 kg counterweight mimicking it needs (2 + m 0.5) g N (virtual work: the
+    counterweight moves m times as far; -1 moves it the other way). -0.676 is the Kinova Gen3 lite
+    finger tip's multiplier (Kinovarobotics/ros2_kortex, gen3_lite.urdf)."""
     from roarmctl.robot.dynamics import gravity_vector
 
     (tmp_path / "lift.urdf").write_text(LIFT % mult)
@@ -247,10 +248,22 @@ def test_mimic_joints_follow_their_joint(tmp_path, mult):
     np.testing.assert_allclose(gravity_vector(robot, q), [(2.0 + mult * 0.5) * g, 0.0], atol=1e-9)
 
 
-def test_mimic_multiplier_other_than_one_is_refused(tmp_path):
-    (tmp_path / "lift.urdf").write_text(LIFT % "0.5")
-    with pytest.raises(DescriptionError, match="joint 'z2': mimic multiplier 0.5 is not supported"):
-        load_robot(str(tmp_path / "lift.urdf"))
+def test_revolute_mimic_with_a_multiplier_turns_that_much(tmp_path):
+    """A revolute finger mimicking with multiplier -0.676 and offset 0.149 (the Gen3 lite's tip joint)
+    turns by -0.676 q + 0.149 rad about its axis: its child's frame is Rz of that angle, by hand."""
+    urdf = """<robot name="f"><link name="a"/><link name="b"/><link name="c"/>
+      <joint name="j" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>
+        <limit lower="0" upper="0.85" effort="1" velocity="1"/></joint>
+      <joint name="k" type="revolute"><parent link="b"/><child link="c"/><origin xyz="0.1 0 0"/><axis xyz="0 1 0"/>
+        <limit lower="-1" upper="1" effort="1" velocity="1"/><mimic joint="j" multiplier="-0.676" offset="0.149"/></joint>
+    </robot>"""
+    (tmp_path / "f.urdf").write_text(urdf)
+    robot = load_robot(str(tmp_path / "f.urdf"))
+    q = 0.6
+    rel = np.linalg.inv(robot.kin.fk(np.array([q]), "b")) @ robot.kin.fk(np.array([q]), "c")
+    a = -0.676 * q + 0.149
+    np.testing.assert_allclose(rel[:3, :3], [[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]], atol=1e-12)
+    np.testing.assert_allclose(rel[:3, 3], [0.1, 0, 0], atol=1e-12)
 
 
 def test_a_finger_that_mimics_the_gripper_is_a_jaw(tmp_path):

@@ -7,8 +7,8 @@ only are constant; every other joint is one step, origin @ motion(q) @ post, wit
 about its local z axis (every URDF joint of the RoArm, every DH joint) as cos(q) A + sin(q) B + C
 (fixed 4x4 A, B, C), one about another unit axis u as origin @ Rodrigues(u, q), a prismatic one as
 the origin moved along its axis, and a DH ``post`` as a fixed product after the motion. A mimic joint
-reads the value of the joint it follows (its multiplier, +-1, and offset are folded into its axis
-and offset by the loader); a continuous joint is a revolute joint without limits. The collision
+reads the value of the joint it follows: its value is multiplier * q + offset (URDF ``<mimic>``; the
+step's multiplier is 1 for every other joint); a continuous joint is a revolute joint without limits. The collision
 checker, the Jacobian and the inverse dynamics (robot/dynamics.py) run on the same tables and the
 same C function.
 
@@ -132,7 +132,7 @@ class Kinematics:
             if post is not None:
                 rec[3] = post.ravel()
             steps_i += [_STEP_KIND[kind], parent, child, max(qi, 0), int(post is not None)]
-            steps_f += [np.array([float(joint.offset)]), rec.ravel()]
+            steps_f += [np.array([float(joint.offset)]), rec.ravel(), np.array([float(joint.multiplier)])]
         const_links = [i for i, c in enumerate(is_const) if c]
         chain_i: list[int] = []
         chain_f: list[float] = []
@@ -152,7 +152,9 @@ class Kinematics:
             at_origin = joint.kind != "prismatic" and np.array_equal(joint.post, eye)
             joints_i += [_JOINT_KIND[joint.kind], p, self._child[j], self._qidx[j], int(at_origin),
                          self._child.index(p) if p != 0 else -1]
-            joints_f += [np.asarray(joint.axis, dtype=float), joint.origin.ravel()]
+            # a mimic joint turns multiplier times as fast as the joint it follows, and its load counts
+            # multiplier times on that joint (virtual work): both are the axis scaled by the multiplier
+            joints_f += [np.asarray(joint.axis, dtype=float) * float(joint.multiplier), joint.origin.ravel()]
         n_chain = len(chain_i) // 2
         ints = [robot.dof, self.n_links, len(steps_i) // 5, len(const_links), n_chain, self.tcp_index, len(robot.joints)]
         self._ki = np.array(ints + const_links + steps_i + chain_i + joints_i, dtype=np.int64)

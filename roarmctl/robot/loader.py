@@ -317,19 +317,19 @@ def _frames(data: dict, where: str) -> dict:
     return out
 
 
-def _mimic(elem: ET.Element, axis: np.ndarray, where: str) -> tuple[str, np.ndarray, float]:
+def _mimic(elem: ET.Element, where: str) -> tuple[str, float, float]:
     """URDF ``<mimic joint= multiplier= offset=>``: value = multiplier * q[joint] + offset. Returns the
-    joint followed, and the axis and offset that give that motion from q[joint] itself (multiplier -1
-    turns the axis round: a turn of -q about a is a turn of q about -a)."""
+    joint followed, the multiplier (default 1) and the offset (default 0; rad or m)."""
     master = elem.get("joint")
     if not master:
         raise DescriptionError(f"{where}: <mimic> needs joint=...")
     mult = _fattr(elem, "multiplier", 1.0, f"{where} mimic")
     offset = _fattr(elem, "offset", 0.0, f"{where} mimic")
-    if mult not in (1.0, -1.0):
-        raise DescriptionError(f"{where}: mimic multiplier {mult:g} is not supported (1 or -1)",
-                               "make the joint fixed at a chosen value in a copy of the URDF")
-    return master, axis * mult, offset * mult
+    if mult == 0 or not math.isfinite(mult) or not math.isfinite(offset):
+        raise DescriptionError(f"{where}: mimic multiplier {mult:g} / offset {offset:g}: the multiplier must be a "
+                               "finite non-zero number and the offset finite",
+                               "make the joint fixed in a copy of the URDF if it does not move")
+    return master, mult, offset
 
 
 def _tool_joint(data: dict, where: str, parent: str, taken: set[str], lscale: float = 1.0,
@@ -465,11 +465,11 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
             if j.get("type") == "continuous":
                 lower, upper = -2 * math.pi, 2 * math.pi
             axis = axis / (np.linalg.norm(axis) or 1.0)
-            master, offset = None, 0.0
+            master, mult, offset = None, 1.0, 0.0
             if j.find("mimic") is not None and kind != "fixed":
-                master, axis, offset = _mimic(j.find("mimic"), axis, where)
+                master, mult, offset = _mimic(j.find("mimic"), where)
             ordered.append(Joint(name, kind, link, j.find("child").get("link"), _origin(j.find("origin"), where),
-                                 axis, lower=lower, upper=upper, offset=offset, mimic=master))
+                                 axis, lower=lower, upper=upper, offset=offset, mimic=master, multiplier=mult))
             stack.append(j.find("child").get("link"))
     actuated = [j.name for j in ordered if j.kind != "fixed" and j.mimic is None]
     for j in ordered:

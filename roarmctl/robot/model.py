@@ -52,7 +52,7 @@ def rpy_from_matrix(rot: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Joint:
-    """One joint: child frame = parent frame @ origin @ motion(q + offset) @ post.
+    """One joint: child frame = parent frame @ origin @ motion(multiplier * q + offset) @ post.
 
     ``origin`` and ``post`` are fixed 4x4 transforms (``post`` is identity for URDF joints and
     carries d/a/alpha for standard DH). ``axis`` is a unit 3-vector in the frame after ``origin``.
@@ -68,9 +68,11 @@ class Joint:
     lower: float = -np.pi
     upper: float = np.pi
     offset: float = 0.0
-    #: URDF ``<mimic>``: the joint moves with this actuated joint's value (its multiplier, 1 or -1, is
-    #: folded into ``axis`` and its offset into ``offset``); not itself an actuated joint.
+    #: URDF ``<mimic>``: the joint moves with this actuated joint's value, its own value being
+    #: ``multiplier * q[mimic] + offset`` (rad or m); not itself an actuated joint.
     mimic: str | None = None
+    #: 1 for every joint that is not a mimic joint.
+    multiplier: float = 1.0
 
 
 @dataclass(frozen=True)
