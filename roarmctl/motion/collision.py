@@ -133,7 +133,7 @@ class CollisionChecker:
         half = _half_extents(kind, size, radius, length, grow_scene, mesh)
         radius_bound = float(np.linalg.norm(half))
         if mesh is not None:  # the farthest vertex bounds the mesh more tightly than the box corner
-            radius_bound = float(np.max(np.linalg.norm(mesh.grown_vertices(max(grow_scene, 0.0)), axis=1)))
+            radius_bound = float(np.max(np.linalg.norm(mesh.grown(max(grow_scene, 0.0))[0], axis=1)))
         return _Moving(name, link, origin[:3, :3].copy(), origin[:3, 3].copy(), half,
                        _half_extents(kind, size, radius, length, grow_self, mesh),
                        radius_bound,

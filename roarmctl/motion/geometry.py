@@ -27,11 +27,10 @@ def fcl_geometry(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float 
     """An FCL geometry, every surface moved outwards by ``grow`` (m; negative shrinks).
 
     A mesh (``MeshGeometry``) becomes an FCL convex polytope (its hull), or a BVH of its triangles
-    when ``mesh.exact``; ``grow`` > 0 moves its vertices out along their normals.
+    when ``mesh.exact``; ``grow`` > 0 pads it (``MeshGeometry.grown``).
     """
     if kind == "mesh":
-        v = mesh.grown_vertices(max(grow, 0.0))
-        f = mesh.faces
+        v, f = mesh.grown(max(grow, 0.0))
         if mesh.exact:
             bvh = fcl.BVHModel()
             bvh.beginModel(len(v), len(f))
@@ -53,7 +52,7 @@ def fcl_geometry(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float 
 def half_extents(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0, mesh=None) -> np.ndarray:
     """Half extents (3,) of the shape's local bounding box, grown by ``grow``."""
     if kind == "mesh":
-        h = np.max(np.abs(mesh.grown_vertices(max(grow, 0.0))), axis=0)
+        h = np.max(np.abs(mesh.grown(max(grow, 0.0))[0]), axis=0)
         return np.maximum(h, 1e-6)
     if kind == "box":
         h = np.asarray(size, dtype=float) / 2

@@ -21,9 +21,9 @@ from roarmctl.robot import visuals
 from roarmctl.robot.frames import UNITS, Frame
 from roarmctl.robot.ik import IK_FAMILIES, ur6_params
 from roarmctl.robot.meshes import PACKAGE_PATHS, description_roots, load_mesh, mesh_modes, package_map, resolve
-from roarmctl.robot.model import CollisionShape, FixedJaw, Gripper, Inertial, Joint, Robot, WireField, transform
+from roarmctl.robot.model import CollisionShape, FixedJaw, Gripper, Inertial, Joint, Robot, WireField, axis_angle, transform
 from roarmctl.robot.singularity import MODELS
-from roarmctl.robot.srdf import read_joint_limits, read_srdf
+from roarmctl.robot.srdf import parse_srdf, read_joint_limits, read_srdf
 from roarmctl.robot.xacro_input import TRUST_ALL, expand
 
 FORMAT = "roarmctl.robot/1"
@@ -99,12 +99,63 @@ def load_robot(spec: str, trust_sidecar: bool = False) -> Robot:
         raise DescriptionError(f"{path}: tcp_link: '{robot.tcp_link}' is moved by the mimic joint '{mimic[0]}'",
                                "put the TCP on a link the arm joints move, e.g. the hand between the fingers")
     robot = _link_roles(robot, data, str(path))
-    # Links joined by a joint touch at the joint and their meshes usually overlap there: their pair is
-    # not checked (MoveIt Setup Assistant's "Adjacent" pairs, Drake's and PyBullet's default).
-    robot.allowed_collisions |= {frozenset((j.parent, j.child)) for j in robot.joints}
+    robot.notes = [f"{robot.name}: {n}" for n in robot.notes] + _default_notes(robot)
+    robot.allowed_collisions |= _adjacent_pairs(robot)
     checks.check_robot(robot, str(path))
     _CACHE[key] = robot
     return robot
+
+
+def _adjacent_pairs(robot: Robot) -> set[frozenset[str]]:
+    """Pairs of links joined by a joint, counting a link without collision geometry as transparent (its
+    neighbours are joined to each other, as MoveIt Setup Assistant's "Adjacent" pairs are computed,
+    moveit_setup_srdf_plugins compute_default_collisions.cpp): links that touch at a joint and whose
+    meshes usually overlap there are not checked against each other (Drake's and PyBullet's default too).
+    Franka's link7 and hand, joined through the geometry-less link8, are such a pair."""
+    near: dict[str, set[str]] = {name: set() for name in robot.link_names}
+    for j in robot.joints:
+        near[j.parent].add(j.child)
+        near[j.child].add(j.parent)
+    solid = {s.link for s in robot.collision}
+    for link in robot.link_names:
+        if link in solid:
+            continue
+        for a in list(near[link]):
+            for b in list(near[link]):
+                if a != b:
+                    near[a].add(b)
+                    near[b].add(a)
+    return {frozenset((a, b)) for a, bs in near.items() for b in bs}
+
+
+def _default_notes(robot: Robot) -> list[str]:
+    """One line naming the limits that are roarmctl's defaults (``robot.defaults``), with the values and
+    units by joint type, or none."""
+    if not robot.defaults:
+        return []
+    kinds = {n: j.kind for j in robot.joints for n in [j.name]}
+
+    def unit(name: str, power: int) -> str:
+        return ("m" if kinds.get(name) == "prismatic" else "rad") + ("/s" if power == 1 else f"/s^{power}")
+
+    parts = []
+    for key, power in (("velocity", 1), ("acceleration", 2), ("jerk", 3)):
+        js = robot.defaults.get(key)
+        if not js:
+            continue
+        if key == "jerk":
+            parts.append(f"jerk = acceleration limit x {DEFAULT_JERK_PER_ACCELERATION:g}/s (full acceleration in "
+                         f"{1 / DEFAULT_JERK_PER_ACCELERATION:g} s) for "
+                         + ("every joint" if len(js) == robot.dof else ", ".join(js)))
+            continue
+        value = DEFAULT_VELOCITY if key == "velocity" else DEFAULT_ACCELERATION
+        groups: dict[str, list[str]] = {}
+        for n in js:
+            groups.setdefault(unit(n, power), []).append(n)
+        parts.append(f"{key} " + "; ".join(f"{value:g} {u} for " + ("every joint" if len(g) == robot.dof else ", ".join(g))
+                                         for u, g in groups.items()))
+    return [f"{robot.name}: limits the description does not give, roarmctl's defaults used: " + "; ".join(parts)
+            + " (set them in the sidecar's limits:)"]
 
 
 def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
@@ -151,6 +202,19 @@ def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
             seeds = [moving[-1].child] if moving else [robot.tcp_link]
         jaws = tuple(dict.fromkeys(link for s in seeds for link in fixed_group(s)))
     robot.jaw_links = jaws
+    if robot.gripper is not None:
+        # The gripper's moving parts (everything the gripper joint and the joints mimicking it move) touch
+        # each other by design: fingers that close on nothing, a four-bar's knuckles. They are not checked
+        # against each other (MoveIt Setup Assistant finds such pairs by sampling); against the rest, they are.
+        below: dict[str, list[str]] = {}
+        for j in robot.joints:
+            below.setdefault(j.parent, []).append(j.child)
+        parts, todo = set(), [j.child for j in robot.joints_moved_by(robot.gripper.joint)]
+        while todo:
+            link = todo.pop()
+            parts.add(link)
+            todo.extend(below.get(link, []))
+        robot.allowed_collisions |= {frozenset((a, b)) for a in parts for b in parts if a < b}
 
     sm = robot.singularity_model
     if sm is not None and sm not in MODELS:
@@ -235,12 +299,25 @@ def _per_joint(data: dict, key: str, names: list[str], default: np.ndarray, wher
 
 
 def _common(data: dict, path: Path, names: list[str], velocity: np.ndarray, acceleration: np.ndarray,
-            effort: np.ndarray | None = None) -> dict:
-    """Sidecar fields shared by the URDF and DH formats."""
+            effort: np.ndarray | None = None, defaulted: dict[str, set[str]] | None = None) -> dict:
+    """Sidecar fields shared by the URDF and DH formats.
+
+    ``defaulted``: limit kind -> joints whose value in ``velocity`` / ``acceleration`` is roarmctl's
+    default (the description gave none); those the sidecar's ``limits`` sets are dropped from it, and
+    jerk is defaulted wherever the sidecar gives none. Returned as ``defaults`` (kind -> joint names)."""
     where = str(path)
     limits = data.get("limits", {}) or {}
     if not isinstance(limits, dict):
         raise DescriptionError(f"{where}: limits: expected a mapping with 'velocity' and 'acceleration'")
+
+    def given(key: str) -> set[str]:
+        value = limits.get(key)
+        return set(names) if isinstance(value, list) else set(value) if isinstance(value, dict) else set()
+
+    defaults = {key: [n for n in names if n in (defaulted or {}).get(key, set()) and n not in given(key)]
+                for key in ("velocity", "acceleration")}
+    defaults["jerk"] = [n for n in names if n not in given("jerk")]
+    defaults = {k: v for k, v in defaults.items() if v}
     vel = _per_joint(limits, "velocity", names, velocity, f"{where}: limits")
     acc = _per_joint(limits, "acceleration", names, acceleration, f"{where}: limits")
     jerk = _per_joint(limits, "jerk", names, acc * DEFAULT_JERK_PER_ACCELERATION, f"{where}: limits")
@@ -290,6 +367,7 @@ def _common(data: dict, path: Path, names: list[str], velocity: np.ndarray, acce
             raise DescriptionError(f"{where}: allowed_collisions[{i}]: expected a pair of link names")
         allowed.add(frozenset(str(p) for p in pair))
     return dict(velocity_limits=vel, acceleration_limits=acc, jerk_limits=jerk, effort_limits=eff, gripper=gripper, named_poses=poses, wire=wire,
+                defaults=defaults,
                 allowed_collisions=allowed, singularity_model=data.get("singularity_model"),
                 description=str(data.get("description", "")), frames=_frames(data, where))
 
@@ -397,25 +475,35 @@ def _read_urdf(urdf: Path, side: dict, sidecar: Path) -> ET.Element:
         raise DescriptionError(f"{urdf}: not valid XML ({exc})") from None
 
 
-def _moveit(side: dict, sidecar: Path, joints_xml: list, links: dict, actuated: list[str]) -> tuple[dict, dict]:
-    """Merge the SRDF's fields into a copy of the sidecar (the sidecar wins); read joint_limits.yaml."""
+def _moveit(side: dict, sidecar: Path, ordered: list[Joint], links: dict, actuated: list[str]) -> tuple[dict, dict]:
+    """Merge the SRDF's fields into a copy of the sidecar (the sidecar wins); read joint_limits.yaml.
+
+    The copy's ``_driven`` holds the joints to drive when the sidecar lists none (the SRDF's arm and
+    gripper groups' joints, passive joints left out), ``_notes`` what was left out."""
     side = dict(side)
+    side["_driven"], side["_notes"] = list(actuated), []
     jl: dict = {}
     if side.get("joint_limits") is not None:
-        jl = read_joint_limits(sidecar.parent / str(side["joint_limits"]), set(actuated), str(sidecar), roots=side.get("_roots"))
+        jl = read_joint_limits(sidecar.parent / str(side["joint_limits"]), {j.name for j in ordered if j.kind != "fixed"},
+                               str(sidecar), roots=side.get("_roots"))
     if side.get("srdf") is None:
         return side, jl
-    jinfo = {j.get("name"): (j.get("type"), j.find("child").get("link")) for j in joints_xml}
-    got = read_srdf((sidecar.parent / str(side["srdf"])).resolve(), jinfo, set(links), side, str(sidecar))
+    jinfo = {j.name: (j.kind, j.child, j.mimic, j.parent) for j in ordered}
+    root, src = parse_srdf((sidecar.parent / str(side["srdf"])).resolve(), side, sidecar, str(sidecar))
+    got = read_srdf(root, src, jinfo, set(links), side, str(sidecar))
+    side["_notes"] = list(got["notes"])
+    driven = [a for a in actuated if a not in got["passive_joints"]]
+    if got.get("planned_joints"):
+        driven = [a for a in driven if a in got["planned_joints"]]
     side["allowed_collisions"] = list(got["allowed_collisions"]) + list(side.get("allowed_collisions") or [])
     if "tcp_link" in got:
         side.setdefault("tcp_link", got["tcp_link"])
     if "gripper" in got:
         side.setdefault("gripper", got["gripper"])
-    if "joints" not in side and got.get("gripper_joint") in actuated:  # gripper last
-        side["joints"] = [j for j in actuated if j != got["gripper_joint"]] + [got["gripper_joint"]]
-    names = list(side.get("joints", actuated))
-    grip = (side.get("gripper") or {}).get("joint") if isinstance(side.get("gripper"), dict) else None
+    grip = (side.get("gripper") or {}).get("joint") if isinstance(side.get("gripper"), dict) else got.get("gripper_joint")
+    if "joints" not in side and grip in driven:  # gripper last
+        side["joints"] = [j for j in driven if j != grip] + [grip]
+    names = list(side.get("joints", driven))
     arm = [n for n in names if n != grip]
     poses = dict(side.get("named_poses") or {})
     for pname, values in got["named_poses_by_joint"].items():
@@ -426,7 +514,30 @@ def _moveit(side: dict, sidecar: Path, joints_xml: list, links: dict, actuated: 
         grip_value = [values[grip]] if grip is not None and grip in values and grip in names else []
         poses.setdefault(pname, [values[n] for n in arm] + grip_value)
     side["named_poses"] = poses
+    side["_driven"] = driven
     return side, jl
+
+
+def _rest_value(joint: Joint) -> float:
+    """Where a movable joint that nothing drives is held: 0 when its limits allow it, else the middle of
+    its range (MoveIt's default joint position, moveit_core RevoluteJointModel/PrismaticJointModel
+    ``computeVariablePositions``)."""
+    return 0.0 if joint.lower <= 0.0 <= joint.upper else 0.5 * (joint.lower + joint.upper)
+
+
+def _held(ordered: list[Joint], held: list[str]) -> list[Joint]:
+    """``ordered`` with every joint in ``held`` (and every joint mimicking one) made fixed at its rest value."""
+    rest = {j.name: _rest_value(j) for j in ordered if j.name in held}
+    out = []
+    for j in ordered:
+        lead = j.name if j.name in rest else j.mimic if j.mimic in rest else None
+        if lead is None:
+            out.append(j)
+            continue
+        value = j.multiplier * rest[lead] + j.offset
+        motion = axis_angle(j.axis, value) if j.kind == "revolute" else transform(value * np.asarray(j.axis))
+        out.append(Joint(j.name, "fixed", j.parent, j.child, j.origin @ motion @ j.post))
+    return out
 
 
 def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
@@ -475,17 +586,28 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     for j in ordered:
         if j.mimic is not None and j.mimic not in actuated:
             raise DescriptionError(f"{urdf}: joint '{j.name}' mimic joint: '{j.mimic}' is not a movable, non-mimic joint")
-    side, jl = _moveit(side, sidecar, joints_xml, links, actuated)
-    names = list(side.get("joints", actuated))
+    side, jl = _moveit(side, sidecar, ordered, links, actuated)
+    notes: list[str] = list(side.pop("_notes"))
+    driven = side.pop("_driven")
+    names = list(side.get("joints", driven))
     for n in names:
         if n not in actuated:
             mimics = next((j.mimic for j in ordered if j.name == n and j.mimic), None)
             raise DescriptionError(f"{sidecar}: joints: '{n}' is not a movable joint of {urdf.name}"
                                    + (f" (it mimics '{mimics}')" if mimics else ""))
-    urdf_vel, urdf_eff = [], []
+    held = [a for a in actuated if a not in names]
+    if held:  # a movable joint that nothing drives (not in joints:, or SRDF-passive) stays where it rests
+        rest = {j.name: _rest_value(j) for j in ordered if j.name in held}
+        notes.append("joint(s) not driven, held still: " + ", ".join(
+            f"{n} at {rest[n]:g} {'m' if next(j for j in ordered if j.name == n).kind == 'prismatic' else 'rad'}"
+            for n in held) + " (list them in the sidecar's joints: to drive them)")
+        ordered = _held(ordered, held)
+    urdf_vel, urdf_eff, vel_default = [], [], set()
     for n in names:
         lim = next(j for j in joints_xml if j.get("name") == n).find("limit")
         v = _fattr(lim, "velocity", 0.0, f"{urdf}: joint '{n}' limit")
+        if "velocity" not in jl.get(n, {}) and not v > 0:
+            vel_default.add(n)
         urdf_vel.append(jl.get(n, {}).get("velocity", v if v > 0 else DEFAULT_VELOCITY))
         e = _fattr(lim, "effort", 0.0, f"{urdf}: joint '{n}' limit")
         urdf_eff.append(e if e > 0 else np.inf)  # URDF effort 0 means unset
@@ -493,7 +615,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
 
     meshes = {"urdf": urdf, "packages": package_map(side.get("packages"), sidecar, str(sidecar)),
               "modes": mesh_modes(side.get("mesh_collision"), list(links), str(sidecar)), "roots": side.get("_roots")}
-    inertials, shapes = {}, []
+    inertials, shapes, massless = {}, [], []
     for lname, el in links.items():
         inn = el.find("inertial")
         if inn is not None and inn.find("mass") is not None:
@@ -505,8 +627,16 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
                                [g.get("ixz", 0), g.get("iyz", 0), g.get("izz", 0)]])
             r = o[:3, :3]
             inertials[lname] = Inertial(_fattr(inn.find("mass"), "value", 0.0, f"{urdf}: link '{lname}' mass"), o[:3, 3], r @ tensor @ r.T)
+        else:
+            # URDF: a link without <inertial> has no mass. Said when the link has a body (collision geometry):
+            # a frame link without one is massless by design
+            inertials[lname] = Inertial(0.0, np.zeros(3), np.zeros((3, 3)))
+            if el.find("collision") is not None:
+                massless.append(lname)
         for k, c in enumerate(el.findall("collision")):
             shapes.extend(_urdf_shape(lname, c, f"{urdf}: link '{lname}' collision[{k}]", k, meshes))
+    if massless:
+        notes.append(f"link(s) with collision geometry but no <inertial>, taken as massless: {', '.join(massless)}")
     tcp = side.get("tcp_link", next((j.child for j in reversed(ordered) if j.mimic is None), ordered[-1].child))
     if tcp not in links:
         raise DescriptionError(f"{sidecar}: tcp_link: '{tcp}' is not a link of {urdf.name}")
@@ -515,7 +645,9 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         ordered.append(tool)
         tcp = tool.child
     acc = np.array([jl.get(n, {}).get("acceleration", DEFAULT_ACCELERATION) for n in names])
-    common = _common(side, sidecar, names, np.array(urdf_vel), acc, np.array(urdf_eff))
+    acc_default = {n for n in names if "acceleration" not in jl.get(n, {})}
+    common = _common(side, sidecar, names, np.array(urdf_vel), acc, np.array(urdf_eff),
+                     {"velocity": vel_default, "acceleration": acc_default})
     return Robot(
         name=str(side.get("name", root.get("name", urdf.stem))),
         source=str(side.get("source", urdf.name)),
@@ -529,6 +661,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         collision=shapes,
         visual_source=visuals.source_of(((n, k, v) for n, e in links.items() for k, v in enumerate(e.findall("visual"))),
                                         meshes, root, _urdf_shape),
+        notes=notes,
         **common,
     )
 
@@ -672,7 +805,8 @@ def _from_dh(path: Path, data: dict) -> Robot:
             inertia = np.array([_vec(r, 3, f"{loc}.inertia") for r in inertia])
         inertials[link] = Inertial(_num(item["mass"], f"{loc}.mass"), _vec(item.get("com", [0, 0, 0]), 3, f"{loc}.com") * lscale, inertia)
     vel_default = np.full(len(names), DEFAULT_VELOCITY)
-    common = _common(data, path, names, vel_default, np.full(len(names), DEFAULT_ACCELERATION))
+    common = _common(data, path, names, vel_default, np.full(len(names), DEFAULT_ACCELERATION),
+                     defaulted={"velocity": set(names), "acceleration": set(names)})
     if deg:
         for key in ("velocity_limits", "acceleration_limits", "jerk_limits"):
             if (data.get("limits") or {}).get(key.split("_")[0]) is not None:

@@ -42,6 +42,15 @@ def transform(xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
     return t
 
 
+def axis_angle(axis, angle: float) -> np.ndarray:
+    """4x4 rotation by ``angle`` (rad) about the unit 3-vector ``axis`` (Rodrigues' formula)."""
+    k = np.asarray(axis, dtype=float)
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    t = np.eye(4)
+    t[:3, :3] = np.eye(3) + np.sin(angle) * kx + (1.0 - np.cos(angle)) * (kx @ kx)
+    return t
+
+
 def rpy_from_matrix(rot: np.ndarray) -> np.ndarray:
     """URDF roll-pitch-yaw (rad, shape (3,)) of a 3x3 rotation; inverse of ``transform``'s rotation."""
     pitch = np.arctan2(-rot[2, 0], np.hypot(rot[0, 0], rot[1, 0]))
@@ -215,6 +224,12 @@ class Robot:
     derived: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
     #: The URDF's ``<visual>`` elements, read only for pictures (``roarmctl.robot.visuals``); None without any.
     visual_source: Any = field(default=None, repr=False, compare=False)
+    #: Limit kind ("velocity", "acceleration", "jerk") -> joints whose limit is roarmctl's default
+    #: because the description gives none (said once by the CLI, written into the trajectory).
+    defaults: dict[str, list[str]] = field(default_factory=dict)
+    #: What the loader chose or left out, one line each (held joints, massless links, SRDF parts
+    #: not used, defaults); the CLI prints them once.
+    notes: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.kin = Kinematics(self)

@@ -1,21 +1,29 @@
 """MoveIt's SRDF and joint_limits.yaml, turned into sidecar fields.
 
-SRDF (``srdf: file.srdf`` in the sidecar):
+SRDF (``srdf: file.srdf`` in the sidecar; a ``.xacro`` SRDF is expanded like the URDF, with the same
+``xacro_args`` and ``packages``):
 - ``disable_collisions`` -> ``allowed_collisions`` pairs;
 - the arm group (``arm_group``, else the group with a ``chain``) -> ``tcp_link`` (the chain's tip)
   and its ``group_state``s -> ``named_poses`` (every arm joint must have a value);
-- the gripper group (``end_effector``'s group, else ``gripper_group``, else a group named
-  ``gripper``) -> ``gripper.joint`` (its one movable joint), and its ``group_state``s named
-  ``open`` and ``close``/``closed`` -> ``gripper.open`` / ``gripper.closed``;
-- ``virtual_joint`` of type fixed is accepted (the URDF root is fixed to the world). Anything else
-  (passive joints, other virtual joints, unknown elements) is an error: nothing is dropped silently.
+- ``passive_joint``: joints that no motor drives (MoveIt Setup Assistant writes one for every mimic
+  finger joint); a passive joint that is not a mimic joint is held still, like a movable joint the
+  sidecar's ``joints`` does not list;
+- the gripper group: ``gripper_group`` when the sidecar names it, else the first of the end effectors'
+  groups, a group named ``gripper`` or ``hand`` that drives exactly one joint (mimic and passive joints
+  follow, they are not counted) -> ``gripper.joint``, and its ``group_state``s named ``open`` and
+  ``close``/``closed`` (any case) -> ``gripper.open`` / ``gripper.closed``. A sidecar ``gripper:``
+  wins over all of it (the SRDF's group is then only used to sort its states);
+- ``virtual_joint`` of type fixed is accepted (the URDF root is fixed to the world).
+Other groups' states and unknown elements are left out with a note (``notes``); elements whose meaning
+would change the robot (floating virtual joints, ``disable_default_collisions``) are errors.
 
 joint_limits.yaml (``joint_limits: file.yaml``): per joint ``has_velocity_limits`` /
 ``max_velocity``, ``has_acceleration_limits`` / ``max_acceleration``, ``has_position_limits`` /
 ``min_position`` / ``max_position``; a limit whose ``has_*`` is false is not used (the URDF's or the
 sidecar's applies). ``default_velocity_scaling_factor`` / ``default_acceleration_scaling_factor``
 are MoveIt's per-request defaults: read and checked, not limits (the plan file's
-``velocity_scale`` plays that role). Jerk limits are refused when switched on.
+``velocity_scale`` plays that role). Jerk limits are refused when switched on. Entries for joints
+that roarmctl does not drive (mimic fingers) are read and checked but not used.
 """
 
 from __future__ import annotations
@@ -30,24 +38,31 @@ from roarmctl.fileio import Roots, read_text
 from roarmctl.validation import load_yaml
 
 SRDF_BYTES = 16 * 1024 * 1024  # an SRDF may have (MoveIt's of published arms: < 100 KiB)
-_KNOWN = {"group", "group_state", "disable_collisions", "end_effector", "virtual_joint", "disable_default_collisions"}
+_KNOWN = {"group", "group_state", "disable_collisions", "end_effector", "virtual_joint", "disable_default_collisions",
+          "passive_joint"}
+_OPEN = ("open",)
+_CLOSED = ("close", "closed")
 
 
-def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, where: str) -> dict[str, Any]:
-    """Sidecar fields from an SRDF. ``joints``: URDF joint name -> (type), ``links``: URDF link names."""
-    text = read_text(path, f"{where}: srdf", SRDF_BYTES, roots=side.get("_roots"), error=DescriptionError,
-                     hint="the path is relative to the sidecar YAML")
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as exc:
-        raise DescriptionError(f"{path}: not valid XML ({exc})") from None
-    src = str(path)
+def read_srdf(root: ET.Element, src: str, joints: dict[str, tuple[str, str, str | None, str]], links: set[str], side: dict,
+              where: str) -> dict[str, Any]:
+    """Sidecar fields from a parsed SRDF (``root``; ``src`` names its file in messages).
+
+    ``joints``: URDF joint name -> (type, child link, joint it mimics or None, parent link); ``links``: URDF link
+    names; ``side``: the sidecar (``arm_group``, ``gripper_group``, ``gripper`` are read).
+    Returns ``allowed_collisions``, ``named_poses_by_joint``, ``passive_joints``, ``notes`` and, when
+    found, ``tcp_link``, ``gripper_joint``, ``gripper`` and ``planned_joints`` (the joints of the arm
+    group and the gripper joint: a movable joint in neither is held still, as MoveIt leaves it).
+    """
     groups: dict[str, ET.Element] = {}
+    notes: list[str] = []
+    passive: list[str] = []
     for el in root:
         if not isinstance(el.tag, str):
             continue
         if el.tag not in _KNOWN:
-            raise DescriptionError(f"{src}: <{el.tag}> is not supported (roarmctl reads {', '.join(sorted(_KNOWN))})")
+            notes.append(f"{src}: <{el.tag}> not used (roarmctl reads {', '.join(sorted(_KNOWN - {'disable_default_collisions'}))})")
+            continue
         if el.tag == "group":
             groups[el.get("name", "")] = el
         if el.tag == "virtual_joint" and el.get("type") != "fixed":
@@ -55,6 +70,10 @@ def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, w
                                    f"(only a fixed mounting)")
         if el.tag == "disable_default_collisions":
             raise DescriptionError(f"{src}: disable_default_collisions is not supported; list the pairs instead")
+        if el.tag == "passive_joint":
+            if el.get("name") not in joints:
+                raise DescriptionError(f"{src}: passive_joint: '{el.get('name')}' is not a joint of the URDF")
+            passive.append(el.get("name"))
 
     def check_link(name: str | None, what: str) -> str:
         if name not in links:
@@ -65,7 +84,7 @@ def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, w
         for chain in g.findall("chain"):
             check_link(chain.get("base_link"), f"group '{gname}' chain base_link")
             check_link(chain.get("tip_link"), f"group '{gname}' chain tip_link")
-    out: dict[str, Any] = {}
+    out: dict[str, Any] = {"passive_joints": passive, "notes": notes}
     pairs = []
     for el in root.iter("disable_collisions"):
         pairs.append([check_link(el.get("link1"), "disable_collisions link1"),
@@ -84,10 +103,16 @@ def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, w
                 js.append(el.get("name"))
             elif el.tag == "link":
                 ln = check_link(el.get("name"), f"group '{name}' link")
-                js.extend(j for j, (_, child) in joints.items() if child == ln)
-            elif el.tag == "chain":
-                check_link(el.get("base_link"), f"group '{name}' chain base_link")
-                check_link(el.get("tip_link"), f"group '{name}' chain tip_link")
+                js.extend(j for j, (_, child, _m, _p) in joints.items() if child == ln)
+            elif el.tag == "chain":  # the joints from the base link down to the tip
+                base = check_link(el.get("base_link"), f"group '{name}' chain base_link")
+                link = check_link(el.get("tip_link"), f"group '{name}' chain tip_link")
+                up = {child: (j, parent) for j, (_, child, _m, parent) in joints.items()}
+                chain: list[str] = []
+                while link != base and link in up:
+                    chain.append(up[link][0])
+                    link = up[link][1]
+                js.extend(reversed(chain))
             elif el.tag == "group":
                 if el.get("name") in seen:
                     raise DescriptionError(f"{src}: group '{name}' includes itself")
@@ -96,14 +121,39 @@ def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, w
                 raise DescriptionError(f"{src}: group '{name}': <{el.tag}> is not supported (joint, link, chain, group)")
         return js
 
-    ee = next(iter(root.iter("end_effector")), None)
-    grip_group = side.get("gripper_group") or (ee.get("group") if ee is not None else None) or \
-        ("gripper" if "gripper" in groups else None)
+    def driven(name: str) -> list[str]:
+        """The group's joints that a motor drives: movable, not mimicking another, not passive."""
+        return [j for j in dict.fromkeys(group_joints(name))
+                if joints[j][0] != "fixed" and joints[j][2] is None and j not in passive]
+
+    for key in ("gripper_group", "arm_group"):
+        value = side.get(key)
+        if value is not None and value not in groups:
+            raise DescriptionError(f"{where}: {key}: '{value}' is not a group of {Path(src).name} (groups: {', '.join(groups)})")
+    side_grip = side.get("gripper") if isinstance(side.get("gripper"), dict) else None
+    ees = list(root.iter("end_effector"))
+    grip_group = side.get("gripper_group")
+    if grip_group is not None:
+        if side_grip is None and len(driven(grip_group)) != 1:
+            moved = driven(grip_group)
+            raise DescriptionError(f"{src}: gripper group '{grip_group}' drives {len(moved)} joints "
+                                   f"({', '.join(moved) or 'none'}); roarmctl drives one gripper joint",
+                                   "name the gripper joint in the sidecar: gripper: {joint, open, closed}")
+    else:
+        candidates = [e.get("group") for e in ees] + [n for n in groups if n.lower() in ("gripper", "hand")]
+        for c in dict.fromkeys(c for c in candidates if c in groups):
+            if side_grip is not None and side_grip.get("joint") in group_joints(c):
+                grip_group = c
+                break
+            if side_grip is None and len(driven(c)) == 1:
+                grip_group = c
+                break
+        if grip_group is None and side_grip is None and candidates:
+            notes.append(f"{src}: no group drives exactly one joint ({', '.join(dict.fromkeys(c for c in candidates if c in groups))}"
+                         "): no gripper taken from the SRDF (give gripper: {joint, open, closed} in the sidecar)")
+    ee = next((e for e in ees if e.get("group") == grip_group), ees[0] if ees else None)
     arm_group = side.get("arm_group") or next((n for n, g in groups.items() if g.find("chain") is not None
                                                and n != grip_group), None)
-    for key, value in (("gripper_group", side.get("gripper_group")), ("arm_group", side.get("arm_group"))):
-        if value is not None and value not in groups:
-            raise DescriptionError(f"{where}: {key}: '{value}' is not a group of {path.name} (groups: {', '.join(groups)})")
     if arm_group is None and grip_group is not None:  # an arm group given as joints: the other group
         # holding only non-gripper movable joints and not composed of groups (e.g. Franka's 'arm')
         plain = [n for n, g in groups.items() if n != grip_group and g.find("group") is None and g.find("chain") is None]
@@ -115,12 +165,10 @@ def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, w
         elif ee is not None and ee.get("parent_link"):  # no chain: the end effector's mounting link
             out["tcp_link"] = check_link(ee.get("parent_link"), "end_effector parent_link")
     gripper_joint = None
-    if grip_group is not None:
-        movable = [j for j in dict.fromkeys(group_joints(grip_group)) if joints[j][0] != "fixed"]
-        if len(movable) != 1:
-            raise DescriptionError(f"{src}: gripper group '{grip_group}' has {len(movable)} movable joints "
-                                   f"({', '.join(movable) or 'none'}); roarmctl drives one gripper joint")
-        gripper_joint = movable[0]
+    if side_grip is not None:
+        gripper_joint = side_grip.get("joint")
+    elif grip_group is not None:
+        gripper_joint = driven(grip_group)[0]
         out["gripper_joint"] = gripper_joint
     poses: dict[str, dict[str, float]] = {}
     grip_states: dict[str, float] = {}
@@ -138,24 +186,48 @@ def read_srdf(path: Path, joints: dict[str, str], links: set[str], side: dict, w
             if not math.isfinite(values[j.get("name")]):
                 raise DescriptionError(f"{src}: group_state '{name}' joint '{j.get('name')}' value: not a finite number: "
                                        f"{j.get('value')!r}")
-        if group == grip_group and gripper_joint is not None:
-            grip_states[name] = values.get(gripper_joint, math.nan)
+        if group == grip_group and grip_group is not None:
+            grip_states[str(name).lower()] = values.get(gripper_joint, math.nan) if gripper_joint else math.nan
         elif group == arm_group:
             poses[name] = values
         elif group in groups and arm_group is not None and {g.get("name") for g in groups[group].findall("group")} \
                 >= {arm_group} and set(group_joints(group)) <= set(group_joints(arm_group)) | {gripper_joint}:
             poses[name] = values  # a group of the arm and gripper groups: a pose with the gripper's value
         else:
-            raise DescriptionError(f"{src}: group_state '{name}' is for group '{group}', which is neither the arm "
-                                   f"group ('{arm_group}') nor the gripper group ('{grip_group}')",
-                                   "name the groups with arm_group / gripper_group in the sidecar")
+            notes.append(f"{src}: group_state '{name}' of group '{group}' not used (neither the arm group "
+                         f"'{arm_group}' nor the gripper group '{grip_group}'; name them with arm_group / gripper_group)")
     out["named_poses_by_joint"] = poses
-    if gripper_joint is not None:
-        opened = grip_states.get("open")
-        closed = grip_states.get("close", grip_states.get("closed"))
+    if arm_group is not None:  # what MoveIt plans: the arm and gripper groups' joints (others stay still)
+        out["planned_joints"] = driven(arm_group) + ([gripper_joint] if gripper_joint else [])
+    if gripper_joint is not None and side_grip is None:
+        opened = next((grip_states[k] for k in _OPEN if k in grip_states), None)
+        closed = next((grip_states[k] for k in _CLOSED if k in grip_states), None)
         if opened is not None and closed is not None and math.isfinite(opened) and math.isfinite(closed):
             out["gripper"] = {"joint": gripper_joint, "open": opened, "closed": closed}
     return out
+
+
+def parse_srdf(path: Path, side: dict, sidecar: Path, where: str) -> tuple[ET.Element, str]:
+    """The SRDF's XML root and its name for messages: read inside the description's roots (``side['_roots']``),
+    a ``.xacro`` SRDF expanded like the URDF (the sidecar's ``xacro_args`` and ``packages``, the same roots)."""
+    from roarmctl.fileio import read_text
+    from roarmctl.robot.meshes import description_roots
+
+    roots = side.get("_roots") or description_roots(side, sidecar)
+    if path.suffix.lower() == ".xacro":
+        from roarmctl.robot.xacro_input import expand
+
+        text = expand(path, side.get("xacro_args"), where, roots=roots, trusted=bool(side.get("_trusted")))
+        try:
+            return ET.fromstring(text), str(path)
+        except ET.ParseError as exc:
+            raise DescriptionError(f"{path}: xacro output is not valid XML ({exc})") from None
+    text = read_text(path, f"{where}: srdf", SRDF_BYTES, roots=roots, error=DescriptionError,
+                     hint="the path is relative to the sidecar YAML")
+    try:
+        return ET.fromstring(text), str(path)
+    except ET.ParseError as exc:
+        raise DescriptionError(f"{path}: not valid XML ({exc})") from None
 
 
 _JL_KEYS = {"has_velocity_limits", "max_velocity", "has_acceleration_limits", "max_acceleration",

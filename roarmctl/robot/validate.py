@@ -303,7 +303,9 @@ def check_urdf(root, where: str) -> None:
         if lim is not None:
             for key in ("lower", "upper", "velocity", "effort"):
                 _attr_floats(lim, key, 1, where, f"joint '{name}' limit {key}")
-            if lim.get("lower") is not None and lim.get("upper") is not None and j.get("type") != "continuous":
+            # URDF reads <limit> on revolute and prismatic joints only: a fixed joint's (Kinova writes
+            # lower="0" upper="0" on its fixed end_effector joint) and a continuous one's bounds mean nothing
+            if lim.get("lower") is not None and lim.get("upper") is not None and j.get("type") in ("revolute", "prismatic"):
                 if not float(lim.get("lower")) < float(lim.get("upper")):
                     _fail(where, f"joint '{name}' limit", f"lower {lim.get('lower')} must be below upper {lim.get('upper')}")
             for key in ("velocity", "effort"):
