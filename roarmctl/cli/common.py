@@ -71,6 +71,22 @@ def one_line(text: str) -> str:
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
+_NOTED: set[int] = set()
+
+
+def load_robot(spec: str):
+    """The robot ``spec`` (``roarmctl.robot.loader.load_robot``), its loader notes (held joints, massless
+    links, defaults used for limits the description lacks) written to stderr the first time it loads."""
+    from roarmctl.robot.loader import load_robot as _load
+
+    robot = _load(spec, trust_sidecar=True)  # the user named it on the command line
+    if id(robot) not in _NOTED:
+        _NOTED.add(id(robot))
+        for n in robot.notes:
+            sys.stderr.write(f"note: {one_line(n)}\n")
+    return robot
+
+
 def warn(message: str) -> None:
     """Write ``warning: MESSAGE`` to stderr on one line."""
     sys.stderr.write(f"warning: {one_line(message)}\n")

@@ -95,10 +95,9 @@ def fk(
     what T:1051 x/y/z and roarm-sdk's pose_get() report; tcp_position is the TCP (the tcp_link) in that frame.
     """
     from roarmctl.robot.frames import device_point, get_frame, to_frame
-    from roarmctl.robot.loader import load_robot
     from roarmctl.robot.model import rpy_from_matrix
 
-    r = load_robot(robot, trust_sidecar=True)  # the user named it
+    r = common.load_robot(robot)
     fr = get_frame(r, frame)
     qv = r.full_q(common.parse_numbers(q, "joint value", deg))
     if link is not None and link not in r.kin.link_index:
@@ -136,10 +135,9 @@ def jacobian(
     json_out: bool = JSON,
 ) -> None:
     """Geometric Jacobian at the TCP (base frame), manipulability, singular values, ellipsoid, singularity."""
-    from roarmctl.robot.loader import load_robot
     from roarmctl.robot.singularity import classify_singularity
 
-    r = load_robot(robot, trust_sidecar=True)  # the user named it
+    r = common.load_robot(robot)
     qv = r.full_q(common.parse_numbers(q, "joint value", deg))
     m = r.kin.manipulability(qv)
     out: dict[str, Any] = {
@@ -224,9 +222,8 @@ def ik(
         takes_pitch,
         tool_pitch,
     )
-    from roarmctl.robot.loader import load_robot
 
-    r = load_robot(robot, trust_sidecar=True)  # the user named it
+    r = common.load_robot(robot)
     fr = get_frame(r, frame)
     conv = (lambda v: float(np.radians(v))) if deg else float
     rpy_rad = None if rpy is None else np.array([conv(v) for v in rpy])
@@ -314,12 +311,11 @@ def dynamics(
     import numpy as np
 
     from roarmctl.robot.dynamics import coriolis_vector, gravity_vector, inverse_dynamics, mass_matrix
-    from roarmctl.robot.loader import load_robot
 
     if (q is None) == (not q_args):
         raise InputError("give the joint positions once: after the robot (like kin fk) or as --q",
                          f"e.g. roarmctl kin dynamics {robot} 0 0.5 1.2 0 0")
-    r = load_robot(robot, trust_sidecar=True)  # the user named it
+    r = common.load_robot(robot)
     qv = _split_numbers(q, "--q", deg) if q is not None else common.parse_numbers(q_args or [], "joint value", deg)
     assert qv is not None  # a string gives an array
     n = qv.size

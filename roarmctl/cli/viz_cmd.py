@@ -118,7 +118,6 @@ def workspace(
     size: str = typer.Option("13x6", "--size", help="Sheet size WxH in inches."),
 ) -> None:
     """Draw the reachable workspace (side and top maps of sampled TCP positions, coloured by manipulability)."""
-    from roarmctl.robot.loader import load_robot
 
     if measure not in ("sigma", "w"):
         raise InputError(f"--measure: '{measure}' is not 'sigma' or 'w'")
@@ -126,7 +125,7 @@ def workspace(
         raise InputError(f"--samples: {samples} is out of range", "use 1 to 2000000")
     _check_dpi(dpi)
     figsize = parse_size(size, dpi)
-    r = load_robot(robot, trust_sidecar=True)  # the user named it
+    r = common.load_robot(robot)
     out = output if output is not None else Path(f"{r.name}_workspace.png")
 
     picture_format(out)

@@ -86,7 +86,8 @@ class _Moving:
 class CollisionChecker:
     """Validity of arm configurations (N, arm_dof) for ``robot`` in ``scene``.
 
-    ``padding`` (m) inflates the arm against the scene. ``singularity_margin`` (m/rad), when
+    ``padding`` (m) inflates the arm against the scene (a link the description pads itself,
+    ``robot.padding``, keeps its own value). ``singularity_margin`` (m/rad), when
     given, is the smallest allowed singular value of the 3 x arm_dof translational Jacobian.
     ``contact_tolerance`` (m) shrinks attached objects so resting contact is not a collision.
     The checker keeps its own copy of the scene (``self.scene``): ``detach`` moves items in it.
@@ -123,8 +124,8 @@ class CollisionChecker:
         self._states: dict[tuple, dict] = {}  # state key -> the tables of _build_tables (see _rebuild)
         for shape in robot.collision:
             self._arm_shapes.append(self._moving(shape.name or shape.link, kin.link_index[shape.link], shape.origin,
-                                                 shape.kind, shape.size, shape.radius, shape.length, self.padding, 0.0,
-                                                 mesh=shape.mesh))
+                                                 shape.kind, shape.size, shape.radius, shape.length,
+                                                 robot.padding.get(shape.link, self.padding), 0.0, mesh=shape.mesh))
         self._rebuild()
 
     # ------------------------------------------------------------------ configuration

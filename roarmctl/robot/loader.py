@@ -100,6 +100,7 @@ def load_robot(spec: str, trust_sidecar: bool = False) -> Robot:
                                "put the TCP on a link the arm joints move, e.g. the hand between the fingers")
     robot = _link_roles(robot, data, str(path))
     robot.notes = [f"{robot.name}: {n}" for n in robot.notes] + _default_notes(robot)
+    robot.spec = spec if path == bundled_dir() / f"{spec}.yaml" else str(path.resolve())
     robot.allowed_collisions |= _adjacent_pairs(robot)
     checks.check_robot(robot, str(path))
     _CACHE[key] = robot
@@ -662,8 +663,27 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         visual_source=visuals.source_of(((n, k, v) for n, e in links.items() for k, v in enumerate(e.findall("visual"))),
                                         meshes, root, _urdf_shape),
         notes=notes,
+        padding=_padding(side, str(sidecar), set(links)),
         **common,
     )
+
+
+def _padding(side: dict, where: str, links: set[str]) -> dict[str, float]:
+    """The sidecar's ``padding: {LINK: m}`` (each in [0, 0.1] m)."""
+    raw = side.get("padding")
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise DescriptionError(f"{where}: padding: expected a mapping link -> metres, e.g. {{left_finger: 0.002}}")
+    out = {}
+    for link, value in raw.items():
+        if link not in links:
+            raise DescriptionError(f"{where}: padding.{link}: not a link of the URDF")
+        v = _num(value, f"{where}: padding.{link}")
+        if not 0.0 <= v <= 0.1:
+            raise DescriptionError(f"{where}: padding.{link}: {v:g} m is outside [0, 0.1] m")
+        out[str(link)] = v
+    return out
 
 
 def _urdf_shape(link: str, c: ET.Element, where: str, k: int, meshes: dict) -> list[CollisionShape]:

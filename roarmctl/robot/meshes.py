@@ -67,21 +67,21 @@ class MeshGeometry:
     def grown(self, grow: float) -> tuple[np.ndarray, np.ndarray]:
         """The shape padded by ``grow`` (m): vertices (V', 3) and faces (F', 3).
 
-        A convex mesh becomes the polytope bounded by its own face planes and by planes in 42
-        directions spread over the sphere (an icosahedron divided once), each moved out by ``grow``:
-        every point within ``grow`` of the hull lies inside (each plane's support distance grows by
-        exactly ``grow``), and no point of it lies farther than about 1.07 x ``grow`` from the hull
-        (the bevel planes cut the sharp corners that moving the vertices along their normals pushed
-        out by up to 5 x ``grow`` on a thin finger). An exact mesh (not convex) moves its vertices out
-        along their normals (``grown_vertices``), keeping its triangles."""
+        A convex mesh becomes the hull of its vertices each surrounded by a polytope that holds a ball
+        of radius ``grow`` (``ball_points``): the Minkowski sum of the hull and that polytope, so every
+        point within ``grow`` of the hull lies inside and no point of it lies farther than 1.071 x
+        ``grow`` from the hull (moving the vertices along their normals pushed a thin finger's sharp
+        corners out by up to 5 x ``grow``). An exact mesh (not convex) moves its vertices out along
+        their normals (``grown_vertices``), keeping its triangles."""
         if grow <= 0:
             return self.vertices, self.faces
         key = float(grow)
         if key not in self._grown:
             if self.exact:
                 self._grown[key] = (self.grown_vertices(grow), self.faces)
-            else:
-                self._grown[key] = _offset_polytope(self.vertices, self.faces, grow, self.source)
+            else:  # the Minkowski sum of the hull and a ball of radius grow, from outside
+                pts = (self.vertices[:, None, :] + grow * ball_points()[None, :, :]).reshape(-1, 3)
+                self._grown[key] = convex_hull(pts, self.source)
         return self._grown[key]
 
     def grown_vertices(self, grow: float) -> np.ndarray:
@@ -105,45 +105,29 @@ class MeshGeometry:
         return v + vn * (grow / np.clip(worst, 0.2, 1.0))[:, None]
 
 
-def sphere_directions() -> np.ndarray:
-    """42 unit vectors (42, 3) spread evenly over the sphere: an icosahedron's 12 vertices and its 30
-    edge midpoints, pushed out onto the sphere."""
-    global _DIRECTIONS
-    if _DIRECTIONS is None:
+def ball_points() -> np.ndarray:
+    """42 points (42, 3) whose convex hull holds the unit ball and lies within 1.0705 of the centre: an
+    icosahedron divided once (its 12 vertices and 30 edge midpoints on the unit sphere), scaled by the
+    inverse of that polytope's inradius."""
+    global _BALL
+    if _BALL is None:
+        from scipy.spatial import ConvexHull
+
         t = (1 + 5 ** 0.5) / 2
         ico = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
                         [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], dtype=float)
         ico /= np.linalg.norm(ico, axis=1)[:, None]
         d = np.linalg.norm(ico[:, None] - ico[None], axis=2)
         edge = np.min(d[d > 0])
-        mids = [(ico[i] + ico[j]) for i in range(12) for j in range(i + 1, 12) if abs(d[i, j] - edge) < 1e-9]
+        mids = [ico[i] + ico[j] for i in range(12) for j in range(i + 1, 12) if abs(d[i, j] - edge) < 1e-9]
         pts = np.vstack([ico, np.array(mids)])
-        _DIRECTIONS = pts / np.linalg.norm(pts, axis=1)[:, None]
-    return _DIRECTIONS
+        pts /= np.linalg.norm(pts, axis=1)[:, None]
+        inradius = float(np.min(-ConvexHull(pts).equations[:, 3]))
+        _BALL = pts / inradius
+    return _BALL
 
 
-_DIRECTIONS: np.ndarray | None = None
-
-
-def _offset_polytope(vertices: np.ndarray, faces: np.ndarray, grow: float, where: str) -> tuple[np.ndarray, np.ndarray]:
-    """The convex polytope {x : n . x <= h(n) + grow} over the hull's face normals and ``sphere_directions``
-    (h: the hull's support function), as vertices and outward-wound faces."""
-    from scipy.spatial import HalfspaceIntersection, QhullError
-
-    v, f = vertices, faces
-    n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    norm = np.linalg.norm(n, axis=1)
-    n = n[norm > 1e-15] / norm[norm > 1e-15, None]
-    normals = np.unique(np.round(np.vstack([n, sphere_directions()]), 12), axis=0)
-    normals /= np.linalg.norm(normals, axis=1)[:, None]
-    offsets = (v @ normals.T).max(axis=0) + grow
-    centre = v.mean(axis=0)
-    try:
-        cut = HalfspaceIntersection(np.hstack([normals, -offsets[:, None]]), centre)
-    except (QhullError, ValueError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise DescriptionError(f"{where}: cannot pad the mesh by {grow * 1000:g} mm: {first}") from None
-    return convex_hull(cut.intersections, where)
+_BALL: np.ndarray | None = None
 
 
 _LOADED: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}

@@ -224,6 +224,8 @@ class Robot:
     derived: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
     #: The URDF's ``<visual>`` elements, read only for pictures (``roarmctl.robot.visuals``); None without any.
     visual_source: Any = field(default=None, repr=False, compare=False)
+    #: Link -> its own collision padding (m) against the scene, instead of the plan's (sidecar ``padding``).
+    padding: dict[str, float] = field(default_factory=dict)
     #: Limit kind ("velocity", "acceleration", "jerk") -> joints whose limit is roarmctl's default
     #: because the description gives none (said once by the CLI, written into the trajectory).
     defaults: dict[str, list[str]] = field(default_factory=dict)

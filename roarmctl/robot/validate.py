@@ -69,7 +69,7 @@ def _xyz_rpy(v: Any, where: str, field: str) -> None:
 COMMON_KEYS = ("format", "name", "source", "description", "limits", "gripper", "named_poses", "wire",
                "allowed_collisions", "singularity_model", "ik", "base_links", "jaw_links", "frames")
 URDF_KEYS = ("urdf", "srdf", "joint_limits", "packages", "xacro_args", "mesh_collision", "joints", "tcp_link",
-             "arm_group", "gripper_group", "tool", "trust")
+             "arm_group", "gripper_group", "tool", "trust", "padding")
 DH_KEYS = ("dh", "convention", "length_unit", "angle_unit", "base", "tool", "inertials")
 NESTED_KEYS = {
     "limits": ("velocity", "acceleration", "jerk", "effort"),
