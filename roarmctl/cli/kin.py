@@ -18,7 +18,7 @@ from roarmctl.errors import InputError, RoarmError, UnreachableError
 
 kin_app = typer.Typer(help="Kinematics and dynamics: fk, ik, jacobian, dynamics.", no_args_is_help=True)
 
-DEG = typer.Option(False, "--deg", help="Angles in and out in degrees (default radians).")
+DEG = typer.Option(False, "--deg", help="Angles in and out in degrees (default radians); prismatic joints stay in metres.")
 JSON = typer.Option(False, "--json", help="Print one JSON object on stdout, nothing else.")
 # Joint values may be negative: let '-0.5' through as an argument instead of an unknown option.
 NUMBERS = {"ignore_unknown_options": True}
@@ -33,10 +33,56 @@ def register(app: typer.Typer) -> None:
 
 
 def _angles_out(values, deg: bool):
+    """Angles that are not joint values (pitch, roll, rpy): degrees when ``deg``."""
     import numpy as np
 
     arr = np.asarray(values, dtype=float)
     return np.degrees(arr) if deg else arr
+
+
+def _looks_like_degrees(what: str, values, deg: bool) -> None:
+    """Warn when angles given without --deg are larger than a turn (2 pi rad): probably degrees."""
+    import math
+
+    big = [v for v in values if v is not None and abs(float(v)) > 2 * math.pi]
+    if big and not deg:
+        common.warn(f"{what} {', '.join(f'{float(v):g}' for v in big)} look like degrees (more than 2 pi rad): read as "
+                    f"radians; pass --deg if they are degrees")
+
+
+def _joint_input(r, values: list[str], deg: bool, what: str = "joint value") -> np.ndarray:
+    """The full configuration (rad, m) from joint values on the command line (arm joints, the gripper may
+    follow; degrees for revolute joints with --deg, prismatic ones always in metres). Warns when values
+    without --deg look like degrees, and when a value is outside its joint's limits."""
+    raw = common.parse_numbers(values, what)
+    cols = list(range(r.dof)) if raw.size == r.dof else list(r.arm_indices) if raw.size == r.arm_dof else []
+    _looks_like_degrees(f"{what}s" if len(values) > 1 else what,
+                        [v for v, c in zip(raw, cols, strict=False) if not r.prismatic[c]], deg)
+    q = r.full_q(r.from_user(raw, deg))
+    _outside_limits(r, q, deg, cols)
+    return q
+
+
+def _outside_limits(r, q: np.ndarray, deg: bool, cols: list[int]) -> None:
+    """Warn for every given joint value outside its joint's limits, in the units it was given in."""
+    out = [c for c in cols if not (r.lower[c] - 1e-9 <= q[c] <= r.upper[c] + 1e-9)]
+    if not out:
+        return
+    shown = r.to_user(q, deg)
+    lo, hi = r.to_user(r.lower, deg), r.to_user(r.upper, deg)
+    common.warn("outside the joint limits (the arm cannot be there): " + "; ".join(
+        f"{r.joint_names[c]} = {shown[c]:.4g} {r.joint_unit(c, deg=deg)} (limits [{lo[c]:.4g}, {hi[c]:.4g}])" for c in out))
+
+
+def _units(r, deg: bool, power: int = 0) -> list[str]:
+    """Per actuated joint, the unit its values are shown in."""
+    return [r.joint_unit(i, power, deg) for i in range(r.dof)]
+
+
+def _unit_caption(r, deg: bool) -> str:
+    """'q1 = base, ...' plus which columns are in metres (prismatic joints), when any."""
+    metres = [f"q{i + 1}" for i in range(r.dof) if r.prismatic[i]]
+    return _joint_caption(r) + (f"; {', '.join(metres)} in m (prismatic)" if metres else "")
 
 
 def _table(title: str, rows: list[tuple[str, str]]) -> None:
@@ -99,13 +145,13 @@ def fk(
 
     r = common.load_robot(robot)
     fr = get_frame(r, frame)
-    qv = r.full_q(common.parse_numbers(q, "joint value", deg))
+    qv = _joint_input(r, q, deg)
     if link is not None and link not in r.kin.link_index:
         raise InputError(f"--link: '{link}' is not a link of {r.name}", f"links: {', '.join(r.link_names)}")
     t = r.kin.fk(qv, link)
     rpy = rpy_from_matrix(t[:3, :3])
-    out = {"robot": r.name, "link": link or r.tcp_link, "q": _angles_out(qv, deg), "position": t[:3, 3],
-           "rotation": t[:3, :3], "rpy": _angles_out(rpy, deg)}
+    out = {"robot": r.name, "link": link or r.tcp_link, "q": r.to_user(qv, deg), "q_units": _units(r, deg),
+           "position": t[:3, 3], "rotation": t[:3, :3], "rpy": _angles_out(rpy, deg)}
     if frame != "world":
         point = t[:3, 3] if link is not None else device_point(r, fr, qv)
         out |= {"frame": frame, "unit": fr.unit, "position": to_frame(fr, point), "tcp_position": to_frame(fr, t[:3, 3]),
@@ -114,7 +160,8 @@ def fk(
         common.print_json(out)
         return
     unit = "deg" if deg else "rad"
-    rows = [(f"q ({unit})", _fmt(out["q"], 4))]
+    q_unit = unit if not r.prismatic.any() else f"{unit}; m for {', '.join(n for n, p in zip(r.joint_names, r.prismatic, strict=True) if p)}"
+    rows = [(f"q ({q_unit})", _fmt(out["q"], 4))]
     if frame != "world":
         what = "end point" if link is None and fr.point_link else "position"
         rows += [(f"{what}, {frame} frame ({fr.unit})", _fmt(out["position"], 3)),
@@ -138,11 +185,12 @@ def jacobian(
     from roarmctl.robot.singularity import classify_singularity
 
     r = common.load_robot(robot)
-    qv = r.full_q(common.parse_numbers(q, "joint value", deg))
+    qv = _joint_input(r, q, deg)
     m = r.kin.manipulability(qv)
     out: dict[str, Any] = {
         "robot": r.name,
-        "q": _angles_out(qv, deg),
+        "q": r.to_user(qv, deg),
+        "q_units": _units(r, deg),
         "jacobian": m.jacobian,
         "manipulability": m.manipulability,
         "translational_manipulability": m.translational,
@@ -226,8 +274,9 @@ def ik(
     r = common.load_robot(robot)
     fr = get_frame(r, frame)
     conv = (lambda v: float(np.radians(v))) if deg else float
+    _looks_like_degrees("--pitch/--roll/--rpy", [pitch, roll, *(rpy or ())], deg)
     rpy_rad = None if rpy is None else np.array([conv(v) for v in rpy])
-    q_ref = _split_numbers(ref, "--ref", deg)
+    q_ref = None if ref is None else _joint_input(r, [p for p in ref.replace(",", " ").split() if p], deg, "--ref value")
     target = from_frame(fr, np.array(xyz, dtype=float))
     is_roarm = takes_pitch(r)  # the IK takes a tool pitch: choose it when left out, print it
     auto = is_roarm and pitch is None and rpy is None
@@ -260,7 +309,8 @@ def ik(
         "robot": r.name,
         "joint_names": r.joint_names,
         "target": {"position": list(xyz), "pitch": pitch, "roll": roll, "rpy": None if rpy is None else list(rpy)},
-        "solutions": [_angles_out(q, deg) for q in sols],
+        "solutions": [r.to_user(q, deg) for q in sols],
+        "units": _units(r, deg),
         "position_errors": [c.position_error for c in checks],
         "orientation_errors": [c.orientation_error for c in checks],
         "frame": frame,
@@ -277,7 +327,7 @@ def ik(
     where = (f"({xyz[0]:.4f}, {xyz[1]:.4f}, {xyz[2]:.4f}) m" if frame == "world" else
              f"({xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f}) {fr.unit} in the {frame} frame")
     t = Table(title=f"IK of {r.name}: TCP at {where}, {len(sols)} solution(s), joints in {unit}",
-              caption=_joint_caption(r) + "; error: FK of the solution to the target")
+              caption=_unit_caption(r, deg) + "; error: FK of the solution to the target")
     t.add_column("#")
     for i in range(r.dof):
         t.add_column(f"q{i + 1}", justify="right")
@@ -287,7 +337,8 @@ def ik(
     digits = 2 if deg else 4  # 0.01 deg or 0.0001 rad: a UR10 row of 6 joints fits 80 columns
     for k, (q, c) in enumerate(zip(out["solutions"], checks, strict=True), 1):
         extra = [f"{out['pitches'][k - 1]:.2f}"] if pitches is not None else []
-        t.add_row(str(k), *[f"{v:.{digits}f}" for v in q], *extra, f"{c.position_error:.1e}")
+        t.add_row(str(k), *[f"{v:.{4 if p else digits}f}" for v, p in zip(q, r.prismatic, strict=True)], *extra,
+                  f"{c.position_error:.1e}")
     common.console().print(t)
     if pitches is not None and pitch is None and rpy is None:
         common.console(stderr=True).print(f"pitch chosen (auto): {out['pitches'][0]:.2f} {unit} (pass --pitch to fix it)")
@@ -298,8 +349,8 @@ def dynamics(
     robot: str = typer.Argument(..., help="Bundled robot name or path to a description (with inertials)."),
     q_args: list[str] | None = typer.Argument(None, metavar="[Q]...", help="Joint positions, as for kin fk (or give --q)."),
     q: str | None = typer.Option(None, "--q", help="Joint positions, space- or comma-separated ('0 0.5 1.2 0 0'); arm joints, the gripper may follow."),
-    qd: str | None = typer.Option(None, "--qd", help="Joint velocities (rad/s, or deg/s with --deg); default 0."),
-    qdd: str | None = typer.Option(None, "--qdd", help="Joint accelerations (rad/s^2, or deg/s^2 with --deg); default 0."),
+    qd: str | None = typer.Option(None, "--qd", help="Joint velocities (rad/s, or deg/s with --deg; m/s for prismatic joints); default 0."),
+    qdd: str | None = typer.Option(None, "--qdd", help="Joint accelerations (rad/s^2, or deg/s^2 with --deg; m/s^2 for prismatic joints); default 0."),
     deg: bool = DEG,
     json_out: bool = JSON,
 ) -> None:
@@ -316,18 +367,19 @@ def dynamics(
         raise InputError("give the joint positions once: after the robot (like kin fk) or as --q",
                          f"e.g. roarmctl kin dynamics {robot} 0 0.5 1.2 0 0")
     r = common.load_robot(robot)
-    qv = _split_numbers(q, "--q", deg) if q is not None else common.parse_numbers(q_args or [], "joint value", deg)
-    assert qv is not None  # a string gives an array
-    n = qv.size
-    qdv = _split_numbers(qd, "--qd", deg) if qd is not None else np.zeros(n)
-    qddv = _split_numbers(qdd, "--qdd", deg) if qdd is not None else np.zeros(n)
-    assert qdv is not None and qddv is not None
+    given = [p for p in q.replace(",", " ").split() if p] if q is not None else list(q_args or [])
+    full = _joint_input(r, given, deg)
+    n = len(given)
+    qv = full if n == r.dof else full[r.arm_indices]
+    qdv = r.from_user(_split_numbers(qd, "--qd", False), deg) if qd is not None else np.zeros(n)
+    qddv = r.from_user(_split_numbers(qdd, "--qdd", False), deg) if qdd is not None else np.zeros(n)
     tau = inverse_dynamics(r, qv, qdv, qddv)
-    full = r.full_q(qv)
     out: dict[str, Any] = {
         "robot": r.name,
         "joint_names": r.joint_names,
-        "q": _angles_out(full, deg),
+        "q": r.to_user(full, deg),
+        "q_units": _units(r, deg),
+        "tau_units": [r.joint_unit(i, kind="effort") for i in range(r.dof)],
         "tau": tau,
         "mass_matrix": mass_matrix(r, full),
         "gravity": gravity_vector(r, full),
@@ -343,7 +395,7 @@ def dynamics(
         ("tau (N m)", tau),
         ("gravity G (N m)", out["gravity"]),
         ("C(q,qd) qd (N m)", out["coriolis"]),
-    ], caption=_joint_caption(r) + "; N m for a revolute joint, N for a prismatic one")
+    ], caption=_unit_caption(r, deg) + "; N m for a revolute joint, N for a prismatic one")
     _columns_table(f"Mass matrix M(q) of {r.name} (kg m^2: N m per rad/s^2)", cols,
                    [(f"row q{i + 1}", mm[i]) for i in range(r.dof)], digits=5)
 

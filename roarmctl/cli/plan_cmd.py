@@ -130,10 +130,12 @@ def _peaks_table(peaks: dict):
 
     table = Table(title="Peaks per joint (fraction of the limit)")
     table.add_column("joint")
-    for name in ("jerk rad/s³", "of limit", "torque N m", "of limit"):
+    for name in ("jerk", "of limit", "torque", "of limit"):
         table.add_column(name, justify="right")
     torque = peaks["torque"] or [None] * len(peaks["joints"])
+    units = peaks["units"]  # rad/s^3 and N m, or m/s^3 and N for a prismatic joint
     for i, name in enumerate(peaks["joints"]):
-        table.add_row(name, f"{peaks['jerk'][i]:.1f}", pct(peaks["jerk_fraction"][i]),
-                      "-" if torque[i] is None else f"{torque[i]:.3f}", pct(peaks["torque_fraction"][i]))
+        table.add_row(name, f"{peaks['jerk'][i]:.{3 if units['jerk'][i].startswith('m') else 1}f} {units['jerk'][i]}",
+                      pct(peaks["jerk_fraction"][i]),
+                      "-" if torque[i] is None else f"{torque[i]:.3f} {units['torque'][i]}", pct(peaks["torque_fraction"][i]))
     return table

@@ -17,6 +17,10 @@ topic                              type                               when
                                                                          object is carried (plan only)
 =================================  =================================  ==========================================
 
+Each JointState names every movable joint of the description: the actuated ones (rad, or m for a
+prismatic joint), then each mimic joint (its leader's value x multiplier + offset) and each joint held
+still (its held value), so a URDF viewer places every link.
+
 Message times: the log time and ``header.stamp`` are the sample time in s from the start of the
 trajectory (an execution log: from its first entry, so nothing is negative).
 """
@@ -169,9 +173,12 @@ def messages(streams: Streams) -> Iterator[tuple[str, str, int, Any]]:
                mk.trajectory(ns_of(0.0), root, names, traj.times, traj.positions, traj.velocities, traj.accelerations))
     for suffix, st in streams.joint_states.items():
         topic = "/joint_states" + (f"/{suffix}" if suffix else "")
+        # every movable joint of the URDF: the actuated ones, the mimic joints from their leaders and the joints
+        # held still, so a URDF viewer (robot_state_publisher, Foxglove) places every link
+        all_names, all_q, all_qd = robot.joint_states(st.positions, st.velocities)
         for i, t in enumerate(st.times):
             yield (topic, "sensor_msgs/msg/JointState", ns_of(t),
-                   mk.joint_state(ns_of(t), names, st.positions[i], None if st.velocities is None else st.velocities[i]))
+                   mk.joint_state(ns_of(t), all_names, all_q[i], None if all_qd is None else all_qd[i]))
 
     kin = robot.kin
     moving = [j for j, joint in enumerate(robot.joints) if joint.kind != "fixed"]

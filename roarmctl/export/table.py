@@ -15,15 +15,17 @@ from roarmctl.fileio import atomic_write_text
 
 def csv_text(streams: Streams) -> str:
     """The CSV of ``streams``: columns ``source`` (plan / commanded / measured), ``time_s``, one
-    ``<joint>_rad`` per joint, ``<joint>_rad_s`` per joint when velocities are known, ``tcp_x_m``,
+    ``<joint>_rad`` per joint (``<joint>_m`` for a prismatic one), ``<joint>_rad_s`` (``_m_s``) per
+    joint when velocities are known, ``tcp_x_m``,
     ``tcp_y_m``, ``tcp_z_m`` (FK of the joints) and ``tcp_speed_m_s`` (|J_v(q) qdot| when
     velocities are known, else the finite difference of the TCP positions). Rows sorted by source
     then time."""
     robot, names = streams.robot, streams.joint_names
     has_vel = any(s.velocities is not None for s in streams.joint_states.values())
-    header = ["source", "time_s"] + [f"{n}_rad" for n in names]
+    unit = ["m" if p else "rad" for p in robot.prismatic]  # a prismatic joint in metres
+    header = ["source", "time_s"] + [f"{n}_{u}" for n, u in zip(names, unit, strict=True)]
     if has_vel:
-        header += [f"{n}_rad_s" for n in names]
+        header += [f"{n}_{u}_s" for n, u in zip(names, unit, strict=True)]
     header += ["tcp_x_m", "tcp_y_m", "tcp_z_m", "tcp_speed_m_s"]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")

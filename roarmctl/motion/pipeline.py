@@ -134,6 +134,12 @@ class Planner:
         checker = CollisionChecker(robot, scene, padding=plan.planner.padding,
                                    singularity_margin=plan.planner.singularity_margin or None)
         self.ctx = PlanContext(plan, robot, checker)
+        from roarmctl.robot.padding import thin_parts
+
+        self.ctx.notes.extend(robot.notes)  # what the description lacks or leaves out, said once with the plan
+        thin = thin_parts(robot, plan.planner.padding)
+        if thin is not None:
+            self.ctx.warnings.append(thin)
 
     def run(self) -> PlanResult:
         """Plan every task (``cycles`` times over) and return the checked trajectory with its report."""

@@ -48,8 +48,9 @@ def motion_peaks(traj, robot) -> dict[str, Any]:
     """Per joint (in ``joint_names`` order): peaks and peak/limit fractions (None where no limit).
 
     Keys: ``joints``, ``cycle_time`` (s), ``velocity``/``acceleration``/``jerk``/``torque`` (peaks in
-    rad/s, rad/s^2, rad/s^3, N m; torque None without inertial data) and ``*_fraction`` of the robot's
-    limits (velocity and acceleration of the scaled limits the plan used).
+    rad/s, rad/s^2, rad/s^3, N m; m/s ... N for prismatic joints, see ``units``; torque None without
+    inertial data) and ``*_fraction`` of the robot's limits (velocity and acceleration of the scaled
+    limits the plan used).
     """
     lim = traj.limits or {}
     vmax = np.asarray(robot.velocity_limits, dtype=float) * float(lim.get("velocity_scale") or 1.0)
@@ -74,4 +75,8 @@ def motion_peaks(traj, robot) -> dict[str, Any]:
         "jerk": j.tolist(), "jerk_fraction": frac(j, robot.jerk_limits),
         "torque": None if t is None else t.tolist(),
         "torque_fraction": [None] * len(v) if t is None else frac(t, robot.effort_limits),
+        # per joint, the units of the peaks above: m/s, m/s^2, m/s^3 and N for a prismatic joint
+        "units": {key: [robot.joint_unit(i, power, kind=kind) for i in range(robot.dof)]
+                  for key, power, kind in (("velocity", 1, "position"), ("acceleration", 2, "position"),
+                                           ("jerk", 3, "position"), ("torque", 0, "effort"))},
     }

@@ -16,7 +16,9 @@ The layout follows ROS 2 ``trajectory_msgs/JointTrajectory`` so it exports 1:1:
       "payloads": [{"start": s, "end": s, "link": str, "mass": kg, "com": [m] (link frame),
                     "inertia": [[kg m^2]] (about the COM, link axes), "label": str}],  # held objects
       "limits": {"velocity": [rad/s], "acceleration": [rad/s^2], "velocity_scale": f,
-                 "acceleration_scale": f, "max_tcp_speed": m/s or null},
+                 "acceleration_scale": f, "max_tcp_speed": m/s or null,
+                 "defaults": {"acceleration"|"velocity"|"jerk": [joint, ...]} (only when the
+                 description lacks some: those joints' limits are roarmctl's defaults)},
       "singularity_margin": {...} or null,
       "scene": {"items": [{"name", "role": "table"|"obstacle"|"object", "shape": "box"|
                 "cylinder"|"sphere", "size": [x,y,z] | "radius", "length", "xyz", "rpy"}]},

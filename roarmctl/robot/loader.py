@@ -597,8 +597,9 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
             raise DescriptionError(f"{sidecar}: joints: '{n}' is not a movable joint of {urdf.name}"
                                    + (f" (it mimics '{mimics}')" if mimics else ""))
     held = [a for a in actuated if a not in names]
+    held_values = {j.name: _rest_value(j) for j in ordered if j.name in held}
     if held:  # a movable joint that nothing drives (not in joints:, or SRDF-passive) stays where it rests
-        rest = {j.name: _rest_value(j) for j in ordered if j.name in held}
+        rest = held_values
         notes.append("joint(s) not driven, held still: " + ", ".join(
             f"{n} at {rest[n]:g} {'m' if next(j for j in ordered if j.name == n).kind == 'prismatic' else 'rad'}"
             for n in held) + " (list them in the sidecar's joints: to drive them)")
@@ -664,6 +665,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
                                         meshes, root, _urdf_shape),
         notes=notes,
         padding=_padding(side, str(sidecar), set(links)),
+        held_joints=held_values,
         **common,
     )
 

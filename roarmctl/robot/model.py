@@ -224,6 +224,9 @@ class Robot:
     derived: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
     #: The URDF's ``<visual>`` elements, read only for pictures (``roarmctl.robot.visuals``); None without any.
     visual_source: Any = field(default=None, repr=False, compare=False)
+    #: Movable joints of the description that nothing drives (not in ``joint_names``), held at these
+    #: values (rad / m); the loader made them fixed joints.
+    held_joints: dict[str, float] = field(default_factory=dict)
     #: Link -> its own collision padding (m) against the scene, instead of the plan's (sidecar ``padding``).
     padding: dict[str, float] = field(default_factory=dict)
     #: Limit kind ("velocity", "acceleration", "jerk") -> joints whose limit is roarmctl's default
@@ -259,6 +262,64 @@ class Robot:
     def joints_moved_by(self, name: str) -> list[Joint]:
         """Actuated joint ``name`` and every joint that mimics it (e.g. both fingers of a gripper)."""
         return [j for j in self.joints if name in (j.name, j.mimic)]
+
+    @property
+    def prismatic(self) -> np.ndarray:
+        """(dof,) bool: which actuated joints are prismatic (their values in m, m/s, ...; the others in rad)."""
+        kinds = {j.name: j.kind for j in self.joints}
+        return np.array([kinds.get(n) == "prismatic" for n in self.joint_names])
+
+    def joint_unit(self, index: int, power: int = 0, deg: bool = False, kind: str = "position") -> str:
+        """The unit of joint ``index``'s value (power 0), velocity (1), acceleration (2) or jerk (3):
+        "rad", "deg/s^2", "m/s", ...; ``deg`` turns radians into degrees (never metres). ``kind``
+        "effort" gives "N m" (revolute) or "N" (prismatic)."""
+        prismatic = bool(self.prismatic[index])
+        if kind == "effort":
+            return "N" if prismatic else "N m"
+        base = "m" if prismatic else ("deg" if deg else "rad")
+        return base + ("" if power == 0 else "/s" if power == 1 else f"/s^{power}")
+
+    def to_user(self, values, deg: bool, columns=None) -> np.ndarray:
+        """Joint values (rad / m) -> what the user asked for: degrees for revolute joints when ``deg``,
+        metres stay metres. ``values``: (..., n) with n = dof, or the joints ``columns`` (indices) name."""
+        arr = np.asarray(values, dtype=float)
+        if not deg:
+            return arr
+        mask = self.prismatic if columns is None else self.prismatic[np.asarray(columns)]
+        return np.where(mask, arr, np.degrees(arr))
+
+    def from_user(self, values, deg: bool) -> np.ndarray:
+        """User joint values (dof or arm_dof of them; degrees for revolute joints when ``deg``) -> rad / m."""
+        arr = np.asarray(values, dtype=float)
+        if not deg:
+            return arr
+        cols = None if arr.shape[-1] == self.dof else self.arm_indices if arr.shape[-1] == self.arm_dof else None
+        if cols is None and arr.shape[-1] != self.dof:
+            return np.radians(arr)  # the wrong count: full_q says so with the count
+        mask = self.prismatic if cols is None else self.prismatic[np.asarray(cols)]
+        return np.where(mask, arr, np.radians(arr))
+
+    def joint_states(self, q, qd=None) -> tuple[list[str], np.ndarray, np.ndarray | None]:
+        """Every movable joint of the description with its value, for a complete ``sensor_msgs/JointState``:
+        the actuated joints (``q`` (N, dof), ``qd`` (N, dof) or None), then each mimic joint (its leader's
+        value times its multiplier plus its offset; velocity times the multiplier), then the held joints (their
+        held value, velocity 0). Returns (names, positions (N, K), velocities (N, K) or None)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        names = list(self.joint_names)
+        cols, vcols = [q], [] if qd is None else [np.atleast_2d(np.asarray(qd, dtype=float))]
+        for j in self.joints:
+            if j.mimic is not None:
+                k = self.joint_names.index(j.mimic)
+                names.append(j.name)
+                cols.append(j.multiplier * q[:, k:k + 1] + j.offset)
+                if qd is not None:
+                    vcols.append(j.multiplier * vcols[0][:, k:k + 1])
+        for name, value in self.held_joints.items():
+            names.append(name)
+            cols.append(np.full((len(q), 1), value))
+            if qd is not None:
+                vcols.append(np.zeros((len(q), 1)))
+        return names, np.hstack(cols), (None if qd is None else np.hstack(vcols))
 
     def joint_index(self, name: str) -> int:
         """Index of the actuated joint ``name`` in ``joint_names``."""

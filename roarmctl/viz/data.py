@@ -84,6 +84,8 @@ class PathData:
     arm_segments: list[tuple[int, int]] = field(default_factory=list)
     scene_items: list[dict] = field(default_factory=list)
     placed_items: list[dict] = field(default_factory=list)
+    #: (dof,) bool: prismatic joints (m, m/s, m/s^2, N), drawn on their own axes; None: all revolute
+    prismatic: np.ndarray | None = None
 
 
 def placed_objects(items: list[dict], events: list[EventMark]) -> list[dict]:
@@ -222,6 +224,7 @@ def path_data(traj: Trajectory, robot: Robot) -> PathData:
         raise TrajectoryFileError("scene.items: expected a list")
 
     return PathData(
+        prismatic=robot.prismatic if robot.prismatic.any() else None,
         robot_name=robot.name,
         joint_names=list(traj.joint_names),
         times=times,

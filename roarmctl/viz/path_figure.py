@@ -257,8 +257,22 @@ def _blend_lines(ax, data: PathData, name: str) -> None:
         ax.axvline(tb, color="#ff7f0e", lw=0.9, ls=":", alpha=0.9, zorder=1, gid=f"blend:{name}")
 
 
+def _axis_for(ax, data: PathData, j: int, twins: dict, label: str):
+    """The axes joint ``j`` is drawn on: ``ax`` for a revolute joint, a twin axis on the right (made once,
+    labelled ``label``) for a prismatic one (metres and radians do not share a scale)."""
+    if data.prismatic is None or not data.prismatic[j]:
+        return ax
+    if ax not in twins:
+        tw = ax.twinx()
+        tw.set_ylabel(label, fontsize=8)
+        tw.tick_params(labelsize=7)
+        twins[ax] = tw
+    return twins[ax]
+
+
 def _draw_torque(ax, data: PathData) -> None:
-    """Joint torques by RNEA (held objects included) with each joint's limit dashed."""
+    """Joint torques by RNEA (held objects included) with each joint's limit dashed; the forces of prismatic
+    joints (N) on their own axis."""
     colors = colormaps["tab10"]
     ax.set_ylabel("torque\n(N m)")
     if data.torque is None:
@@ -266,15 +280,25 @@ def _draw_torque(ax, data: PathData) -> None:
                 fontsize=8, color="0.4")
         return
     top = 0.0
+    twins: dict = {}
     for j, name in enumerate(data.joint_names):
         c = colors(j % 10)
+        if data.prismatic is not None and data.prismatic[j]:
+            tw = _axis_for(ax, data, j, twins, "force (N),\nprismatic")
+            tw.plot(data.times, data.torque[:, j], color=c, lw=1.1, ls="-.", gid=f"tau:{name}")
+            lim = None if data.torque_limit is None else data.torque_limit[j]
+            if lim is not None and np.isfinite(lim):
+                for sign in (1, -1):
+                    tw.axhline(sign * lim, color=c, lw=0.9, ls="--", alpha=0.75, gid=f"taulim:{name}")
+            continue
         ax.plot(data.times, data.torque[:, j], color=c, lw=1.1, gid=f"tau:{name}")
         top = max(top, float(np.max(np.abs(data.torque[:, j]))))
         lim = None if data.torque_limit is None else data.torque_limit[j]
         if lim is not None and np.isfinite(lim):
             for sign in (1, -1):
                 ax.axhline(sign * lim, color=c, lw=0.9, ls="--", alpha=0.75, gid=f"taulim:{name}")
-    finite = [] if data.torque_limit is None else [v for v in data.torque_limit if np.isfinite(v)]
+    finite = [] if data.torque_limit is None else [v for j, v in enumerate(data.torque_limit) if np.isfinite(v)
+                                                   and (data.prismatic is None or not data.prismatic[j])]
     if finite:  # show the largest torque and the limits near it, not every far-away limit
         span = max(top * 1.25, min(v for v in finite if v >= top) if any(v >= top for v in finite) else top * 1.25)
         ax.set_ylim(-span * 1.05, span * 1.05)
@@ -286,12 +310,18 @@ def draw_time_plots(axes, data: PathData) -> None:
     ax_q, ax_v, ax_a, ax_t, ax_s, ax_m = axes
     colors = colormaps["tab10"]
     t = data.times
+    twins: dict = {}  # prismatic joints (m, m/s, m/s^2) on a twin axis of each panel, drawn dash-dotted
     for j, name in enumerate(data.joint_names):
         c = colors(j % 10)
-        ax_q.plot(t, data.positions[:, j], color=c, lw=1.3, label=name, gid=f"q:{name}")
-        ax_v.plot(t, data.velocities[:, j], color=c, lw=1.3, gid=f"v:{name}")
-        ax_a.plot(t, data.accelerations[:, j], color=c, lw=1.1, gid=f"a:{name}")
-        for ax, lim, tag in ((ax_v, data.velocity_limit[j], "vlim"), (ax_a, data.acceleration_limit[j], "alim")):
+        ls = "-." if data.prismatic is not None and data.prismatic[j] else "-"
+        aq = _axis_for(ax_q, data, j, twins, "position (m),\nprismatic")
+        av = _axis_for(ax_v, data, j, twins, "velocity (m/s),\nprismatic")
+        aa = _axis_for(ax_a, data, j, twins, "acceleration\n(m/s²), prismatic")
+        aq.plot(t, data.positions[:, j], color=c, lw=1.3, ls=ls, label=name if aq is ax_q else f"{name} (m, right axis)",
+                gid=f"q:{name}")
+        av.plot(t, data.velocities[:, j], color=c, lw=1.3, ls=ls, gid=f"v:{name}")
+        aa.plot(t, data.accelerations[:, j], color=c, lw=1.1, ls=ls, gid=f"a:{name}")
+        for ax, lim, tag in ((av, data.velocity_limit[j], "vlim"), (aa, data.acceleration_limit[j], "alim")):
             for sign in (1, -1):
                 ax.axhline(sign * lim, color=c, lw=0.9, ls="--", alpha=0.75, gid=f"{tag}:{name}")
     src = "" if data.limits_source == "trajectory" else " (robot's limits: the file has none)"
@@ -302,6 +332,8 @@ def draw_time_plots(axes, data: PathData) -> None:
     ax_a.set_title(f"dashed: acceleration limit × {data.acceleration_scale:g}", fontsize=8, loc="right", pad=2)
 
     handles, _ = ax_q.get_legend_handles_labels()
+    if ax_q in twins:
+        handles += twins[ax_q].get_legend_handles_labels()[0]
     handles.append(Patch(color="0.5", alpha=0.2, label="Cartesian segment (band)"))
     ax_q.legend(handles=handles, loc="lower left", bbox_to_anchor=(0.0, 1.13), ncol=4, fontsize=7.5, frameon=False,
                 handlelength=1.5, columnspacing=1.0, borderaxespad=0.0)

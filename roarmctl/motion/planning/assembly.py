@@ -82,11 +82,13 @@ def assemble(ctx: PlanContext, pieces: list[TimedPiece]) -> Trajectory:
             "jerk": None if ctx.jmax is None else [float(v) for v in ctx.jmax],
             "effort": None if ctx.effort is None else [float(v) if np.isfinite(v) else None for v in ctx.effort],
             "blend": p.limits.blend,
+            # limit kind -> joints whose limit above is roarmctl's default (the description gives none)
+            **({"defaults": {k: list(v) for k, v in ctx.robot.defaults.items()}} if ctx.robot.defaults else {}),
         },
         singularity_margin={"min_singular_value": p.planner.singularity_margin} if p.planner.singularity_margin else None,
         scene=initial_scene_dict(ctx),
         plan={"path": str(p.path), "sha256": p.sha256, "planner": p.planner.name, "seed": p.planner.seed,
-              "padding": p.planner.padding},
+              "padding": p.planner.padding, **({"link_padding": dict(ctx.robot.padding)} if ctx.robot.padding else {})},
         sample_rate=1.0 / SAMPLE_DT,
     )
     return traj
