@@ -128,7 +128,10 @@ class Planner:
         if robot.gripper is None:
             needs = [t for t in plan.tasks if isinstance(t, (PickTask, PlaceTask))]
             if needs:
-                raise InfeasibleError(f"{plan.path}:{needs[0].line}: {robot.name} has no gripper, so it cannot pick or place")
+                at = f"{plan.path}:{needs[0].line}" if needs[0].line else f"{plan.path}: task {plan.tasks.index(needs[0]) + 1}"
+                raise InfeasibleError(f"{at}: {robot.name} has no gripper, so it cannot pick or place",
+                                      "give the description a gripper (the sidecar's gripper: {joint, open, closed}) or "
+                                      "use move tasks")
         self.progress = progress or (lambda stage, done, total: None)
         scene = Scene([scene_item(s) for s in plan.scene + plan.objects])
         checker = CollisionChecker(robot, scene, padding=plan.planner.padding,

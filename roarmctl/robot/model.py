@@ -224,6 +224,8 @@ class Robot:
     derived: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
     #: The URDF's ``<visual>`` elements, read only for pictures (``roarmctl.robot.visuals``); None without any.
     visual_source: Any = field(default=None, repr=False, compare=False)
+    #: How it was loaded: a bundled name, or the description file's absolute path (what a trajectory names).
+    spec: str = ""
     #: Movable joints of the description that nothing drives (not in ``joint_names``), held at these
     #: values (rad / m); the loader made them fixed joints.
     held_joints: dict[str, float] = field(default_factory=dict)

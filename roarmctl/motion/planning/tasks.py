@@ -24,8 +24,9 @@ if TYPE_CHECKING:
 
 
 def where(task, index: int) -> str:
-    """How messages name a task: ``task 2 (place, line 14)`` (counted from 1)."""
-    return f"task {index + 1} ({task.kind}, line {task.line})"
+    """How messages name a task: ``task 2 (place, line 14)`` (counted from 1); a plan given as a dict (no
+    lines) ``task 2 (place)``."""
+    return f"task {index + 1} ({task.kind}" + (f", line {task.line})" if task.line else ")")
 
 
 def pitch_label(pitch: float | None, auto: bool) -> str:

@@ -12,6 +12,15 @@
     rc.draw(traj, "pick_place.png")                    # .png, .svg or .pdf
     rc.export(traj, "pick_place.mcap")                 # .mcap, .csv or a bag folder name
 
+Single queries, as in mplib (``roarmctl.api.planner``, ``roarmctl.api.scene``):
+
+    scene = rc.Scene()
+    scene.add_box("wall", size=(0.04, 0.10, 0.15), xyz=(0.28, 0, 0.075))
+    planner = rc.Planner(robot, scene, seed=1)
+    goal = planner.ik(rc.Pose((0.25, 0.15, 0.06), pitch=math.pi / 2)).best
+    path = planner.plan_to_joints(q_start, goal)       # or planner.plan_to_pose(q_start, pose)
+    traj = planner.time(path)                          # a Trajectory, like plan()'s
+
 Everything raises ``roarmctl.errors.RoarmError`` subclasses on bad input or failure (each with an
 ``exit_code`` and a one-line ``message``); nothing here prints or exits. Units: m, rad, s.
 Heavy libraries (OMPL, FCL, TOPP-RA, matplotlib, rosbags) are imported only by the functions that
@@ -27,21 +36,28 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from roarmctl.api.planner import IKResult, JointPath, Planner, Pose, Validity
+from roarmctl.api.scene import Scene
 from roarmctl.device.session import run_execution
 from roarmctl.device.streamer import StreamConfig, build_schedule
 from roarmctl.device.streamer import sample as _sample
-from roarmctl.errors import (  # noqa: F401 - re-exported for API users
+from roarmctl.errors import (
+    DescriptionError,
     DeviceError,
     InfeasibleError,
     InputError,
+    Interrupted,
     PlanFileError,
     PlanningError,
     RoarmError,
+    StopRequested,
     TrajectoryFileError,
+    UnreachableError,
 )
 from roarmctl.export import export as _export
 from roarmctl.export import format_for
-from roarmctl.motion.trajectory import Event, Segment, Trajectory  # noqa: F401
+from roarmctl.motion.scene import SceneItem
+from roarmctl.motion.trajectory import Event, Segment, Trajectory
 from roarmctl.viz.formats import picture_format
 
 if TYPE_CHECKING:
@@ -52,16 +68,10 @@ PathLike = str | os.PathLike[str]
 TrajectoryLike = Trajectory | PathLike
 
 __all__ = [
-    "RoarmError",
-    "Trajectory",
-    "draw",
-    "execute",
-    "export",
-    "load_robot",
-    "load_trajectory",
-    "plan",
-    "sample",
-    "save_trajectory",
+    "DescriptionError", "DeviceError", "Event", "IKResult", "InfeasibleError", "InputError", "Interrupted",
+    "JointPath", "PlanFileError", "Planner", "PlanningError", "Pose", "RoarmError", "Scene", "SceneItem",
+    "Segment", "StopRequested", "Trajectory", "TrajectoryFileError", "UnreachableError", "Validity", "draw",
+    "execute", "export", "load_robot", "load_trajectory", "plan", "sample", "save_trajectory",
     "to_joint_trajectory",
 ]
 

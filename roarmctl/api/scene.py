@@ -1,0 +1,147 @@
+"""``Scene``: the world a ``Planner`` checks against, built one call at a time.
+
+    scene = Scene()
+    scene.add_box("table", size=(0.8, 0.6, 0.02), xyz=(0.15, 0, -0.01), role="table")
+    scene.add_box("wall", size=(0.04, 0.10, 0.15), xyz=(0.28, 0, 0.075))
+    scene.add_cylinder("can", radius=0.015, length=0.05, xyz=(0.18, 0.22, 0.025), role="object")
+    scene.remove("can")
+    scene.attach("cube", q)   # the TCP carries it from configuration q on
+    scene.detach("cube", q2)  # put down where the TCP has carried it at q2
+
+Items are ``roarmctl.motion.scene.SceneItem``s (the plan file's shapes), poses in the robot's root frame,
+metres and radians. Roles: ``table`` (the arm's base links may touch it), ``obstacle``, ``object`` (may be
+grasped and carried). A carried item moves rigidly with the TCP; the checker tests it like a part of the
+arm. Every change bumps ``version`` so a ``Planner`` using the scene rebuilds its collision checker once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from roarmctl.errors import InputError
+from roarmctl.motion.scene import Role, SceneItem
+from roarmctl.motion.scene import Scene as _WorldScene
+
+if TYPE_CHECKING:
+    from roarmctl.robot.model import Robot
+
+
+class Scene:
+    """A mutable set of named scene items and the items the arm carries.
+
+    ``robot`` (set by the ``Planner`` that uses the scene, or given here) is needed by ``attach`` and
+    ``detach``, which place a carried item with the robot's FK.
+    """
+
+    def __init__(self, items: list[SceneItem] | None = None, *, robot: Robot | None = None) -> None:
+        self.robot = robot
+        self._items: dict[str, SceneItem] = {}
+        self._carried: dict[str, tuple[SceneItem, np.ndarray]] = {}  # name -> (item, pose in the TCP frame)
+        self.version = 0
+        for item in items or []:
+            self.add(item)
+
+    # ------------------------------------------------------------------ adding and removing
+    def add(self, item: SceneItem) -> SceneItem:
+        """Add a ``SceneItem``; its name must be new to the scene."""
+        if item.name in self:
+            raise InputError(f"scene: an item named '{item.name}' is already there", "remove it first, or use another name")
+        self._items[item.name] = item
+        self.version += 1
+        return item
+
+    def add_box(self, name: str, size, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *, role: Role = "obstacle") -> SceneItem:
+        """A box of full edge lengths ``size`` (3,) m, centred at ``xyz`` (m), turned by URDF ``rpy`` (rad)."""
+        return self.add(SceneItem.box(name, size, xyz, rpy, role=role))
+
+    def add_cylinder(self, name: str, radius: float, length: float, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *,
+                     role: Role = "obstacle") -> SceneItem:
+        """A cylinder of ``radius`` and ``length`` (m) along its local z, centred at ``xyz``, turned by ``rpy``."""
+        return self.add(SceneItem.cylinder(name, radius, length, xyz, rpy, role=role))
+
+    def add_sphere(self, name: str, radius: float, xyz=(0.0, 0.0, 0.0), *, role: Role = "obstacle") -> SceneItem:
+        """A sphere of ``radius`` (m) centred at ``xyz``."""
+        return self.add(SceneItem.sphere(name, radius, xyz, role=role))
+
+    def remove(self, name: str) -> SceneItem:
+        """Take item ``name`` out of the scene (a carried one too); returns it."""
+        if name in self._carried:
+            item = self._carried.pop(name)[0]
+        elif name in self._items:
+            item = self._items.pop(name)
+        else:
+            raise InputError(f"scene has no item '{name}' (items: {', '.join(self.names()) or 'none'})")
+        self.version += 1
+        return item
+
+    # ------------------------------------------------------------------ carrying
+    def _tcp(self, q) -> np.ndarray:
+        if self.robot is None:
+            raise InputError("scene: attach/detach place the item with the robot's FK, and this scene has no robot",
+                             "pass the scene to Planner(robot, scene) first, or build it with Scene(robot=robot)")
+        return self.robot.kin.fk(self.robot.full_q(np.asarray(q, dtype=float)))
+
+    def attach(self, name: str, q) -> None:
+        """The TCP carries item ``name`` from configuration ``q`` (rad/m, dof or arm joints) on: the item keeps
+        its pose relative to the TCP as it is at ``q``."""
+        if name in self._carried:
+            raise InputError(f"scene: '{name}' is already carried")
+        item = self[name]
+        if item.role == "table":
+            raise InputError(f"scene: cannot attach '{name}': it is the table")
+        rel = np.linalg.inv(self._tcp(q)) @ item.pose
+        del self._items[name]
+        self._carried[name] = (item, rel)
+        self.version += 1
+
+    def detach(self, name: str, q) -> SceneItem:
+        """Put carried item ``name`` down where the TCP has carried it at configuration ``q``; returns it (its
+        new pose in ``.pose``)."""
+        if name not in self._carried:
+            raise InputError(f"scene: '{name}' is not carried (carried: {', '.join(self._carried) or 'none'})")
+        item, rel = self._carried.pop(name)
+        item.pose = self._tcp(q) @ rel
+        self._items[name] = item
+        self.version += 1
+        return item
+
+    # ------------------------------------------------------------------ reading
+    def __getitem__(self, name: str) -> SceneItem:
+        if name in self._items:
+            return self._items[name]
+        if name in self._carried:
+            return self._carried[name][0]
+        raise InputError(f"scene has no item '{name}' (items: {', '.join(self.names()) or 'none'})")
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._items or name in self._carried
+
+    def names(self) -> list[str]:
+        """Every item's name: those in the world, then the carried ones."""
+        return list(self._items) + list(self._carried)
+
+    @property
+    def items(self) -> list[SceneItem]:
+        """The items in the world (not the carried ones)."""
+        return list(self._items.values())
+
+    @property
+    def carried(self) -> dict[str, np.ndarray]:
+        """Carried item name -> its pose (4, 4) in the TCP frame."""
+        return {name: rel.copy() for name, (_, rel) in self._carried.items()}
+
+    def world(self, q=None) -> _WorldScene:
+        """The items as a ``roarmctl.motion.scene.Scene`` (what the checker and the trajectory file take); with
+        ``q``, the carried items too, where the TCP holds them at ``q``."""
+        items = [replace(i, pose=i.pose.copy()) for i in self._items.values()]
+        if q is not None and self._carried:
+            tcp = self._tcp(q)
+            items += [replace(i, pose=tcp @ rel) for i, rel in self._carried.values()]
+        return _WorldScene(items)
+
+    def to_dict(self) -> dict:
+        """The world items in the trajectory file's form: ``{"items": [{name, role, shape, size|radius, xyz, rpy}]}``."""
+        return self.world().to_dict()

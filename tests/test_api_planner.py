@@ -1,0 +1,183 @@
+"""The single-query API (issue 22, item 5): ``Planner`` (ik, is_valid, plan_to_joints, plan_to_pose, time) and
+``Scene`` (add, remove, attach, detach), checked against independent measures: FK of IK answers, a second
+collision checker at a finer resolution over the returned paths, the trajectory validator ``execute`` uses,
+and hand-placed scene items. ``check_example`` checks what the example scripts 05-11 wrote."""
+
+from __future__ import annotations
+
+import inspect
+import itertools
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import roarmctl.api as rc
+import roarmctl.errors as errors
+from roarmctl.motion.collision import CollisionChecker
+from roarmctl.motion.scene import Scene as WorldScene
+from roarmctl.motion.scene import SceneItem
+
+ROBOT = rc.load_robot("roarm_m3_pro")
+HOME = ROBOT.named_poses["home"]
+DOWN = math.pi / 2
+TABLE = SceneItem.box("table", (0.8, 0.6, 0.02), (0.15, 0.0, -0.01), role="table")
+WALL = SceneItem.box("wall", (0.04, 0.10, 0.15), (0.28, 0.0, 0.075))
+LEFT, RIGHT = [-0.54, 0.53, 1.93, 0.67, 0.0], [0.54, 0.53, 1.93, 0.67, 0.0]  # low, either side of the wall
+
+
+def scene_with_wall() -> rc.Scene:
+    s = rc.Scene()
+    s.add_box("table", (0.8, 0.6, 0.02), (0.15, 0.0, -0.01), role="table")
+    s.add_box("wall", (0.04, 0.10, 0.15), (0.28, 0.0, 0.075))
+    return s
+
+
+def path_is_free(waypoints: np.ndarray, items: list[SceneItem], padding: float = 0.005) -> bool:
+    """An independent check of a path: a fresh checker, every straight step cut at 2 mrad."""
+    checker = CollisionChecker(ROBOT, WorldScene([SceneItem.box(i.name, i.size, i.xyz, role=i.role) for i in items]),
+                               padding=padding)
+    wps = np.asarray(waypoints)[:, ROBOT.arm_indices]
+    dense = [wps[0]]
+    for a, b in itertools.pairwise(wps):
+        n = max(int(np.ceil(np.max(np.abs(b - a)) / 0.002)), 1)
+        dense += [a + (b - a) * k / n for k in range(1, n + 1)]
+    return bool(np.all(checker.validity_batch(np.array(dense))))
+
+
+def test_every_error_class_is_exported():
+    classes = {n for n, c in inspect.getmembers(errors, inspect.isclass) if issubclass(c, BaseException)
+               and c.__module__ == errors.__name__}
+    assert classes <= set(rc.__all__) and all(getattr(rc, n) is getattr(errors, n) for n in classes)
+
+
+def test_ik_solutions_are_valid_and_reach_the_pose_by_fk():
+    planner = rc.Planner(ROBOT, scene_with_wall())
+    found = planner.ik(rc.Pose((0.25, -0.15, 0.08), pitch=DOWN), q_ref=HOME)
+    assert found.ok
+    for q in found.solutions:
+        t = ROBOT.kin.fk(q)
+        np.testing.assert_allclose(t[:3, 3], [0.25, -0.15, 0.08], atol=1e-6)
+        assert t[:3, 0] @ [0, 0, -1] > math.cos(1e-4)  # the approach axis straight down
+        assert planner.is_valid(q)
+    with pytest.raises(rc.UnreachableError):
+        planner.ik(rc.Pose((2.0, 0.0, 0.1)))
+
+
+def test_is_valid_says_why():
+    planner = rc.Planner(ROBOT, scene_with_wall())
+    assert planner.is_valid(HOME)
+    v = planner.is_valid([0.0, 0.0, 3.5, 0.0, 0.0])
+    assert not v and "outside its limits" in v.reason
+    v = planner.is_valid([0.0, 1.4, 1.2, 0.0, 0.0])
+    assert not v and "table" in v.reason
+
+
+def test_plan_to_joints_goes_around_the_wall_and_the_path_is_free_for_another_checker():
+    planner = rc.Planner(ROBOT, scene_with_wall(), seed=3)
+    path = planner.plan_to_joints(LEFT, RIGHT)
+    np.testing.assert_allclose(path.waypoints[0][ROBOT.arm_indices], LEFT)
+    np.testing.assert_allclose(path.waypoints[-1][ROBOT.arm_indices], RIGHT)
+    assert len(path.waypoints) > 2  # the straight move goes through the wall
+    assert not path_is_free(np.array([ROBOT.full_q(LEFT), ROBOT.full_q(RIGHT)]), [TABLE, WALL])
+    assert path_is_free(path.waypoints, [TABLE, WALL])
+    again = rc.Planner(ROBOT, scene_with_wall(), seed=3).plan_to_joints(LEFT, RIGHT)
+    np.testing.assert_array_equal(again.waypoints, path.waypoints)  # same seed, same calls: same path
+
+
+def test_plan_to_joints_refuses_an_invalid_goal():
+    planner = rc.Planner(ROBOT, scene_with_wall())
+    with pytest.raises(rc.PlanningError, match=r"goal configuration is invalid: .*table"):
+        planner.plan_to_joints(HOME, [0.0, 1.4, 1.2, 0.0, 0.0])
+
+
+def test_plan_to_pose_ends_at_the_pose():
+    planner = rc.Planner(ROBOT, scene_with_wall(), seed=1)
+    path = planner.plan_to_pose(LEFT, rc.Pose((0.25, 0.15, 0.06), pitch=DOWN))
+    np.testing.assert_allclose(ROBOT.kin.fk(path.waypoints[-1])[:3, 3], [0.25, 0.15, 0.06], atol=1e-6)
+    assert path_is_free(path.waypoints, [TABLE, WALL])
+
+
+def test_time_gives_a_trajectory_the_validator_accepts(tmp_path):
+    planner = rc.Planner(ROBOT, scene_with_wall(), seed=3, velocity_scale=0.4)
+    traj = planner.time(planner.plan_to_joints(LEFT, RIGHT))
+    assert isinstance(traj, rc.Trajectory)
+    assert np.all(np.abs(traj.velocities) <= ROBOT.velocity_limits * 0.4 * (1 + 1e-6) + 1e-9)
+    np.testing.assert_allclose(traj.positions[0][ROBOT.arm_indices], LEFT, atol=1e-9)
+    np.testing.assert_allclose(traj.positions[-1][ROBOT.arm_indices], RIGHT, atol=1e-9)
+    assert [i["name"] for i in traj.scene["items"]] == ["table", "wall"]
+    back = rc.load_trajectory(rc.save_trajectory(traj, tmp_path / "t.traj.json"))  # execute's validator
+    assert back.duration == pytest.approx(traj.duration)
+
+
+def test_scene_changes_reach_the_next_query():
+    scene = rc.Scene()
+    planner = rc.Planner(ROBOT, scene)
+    q = [0.0, 0.6, 1.8, 0.0, 0.0]
+    assert planner.is_valid(q)
+    scene.add_box("crate", (0.10, 0.10, 0.10), (0.30, 0.0, 0.0))
+    assert "crate" in planner.is_valid(q).reason
+    scene.remove("crate")
+    assert planner.is_valid(q)
+    with pytest.raises(rc.InputError, match="already there"):
+        scene.add_box("wall", (0.1, 0.1, 0.1), (1, 1, 1)) and scene.add_box("wall", (0.1, 0.1, 0.1), (1, 1, 1))
+
+
+def test_a_carried_item_moves_with_the_tcp_and_is_checked_like_the_arm():
+    """Attach a cube at the grasp; at another configuration the cube is where the TCP took it (FK, by hand:
+    the grasp offset kept), it collides with a post the bare arm clears, and detach puts it down there."""
+    scene = scene_with_wall()
+    scene.add_box("cube", (0.04, 0.04, 0.04), (0.25, -0.15, 0.02), role="object")
+    planner = rc.Planner(ROBOT, scene, seed=1)
+    grasp = planner.ik(rc.Pose((0.25, -0.15, 0.02), pitch=DOWN), q_ref=HOME, touching="cube").best
+    assert not planner.is_valid(grasp)  # without 'touching' the jaws hit the cube they hold
+    scene.attach("cube", grasp)
+    assert planner.is_valid(grasp)
+    up = planner.ik(rc.Pose((0.25, -0.15, 0.12), pitch=DOWN), q_ref=grasp).best
+    # a post under the cube's bottom face (the cube is centred on the TCP, 2 cm down to its face): the cube hits
+    # it, the arm alone clears it (a scene without the cube, a new planner)
+    post = ((0.02, 0.02, 0.02), (0.25, -0.15, 0.095))
+    scene.add_box("post", *post)
+    v = planner.is_valid(up)
+    assert not v and "cube" in v.reason
+    bare = scene_with_wall()
+    bare.add_box("post", *post)
+    assert rc.Planner(ROBOT, bare).is_valid(up)
+    scene.remove("post")
+    cube = scene.detach("cube", up)
+    np.testing.assert_allclose(cube.pose[:3, 3], [0.25, -0.15, 0.12], atol=1e-6)  # centred on the TCP, as grasped
+
+
+def check_example(number: str, out: Path) -> None:
+    """What the examples 05-11 wrote, checked independently."""
+    if number == "05":
+        data = json.loads((out / "ik.json").read_text())
+        assert data["solutions"]
+        for q in data["solutions"]:
+            np.testing.assert_allclose(ROBOT.kin.fk(np.array(q))[:3, 3], data["xyz"], atol=1e-6)
+    elif number == "06":
+        data = json.loads((out / "is_valid.json").read_text())
+        assert data["home"][0] and not data["into the desk"][0] and "table" in data["into the desk"][1]
+        assert "outside its limits" in data["elbow past its limit"][1]
+    elif number == "07":
+        wps = np.array(json.loads((out / "path.json").read_text())["waypoints"])
+        assert path_is_free(wps, [TABLE, WALL]) and len(wps) > 2
+    elif number == "08":
+        data = json.loads((out / "pose_path.json").read_text())
+        np.testing.assert_allclose(ROBOT.kin.fk(np.array(data["waypoints"][-1]))[:3, 3], data["xyz"], atol=1e-6)
+        assert path_is_free(np.array(data["waypoints"]), [TABLE, WALL])
+    elif number == "09":
+        traj = rc.load_trajectory(out / "timed.traj.json")
+        np.testing.assert_allclose(traj.positions[-1][ROBOT.arm_indices], ROBOT.named_poses["ready"][ROBOT.arm_indices],
+                                   atol=1e-9)
+    elif number == "10":
+        data = json.loads((out / "scene.json").read_text())
+        assert "crate" in data["blocked"] and data["items"] == ["post", "ball"]
+    elif number == "11":
+        data = json.loads((out / "carried.json").read_text())
+        np.testing.assert_allclose(np.array(data["cube"])[:3, 3], [0.25, 0.15, 0.02], atol=1e-6)
+        np.testing.assert_allclose(ROBOT.kin.fk(np.array(data["put"]))[:3, 3], [0.25, 0.15, 0.02], atol=1e-6)
+    else:
+        raise AssertionError(f"example {number}: nothing checks what it does")
