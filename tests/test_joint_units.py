@@ -69,7 +69,7 @@ def wx_traj(tmp_path_factory) -> Path:
 @pytest.mark.slow
 def test_peaks_csv_and_drawing_use_the_finger_units(wx_traj, tmp_path):
     from roarmctl.motion.report import motion_peaks
-    from roarmctl.motion.trajectory import load_trajectory
+    from roarmctl.motion.validate import load_trajectory
     from roarmctl.viz.data import path_data, robot_for
     from roarmctl.viz.path_figure import render_path
 

@@ -80,6 +80,8 @@ def run(cmd: str, cwd: Path, tty: bool = False) -> subprocess.CompletedProcess:
 def workdir(tmp_path_factory) -> Path:
     d = tmp_path_factory.mktemp("readme")
     shutil.copytree(ROOT / "plans", d / "plans")
+    (d / "tests" / "data").mkdir(parents=True)  # the corpus of published arms, read in place
+    (d / "tests" / "data" / "arms").symlink_to(ROOT / "tests" / "data" / "arms")
     r = run("roarmctl plan plans/pick_place.yaml -o pick_place.traj.json", d)
     assert r.returncode == 0, r.stderr
     return d

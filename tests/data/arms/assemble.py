@@ -44,6 +44,12 @@ ARMS: dict[str, dict] = {
         packages={"xarm_description": "xarm_description", "xarm_moveit_config": "xarm_moveit_config"},
         urdf="xarm_description/urdf/xarm_device.urdf.xacro", srdf="xarm_moveit_config/srdf/xarm.srdf.xacro",
         joint_limits="xarm_moveit_config/config/xarm6/joint_limits.yaml", xacro_args={"dof": 6, "add_gripper": "true", "robot_type": "xarm"}),
+    "xarm7": dict(
+        repo="xArm-Developer/xarm_ros2", commit="3654ba7bb2a0e502088251728d07263ea399d4a4",
+        licence="BSD-3-Clause", licence_file="LICENSE",
+        packages={"xarm_description": "xarm_description", "xarm_moveit_config": "xarm_moveit_config"},
+        urdf="xarm_description/urdf/xarm_device.urdf.xacro", srdf="xarm_moveit_config/srdf/xarm.srdf.xacro",
+        joint_limits="xarm_moveit_config/config/xarm7/joint_limits.yaml", xacro_args={"dof": 7, "add_gripper": "true", "robot_type": "xarm"}),
     "wx250s": dict(
         repo="Interbotix/interbotix_ros_manipulators", commit="a4b7e51150d604e2f16451b703fa5f324dd52520",  # branch humble
         licence="BSD-3-Clause", licence_file="LICENSE",
