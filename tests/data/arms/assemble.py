@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import builtins
-import hashlib
 import io
 import os
 import re
