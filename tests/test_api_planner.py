@@ -181,3 +181,23 @@ def check_example(number: str, out: Path) -> None:
         np.testing.assert_allclose(ROBOT.kin.fk(np.array(data["put"]))[:3, 3], [0.25, 0.15, 0.02], atol=1e-6)
     else:
         raise AssertionError(f"example {number}: nothing checks what it does")
+
+
+def test_dict_plans_name_the_task_and_field_and_find_a_relative_robot(tmp_path, monkeypatch):
+    """A plan given as a dict has no lines: its messages name the task and the field, never 'line 0' or ':1';
+    a relative robot path starts at base_dir (default the current folder)."""
+    corpus = Path(__file__).parent / "data" / "arms"
+    plan = {"robot": "so100/robot.yaml", "start": [0, 1.5, -1.5, 0.5, 0], "tasks": [{"wait": {"seconds": 0.1}}]}
+    assert rc.plan(plan, base_dir=corpus).trajectory.robot == str((corpus / "so100" / "robot.yaml").resolve())
+    monkeypatch.chdir(corpus)
+    assert rc.plan(plan).trajectory.duration == pytest.approx(0.1)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(rc.PlanFileError) as err:
+        rc.plan(plan)
+    assert err.value.message.startswith("<plan dict>: robot: unknown robot 'so100/robot.yaml'")
+    assert "base_dir" in err.value.hint
+    for bad, needle in (({"move": {"xyz": [2.2, 0, 0.1]}}, "task 1 (move): target"),
+                        ({"pick": {"object": "nope"}}, "task 1: pick.object: no object named 'nope'")):
+        with pytest.raises(rc.RoarmError) as err:
+            rc.plan({"robot": "roarm_m3_pro", "tasks": [bad]})
+        assert needle in err.value.message and "line" not in err.value.message and ":0" not in err.value.message

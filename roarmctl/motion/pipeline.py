@@ -77,7 +77,13 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
         robot = load_robot(robot_spec(plan))
     except DescriptionError:
         raise
-    except InputError as exc:  # unknown robot: name the plan's line
+    except InputError as exc:  # unknown robot: name the plan's line (a dict has none: say where paths start)
+        from roarmctl.plan.schema import DICT_NAME
+
+        if plan.path.name == DICT_NAME:
+            raise PlanFileError(f"{DICT_NAME}: robot: {exc.message}",
+                                f"a plan dict's relative robot path starts at base_dir (here {plan.path.parent.resolve()}); "
+                                f"pass base_dir=, an absolute path, or a bundled name ({exc.hint})") from None
         raise PlanFileError(f"{plan.path}:{plan.lines.get('robot', 1)}: robot: {exc.message}", exc.hint) from None
     plan = load_plan(path, named_poses=list(robot.named_poses), base_dir=base_dir, frames=robot.frames, parsed=plan)
     if start_here or (isinstance(plan.start, str) and plan.start == "current"):
