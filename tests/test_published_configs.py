@@ -181,3 +181,14 @@ def test_gripper_parts_against_the_arm_are_still_checked(tmp_path):
     assert frozenset(("left", "upper")) not in r.allowed_collisions
     checker = CollisionChecker(r, Scene([]), padding=0.0)
     assert checker.is_valid(np.array([0.0, 0.0]))
+
+
+def test_a_mimic_joints_own_limits_bound_its_leader(tmp_path):
+    """The right finger (-0.676 q + 0.149) may not go below -0.3 rad: the driven finger then stops at
+    (0.149 + 0.3) / 0.676 = 0.66420 rad instead of its own 0.8 (by hand), and the loader says so."""
+    side = write(tmp_path, {"gripper": {"joint": "finger", "open": 0.6, "closed": 0.05}})
+    (tmp_path / "arm.urdf").write_text(URDF.replace('<limit lower="-1" upper="0.5"', '<limit lower="-0.3" upper="0.5"'))
+    r = load_robot(str(side))
+    i = r.joint_index("finger")
+    assert r.lower[i] == 0.0 and r.upper[i] == pytest.approx((0.149 + 0.3) / 0.676, abs=1e-12)
+    assert any("'finger' limited to [0, 0.664201]" in n for n in r.notes)

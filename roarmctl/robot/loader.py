@@ -558,6 +558,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     for j in joints_xml:
         by_parent.setdefault(j.find("parent").get("link"), []).append(j)
     ordered: list[Joint] = []
+    bounded: set[str] = set()  # joints whose <limit> gives lower and upper
     stack = [roots[0]]
     while stack:  # depth-first so parents precede children
         link = stack.pop(0)
@@ -576,6 +577,8 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
             upper = _fattr(lim, "upper", math.pi, f"{where} limit")
             if j.get("type") == "continuous":
                 lower, upper = -2 * math.pi, 2 * math.pi
+            elif lim is not None and lim.get("lower") is not None and lim.get("upper") is not None:
+                bounded.add(name)
             axis = axis / (np.linalg.norm(axis) or 1.0)
             master, mult, offset = None, 1.0, 0.0
             if j.find("mimic") is not None and kind != "fixed":
@@ -646,6 +649,9 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     if tool is not None:
         ordered.append(tool)
         tcp = tool.child
+    lower = np.array([jl.get(n, {}).get("lower", by_name[n].lower) for n in names])
+    upper = np.array([jl.get(n, {}).get("upper", by_name[n].upper) for n in names])
+    _mimic_bounds(ordered, names, bounded, lower, upper, notes)
     acc = np.array([jl.get(n, {}).get("acceleration", DEFAULT_ACCELERATION) for n in names])
     acc_default = {n for n in names if "acceleration" not in jl.get(n, {})}
     common = _common(side, sidecar, names, np.array(urdf_vel), acc, np.array(urdf_eff),
@@ -657,8 +663,8 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         joints=ordered,
         joint_names=names,
         tcp_link=tcp,
-        lower=np.array([jl.get(n, {}).get("lower", by_name[n].lower) for n in names]),
-        upper=np.array([jl.get(n, {}).get("upper", by_name[n].upper) for n in names]),
+        lower=lower,
+        upper=upper,
         inertials=inertials,
         collision=shapes,
         visual_source=visuals.source_of(((n, k, v) for n, e in links.items() for k, v in enumerate(e.findall("visual"))),
@@ -686,6 +692,25 @@ def _padding(side: dict, where: str, links: set[str]) -> dict[str, float]:
             raise DescriptionError(f"{where}: padding.{link}: {v:g} m is outside [0, 0.1] m")
         out[str(link)] = v
     return out
+
+
+def _mimic_bounds(ordered: list[Joint], names: list[str], bounded: set[str], lower: np.ndarray, upper: np.ndarray,
+                  notes: list[str]) -> None:
+    """Narrow a driven joint's limits (in place) to the values at which every joint mimicking it stays within its
+    own URDF limits (multiplier x q + offset inside [lower, upper] of the mimic joint); said in ``notes``."""
+    for j in ordered:
+        if j.mimic is None or j.name not in bounded or j.mimic not in names:
+            continue
+        k = names.index(j.mimic)
+        a, b = sorted(((j.lower - j.offset) / j.multiplier, (j.upper - j.offset) / j.multiplier))
+        lo, hi = max(lower[k], a), min(upper[k], b)
+        if lo > hi:
+            raise DescriptionError(f"joint '{j.name}' mimics '{j.mimic}' but no value of '{j.mimic}' within its limits "
+                                   f"keeps '{j.name}' within [{j.lower:g}, {j.upper:g}]")
+        if lo > lower[k] + 1e-9 or hi < upper[k] - 1e-9:
+            notes.append(f"joint '{j.mimic}' limited to [{lo:.6g}, {hi:.6g}] so that '{j.name}', which mimics it, stays "
+                         f"within its own limits [{j.lower:g}, {j.upper:g}]")
+            lower[k], upper[k] = lo, hi
 
 
 def _urdf_shape(link: str, c: ET.Element, where: str, k: int, meshes: dict) -> list[CollisionShape]:
