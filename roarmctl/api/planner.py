@@ -27,10 +27,13 @@ import numpy as np
 
 from roarmctl.api.scene import Scene
 from roarmctl.errors import InputError, PlanningError, UnreachableError
+from roarmctl.motion.planning import motions
+from roarmctl.motion.planning.context import PlanContext
+from roarmctl.motion.planning.pieces import TaskStep, UntimedMotion
+from roarmctl.robot.ik import solve_ik
 from roarmctl.robot.model import Robot, rpy_from_matrix
 
 if TYPE_CHECKING:
-    from roarmctl.motion.planning.context import PlanContext
     from roarmctl.motion.trajectory import Trajectory
 
 
@@ -167,7 +170,6 @@ class Planner:
         if self._ctx is not None and self._version == self.scene.version:
             return self._ctx
         from roarmctl.motion.collision import CollisionChecker
-        from roarmctl.motion.planning.context import PlanContext
         from roarmctl.plan.schema import Plan
 
         r = self.robot
@@ -216,16 +218,18 @@ class Planner:
         """Every IK solution for ``pose`` that ``is_valid`` (with ``touching``), nearest to ``q_ref`` (dof or arm
         joints; its gripper value is kept) first. Raises ``UnreachableError`` when the pose has no solution at
         all (out of reach, only outside the limits, orientation not reachable)."""
-        from roarmctl.robot.ik import solve_ik
-
         if not isinstance(pose, Pose):
             raise InputError(f"ik: expected a Pose, got {type(pose).__name__}", "e.g. Pose((0.25, 0, 0.1), pitch=math.pi / 2)")
         ref = None if q_ref is None else self._full(q_ref, "ik: q_ref")
         sols = solve_ik(self.robot, pose.xyz, pitch=pose.pitch, roll=pose.roll, rpy=pose.rpy, q_ref=ref, all_solutions=True)
-        good, rejected = [], []
+        good: list[np.ndarray] = []
+        rejected: list[str] = []
         for q in sols:
             v = self.is_valid(q, touching=touching)
-            (good if v else rejected).append(np.asarray(q, dtype=float) if v else v.reason)
+            if v:
+                good.append(np.asarray(q, dtype=float))
+            else:
+                rejected.append(v.reason)
         return IKResult(tuple(good), tuple(rejected))
 
     def plan_to_joints(self, q_from, q_to, *, touching: str | None = None) -> JointPath:
@@ -233,9 +237,6 @@ class Planner:
         move when it is valid, else OMPL's (the shortest of a few tries, shortcut). The gripper stays at
         ``q_from``'s value; ``touching`` as for ``is_valid``. Raises ``PlanningError`` when either end is
         invalid or no path is found."""
-        from roarmctl.motion.planning import motions
-        from roarmctl.motion.planning.pieces import TaskStep
-
         qf, qt = self._full(q_from, "plan_to_joints: q_from"), self._full(q_to, "plan_to_joints: q_to")
         ctx = self._context()
         if ctx.gi is not None:
@@ -273,9 +274,7 @@ class Planner:
         """``path`` timed from rest to rest by TOPP-RA under the scaled joint limits (jerk, torque and TCP speed
         limits included), sampled at 100 Hz and every sample checked again: a ``Trajectory`` (``save``,
         ``roarmctl.api.draw``/``export``/``execute`` take it). Raises ``PlanningError`` when it cannot be timed."""
-        from roarmctl.motion.planning import motions
         from roarmctl.motion.planning.assembly import assemble
-        from roarmctl.motion.planning.pieces import TaskStep, UntimedMotion
 
         if not isinstance(path, JointPath):
             raise InputError(f"time: expected a JointPath, got {type(path).__name__}")

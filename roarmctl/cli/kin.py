@@ -6,6 +6,7 @@ stdout, nothing else); without ``--json`` a readable table is printed.
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any
 
 import typer
@@ -42,8 +43,6 @@ def _angles_out(values, deg: bool):
 
 def _looks_like_degrees(what: str, values, deg: bool) -> None:
     """Warn when angles given without --deg are larger than a turn (2 pi rad): probably degrees."""
-    import math
-
     big = [v for v in values if v is not None and abs(float(v)) > 2 * math.pi]
     if big and not deg:
         common.warn(f"{what} {', '.join(f'{float(v):g}' for v in big)} look like degrees (more than 2 pi rad): read as "

@@ -29,9 +29,10 @@ from roarmctl.motion.report import motion_peaks
 from roarmctl.motion.scene import Scene
 from roarmctl.motion.timing import TimedPath
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
-from roarmctl.plan.schema import PickTask, PlaceTask, Plan, load_plan
+from roarmctl.plan.schema import DICT_NAME, PickTask, PlaceTask, Plan, load_plan
 from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import Robot
+from roarmctl.robot.padding import thin_parts
 
 __all__ = ["SAMPLE_DT", "PartialPlan", "PlanResult", "Planner", "load_planning_libraries", "plan_file"]
 
@@ -78,8 +79,6 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
     except DescriptionError:
         raise
     except InputError as exc:  # unknown robot: name the plan's line (a dict has none: say where paths start)
-        from roarmctl.plan.schema import DICT_NAME
-
         if plan.path.name == DICT_NAME:
             raise PlanFileError(f"{DICT_NAME}: robot: {exc.message}",
                                 f"a plan dict's relative robot path starts at base_dir (here {plan.path.parent.resolve()}); "
@@ -143,8 +142,6 @@ class Planner:
         checker = CollisionChecker(robot, scene, padding=plan.planner.padding,
                                    singularity_margin=plan.planner.singularity_margin or None)
         self.ctx = PlanContext(plan, robot, checker)
-        from roarmctl.robot.padding import thin_parts
-
         self.ctx.notes.extend(robot.notes)  # what the description lacks or leaves out, said once with the plan
         thin = thin_parts(robot, plan.planner.padding)
         if thin is not None:

@@ -19,7 +19,10 @@ if TYPE_CHECKING:
 def thickness(shape: CollisionShape) -> float:
     """The shape's smallest width (m)."""
     if shape.kind == "mesh":
-        return shape.mesh.thickness()  # type: ignore[union-attr]
+        from roarmctl.robot.meshes import MeshGeometry
+
+        assert isinstance(shape.mesh, MeshGeometry)
+        return shape.mesh.thickness()
     if shape.kind == "box":
         return float(min(shape.size))
     return 2.0 * float(shape.radius)  # sphere, cylinder, capsule

@@ -35,6 +35,7 @@ from typing import Any
 
 from roarmctl.errors import DescriptionError
 from roarmctl.fileio import Roots, read_text
+from roarmctl.robot.xacro_input import expand
 from roarmctl.validation import load_yaml
 
 SRDF_BYTES = 16 * 1024 * 1024  # an SRDF may have (MoveIt's of published arms: < 100 KiB)
@@ -210,13 +211,10 @@ def read_srdf(root: ET.Element, src: str, joints: dict[str, tuple[str, str, str 
 def parse_srdf(path: Path, side: dict, sidecar: Path, where: str) -> tuple[ET.Element, str]:
     """The SRDF's XML root and its name for messages: read inside the description's roots (``side['_roots']``),
     a ``.xacro`` SRDF expanded like the URDF (the sidecar's ``xacro_args`` and ``packages``, the same roots)."""
-    from roarmctl.fileio import read_text
     from roarmctl.robot.meshes import description_roots
 
     roots = side.get("_roots") or description_roots(side, sidecar)
     if path.suffix.lower() == ".xacro":
-        from roarmctl.robot.xacro_input import expand
-
         text = expand(path, side.get("xacro_args"), where, roots=roots, trusted=bool(side.get("_trusted")))
         try:
             return ET.fromstring(text), str(path)
