@@ -188,7 +188,8 @@ def test_dict_plans_name_the_task_and_field_and_find_a_relative_robot(tmp_path, 
     a relative robot path starts at base_dir (default the current folder)."""
     corpus = Path(__file__).parent / "data" / "arms"
     plan = {"robot": "so100/robot.yaml", "start": [0, 1.5, -1.5, 0.5, 0], "tasks": [{"wait": {"seconds": 0.1}}]}
-    assert rc.plan(plan, base_dir=corpus).trajectory.robot == str((corpus / "so100" / "robot.yaml").resolve())
+    traj = rc.plan(plan, base_dir=corpus).trajectory
+    assert traj.robot == "so_arm100" and traj.robot_description is not None  # the description travels with it
     monkeypatch.chdir(corpus)
     assert rc.plan(plan).trajectory.duration == pytest.approx(0.1)
     monkeypatch.chdir(tmp_path)

@@ -23,12 +23,9 @@ from roarmctl.cli import run as run_cli
 CORPUS = Path(__file__).parent / "data" / "arms"
 ARMS = sorted(p.name for p in CORPUS.iterdir() if (p / "robot.yaml").is_file())
 GRIPPERLESS = {"ur5e", "irb2400"}  # published without a gripper: their plans move the TCP along the same path
-# Published xacro that roarmctl's xacro-as-data evaluator (robot/xacro_safe.py, issue 19) does not take yet:
-# known defects, strict (an arm that starts to load turns its xfail into a failure: remove it here then).
-PENDING = {
-    "fer": "xacro expression ${xyz.split(' ')[0]} (franka_description robots/common/utils.xacro) is refused",
-    "ur5e": "xacro.load_yaml of a '!degrees 360.0' value (ur_description config/ur5e/joint_limits.yaml) is refused",
-}
+# Published descriptions roarmctl does not load yet: known defects, strict xfails (an arm that starts to load turns
+# its xfail into a failure: remove it here then). None at the moment.
+PENDING: dict[str, str] = {}
 LOADING = [pytest.param(a, marks=pytest.mark.xfail(reason=PENDING[a], strict=True)) if a in PENDING else a for a in ARMS]
 
 
