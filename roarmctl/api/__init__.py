@@ -56,8 +56,11 @@ from roarmctl.errors import (
 )
 from roarmctl.export import export as _export
 from roarmctl.export import format_for
+from roarmctl.motion.pipeline import plan_file
 from roarmctl.motion.scene import SceneItem
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
+from roarmctl.motion.validate import robot_of, validate_trajectory
+from roarmctl.robot.loader import load_robot as _load
 from roarmctl.viz.formats import picture_format
 
 if TYPE_CHECKING:
@@ -81,8 +84,6 @@ def load_robot(spec: PathLike) -> Robot:
     ``.yaml`` or DH table). The ``Robot`` offers ``robot.kin.fk(q)`` (4x4 TCP pose), ``robot.kin.jacobian(q)``
     (6 x arm_dof), ``joint_names``, ``lower``/``upper`` limits (rad) and ``named_poses``. A sidecar's
     ``trust: true`` counts here: the caller named the file."""
-    from roarmctl.robot.loader import load_robot as _load
-
     return _load(str(spec), trust_sidecar=True)
 
 
@@ -97,8 +98,6 @@ def plan(source: PathLike | Mapping[str, Any], *, seed: int | None = None, base_
     ``InfeasibleError`` (exit 3) when it cannot be done; the latter carries ``.partial``, the
     trajectory up to the failing task and its target.
     """
-    from roarmctl.motion.pipeline import plan_file
-
     if isinstance(source, Mapping):
         return plan_file(dict(source), seed=seed, progress=progress, base_dir=base_dir)
     return plan_file(Path(source), seed=seed, progress=progress)
@@ -107,8 +106,6 @@ def plan(source: PathLike | Mapping[str, Any], *, seed: int | None = None, base_
 def load_trajectory(path: PathLike) -> Trajectory:
     """Read a ``*.traj.json`` and check it against its robot (the validator ``execute`` uses): joint
     names, limits, speeds and steps. Raises ``TrajectoryFileError`` (exit 2) naming the point and joint."""
-    from roarmctl.motion.validate import validate_trajectory
-
     return validate_trajectory(Path(path))
 
 
@@ -164,7 +161,6 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
     Writes the execution log to ``log`` when given. Returns the summary: ``outcome``, ``commands``
     (T:102/T:101 lines sent while streaming), ``lateness_ms``, ``tracking_mm``, ``final_error_mm``, ``log``.
     """
-    from roarmctl.motion.validate import robot_of
 
     t = _trajectory(traj)
     robot = robot_of(t)

@@ -28,9 +28,12 @@ import numpy as np
 from roarmctl.api.scene import Scene
 from roarmctl.errors import InputError, PlanningError, UnreachableError
 from roarmctl.motion.planning import motions
+from roarmctl.motion.planning.assembly import assemble
 from roarmctl.motion.planning.context import PlanContext
 from roarmctl.motion.planning.pieces import TaskStep, UntimedMotion
+from roarmctl.plan.schema import Limits, Plan, PlannerConfig
 from roarmctl.robot.ik import solve_ik
+from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import Robot, rpy_from_matrix
 
 if TYPE_CHECKING:
@@ -138,11 +141,7 @@ class Planner:
                  singularity_margin: float = 0.02, velocity_scale: float = 0.5, acceleration_scale: float = 0.5,
                  max_tcp_speed: float | None = None, planner: str = "RRTConnect", seed: int = 0,
                  max_checks: int = 2_000_000) -> None:
-        from roarmctl.plan.schema import Limits, PlannerConfig
-
         if not isinstance(robot, Robot):
-            from roarmctl.robot.loader import load_robot
-
             robot = load_robot(str(robot))
         self.robot = robot
         self.scene = scene if scene is not None else Scene()
@@ -170,7 +169,6 @@ class Planner:
         if self._ctx is not None and self._version == self.scene.version:
             return self._ctx
         from roarmctl.motion.collision import CollisionChecker
-        from roarmctl.plan.schema import Plan
 
         r = self.robot
         rest = np.clip(np.zeros(r.dof), r.lower, r.upper)
@@ -274,7 +272,6 @@ class Planner:
         """``path`` timed from rest to rest by TOPP-RA under the scaled joint limits (jerk, torque and TCP speed
         limits included), sampled at 100 Hz and every sample checked again: a ``Trajectory`` (``save``,
         ``roarmctl.api.draw``/``export``/``execute`` take it). Raises ``PlanningError`` when it cannot be timed."""
-        from roarmctl.motion.planning.assembly import assemble
 
         if not isinstance(path, JointPath):
             raise InputError(f"time: expected a JointPath, got {type(path).__name__}")

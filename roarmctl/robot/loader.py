@@ -20,8 +20,20 @@ from roarmctl.robot import validate as checks
 from roarmctl.robot import visuals
 from roarmctl.robot.frames import UNITS, Frame
 from roarmctl.robot.ik import IK_FAMILIES, ur6_params
+from roarmctl.robot.implied import (
+    DEFAULT_ACCELERATION,
+    DEFAULT_JERK_PER_ACCELERATION,
+    DEFAULT_VELOCITY,
+    adjacent_pairs,
+    default_notes,
+    gripper_part_pairs,
+    held_fixed,
+    mimic_bounds,
+    rest_value,
+)
 from roarmctl.robot.meshes import PACKAGE_PATHS, description_roots, load_mesh, mesh_modes, package_map, resolve
-from roarmctl.robot.model import CollisionShape, FixedJaw, Gripper, Inertial, Joint, Robot, WireField, axis_angle, transform
+from roarmctl.robot.model import CollisionShape, FixedJaw, Gripper, Inertial, Joint, Robot, WireField, transform
+from roarmctl.robot.padding import sidecar_padding
 from roarmctl.robot.singularity import MODELS
 from roarmctl.robot.srdf import parse_srdf, read_joint_limits, read_srdf
 from roarmctl.robot.xacro_input import TRUST_ALL, expand
@@ -29,10 +41,6 @@ from roarmctl.robot.xacro_input import TRUST_ALL, expand
 FORMAT = "roarmctl.robot/1"
 MESH_SCALE = (1e-5, 1e5)  # a mesh's scale factors (a mesh in mm has 0.001); beyond, a link's shape vanishes or explodes
 URDF_BYTES = 16 * 1024 * 1024  # a URDF (or the text xacro makes) may have; published arms have < 1 MiB
-DEFAULT_VELOCITY = 1.0  # rad/s, used only where a description gives none
-DEFAULT_ACCELERATION = 2.0  # rad/s^2
-# Where a description gives no jerk limit: the acceleration may rise from zero to its limit in 0.1 s.
-DEFAULT_JERK_PER_ACCELERATION = 10.0  # 1/s
 
 
 def bundled_dir() -> Path:
@@ -99,64 +107,12 @@ def load_robot(spec: str, trust_sidecar: bool = False) -> Robot:
         raise DescriptionError(f"{path}: tcp_link: '{robot.tcp_link}' is moved by the mimic joint '{mimic[0]}'",
                                "put the TCP on a link the arm joints move, e.g. the hand between the fingers")
     robot = _link_roles(robot, data, str(path))
-    robot.notes = [f"{robot.name}: {n}" for n in robot.notes] + _default_notes(robot)
+    robot.notes = [f"{robot.name}: {n}" for n in robot.notes] + default_notes(robot)
     robot.spec = spec if path == bundled_dir() / f"{spec}.yaml" else str(path.resolve())
-    robot.allowed_collisions |= _adjacent_pairs(robot)
+    robot.allowed_collisions |= adjacent_pairs(robot)
     checks.check_robot(robot, str(path))
     _CACHE[key] = robot
     return robot
-
-
-def _adjacent_pairs(robot: Robot) -> set[frozenset[str]]:
-    """Pairs of links joined by a joint, counting a link without collision geometry as transparent (its
-    neighbours are joined to each other, as MoveIt Setup Assistant's "Adjacent" pairs are computed,
-    moveit_setup_srdf_plugins compute_default_collisions.cpp): links that touch at a joint and whose
-    meshes usually overlap there are not checked against each other (Drake's and PyBullet's default too).
-    Franka's link7 and hand, joined through the geometry-less link8, are such a pair."""
-    near: dict[str, set[str]] = {name: set() for name in robot.link_names}
-    for j in robot.joints:
-        near[j.parent].add(j.child)
-        near[j.child].add(j.parent)
-    solid = {s.link for s in robot.collision}
-    for link in robot.link_names:
-        if link in solid:
-            continue
-        for a in list(near[link]):
-            for b in list(near[link]):
-                if a != b:
-                    near[a].add(b)
-                    near[b].add(a)
-    return {frozenset((a, b)) for a, bs in near.items() for b in bs}
-
-
-def _default_notes(robot: Robot) -> list[str]:
-    """One line naming the limits that are roarmctl's defaults (``robot.defaults``), with the values and
-    units by joint type, or none."""
-    if not robot.defaults:
-        return []
-    kinds = {n: j.kind for j in robot.joints for n in [j.name]}
-
-    def unit(name: str, power: int) -> str:
-        return ("m" if kinds.get(name) == "prismatic" else "rad") + ("/s" if power == 1 else f"/s^{power}")
-
-    parts = []
-    for key, power in (("velocity", 1), ("acceleration", 2), ("jerk", 3)):
-        js = robot.defaults.get(key)
-        if not js:
-            continue
-        if key == "jerk":
-            parts.append(f"jerk = acceleration limit x {DEFAULT_JERK_PER_ACCELERATION:g}/s (full acceleration in "
-                         f"{1 / DEFAULT_JERK_PER_ACCELERATION:g} s) for "
-                         + ("every joint" if len(js) == robot.dof else ", ".join(js)))
-            continue
-        value = DEFAULT_VELOCITY if key == "velocity" else DEFAULT_ACCELERATION
-        groups: dict[str, list[str]] = {}
-        for n in js:
-            groups.setdefault(unit(n, power), []).append(n)
-        parts.append(f"{key} " + "; ".join(f"{value:g} {u} for " + ("every joint" if len(g) == robot.dof else ", ".join(g))
-                                         for u, g in groups.items()))
-    return [f"{robot.name}: limits the description does not give, roarmctl's defaults used: " + "; ".join(parts)
-            + " (set them in the sidecar's limits:)"]
 
 
 def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
@@ -203,19 +159,7 @@ def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
             seeds = [moving[-1].child] if moving else [robot.tcp_link]
         jaws = tuple(dict.fromkeys(link for s in seeds for link in fixed_group(s)))
     robot.jaw_links = jaws
-    if robot.gripper is not None:
-        # The gripper's moving parts (everything the gripper joint and the joints mimicking it move) touch
-        # each other by design: fingers that close on nothing, a four-bar's knuckles. They are not checked
-        # against each other (MoveIt Setup Assistant finds such pairs by sampling); against the rest, they are.
-        below: dict[str, list[str]] = {}
-        for j in robot.joints:
-            below.setdefault(j.parent, []).append(j.child)
-        parts, todo = set(), [j.child for j in robot.joints_moved_by(robot.gripper.joint)]
-        while todo:
-            link = todo.pop()
-            parts.add(link)
-            todo.extend(below.get(link, []))
-        robot.allowed_collisions |= {frozenset((a, b)) for a in parts for b in parts if a < b}
+    robot.allowed_collisions |= gripper_part_pairs(robot)
 
     sm = robot.singularity_model
     if sm is not None and sm not in MODELS:
@@ -519,28 +463,6 @@ def _moveit(side: dict, sidecar: Path, ordered: list[Joint], links: dict, actuat
     return side, jl
 
 
-def _rest_value(joint: Joint) -> float:
-    """Where a movable joint that nothing drives is held: 0 when its limits allow it, else the middle of
-    its range (MoveIt's default joint position, moveit_core RevoluteJointModel/PrismaticJointModel
-    ``computeVariablePositions``)."""
-    return 0.0 if joint.lower <= 0.0 <= joint.upper else 0.5 * (joint.lower + joint.upper)
-
-
-def _held(ordered: list[Joint], held: list[str]) -> list[Joint]:
-    """``ordered`` with every joint in ``held`` (and every joint mimicking one) made fixed at its rest value."""
-    rest = {j.name: _rest_value(j) for j in ordered if j.name in held}
-    out = []
-    for j in ordered:
-        lead = j.name if j.name in rest else j.mimic if j.mimic in rest else None
-        if lead is None:
-            out.append(j)
-            continue
-        value = j.multiplier * rest[lead] + j.offset
-        motion = axis_angle(j.axis, value) if j.kind == "revolute" else transform(value * np.asarray(j.axis))
-        out.append(Joint(j.name, "fixed", j.parent, j.child, j.origin @ motion @ j.post))
-    return out
-
-
 def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     root = _read_urdf(urdf, side, sidecar)
     checks.check_urdf(root, str(urdf))  # a tree with finite numbers before it is walked
@@ -600,13 +522,13 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
             raise DescriptionError(f"{sidecar}: joints: '{n}' is not a movable joint of {urdf.name}"
                                    + (f" (it mimics '{mimics}')" if mimics else ""))
     held = [a for a in actuated if a not in names]
-    held_values = {j.name: _rest_value(j) for j in ordered if j.name in held}
+    held_values = {j.name: rest_value(j) for j in ordered if j.name in held}
     if held:  # a movable joint that nothing drives (not in joints:, or SRDF-passive) stays where it rests
         rest = held_values
         notes.append("joint(s) not driven, held still: " + ", ".join(
             f"{n} at {rest[n]:g} {'m' if next(j for j in ordered if j.name == n).kind == 'prismatic' else 'rad'}"
             for n in held) + " (list them in the sidecar's joints: to drive them)")
-        ordered = _held(ordered, held)
+        ordered = held_fixed(ordered, held)
     urdf_vel, urdf_eff, vel_default = [], [], set()
     for n in names:
         lim = next(j for j in joints_xml if j.get("name") == n).find("limit")
@@ -651,7 +573,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         tcp = tool.child
     lower = np.array([jl.get(n, {}).get("lower", by_name[n].lower) for n in names])
     upper = np.array([jl.get(n, {}).get("upper", by_name[n].upper) for n in names])
-    _mimic_bounds(ordered, names, bounded, lower, upper, notes)
+    mimic_bounds(ordered, names, bounded, lower, upper, notes)
     acc = np.array([jl.get(n, {}).get("acceleration", DEFAULT_ACCELERATION) for n in names])
     acc_default = {n for n in names if "acceleration" not in jl.get(n, {})}
     common = _common(side, sidecar, names, np.array(urdf_vel), acc, np.array(urdf_eff),
@@ -670,47 +592,10 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         visual_source=visuals.source_of(((n, k, v) for n, e in links.items() for k, v in enumerate(e.findall("visual"))),
                                         meshes, root, _urdf_shape),
         notes=notes,
-        padding=_padding(side, str(sidecar), set(links)),
+        padding=sidecar_padding(side, str(sidecar), set(links)),
         held_joints=held_values,
         **common,
     )
-
-
-def _padding(side: dict, where: str, links: set[str]) -> dict[str, float]:
-    """The sidecar's ``padding: {LINK: m}`` (each in [0, 0.1] m)."""
-    raw = side.get("padding")
-    if raw is None:
-        return {}
-    if not isinstance(raw, dict):
-        raise DescriptionError(f"{where}: padding: expected a mapping link -> metres, e.g. {{left_finger: 0.002}}")
-    out = {}
-    for link, value in raw.items():
-        if link not in links:
-            raise DescriptionError(f"{where}: padding.{link}: not a link of the URDF")
-        v = _num(value, f"{where}: padding.{link}")
-        if not 0.0 <= v <= 0.1:
-            raise DescriptionError(f"{where}: padding.{link}: {v:g} m is outside [0, 0.1] m")
-        out[str(link)] = v
-    return out
-
-
-def _mimic_bounds(ordered: list[Joint], names: list[str], bounded: set[str], lower: np.ndarray, upper: np.ndarray,
-                  notes: list[str]) -> None:
-    """Narrow a driven joint's limits (in place) to the values at which every joint mimicking it stays within its
-    own URDF limits (multiplier x q + offset inside [lower, upper] of the mimic joint); said in ``notes``."""
-    for j in ordered:
-        if j.mimic is None or j.name not in bounded or j.mimic not in names:
-            continue
-        k = names.index(j.mimic)
-        a, b = sorted(((j.lower - j.offset) / j.multiplier, (j.upper - j.offset) / j.multiplier))
-        lo, hi = max(lower[k], a), min(upper[k], b)
-        if lo > hi:
-            raise DescriptionError(f"joint '{j.name}' mimics '{j.mimic}' but no value of '{j.mimic}' within its limits "
-                                   f"keeps '{j.name}' within [{j.lower:g}, {j.upper:g}]")
-        if lo > lower[k] + 1e-9 or hi < upper[k] - 1e-9:
-            notes.append(f"joint '{j.mimic}' limited to [{lo:.6g}, {hi:.6g}] so that '{j.name}', which mimics it, stays "
-                         f"within its own limits [{j.lower:g}, {j.upper:g}]")
-            lower[k], upper[k] = lo, hi
 
 
 def _urdf_shape(link: str, c: ET.Element, where: str, k: int, meshes: dict) -> list[CollisionShape]:
