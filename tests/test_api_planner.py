@@ -1,7 +1,7 @@
 """The single-query API (issue 22, item 5): ``Planner`` (ik, is_valid, plan_to_joints, plan_to_pose, time) and
 ``Scene`` (add, remove, attach, detach), checked against independent measures: FK of IK answers, a second
 collision checker at a finer resolution over the returned paths, the trajectory validator ``execute`` uses,
-and hand-placed scene items. ``check_example`` checks what the example scripts 05-11 wrote."""
+and hand-placed scene items. ``check_example`` checks what the example scripts 05-13 wrote."""
 
 from __future__ import annotations
 
@@ -151,7 +151,7 @@ def test_a_carried_item_moves_with_the_tcp_and_is_checked_like_the_arm():
 
 
 def check_example(number: str, out: Path) -> None:
-    """What the examples 05-11 wrote, checked independently."""
+    """What the examples 05-13 wrote, checked independently."""
     if number == "05":
         data = json.loads((out / "ik.json").read_text())
         assert data["solutions"]
@@ -179,6 +179,12 @@ def check_example(number: str, out: Path) -> None:
         data = json.loads((out / "carried.json").read_text())
         np.testing.assert_allclose(np.array(data["cube"])[:3, 3], [0.25, 0.15, 0.02], atol=1e-6)
         np.testing.assert_allclose(ROBOT.kin.fk(np.array(data["put"]))[:3, 3], [0.25, 0.15, 0.02], atol=1e-6)
+    elif number in ("12", "13"):
+        # the same pose is free without the item (example 10); with the mesh crate / the scan it is not, and the
+        # reason names the item
+        data = json.loads((out / ("mesh.json" if number == "12" else "cloud.json")).read_text())
+        assert not data["valid"] and ("'crate'" if number == "12" else "'scan'") in data["blocked"]
+        assert rc.Planner(ROBOT, rc.Scene()).is_valid([0.0, 0.6, 1.8, 0.0, 0.0])
     else:
         raise AssertionError(f"example {number}: nothing checks what it does")
 
@@ -202,3 +208,23 @@ def test_dict_plans_name_the_task_and_field_and_find_a_relative_robot(tmp_path, 
         with pytest.raises(rc.RoarmError) as err:
             rc.plan({"robot": "roarm_m3_pro", "tasks": [bad]})
         assert needle in err.value.message and "line" not in err.value.message and ":0" not in err.value.message
+
+
+def test_scene_mesh_from_triangles_and_a_cloud_block_what_a_box_there_blocks():
+    """A mesh given as triangles (a 10 cm box's) and a cloud of points filling that box block the same pose as
+    a box item of that size does (three shapes, one answer), and the free pose stays free."""
+    import trimesh
+
+    q = [0.0, 0.6, 1.8, 0.0, 0.0]
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    g = np.linspace(-0.045, 0.045, 10)
+    cloud = np.array([(a, b, c) for a in g for b in g for c in g])
+    for add in (lambda s: s.add_box("thing", (0.1, 0.1, 0.1), (0.3, 0.0, 0.0)),
+                lambda s: s.add_mesh("thing", box.vertices, (0.3, 0.0, 0.0), faces=box.faces),
+                lambda s: s.add_point_cloud("thing", cloud, 0.01, (0.3, 0.0, 0.0))):
+        scene = rc.Scene()
+        planner = rc.Planner(ROBOT, scene)
+        assert planner.is_valid(q)
+        add(scene)
+        v = planner.is_valid(q)
+        assert not v and "'thing'" in v.reason

@@ -4,6 +4,8 @@
     scene.add_box("table", size=(0.8, 0.6, 0.02), xyz=(0.15, 0, -0.01), role="table")
     scene.add_box("wall", size=(0.04, 0.10, 0.15), xyz=(0.28, 0, 0.075))
     scene.add_cylinder("can", radius=0.015, length=0.05, xyz=(0.18, 0.22, 0.025), role="object")
+    scene.add_mesh("bracket", "bracket.stl", xyz=(0.2, -0.2, 0), scale=0.001)   # an STL in mm
+    scene.add_point_cloud("desk", "scan.ply", resolution=0.01)                  # a scan, 1 cm cells
     scene.remove("can")
     scene.attach("cube", q)   # the TCP carries it from configuration q on
     scene.detach("cube", q2)  # put down where the TCP has carried it at q2
@@ -17,6 +19,7 @@ arm. Every change bumps ``version`` so a ``Planner`` using the scene rebuilds it
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -65,6 +68,24 @@ class Scene:
     def add_sphere(self, name: str, radius: float, xyz=(0.0, 0.0, 0.0), *, role: Role = "obstacle") -> SceneItem:
         """A sphere of ``radius`` (m) centred at ``xyz``."""
         return self.add(SceneItem.sphere(name, radius, xyz, role=role))
+
+    def add_mesh(self, name: str, mesh, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *, faces=None, scale=1.0,
+                 exact: bool = False, role: Role = "obstacle") -> SceneItem:
+        """A mesh: ``mesh`` a file (STL, OBJ, PLY, DAE; its units times ``scale``) or, with ``faces`` (F, 3), the
+        vertices (V, 3) m in the item frame; placed at ``xyz`` (m) with URDF ``rpy`` (rad). Checked as the convex
+        hulls of its connected parts, or its triangles with ``exact`` (``SceneItem.mesh_file`` / ``from_mesh``)."""
+        if faces is not None:
+            return self.add(SceneItem.from_mesh(name, mesh, faces, xyz, rpy, exact=exact, role=role))
+        return self.add(SceneItem.mesh_file(name, mesh, xyz, rpy, scale=scale, exact=exact, role=role))
+
+    def add_point_cloud(self, name: str, points, resolution: float, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *,
+                        role: Role = "obstacle") -> SceneItem:
+        """A point cloud: ``points`` a file (PLY, PCD, .npy; m) or an (N, 3) array (m, item frame), each point
+        occupying its cubic cell of side ``resolution`` (m); placed at ``xyz`` with ``rpy``
+        (``SceneItem.cloud_file`` / ``from_points``)."""
+        if isinstance(points, (str, Path)):
+            return self.add(SceneItem.cloud_file(name, points, resolution, xyz, rpy, role=role))
+        return self.add(SceneItem.from_points(name, points, resolution, xyz, rpy, role=role))
 
     def remove(self, name: str) -> SceneItem:
         """Take item ``name`` out of the scene (a carried one too); returns it."""
