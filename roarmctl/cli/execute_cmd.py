@@ -293,8 +293,8 @@ def sim_device(
             common.print_json({"port": path, "pty": simulator.path, "firmware": firmware})
         else:
             print(path)
-            arm = "RoArm-M2" if firmware == "m2" else "RoArm-M3"
-            common.console(stderr=True).print(f"simulating {arm} firmware {firmware} on {simulator.path}; Ctrl-C to stop")
+            model = "RoArm-M2" if firmware == "m2" else "RoArm-M3"
+            common.console(stderr=True).print(f"simulating {model} firmware {firmware} on {simulator.path}; Ctrl-C to stop")
         sys.stdout.flush()
         while simulator.alive():
             simulator.join(0.5)

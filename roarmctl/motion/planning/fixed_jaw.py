@@ -34,7 +34,8 @@ ITERATIONS = 4
 
 def closing_axis(robot: Robot, q) -> np.ndarray:
     """The fixed jaw's face normal (toward the moving jaw) in the world frame at ``q`` (3,)."""
-    jaw = robot.gripper.fixed_jaw  # type: ignore[union-attr]
+    jaw = robot.gripper.fixed_jaw if robot.gripper is not None else None
+    assert jaw is not None  # called for a gripper with a fixed jaw only
     t = robot.kin.fk(robot.full_q(q), jaw.link)
     return t[:3, :3] @ np.asarray(jaw.normal, dtype=float)
 
@@ -42,7 +43,8 @@ def closing_axis(robot: Robot, q) -> np.ndarray:
 def object_offset(robot: Robot, q, width: float, margin: float = MARGIN) -> np.ndarray:
     """World vector (3,) from the TCP to the centre of a ``width``-wide object resting ``margin`` from the
     fixed jaw's face, at configuration ``q``."""
-    jaw = robot.gripper.fixed_jaw  # type: ignore[union-attr]
+    jaw = robot.gripper.fixed_jaw if robot.gripper is not None else None
+    assert jaw is not None  # called for a gripper with a fixed jaw only
     q = robot.full_q(q)
     t_jaw = robot.kin.fk(q, jaw.link)
     n = t_jaw[:3, :3] @ np.asarray(jaw.normal, dtype=float)
