@@ -173,7 +173,7 @@ def read_points(path, where: str, error: type[InputError] = InputError) -> np.nd
         elif suffix == ".pcd":
             from pypcd4 import PointCloud
 
-            pc = PointCloud.from_fileobj(io.BytesIO(data))  # any binary file object reads
+            pc = PointCloud.from_fileobj(io.BufferedReader(io.BytesIO(data)))  # typed as taking a BufferedReader
             missing = [c for c in "xyz" if c not in pc.fields]
             if missing:
                 raise ValueError(f"no field {', '.join(missing)} (fields: {', '.join(pc.fields)})")
