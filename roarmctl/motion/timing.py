@@ -286,6 +286,9 @@ def check_holding(model: TorqueModel, q: np.ndarray, label: str) -> np.ndarray:
     return hold
 
 
+_Samples = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # integral of s, s, sdot, sddot (_Profile.eval)
+
+
 class _Profile:
     """TOPP-RA's result in time: piecewise-constant path acceleration between grid points."""
 
@@ -301,7 +304,7 @@ class _Profile:
         self.s_end = float(self.s[-1])
         # integral of s over [0, t_i]
         self.S = np.concatenate([[0.0], np.cumsum(self.s[:-1] * dt + sd[:-1] * dt**2 / 2 + self.sdd * dt**3 / 6)])
-        self._last: tuple[np.ndarray, tuple] | None = None  # (t, eval(t)) of the last _eval_grid call
+        self._last: tuple[np.ndarray, _Samples] | None = None  # (t, eval(t)) of the last _eval_grid call
         self.jerk_answers: dict = {}  # _jerk_ok's answers for this profile ("path": the path they are for)
 
     def slowed(self, factor: float) -> _Profile:
@@ -309,7 +312,7 @@ class _Profile:
         accelerations / factor**2)."""
         return _Profile(self.grid, self.sd / factor)
 
-    def _eval_grid(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _eval_grid(self, t: np.ndarray) -> _Samples:
         """``eval(t)``, reusing the previous call's values where ``t`` and the previous ``t`` agree: the jerk
         check asks for the same fine grid (growing with the filter width) at every width it tries. ``eval`` is
         elementwise in ``t``, so the result is the same bit for bit."""
@@ -319,15 +322,18 @@ class _Profile:
             m = min(len(t), len(lt))
             if m and np.array_equal(t[:m], lt[:m]):
                 if len(t) <= len(lt):
-                    return tuple(v[:len(t)] for v in lv)
-                out = tuple(np.concatenate([a, b]) for a, b in zip(lv, self.eval(t[m:])))
+                    k = len(t)
+                    return lv[0][:k], lv[1][:k], lv[2][:k], lv[3][:k]
+                more = self.eval(t[m:])
+                out = (np.concatenate([lv[0], more[0]]), np.concatenate([lv[1], more[1]]),
+                       np.concatenate([lv[2], more[2]]), np.concatenate([lv[3], more[3]]))
                 self._last = (t, out)
                 return out
         out = self.eval(t)
         self._last = (t, out)
         return out
 
-    def eval(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def eval(self, t: np.ndarray) -> _Samples:
         """Integral of s, s, sdot, sddot at times ``t`` (any shape); at rest before 0 and after the end."""
         t = np.asarray(t, dtype=float)
         i = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.sdd) - 1)
@@ -534,13 +540,9 @@ def _jerk_slowdown(path, prof: _Profile, w0: float, jm: np.ndarray) -> tuple[_Pr
     that ends soonest. The slowed motion is sampled at other instants, where a sharp bend can show more jerk: its
     own ratio then slows it further, up to SLOWDOWN_TRIES times. Returns (slowed profile, its filter width), None if
     its sampled jerk still fails."""
-    best = None
-    for k in range(FILTER_TRIES):
-        w = w0 * FILTER_GROWTH**k
-        f = _jerk_slowdown_factor(_jerk_ratio(path, prof, w, jm))
-        if best is None or f * (prof.T + w) < best[0]:
-            best = (f * (prof.T + w), w, f)
-    _, w, f = best
+    tried = [(w, _jerk_slowdown_factor(_jerk_ratio(path, prof, w, jm)))
+             for w in (w0 * FILTER_GROWTH**k for k in range(FILTER_TRIES))]
+    w, f = min(tried, key=lambda wf: wf[1] * (prof.T + wf[0]))  # the first of equal ends, as a strict < keeps
     for _ in range(SLOWDOWN_TRIES):
         slow = prof.slowed(f)
         if _jerk_ok(path, slow, w * f, jm):
@@ -581,12 +583,11 @@ def _jerk_filtered(algo, constraints: list, path, gridpoints: np.ndarray, prof: 
 
 def _sampled_within_limits(path, prof: _Profile, w: float, wp: np.ndarray, sample_dt: float, vmax: np.ndarray,
                            amax: np.ndarray, jm: np.ndarray | None,
-                           tcp_velocity_per_ds: Callable[[np.ndarray, np.ndarray], np.ndarray] | None,
-                           max_tcp_speed: float | None):
+                           tcp: tuple[Callable[[np.ndarray, np.ndarray], np.ndarray], float] | None):
     """``prof`` filtered at width ``w`` (s) sampled every ``sample_dt`` s, at rest at the end waypoints of ``wp``
     (K, n), and slowed down in time (``_slowed``, at most SLOWDOWN_TRIES times) until the samples keep the joint
     velocity, acceleration and jerk limits ``vmax``, ``amax``, ``jm`` (n,; jm None: no jerk limit) and, with
-    ``tcp_velocity_per_ds``, the TCP speed ``max_tcp_speed`` (m/s).
+    ``tcp`` = (tcp_velocity_per_ds, max_tcp_speed) of ``time_parameterise``, the TCP speed (m/s).
 
     Returns (prof, w, times (N,), (q, qd, qdd (N, n), s (N,)), ok, slowed_by): the profile and width sampled last,
     its samples, whether they keep those limits, and the product of the slowdown factors applied (1: none)."""
@@ -599,19 +600,21 @@ def _sampled_within_limits(path, prof: _Profile, w: float, wp: np.ndarray, sampl
         # The constraints hold at grid points; between them (and after filtering) a sample can be
         # slightly over. Check the samples and slow the motion down until they are inside.
         ok = bool(np.all(np.abs(qd) <= vmax) and np.all(np.abs(qdd) <= amax))
-        tcp_speed = np.linalg.norm(tcp_velocity_per_ds(q, qd), axis=1) if tcp_velocity_per_ds is not None else None
-        if tcp_speed is not None:
-            ok = ok and bool(np.max(tcp_speed) <= max_tcp_speed)
+        tcp_excess = 0.0
+        if tcp is not None:
+            tcp_top = float(np.max(np.linalg.norm(tcp[0](q, qd), axis=1)))
+            ok = ok and tcp_top <= tcp[1]
+            tcp_excess = tcp_top / tcp[1]
         # The jerk was checked every FINE_DT up to past the end: the output's last interval, shorter than that,
         # can still be over (the check spread its change of acceleration over a whole FINE_DT).
         jerk = None if jm is None or len(times) < 2 else np.abs(np.diff(qdd, axis=0)) / np.diff(times)[:, None]
-        if jerk is not None:
+        if jerk is not None and jm is not None:
             ok = ok and bool(np.all(jerk <= jm * (1 + 1e-9)))
         if ok or slowdown == SLOWDOWN_TRIES:
             break
         excess = max(float(np.max(np.abs(qd) / vmax)), float(np.sqrt(np.max(np.abs(qdd) / amax))),
-                     0.0 if tcp_speed is None else float(np.max(tcp_speed)) / max_tcp_speed)
-        jerk_excess = 0.0 if jerk is None else float(np.max(jerk / jm)) ** (1.0 / 3.0)
+                     tcp_excess)
+        jerk_excess = 0.0 if jerk is None or jm is None else float(np.max(jerk / jm)) ** (1.0 / 3.0)
         factor = max(excess, jerk_excess) * (1.0 + SLOWDOWN_SLACK)
         slowed = _slowed(path, prof, w, factor, jm, keep_width=jerk_excess <= 1.0)
         if slowed is None:
@@ -659,13 +662,13 @@ def time_parameterise(
     gridpoints = toppra_grid(ss)
     hold = check_holding(torque, path(gridpoints), label) if torque is not None else None
     torque_limited = torque is not None and bool(np.any(np.isfinite(torque.limits)))
-    tcp_ok = max_tcp_speed is not None and tcp_velocity_per_ds is not None
+    tcp = None if max_tcp_speed is None or tcp_velocity_per_ds is None else (tcp_velocity_per_ds, max_tcp_speed)
     # Constraint pieces that do not depend on the margin: computed once per path, on the one grid.
-    speed_per_ds = np.linalg.norm(tcp_velocity_per_ds(path(gridpoints), path(gridpoints, 1)), axis=1) if tcp_ok else None
+    speed_per_ds = None if tcp is None else np.linalg.norm(tcp[0](path(gridpoints), path(gridpoints, 1)), axis=1)
     jm = None if jmax is None else np.asarray(jmax, dtype=float)
     path_jerk = None if jm is None else _path_jerk(path, gridpoints)
     line_key = None
-    if n == 1 and len(wp) == 2 and not tcp_ok and torque is None:
+    if n == 1 and len(wp) == 2 and tcp is None and torque is None:
         line_key = (float(ss[-1]), vmax.tobytes(), amax.tobytes(), None if jm is None else jm.tobytes(), float(sample_dt))
         known = _ONE_JOINT_LINES.get(line_key)
         if known is not None:
@@ -691,11 +694,11 @@ def time_parameterise(
     while i < len(SAFETY_STEPS):
         safety = SAFETY_STEPS[i]
         constraints = _joint_limit_constraints(constraint, vmax * safety, amax * safety)
-        if tcp_ok:
-            constraints.append(_tcp_speed_constraint(speed_per_ds, max_tcp_speed * safety))
-        if jm is not None:
+        if tcp is not None and speed_per_ds is not None:
+            constraints.append(_tcp_speed_constraint(speed_per_ds, tcp[1] * safety))
+        if jm is not None and path_jerk is not None:
             constraints.append(_geometric_jerk_constraint(path_jerk, jm * safety))
-        if torque_terms is not None:
+        if torque_terms is not None and torque is not None:
             constraints.append(_torque_constraint(torque_terms, np.where(np.isfinite(torque.limits), torque.limits * safety, 1e9)))
         instance = algo.TOPPRA(constraints, path, gridpoints=gridpoints, parametrizer="ParametrizeConstAccel")
         instance.compute_parameterization(0.0, 0.0)
@@ -714,10 +717,10 @@ def time_parameterise(
                 continue
             prof, w = filtered
         prof, w, times, (q, qd, qdd, s_samples), ok, slowed_by = _sampled_within_limits(
-            path, prof, w, wp, sample_dt, vmax, amax, jm, tcp_velocity_per_ds if tcp_ok else None, max_tcp_speed)
+            path, prof, w, wp, sample_dt, vmax, amax, jm, tcp)
         if ok and torque is not None:
             tau = np.abs(torque.inverse_dynamics(q, qd, qdd))
-            if torque_limited and torque_terms is None and np.any(tau > TORQUE_LAZY_SHARE * torque.limits):
+            if torque_limited and torque_terms is None and hold is not None and np.any(tau > TORQUE_LAZY_SHARE * torque.limits):
                 # close to a limit without the torque constraint: add it and time this margin again
                 torque_terms = _torque_terms(torque, path, gridpoints, hold)
                 continue
