@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +46,7 @@ _OPEN = ("open",)
 _CLOSED = ("close", "closed")
 
 
-def read_srdf(root: ET.Element, src: str, joints: dict[str, tuple[str, str, str | None, str]], links: set[str], side: dict,
+def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, str | None, str]], links: set[str], side: dict,
               where: str) -> dict[str, Any]:
     """Sidecar fields from a parsed SRDF (``root``; ``src`` names its file in messages).
 
@@ -58,6 +59,12 @@ def read_srdf(root: ET.Element, src: str, joints: dict[str, tuple[str, str, str 
     groups: dict[str, ET.Element] = {}
     notes: list[str] = []
     passive: list[str] = []
+
+    def check_joint(name: str | None, what: str) -> str:
+        if name is None or name not in joints:
+            raise DescriptionError(f"{src}: {what}: '{name}' is not a joint of the URDF")
+        return name
+
     for el in root:
         if not isinstance(el.tag, str):
             continue
@@ -72,12 +79,10 @@ def read_srdf(root: ET.Element, src: str, joints: dict[str, tuple[str, str, str 
         if el.tag == "disable_default_collisions":
             raise DescriptionError(f"{src}: disable_default_collisions is not supported; list the pairs instead")
         if el.tag == "passive_joint":
-            if el.get("name") not in joints:
-                raise DescriptionError(f"{src}: passive_joint: '{el.get('name')}' is not a joint of the URDF")
-            passive.append(el.get("name"))
+            passive.append(check_joint(el.get("name"), "passive_joint"))
 
     def check_link(name: str | None, what: str) -> str:
-        if name not in links:
+        if name is None or name not in links:
             raise DescriptionError(f"{src}: {what}: '{name}' is not a link of the URDF")
         return name
 
@@ -99,9 +104,7 @@ def read_srdf(root: ET.Element, src: str, joints: dict[str, tuple[str, str, str 
         js: list[str] = []
         for el in g:
             if el.tag == "joint":
-                if el.get("name") not in joints:
-                    raise DescriptionError(f"{src}: group '{name}' joint: '{el.get('name')}' is not a joint of the URDF")
-                js.append(el.get("name"))
+                js.append(check_joint(el.get("name"), f"group '{name}' joint"))
             elif el.tag == "link":
                 ln = check_link(el.get("name"), f"group '{name}' link")
                 js.extend(j for j, (_, child, _m, _p) in joints.items() if child == ln)
@@ -115,9 +118,10 @@ def read_srdf(root: ET.Element, src: str, joints: dict[str, tuple[str, str, str 
                     link = up[link][1]
                 js.extend(reversed(chain))
             elif el.tag == "group":
-                if el.get("name") in seen:
+                inner = el.get("name", "")
+                if inner in seen:
                     raise DescriptionError(f"{src}: group '{name}' includes itself")
-                js.extend(group_joints(el.get("name"), seen + (name,)))
+                js.extend(group_joints(inner, seen + (name,)))
             elif isinstance(el.tag, str):
                 raise DescriptionError(f"{src}: group '{name}': <{el.tag}> is not supported (joint, link, chain, group)")
         return js
@@ -160,9 +164,9 @@ def read_srdf(root: ET.Element, src: str, joints: dict[str, tuple[str, str, str 
         plain = [n for n, g in groups.items() if n != grip_group and g.find("group") is None and g.find("chain") is None]
         arm_group = plain[0] if len(plain) == 1 else None
     if arm_group is not None:
-        chain = groups[arm_group].find("chain")
-        if chain is not None:
-            out["tcp_link"] = chain.get("tip_link")
+        arm_chain = groups[arm_group].find("chain")
+        if arm_chain is not None:
+            out["tcp_link"] = arm_chain.get("tip_link")
         elif ee is not None and ee.get("parent_link"):  # no chain: the end effector's mounting link
             out["tcp_link"] = check_link(ee.get("parent_link"), "end_effector parent_link")
     gripper_joint = None
@@ -174,18 +178,17 @@ def read_srdf(root: ET.Element, src: str, joints: dict[str, tuple[str, str, str 
     poses: dict[str, dict[str, float]] = {}
     grip_states: dict[str, float] = {}
     for gs in root.iter("group_state"):
-        name, group = gs.get("name"), gs.get("group")
-        values = {}
+        name, group = gs.get("name", ""), gs.get("group")
+        values: dict[str, float] = {}
         for j in gs.findall("joint"):
-            if j.get("name") not in joints:
-                raise DescriptionError(f"{src}: group_state '{name}' joint: '{j.get('name')}' is not a joint of the URDF")
+            jname = check_joint(j.get("name"), f"group_state '{name}' joint")
             try:
-                values[j.get("name")] = float(j.get("value"))
+                values[jname] = float(j.get("value", ""))
             except (TypeError, ValueError):
-                raise DescriptionError(f"{src}: group_state '{name}' joint '{j.get('name')}' value: not a number: "
+                raise DescriptionError(f"{src}: group_state '{name}' joint '{jname}' value: not a number: "
                                        f"{str(j.get('value'))[:40]!r}") from None
-            if not math.isfinite(values[j.get("name")]):
-                raise DescriptionError(f"{src}: group_state '{name}' joint '{j.get('name')}' value: not a finite number: "
+            if not math.isfinite(values[jname]):
+                raise DescriptionError(f"{src}: group_state '{name}' joint '{jname}' value: not a finite number: "
                                        f"{j.get('value')!r}")
         if group == grip_group and grip_group is not None:
             grip_states[str(name).lower()] = values.get(gripper_joint, math.nan) if gripper_joint else math.nan
