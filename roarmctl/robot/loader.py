@@ -32,7 +32,17 @@ from roarmctl.robot.implied import (
     rest_value,
 )
 from roarmctl.robot.meshes import PACKAGE_PATHS, description_roots, load_mesh, mesh_modes, package_map, resolve
-from roarmctl.robot.model import CollisionShape, FixedJaw, Gripper, Inertial, Joint, Robot, WireField, transform
+from roarmctl.robot.model import (
+    CollisionShape,
+    FixedJaw,
+    Gripper,
+    Inertial,
+    Joint,
+    JointKind,
+    Robot,
+    WireField,
+    transform,
+)
 from roarmctl.robot.padding import sidecar_padding
 from roarmctl.robot.singularity import MODELS
 from roarmctl.robot.srdf import parse_srdf, read_joint_limits, read_srdf
@@ -217,7 +227,8 @@ def _fixed_jaw(value: Any, where: str) -> FixedJaw:
     norm = float(np.linalg.norm(normal))
     if not norm > 1e-9 or not np.all(np.isfinite(point)):
         raise DescriptionError(f"{where}.normal: must be a non-zero vector")
-    return FixedJaw(value["link"], tuple(float(v) for v in point), tuple(float(v) / norm for v in normal))
+    return FixedJaw(value["link"], (float(point[0]), float(point[1]), float(point[2])),
+                    (float(normal[0]) / norm, float(normal[1]) / norm, float(normal[2]) / norm))
 
 
 def _per_joint(data: dict, key: str, names: list[str], default: np.ndarray, where: str) -> np.ndarray:
@@ -286,10 +297,9 @@ def _common(data: dict, path: Path, names: list[str], velocity: np.ndarray, acce
             if n < 2 or np.any(np.diff(jq) <= 0) or np.any(np.diff(jw) <= 0):
                 raise DescriptionError(f"{where}: gripper.jaw_width: needs 2+ points, q and mm both increasing")
         extra = {k: _num(g[k], f"{where}: gripper.{k}") for k in ("squeeze", "clearance") if g.get(k) is not None}
-        if g.get("fixed_jaw") is not None:
-            extra["fixed_jaw"] = _fixed_jaw(g["fixed_jaw"], f"{where}: gripper.fixed_jaw")
+        jaw = None if g.get("fixed_jaw") is None else _fixed_jaw(g["fixed_jaw"], f"{where}: gripper.fixed_jaw")
         gripper = Gripper(g["joint"], _num(g.get("open"), f"{where}: gripper.open"), _num(g.get("closed"), f"{where}: gripper.closed"),
-                          jq, jw, **extra)
+                          jq, jw, fixed_jaw=jaw, **extra)
     poses = {}
     for pname, values in (data.get("named_poses") or {}).items():
         vals = list(values) if isinstance(values, list) else values
@@ -393,7 +403,7 @@ def _fattr(elem: ET.Element | None, key: str, default: float, where: str) -> flo
     if elem is None or elem.get(key) is None:
         return default
     try:
-        return float(elem.get(key))
+        return float(elem.get(key, ""))
     except ValueError:
         raise DescriptionError(f"{where} {key}: not a number: '{elem.get(key)}'") from None
 
@@ -463,55 +473,68 @@ def _moveit(side: dict, sidecar: Path, ordered: list[Joint], links: dict, actuat
     return side, jl
 
 
+# URDF joint types -> roarmctl's kinds: a continuous joint is a revolute one without limits (+-2 pi)
+_URDF_KINDS: dict[str, JointKind] = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prismatic",
+                                     "fixed": "fixed"}
+
+
+def _link_of(joint: ET.Element, tag: str) -> str:
+    """The link a URDF joint's ``<parent>`` or ``<child>`` (``tag``) names; "" when absent (check_urdf refuses that)."""
+    end = joint.find(tag)
+    return "" if end is None else end.get("link", "")
+
+
 def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     root = _read_urdf(urdf, side, sidecar)
     checks.check_urdf(root, str(urdf))  # a tree with finite numbers before it is walked
-    links = {el.get("name"): el for el in root.findall("link")}
+    links = {el.get("name", ""): el for el in root.findall("link")}  # check_urdf: every link and joint has a name
     joints_xml = root.findall("joint")
     for j in joints_xml:
         for tag in ("parent", "child"):
-            if j.find(tag) is None or j.find(tag).get("link") not in links:
+            if _link_of(j, tag) not in links:
                 raise DescriptionError(f"{urdf}: joint '{j.get('name')}': <{tag} link=...> missing or names no link")
-    children = {j.find("child").get("link") for j in joints_xml}
+    children = {_link_of(j, "child") for j in joints_xml}
     roots = [name for name in links if name not in children]
     if len(roots) != 1:
         raise DescriptionError(f"{urdf}: expected one root link, found {roots}")
     by_parent: dict[str, list[ET.Element]] = {}
     for j in joints_xml:
-        by_parent.setdefault(j.find("parent").get("link"), []).append(j)
+        by_parent.setdefault(_link_of(j, "parent"), []).append(j)
     ordered: list[Joint] = []
     bounded: set[str] = set()  # joints whose <limit> gives lower and upper
     stack = [roots[0]]
     while stack:  # depth-first so parents precede children
         link = stack.pop(0)
         for j in by_parent.get(link, []):
-            name, kind = j.get("name"), j.get("type")
+            name = j.get("name", "")
             where = f"{urdf}: joint '{name}'"
-            if kind == "continuous":
-                kind = "revolute"
-            if kind not in ("revolute", "prismatic", "fixed"):
-                raise DescriptionError(f"{where}: type '{kind}' is not supported (revolute, continuous, prismatic, fixed)")
-            axis = _floats(j.find("axis").get("xyz") if j.find("axis") is not None else "1 0 0", 3, f"{where} axis")
+            kind = _URDF_KINDS.get(j.get("type", ""))
+            if kind is None:
+                raise DescriptionError(f"{where}: type '{j.get('type')}' is not supported (revolute, continuous, prismatic, fixed)")
+            axis_el = j.find("axis")
+            axis = _floats("1 0 0" if axis_el is None else axis_el.get("xyz"), 3, f"{where} axis")
             if np.linalg.norm(axis) == 0 and kind != "fixed":
                 raise DescriptionError(f"{where}: axis is zero")
             lim = j.find("limit")
-            lower = _fattr(lim, "lower", -math.pi, f"{where} limit")
-            upper = _fattr(lim, "upper", math.pi, f"{where} limit")
+            j_lower = _fattr(lim, "lower", -math.pi, f"{where} limit")
+            j_upper = _fattr(lim, "upper", math.pi, f"{where} limit")
             if j.get("type") == "continuous":
-                lower, upper = -2 * math.pi, 2 * math.pi
+                j_lower, j_upper = -2 * math.pi, 2 * math.pi
             elif lim is not None and lim.get("lower") is not None and lim.get("upper") is not None:
                 bounded.add(name)
             axis = axis / (np.linalg.norm(axis) or 1.0)
-            master, mult, offset = None, 1.0, 0.0
-            if j.find("mimic") is not None and kind != "fixed":
-                master, mult, offset = _mimic(j.find("mimic"), where)
-            ordered.append(Joint(name, kind, link, j.find("child").get("link"), _origin(j.find("origin"), where),
-                                 axis, lower=lower, upper=upper, offset=offset, mimic=master, multiplier=mult))
-            stack.append(j.find("child").get("link"))
+            master: str | None = None
+            mult, offset = 1.0, 0.0
+            mimic_el = j.find("mimic")
+            if mimic_el is not None and kind != "fixed":
+                master, mult, offset = _mimic(mimic_el, where)
+            ordered.append(Joint(name, kind, link, _link_of(j, "child"), _origin(j.find("origin"), where),
+                                 axis, lower=j_lower, upper=j_upper, offset=offset, mimic=master, multiplier=mult))
+            stack.append(_link_of(j, "child"))
     actuated = [j.name for j in ordered if j.kind != "fixed" and j.mimic is None]
-    for j in ordered:
-        if j.mimic is not None and j.mimic not in actuated:
-            raise DescriptionError(f"{urdf}: joint '{j.name}' mimic joint: '{j.mimic}' is not a movable, non-mimic joint")
+    for jt in ordered:
+        if jt.mimic is not None and jt.mimic not in actuated:
+            raise DescriptionError(f"{urdf}: joint '{jt.name}' mimic joint: '{jt.mimic}' is not a movable, non-mimic joint")
     side, jl = _moveit(side, sidecar, ordered, links, actuated)
     notes: list[str] = list(side.pop("_notes"))
     driven = side.pop("_driven")
@@ -629,15 +652,16 @@ def _urdf_shape(link: str, c: ET.Element, where: str, k: int, meshes: dict) -> l
     if g.tag == "capsule":  # not URDF 1.0, but common (Gazebo/SDF extension)
         return [CollisionShape(link, "capsule", origin, radius=req("radius"), length=req("length"), name=name)]
     if g.tag == "mesh":
-        if not g.get("filename"):
+        filename, scale_text = g.get("filename"), g.get("scale")
+        if not filename:
             raise DescriptionError(f"{where} mesh: missing attribute 'filename'")
         scale = np.ones(3)
-        if g.get("scale") is not None:
-            scale = _floats(g.get("scale"), 3, f"{where} mesh scale")
+        if scale_text is not None:
+            scale = _floats(scale_text, 3, f"{where} mesh scale")
             if not np.all((scale >= MESH_SCALE[0]) & (scale <= MESH_SCALE[1])):
-                raise DescriptionError(f"{where} mesh scale: '{g.get('scale')[:40]}': each factor must be between "
+                raise DescriptionError(f"{where} mesh scale: '{scale_text[:40]}': each factor must be between "
                                        f"{MESH_SCALE[0]:g} and {MESH_SCALE[1]:g}", "mm to m is 0.001")
-        path = resolve(g.get("filename"), meshes["urdf"], meshes["packages"], where, meshes.get("roots"))
+        path = resolve(filename, meshes["urdf"], meshes["packages"], where, meshes.get("roots"))
         mesh, centre = load_mesh(path, scale, meshes["modes"].get(link, "convex") == "exact", where, meshes.get("roots"))
         placed = origin.copy()
         placed[:3, 3] = origin[:3, 3] + origin[:3, :3] @ centre
