@@ -99,7 +99,7 @@ def plan(source: PathLike | Mapping[str, Any], *, seed: int | None = None, base_
     trajectory up to the failing task and its target.
     """
     if isinstance(source, Mapping):
-        return plan_file(dict(source), seed=seed, progress=progress, base_dir=base_dir)
+        return plan_file(dict(source), seed=seed, progress=progress, base_dir=None if base_dir is None else Path(base_dir))
     return plan_file(Path(source), seed=seed, progress=progress)
 
 
@@ -111,7 +111,7 @@ def load_trajectory(path: PathLike) -> Trajectory:
 
 def save_trajectory(traj: Trajectory, path: PathLike) -> Path:
     """Write ``traj`` as ``*.traj.json`` atomically; returns the path."""
-    return traj.save(path)
+    return traj.save(Path(path))
 
 
 def _trajectory(traj: TrajectoryLike) -> Trajectory:
@@ -169,7 +169,7 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
     build_schedule(t, robot, rate=rate, speed_scale=speed_scale, strategy=cfg.strategy)  # refuse before opening
     if sim:
         confirm = confirm or (lambda message: True)
-    run = run_execution(t, robot, cfg, port=None if port is None else str(port), sim=sim, log_path=log,
+    run = run_execution(t, robot, cfg, port=None if port is None else str(port), sim=sim, log_path=None if log is None else Path(log),
                         confirm=confirm or (lambda message: False))
     summary = run.result.summary() | {"log": None if log is None else str(log), "port": run.port}
     if run.simulator is not None:
@@ -185,11 +185,12 @@ def draw(traj: TrajectoryLike, output: PathLike, *, view: str = "iso", dpi: floa
     ``size`` in inches. Returns the path written."""
     from roarmctl.viz.path_figure import VIEWS, visualize_trajectory
 
+    output = Path(output)
     picture_format(output)
     if view not in VIEWS:
         raise InputError(f"view: '{view}' is not one of {', '.join(VIEWS)}")
     t = _trajectory(traj)
-    return visualize_trajectory(t, output, view=view, dpi=dpi, size=size, name=Path(str(output)).stem)
+    return visualize_trajectory(t, output, view=view, dpi=dpi, size=size, name=output.stem)
 
 
 def export(source: TrajectoryLike, output: PathLike, *, trajectory: TrajectoryLike | None = None) -> dict[str, Any]:
