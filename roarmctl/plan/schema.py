@@ -19,7 +19,7 @@ import numpy as np
 from roarmctl.errors import PlanFileError, describe_value
 from roarmctl.robot.frames import from_frame
 from roarmctl.robot.model import transform
-from roarmctl.validation import Checker, LocatedDict, closest, load_yaml, locate
+from roarmctl.validation import Checker, LocatedDict, LocatedList, closest, load_yaml, locate
 
 DICT_NAME = "<plan dict>"  # stands for the file name in errors about a plan given as a dict
 PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
@@ -181,6 +181,14 @@ class _Ctx:
             if key not in value:
                 self.fail(value.line, where or "plan", f"'{key}' is missing")
         return value
+
+    def listed(self, value: Any, line: int, where: str, most: int, what: str, hint: str | None = None) -> LocatedList:
+        """``value`` checked to be a list of at most ``most`` items (``what``: their name in the message)."""
+        if not isinstance(value, list):
+            self.fail(line, where, "expected a list")
+        if len(value) > most:
+            self.fail(line, where, f"{len(value)} {what} are more than {most}", hint)
+        return value if isinstance(value, LocatedList) else locate(value)
 
     def number(self, value: Any, line: int, where: str, *, lo: float | None = None, hi: float | None = None,
                angle: bool = False, strict_lo: bool = False) -> float:
@@ -369,7 +377,7 @@ def _file_item(ctx: _Ctx, d: LocatedDict, where: str, spec: ItemSpec) -> None:
 # ------------------------------------------------------------------ tasks
 def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpec], poses: list[str] | None,
           frames: dict | None = None) -> Any:
-    if not isinstance(raw, dict) or len(raw) != 1:
+    if not isinstance(raw, LocatedDict) or len(raw) != 1:
         ctx.fail(line, where, "each task is one of 'pick: {...}', 'place: {...}', 'move: {...}', 'wait: seconds'")
     (kind, body), = raw.items()
     bline = raw.line_of(kind)
@@ -388,50 +396,50 @@ def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpe
         if name not in objects:
             ctx.fail(d.line_of("object"), f"{w}.object", f"no object named '{name}'",
                      f"objects: {', '.join(objects) or 'none'}")
-        t = PickTask(object=name, line=bline)
-        _common_grasp(ctx, d, w, t)
+        pick = PickTask(object=name, line=bline)
+        _common_grasp(ctx, d, w, pick)
         if "gripper_closed" in d:
-            t.gripper_closed = ctx.number(d["gripper_closed"], d.line_of("gripper_closed"), f"{w}.gripper_closed", angle=True)
+            pick.gripper_closed = ctx.number(d["gripper_closed"], d.line_of("gripper_closed"), f"{w}.gripper_closed", angle=True)
         if "grasp_offset" in d:
-            t.grasp_offset = ctx.number(d["grasp_offset"], d.line_of("grasp_offset"), f"{w}.grasp_offset")
+            pick.grasp_offset = ctx.number(d["grasp_offset"], d.line_of("grasp_offset"), f"{w}.grasp_offset")
         if "squeeze" in d:
-            t.squeeze = ctx.number(d["squeeze"], d.line_of("squeeze"), f"{w}.squeeze", lo=0.0, hi=0.05)
-        return t
+            pick.squeeze = ctx.number(d["squeeze"], d.line_of("squeeze"), f"{w}.squeeze", lo=0.0, hi=0.05)
+        return pick
     if kind == "place":
         d = ctx.mapping(body, bline, w, ("object", "xyz", "approach_height", "pitch", "roll", "gripper_open"), ("xyz",))
-        t = PlaceTask(xyz=_position(ctx, d["xyz"], d.line_of("xyz"), f"{w}.xyz", frames), line=bline)
+        place = PlaceTask(xyz=_position(ctx, d["xyz"], d.line_of("xyz"), f"{w}.xyz", frames), line=bline)
         if "object" in d:
-            t.object = ctx.string(d["object"], d.line_of("object"), f"{w}.object")
-            if t.object not in objects:
-                ctx.fail(d.line_of("object"), f"{w}.object", f"no object named '{t.object}'", f"objects: {', '.join(objects) or 'none'}")
-        _common_grasp(ctx, d, w, t)
-        return t
+            place.object = ctx.string(d["object"], d.line_of("object"), f"{w}.object")
+            if place.object not in objects:
+                ctx.fail(d.line_of("object"), f"{w}.object", f"no object named '{place.object}'", f"objects: {', '.join(objects) or 'none'}")
+        _common_grasp(ctx, d, w, place)
+        return place
     if kind == "move":
         d = ctx.mapping(body, bline, w, ("pose", "joints", "xyz", "pitch", "gripper"))
         given = [k for k in ("pose", "joints", "xyz") if k in d]
         if len(given) != 1:
             ctx.fail(bline, w, "give exactly one of 'pose' (a named pose), 'joints' (list) or 'xyz' (+ 'pitch')")
-        t = MoveTask(line=bline)
+        move = MoveTask(line=bline)
         if "gripper" in d:
             g = d["gripper"]
             if isinstance(g, str):
-                t.gripper = ctx.string(g, d.line_of("gripper"), f"{w}.gripper", ("open", "closed"))
+                move.gripper = ctx.string(g, d.line_of("gripper"), f"{w}.gripper", ("open", "closed"))
             else:
-                t.gripper = ctx.number(g, d.line_of("gripper"), f"{w}.gripper", angle=True)
+                move.gripper = ctx.number(g, d.line_of("gripper"), f"{w}.gripper", angle=True)
         if "pose" in d:
-            t.pose = ctx.string(d["pose"], d.line_of("pose"), f"{w}.pose", tuple(poses) if poses is not None else None)
+            move.pose = ctx.string(d["pose"], d.line_of("pose"), f"{w}.pose", tuple(poses) if poses is not None else None)
         elif "joints" in d:
             j = d["joints"]
             deg = isinstance(j, dict) and set(j) == {"deg"}
             vals = j["deg"] if deg else j
             if not isinstance(vals, list):
                 ctx.fail(d.line_of("joints"), f"{w}.joints", "expected a list of joint values (rad) or {deg: [...]}")
-            t.joints = ctx.vector(j, d.line_of("joints"), f"{w}.joints", len(vals), angle=True)
+            move.joints = ctx.vector(j, d.line_of("joints"), f"{w}.joints", len(vals), angle=True)
         else:
-            t.xyz = _position(ctx, d["xyz"], d.line_of("xyz"), f"{w}.xyz", frames)
+            move.xyz = _position(ctx, d["xyz"], d.line_of("xyz"), f"{w}.xyz", frames)
             if "pitch" in d:
-                _pitch(ctx, d, w, t)
-        return t
+                _pitch(ctx, d, w, move)
+        return move
     close = closest(str(kind), ("pick", "place", "move", "wait"))
     ctx.fail(bline, f"{where}", f"unknown task '{kind}'", f"did you mean '{close}'?" if close else "tasks: pick, place, move, wait")
 
@@ -512,20 +520,12 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
         sc = ctx.mapping(top["scene"], top.line_of("scene"), "scene", ("table", "obstacles"))
         if "table" in sc and sc["table"] is not None:
             scene.append(_item(ctx, sc["table"], sc.line_of("table"), "scene.table", "table", frames))
-        obs = sc.get("obstacles") or []
-        if not isinstance(obs, list):
-            ctx.fail(sc.line_of("obstacles"), "scene.obstacles", "expected a list")
-        if len(obs) > MAX_ITEMS:
-            ctx.fail(sc.line_of("obstacles"), "scene.obstacles", f"{len(obs)} obstacles are more than {MAX_ITEMS}")
+        obs = ctx.listed(sc.get("obstacles") or [], sc.line_of("obstacles"), "scene.obstacles", MAX_ITEMS, "obstacles")
         for i, o in enumerate(obs):
             scene.append(_item(ctx, o, obs.line_of(i), f"scene.obstacles[{i}]", "obstacle", frames))
 
     objects: list[ItemSpec] = []
-    objs = top.get("objects") or []
-    if not isinstance(objs, list):
-        ctx.fail(top.line_of("objects"), "objects", "expected a list")
-    if len(objs) > MAX_ITEMS:
-        ctx.fail(top.line_of("objects"), "objects", f"{len(objs)} objects are more than {MAX_ITEMS}")
+    objs = ctx.listed(top.get("objects") or [], top.line_of("objects"), "objects", MAX_ITEMS, "objects")
     for i, o in enumerate(objs):
         objects.append(_item(ctx, o, objs.line_of(i), f"objects[{i}]", "object", frames))
     names: dict[str, ItemSpec] = {}
@@ -538,8 +538,7 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
     tasks_raw = top["tasks"]
     if not isinstance(tasks_raw, list) or not tasks_raw:
         ctx.fail(top.line_of("tasks"), "tasks", "expected a non-empty list of tasks")
-    if len(tasks_raw) > MAX_TASKS:
-        ctx.fail(top.line_of("tasks"), "tasks", f"{len(tasks_raw)} tasks are more than {MAX_TASKS}", "split the plan")
+    tasks_raw = ctx.listed(tasks_raw, top.line_of("tasks"), "tasks", MAX_TASKS, "tasks", "split the plan")
     tasks = [_task(ctx, t, tasks_raw.line_of(i), f"task {i + 1}", by_object, named_poses, frames) for i, t in enumerate(tasks_raw)]
 
     cycles = 1
