@@ -90,6 +90,7 @@ def test_a_stop_while_the_planning_libraries_load_waits_until_they_have_loaded(t
     finished = tmp_path / "the import step finished"
     code = f"""
 import os, signal
+signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal, also when started with SIGINT ignored
 import roarmctl.motion.timing as timing
 from roarmctl.motion.pipeline import load_planning_libraries
 
