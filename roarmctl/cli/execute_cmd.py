@@ -214,7 +214,7 @@ class _Display:
 # --------------------------------------------------------------------------- sim-device
 def sim_device(
     firmware: str | None = typer.Option(None, "--firmware", help="Which firmware to imitate: m3-0.84 (default), m3-2026, m2."),
-    servos: str = typer.Option("physics", "--servos", help=SERVOS_HELP),
+    servos: str | None = typer.Option(None, "--servos", help=SERVOS_HELP + " With --guide: ideal."),
     model: str | None = typer.Option(None, "--model", help="Imitate this robot's firmware, from its description's wire map "
                                         "(e.g. roarm_m2_s -> m2, roarm_m3_pro -> m3-0.84)."),
     info_print: int = typer.Option(2, "--info-print", help="InfoPrint level at start (factory 2 = continuous feedback)."),
@@ -237,6 +237,9 @@ def sim_device(
     silent: bool = typer.Option(False, "--silent", help="Fault: the arm never says anything."),
     boot_mission: list[str] = typer.Option([], "--boot-mission", metavar="JSON", help="A line of the flash mission 'boot' "
                                            "(run at start-up unless serial input is waiting). Repeatable."),
+    guide: Path | None = typer.Option(None, "--guide", metavar="FILE", help="While torque is off, a hand moves the arm "
+                                      "along FILE: a YAML list of {t: s, joints: [rad x 5], gripper: rad} (docs/guide.md, "
+                                      "'Teaching by hand')."),
 ) -> None:
     """Start the firmware simulator on a pseudo-terminal, print its path, and serve until Ctrl-C.
 
@@ -267,10 +270,17 @@ def sim_device(
                        boot_mission=tuple(boot_mission))
     if not 0 < voltage < 100:
         raise InputError(f"--voltage: {voltage:g} V is not a supply voltage")
+    servos = servos or ("ideal" if guide is not None else "physics")
     if servos not in ("physics", "ideal"):
         raise InputError(f"--servos: '{servos}' is not physics or ideal")
     factory = None
-    if servos == "physics":
+    if guide is not None:
+        from roarmctl.device.guide import guided_servos, load_guide
+
+        if servos != "ideal":
+            raise InputError("--guide moves the ideal servos; the physics servos do not take a hand yet", "drop --servos physics")
+        factory = guided_servos(load_guide(guide), config.max_speed)
+    elif servos == "physics":
         from roarmctl.physics.servo_backend import for_firmware
         from roarmctl.robot.loader import load_robot
 

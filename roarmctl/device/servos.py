@@ -110,6 +110,12 @@ class KinematicServos:
             self._on[j] = bool(on)
             self._vel[j] = 0.0
 
+    def place(self, joints, positions) -> None:
+        """An outside force (a hand) moved these servos while limp: they stand at ``positions`` (steps), at rest."""
+        for j, p in zip(joints, positions):
+            self._pos[j] = float(p)
+            self._vel[j] = 0.0
+
     def advance(self, t: float) -> None:
         """See ``ServoModel.advance``: each servo's trapezoid, solved in closed form."""
         dt = t - self.t
