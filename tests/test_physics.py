@@ -250,13 +250,13 @@ def test_jaws_closing_5_mm_short_of_a_30_mm_cube_do_not_lift_it(tmp_path, capsys
     assert not c["lifted"] and not c["placed"] and c["lift_mm"] < 5
 
 
-def test_a_box_the_checker_saw_lower_than_it_is_is_hit_by_the_held_cube(trajs, tmp_path, capsys):
-    """A thin plate across the carry path whose top the checker saw (clearance + 1 mm) lower than it is: the
-    held cube, carried over it as planned, drags through its top 1 mm; simulate reports that contact."""
+def _plate(traj_path: Path) -> tuple[list[float], list[float]]:
+    """(size, centre) m of a thin plate across the carry path of ``traj_path``'s cube (crossing y = 0), whose
+    top is 1 mm above the bottom of the cube carried over it as planned."""
     from roarmctl.device.schedule import sample
     from roarmctl.motion.validate import load_trajectory
 
-    traj = load_trajectory(trajs["pick_place"])
+    traj = load_trajectory(traj_path)
     robot = load_robot(traj.robot)
     p = traj.payloads[0]
     t = np.linspace(p["start"], p["end"], 400)
@@ -264,10 +264,38 @@ def test_a_box_the_checker_saw_lower_than_it_is_is_hit_by_the_held_cube(trajs, t
     centre = np.einsum("nij,j->ni", tcp[:, :3, :3], p["com"]) + tcp[:, :3, 3]
     cross = int(np.argmin(np.abs(centre[:, 1])))  # the carried cube crosses y = 0 (between pick and place)
     bottom = centre[cross, 2] - 0.02  # the cube's lowest point there (it is carried upright)
-    plate = {"name": "plate", "role": "obstacle", "shape": "box", "size": [0.2, 0.002, bottom + 0.001],
-             "xyz": [float(centre[cross, 0]), 0.0, (bottom + 0.001) / 2], "rpy": [0, 0, 0]}
+    return [0.2, 0.002, float(bottom + 0.001)], [float(centre[cross, 0]), 0.0, float(bottom + 0.001) / 2]
+
+
+def _box_triangles(size) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (8, 3) and faces (12, 3) of a box of ``size`` centred on its origin (outward normals)."""
+    v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float) * np.asarray(size) / 2
+    f = [[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+         [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]
+    return v, np.array(f)
+
+
+@pytest.mark.parametrize("shape", ["box", "mesh", "cloud"])
+def test_a_box_the_checker_saw_lower_than_it_is_is_hit_by_the_held_cube(trajs, tmp_path, capsys, shape):
+    """A thin plate across the carry path whose top the checker saw (clearance + 1 mm) lower than it is: the
+    held cube, carried over it as planned, drags through its top 1 mm; simulate reports that contact. The
+    plate is a box, a mesh of its 12 triangles (a scene mesh item: convex pieces) or a point cloud filling it
+    at 1 mm (a cloud item: its occupied cells as merged boxes)."""
+    from roarmctl.motion.scene import SceneItem
+    from roarmctl.motion.validate import load_trajectory
+
+    size, xyz = _plate(trajs["pick_place"])
+    if shape == "box":
+        plate = SceneItem.box("plate", size, xyz)
+    elif shape == "mesh":
+        plate = SceneItem.from_mesh("plate", *_box_triangles(size), xyz=xyz)
+    else:  # points at the centres of the 1 mm cells of the plate; the item frame at its corner
+        r = 0.001
+        n = np.round(np.asarray(size) / r).astype(int)
+        idx = np.stack(np.meshgrid(*(np.arange(k) for k in n), indexing="ij"), -1).reshape(-1, 3)
+        plate = SceneItem.from_points("plate", (idx + 0.5) * r, r, xyz=np.asarray(xyz) - n * r / 2)
     doc = json.loads(trajs["pick_place"].read_text())
-    doc["scene"]["items"].append(plate)
+    doc["scene"]["items"].append(plate.to_dict())
     hit = tmp_path / "plate.traj.json"
     hit.write_text(json.dumps(doc))
     code, rep = _simulate(capsys, str(hit))
@@ -275,7 +303,40 @@ def test_a_box_the_checker_saw_lower_than_it_is_is_hit_by_the_held_cube(trajs, t
     plate_contacts = [c for c in rep["contacts"] if "plate" in (c.get("item"), c["with"])]
     assert plate_contacts and all({c.get("item"), c["with"]} == {"cube", "plate"} for c in plate_contacts)
     c = plate_contacts[0]
-    assert 0.05 < c["depth_mm"] < 5 and traj.payloads[0]["start"] < c["start_s"] < traj.payloads[0]["end"] + 0.5
+    payload = load_trajectory(trajs["pick_place"]).payloads[0]
+    assert 0.05 < c["depth_mm"] < 5 and payload["start"] < c["start_s"] < payload["end"] + 0.5
+    if shape == "cloud":  # 200 x 2 x 50-odd cells, one box
+        assert any("as 1 box" in n for n in rep["model"]["notes"])
+
+
+def test_cloud_cells_become_boxes_whose_union_is_the_cells():
+    """Against counting: every cell covered exactly once by the boxes, nothing else covered."""
+    from roarmctl.physics.mjcf import cell_boxes
+
+    rng = np.random.default_rng(3)
+    for density in (0.1, 0.5, 0.9, 1.0):
+        cells = np.argwhere(rng.random((9, 7, 5)) < density) - 3
+        lo, hi = cell_boxes(cells)
+        covered = [tuple(c) for a, b in zip(lo, hi) for c in np.argwhere(np.ones(b - a, dtype=bool)) + a]
+        assert len(covered) == len(set(covered)) == len(cells) and set(covered) == set(map(tuple, cells))
+    lo, hi = cell_boxes(np.argwhere(np.ones((4, 5, 6), dtype=bool)))  # a full block is one box
+    assert lo.tolist() == [[0, 0, 0]] and hi.tolist() == [[4, 5, 6]]
+
+
+def test_scan_desk_the_cloud_table_and_the_mesh_wall_simulate(tmp_path, capsys):
+    """plans/scan_desk.yaml: the desk a point cloud (role table), the wall an STL; the cube is placed, the
+    base stands on the cloud without a contact, and the wall's convex piece is in the model."""
+    traj = _plan(ROOT / "plans" / "scan_desk.yaml", tmp_path / "scan.traj.json")
+    code, rep = _simulate(capsys, str(traj))
+    assert code == 0 and rep["ok"] and rep["contacts"] == []
+    (cube,) = rep["objects"]
+    assert cube["lifted"] and cube["placed"] and cube["error_mm"] < 10
+    assert any(n.startswith("scene item table: ") and "occupied cells" in n for n in rep["model"]["notes"])
+    from roarmctl.motion.validate import load_trajectory
+
+    world = World(load_robot("roarm_m3_pro"), Scene.from_dict(load_trajectory(traj).scene))
+    owners = {o for o in world.doc.geom_owner.values()}
+    assert ("item", "wall") in owners and ("item", "table") in owners and world.model.nmesh >= 1
 
 
 VENDOR = next((d / "shared" / "reference" / "roarm_m3" / "m2s_roarm_ws_em0" for d in (ROOT.parent, ROOT.parent.parent)

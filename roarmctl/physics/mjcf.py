@@ -16,7 +16,10 @@ trajectory's ``Scene``.
   a note says so). Pairs the description allows to touch (SRDF ``disable_collisions``) are excluded,
   and so are the links on the table (``base_links``) against items of role ``table``.
 * Scene: tables and obstacles are fixed; objects are free bodies with the plan's masses (payloads of
-  the trajectory), other objects at ``DEFAULT_OBJECT_DENSITY``.
+  the trajectory), other objects at ``DEFAULT_OBJECT_DENSITY``. A mesh item is its convex pieces (the
+  checker's: the hull of each connected part), one mesh geom each; a point-cloud item is its occupied cells
+  (the checker's octree leaves) as boxes, runs of cells merged (``cell_boxes``), not a height field: the
+  cells are what the checker saw, overhangs included.
 * Contact: friction ``FRICTION`` (sliding, torsional, rolling) on every geom, elliptic friction cones
   with ``IMPRATIO``, contact stiffness ``SOLREF``; gravity 9.81 m/s^2 along -z of the world.
 
@@ -50,6 +53,11 @@ DEFAULT_DENSITY = 1000.0  # kg/m^3, a link without <inertial> (MuJoCo's own defa
 DEFAULT_OBJECT_DENSITY = 500.0  # kg/m^3, an object whose mass the trajectory does not give (wood)
 FALLBACK_MASS = 0.001  # kg, a moving link with neither <inertial> nor collision shapes
 MIN_MASS = 1e-6  # kg: an <inertial> below this counts as missing
+#: Boxes of one point-cloud item (its merged occupied cells): more would slow every physics step down.
+MAX_CLOUD_BOXES = 20_000
+#: Contact bits (MuJoCo: two geoms collide when one's contype shares a bit with the other's conaffinity):
+#: every geom has both bits; a point-cloud table's boxes only TABLE_BIT, the base links' geoms only the other.
+EVERY_BIT, TABLE_BIT = 3, 2
 
 
 def body_name(link: str) -> str:
@@ -163,7 +171,8 @@ def build_document(robot: Robot, scene, masses: dict[str, float] | None = None,
     ET.SubElement(opt, "flag", multiccd="enable")
     ET.SubElement(root, "size", memory="64M")
     default = ET.SubElement(root, "default")
-    ET.SubElement(default, "geom", friction=_f(friction), solref=_f(SOLREF), condim="4",
+    ET.SubElement(default, "geom", friction=_f(friction), solref=_f(SOLREF), condim="4", contype=str(EVERY_BIT),
+                  conaffinity=str(EVERY_BIT),
                   density=repr(DEFAULT_DENSITY), rgba="0.7 0.7 0.7 1")
     asset = ET.SubElement(root, "asset")
     world = ET.SubElement(root, "worldbody")
@@ -225,7 +234,7 @@ def build_document(robot: Robot, scene, masses: dict[str, float] | None = None,
         a, b = pair
         if a in bodies and b in bodies and a != b:
             ET.SubElement(contact, "exclude", body1=body_name(a), body2=body_name(b))
-    _scene(doc, robot, scene, world, contact, bodies, masses)
+    _scene(doc, robot, scene, world, contact, asset, bodies, masses)
     if not len(equality):
         root.remove(equality)
     if not len(contact):
@@ -256,7 +265,7 @@ def _inertial(doc: BuiltDocument, robot: Robot, link: str, body: ET.Element, has
                      f"{r * 1e3:g} mm sphere (assumed)")
 
 
-def _scene(doc: BuiltDocument, robot: Robot, scene, world: ET.Element, contact: ET.Element,
+def _scene(doc: BuiltDocument, robot: Robot, scene, world: ET.Element, contact: ET.Element, asset: ET.Element,
            bodies: dict[str, ET.Element], masses: dict[str, float]) -> None:
     base = [link for link in robot.base_links if link in bodies]
     for item in scene.items:
@@ -275,16 +284,98 @@ def _scene(doc: BuiltDocument, robot: Robot, scene, world: ET.Element, contact: 
             g.set("density", repr(mass / volume))
             doc.masses[item.name] = float(mass)
             doc.objects.append(item.name)
+            doc.geom_owner[f"item:{item.name}"] = ("item", item.name)
         else:  # fixed: a static body of its own, so that contacts can be excluded per item
             body = ET.SubElement(world, "body", name=item_body_name(item.name))
             _place(body, item.pose)
-            g = ET.SubElement(body, "geom", name=f"item:{item.name}", density="0",
-                              rgba="0.5 0.5 0.5 1" if item.role == "table" else "0.6 0.2 0.2 1")
-            _geom_shape(g, item.shape, item.size, item.radius, item.length)
+            rgba = "0.5 0.5 0.5 1" if item.role == "table" else "0.6 0.2 0.2 1"
+            if item.shape == "mesh":
+                _mesh_item(doc, item, body, asset, rgba)
+            elif item.shape == "cloud":
+                world.remove(body)
+                _cloud_item(doc, item, world, rgba, item.role == "table")
+                if item.role == "table":
+                    _off_cloud_tables(robot, base, bodies)
+                continue
+            else:
+                g = ET.SubElement(body, "geom", name=f"item:{item.name}", density="0", rgba=rgba)
+                _geom_shape(g, item.shape, item.size, item.radius, item.length)
+                doc.geom_owner[f"item:{item.name}"] = ("item", item.name)
             if item.role == "table":
                 for link in base:
                     ET.SubElement(contact, "exclude", body1=body_name(link), body2=item_body_name(item.name))
-        doc.geom_owner[f"item:{item.name}"] = ("item", item.name)
+
+
+def _mesh_item(doc: BuiltDocument, item, body: ET.Element, asset: ET.Element, rgba: str) -> None:
+    """A mesh scene item: one mesh geom per convex piece (the checker's pieces); an ``exact`` mesh (FCL checks
+    its triangles) collides as its convex hull in MuJoCo, as a robot's exact mesh does, and a note says so."""
+    for k, (v, f) in enumerate(item.mesh.pieces):
+        mname, gname = f"mesh:item:{item.name}:{k}", f"item:{item.name}:{k}"
+        ET.SubElement(asset, "mesh", name=mname, vertex=_f(np.asarray(v).ravel()),
+                      face=" ".join(str(int(i)) for i in np.asarray(f).ravel()))
+        ET.SubElement(body, "geom", name=gname, type="mesh", mesh=mname, density="0", rgba=rgba)
+        doc.geom_owner[gname] = ("item", item.name)
+    if item.mesh.exact:
+        doc.notes.append(f"scene item {item.name}: its 'exact' mesh collides as its convex hull in MuJoCo "
+                         "(a concave part is filled)")
+
+
+def _cloud_item(doc: BuiltDocument, item, world: ET.Element, rgba: str, table: bool) -> None:
+    """A point-cloud scene item: its occupied cells (the checker's octree leaves) as boxes, runs of cells
+    merged into one box each (``cell_boxes``: the same volume, far fewer geoms). The boxes are geoms of the
+    world body itself: MuJoCo's broad phase then passes over them (hundreds of boxes in a static body of their
+    own cost every step 40 us). A table's boxes touch no geom of a base link (``TABLE_BIT``)."""
+    r = item.cloud.resolution
+    lo, hi = cell_boxes(item.cloud.cells)
+    if len(lo) > MAX_CLOUD_BOXES:
+        raise InputError(f"physics: scene item '{item.name}': its {len(item.cloud.cells)} cells make {len(lo)} boxes, "
+                         f"more than {MAX_CLOUD_BOXES}", "give the cloud a coarser resolution")
+    rot, t = item.pose[:3, :3], item.pose[:3, 3]
+    q = None if np.allclose(rot, np.eye(3), atol=1e-15) else _f(quat(rot))
+    centres = ((lo + hi) * r / 2) @ rot.T + t
+    for k, (a, b) in enumerate(zip(lo, hi)):
+        gname = f"item:{item.name}:{k}"
+        g = ET.SubElement(world, "geom", name=gname, type="box", size=_f((b - a) * r / 2), pos=_f(centres[k]),
+                          density="0", rgba=rgba)
+        if q is not None:
+            g.set("quat", q)
+        if table:
+            g.set("contype", str(TABLE_BIT))
+            g.set("conaffinity", str(TABLE_BIT))
+        doc.geom_owner[gname] = ("item", item.name)
+    doc.notes.append(f"scene item {item.name}: {len(item.cloud.cells)} occupied cells of {r * 1e3:g} mm as "
+                     f"{len(lo)} box{'es' if len(lo) != 1 else ''}")
+
+
+def _off_cloud_tables(robot: Robot, base: list[str], bodies: dict[str, ET.Element]) -> None:
+    """The base links' geoms leave out ``TABLE_BIT``: they never touch a table made of a cloud's boxes (which
+    are world geoms, not a body that an ``exclude`` could name)."""
+    for link in base:
+        for g in bodies[link].findall("geom"):
+            g.set("contype", str(EVERY_BIT & ~TABLE_BIT))
+            g.set("conaffinity", str(EVERY_BIT & ~TABLE_BIT))
+
+
+def cell_boxes(cells) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes whose union is exactly the occupied cells ``cells`` (K, 3) int (unique): cells merged into runs
+    along x, runs of equal extent into rectangles along y, rectangles into blocks along z. Returns
+    (lo (B, 3), hi (B, 3)) int: box b spans cells lo[b] .. hi[b] - 1 (multiply by the resolution for m)."""
+    c = np.unique(np.asarray(cells, dtype=np.int64).reshape(-1, 3), axis=0)
+    lo, hi = c.copy(), c + 1
+    for axis in range(3):  # merge along x, then y, then z: boxes equal in every other extent and touching
+        others = [a for a in range(3) if a != axis]
+        keys = np.column_stack([lo[:, a] for a in others] + [hi[:, a] for a in others])
+        order = np.lexsort((lo[:, axis],) + tuple(keys[:, i] for i in reversed(range(keys.shape[1]))))
+        lo, hi, keys = lo[order], hi[order], keys[order]
+        # a run continues while the next box starts where this one ends
+        new = np.ones(len(lo), dtype=bool)
+        new[1:] = np.any(keys[1:] != keys[:-1], axis=1) | (lo[1:, axis] != hi[:-1, axis])
+        start = np.flatnonzero(new)
+        last = np.r_[start[1:], len(lo)] - 1
+        top = hi[last, axis]
+        lo, hi = lo[start], hi[start]
+        hi[:, axis] = top
+    return lo, hi
 
 
 def _volume(item) -> float:

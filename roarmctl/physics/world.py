@@ -95,8 +95,9 @@ class World:
             self.object_qpos[name] = int(m.jnt_qposadr[j])
         self.link_body = {link: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, body_name(link)) for link in robot.link_names
                           if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, body_name(link)) >= 0}
-        self.item_body = {o[1]: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, item_body_name(o[1]))
-                          for o in self.owners if o[0] == "item"}
+        # scene item -> its body (a point cloud's boxes are geoms of the world body: no body of its own)
+        self.item_body = {o[1]: b for o in self.owners if o[0] == "item"
+                          if (b := mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, item_body_name(o[1]))) >= 0}
         self._mimic = [(jj, robot.joint_names.index(jj.mimic)) for jj in robot.joints if jj.mimic is not None]
         self._mimic_adr = [int(m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, joint_name(jj.name))])
                            for jj, _ in self._mimic]
