@@ -39,15 +39,16 @@ import itertools
 import math
 import threading
 from dataclasses import dataclass
+from typing import Any
 
 import fcl
 import numpy as np
 
 from roarmctl import _kernel
 from roarmctl.errors import InputError
+from roarmctl.motion.geometry import Part, item_parts
 from roarmctl.motion.geometry import fcl_geometry as _geometry
 from roarmctl.motion.geometry import half_extents as _half_extents
-from roarmctl.motion.geometry import item_parts
 from roarmctl.motion.geometry import second_box as _second_box  # noqa: F401 (tests reach it here)
 from roarmctl.motion.scene import Scene, SceneItem
 from roarmctl.robot.model import Robot
@@ -62,6 +63,11 @@ _TABLES = ("_parts", "_items", "_item_objs", "_item_lo", "_item_hi", "_item_c", 
            "_mv_pos", "_mv_half", "_mv_half_self", "_mv_radius", "_scene_mask", "_active", "_active_mask", "_active_r2",
            "_pairs", "_pair_r2", "_ki", "_kf", "_q_template", "_kfm", "_kim")
 
+
+#: The kernel's output buffers (``CollisionChecker._buffers``): "n" (int, states they hold), "valid", "near", "scene",
+#: "self", "pose", "idx" (arrays), "near_bytes" (the bytearray under "near"), "views" and "seg_views" (memoryviews
+#: of the arrays, as ``_kernel.check`` and ``_kernel.segment`` take them); {} before the first check.
+_Buffers = dict[str, Any]
 
 _FCL_REQUEST = fcl.CollisionRequest()  # FCL's defaults (what fcl.collide makes when given none), made once
 _SWEEP_GAINS: dict[tuple, tuple[Robot, float]] = {}  # see CollisionChecker._cached_sweep_gain
@@ -93,6 +99,9 @@ class CollisionChecker:
     The checker keeps its own copy of the scene (``self.scene``): ``detach`` moves items in it.
     """
 
+    _parts: list[Part]  # the scene's collision parts (an item has one or more), set by _build_tables
+    _items: list[SceneItem]  # one entry per part: the item it belongs to
+
     def __init__(self, robot: Robot, scene: Scene, *, padding: float = 0.005,
                  singularity_margin: float | None = None, contact_tolerance: float = 0.001) -> None:
         if padding < 0:
@@ -108,7 +117,7 @@ class CollisionChecker:
         self._lower = robot.lower[self._arm]
         self._upper = robot.upper[self._arm]
         self._q_template = robot.full_q(np.zeros(robot.arm_dof))  # a view into the kernel's table after _rebuild
-        self._bufs: dict[str, np.ndarray] = {}
+        self._bufs: _Buffers = {}
         # One check at a time: the kernel's output buffers and the FCL objects' poses are shared (OMPL's PRM
         # calls back from two threads).
         self._lock = threading.RLock()
@@ -357,7 +366,8 @@ class CollisionChecker:
         # per state, for every group and link pair that has it (a link's group and link-pair spheres are the same
         # sphere when all its shapes take part in the scene test).
         sph_index: dict[tuple[int, bytes], int] = {}
-        sph_link, sph_c = [], []
+        sph_link: list[int] = []
+        sph_c: list[np.ndarray] = []
 
         def sph(link: int, c: np.ndarray) -> int:
             key = (int(link), np.asarray(c, dtype=float).tobytes())
@@ -371,7 +381,8 @@ class CollisionChecker:
         # mean centre (link frame) that holds each shape's sphere, plus 1e-9 m against rounding.
         links = self._mv_link[self._active]
         g_links = sorted(set(links.tolist()))
-        g_order, g_start, g_sph, g_r, g_mask = [], [0], [], [], []
+        g_order: list[int] = []
+        g_start, g_sph, g_r, g_mask = [0], [], [], []
         for link in g_links:
             members = np.flatnonzero(links == link)
             centres = self._mv_pos[self._active[members]]
@@ -390,10 +401,11 @@ class CollisionChecker:
         by_links: dict[tuple[int, int], list[int]] = {}
         for p, (a, b) in enumerate(self._pairs.tolist()):
             by_links.setdefault((int(self._mv_link[a]), int(self._mv_link[b])), []).append(p)
-        lp_sph, lp_start, lp_order, lp_r = [], [0], [], []
-        for (la, lb), members in by_links.items():
+        lp_order: list[int] = []
+        lp_sph, lp_start, lp_r = [], [0], []
+        for (la, lb), in_pair in by_links.items():
             lp_sph += [sph(la, sphere[la][0]), sph(lb, sphere[lb][0])]
-            lp_order += members
+            lp_order += in_pair
             lp_start.append(len(lp_order))
             lp_r += [sphere[la][1], sphere[lb][1]]
         margin = self.singularity_margin
@@ -474,14 +486,14 @@ class CollisionChecker:
         _kernel.sigma(self._kf, self._ki, Q, self._grip_arg(gripper, Q.shape[0]), out)
         return out
 
-    def _grip_arg(self, gripper, n: int) -> np.ndarray:
+    def _grip_arg(self, gripper, n: int) -> np.ndarray | memoryview:
         if gripper is None:
             return _NO_GRIP
         if self._gripper_index is None:
             raise InputError(f"{self.robot.name} has no gripper")
         return np.ascontiguousarray(np.broadcast_to(np.asarray(gripper, dtype=float), (n,)))
 
-    def _buffers(self, n: int) -> dict[str, np.ndarray]:
+    def _buffers(self, n: int) -> _Buffers:
         """Output buffers of the kernel for batches of up to ``n`` states (reused between calls)."""
         b = self._bufs
         if b.get("n", 0) < n:
@@ -514,7 +526,7 @@ class CollisionChecker:
             self._narrow(valid, b, ns, npairs, stop_at_first)
         return valid, near
 
-    def _narrow(self, valid: np.ndarray, b: dict, ns: int, npairs: int, stop_at_first: bool) -> None:
+    def _narrow(self, valid: np.ndarray, b: _Buffers, ns: int, npairs: int, stop_at_first: bool) -> None:
         """FCL on the kernel's candidate pairs, in state order; marks colliding states invalid in ``valid``."""
         moving, items, pose, req = self._moving_shapes, self._item_objs, b["pose"], _FCL_REQUEST
         res = fcl.CollisionResult()  # one for the call: fcl.collide adds a contact to it per hit, which no one reads
@@ -647,7 +659,7 @@ class CollisionChecker:
         n = len(idx) * (refine - 1)
         return self._line_ok(b if b["n"] >= n else self._buffers(n), q0, d, steps, 0, 1, 0.0, idx, refine)
 
-    def _line_ok(self, b: dict, q0: np.ndarray, d: np.ndarray, steps: int, start: int, stride: int, sweep: float = 0.0,
+    def _line_ok(self, b: _Buffers, q0: np.ndarray, d: np.ndarray, steps: int, start: int, stride: int, sweep: float = 0.0,
                  idx: np.ndarray = _NO_IDX, refine: int = 1, skip: int = 0) -> bool:
         """True when the states of the segment q0 -> q0 + d that ``_kernel.check_line`` makes (see there) are
         all valid; stops at the first invalid one. ``b``: output buffers (``_buffers``) large enough for them; with
@@ -662,7 +674,7 @@ class CollisionChecker:
             return False
         return not (ns or npairs) or self._all_clear(b, n, ns, npairs, limit)
 
-    def _all_clear(self, b: dict, n: int, ns: int, npairs: int, limit: int) -> bool:
+    def _all_clear(self, b: _Buffers, n: int, ns: int, npairs: int, limit: int) -> bool:
         """The verdict on ``n`` states the kernel checked with stop-at-first: False at a limit or margin
         failure (``limit`` < n), else FCL decides the ``ns`` scene and ``npairs`` self candidates it left."""
         if limit < n:  # limits or margin
