@@ -119,7 +119,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--traj", type=Path, default=None)
     ap.add_argument("--servos", default=None, help="MODULE:FACTORY of another servo model (default: the kinematic servos)")
-    ap.add_argument("--strategies", default="timed,timed-acc,per-joint,dense")
+    ap.add_argument("--strategies", default="timed,timed-lead,timed-acc,per-joint,dense")
+    ap.add_argument("--builds", default="m3-0.84,m3-2026", help="firmware builds, comma-separated")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
     traj_path = args.traj or bundled_trajectory(tmp / "pick_place.traj.json")
@@ -131,7 +132,7 @@ def main() -> None:
           f"{args.repeats} runs each, medians")
     print(f"{'build':<9}{'strategy':<11}{'TCP RMS':>8}{'max':>7}{'lag':>6}{'p99':>6}{'link':>6}{'lines/s':>8}{'hold':>6}"
           "   (mm, mm, ms, ms, share, -, ms)")
-    for firmware in ("m3-0.84", "m3-2026"):
+    for firmware in args.builds.split(","):
         for strategy in strategies:
             full = [run_one(traj, robot, firmware, strategy, servos=servos) for _ in range(args.repeats)]
             stop = [run_one(traj, robot, firmware, strategy, servos=servos, stop_at=0.5) for _ in range(args.repeats)]

@@ -20,7 +20,7 @@ SERVOS_HELP = ("The simulated servos: physics (default: MuJoCo, the ST3235 model
                "docs/physics.md) or ideal (each servo runs its trapezoid exactly, no lag, no gravity).")
 SAG_HELP = ("Offset each goal by the servos' sag under gravity and the held payload (the ST3235's P-only loop; "
             "see docs/physics.md).")
-STRATEGY_HELP = ("Streaming strategy: timed (default), timed-acc, per-joint, timed-shared, dense, dense-ahead "
+STRATEGY_HELP = ("Streaming strategy: timed (default), timed-lead, timed-acc, per-joint, timed-shared, dense, dense-ahead "
                  "(compared in docs/benchmarks.md).")
 
 
@@ -51,7 +51,10 @@ def execute(
     move_to_start: bool = typer.Option(False, "--move-to-start", help="If the arm is not at the first point, plan a collision-checked, timed motion there first (the trajectory's scene, limits and planner)."),
     from_current: bool = typer.Option(False, "--from-current", help="If the arm is not at the first point, plan the first free motion again from where it is."),
     max_error: float = typer.Option(30.0, "--max-error", help="Abort (and hold) when the TCP tracking error exceeds this (mm)."),
-    sag: bool = typer.Option(False, "--sag/--no-sag", help=SAG_HELP + " (Not with --sim: its ideal servos do not sag.)"),
+    sag: bool = typer.Option(False, "--sag/--no-sag", help=SAG_HELP + " (With --sim only with --servos physics: ideal servos do not sag.)"),
+    servos: str = typer.Option("ideal", "--servos", help="With --sim: the simulated servos, ideal (default: each runs its trapezoid "
+                               "exactly, no lag, no gravity) or physics (MuJoCo, the ST3235 model with its 46 ms lag, gravity, "
+                               "the trajectory's scene and payload; docs/physics.md)."),
     log: Path | None = typer.Option(None, "--log", help="Execution log (JSON); default: next to TRAJ as NAME.exec.json."),
     json_out: bool = typer.Option(False, "--json", help="Print one JSON summary object on stdout, nothing else."),
 ) -> None:
@@ -73,6 +76,10 @@ def execute(
         raise InputError(f"--strategy: unknown '{strategy}'", f"choose one of {', '.join(STRATEGIES)}")
     if not max_error > 0:
         raise InputError("--max-error: must be positive (mm)")
+    if servos not in ("physics", "ideal"):
+        raise InputError(f"--servos: '{servos}' is not physics or ideal")
+    if servos != "ideal" and not sim:
+        raise InputError("--servos: only with --sim (a real arm has its own servos)")
     traj = validate_trajectory(traj_path)  # limits, speeds and steps: nothing unchecked reaches the port
     robot = robot_of(traj, str(traj_path))
     if move_to_start and from_current:
@@ -96,7 +103,12 @@ def execute(
     build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy, sag=sag)  # validate before opening
     if port is not None and not yes and not sys.stdin.isatty():
         raise InputError("refusing to ask for confirmation: stdin is not a terminal", "pass --yes to execute without asking")
-    _run(traj, traj_path, robot, cfg, port, sim, yes, log or default_log_path(traj_path), json_out)
+    factory = None
+    if sim and servos == "physics":
+        from roarmctl.physics.servo_backend import for_firmware
+
+        factory = for_firmware(robot, traj)
+    _run(traj, traj_path, robot, cfg, port, sim, yes, log or default_log_path(traj_path), json_out, factory)
 
 
 def _write_output(path: Path, schedule) -> None:
@@ -107,7 +119,8 @@ def _write_output(path: Path, schedule) -> None:
     atomic_write_bytes(path, b"".join(lines))
 
 
-def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path: Path, json_out: bool) -> None:
+def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path: Path, json_out: bool,
+         sim_servos=None) -> None:
     err = common.console(stderr=True)
     live = _Display(err, len(robot.joint_names), robot) if (err.is_terminal and not json_out) else None
 
@@ -135,7 +148,7 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
     run = run_execution(traj, robot, cfg, port=port, sim=sim, log_path=log_path, confirm=confirm,
                         on_status=live.update if live else None, on_start=live.start if live else None,
                         on_note=note, on_end=live.stop if live else None, shield=signals.shielded,
-                        on_log_error=log_error, on_info=info)
+                        on_log_error=log_error, on_info=info, sim_servos=sim_servos)
     result, port = run.result, run.port
     summary = result.summary() | {"log": str(log_path), "notes": result.log.get("notes", []),
                                   "final_pose": result.log.get("final_pose")}

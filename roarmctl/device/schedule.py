@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from roarmctl.device import protocol
+from roarmctl.device import protocol, st3235
 from roarmctl.device.protocol import WireMap, acc_register, spd_register, wire_seconds
 from roarmctl.device.sag import offsets as sag_offsets
 from roarmctl.errors import InputError
@@ -62,7 +62,8 @@ class Strategy:
     ``margin``); ``acc``: ``"none"`` (0: no ramp) or ``"trajectory"`` (from the plan's
     acceleration, in the register's unit of 100 steps/s^2); ``per_joint``: one ``T:101`` per joint
     with its own spd instead of one ``T:102``; ``rate``: the rate this strategy is meant for (None:
-    the stream's).
+    the stream's); ``lead`` (s): every target is taken this much later on the plan, so that servos
+    whose position loop lags a moving goal by that much follow the plan itself (``timed-lead``).
     """
 
     name: str
@@ -73,6 +74,7 @@ class Strategy:
     split_gripper: bool = False
     per_joint: bool = False
     rate: float | None = None
+    lead: float = 0.0
     description: str = ""
 
 
@@ -80,6 +82,9 @@ STRATEGIES = {
     "timed": Strategy("timed", 1, "velocity", "none", split_gripper=True,
                       description="T:102 aimed one interval ahead, spd = what the fastest arm joint needs, acc 0; "
                                   "the gripper gets its own T:101 when it needs more"),
+    "timed-lead": Strategy("timed-lead", 1, "velocity", "none", split_gripper=True, lead=st3235.LOOP_LAG,
+                           description="as timed, aimed the servo loop's lag (46 ms) further ahead on the plan: "
+                                       "the ST3235's P-only loop follows a moving goal that late"),
     "timed-acc": Strategy("timed-acc", 1, "velocity", "trajectory", split_gripper=True,
                           description="as timed, with acc from the plan's acceleration (servo units)"),
     "per-joint": Strategy("per-joint", 1, "velocity", "none", per_joint=True, rate=12.5,
@@ -150,8 +155,9 @@ def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: floa
     ts = np.minimum(np.arange(n) * dt, t_end)
     ahead = strat.lookahead * dt
     # plan times (un-scaled) of where each interval starts and ends, shifted by the link latency
-    t_from = np.minimum(ts + lat, t_end) * speed_scale
-    t_to = np.minimum(ts + ahead + lat, t_end) * speed_scale
+    # and the strategy's lead
+    t_from = np.minimum(ts + lat + strat.lead, t_end) * speed_scale
+    t_to = np.minimum(ts + ahead + lat + strat.lead, t_end) * speed_scale
     q_to, q_from = sample(traj, t_to), sample(traj, t_from)
     c_to, c_from = q_to, q_from  # what is commanded: the plan, offset by the sag when compensated
     if sag:

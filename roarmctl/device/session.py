@@ -37,7 +37,8 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
                   on_note: Callable[[str], None] | None = None, on_end: Callable[[], None] | None = None,
                   shield: Callable[[], AbstractContextManager] = contextlib.nullcontext,
                   on_log_error: Callable[[Path, Exception], None] | None = None,
-                  on_info: Callable[[str], None] | None = None) -> Execution:
+                  on_info: Callable[[str], None] | None = None,
+                  sim_servos: Callable[[], Any] | None = None) -> Execution:
     """Stream ``traj`` (a validated ``Trajectory`` for ``robot``) with ``cfg`` (``StreamConfig``).
 
     Exactly one of ``port`` (a serial port name or pyserial URL) and ``sim=True`` (the firmware
@@ -48,7 +49,9 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
     written on every way out once the port has opened (a port that never opened exchanged nothing
     and leaves an existing log alone); a log that cannot be written calls ``on_log_error(path, exc)`` (default: a ``RuntimeWarning``)
     instead of hiding the run's own outcome. ``on_info(line)`` hears what connecting learned (the
-    firmware build, round trip, pacing) and the link budget. Errors propagate after the log is written; the stream
+    firmware build, round trip, pacing) and the link budget. ``sim_servos``: a zero-argument factory of
+    the simulator's servo model (``roarmctl.physics.servo_backend.for_firmware``: the physics servos;
+    default the ideal kinematic ones). Errors propagate after the log is written; the stream
     result of a failed run is the exception's ``result`` attribute when it has one.
     """
     from roarmctl.device.link import Link
@@ -64,7 +67,8 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
 
         # the simulated arm is the kind the trajectory is for (an M2 trajectory gets the M2 protocol);
         # its firmware runs in a process of its own, with its own time, as the ESP32 does
-        simulator = PtySimulator(SimConfig(firmware="m2" if model == "m2" else "m3-0.84"), process=True).start()
+        simulator = PtySimulator(SimConfig(firmware="m2" if model == "m2" else "m3-0.84"), servos=sim_servos,
+                                 process=True).start()
         port = simulator.path
 
     def replan(q, mode: str):
