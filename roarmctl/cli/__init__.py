@@ -16,7 +16,18 @@ from typing import Any
 import typer
 
 from roarmctl import __version__
-from roarmctl.cli import common, execute_cmd, export_cmd, kin, plan_cmd, signals, simulate_cmd, view_cmd, viz_cmd
+from roarmctl.cli import (
+    common,
+    execute_cmd,
+    export_cmd,
+    kin,
+    plan_cmd,
+    signals,
+    simulate_cmd,
+    teach_cmd,
+    view_cmd,
+    viz_cmd,
+)
 from roarmctl.cli.signals import exit_code
 from roarmctl.errors import InputError, RoarmError, signal_name
 from roarmctl.fileio import interrupted_write_state
@@ -96,6 +107,7 @@ viz_cmd.register(app)
 view_cmd.register(app)
 export_cmd.register(app)
 simulate_cmd.register(app)
+teach_cmd.register(app)
 
 
 def run(argv: list[str] | None = None) -> int:
