@@ -57,7 +57,7 @@ _EPS = 1e-9  # rad: joint-limit tolerance (the kernel uses the same)
 _NO_GRIP = memoryview(np.zeros(0))  # "every state at the set_gripper value"
 _NO_IDX = np.zeros(0, dtype=np.int64)
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
-_STATE_CACHE = 8  # collision states whose tables a checker keeps
+_STATE_CACHE = 32  # collision states whose tables are kept (for every checker of the process: _rebuild)
 # What _build_tables sets: the kept tables of one collision state.
 _TABLES = ("_parts", "_items", "_item_objs", "_item_lo", "_item_hi", "_item_c", "_item_h", "_moving_shapes", "_mv_link", "_mv_rot",
            "_mv_pos", "_mv_half", "_mv_half_self", "_mv_radius", "_scene_mask", "_active", "_active_mask", "_active_r2",
@@ -71,6 +71,14 @@ _Buffers = dict[str, Any]
 
 _FCL_REQUEST = fcl.CollisionRequest()  # FCL's defaults (what fcl.collide makes when given none), made once
 _SWEEP_GAINS: dict[tuple, tuple[Robot, float]] = {}  # see CollisionChecker._cached_sweep_gain
+# Set-up shared by the checkers of one process (a plan makes one checker, and every api.plan call or Planner query
+# another, for the same robot and mostly the same scene): the arm's shapes per robot and padding, and the tables of
+# the last _STATE_CACHE collision states, each with the robot it was made for (ids are compared only while it lives).
+_ARM_SHAPES: dict[tuple, tuple[Robot, list[_Moving]]] = {}
+_STATE_TABLES: dict[tuple, tuple[Robot, dict[str, Any]]] = {}
+# One check at a time in the process: checkers share the FCL objects of their shapes (a check sets their poses) and
+# the kernel's tables; the kernel and FCL hold the GIL while they work, so no parallelism is lost.
+_LOCK = threading.RLock()
 
 
 @dataclass
@@ -119,8 +127,8 @@ class CollisionChecker:
         self._q_template = robot.full_q(np.zeros(robot.arm_dof))  # a view into the kernel's table after _rebuild
         self._bufs: _Buffers = {}
         # One check at a time: the kernel's output buffers and the FCL objects' poses are shared (OMPL's PRM
-        # calls back from two threads).
-        self._lock = threading.RLock()
+        # calls back from two threads; checkers share their shapes: _LOCK).
+        self._lock = _LOCK
         self._gripper_index = robot.joint_index(robot.gripper.joint) if robot.gripper else None
         kin = robot.kin
         self._link_index = kin.link_index
@@ -129,13 +137,25 @@ class CollisionChecker:
         self._grasp_target: str | None = None
         self._jaw_strict = False  # set_grasp_target(..., moving_jaw_clear=True)
         self._attached: dict[str, tuple[SceneItem, np.ndarray]] = {}  # name -> (item, pose in TCP frame)
-        self._arm_shapes: list[_Moving] = []
-        self._states: dict[tuple, dict] = {}  # state key -> the tables of _build_tables (see _rebuild)
-        for shape in robot.collision:
-            self._arm_shapes.append(self._moving(shape.name or shape.link, kin.link_index[shape.link], shape.origin,
-                                                 shape.kind, shape.size, shape.radius, shape.length,
-                                                 robot.padding.get(shape.link, self.padding), 0.0, mesh=shape.mesh))
-        self._rebuild()
+        self._arm_shapes = self._shared_arm_shapes()
+        with self._lock:
+            self._rebuild()
+
+    def _shared_arm_shapes(self) -> list[_Moving]:
+        """The arm's collision shapes (padded by ``self.padding`` where the description gives a link none), made once
+        per process for the same robot and padding (``_ARM_SHAPES``)."""
+        robot, kin = self.robot, self.robot.kin
+        key = (id(robot), self.padding)
+        hit = _ARM_SHAPES.get(key)
+        if hit is not None and hit[0] is robot:
+            return hit[1]
+        shapes = [self._moving(shape.name or shape.link, kin.link_index[shape.link], shape.origin, shape.kind, shape.size,
+                               shape.radius, shape.length, robot.padding.get(shape.link, self.padding), 0.0, mesh=shape.mesh)
+                  for shape in robot.collision]
+        if len(_ARM_SHAPES) >= 64:
+            _ARM_SHAPES.pop(next(iter(_ARM_SHAPES)))
+        _ARM_SHAPES[key] = (robot, shapes)
+        return shapes
 
     # ------------------------------------------------------------------ configuration
     def _moving(self, name, link, origin, kind, size, radius, length, grow_scene, grow_self, attached=False,
@@ -242,21 +262,26 @@ class CollisionChecker:
     def _rebuild(self) -> None:
         """Recompute the static tables (items, moving shapes, pair masks) after a scene change.
 
-        The tables of the last few collision states are kept (``_STATE_CACHE``): a plan switches back and forth
-        between a handful (grasp target, moving-jaw check, attached object), and building them costs ~0.5 ms.
-        A kept state gets the current joint template (the gripper value), as a new build would."""
-        key = self._state_key()
-        tables = self._states.get(key)
-        if tables is None:
+        The tables of the last few collision states are kept for every checker of the process (``_STATE_CACHE``,
+        ``_STATE_TABLES``): a plan switches back and forth between a handful (grasp target, moving-jaw check,
+        attached object), every plan of the same scene starts from the same one, and building them costs ~0.5 ms
+        (5 ms with 200 boxes). A kept state gets a copy of its float table with this checker's joint template (the
+        gripper value), as a new build would; the rest is only read."""
+        key = (id(self.robot), *self._state_key())
+        hit = _STATE_TABLES.get(key)
+        if hit is None or hit[0] is not self.robot:
             self._build_tables()
-            if len(self._states) >= _STATE_CACHE:
-                self._states.pop(next(iter(self._states)))
-            self._states[key] = {name: getattr(self, name) for name in _TABLES}
+            if len(_STATE_TABLES) >= _STATE_CACHE:
+                _STATE_TABLES.pop(next(iter(_STATE_TABLES)))
+            _STATE_TABLES[key] = (self.robot, {name: getattr(self, name) for name in _TABLES})
         else:
             template = self._q_template.copy()
-            for name, value in tables.items():
+            for name, value in hit[1].items():
                 setattr(self, name, value)
-            self._q_template[:] = template  # a view into the kept kernel table
+            self._kf = self._kf.copy()  # this checker's own: set_gripper writes the template in it
+            self._kfm = memoryview(self._kf)
+            self._q_template = self._template_view()
+            self._q_template[:] = template
             by_name = {it.name: it for it in self.scene.items}
             self._items = [by_name[it.name] for it in self._items]  # the scene's own item objects, one per part
             self._bufs = {}
@@ -422,10 +447,15 @@ class CollisionChecker:
                   self._active_r2.ravel(), self._pair_r2, np.sqrt(self._active_r2.ravel()), np.sqrt(self._pair_r2),
                   g_r, lp_r, np.array(sph_c, dtype=float).ravel()]
         self._kf = np.concatenate([np.asarray(f, dtype=float).ravel() for f in floats])
-        off = len(kin._kf) + 2 * len(self._arm)
-        self._q_template = self._kf[off:off + len(self._q_template)]  # set_gripper writes the kernel's table
+        self._q_template = self._template_view()  # set_gripper writes the kernel's table
         self._kfm, self._kim = memoryview(self._kf), memoryview(self._ki)  # cheaper to pass than the arrays
         self._bufs = {}
+
+    def _template_view(self) -> np.ndarray:
+        """The joint template (dof,) inside the kernel's float table ``self._kf`` (after the kinematic tables and the
+        arm's lower and upper limits: parse_model in roarmctl/_kernel.c)."""
+        off = len(self._fk._kf) + 2 * len(self._arm)
+        return self._kf[off:off + self.robot.dof]
 
     def _cached_sweep_gain(self) -> float:
         """``_sweep_gain()``, computed once per process for the same robot, shapes and joint template (a plan and every
