@@ -109,6 +109,7 @@ class CollisionChecker:
 
     _parts: list[Part]  # the scene's collision parts (an item has one or more), set by _build_tables
     _items: list[SceneItem]  # one entry per part: the item it belongs to
+    _kf: np.ndarray  # the kernel's float table (_pack); this checker's own copy
 
     def __init__(self, robot: Robot, scene: Scene, *, padding: float = 0.005,
                  singularity_margin: float | None = None, contact_tolerance: float = 0.001) -> None:
