@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import difflib
 import hashlib
+import importlib
 import json
 import math
 from collections.abc import Callable
@@ -70,6 +71,8 @@ def locate(value: Any) -> Any:
 
 # --------------------------------------------------------------------------- YAML
 MERGE_TAG = "tag:yaml.org,2002:merge"
+MAP_TAG = "tag:yaml.org,2002:map"
+SEQ_TAG = "tag:yaml.org,2002:seq"
 
 #: Limits of a YAML input (docs/reference.md; plan, sidecar, joint_limits.yaml, a file xacro loads): its size in bytes,
 #: how deep its mappings and lists nest, and how many values it expands to (an alias counts again each
@@ -89,6 +92,11 @@ class _Budget:
         self.tags = tags or {}
 
 
+def _short_tag(tag: str) -> str:
+    """``tag:yaml.org,2002:set`` -> ``!!set``, cut to 60 characters."""
+    return tag.replace("tag:yaml.org,2002:", "!!")[:60]
+
+
 def _construct(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError], budget: _Budget, depth: int = 0) -> Any:
     budget.nodes += 1
     line = node.start_mark.line + 1
@@ -98,6 +106,8 @@ def _construct(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError]
     if depth > MAX_DEPTH:
         raise error(f"{loader.name}:{line}: nested more than {MAX_DEPTH} levels deep (or an alias that contains itself)")
     if isinstance(node, yaml.MappingNode):
+        if node.tag != MAP_TAG:
+            raise error(f"{loader.name}:{line}: the tag {_short_tag(node.tag)} is not allowed", "remove the tag")
         out = LocatedDict()
         out.line, out.lines = line, {}
         merged: dict[Any, tuple[Any, int]] = {}
@@ -126,6 +136,8 @@ def _construct(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError]
                 out.lines[k] = kline
         return out
     if isinstance(node, yaml.SequenceNode):
+        if node.tag != SEQ_TAG:
+            raise error(f"{loader.name}:{line}: the tag {_short_tag(node.tag)} is not allowed", "remove the tag")
         lst = LocatedList(_construct(n, loader, error, budget, depth + 1) for n in node.value)
         lst.line, lst.lines = line, [n.start_mark.line + 1 for n in node.value]
         return lst
@@ -182,9 +194,54 @@ def _flow_depth_line(text: str) -> int:
     return 0
 
 
-#: PyYAML's safe loader on libyaml (its C parser, about 10x faster) where PyYAML was built with it, else its own
-#: Python one: the same nodes with the same line marks, the same safe constructors.
-SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+#: The YAML 1.1 scalar types a document may hold (``!!str``, ``!!int``, ...); mappings and lists are built by
+#: ``_construct``. Any other tag (``!!python/...``, a local ``!tag`` the reader did not ask for) is refused.
+SCALAR_TAGS = ("null", "bool", "int", "float", "binary", "timestamp", "str")
+_IMPLICIT_TAGS = {f"tag:yaml.org,2002:{t}" for t in ("null", "bool", "int", "float", "timestamp", "merge", "value")}
+
+
+def _private_loader() -> type:
+    """A loader class of our own: PyYAML's safe parser (libyaml's C one where PyYAML was built with it, about
+    10x faster, else its Python one) with constructor and resolver tables COPIED at import and never shared.
+
+    PyYAML keeps these tables on classes: whoever calls ``SafeLoader.add_constructor`` (xacro's
+    ``load_yaml`` does, for ``!degrees``, with a constructor that runs xacro's ``eval``) or
+    ``add_implicit_resolver`` changes every document read through ``SafeLoader``/``CSafeLoader`` in the
+    process. Our class lists the safe scalar constructors by name and keeps only the standard implicit
+    resolvers, so no registration elsewhere reaches a plan, and nothing we do reaches anyone else."""
+    from yaml.composer import Composer
+    from yaml.constructor import SafeConstructor
+    from yaml.parser import Parser
+    from yaml.reader import Reader
+    from yaml.resolver import Resolver
+    from yaml.scanner import Scanner
+
+    c_parser: Any = getattr(yaml, "__with_libyaml__", False) and importlib.import_module("yaml.cyaml").CParser
+    parsers: tuple[type, ...] = (c_parser,) if c_parser else (Reader, Scanner, Parser, Composer)
+
+    def __init__(self: Any, stream: str) -> None:
+        if c_parser:
+            c_parser.__init__(self, stream)
+        else:
+            Reader.__init__(self, stream)
+            Scanner.__init__(self)
+            Parser.__init__(self)
+            Composer.__init__(self)
+        SafeConstructor.__init__(self)
+        Resolver.__init__(self)
+
+    constructors: dict[Any, Any] = {f"tag:yaml.org,2002:{t}": getattr(SafeConstructor, f"construct_yaml_{t}")
+                                    for t in SCALAR_TAGS}
+    constructors[None] = SafeConstructor.construct_undefined
+    resolvers = {first: [(tag, rx) for tag, rx in pairs if tag in _IMPLICIT_TAGS]
+                 for first, pairs in Resolver.yaml_implicit_resolvers.items()}
+    return type("RoarmctlYAMLLoader", (*parsers, SafeConstructor, Resolver), {
+        "__init__": __init__, "yaml_constructors": constructors, "yaml_multi_constructors": {},
+        "yaml_implicit_resolvers": resolvers, "yaml_path_resolvers": {}})
+
+
+#: The loader every YAML input is parsed with (see ``_private_loader``).
+SAFE_LOADER = _private_loader()
 
 
 def parse_yaml(text: str, name: str, error: type[InputError] = PlanFileError,

@@ -684,3 +684,85 @@ def test_a_stop_signal_that_python_wraps_is_still_a_stop_not_a_bug(tmp_path, mon
     monkeypatch.setattr(export_module, "export", stopped)
     code, _, err = cli(["export", str(traj), "-o", str(tmp_path / "x.mcap")])
     assert code == 143 and "terminated by SIGTERM" in err and "internal error" not in err, err
+
+
+# --------------------------------------------------------------------------- YAML tables of our own
+@pytest.fixture
+def shared_yaml_tables():
+    """PyYAML's class-level tables as they are, restored after the test (which writes to them)."""
+    import yaml.constructor
+    import yaml.resolver
+
+    classes = [yaml.SafeLoader, yaml.CSafeLoader, yaml.constructor.SafeConstructor, yaml.resolver.Resolver,
+               yaml.resolver.BaseResolver]
+    keys = ("yaml_constructors", "yaml_multi_constructors", "yaml_implicit_resolvers")
+    saved = {(c, k): c.__dict__[k] for c in classes for k in keys if k in c.__dict__}
+    copies = {ck: ({f: list(v) for f, v in t.items()} if ck[1] == "yaml_implicit_resolvers" else dict(t))
+              for ck, t in saved.items()}
+    yield classes
+    for c in classes:
+        for k in keys:
+            if (c, k) in saved:
+                setattr(c, k, copies[(c, k)])
+            elif k in c.__dict__:
+                delattr(c, k)
+
+
+def test_constructors_and_resolvers_registered_elsewhere_never_reach_our_yaml(tmp_path, shared_yaml_tables):
+    """xacro's own ``load_yaml`` (a trusted xacro) registers ``!degrees`` on ``yaml.SafeLoader`` with a constructor
+    that runs xacro's ``eval``; any library may do the like. None of it reaches a plan, a sidecar or a
+    joint_limits.yaml: our loader's tables are its own (roarmctl.validation._private_loader)."""
+    import re
+
+    called: list[str] = []
+
+    def evil(loader, node):
+        called.append(node.value)
+        return "EVIL"
+
+    for cls in shared_yaml_tables[:3]:
+        cls.add_constructor("!evil", evil)
+        cls.add_constructor("!degrees", evil)
+        cls.add_multi_constructor("!multi", lambda loader, suffix, node: called.append(suffix))
+    for cls in shared_yaml_tables[:2] + shared_yaml_tables[3:]:
+        cls.add_implicit_resolver("!evil", re.compile(r"^HIJACK$"), list("H"))
+    for body, needle in (("robot: roarm_m3_pro\nname: !evil x\ntasks: [{wait: 0.2}]\n", "!evil"),
+                         ("robot: roarm_m3_pro\nname: !degrees 90\ntasks: [{wait: 0.2}]\n", "!degrees"),
+                         ("robot: roarm_m3_pro\nname: !multi:x y\ntasks: [{wait: 0.2}]\n", "!multi")):
+        (tmp_path / "p.yaml").write_text(body)
+        refused(["plan", str(tmp_path / "p.yaml"), "-o", str(tmp_path / "p.traj.json")], "p.yaml:2", needle)
+    (tmp_path / "p.yaml").write_text("robot: roarm_m3_pro\nobjects: [{name: HIJACK, shape: box, size: [0.04, 0.04, 0.04], "
+                                     "xyz: [0.25, -0.15, 0.02]}]\ntasks: [{wait: 0.2}]\n")
+    code, _, err = cli(["plan", str(tmp_path / "p.yaml"), "-o", str(tmp_path / "p.traj.json")])
+    assert code == 0, err  # the plain word HIJACK stays a string, as YAML says
+    assert called == []
+
+
+def test_reading_yaml_registers_nothing_on_pyyaml_s_classes(tmp_path, shared_yaml_tables):
+    """Reading the UR5e's joint_limits.yaml (``!degrees``, our own reader of the tag) and a plan leaves
+    PyYAML's shared tables as they were."""
+    from roarmctl.validation import load_yaml
+
+    def tables():
+        return [{k: (dict(c.__dict__[k]) if k in c.__dict__ else None)
+                 for k in ("yaml_constructors", "yaml_multi_constructors", "yaml_implicit_resolvers")}
+                for c in shared_yaml_tables]
+
+    before = tables()
+    (tmp_path / "jl.yaml").write_text("joint_limits: {j: {max_velocity: !degrees 180.0}}\n")
+    got = load_yaml(tmp_path / "jl.yaml", tags={"!degrees": lambda text: float(text) * 3.141592653589793 / 180})
+    assert got["joint_limits"]["j"]["max_velocity"] == pytest.approx(3.141592653589793)
+    code, _, err = cli(["kin", "fk", str(Path(__file__).parent / "data/arms/ur5e/robot.yaml"), "0", "0", "0", "0", "0", "0"])
+    assert code == 0, err
+    assert tables() == before
+
+
+@pytest.mark.parametrize("text, needle", [
+    ("a: !!python/object/apply:os.system [echo hi]\n", "!!python/object/apply:os.system"),
+    ("a: !!set {x, y}\n", "!!set"),
+    ("a: !!python/name:os.system x\n", "python/name:os.system"),
+    ("a: !local {x: 1}\n", "!local"),
+])
+def test_a_tag_on_a_yaml_value_that_is_not_a_plain_type_is_refused(tmp_path, text, needle):
+    (tmp_path / "p.yaml").write_text("robot: roarm_m3_pro\ntasks: [{wait: 0.2}]\n" + text)
+    refused(["plan", str(tmp_path / "p.yaml"), "-o", str(tmp_path / "p.traj.json")], "p.yaml:3", needle)
