@@ -54,14 +54,17 @@ class LocatedList(list):
         return self.lines[index] if 0 <= index < len(self.lines) else self.line
 
 
+_PLAIN = (int, float, str, bool, type(None))  # values locate leaves as they are
+
+
 def locate(value: Any) -> Any:
     """Plain Python values (from a dict built in code) -> located containers with line 0 everywhere."""
     if isinstance(value, dict):
-        out = LocatedDict((k, locate(v)) for k, v in value.items())
+        out = LocatedDict((k, v if type(v) in _PLAIN else locate(v)) for k, v in value.items())
         out.line, out.lines = 0, {}
         return out
     if isinstance(value, (list, tuple)):
-        lst = LocatedList(locate(v) for v in value)
+        lst = LocatedList(v if type(v) in _PLAIN else locate(v) for v in value)
         lst.line, lst.lines = 0, []
         return lst
     if hasattr(value, "tolist"):  # numpy arrays and scalars

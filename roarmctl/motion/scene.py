@@ -15,7 +15,6 @@ spans [i r, (i + 1) r) along x in the item frame, and so on) and ``"source"``.
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -216,7 +215,8 @@ class Scene:
         """A copy whose items can be moved (poses copied); mesh and cloud data (read-only) are shared."""
         items = []
         for item in self.items:
-            twin = copy.copy(item)
+            twin = object.__new__(SceneItem)  # copy.copy's result, without its generic protocol (5x the time)
+            twin.__dict__.update(item.__dict__)
             twin.pose = item.pose.copy()
             items.append(twin)
         return Scene(items)

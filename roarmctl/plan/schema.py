@@ -164,11 +164,13 @@ class _Ctx:
 
     def __init__(self, path: Path) -> None:
         self.path = path
+        self.is_dict = path.name == DICT_NAME  # a dict's messages name no file and line
+        self._file = str(path)
         self.known: dict = {}  # id(raw item) -> ItemSpec validated before (a frame-free item is the same again)
         self.specs: dict = {}  # what this reading validated, for the next
 
     def where(self, line: int) -> str:
-        return DICT_NAME if self.path.name == DICT_NAME else f"{self.path}:{line}"
+        return DICT_NAME if self.is_dict else f"{self._file}:{line}"
 
     def fail(self, line: int, field_path: str, message: str, hint: str | None = None) -> NoReturn:
         self.check.fail(self.where(line), field_path or "plan", message, hint)
@@ -249,8 +251,7 @@ MAX_DURATION = 3600.0  # s of motion the plan may need (the trajectory validator
 
 
 def _bounds(where: str, lo: float | None, hi: float | None) -> tuple[float, float]:
-    key = _field_name(where)
-    flo, fhi = FIELD_BOUNDS.get(key, (-DEFAULT_BOUND, DEFAULT_BOUND))
+    flo, fhi = FIELD_BOUNDS.get(_field_name(where), (-DEFAULT_BOUND, DEFAULT_BOUND))
     return (flo if lo is None else max(lo, flo)), (fhi if hi is None else min(hi, fhi))
 
 
@@ -305,7 +306,7 @@ def _item_spec(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: di
     xyz = _position(ctx, d["xyz"], d.line_of("xyz"), f"{where}.xyz", frames)
     rpy = ctx.vector(d.get("rpy", [0, 0, 0]), d.line_of("rpy"), f"{where}.rpy", 3, angle=True)
     spec = ItemSpec(name=str(d.get("name", "table")), role=role, shape=shape, pose=transform(xyz, rpy), line=d.line)
-    spec.where = f"{DICT_NAME if ctx.path.name == DICT_NAME else f'{ctx.path}:{d.line}'}: {where}"
+    spec.where = f"{ctx.where(d.line)}: {where}"
     own = {"box": ("size",), "cylinder": ("radius", "length"), "sphere": ("radius",), "mesh": ("file", "scale", "collision"),
            "cloud": ("file", "resolution")}[shape]
     for key in ("size", "radius", "length", "file", "scale", "collision", "resolution"):
