@@ -4,7 +4,8 @@ The plan starts where the arm stands (``start: current``), carries the scene of 
 ``--plan`` (its ``scene``, ``objects`` and ``planner``), and moves through the recorded joint waypoints
 in order, one ``move: {joints: [...]}`` task each. A grasp or release is a move to its waypoint that
 sets the gripper to the value measured there (``gripper: rad``, as the gripper was when ``g`` was
-pressed), so the replay closes and opens the gripper where the hand did. ``limits.blend`` is false:
+pressed), so the replay closes and opens the gripper where the hand did; the first waypoint, and any
+whose gripper moved by more than ``GRIPPER_MOVED``, set it too (a move sets the gripper after the arm arrives). ``limits.blend`` is false:
 the replay stops at every waypoint instead of rounding it. Waypoints the planner would refuse (inside
 the singularity margin, in collision, beyond a limit) or that lie within the warning band are flagged
 in a comment above their task.
@@ -20,6 +21,7 @@ import yaml
 from roarmctl.device.teach import NEAR_FACTOR, Waypoint, gripper_index
 from roarmctl.fileio import atomic_write_text
 
+GRIPPER_MOVED = 0.02  # rad: a waypoint sets the gripper when it moved more than this since the last one that did
 FORMAT_NOTE = "# Taught by hand with 'roarmctl teach': replay with 'roarmctl plan FILE --port PORT' (or --sim)."
 
 
@@ -60,6 +62,7 @@ def plan_text(robot, waypoints: list[Waypoint], margin: float, source: Any = Non
         if key in doc:
             lines.append(_dump(key, doc[key]).rstrip())
     lines.append("tasks:")
+    last_grip: float | None = None
     for k, w in enumerate(waypoints, 1):
         head = f"  # waypoint {k} at {w.t:.1f} s: sigma {w.measures.sigma:.4f} m/rad"
         if w.measures.clearance is not None:
@@ -68,8 +71,10 @@ def plan_text(robot, waypoints: list[Waypoint], margin: float, source: Any = Non
         for flag in w.flags:
             lines.append(f"  # FLAGGED: {flag}")
         body = f"joints: {_numbers(np.asarray(w.q)[arm])}"
-        if w.action is not None:
-            body += f", gripper: {float(w.q[gi]):.6f}"
+        grip = float(w.q[gi])
+        if w.action is not None or last_grip is None or abs(grip - last_grip) > GRIPPER_MOVED:
+            body += f", gripper: {grip:.6f}"
+            last_grip = grip
         lines.append(f"  - move: {{{body}}}" + (f"   # {w.action}" if w.action else ""))
     limits = dict(_plain(doc.get("limits") or {}))
     limits["blend"] = False
