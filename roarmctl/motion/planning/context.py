@@ -21,6 +21,7 @@ from roarmctl.robot.meshes import PACKAGE_PATHS
 if TYPE_CHECKING:
     from roarmctl.motion.collision import CollisionChecker
     from roarmctl.motion.scene import Role, SceneItem, Shape
+    from roarmctl.motion.timing import TimedPath
     from roarmctl.plan.schema import ItemSpec, Plan
     from roarmctl.robot.model import Robot
 
@@ -68,6 +69,7 @@ class PlanContext:
         self.payload: dict | None = None  # link -> Inertial of the held object, from grasp to release
         self.payload_label = ""
         self.free_count = 0  # free motions planned so far (each gets its own OMPL seed)
+        self.timed: dict[tuple, TimedPath] = {}  # what motions.time_path timed, by its waypoints and payload
 
     def set_state(self, gripper: float | None, grasp_target: str | None = None) -> None:
         """Put the checker in a motion's collision state: the gripper at ``gripper`` (rad; None: as it is) and

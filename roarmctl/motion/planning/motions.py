@@ -77,10 +77,32 @@ def free_path(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> np.ndarray:
     return vertices
 
 
+TIMED_KEPT = 256  # timed paths a plan keeps (time_path)
+
+
+def _copied(tp: TimedPath) -> TimedPath:
+    """``tp`` with its own arrays (a kept timing is handed out again: no caller may change the kept one)."""
+    return TimedPath(tp.times.copy(), tp.q.copy(), tp.qd.copy(), tp.qdd.copy(), tp.jerk_filter,
+                     None if tp.s is None else tp.s.copy())
+
+
 def time_path(ctx: PlanContext, wps: np.ndarray, label: str) -> TimedPath:
     """TOPP-RA timing of the arm joints along the waypoints ``wps`` (K, dof), rest to rest, under the scaled
-    joint limits, the jerk limits, the torque limits (with the held payload) and ``max_tcp_speed``."""
+    joint limits, the jerk limits, the torque limits (with the held payload) and ``max_tcp_speed``.
+
+    The timing is a function of these alone (the limits are fixed per plan), so a plan keeps what it timed
+    (``ctx.timed``, keyed by the waypoints' bytes and the payload): a plan of several cycles meets the same
+    straight approaches and retreats again in every cycle, and times them once (``label`` only names a failure,
+    which is never kept)."""
     t0 = time.perf_counter()
+    payload = None if ctx.payload is None else tuple(
+        (link, float(i.mass), np.asarray(i.com, dtype=float).tobytes(), np.asarray(i.inertia, dtype=float).tobytes())
+        for link, i in ctx.payload.items())
+    key = (wps.shape, np.ascontiguousarray(wps, dtype=float).tobytes(), payload)
+    known = ctx.timed.get(key)
+    if known is not None:
+        ctx.timer.add("toppra", t0)
+        return _copied(known)
     arm = ctx.arm
     tcpv = None
     if ctx.plan.limits.max_tcp_speed is not None:
@@ -99,8 +121,12 @@ def time_path(ctx: PlanContext, wps: np.ndarray, label: str) -> TimedPath:
     q[:, arm] = tp_arm.q
     qd, qdd = np.zeros_like(q), np.zeros_like(q)
     qd[:, arm], qdd[:, arm] = tp_arm.qd, tp_arm.qdd
+    timed = TimedPath(tp_arm.times, q, qd, qdd, tp_arm.jerk_filter, tp_arm.s)
+    if len(ctx.timed) >= TIMED_KEPT:
+        ctx.timed.clear()
+    ctx.timed[key] = _copied(timed)
     ctx.timer.add("toppra", t0)
-    return TimedPath(tp_arm.times, q, qd, qdd, tp_arm.jerk_filter, tp_arm.s)
+    return timed
 
 
 def time_motion(ctx: PlanContext, motion: UntimedMotion) -> TimedPiece:
