@@ -289,6 +289,14 @@ class _View:
             self.line(f"[{f.t:7.2f} s] q {q} | sigma {m.sigma:.4f} {m.band} | {f.rate:.0f} Hz")
 
 
+def _joint_labels(session) -> list[str]:
+    """Column names: the firmware's names of the joints (base, shoulder, ...), else the description's."""
+    names = list(session.robot.joint_names)
+    for w, i in zip(session.wm.fields, session.wm.index):
+        names[i] = "gripper" if w.field == "hand" else w.field
+    return names
+
+
 def render(session, judge):
     """The live frame: joints, TCP (desk and firmware frames), singularity measure with its band, clearance,
     recorded waypoints, the last events and the keys."""
@@ -296,31 +304,32 @@ def render(session, judge):
     from rich.table import Table
     from rich.text import Text
 
+    from roarmctl.device.teach import NEAR_FACTOR
+
     f = session.frame
     m = f.measures
-    robot = session.robot
     grid = Table.grid(padding=(0, 2))
-    joints = Table(*["", *[n.split("_to_")[-1] if "_to_" in n else n for n in robot.joint_names]], box=None, pad_edge=False)
+    joints = Table(*["", *_joint_labels(session)], box=None, pad_edge=False)
     joints.add_row("deg", *[f"{math.degrees(v):7.1f}" for v in f.q])
     joints.add_row("rad", *[f"{v:7.4f}" for v in f.q])
     grid.add_row(joints)
     p = f.tcp_world
     tcp = f"TCP desk ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
     for name, (xyz, unit) in f.tcp_frames.items():
-        tcp += f"   {name} ({xyz[0]:.1f}, {xyz[1]:.1f}, {xyz[2]:.1f}) {unit}"
+        tcp += f"   {name} frame ({xyz[0]:.1f}, {xyz[1]:.1f}, {xyz[2]:.1f}) {unit}"
     if f.firmware_xyz is not None:
         x, y, z = f.firmware_xyz
-        tcp += f"   reported ({x:.1f}, {y:.1f}, {z:.1f}) mm"
+        tcp += f" (arm: {x:.1f}, {y:.1f}, {z:.1f})"
     grid.add_row(tcp)
     band = Text()
     band.append(f" {m.band.upper():7s}", style=BAND_STYLE[m.band])
-    width = 30
+    width = 20
     scale = 4 * judge.margin if judge.margin > 0 else 0.2
     filled = max(0, min(width, int(round(width * m.sigma / scale))))
     band.append("█" * filled, style=BAND_STYLE[m.band])
     band.append("·" * (width - filled), style="dim")
-    band.append(f"  sigma_min {m.sigma:.4f} m/rad (margin {judge.margin:.4f}, warn < {2 * judge.margin:.4f})"
-                f"   manipulability {m.manipulability:.2e}")
+    band.append(f"  sigma_min {m.sigma:.4f} m/rad  margin {judge.margin:.4f} (warn < {NEAR_FACTOR * judge.margin:.4f})"
+                f"  manipulability {m.manipulability:.2e}")
     grid.add_row(band)
     if m.band != "clear":
         grid.add_row(Text(" WARNING: near a singular pose - small hand motions turn into fast joint motions "

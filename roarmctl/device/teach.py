@@ -265,8 +265,8 @@ class TeachSession:
             flags.append(f"within {NEAR_FACTOR:g}x the singularity margin (sigma {m.sigma:.4f} m/rad)")
         wp = Waypoint(q, self.elapsed(), action, m, flags)
         self.waypoints.append(wp)
-        what = f"{action} (gripper {q[self._gi]:.3f} rad)" if action else "waypoint"
-        self.event(f"recorded {what} {len(self.waypoints)}" + (f"  FLAGGED: {'; '.join(flags)}" if flags else ""))
+        what = f"{action} {len(self.waypoints)} (gripper {q[self._gi]:.3f} rad)" if action else f"waypoint {len(self.waypoints)}"
+        self.event(f"recorded {what}" + (f"  FLAGGED: {'; '.join(flags)}" if flags else ""))
         return wp
 
     def grasp(self) -> Waypoint:

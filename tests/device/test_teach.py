@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -140,3 +141,35 @@ def test_guide_goes_with_sim_and_one_source():
     assert r.returncode == 2 and "exactly one" in r.stderr
     r = roarmctl("teach", "--port", "/dev/nonexistent", "--guide", "x.yaml", "--yes")
     assert r.returncode == 2 and "--sim" in r.stderr
+
+
+def test_live_display_on_a_terminal_shows_the_measure_and_quits(tmp_path):
+    """On a terminal (stderr a pty) the rich display runs: joints, TCP, the measure and its band, the keys."""
+    master, slave = os.openpty()
+    env = dict(os.environ, PYTHONUNBUFFERED="1", COLUMNS="120", TERM="xterm")
+    proc = subprocess.Popen([sys.executable, "-m", "roarmctl", "teach", "--sim", "-o", "t.yaml"], stdin=slave,
+                            stdout=subprocess.PIPE, stderr=slave, env=env, cwd=tmp_path)
+    os.close(slave)
+    seen = b""
+    end = time.monotonic() + 60
+    try:
+        while time.monotonic() < end and not all(w in seen for w in (b"sigma_min", b"CLEAR", b"TCP desk", b"q quit")):
+            if select.select([master], [], [], 0.1)[0]:
+                try:
+                    seen += os.read(master, 65536)
+                except OSError:
+                    break
+        os.write(master, b"q")
+        code = proc.wait(30)
+        while select.select([master], [], [], 0.2)[0]:
+            try:
+                chunk = os.read(master, 65536)
+            except OSError:
+                break
+            if not chunk:
+                break
+            seen += chunk
+    finally:
+        os.close(master)
+    assert all(w in seen for w in (b"sigma_min", b"CLEAR", b"TCP desk", b"q quit")), seen[-2000:]
+    assert code == 0 and b"nothing recorded" in seen
