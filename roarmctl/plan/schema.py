@@ -298,18 +298,23 @@ def _item(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: dict | 
     return spec
 
 
+_ITEM_KEYS = ("name", "shape", "size", "radius", "length", "xyz", "rpy", "mass", "com", "inertia", "grasp_width",
+              "file", "scale", "collision", "resolution")
+_SHAPE_KEYS = ("size", "radius", "length", "file", "scale", "collision", "resolution")  # each shape has its own of these
+_OWN_KEYS = {"box": ("size",), "cylinder": ("radius", "length"), "sphere": ("radius",), "mesh": ("file", "scale", "collision"),
+             "cloud": ("file", "resolution")}
+_NO_ROTATION = (0.0, 0.0, 0.0)  # rpy when an item gives none
+
+
 def _item_spec(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: dict | None = None) -> ItemSpec:
-    keys = ("name", "shape", "size", "radius", "length", "xyz", "rpy", "mass", "com", "inertia", "grasp_width",
-            "file", "scale", "collision", "resolution")
-    d = ctx.mapping(raw, line, where, keys, required=("shape", "xyz") + (("name",) if role != "table" else ()))
+    d = ctx.mapping(raw, line, where, _ITEM_KEYS, required=("shape", "xyz") + (("name",) if role != "table" else ()))
     shape = ctx.string(d["shape"], d.line_of("shape"), f"{where}.shape", SHAPES if role == "object" else SCENE_SHAPES)
     xyz = _position(ctx, d["xyz"], d.line_of("xyz"), f"{where}.xyz", frames)
-    rpy = ctx.vector(d.get("rpy", [0, 0, 0]), d.line_of("rpy"), f"{where}.rpy", 3, angle=True)
+    rpy = ctx.vector(d["rpy"], d.line_of("rpy"), f"{where}.rpy", 3, angle=True) if "rpy" in d else _NO_ROTATION
     spec = ItemSpec(name=str(d.get("name", "table")), role=role, shape=shape, pose=transform(xyz, rpy), line=d.line)
     spec.where = f"{ctx.where(d.line)}: {where}"
-    own = {"box": ("size",), "cylinder": ("radius", "length"), "sphere": ("radius",), "mesh": ("file", "scale", "collision"),
-           "cloud": ("file", "resolution")}[shape]
-    for key in ("size", "radius", "length", "file", "scale", "collision", "resolution"):
+    own = _OWN_KEYS[shape]
+    for key in _SHAPE_KEYS:
         if key in d and key not in own:
             ctx.fail(d.line_of(key), f"{where}.{key}", f"does not apply to a {shape}")
     if shape in ("mesh", "cloud"):
