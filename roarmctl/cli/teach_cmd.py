@@ -21,7 +21,7 @@ except ImportError:  # pragma: no cover - Windows
     termios = tty = None  # type: ignore[assignment]
 
 from roarmctl.cli import common, signals
-from roarmctl.errors import DeviceError, InputError, signal_name
+from roarmctl.errors import DeviceError, InputError, Interrupted, signal_name
 from roarmctl.fileio import atomic_write_json, check_output_file
 
 KEYS_HELP = "Enter record a waypoint · g grasp/release here · u undo · s save · q quit"
@@ -103,7 +103,7 @@ def teach(
         if surprise:
             common.warn(surprise)
         if not (yes or sim) and not typer.confirm("Torque goes off: hold the arm, it will sag. Continue?", default=False, err=True):
-            raise typer.Exit(1)
+            raise Interrupted("not confirmed; torque stays on")
         session = TeachSession(link, robot, judge, keep_raw=raw is not None)
         keys.start()
         session.start()

@@ -51,6 +51,8 @@ SURPRISES = {
                 "(servoTorqueCtrl calls Move_to_location() in its RoArm-M3_module.h), then releases it: keep clear, "
                 "and hold the arm once it stops"),
 }
+HAND_SPEED = 12.0  # rad/s a joint may move between frames while a hand moves it (the servos' check is 5.9)
+HAND_RUN_LIMIT = 25  # refused frames in a row before teach leaves (about 0.5 s of frames)
 MAX_RAW = 1_000_000  # lines kept for --raw (sent + received); beyond, the log says how many were dropped
 
 
@@ -144,7 +146,10 @@ class TeachSession:
         self.judge = judge
         self.clock = clock
         self.wm = WireMap(robot)
-        self.validator = FeedbackValidator(robot, firmware=link.firmware, expect_torque=None)
+        # a hand may move a joint faster than its servo can (a frame faster than HAND_SPEED is still refused, as
+        # a failed read would be), and a refused frame costs nothing while the arm is limp: a longer run is allowed
+        self.validator = FeedbackValidator(robot, firmware=link.firmware, expect_torque=None, max_speed=HAND_SPEED,
+                                           run_limit=HAND_RUN_LIMIT)
         self.lost_after, self.grace, self.ask_again = lost_after, grace, ask_again
         self.keep_raw = keep_raw
         self.raw_dropped = 0

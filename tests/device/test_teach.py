@@ -173,3 +173,23 @@ def test_live_display_on_a_terminal_shows_the_measure_and_quits(tmp_path):
         os.close(master)
     assert all(w in seen for w in (b"sigma_min", b"CLEAR", b"TCP desk", b"q quit")), seen[-2000:]
     assert code == 0 and b"nothing recorded" in seen
+
+
+def test_20260701_build_is_warned_about_and_taught(tmp_path):
+    """That build folds the arm to its rest pose before it releases torque (no feedback meanwhile): teach says so
+    before torque goes off, waits the fold out, then teaches and leaves as on the 0.84 build."""
+    guide = Guide(np.array([1.0]), np.array([POSE]))
+    with PtySimulator(SimConfig(firmware="m3-2026"), servos=guided_servos(guide)) as sim:
+        t = Teach(["--port", sim.path, "--yes", "-o", "taught.yaml"], tmp_path)
+        warned = t.wait_for(lambda s: "REST POSE" in s)
+        t.wait_for(lambda s: "torque off" in s)
+        t.wait_for(at_pose)
+        t.key("\rq")
+        code = t.finish()
+        executed = [c for _, _, c in sim.executed()]
+    assert code == 0 and "Move_to_location" in warned
+    off = executed.index({"T": 210, "cmd": 0})
+    after = [c for c in executed[off + 1:] if c.get("T") not in (105, 605)]
+    assert after[0]["T"] == 102 and after[1] == {"T": 210, "cmd": 1}
+    assert np.array([after[0][k] for k in ("base", "shoulder", "elbow", "wrist", "roll")]) == pytest.approx(POSE[:5], abs=2 * COUNT)
+    assert (tmp_path / "taught.yaml").read_text().count("- move:") == 1
