@@ -65,3 +65,39 @@ def test_saved_plan_reads_back_with_the_scene_flags_and_gripper(tmp_path):
 def test_nothing_to_save_is_refused():
     with pytest.raises(ValueError):
         plan_text(ROBOT, [], 0.02)
+
+
+def test_a_grasp_at_a_plan_object_becomes_pick_and_place_that_plan(tmp_path):
+    """Taught over plans/pick_place.yaml: above the cube, grasp at its centre, carry, release 30 cm over: the saved
+    plan picks the cube and places it where the hand released it; `plan` plans it (the cube carried and checked)."""
+    import json
+
+    from clirun import roarmctl
+
+    from roarmctl.robot.ik import solve_ik_near
+
+    source = load_plan(ROOT / "plans" / "pick_place.yaml", list(ROBOT.named_poses), frames=ROBOT.frames)
+    judge = Judge(ROBOT, source.planner.singularity_margin, [scene_item(s) for s in source.scene + source.objects])
+    home = ROBOT.named_poses["home"]
+    cube, target = np.array([0.25, -0.15, 0.02]), np.array([0.25, 0.15, 0.02])
+
+    def at(xyz, grip):
+        q = solve_ik_near(ROBOT, xyz, home, pitch=np.pi / 2).copy()
+        q[5] = grip
+        return q
+
+    taught = [(at(cube + [0, 0, 0.06], 1.0), None), (at(cube, 0.6), "grasp"), (at(target + [0, 0, 0.06], 0.6), None),
+              (at(target, 1.0), "release"), (at(target + [0, 0, 0.06], 1.0), None)]
+    wps = [Waypoint(q, float(t), a, judge.measure(q, validity=True)) for t, (q, a) in enumerate(taught)]
+    out = tmp_path / "taught.yaml"
+    save_plan(out, ROBOT, wps, judge.margin, source)
+    plan = load_plan(out, list(ROBOT.named_poses), frames=ROBOT.frames)
+    assert [t.kind for t in plan.tasks] == ["move", "pick", "move", "place", "move"]
+    pick, place = plan.tasks[1], plan.tasks[3]
+    assert pick.object == "cube" and pick.gripper_closed == pytest.approx(0.6) and pick.grasp_offset == pytest.approx(0, abs=1e-4)
+    assert pick.pitch == pytest.approx(np.pi / 2, abs=1e-3) and place.pitch == pytest.approx(np.pi / 2, abs=1e-3)
+    assert place.xyz == pytest.approx(target, abs=1e-4)  # the cube's centre where the hand let it go
+    r = roarmctl("plan", str(out), "--sim", "-o", str(tmp_path / "t.traj.json"))
+    assert r.returncode == 0, r.stderr
+    kinds = [e["kind"] for e in json.loads((tmp_path / "t.traj.json").read_text())["events"]]
+    assert kinds == ["grasp", "release"]
