@@ -392,3 +392,21 @@ def test_checks_near_a_cylinder_answer_as_exhaustive_fcl_does(robot):
             assert checker.validity_batch(states).all()
         else:
             assert not checker.validity_batch(states).all()
+
+
+def test_checkers_of_one_scene_share_set_up_but_not_their_gripper_value(robot):
+    """Two checkers of the same robot and scene share the set-up (the second builds nothing: the same integer
+    tables), yet each has its own float table, with its own joint template, which the kernel reads: the gripper
+    value one sets is not the other's."""
+    a = CollisionChecker(robot, example_scene(), padding=0.0)
+    b = CollisionChecker(robot, example_scene(), padding=0.0)
+    assert a._ki is b._ki and a._kf is not b._kf
+    g = robot.joint_index(robot.gripper.joint)
+    lo, hi = float(robot.lower[g]), float(robot.upper[g])
+    a.set_gripper(hi)
+    b.set_gripper(lo)
+    assert a._q_template[g] == hi and b._q_template[g] == lo
+    assert np.shares_memory(a._q_template, a._kf) and np.shares_memory(b._q_template, b._kf)
+    a.set_grasp_target("cube")  # another state and back: the kept tables come back with a's own gripper value
+    a.set_grasp_target(None)
+    assert a._q_template[g] == hi and b._q_template[g] == lo and np.shares_memory(a._q_template, a._kf)

@@ -57,7 +57,7 @@ _EPS = 1e-9  # rad: joint-limit tolerance (the kernel uses the same)
 _NO_GRIP = memoryview(np.zeros(0))  # "every state at the set_gripper value"
 _NO_IDX = np.zeros(0, dtype=np.int64)
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
-_STATE_CACHE = 32  # collision states whose tables are kept (for every checker of the process: _rebuild)
+_STATE_CACHE = 64  # collision states whose tables are kept (for every checker of the process: _rebuild), least recently used out
 # What _build_tables sets: the kept tables of one collision state.
 _TABLES = ("_parts", "_items", "_item_objs", "_item_lo", "_item_hi", "_item_c", "_item_h", "_moving_shapes", "_mv_link", "_mv_rot",
            "_mv_pos", "_mv_half", "_mv_half_self", "_mv_radius", "_scene_mask", "_active", "_active_mask", "_active_r2",
@@ -276,6 +276,7 @@ class CollisionChecker:
                 _STATE_TABLES.pop(next(iter(_STATE_TABLES)))
             _STATE_TABLES[key] = (self.robot, {name: getattr(self, name) for name in _TABLES})
         else:
+            _STATE_TABLES[key] = _STATE_TABLES.pop(key)  # now the most recently used
             template = self._q_template.copy()
             for name, value in hit[1].items():
                 setattr(self, name, value)
