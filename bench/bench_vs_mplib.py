@@ -2,6 +2,14 @@
 
 Run: .venv/bin/python bench/bench_vs_mplib.py [--rounds 20] [--venv /tmp/mplib-venv]
 
+At the end it prints issue 25's figures in one table, each beside mplib's where mplib has one: api.plan and
+Planner.run on queries a-e (the public API on the five queries below, nothing held), the wall query with 200
+boxes off the path (and its set-up: api.plan outside Planner.run, against mplib adding the boxes), the desk
+cloud, and from the same interleaved rounds: a fresh ``roarmctl plan plans/pick_place.yaml`` process and
+``roarmctl --help`` (wall, beside ``python -c pass``; bytecode compiled first, as bench/bench_startup.py does), and
+the planning time per task of a 20-task plan (pick_place's cube carried there and back, 5 cycles of 4 tasks)
+with TOPP-RA's share.
+
 mplib needs numpy < 2, so it lives in its own throwaway venv (created with pip on first use, reused
 afterwards) and runs as a worker process that this script drives over a pipe; both sides time only
 their own work, in the same rounds, one query after the other (so machine load hits both alike).
@@ -17,6 +25,8 @@ Queries (the start and goal configurations are the ones the pipeline plans, capt
   free  pick_place.yaml, home -> above the cube (the straight joint move is valid)
   wall  obstacle.yaml, above pick -> above place, through the wall
   post  multi_object.yaml, above the can -> above its place, past the post
+  tray  bench/scenes.py tray_plan: above the cube -> above a tray behind a wall 0.20 m high, the cube held
+  posts bench/scenes.py posts_plan: above the cube -> above its place, past twelve posts in two rows, the cube held
 Per query and round: roarmctl's free-motion geometry (OMPL RRTConnect + shortcutting) plus its timing
 and re-check of that motion, against mplib's plan_qpos (RRTConnect + simplify + TOPP-RA). Each
 round uses another seed on both sides. On the wall and post queries also "like for like": roarmctl's geometry
@@ -29,7 +39,9 @@ how much of the gap is the jerk limit, torque and TCP-speed checks and the re-ch
 from __future__ import annotations
 
 import argparse
+import copy
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -43,10 +55,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/scenes.py
 
 ROOT = Path(__file__).resolve().parents[1]
 MPLIB = "mplib==0.2.1"
-QUERIES = {  # name -> (plan, label fragment of the free motion)
+QUERIES = {  # name -> (plan: a bundled plan's name or a plan dict of bench/scenes.py, label fragment of the free motion)
     "free": ("pick_place", "transit above 'cube'"),
     "wall": ("obstacle", "transit above the place for 'cube'"),
     "post": ("multi_object", "transit above the place for 'can'"),
+    "tray": ("tray", "transit above the place for 'cube'"),
+    "posts": ("posts", "transit above the place for 'cube'"),
 }
 
 
@@ -177,6 +191,17 @@ def export_model(robot, folder: Path) -> tuple[Path, Path]:
 
 
 # --------------------------------------------------------------------------- the roarmctl side
+def plan_source(plan_name: str) -> dict:
+    """The plan a query comes from, as a dict: a bundled plan file's, or one of bench/scenes.py's (tray, posts)."""
+    import yaml
+    from scenes import posts_plan, tray_plan
+
+    made = {"tray": tray_plan, "posts": posts_plan}
+    if plan_name in made:
+        return made[plan_name]()
+    return yaml.safe_load((ROOT / "plans" / f"{plan_name}.yaml").read_text())
+
+
 def capture(plan_name: str, fragment: str):
     """Plan ``plan_name`` and stop at the free motion whose label contains ``fragment``: returns
     (ctx, step, q) there (the planning context, with the world state (held object, object poses) as the
@@ -198,7 +223,8 @@ def capture(plan_name: str, fragment: str):
 
     motions.geometry = hook
     try:
-        pipeline.plan_file(ROOT / "plans" / f"{plan_name}.yaml")
+        pipeline.plan_file(ROOT / "plans" / f"{plan_name}.yaml") if (ROOT / "plans" / f"{plan_name}.yaml").exists() \
+            else pipeline.plan_file(plan_source(plan_name), base_dir=ROOT / "plans")
     except Captured:
         pass
     finally:
@@ -274,7 +300,7 @@ def item_dict(it) -> dict:
             "radius": it.radius, "length": it.length}
 
 
-API_FROM = {"a": "free", "b": "wall", "c": "post", "b200": "wall", "desk": "free"}  # API query -> captured query
+API_FROM = {"a": "free", "b": "wall", "c": "post", "d": "tray", "e": "posts", "b200": "wall", "desk": "free"}  # API query -> captured query
 DESK_RESOLUTION = 0.005  # m: the desk cloud's cells (both sides)
 
 
@@ -284,7 +310,6 @@ def api_queries(captured: dict, goals: dict, folder: Path) -> tuple[dict, dict]:
     captured motions in their plans' scenes (nothing held: a plan starts with empty hands); b200: b with 200
     boxes off the path; desk: a in a 100,000-point cloud of a cluttered desk (bench/scenes.py), the table's place."""
     import numpy as np
-    import yaml
     from scenes import boxes_off_path, desk_cloud
 
     from roarmctl.motion.octree import cells_of
@@ -296,7 +321,7 @@ def api_queries(captured: dict, goals: dict, folder: Path) -> tuple[dict, dict]:
     np.save(folder / "desk.npy", points)
     for name, source in API_FROM.items():
         ctx, _, q = captured[source]
-        plan_doc = yaml.safe_load((ROOT / "plans" / f"{QUERIES[source][0]}.yaml").read_text())
+        plan_doc = plan_source(QUERIES[source][0])
         scene = dict(plan_doc.get("scene") or {})
         cloud = None
         if name == "b200":
@@ -321,6 +346,30 @@ def api_query(start, goal, scene: dict, objects: list, plan: dict) -> dict:
     """A one-motion plan dict for ``roarmctl.api.plan``: from ``start`` to ``goal`` (full configurations, rad)."""
     return {"robot": "roarm_m3_pro", "start": [float(v) for v in start], "scene": scene, "objects": objects,
             "tasks": [{"move": {"joints": [float(v) for v in goal]}}], "planner": plan["planner"], "limits": plan["limits"]}
+
+
+def twenty_tasks() -> dict:
+    """A 20-task plan: pick_place.yaml's cube carried to its place and back, 5 cycles of pick, place, pick, place."""
+    doc = plan_source("pick_place")
+    pick, place, _home = doc["tasks"]
+    back = {"place": {**place["place"], "xyz": doc["objects"][0]["xyz"]}}
+    doc["tasks"], doc["cycles"] = [pick, place, {"pick": dict(pick["pick"])}, back], 5
+    return doc
+
+
+def fresh_processes() -> tuple[dict[str, list[str]], dict[str, str], Path]:
+    """The fresh-process commands timed in every round (name -> argv), their environment, and the plan's output:
+    bytecode written first and PYTHONDONTWRITEBYTECODE unset, as an installed copy runs (bench/bench_startup.py)."""
+    env = dict(os.environ)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "roarmctl")], check=True, env=env, capture_output=True)
+    out = Path(tempfile.mkdtemp()) / "pick_place.traj.json"
+    cli = [sys.executable, "-m", "roarmctl"]
+    cmds = {"python -c pass": [sys.executable, "-c", "pass"], "roarmctl --help": cli + ["--help"],
+            "roarmctl plan pick_place": cli + ["plan", "plans/pick_place.yaml", "-o", str(out), "--json"]}
+    for cmd in cmds.values():  # once untimed: writes what bytecode is still missing, as a user's first run does
+        subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, check=True)
+    return cmds, env, out
 
 
 def main() -> None:
@@ -405,7 +454,22 @@ def main() -> None:
     api_theirs = {k: ([], []) for k in api}  # (set-up + plan_qpos wall, set-up wall)
     api_clear = {k: ([], []) for k in api}
     api_fails = {k: [0, 0] for k in api}
+    cmds, env, _ = fresh_processes()
+    fresh = {k: [] for k in cmds}  # wall s of each fresh process
+    fresh_planning: list[float] = []  # the fresh plan process's own planning_time
+    tasks20 = twenty_tasks()
+    per_task: list[tuple[float, float]] = []  # (planning s per task, TOPP-RA share) of the 20-task plan
     for r in range(args.rounds):
+        for name, cmd in cmds.items():
+            t0 = time.perf_counter()
+            proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
+            fresh[name].append(time.perf_counter() - t0)
+            if proc.returncode != 0:
+                raise SystemExit(f"{' '.join(cmd)} failed: {proc.stderr.strip()}")
+            if name.startswith("roarmctl plan"):
+                fresh_planning.append(json.loads(proc.stdout)["planning_time"])
+        long_plan = pipeline.plan_file(copy.deepcopy(tasks20), seed=100 + r, base_dir=ROOT / "plans")
+        per_task.append((long_plan.planning_time / 20, long_plan.timings.get("toppra", 0.0) / long_plan.planning_time))
         for name, (doc, _, _) in api.items():
             try:
                 t0 = time.perf_counter()
@@ -483,6 +547,7 @@ def main() -> None:
         print(f"{name:<6}{a:>10.1f}{run:>13.1f}{a / run:>8.2f}x{b:>10.1f}{setup:>12.1f}{a / b:>7.2f}x"
               f"   {sum(c < padding - 1e-6 for c in ca)} of {len(ca)} / {sum(c < padding - 1e-6 for c in cb)} of {len(cb)}"
               f"{'':>16}{api_fails[name][0]}/{api_fails[name][1]}")
+    print_issue_table(api, api_ours, api_theirs, fresh, fresh_planning, per_task)
     print("roarmctl's part, medians (ms): geometry (OMPL tries + shortcutting) | timing + re-check (TOPP-RA etc.)")
     for name in QUERIES:
         g = statistics.median(geometry[name]) * 1000
@@ -511,6 +576,32 @@ def main() -> None:
           f"({res['colliding']} colliding): ratio {ours_rate / res['rate']:.2f}x")
     worker.stdin.close()
     worker.wait(timeout=30)
+
+
+def print_issue_table(api: dict, ours: dict, theirs: dict, fresh: dict, fresh_planning: list[float],
+                      per_task: list[tuple[float, float]]) -> None:
+    """Issue 25's figures, medians of the interleaved rounds, each beside mplib's where it has one."""
+    med = statistics.median
+    print("\nissue 25's figures (medians of the same interleaved rounds; ratio = roarmctl / mplib)")
+    print(f"  {'what':<58}{'roarmctl':>11}{'mplib':>11}{'ratio':>8}")
+
+    def row(what: str, a: float, b: float | None = None, unit: str = "ms") -> None:
+        print(f"  {what:<58}{a:>8.1f} {unit}" + (f"{b:>8.1f} {unit}{a / b:>7.2f}x" if b else ""))
+
+    labels = {"a": "free move", "b": "through the wall", "c": "past the post", "d": "tray behind a tall wall",
+              "e": "twelve posts", "b200": "b + 200 boxes off the path", "desk": "a in the 100,000-point desk cloud"}
+    for name in api:
+        a, run = (med(v) * 1000 for v in ours[name])
+        b, setup = (med(v) * 1000 for v in theirs[name])
+        row(f"api.plan, {name}: {labels[name]}", a, b)
+        row(f"  its Planner.run (api.plan / run {a / run:.2f}x)", run, b)
+        if name in ("b200", "desk"):
+            outside = med(x - y for x, y in zip(*ours[name])) * 1000
+            row("  api.plan outside Planner.run (set-up) | mplib's scene set-up", outside, setup)
+    for name, v in fresh.items():
+        row(f"{name}, fresh process (wall)", med(v) * 1000)
+    row("  its planning_time", med(fresh_planning) * 1000)
+    row(f"20-task plan, planning per task (TOPP-RA {med(s for _, s in per_task):.0%})", med(t for t, _ in per_task) * 1000)
 
 
 if __name__ == "__main__":

@@ -77,3 +77,40 @@ def desk_cloud(n: int = 100_000, seed: int = 0) -> np.ndarray:
         else:
             parts.append(_cylinder_surface(rng, (thing[1], thing[2], 0.0), thing[3], thing[4], k))
     return np.vstack(parts)
+
+
+def _pick_place_plan(obstacles: list[dict], place: list[float], seed: int) -> dict:
+    """obstacle.yaml's pick and place (the cube from (0.25, -0.15) to ``place``) among ``obstacles``, as a plan dict."""
+    return {
+        "robot": "roarm_m3_pro", "start": "home",
+        "scene": {"table": {"shape": "box", "size": [0.80, 0.60, 0.02], "xyz": [0.15, 0.0, -0.01]}, "obstacles": obstacles},
+        "objects": [{"name": "cube", "shape": "box", "size": [0.04, 0.04, 0.04], "xyz": [0.25, -0.15, 0.02], "mass": 0.03}],
+        "tasks": [
+            {"pick": {"object": "cube", "approach_height": 0.06, "pitch": {"deg": 90}, "gripper_open": 1.0, "gripper_closed": 0.6}},
+            {"place": {"xyz": place, "approach_height": 0.06, "pitch": {"deg": 90}, "gripper_open": 1.0}},
+            {"move": {"pose": "home", "gripper": "closed"}},
+        ],
+        "limits": {"velocity_scale": 0.6, "acceleration_scale": 0.6, "max_tcp_speed": 0.25, "gripper_time": 0.5},
+        "planner": {"name": "RRTConnect", "time_budget": 2.0, "seed": seed, "singularity_margin": 0.02, "padding": 0.005},
+    }
+
+
+def tray_plan() -> dict:
+    """A tray behind a tall wall: the cube is carried over a wall 0.20 m high and set down inside a tray (a 0.20 m
+    square floor and four 30 mm rims) on the far side."""
+    x, y, w, rim = 0.24, 0.17, 0.20, 0.03
+    obstacles = [{"name": "wall", "shape": "box", "size": [0.20, 0.03, 0.20], "xyz": [0.26, 0.0, 0.10]},
+                 {"name": "tray_floor", "shape": "box", "size": [w, w, 0.004], "xyz": [x, y, 0.002]}]
+    for i, (dx, dy) in enumerate(((-1, 0), (1, 0), (0, -1), (0, 1))):
+        size = [0.004, w, rim] if dx else [w, 0.004, rim]
+        obstacles.append({"name": f"tray_rim{i}", "shape": "box", "size": size,
+                          "xyz": [round(x + dx * w / 2, 4), round(y + dy * w / 2, 4), rim / 2]})
+    return _pick_place_plan(obstacles, [x, y, 0.024], seed=3)
+
+
+def posts_plan() -> dict:
+    """Twelve posts: upright cylinders (15 mm radius, 0.14 m high) in two rows of six across the table between the
+    pick and the place, the cube carried over or between them."""
+    posts = [{"name": f"post{i}", "shape": "cylinder", "radius": 0.015, "length": 0.14,
+              "xyz": [round(0.16 + 0.05 * (i % 6), 3), -0.04 if i < 6 else 0.04, 0.07]} for i in range(12)]
+    return _pick_place_plan(posts, [0.25, 0.15, 0.02], seed=3)
