@@ -76,6 +76,39 @@ def string_doubling(levels: int = 60) -> str:
     return "".join(props) + f'<link name="${{p{levels}}}"/>'
 
 
+#: Expressions that build something huge from a few characters (issue 19 review): each must stop on a bound
+#: (a size checked before or as the value is made), not in memory. Name -> (expression, what the refusal says).
+SIZE_BOMBS = {
+    "string repetition": ("'a'*10**9", "repetition"),
+    "list repetition": ("[0]*10**9", "repetition"),
+    "integer power": ("2**10**8", "larger than 256 bits"),
+    "float power": ("2.0**10**8", "out of range"),
+    "nested parentheses": ("(" * 5000 + "1" + ")" * 5000, "nested"),
+    "long expression": ("+".join(["1"] * 200_000), "an expression of more than"),
+    "long list display": ("[" + ",".join(["1"] * 200_000) + "]", "an expression of more than"),
+    "str of a shared list": ("str(['a'*1000000]*100000)", "prints as more than"),
+    "shared list printed": ("len(str([[[0]*1000]*1000]*100))", "prints as more than"),
+    "compare shared lists": ("[[0]*100000]*100000 == [[0]*100000]*100000", "prints as more than"),
+    "repeated work on a property": ("'ab'", "characters to expand"),
+}
+
+
+def lexer_bomb(n: int = 1_000_000) -> str:
+    """An attribute of ``n`` ``$a`` pieces: xacro's lexer copies the rest of the text after each piece."""
+    return f'<foo a="{"$a" * n}"/>'
+
+
+def macro_params_redos(n: int = 40) -> str:
+    """A macro parameter default with an unclosed quote: xacro's pattern for it backtracks 2**n ways."""
+    return f'<xacro:macro name="m" params="x:={"a" * n}\'"><foo/></xacro:macro><xacro:m/>'
+
+
+def repeated_work(n: int = 2000) -> str:
+    """A 1 MB string property compared ``n`` times: no value is made, each comparison reads 1 MB."""
+    return ('<xacro:property name="big" value="${\'a\'*1000000}"/><xacro:property name="big2" value="${\'a\'*1000000}"/>'
+            + "".join(f'<foo a="${{big == big2}}"/>' for _ in range(n)))
+
+
 def self_include(folder: Path) -> Path:
     """A xacro that includes itself."""
     path = folder / "loop.xacro"

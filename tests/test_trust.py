@@ -276,6 +276,25 @@ def test_bombs_and_fifos_are_refused_by_the_work_budget(tmp_path, bomb, needle):
     refused(["kin", "fk", str(bomb(tmp_path)), *hostile.M3_Q], needle)
 
 
+@pytest.mark.parametrize("name", list(hostile.SIZE_BOMBS))
+def test_expressions_that_build_something_huge_are_refused_by_a_bound(tmp_path, name):
+    """Refused where the value would be made (or before the expression is parsed), never by running out of
+    memory or time: measured under 1 s each with under 100 MB resident (notes/s19v.md)."""
+    expr, needle = hostile.SIZE_BOMBS[name]
+    extra = hostile.repeated_work() if name == "repeated work on a property" else ""
+    err = refused(["kin", "fk", str(hostile.m3_xacro(tmp_path, expr, extra)), *hostile.M3_Q], "arm.xacro")
+    assert needle in err, err
+
+
+@pytest.mark.parametrize("extra, needle", [(hostile.lexer_bomb(), "tokens"),
+                                           (hostile.macro_params_redos(), "Undefined parameters")],
+                         ids=["lexer: a million $a", "macro params: unclosed quote"])
+def test_xacro_s_own_text_parsing_is_linear(tmp_path, extra, needle):
+    """xacro's lexer (quadratic: hours for a 2 MB attribute) and its macro-parameter pattern (exponential: 2 s
+    at 24 letters, doubling with each) are replaced while a description expands (xacro_safe._Lexer, MACRO_ARG)."""
+    refused(["kin", "fk", str(hostile.m3_xacro(tmp_path, "'a'", extra)), *hostile.M3_Q], "arm.xacro", needle)
+
+
 def test_an_obj_whose_mtllib_names_a_fifo_loads_without_opening_it(tmp_path):
     import trimesh
 

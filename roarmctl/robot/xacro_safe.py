@@ -21,7 +21,11 @@ expansion, the functions of the ``xacro`` module where it evaluates and reads:
 * ``eval_all`` (every element): counted against the ``Budget``, like every expression, every step of
   an expression and every character produced, so an exponent bomb (``${9**9**9}``), a macro that
   doubles itself or a property that doubles a string stop with exit 2 after a fixed amount of WORK
-  (the same verdict on any machine), long before a second has passed.
+  (the same verdict on any machine), long before a second has passed. Every value an operation makes
+  is bounded as it is made (``Evaluator._made``: its printed size too, however its parts are shared),
+  and what an operation reads counts (``_operand``), so comparing or printing large values is work.
+* ``QuickLexer`` and ``parse_macro_arg``: xacro's lexer is quadratic and its macro-parameter pattern
+  exponential on an unclosed quote; ``_Lexer`` and ``MACRO_ARG`` do the same in linear time.
 
 ``trusted=True`` (``--trust-xacro``, or ``trust: true`` in a sidecar the user named) leaves
 expressions and ``$(...)`` to xacro itself: only for files whose author you trust.
@@ -34,6 +38,7 @@ import glob as _glob
 import math
 import operator
 import os
+import re
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -45,7 +50,8 @@ from roarmctl.fileio import UNKNOWN_PACKAGE, Roots, read_text
 #: Work one expansion may do (counts, not seconds: the same verdict on a busy machine).
 MAX_ELEMENTS = 20_000  # elements evaluated (macro bodies count each time they are expanded)
 MAX_EXPRESSIONS = 200_000  # ${...} and $(...) evaluated
-MAX_STEPS = 2_000_000  # syntax-tree nodes evaluated, over all expressions
+MAX_STEPS = 2_000_000  # syntax-tree nodes evaluated (and parts of values sized), over all expressions
+MAX_TOKENS = 200_000  # pieces of text, ${...} and $(...) that xacro's lexer cuts the document's texts into
 MAX_CHARS = 32 * 1024 * 1024  # characters produced by expressions and held by the elements evaluated
 MAX_INCLUDES = 1000  # files included
 MAX_INCLUDE_DEPTH = 40  # includes within includes (a file including itself stops here)
@@ -55,6 +61,21 @@ MAX_FILE_BYTES = 8 * 1024 * 1024  # one xacro file or included file
 MAX_INT_BITS = 256
 MAX_STR = 1024 * 1024
 MAX_ITEMS = 100_000
+#: Characters a list, tuple or mapping may print as (``str()``; xacro prints a value placed in text): a
+#: bound on the work of printing or comparing it, however its parts are shared (``[[0]*10**5]*10**5``).
+MAX_VALUE_CHARS = 4 * MAX_STR
+#: Characters of one ``${...}`` (or ``$(eval ...)``) expression, checked before it is parsed: a long
+#: expression costs memory in Python's parser (about 250 bytes a character).
+MAX_EXPR_CHARS = 64 * 1024
+#: Characters of a macro's ``params`` (xacro parses them one by one, copying the rest each time).
+MAX_PARAMS_CHARS = 16 * 1024
+#: xacro's pattern of one macro parameter (``name:=default``, ``^|`` forwarding) without its nested
+#: quantifier: xacro's ``(?:'.*?'|".*?"|[^\s'"]+)+`` backtracks exponentially on an unclosed quote
+#: (``params="x:=aaaa...a'"``: 2 s at 24 letters, doubling with each). Here each character of a default
+#: has one way to match; a well-formed default matches as xacro's does.
+MACRO_ARG = re.compile(r"^\s*([^\s:=]+?)\s*:?=\s*(\^\|?)?("
+                       r"""\$\{[^}\n]*\}|\$\([^)\n]*\)|(?:'[^'\n]*'|"[^"\n]*"|[^\s'"])+|"""
+                       r")(?:\s+|$)(.*)")
 
 MATH_FUNCTIONS = ("acos", "acosh", "asin", "asinh", "atan", "atan2", "atanh", "ceil", "copysign", "cos", "cosh",
                   "degrees", "dist", "erf", "erfc", "exp", "expm1", "fabs", "floor", "fmod", "hypot", "isclose",
@@ -78,7 +99,7 @@ class Budget:
     """Counters of one expansion; ``spend`` raises ``Refused`` past a limit."""
 
     LIMITS: ClassVar[dict[str, int]] = {"elements": MAX_ELEMENTS, "expressions": MAX_EXPRESSIONS, "steps": MAX_STEPS, "characters": MAX_CHARS,
-              "includes": MAX_INCLUDES, "node moves": MAX_MOVES}
+              "includes": MAX_INCLUDES, "node moves": MAX_MOVES, "tokens": MAX_TOKENS}
 
     def __init__(self) -> None:
         self.used = dict.fromkeys(self.LIMITS, 0)
@@ -92,25 +113,6 @@ class Budget:
 
 
 # --------------------------------------------------------------------------- values
-def _checked(value: Any) -> Any:
-    """``value`` if it is a value a description may hold (bounded), else Refused."""
-    if value is None or isinstance(value, (bool, float)):
-        return value
-    if isinstance(value, int):
-        if value.bit_length() > MAX_INT_BITS:
-            raise Refused(f"an integer of more than {MAX_INT_BITS} bits")
-        return value
-    if isinstance(value, str):
-        if len(value) > MAX_STR:
-            raise Refused(f"a string of more than {MAX_STR:,} characters")
-        return value
-    if isinstance(value, (list, tuple, dict)):
-        if len(value) > MAX_ITEMS:
-            raise Refused(f"a list of more than {MAX_ITEMS:,} items")
-        return value
-    raise Refused(f"a value of type {type(value).__name__}")
-
-
 def _int(value: Any = 0) -> int:
     if isinstance(value, str) and len(value) > 80:
         raise Refused("int() of a string of more than 80 characters")
@@ -141,8 +143,9 @@ def _pow(a: Any, b: Any) -> Any:
 
 def _mul(a: Any, b: Any) -> Any:
     for seq, n in ((a, b), (b, a)):
-        if isinstance(seq, (str, list, tuple)) and isinstance(n, int) and len(seq) * max(n, 0) > MAX_STR:
-            raise Refused(f"a repetition of more than {MAX_STR:,} items")
+        if isinstance(seq, (str, list, tuple)) and isinstance(n, int) and not isinstance(n, bool) and (
+                len(seq) * max(n, 0) > MAX_STR or (not isinstance(seq, str) and len(seq) * max(n, 0) > MAX_ITEMS)):
+            raise Refused(f"a repetition of more than {MAX_ITEMS if not isinstance(seq, str) else MAX_STR:,} items")
     if isinstance(a, int) and isinstance(b, int) and a.bit_length() + b.bit_length() > 2 * MAX_INT_BITS:
         raise Refused(f"a product of more than {MAX_INT_BITS} bits")
     return operator.mul(a, b)
@@ -166,6 +169,8 @@ COMPARE: dict[type, Callable[[Any, Any], Any]] = {
 
 
 # --------------------------------------------------------------------------- the interpreter
+#: Nodes that make a new value (not a property's value, a constant or a part of one): checked by ``_made``.
+_MAKERS = (ast.BinOp, ast.UnaryOp, ast.Call, ast.List, ast.Tuple, ast.Dict, ast.Subscript)
 class Evaluator:
     """Evaluates one expression's syntax tree node by node; only the node types below exist for it.
 
@@ -185,6 +190,8 @@ class Evaluator:
     def __call__(self, text: str) -> Any:
         """The value of the expression ``text`` (the inside of ``${...}``); Refused if it leaves the allow-list."""
         self.budget.spend("expressions")
+        if len(text) > MAX_EXPR_CHARS:
+            raise Refused(f"an expression of more than {MAX_EXPR_CHARS:,} characters")
         try:
             tree = ast.parse(text.strip(), mode="eval")
         except SyntaxError as exc:
@@ -195,7 +202,49 @@ class Evaluator:
             value = self.eval(tree.body)
         except RecursionError:
             raise Refused("nested too deeply") from None
-        self.budget.spend("characters", len(value) if isinstance(value, str) else 1)
+        self.budget.spend("characters", self.size(value))  # xacro prints it into the document
+        return value
+
+    def size(self, value: Any) -> int:
+        """The characters ``value`` prints as (at least 1), computed once per shared part and counted as
+        steps; past ``MAX_VALUE_CHARS`` the count stops (the value is refused where it is made)."""
+        memo: dict[int, int] = {}
+
+        def walk(v: Any) -> int:
+            if isinstance(v, str):
+                return len(v) + 2
+            if not isinstance(v, (list, tuple, dict)):
+                return 24 if not isinstance(v, int) else 2 + v.bit_length() // 3
+            if id(v) in memo:
+                return memo[id(v)]
+            self.budget.spend("steps", 1 + len(v))
+            total = 2
+            for item in (v.items() if isinstance(v, dict) else v):
+                total += walk(item) + 2
+                if total > MAX_VALUE_CHARS:
+                    break
+            memo[id(v)] = total
+            return total
+
+        return max(walk(value) - (2 if isinstance(value, str) else 0), 1)
+
+    def _made(self, value: Any) -> Any:
+        """A value an operation has just made: refused past its bounds, its size counted as characters."""
+        if isinstance(value, str) and len(value) > MAX_STR:
+            raise Refused(f"a string of more than {MAX_STR:,} characters")
+        if isinstance(value, (list, tuple, dict)):
+            if len(value) > MAX_ITEMS:
+                raise Refused(f"a list of more than {MAX_ITEMS:,} items")
+            if self.size(value) > MAX_VALUE_CHARS:
+                raise Refused(f"a value that prints as more than {MAX_VALUE_CHARS:,} characters")
+        self.budget.spend("characters", self.size(value))
+        return value
+
+    def _operand(self, value: Any) -> Any:
+        """A string or container an operation reads (compares, searches, prints): its size counted as
+        characters, so that repeating the operation on a large property is bounded like making it."""
+        if isinstance(value, (str, list, tuple, dict)):
+            self.budget.spend("characters", self.size(value))
         return value
 
     def eval(self, node: ast.AST) -> Any:
@@ -205,7 +254,12 @@ class Evaluator:
         if method is None:
             raise Refused(f"{_describe(node)} is not allowed in a description (only numbers, strings, arithmetic, "
                           "comparisons, and/or/not, 'if else', property names and math functions)")
-        return _checked(method(node))
+        value = method(node)
+        if not (value is None or isinstance(value, (bool, int, float, str, list, tuple, dict))):
+            raise Refused(f"a value of type {type(value).__name__}")
+        if isinstance(value, int) and value.bit_length() > MAX_INT_BITS:
+            raise Refused(f"an integer of more than {MAX_INT_BITS} bits")
+        return self._made(value) if isinstance(node, _MAKERS) else value
 
     def _Constant(self, node: ast.Constant) -> Any:
         return node.value
@@ -229,7 +283,7 @@ class Evaluator:
         op = BINARY.get(type(node.op))
         if op is None:
             raise Refused(f"the operator {type(node.op).__name__} is not allowed")
-        return op(self.eval(node.left), self.eval(node.right))
+        return op(self._operand(self.eval(node.left)), self._operand(self.eval(node.right)))
 
     def _UnaryOp(self, node: ast.UnaryOp) -> Any:
         op = UNARY.get(type(node.op))
@@ -252,7 +306,7 @@ class Evaluator:
             if op is None:
                 raise Refused(f"the comparison {type(op_node).__name__} is not allowed")
             right = self.eval(right_node)
-            if not op(left, right):
+            if not op(self._operand(left), self._operand(right)):
                 return False
             left = right
         return True
@@ -305,7 +359,7 @@ class Evaluator:
         if node.keywords or any(isinstance(a, ast.Starred) for a in node.args):
             raise Refused("keyword or * arguments are not allowed")
         func = self._function(node.func)
-        args = [self.eval(a) for a in node.args]
+        args = [self._operand(self.eval(a)) for a in node.args]
         try:
             return func(*args)
         except Refused:
@@ -323,7 +377,7 @@ class Evaluator:
     def _function(self, node: ast.AST) -> Callable[..., Any]:
         if isinstance(node, ast.Attribute) and node.attr in STR_METHODS and not (
                 isinstance(node.value, ast.Name) and node.value.id in ("math", "xacro") and not self._is_property(node.value.id)):
-            owner = self.eval(node.value)
+            owner = self._operand(self.eval(node.value))
             if isinstance(owner, str):
                 return _str_method(owner, node.attr)
         if isinstance(node, ast.Name) and not self._is_property(node.id):
@@ -389,6 +443,41 @@ def _describe(node: ast.AST) -> str:
 _LOCK = threading.RLock()
 
 
+class _Lexer:
+    """xacro's ``QuickLexer`` (the tokens of a text with ``${...}`` and ``$(...)``) in linear time: xacro's
+    copies the rest of the text after each token, so an attribute of a million ``$a`` takes hours. Same
+    token patterns (xacro's ``LEXER``, matched at a position instead of at the start of a copy), same tokens."""
+
+    def __init__(self, other: Any) -> None:
+        self.__dict__.update({k: v for k, v in other.__dict__.items() if k.isupper()})  # the token ids
+        self.res = [re.compile(r.pattern[1:] if r.pattern.startswith("^") else r.pattern) for r in other.res]
+        self.text, self.pos = "", 0
+        self.top: tuple[int, str] | None = None
+
+    def lex(self, text: str) -> None:
+        """Start on ``text``."""
+        self.text, self.pos, self.top = text, 0, None
+        self.next()
+
+    def peek(self) -> Any:
+        """The current token (id, text), None at the end."""
+        return self.top
+
+    def next(self) -> Any:
+        """The current token; moves on to the next."""
+        import xacro
+
+        result, self.top = self.top, None
+        if self.pos >= len(self.text):
+            return result
+        for i, rx in enumerate(self.res):
+            m = rx.match(self.text, self.pos)
+            if m:
+                self.top, self.pos = (i, m.group(0)), m.end()
+                return result
+        raise xacro.XacroException("invalid expression: " + self.text[self.pos:self.pos + 80])
+
+
 def _xacro_lookup(symbols: Any, name: str) -> Any:
     """A property of xacro's symbol ``Table`` chain (never xacro's global symbols: Python builtins)."""
     import xacro
@@ -410,9 +499,25 @@ def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
 
     budget = Budget()
     originals = {name: getattr(xacro, name) for name in ("safe_eval", "eval_extension", "parse", "eval_all", "glob",
-                                                          "replace_node")}
+                                                          "replace_node", "QuickLexer", "parse_macro_arg")}
     orig_parse, orig_eval_all, orig_replace = originals["parse"], originals["eval_all"], originals["replace_node"]
     orig_find = substitution_args._eval_find
+    orig_macro_arg = originals["parse_macro_arg"]
+
+    class Lexer(_Lexer):
+        def next(self) -> Any:
+            budget.spend("tokens")
+            return super().next()
+
+    def parse_macro_arg(text: str) -> Any:
+        if len(text) > MAX_PARAMS_CHARS:
+            raise Refused(f"macro params of more than {MAX_PARAMS_CHARS:,} characters")
+        budget.spend("steps")
+        saved, xacro.re_macro_arg = xacro.re_macro_arg, MACRO_ARG
+        try:
+            return orig_macro_arg(text)
+        finally:
+            xacro.re_macro_arg = saved
 
     def find(pkg: str) -> str:
         folder = roots.packages.get(pkg)
@@ -526,6 +631,7 @@ def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
     with _LOCK:
         try:
             xacro.parse, xacro.eval_all, xacro.glob, xacro.replace_node = parse, eval_all, _Glob, replace_node
+            xacro.QuickLexer, xacro.parse_macro_arg = Lexer, parse_macro_arg
             substitution_args._eval_find = find
             if not trusted:
                 xacro.safe_eval, xacro.eval_extension = safe_eval, eval_extension
