@@ -57,7 +57,7 @@ def run_one(traj, robot, firmware: str, strategy: str, *, rate: float = 50.0, se
     from roarmctl.device.simulator import PtySimulator, SimConfig
     from roarmctl.device.streamer import StreamConfig, Streamer
     from roarmctl.device.tracking import true_tracking
-    from roarmctl.errors import Interrupted
+    from roarmctl.errors import DeviceError, Interrupted
 
     with PtySimulator(SimConfig(firmware=firmware), servos=servos, process=True) as sim:
         link = Link(sim.path).open()
@@ -73,17 +73,23 @@ def run_one(traj, robot, firmware: str, strategy: str, *, rate: float = 50.0, se
                 raise KeyboardInterrupt
 
         st.hook = hook
+        failed = None
         try:
             res = st.run()
         except Interrupted as exc:
             res = exc.result  # type: ignore[attr-defined]
+        except DeviceError as exc:  # a run the streamer stopped (counted, not averaged)
+            res, failed = exc.result, exc.message  # type: ignore[attr-defined]
         time.sleep(0.6 if stop_at is not None else 0.0)
         link.close()
         rec, executed, late = sim.recording(), sim.executed(), sim.lateness()
     log = res.log
     host = np.array([[e["t"], e["lateness"]] for e in log["sent"] if "tick" in e]).reshape(-1, 2)
     out = {"p99": res.summary()["lateness_ms"]["p99"], "link": log["link_budget"]["up_share"],
-           "lines": log["link_budget"]["lines_per_s"], "rtt": info.rtt}
+           "lines": log["link_budget"]["lines_per_s"], "rtt": info.rtt, "failed": failed}
+    if failed is not None:
+        print(f"  ({firmware}, {strategy}: stopped: {failed})", flush=True)
+        return out
     if stop_at is None:
         trk = true_tracking(robot, traj, rec, res.t0, host_late=host, device_late=late, lag=True)
         out |= {"rms": trk["rms_mm"], "max": trk["max_mm"], "lag": trk["lag_s"] * 1e3}
@@ -111,7 +117,7 @@ def med(runs: list[dict], key: str) -> float:
 
 
 def main() -> None:
-    from roarmctl.device.schedule import STRATEGIES
+    from roarmctl.device.schedule import DEFAULT_STRATEGY, STRATEGIES
     from roarmctl.motion.validate import load_trajectory
     from roarmctl.robot.loader import load_robot
 
@@ -139,11 +145,12 @@ def main() -> None:
             print(f"{firmware:<9}{strategy:<11}{med(full, 'rms'):>8.2f}{med(full, 'max'):>7.1f}{med(full, 'lag'):>6.0f}"
                   f"{med(full, 'p99'):>6.1f}{med(full, 'link'):>6.0%}{med(full, 'lines'):>8.0f}{med(stop, 'hold_ms'):>6.0f}",
                   flush=True)
-    print("\nthe hold, stopped at 30/45/60/75 % of the run (0.84 build, timed): joint motion after the hold was sent")
+    print(f"\nthe hold, stopped at 30/45/60/75 % of the run (0.84 build, {DEFAULT_STRATEGY}): joint motion after the hold was sent")
     print(f"{'hold at':<12}{'moved':>8}{'back':>8}{'TCP':>8}   (rad, rad against the travel, mm)")
     for mode in ("path", "setpoint", "measured"):
-        runs = [run_one(traj, robot, "m3-0.84", "timed", servos=servos, stop_at=f, hold=mode)
+        runs = [run_one(traj, robot, "m3-0.84", DEFAULT_STRATEGY, servos=servos, stop_at=f, hold=mode)
                 for f in (0.3, 0.45, 0.6, 0.75) for _ in range(max(1, args.repeats // 2))]
+        runs = [r for r in runs if "moved" in r]
         print(f"{mode:<12}{max(r['moved'] for r in runs):>8.3f}{max(r['back'] for r in runs):>8.3f}"
               f"{max(r['tcp_mm'] for r in runs):>8.1f}   (worst of {len(runs)})", flush=True)
 

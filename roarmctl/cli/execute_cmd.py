@@ -20,8 +20,8 @@ SERVOS_HELP = ("The simulated servos: physics (default: MuJoCo, the ST3235 model
                "docs/physics.md) or ideal (each servo runs its trapezoid exactly, no lag, no gravity).")
 SAG_HELP = ("Offset each goal by the servos' sag under gravity and the held payload (the ST3235's P-only loop; "
             "see docs/physics.md).")
-STRATEGY_HELP = ("Streaming strategy: timed (default), timed-lead, timed-acc, per-joint, timed-shared, dense, dense-ahead "
-                 "(compared in docs/benchmarks.md).")
+STRATEGY_HELP = ("Streaming strategy: timed-lead, timed, timed-acc, per-joint, timed-shared, dense, dense-ahead "
+                 "(compared in docs/guide.md, 'Talking to the firmware').")
 
 
 def register(app: typer.Typer) -> None:
@@ -46,15 +46,15 @@ def execute(
     output: Path | None = typer.Option(None, "--output", "-o", help="Write the commands that would be sent (JSON lines) instead; no device."),
     rate: float = typer.Option(50.0, "--rate", help="Commands per second (at most 90 at 115200 baud)."),
     speed_scale: float = typer.Option(1.0, "--speed-scale", help="Slow the motion down: 0.5 = half speed (0 < S <= 1)."),
-    strategy: str = typer.Option("timed", "--strategy", help=STRATEGY_HELP),
+    strategy: str = typer.Option("timed-lead", "--strategy", help=STRATEGY_HELP),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask for confirmation before moving the arm."),
     move_to_start: bool = typer.Option(False, "--move-to-start", help="If the arm is not at the first point, plan a collision-checked, timed motion there first (the trajectory's scene, limits and planner)."),
     from_current: bool = typer.Option(False, "--from-current", help="If the arm is not at the first point, plan the first free motion again from where it is."),
     max_error: float = typer.Option(30.0, "--max-error", help="Abort (and hold) when the TCP tracking error exceeds this (mm)."),
     sag: bool = typer.Option(False, "--sag/--no-sag", help=SAG_HELP + " (With --sim only with --servos physics: ideal servos do not sag.)"),
-    servos: str = typer.Option("ideal", "--servos", help="With --sim: the simulated servos, ideal (default: each runs its trapezoid "
-                               "exactly, no lag, no gravity) or physics (MuJoCo, the ST3235 model with its 46 ms lag, gravity, "
-                               "the trajectory's scene and payload; docs/physics.md)."),
+    servos: str | None = typer.Option(None, "--servos", help="With --sim: the simulated servos, physics (the default: MuJoCo, "
+                                      "the ST3235 model with its 46 ms lag, gravity, the trajectory's scene and payload; "
+                                      "docs/physics.md) or ideal (each runs its trapezoid exactly, no lag, no gravity)."),
     log: Path | None = typer.Option(None, "--log", help="Execution log (JSON); default: next to TRAJ as NAME.exec.json."),
     json_out: bool = typer.Option(False, "--json", help="Print one JSON summary object on stdout, nothing else."),
 ) -> None:
@@ -76,10 +76,11 @@ def execute(
         raise InputError(f"--strategy: unknown '{strategy}'", f"choose one of {', '.join(STRATEGIES)}")
     if not max_error > 0:
         raise InputError("--max-error: must be positive (mm)")
+    if servos is not None and not sim:
+        raise InputError("--servos: only with --sim (a real arm has its own servos)")
+    servos = servos or "physics"
     if servos not in ("physics", "ideal"):
         raise InputError(f"--servos: '{servos}' is not physics or ideal")
-    if servos != "ideal" and not sim:
-        raise InputError("--servos: only with --sim (a real arm has its own servos)")
     traj = validate_trajectory(traj_path)  # limits, speeds and steps: nothing unchecked reaches the port
     robot = robot_of(traj, str(traj_path))
     if move_to_start and from_current:

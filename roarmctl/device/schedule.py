@@ -95,7 +95,7 @@ STRATEGIES = {
     "dense-ahead": Strategy("dense-ahead", 1, "max", "none",
                             description="T:102 one interval ahead, spd 0 / acc 0"),
 }
-DEFAULT_STRATEGY = "timed"
+DEFAULT_STRATEGY = "timed-lead"
 
 
 def default_latency(rate: float) -> float:

@@ -43,6 +43,7 @@ from roarmctl.device.schedule import (
     FEEDBACK_RATE,
     MAX_LINK_RATE,
     STRATEGIES,
+    T105_BYTES,
     Strategy,
     Tick,
     build_schedule,
@@ -390,7 +391,8 @@ class Streamer:
         n = len(sched)
         err = None
         lines, confirmed = 0, 0
-        polls: deque[tuple[float, int]] = deque()  # (sent at, lines sent up to and including it)
+        polls: deque[tuple[float, int]] = deque()  # (on the wire from, lines sent up to and including it)
+        wire_free = 0.0  # when the bytes sent so far will have left the host (115200 baud)
         last_sent_k, last_wire = -1, None
         polled = self.clock()
         for k, tick in enumerate(sched):
@@ -412,14 +414,19 @@ class Streamer:
             if send:
                 cmds = tick.commands if (last_sent_k == k - 1 or last_wire is None) else catch_up(tick, last_wire, dt, self.wm)
                 t_sent = link.send(cmds[0])
+                wire_free = max(wire_free, t_sent) + wire_seconds(len(protocol.encode(cmds[0])))
                 self._tick_of[id(cmds[0])] = k
                 for extra in cmds[1:]:
-                    link.send(extra)
+                    wire_free = max(wire_free, link.send(extra)) + wire_seconds(len(protocol.encode(extra)))
                 lines += len(cmds)
                 self.sent_lateness.append((k, t_sent - due))
                 self.setpoint, last_sent_k, last_wire = tick, k, tick.wire
                 if (k % poll_every == 0 or not polls) and len(polls) < 2:
-                    polls.append((link.send(protocol.feedback_request()), lines + 1))
+                    # the T:105 leaves the host's UART after the command bytes still in flight ahead of it:
+                    # its round trip starts then (the one measured at connect had nothing ahead of it)
+                    t_poll = link.send(protocol.feedback_request())
+                    polls.append((max(t_poll, wire_free), lines + 1))
+                    wire_free = max(wire_free, t_poll) + wire_seconds(T105_BYTES)
                     lines += 1
             polled_before, polled = polled, self.clock()
             new = link.poll()
@@ -492,8 +499,9 @@ class Streamer:
             return ("measured", np.array([fresh.wire[f] for f in self.wm.field_names])) if fresh is not None else ("none", None)
         if mode == "setpoint" or math.isnan(self.t0):
             return "setpoint", sp.wire
-        arrive = now - self.t0 + default_latency(self.rate)
-        latest = min(arrive, sp.t + 1.0 / self.rate + default_latency(self.rate))
+        # the goals ran ``lead`` ahead on the plan: the hold stops them where they would be when it arrives
+        arrive = now - self.t0 + default_latency(self.rate) + self.lead
+        latest = min(arrive, sp.t + 1.0 / self.rate + default_latency(self.rate) + self.lead)
         q = sample(self.traj, max(0.0, latest) * self.cfg.speed_scale)
         return "path", self.wm.to_wire_array(q)[0]
 

@@ -23,6 +23,7 @@ from devtraj import HOME, min_jerk, pick_place
 from roarmctl.cli import run as run_cli
 from roarmctl.device.protocol import encode
 from roarmctl.device.simulator import PtySimulator, SimConfig
+from roarmctl.device.schedule import DEFAULT_STRATEGY, STRATEGIES
 from roarmctl.device.streamer import default_latency, sample
 from roarmctl.robot.loader import load_robot
 
@@ -233,7 +234,7 @@ def test_output_file_exact_bytes_mapping_and_times(traj_file, tmp_path):
     rows = [json.loads(x) for x in lines]
     motion = [r for r in rows if r["cmd"]["T"] == 102]
     assert len(motion) == math.ceil(traj.duration * 50 - 1e-9) + 1
-    lat = default_latency(50)
+    lat = default_latency(50) + STRATEGIES[DEFAULT_STRATEGY].lead  # the default aims ahead by the servos' lag too
     for k, (line, r) in enumerate(zip(lines, rows)):
         cmd = r["cmd"]
         # exact bytes: the command inside the line is exactly what goes on the wire

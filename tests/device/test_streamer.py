@@ -119,7 +119,7 @@ def test_interrupt_at_tick_k_holds_on_the_planned_path_never_beyond_the_last_set
     path = sample(t, taus)
     i = int(np.argmin(np.max(np.abs(path - held), axis=1)))
     assert np.max(np.abs(path[i] - held)) < 2e-4
-    last_target = st.schedule[19].t + 0.02 + 0.0124  # the last tick targets one interval + latency ahead
+    last_target = st.schedule[19].t + 0.02 + 0.0124 + st.lead  # the last tick targets one interval + latency (+ lead) ahead
     assert taus[i] <= last_target + 1e-3
     assert taus[i] >= st.schedule[19].t - 0.02  # and not behind where the arm was sent
     assert res.log["summary"]["outcome"] == "interrupted" and len(res.log["sent"]) == len(link.sent)
