@@ -93,6 +93,8 @@ def test_leaving_sets_the_measured_pose_before_torque_on(tmp_path, how):
         t.wait_for(at_pose)
         t.key("\r")  # one waypoint, so that there is a recording to save
         t.wait_for(lambda s: "recorded waypoint 1" in s)
+        t.key("\ru")  # and one more, undone
+        t.wait_for(lambda s: "undone: waypoint 2" in s)
         if how == "q":
             t.key("q")
         elif how == "ctrl-c":
