@@ -105,3 +105,33 @@ def test_sim_device_guide_option_refuses_physics_servos(tmp_path):
     r = subprocess.run([sys.executable, "-m", "roarmctl", "sim-device", "--guide", str(p), "--servos", "physics"],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "ideal" in r.stderr
+
+
+def test_sim_device_guide_moves_the_served_arm_while_torque_is_off(tmp_path):
+    """`sim-device --guide` end to end: a client switches torque off, and the feedback follows the script."""
+    import signal
+    import time
+
+    from roarmctl.device.feedback import FeedbackValidator, read_valid
+    from roarmctl.device.link import Link
+    from roarmctl.robot.loader import load_robot
+
+    p = tmp_path / "g.yaml"
+    p.write_text("- {t: 0.5, joints: [0.3, 0.2, 1.2, 0.4, 0.1], gripper: 0.5}\n")
+    proc = subprocess.Popen([sys.executable, "-m", "roarmctl", "sim-device", "--guide", str(p), "--no-boot"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        path = proc.stdout.readline().strip()
+        robot = load_robot("roarm_m3_pro")
+        link = Link(path)
+        link.require_torque = False
+        with link:
+            link.connect()
+            link.send({"T": 210, "cmd": 0})
+            time.sleep(1.0)
+            q = read_valid(link, FeedbackValidator(robot, firmware=link.firmware, expect_torque=None)).q
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=30)
+    assert q == pytest.approx(Q_A, abs=2e-3)
