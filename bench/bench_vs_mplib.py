@@ -241,6 +241,7 @@ def roarmctl_query(ctx, step, q, seed: int):
 
     ctx.plan.planner.seed = seed
     ctx.free_count = 0
+    ctx.timed.clear()  # the query is timed afresh in every round (a plan keeps what it timed: motions.time_path)
     t0 = time.perf_counter()
     motion = motions.geometry(ctx, step, q)
     t1 = time.perf_counter()
@@ -258,6 +259,7 @@ def roarmctl_like_mplib(ctx, step, q, seed: int):
 
     ctx.plan.planner.seed = seed
     ctx.free_count = 0
+    ctx.timed.clear()  # the query is timed afresh in every round (a plan keeps what it timed: motions.time_path)
     arm = ctx.arm
     t0 = time.perf_counter()
     motion = motions.geometry(ctx, step, q)

@@ -93,6 +93,9 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
     return Planner(plan, robot, progress).run()
 
 
+_LIBRARIES_LOADED = False  # load_planning_libraries has imported them all
+
+
 def load_planning_libraries() -> None:
     """Import toppra (about 0.5 s, mostly scipy), OMPL and FCL up front, so stage timings measure work, not imports
     (also Ruckig, the blend's corner moves: 1-2 ms that a fresh process otherwise counted as blend time; RNEA's
@@ -102,7 +105,10 @@ def load_planning_libraries() -> None:
     again once they have loaded, for the handler that was in place: a Python handler that raises while a
     nanobind module (OMPL, Ruckig) initialises makes it call C++ terminate, so a Ctrl-C at that moment
     aborted the process instead of stopping it. (Blocking the signals would not do: numpy's BLAS threads
-    receive them.)"""
+    receive them.) Once they have loaded, a call does nothing (every api.plan calls it)."""
+    global _LIBRARIES_LOADED
+    if _LIBRARIES_LOADED:
+        return
     received: list[int] = []
     previous = {}
     if threading.current_thread() is threading.main_thread():
@@ -116,6 +122,8 @@ def load_planning_libraries() -> None:
 
         timing.import_toppra()
         from ompl import base, geometric  # noqa: F401
+
+        _LIBRARIES_LOADED = True
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)

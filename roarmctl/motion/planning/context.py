@@ -98,11 +98,17 @@ class PlanContext:
         self.set_state(motion.wps[0][self.gi] if self.gi is not None else None, grasp_target=motion.step.grasp_target)
 
 
+_BUNDLED: frozenset[str] | None = None
+
+
 def robot_spec(plan: Plan) -> str:
     """The plan's ``robot``: a bundled name as is; any other name is a path relative to the plan file's
     directory, which it may not leave (a plan reads only beside itself and in ``--package-path`` folders;
     a plan given as a dict is the caller's own and takes any path)."""
-    if plan.robot in bundled_robots():
+    global _BUNDLED
+    if _BUNDLED is None:
+        _BUNDLED = frozenset(bundled_robots())  # the package's own files: listed once per process
+    if plan.robot in _BUNDLED:
         return plan.robot
     if plan.path.name == DICT_NAME:
         candidate = plan.path.parent / Path(plan.robot).expanduser()
