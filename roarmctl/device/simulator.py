@@ -62,6 +62,8 @@ __all__ = [
 
 LATE = 0.002  # a wake-up this much after the firmware's next event counts as lateness (s)
 RECENT = 0.25  # s over which recent_lateness() takes its maximum
+SLICE = 0.05  # s of firmware time advanced between two looks at the stop flag
+JOIN = 10.0  # s stop() waits for the serving thread (it sees the stop within a SLICE of model time)
 
 
 class _Server:
@@ -103,13 +105,29 @@ class _Server:
                     data = b""
                 if data:
                     fw.receive(data, now)
-            fw.advance(now)
+            if not self._advance(now, stopped):
+                return
             out = fw.pop_output(now)
             if out:
                 try:
                     os.write(self.master, out)
                 except OSError:
                     pass  # nobody reads and the buffer is full (or closed): lost, like bytes on an open UART
+
+
+    def _advance(self, now: float, stopped: Callable[[], bool]) -> bool:
+        """The model up to ``now`` in slices of ``SLICE`` s, so that a stop is seen within a slice even when a
+        stall of the machine left much to catch up (physics servos step MuJoCo through all of it: a thread
+        still inside it when the interpreter exits crashes the process). False if stopped meanwhile."""
+        fw = self.fw
+        t = fw.now
+        while t + SLICE < now:
+            if stopped():
+                return False
+            t += SLICE
+            fw.advance(t)
+        fw.advance(now)
+        return True
 
 
 def _open_pty() -> tuple[int, int, str]:
@@ -272,7 +290,7 @@ class PtySimulator:
         self._stopped = True
         self._stop.set()
         if self._thread.is_alive():
-            self._thread.join(timeout=2.0)
+            self._thread.join(timeout=JOIN)
         for fd in (self.master, self.slave):
             try:
                 os.close(fd)

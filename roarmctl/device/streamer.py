@@ -211,6 +211,10 @@ class Streamer:
         self._tick_of: dict[int, int] = {}  # id(first command sent for a tick) -> tick
         self._asked_at: dict[int, float] = {}  # id(Reading) -> when its T:105 was sent
         self.device_late: deque[tuple[float, float]] = deque(maxlen=1000)  # (when seen, how late) of poll answers
+        # s: how far behind the plan skipped ticks left the arm (a stalled host or a busy firmware): the tick
+        # sent after a gap is less than a period late, but the arm had no newer goal for the whole gap, and
+        # each tick's spd is the plan's, so it stays that far behind until a frame shows it caught up
+        self.behind = 0.0
 
     def _schedule(self, traj) -> list[Tick]:
         return build_schedule(traj, self.robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale, sag=self.cfg.sag,
@@ -344,10 +348,11 @@ class Streamer:
 
     def _lateness_window(self, t_meas: float) -> float:
         """How far behind the plan the arm may be at ``t_meas`` (s after t0) for reasons measured
-        here: the host's own lateness on the ticks of the last 0.25 s, plus the device's."""
+        here: the host's own lateness on the ticks of the last 0.25 s or, when ticks were skipped, the
+        gap since the arm last caught up (``behind``), plus the device's."""
         recent = [x for k, x in self.sent_lateness[-40:] if t_meas - 0.25 <= self.schedule[k].t <= t_meas + 0.02]
         late = max(recent, default=0.0)
-        return max(0.0, late) + self._device_late()
+        return max(0.0, late, self.behind) + self._device_late()
 
     def _device_late(self) -> float:
         """How late the device itself has been lately (s): its answers to T:105 that came later than the
@@ -374,6 +379,8 @@ class Streamer:
         p = self._tcp(reading.q)
         err = float(np.linalg.norm(p - self._tcp(sample(self.traj, t_meas * s))))
         self.tracking.append((t_meas, err))
+        if err <= self.cfg.max_error / 3:
+            self.behind = 0.0  # caught up with the plan
         slack = self._lateness_window(t_meas) + max(0.0, SERVO_LAG - self.lead)
         taus = np.linspace(max(0.0, t_meas - slack - 0.01), t_meas + self.lead + 0.005, 12) * s
         plans = self.robot.kin.fk(self.robot.full_q(sample(self.traj, taus)))[:, :3, 3]
@@ -420,6 +427,8 @@ class Streamer:
                     wire_free = max(wire_free, link.send(extra)) + wire_seconds(len(protocol.encode(extra)))
                 lines += len(cmds)
                 self.sent_lateness.append((k, t_sent - due))
+                if 0 <= last_sent_k < k - 1:
+                    self.behind = max(self.behind, t_sent - (self.t0 + sched[last_sent_k + 1].t))
                 self.setpoint, last_sent_k, last_wire = tick, k, tick.wire
                 if (k % poll_every == 0 or not polls) and len(polls) < 2:
                     # the T:105 leaves the host's UART after the command bytes still in flight ahead of it:
