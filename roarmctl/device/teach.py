@@ -53,6 +53,8 @@ SURPRISES = {
 }
 HAND_SPEED = 12.0  # rad/s a joint may move between frames while a hand moves it (the servos' check is 5.9)
 HAND_RUN_LIMIT = 25  # refused frames in a row before teach leaves (about 0.5 s of frames)
+STALE_POSE = 0.3  # s: a measured pose older than this when leaving is stale (the link failed)
+STALE_HOLD_SPD = 100  # steps/s (0.15 rad/s) toward a stale pose, where the firmware's own hold speed is 600
 MAX_RAW = 1_000_000  # lines kept for --raw (sent + received); beyond, the log says how many were dropped
 
 
@@ -294,14 +296,17 @@ class TeachSession:
     # ------------------------------------------------------------------ leaving
     def hold_here(self, fresh: float = 0.3) -> dict[str, Any] | None:
         """Leave without a jump: every servo's goal = the measured pose (a ``T:102`` of the newest accepted
-        frame, read again for up to ``fresh`` s), then torque on. Best effort on a failing link: returns what
+        frame, read again for up to ``fresh`` s), then torque on; toward a pose older than ``STALE_POSE`` (a lost
+        link: the hand may have moved the arm since) at ``STALE_HOLD_SPD``. Best effort on a failing link: returns what
         was sent ({pose, fresh, t}) or None when nothing could be sent (the arm then stays limp)."""
         if not self.torque_off:
             return None
         reading = self._fresh(fresh)
         if reading is None:
             return None
-        cmd = self.wm.hold(dict(reading.wire), HOLD_SPD, 0)
+        stale = self.clock() - reading.t > STALE_POSE
+        # a pose measured a while ago (a lost link) may no longer be where the hand holds the arm: go there slowly
+        cmd = self.wm.hold(dict(reading.wire), STALE_HOLD_SPD if stale else HOLD_SPD, 0)
         try:
             t = self.link.send(cmd, fresh_line=True)
             self.link.send(TORQUE_ON)
@@ -310,7 +315,8 @@ class TeachSession:
             return None
         self.torque_off = False
         self.hold_sent = {"t": t, "cmd": cmd, "pose_age_s": round(t - reading.t, 4)}
-        self.event(f"torque on at the measured pose (pose {self.hold_sent['pose_age_s'] * 1e3:.0f} ms old)")
+        self.event(f"torque on at the measured pose (pose {self.hold_sent['pose_age_s'] * 1e3:.0f} ms old"
+                   + (f"; stale: servos limited to {STALE_HOLD_SPD} steps/s)" if stale else ")"))
         return self.hold_sent
 
     def _fresh(self, wait: float) -> Reading | None:

@@ -72,6 +72,16 @@ class Teach:
         return code
 
 
+def executed_until_torque_on(sim, timeout: float = 10.0) -> list:
+    """The commands the simulated firmware ran, once it ran the torque-on (its serving thread and its queue
+    may lag the teach process's exit on a loaded machine), plus a little for the servos to settle."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and {"T": 210, "cmd": 1} not in [c for _, _, c in sim.executed()]:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    return sim.executed()
+
+
 def status_q(line: str) -> np.ndarray | None:
     """The joints of a plain-mode status line ``[ t s] q a b c d e f | sigma ...``."""
     if "] q " not in line:
@@ -104,8 +114,7 @@ def test_leaving_sets_the_measured_pose_before_torque_on(tmp_path, how):
         else:
             sim.firmware.cfg.silent = True  # the arm stops answering (commands still arrive)
         code = t.finish()
-        time.sleep(0.5)
-        executed = sim.executed()
+        executed = executed_until_torque_on(sim)
         ts, q, torque = sim.recording()
     assert code == {"q": 0, "ctrl-c": 130, "sigterm": 143, "lost link": 4}[how], "\n".join(t.lines[-20:])
     if how == "lost link":
@@ -188,7 +197,7 @@ def test_20260701_build_is_warned_about_and_taught(tmp_path):
         t.wait_for(at_pose)
         t.key("\rq")
         code = t.finish()
-        executed = [c for _, _, c in sim.executed()]
+        executed = [c for _, _, c in executed_until_torque_on(sim)]
     assert code == 0 and "Move_to_location" in warned
     off = executed.index({"T": 210, "cmd": 0})
     after = [c for c in executed[off + 1:] if c.get("T") not in (105, 605)]
