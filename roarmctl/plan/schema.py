@@ -292,7 +292,7 @@ def _item(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: dict | 
     if known is not None and known.role == role:
         ctx.specs[id(raw)] = known
         return known
-    spec = _item_spec(ctx, raw, line, where, role, frames)
+    spec = _plain_primitive(ctx, raw, where, role) or _item_spec(ctx, raw, line, where, role, frames)
     if not (isinstance(raw, dict) and isinstance(raw.get("xyz"), dict)):  # no position in a robot frame
         ctx.specs[id(raw)] = spec
     return spec
@@ -304,6 +304,53 @@ _SHAPE_KEYS = ("size", "radius", "length", "file", "scale", "collision", "resolu
 _OWN_KEYS = {"box": ("size",), "cylinder": ("radius", "length"), "sphere": ("radius",), "mesh": ("file", "scale", "collision"),
              "cloud": ("file", "resolution")}
 _NO_ROTATION = (0.0, 0.0, 0.0)  # rpy when an item gives none
+
+
+# The keys of an obstacle or the table written as a primitive with nothing else (most of a big scene): a shape's own
+_PLAIN_KEYS = {"box": frozenset(("name", "shape", "size", "xyz", "rpy")),
+               "cylinder": frozenset(("name", "shape", "radius", "length", "xyz", "rpy")),
+               "sphere": frozenset(("name", "shape", "radius", "xyz", "rpy"))}
+
+
+def _numbers_within(value: Any, lo: float, hi: float, positive: bool = False) -> bool:
+    """``value`` is a list of 3 plain numbers (no bool), each in [lo, hi] (> lo when ``positive``; NaN fails)."""
+    return (type(value) is LocatedList and len(value) == 3
+            and all(type(v) in (int, float) and lo <= v <= hi and (not positive or v > lo) for v in value))
+
+
+def _plain_primitive(ctx: _Ctx, raw: Any, where: str, role: str) -> ItemSpec | None:
+    """The spec ``_item_spec`` makes of an obstacle or the table written as a box, cylinder or sphere with nothing but
+    its name, shape, size (radius, length), xyz as [x, y, z] and rpy as [r, p, y], every field well-formed and
+    within its ``FIELD_BOUNDS``: the same checks all at once (the common case of a scene of many items), the same
+    spec. None for anything else, which ``_item_spec`` reads field by field (and names what is wrong)."""
+    if role == "object" or type(raw) is not LocatedDict:
+        return None
+    shape = raw.get("shape")
+    if type(shape) is not str:
+        return None
+    keys = _PLAIN_KEYS.get(shape)
+    if keys is None or not keys.issuperset(raw) or "xyz" not in raw or (role != "table" and "name" not in raw):
+        return None
+    xyz, rpy = raw["xyz"], raw.get("rpy", _NO_ROTATION)
+    if not _numbers_within(xyz, *FIELD_BOUNDS["xyz"]) or ("rpy" in raw and not _numbers_within(rpy, *FIELD_BOUNDS["rpy"])):
+        return None
+    top = FIELD_BOUNDS["size"][1]  # radius and length have the same bounds: (0, 10] m
+    if shape == "box":
+        if not _numbers_within(raw.get("size"), 0.0, top, positive=True):
+            return None
+    else:
+        dims: tuple[Any, ...] = (raw.get("radius"), raw.get("length")) if shape == "cylinder" else (raw.get("radius"),)
+        if not all(type(v) in (int, float) and 0.0 < v <= top for v in dims):
+            return None
+    spec = ItemSpec(name=str(raw.get("name", "table")), role=role, shape=shape, pose=transform(xyz, rpy), line=raw.line)
+    spec.where = f"{ctx.where(raw.line)}: {where}"
+    if shape == "box":
+        spec.size = tuple(np.array(raw["size"], dtype=float))
+    else:
+        spec.radius = float(raw["radius"])
+        if shape == "cylinder":
+            spec.length = float(raw["length"])
+    return spec
 
 
 def _item_spec(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: dict | None = None) -> ItemSpec:
