@@ -785,3 +785,93 @@ def test_reading_yaml_registers_nothing_on_pyyaml_s_classes(tmp_path, shared_yam
 def test_a_tag_on_a_yaml_value_that_is_not_a_plain_type_is_refused(tmp_path, text, needle):
     (tmp_path / "p.yaml").write_text("robot: roarm_m3_pro\ntasks: [{wait: 0.2}]\n" + text)
     refused(["plan", str(tmp_path / "p.yaml"), "-o", str(tmp_path / "p.traj.json")], "p.yaml:3", needle)
+
+
+# --------------------------------------------------------------------------- a description a file named stays in its folder
+def _outside_files(o: Path) -> None:
+    """In ``o`` (outside the description's folder): a joint_limits.yaml and a URDF whose content must never be
+    read through a description that a plan, trajectory or log named."""
+    (o / "jl.yaml").write_text("joint_limits: {SECRET_JOINT_4711: {has_velocity_limits: true, max_velocity: 1.0}}\n")
+    (o / "arm.urdf").write_text((hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text()
+                                .replace('name="roarm_m3_pro"', 'name="SECRET_ROBOT_4711"', 1))
+
+
+CONFINED_CASES = {
+    "urdf absolute": ({"urdf": "{o}/arm.urdf"}, "urdf"),
+    "urdf ../": ({"urdf": "../outside/arm.urdf"}, "urdf"),
+    "srdf absolute": ({"srdf": "{o}/arm.urdf"}, "srdf"),
+    "joint_limits ../": ({"joint_limits": "../outside/jl.yaml"}, "joint_limits"),
+    "joint_limits through a symlinked folder": ({"joint_limits": "sub/jl.yaml"}, "joint_limits"),
+    "package folder /": ({"packages": {"p": "/"}}, "packages.p"),
+    "package folder through a symlink": ({"packages": {"p": "sub"}}, "packages.p"),
+}
+
+
+@pytest.mark.parametrize("route, case", [("plan", c) for c in CONFINED_CASES] + [  # a bundle holds no symlinks
+    ("trajectory robot_description", c) for c in CONFINED_CASES if "symlink" not in c])
+def test_a_description_a_file_names_cannot_point_outside_its_folder(tmp_path, secret, case, route):
+    """A sidecar that a plan names, or the robot.yaml a trajectory carries, reads only inside its own folder
+    and --package-path folders: its urdf, srdf, joint_limits and packages may not widen that (symlinks
+    resolved first). Before, each of these read the outside file (a joint name from it was in the error)."""
+    o = secret.parent
+    _outside_files(o)
+    d = _desc_dir(tmp_path)
+    (d / "sub").symlink_to(o)
+    (d / "arm.urdf").write_text((hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text())
+    fields, needle = CONFINED_CASES[case]
+    fields = {k: (v.replace("{o}", str(o)) if isinstance(v, str) else v) for k, v in fields.items()}
+    if route == "plan":
+        hostile.sidecar(d, fields.pop("urdf", "arm.urdf"), **fields)
+        (d / "p.yaml").write_text("robot: arm.yaml\nstart: [0, 0, 1.57, 0, 0, 0]\ntasks: [{wait: 0.2}]\n")
+        args = ["plan", str(d / "p.yaml"), "-o", str(d / "p.traj.json")]
+    else:
+        side = yaml.safe_load((hostile.bundled_dir() / "roarm_m3_pro.yaml").read_text())
+        side.update({"urdf": "robot.urdf", **fields})
+        doc = hostile.trajectory_doc("custom")
+        doc["robot_description"] = {"format": "roarmctl.robot-bundle/1", "files": {
+            "robot.yaml": yaml.safe_dump(side), "robot.urdf": (hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text()}}
+        (d / "t.traj.json").write_text(json.dumps(doc))
+        args = ["visualize-path", str(d / "t.traj.json"), "-o", str(d / "t.png")]
+    code, out, err = cli(args)
+    assert code == 2 and f"{needle}: '" in err and "lies outside the folders" in err, err
+    assert "SECRET" not in out + err
+    assert not (d / "p.traj.json").exists() and not (d / "t.png").exists()
+
+
+def test_the_user_s_own_sidecar_may_name_files_elsewhere(tmp_path, secret):
+    """The control: named on the command line (kin), the sidecar is the user's word and its files may lie
+    beside it or elsewhere; the same sidecar named by a plan is refused."""
+    o = secret.parent
+    (o / "jl.yaml").write_text("joint_limits: {base_link_to_link1: {has_velocity_limits: true, max_velocity: 1.0}}\n")
+    d = _desc_dir(tmp_path)
+    (d / "arm.urdf").write_text((hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text())
+    side = hostile.sidecar(d, "arm.urdf", joint_limits="../outside/jl.yaml")
+    code, _, err = cli(["kin", "fk", str(side), *hostile.M3_Q[:5]])
+    assert code == 0, err
+    (d / "p.yaml").write_text("robot: arm.yaml\nstart: [0, 0, 1.57, 0, 0]\ntasks: [{wait: 0.2}]\n")
+    refused(["plan", str(d / "p.yaml"), "-o", str(d / "p.traj.json")], "joint_limits: '", "lies outside the folders")
+
+
+@pytest.mark.parametrize("kind", ["trajectory", "execution log"])
+def test_an_old_file_naming_a_description_path_reads_it_only_beside_itself(tmp_path, secret, kind):
+    """A trajectory or log written before bundles names its description by path: beside the file (or under
+    --package-path) it loads as data; elsewhere, or through a symlink out, it is refused unread."""
+    o = secret.parent
+    hostile.m3_xacro(o, "'SECRET_ROBOT_4711'")
+    outside = hostile.sidecar(o, "arm.xacro")
+    d = _desc_dir(tmp_path)
+    (d / "link.yaml").symlink_to(outside)
+    for robot in (str(outside), "../outside/arm.yaml", "link.yaml"):
+        if kind == "trajectory":
+            (d / "t.traj.json").write_text(json.dumps(hostile.trajectory_doc(robot)))
+            args = ["visualize-path", str(d / "t.traj.json"), "-o", str(d / "t.png")]
+        else:
+            (d / "run.exec.json").write_text(json.dumps(hostile.execlog_doc(robot)))
+            args = ["export", str(d / "run.exec.json"), "-o", str(d / "run.mcap")]
+        code, out, err = cli(args)
+        assert code == 2 and "robot: '" in err and "lies outside the folders" in err, (robot, err)
+        assert "SECRET" not in out + err
+    doc = hostile.trajectory_doc(str(outside)) if kind == "trajectory" else hostile.execlog_doc(str(outside))
+    Path(args[1]).write_text(json.dumps(doc))
+    code, _, err = cli(["--package-path", f"arms={o}", *args])
+    assert code == 0, err  # the user's word: --package-path

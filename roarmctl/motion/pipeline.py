@@ -75,7 +75,7 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
                          "pass --port PORT (or --sim), or give a named pose or joint values as start")
     load_planning_libraries()
     try:
-        robot = load_robot(robot_spec(plan))
+        robot = load_robot(robot_spec(plan), confine=plan.path.name != DICT_NAME)  # a dict plan is the caller's own
     except DescriptionError:
         raise
     except InputError as exc:  # unknown robot: name the plan's line (a dict has none: say where paths start)

@@ -21,6 +21,7 @@ import base64
 import binascii
 import hashlib
 import json
+import os
 import re
 import tempfile
 import xml.etree.ElementTree as ET
@@ -28,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from roarmctl.errors import DescriptionError, InputError, TrajectoryFileError
-from roarmctl.fileio import read_bytes, read_text
+from roarmctl.fileio import Roots, read_bytes, read_text
 from roarmctl.robot.meshes import MESH_BYTES, description_roots, package_map, resolve
 from roarmctl.robot.model import Robot
 from roarmctl.robot.xacro_input import expand
@@ -48,11 +49,12 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def make_bundle(spec: str) -> dict[str, Any] | None:
+def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
     """The ``robot_description`` of the description at path ``spec`` (None for a bundled robot's name).
 
-    Reads exactly what loading it reads (inside its roots, bounded); xacro is expanded as loading it
-    from a plan would (the safe evaluator, unless the user's ``--trust-xacro``)."""
+    Reads exactly what loading it reads (inside its roots, bounded; ``confine`` as ``load_robot``'s, for a
+    description a plan named); xacro is expanded as loading it from a plan would (the safe evaluator,
+    unless the user's ``--trust-xacro``)."""
     import yaml
 
     from roarmctl.robot import loader
@@ -70,7 +72,7 @@ def make_bundle(spec: str) -> dict[str, Any] | None:
             files["robot.yaml"] = yaml.safe_dump(_plain(side), sort_keys=False)
             return {"format": FORMAT, "files": files}
         urdf = (path.parent / str(side["urdf"])).resolve()
-    roots = description_roots(side, path)
+    roots = description_roots(side, path, confined=confine)
     side["_roots"] = roots
     root = loader._read_urdf(urdf, side, path)
     packages = package_map(side.get("packages"), path, str(path))
@@ -160,7 +162,7 @@ def load_bundle(doc: Any, where: str) -> Robot:
             (folder / name).parent.mkdir(exist_ok=True)
             (folder / name).write_bytes(data)
         try:
-            robot = load_robot(str(folder / "robot.yaml"))
+            robot = load_robot(str(folder / "robot.yaml"), confine=True)
         except InputError as exc:
             message = exc.message.replace(str(folder), f"{where}: robot_description")
             raise type(exc)(message, exc.hint) from None
@@ -171,9 +173,19 @@ def load_bundle(doc: Any, where: str) -> Robot:
 def trajectory_robot(name: str, description: Any, where: str) -> Robot:
     """The robot of a trajectory or execution log: its ``robot_description`` when it carries one, else the
     bundled robot ``name`` - or, in a file written before bundles, the description at path ``name``,
-    loaded as data (xacro by the safe evaluator, a sidecar's ``trust`` ignored)."""
-    from roarmctl.robot.loader import load_robot
+    loaded as data (xacro by the safe evaluator, a sidecar's ``trust`` ignored). When ``where`` is the
+    file, that path must lie beside it (relative to its folder) or under a ``--package-path`` folder,
+    and the description reads only inside its own folder (``load_robot``'s ``confine``), as a plan's."""
+    from roarmctl.robot.loader import bundled_robots, load_robot
+    from roarmctl.robot.meshes import CONFINED_HINT, PACKAGE_PATHS
 
     if description is not None:
         return load_bundle(description, where)
-    return load_robot(name)
+    source = Path(where)
+    if name in bundled_robots() or not source.is_file():  # a bundled name, or a trajectory made in memory
+        return load_robot(name)
+    candidate = source.parent / Path(name)
+    if "/" not in name and os.sep not in name and not candidate.is_file():
+        return load_robot(name)  # an unknown plain name: said as such
+    Roots([source.parent], PACKAGE_PATHS).check(candidate, f"{where}: robot", TrajectoryFileError, CONFINED_HINT)
+    return load_robot(str(candidate), confine=True)

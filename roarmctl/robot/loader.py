@@ -66,20 +66,22 @@ def bundled_robots() -> list[str]:
 _CACHE: dict[tuple, Robot] = {}
 
 
-def load_robot(spec: str, trust_sidecar: bool = False) -> Robot:
+def load_robot(spec: str, trust_sidecar: bool = False, confine: bool = False) -> Robot:
     """A bundled robot name (``roarm_m3_pro``) or a path to a ``.yaml``, ``.urdf`` or ``.xacro`` file.
 
     A description reads only inside its roots (``meshes.description_roots``: its folder and its
     packages). ``trust_sidecar``: a sidecar's ``trust: true`` lets xacro evaluate its expressions
     itself - True only where the user named the file (``kin``, ``api.load_robot``), never where a plan,
     trajectory or log did (then only the user's ``--trust-xacro`` counts, see ``robot.xacro_safe``).
+    ``confine``: a plan, trajectory or log named it: it reads only inside its own folder and the
+    ``--package-path`` folders (``meshes.description_roots``), whatever its sidecar names.
     """
     try:  # a file edited since it was loaded is loaded again
         st = os.stat(spec)
         stamp: tuple = (st.st_mtime_ns, st.st_size)
     except (OSError, ValueError):
         stamp = ()
-    key = (spec, stamp, trust_sidecar, TRUST_ALL, tuple(sorted((k, str(v)) for k, v in PACKAGE_PATHS.items())))
+    key = (spec, stamp, trust_sidecar, confine, TRUST_ALL, tuple(sorted((k, str(v)) for k, v in PACKAGE_PATHS.items())))
     if key in _CACHE:
         return _CACHE[key]
     path = bundled_dir() / f"{spec}.yaml"
@@ -98,7 +100,7 @@ def load_robot(spec: str, trust_sidecar: bool = False) -> Robot:
         if "dh" in data:
             robot = _from_dh(path, data)
         elif "urdf" in data:
-            data["_roots"] = description_roots(data, path)
+            data["_roots"] = description_roots(data, path, confined=confine)
             data["_trusted"] = trust_sidecar and data.get("trust") is True
             urdf = (path.parent / str(data["urdf"])).resolve()
             if not urdf.exists():  # anything else (a FIFO, a folder) is refused by the reader

@@ -133,12 +133,30 @@ _BALL: np.ndarray | None = None
 _LOADED: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
 
 
-def description_roots(side: dict, sidecar: Path) -> Roots:
+#: Why a description named by a plan, trajectory or log may not point elsewhere, and the fix.
+CONFINED_HINT = ("a description named by a plan, trajectory or execution log reads only inside its own folder and "
+                 "--package-path folders: keep its files there, or give the folder with --package-path NAME=DIR")
+
+
+def description_roots(side: dict, sidecar: Path, confined: bool = False) -> Roots:
     """The folders a description may read (``roarmctl.fileio.Roots``): the folder of ``sidecar`` (the
     YAML, or the URDF/xacro named directly), the folders of the files the sidecar names (``urdf``,
     ``srdf``, ``joint_limits``), the sidecar's ``packages`` and the command line's ``--package-path``
     folders (``PACKAGE_PATHS``; the sidecar wins). What those files refer to (meshes, includes,
-    ``load_yaml``) must lie inside these folders."""
+    ``load_yaml``) must lie inside these folders.
+
+    ``confined`` (a description a plan, trajectory or log named, not the user): only the sidecar's folder
+    and ``--package-path`` folders; a ``urdf``, ``srdf``, ``joint_limits`` or package folder the sidecar
+    names outside them (after symlinks) is refused, so such a file cannot widen what it may read."""
+    if confined:
+        base = Roots([Path(sidecar).parent], PACKAGE_PATHS)
+        for key in ("urdf", "srdf", "joint_limits"):
+            if isinstance(side.get(key), str):
+                base.check(Path(sidecar).parent / str(side[key]), f"{sidecar}: {key}", DescriptionError, CONFINED_HINT)
+        own = package_map(side.get("packages"), sidecar, str(sidecar))
+        for name, folder in own.items():
+            base.check(folder, f"{sidecar}: packages.{name}", DescriptionError, CONFINED_HINT)
+        return Roots(base.folders, {**PACKAGE_PATHS, **own})
     packages = {**PACKAGE_PATHS, **package_map(side.get("packages"), sidecar, str(sidecar))}
     named = [Path(sidecar).parent / str(side[k]) for k in ("urdf", "srdf", "joint_limits") if isinstance(side.get(k), str)]
     return Roots([Path(sidecar).parent] + [p.parent for p in named], packages)

@@ -14,7 +14,7 @@ from roarmctl.motion.planning.pieces import SAMPLE_DT, TimedPiece
 from roarmctl.motion.planning.tasks import where
 from roarmctl.motion.timing import TimedPath
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
-from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask
+from roarmctl.plan.schema import DICT_NAME, MoveTask, PickTask, PlaceTask
 from roarmctl.robot.bundle import make_bundle
 from roarmctl.robot.loader import bundled_robots
 
@@ -63,7 +63,7 @@ def assemble(ctx: PlanContext, pieces: list[TimedPiece]) -> Trajectory:
     p = ctx.plan
     traj = Trajectory(
         robot=ctx.robot.name,
-        robot_description=make_bundle(robot_spec(p)) if p.robot not in bundled_robots() else None,
+        robot_description=make_bundle(robot_spec(p), confine=p.path.name != DICT_NAME) if p.robot not in bundled_robots() else None,
         joint_names=list(ctx.robot.joint_names),
         times=t[keep],
         positions=np.concatenate(qs)[keep],
