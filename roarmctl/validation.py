@@ -26,6 +26,12 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 import yaml
+from yaml.composer import Composer
+from yaml.constructor import SafeConstructor
+from yaml.parser import Parser
+from yaml.reader import Reader
+from yaml.resolver import Resolver
+from yaml.scanner import Scanner
 
 from roarmctl.errors import InputError, PlanFileError, describe_value
 from roarmctl.fileio import Roots, read_bytes
@@ -212,13 +218,6 @@ def _private_loader() -> type:
     ``add_implicit_resolver`` changes every document read through ``SafeLoader``/``CSafeLoader`` in the
     process. Our class lists the safe scalar constructors by name and keeps only the standard implicit
     resolvers, so no registration elsewhere reaches a plan, and nothing we do reaches anyone else."""
-    from yaml.composer import Composer
-    from yaml.constructor import SafeConstructor
-    from yaml.parser import Parser
-    from yaml.reader import Reader
-    from yaml.resolver import Resolver
-    from yaml.scanner import Scanner
-
     c_parser: Any = getattr(yaml, "__with_libyaml__", False) and importlib.import_module("yaml.cyaml").CParser
     parsers: tuple[type, ...] = (c_parser,) if c_parser else (Reader, Scanner, Parser, Composer)
 

@@ -30,7 +30,7 @@ from typing import Any
 
 from roarmctl.errors import DescriptionError, InputError, TrajectoryFileError
 from roarmctl.fileio import Roots, read_bytes, read_text
-from roarmctl.robot.meshes import MESH_BYTES, description_roots, package_map, resolve
+from roarmctl.robot.meshes import CONFINED_HINT, MESH_BYTES, PACKAGE_PATHS, description_roots, package_map, resolve
 from roarmctl.robot.model import Robot
 from roarmctl.robot.xacro_input import expand
 
@@ -177,7 +177,6 @@ def trajectory_robot(name: str, description: Any, where: str) -> Robot:
     file, that path must lie beside it (relative to its folder) or under a ``--package-path`` folder,
     and the description reads only inside its own folder (``load_robot``'s ``confine``), as a plan's."""
     from roarmctl.robot.loader import bundled_robots, load_robot
-    from roarmctl.robot.meshes import CONFINED_HINT, PACKAGE_PATHS
 
     if description is not None:
         return load_bundle(description, where)
