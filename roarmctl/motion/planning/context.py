@@ -128,7 +128,7 @@ def scene_item(spec: ItemSpec) -> SceneItem:
     or point cloud from the data it carries (a trajectory's scene) or else read from its file
     (``roarmctl.motion.scenefiles``; errors are ``PlanFileError`` naming the plan's line)."""
     # the plan's schema checked role and shape against the scene's
-    role, pose = cast("Role", spec.role), spec.pose.copy()
+    role, pose = cast("Role", spec.role), spec.pose  # SceneItem keeps a copy of it
     if spec.shape == "mesh":
         mesh = spec.data or read_mesh_item(spec.file, spec.scale, spec.exact, f"{spec.where}.file", PlanFileError)
         return SceneItem(name=spec.name, role=role, shape="mesh", pose=pose, mesh=mesh)
@@ -136,4 +136,4 @@ def scene_item(spec: ItemSpec) -> SceneItem:
         cloud = spec.data or read_cloud_item(spec.file, spec.resolution, f"{spec.where}.file", PlanFileError)
         return SceneItem(name=spec.name, role=role, shape="cloud", pose=pose, cloud=cloud)
     return SceneItem(name=spec.name, role=role, shape=cast("Shape", spec.shape), pose=pose,
-                     size=cast(tuple[float, float, float], tuple(spec.size)), radius=spec.radius, length=spec.length)
+                     size=cast("tuple[float, float, float]", tuple(spec.size)), radius=spec.radius, length=spec.length)
