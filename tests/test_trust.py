@@ -875,3 +875,22 @@ def test_an_old_file_naming_a_description_path_reads_it_only_beside_itself(tmp_p
     Path(args[1]).write_text(json.dumps(doc))
     code, _, err = cli(["--package-path", f"arms={o}", *args])
     assert code == 0, err  # the user's word: --package-path
+
+
+@pytest.mark.parametrize("scale, ok", [(0.0005, False), (0.001, True)])
+def test_execute_and_export_hold_speed_scale_to_one_bound(tmp_path, traj, scale, ok):
+    """``execute --speed-scale`` took any S > 0 while ``export`` refused a log slowed below 0.001 (a run at
+    1e-300 of its speed would never end): both read ``motion.validate.MIN_SPEED_SCALE`` now."""
+    from roarmctl.motion.validate import MIN_SPEED_SCALE
+
+    assert MIN_SPEED_SCALE == 0.001
+    code, _, err = cli(["execute", str(traj), "--output", str(tmp_path / "cmds.jsonl"), "--speed-scale", str(scale)])
+    assert (code == 0) == ok, err
+    if not ok:
+        assert "--speed-scale: 0.0005 is outside [0.001, 1]" in err, err
+    log = tmp_path / "run.exec.json"
+    log.write_text(json.dumps({**hostile.execlog_doc(), "speed_scale": scale}))
+    code, _, err = cli(["export", str(log), "-o", str(tmp_path / "run.mcap")])
+    assert (code == 0) == ok, err
+    if not ok:
+        assert "speed_scale" in err, err

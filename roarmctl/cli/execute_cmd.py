@@ -45,7 +45,7 @@ def execute(
     sim: bool = typer.Option(False, "--sim", help="Run against the built-in firmware simulator (over a real pseudo-terminal)."),
     output: Path | None = typer.Option(None, "--output", "-o", help="Write the commands that would be sent (JSON lines) instead; no device."),
     rate: float = typer.Option(50.0, "--rate", help="Commands per second (at most 90 at 115200 baud)."),
-    speed_scale: float = typer.Option(1.0, "--speed-scale", help="Slow the motion down: 0.5 = half speed (0 < S <= 1)."),
+    speed_scale: float = typer.Option(1.0, "--speed-scale", help="Slow the motion down: 0.5 = half speed (0.001 <= S <= 1)."),
     strategy: str = typer.Option("timed-lead", "--strategy", help=STRATEGY_HELP),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask for confirmation before moving the arm."),
     move_to_start: bool = typer.Option(False, "--move-to-start", help="If the arm is not at the first point, plan a collision-checked, timed motion there first (the trajectory's scene, limits and planner)."),

@@ -22,6 +22,7 @@ from roarmctl.device import protocol, st3235
 from roarmctl.device.protocol import WireMap, acc_register, spd_register, wire_seconds
 from roarmctl.device.sag import offsets as sag_offsets
 from roarmctl.errors import InputError
+from roarmctl.motion.validate import MIN_SPEED_SCALE
 
 MAX_LINK_RATE = 90.0  # T:102 lines/s the 115200 link can carry at all (about 10.4 ms each)
 DEFAULT_RATE = 50.0
@@ -143,8 +144,8 @@ def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: floa
     if not 0 < rate <= MAX_LINK_RATE:
         raise InputError(f"--rate: {rate:g} Hz is outside (0, {MAX_LINK_RATE:g}]",
                          f"115200 baud carries at most about {MAX_LINK_RATE:g} T:102 lines/s; 20-50 Hz is sensible")
-    if not 0 < speed_scale <= 1.0:
-        raise InputError(f"--speed-scale: {speed_scale:g} is outside (0, 1]", "use 0.5 for half speed")
+    if not MIN_SPEED_SCALE <= speed_scale <= 1.0:  # the bound an execution log's reader holds it to (export)
+        raise InputError(f"--speed-scale: {speed_scale:g} is outside [{MIN_SPEED_SCALE:g}, 1]", "use 0.5 for half speed")
     rate = strategy_rate(strat, rate)
     wm = WireMap(robot)
     _check_wire_range(traj, wm)
