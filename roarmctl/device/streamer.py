@@ -211,10 +211,12 @@ class Streamer:
         self._tick_of: dict[int, int] = {}  # id(first command sent for a tick) -> tick
         self._asked_at: dict[int, float] = {}  # id(Reading) -> when its T:105 was sent
         self.device_late: deque[tuple[float, float]] = deque(maxlen=1000)  # (when seen, how late) of poll answers
-        # s: how far behind the plan skipped ticks left the arm (a stalled host or a busy firmware): the tick
-        # sent after a gap is less than a period late, but the arm had no newer goal for the whole gap, and
-        # each tick's spd is the plan's, so it stays that far behind until a frame shows it caught up
-        self.behind = 0.0
+        # s after t0: the first tick skipped since the arm last followed normally (a stalled host or a busy
+        # firmware). The tick sent after a gap is less than a period late, but the arm had no newer goal for
+        # the whole gap, and each tick's spd is what the plan needs, not what catching up needs: a joint left
+        # behind stays behind by that distance (in time, more as the plan slows down) until the motion ends.
+        # Until a frame shows it caught up, the tracking check accepts the arm anywhere on the path since then.
+        self.behind_since: float | None = None
 
     def _schedule(self, traj) -> list[Tick]:
         return build_schedule(traj, self.robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale, sag=self.cfg.sag,
@@ -348,11 +350,10 @@ class Streamer:
 
     def _lateness_window(self, t_meas: float) -> float:
         """How far behind the plan the arm may be at ``t_meas`` (s after t0) for reasons measured
-        here: the host's own lateness on the ticks of the last 0.25 s or, when ticks were skipped, the
-        gap since the arm last caught up (``behind``), plus the device's."""
+        here: the host's own lateness on the ticks of the last 0.25 s, plus the device's."""
         recent = [x for k, x in self.sent_lateness[-40:] if t_meas - 0.25 <= self.schedule[k].t <= t_meas + 0.02]
         late = max(recent, default=0.0)
-        return max(0.0, late, self.behind) + self._device_late()
+        return max(0.0, late) + self._device_late()
 
     def _device_late(self) -> float:
         """How late the device itself has been lately (s): its answers to T:105 that came later than the
@@ -379,12 +380,21 @@ class Streamer:
         p = self._tcp(reading.q)
         err = float(np.linalg.norm(p - self._tcp(sample(self.traj, t_meas * s))))
         self.tracking.append((t_meas, err))
-        if err <= self.cfg.max_error / 3:
-            self.behind = 0.0  # caught up with the plan
         slack = self._lateness_window(t_meas) + max(0.0, SERVO_LAG - self.lead)
-        taus = np.linspace(max(0.0, t_meas - slack - 0.01), t_meas + self.lead + 0.005, 12) * s
+        lo, hi = max(0.0, t_meas - slack - 0.01), t_meas + self.lead + 0.005
+        near = self._path_error(p, lo, hi)
+        if self.behind_since is not None:
+            if near <= self.cfg.max_error / 3:
+                self.behind_since = None  # caught up: where a normally following arm would be
+            else:
+                near = min(near, self._path_error(p, min(lo, self.behind_since), hi))
+        return err, min(err, near)
+
+    def _path_error(self, p: np.ndarray, lo: float, hi: float) -> float:
+        """The least distance (m) of TCP ``p`` from the plan's TCP at times ``lo..hi`` (s after t0, every 10 ms at least)."""
+        taus = np.linspace(lo, hi, max(12, int((hi - lo) / 0.01) + 2)) * self.cfg.speed_scale
         plans = self.robot.kin.fk(self.robot.full_q(sample(self.traj, taus)))[:, :3, 3]
-        return err, min(err, float(np.min(np.linalg.norm(plans - p, axis=1))))
+        return float(np.min(np.linalg.norm(plans - p, axis=1)))
 
     def _stream(self) -> None:
         link, sched, cfg = self.link, self.schedule, self.cfg
@@ -427,8 +437,8 @@ class Streamer:
                     wire_free = max(wire_free, link.send(extra)) + wire_seconds(len(protocol.encode(extra)))
                 lines += len(cmds)
                 self.sent_lateness.append((k, t_sent - due))
-                if 0 <= last_sent_k < k - 1:
-                    self.behind = max(self.behind, t_sent - (self.t0 + sched[last_sent_k + 1].t))
+                if 0 <= last_sent_k < k - 1 and self.behind_since is None:
+                    self.behind_since = sched[last_sent_k + 1].t
                 self.setpoint, last_sent_k, last_wire = tick, k, tick.wire
                 if (k % poll_every == 0 or not polls) and len(polls) < 2:
                     # the T:105 leaves the host's UART after the command bytes still in flight ahead of it:
