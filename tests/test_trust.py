@@ -894,3 +894,22 @@ def test_execute_and_export_hold_speed_scale_to_one_bound(tmp_path, traj, scale,
     assert (code == 0) == ok, err
     if not ok:
         assert "speed_scale" in err, err
+
+
+def test_a_carried_robot_holds_no_visuals_and_is_drawn_from_its_collision_shapes(tmp_path):
+    """The choice for visuals (docs/reference.md, Trajectories and logs): the bundle keeps what planning and
+    checking read; a visual mesh is not carried, and the picture of a carried robot still draws."""
+    d = _desc_dir(tmp_path)
+    _stl(d / "visual.stl")
+    urdf = (hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text().replace(
+        '<link name="link3">', '<link name="link3"><visual><geometry><mesh filename="visual.stl"/></geometry></visual>', 1)
+    (d / "arm.urdf").write_text(urdf)
+    hostile.sidecar(d, "arm.urdf")
+    (d / "p.yaml").write_text("robot: arm.yaml\ntasks: [{move: {joints: [0.3, 0.2, 1.6, 0.1, 0.2]}}]\n")
+    code, _, err = cli(["plan", str(d / "p.yaml"), "-o", str(d / "p.traj.json")])
+    assert code == 0, err
+    files = json.loads((d / "p.traj.json").read_text())["robot_description"]["files"]
+    assert "<visual" in urdf and "<visual" not in files["robot.urdf"] and not any(f.startswith("meshes/") for f in files)
+    (d / "visual.stl").unlink()
+    code, _, err = cli(["visualize-path", str(d / "p.traj.json"), "-o", str(d / "t.png")])
+    assert code == 0 and (d / "t.png").stat().st_size > 0, err
