@@ -283,7 +283,12 @@ class Evaluator:
         op = BINARY.get(type(node.op))
         if op is None:
             raise Refused(f"the operator {type(node.op).__name__} is not allowed")
-        return op(self._operand(self.eval(node.left)), self._operand(self.eval(node.right)))
+        left, right = self._operand(self.eval(node.left)), self._operand(self.eval(node.right))
+        try:
+            return op(left, right)
+        except (ValueError, TypeError, OverflowError, ZeroDivisionError) as exc:
+            reason = exc.args[-1] if isinstance(exc, OverflowError) and exc.args else exc  # (34, 'Numerical result out of range')
+            raise Refused(f"{_describe(node)}: {reason}") from None
 
     def _UnaryOp(self, node: ast.UnaryOp) -> Any:
         op = UNARY.get(type(node.op))
