@@ -22,6 +22,9 @@ import yaml
 
 from roarmctl.device.teach import NEAR_FACTOR, Waypoint, gripper_index
 from roarmctl.fileio import atomic_write_text
+from roarmctl.motion.geometry import half_extents
+from roarmctl.motion.planning.context import scene_item
+from roarmctl.robot.ik.pitch import tool_pitch
 
 GRASP_REACH = 0.015  # m: a grasp with the TCP this close to an object's box picks that object
 GRIPPER_MOVED = 0.02  # rad: a waypoint sets the gripper when it moved more than this since the last one that did
@@ -106,10 +109,6 @@ def _picks(robot, waypoints: list[Waypoint], source: Any) -> dict[int, str]:
     the object's centre at the grasp)."""
     if source is None or not source.objects:
         return {}
-    from roarmctl.motion.geometry import half_extents
-    from roarmctl.motion.planning.context import scene_item
-    from roarmctl.robot.ik.pitch import tool_pitch
-
     items = {spec.name: scene_item(spec) for spec in source.objects}
     gi = gripper_index(robot)
     out: dict[int, str] = {}
