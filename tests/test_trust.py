@@ -539,8 +539,9 @@ def test_a_trajectory_carries_its_description_and_needs_no_file(tmp_path):
     (lambda f: f.update({"meshes/m0.stl": {"base64": "***"}}), "not valid base64"),
     (lambda f: f.update({"robot.urdf": 5}), "expected the file's text"),
     (lambda f: f.pop("robot.yaml"), "'robot.yaml' is missing"),
+    (lambda f: f.update({f"meshes/m{i}.stl": {"base64": "eA=="} for i in range(1001)}), "more than 1000 files"),
     (lambda f: f.update({"robot.urdf": f["robot.urdf"].replace("<robot", "<robto")}), "robot_description"),
-], ids=["path out", "bad base64", "not text", "no sidecar", "broken urdf"])
+], ids=["path out", "bad base64", "not text", "no sidecar", "1001 files", "broken urdf"])
 def test_a_damaged_carried_description_is_exit_2_naming_the_field(tmp_path, edit, needle):
     from roarmctl.robot.bundle import make_bundle
 
