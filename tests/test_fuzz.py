@@ -15,7 +15,10 @@ folder, loop or block; mutated SRDF and joint_limits.yaml; export paths onto use
 appears), delete a file the test made, or leave a temporary file. Profiles: ``ROARMCTL_FUZZ=full``
 (``make fuzz``, run by ``.ci/run``) runs 1,000 plans, 500 trajectories, 300 descriptions, 400 xacro
 files, 200 mesh paths, 200 SRDF, 200 joint_limits.yaml, 200 export paths and 300 logs; the default
-``make test`` runs a tenth of that. Hypothesis is derandomized: the same cases every run.
+``make test`` runs a tenth of that. Hypothesis is derandomized: the same cases every run. Also (issue 19
+review): YAML tags in every text-edited file, the size bombs, lexer and macro-params cases of
+tests/hostile.py, and 200 descriptions named by a plan or carried by a trajectory whose file fields point
+outside (absolute, ``..``, symlinks, FIFOs, loops).
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ pytestmark = pytest.mark.fuzz
 
 FULL = os.environ.get("ROARMCTL_FUZZ", "") == "full"
 _FULL_COUNTS = {"plans": 1000, "trajectories": 500, "descriptions": 300, "xacro": 400, "meshes": 200, "srdf": 200,
-                "joint_limits": 200, "export_paths": 200, "logs": 300}
+                "joint_limits": 200, "export_paths": 200, "logs": 300, "named_descriptions": 200}
 COUNTS = _FULL_COUNTS if FULL else {k: v // 10 for k, v in _FULL_COUNTS.items()}
 CASE_ALARM = 60  # s, a hang detector only
 
@@ -153,7 +156,11 @@ def mutate(doc, data, keys: list[str], rounds: int = 3):
     return doc
 
 
-TEXT_EDITS = st.sampled_from(["none", "none", "none", "truncate", "control", "alias", "deep", "bytes"])
+TEXT_EDITS = st.sampled_from(["none", "none", "none", "truncate", "control", "alias", "deep", "bytes", "tag"])
+#: YAML tags a file may carry that must never construct anything but plain values (issue 19 review).
+YAML_TAGS = st.sampled_from(["!!python/object/apply:os.system [touch MARKER]", "!!python/name:os.system x",
+                             "!!set {a, b}", "!!omap [a: 1]", "!degrees 90", "!local {a: 1}", "!!binary aGk=",
+                             "!!timestamp 2001-12-14", "!!float abc", "!!int 99999999999999999999999"])
 
 
 def text_edit(text: str, data) -> bytes:
@@ -173,6 +180,8 @@ def text_edit(text: str, data) -> bytes:
     if how == "bytes":
         at = data.draw(st.integers(0, len(raw)))
         return raw[:at] + data.draw(st.binary(min_size=1, max_size=4)) + raw[at:]
+    if how == "tag":
+        return raw + b"\nx_tag: " + data.draw(YAML_TAGS).encode() + b"\n"
     return raw
 
 
@@ -363,6 +372,11 @@ def _xacro_case(work: Path, data) -> Path:
         "include outside": lambda: hostile.m3_xacro(work, "'a'", '<xacro:include filename="/etc/hostname"/>'),
         "include pkg": lambda: hostile.m3_xacro(work, "'a'", '<xacro:include filename="$(find pkg)/parts.xacro"/>'),
         "include glob": lambda: hostile.m3_xacro(work, "'a'", '<xacro:include filename="/etc/*.conf"/>'),
+        "lexer": lambda: hostile.m3_xacro(work, "'a'", hostile.lexer_bomb(data.draw(st.sampled_from([1000, 1_000_000])))),
+        "macro params": lambda: hostile.m3_xacro(work, "'a'", hostile.macro_params_redos(data.draw(st.sampled_from([5, 40])))),
+        **{f"size: {name}": (lambda e, n: lambda: hostile.m3_xacro(
+            work, e, hostile.repeated_work() if n == "repeated work on a property" else ""))(expr, name)
+           for name, (expr, _) in hostile.SIZE_BOMBS.items()},
     }
     return corpus[data.draw(st.sampled_from(sorted(corpus)))]()
 
@@ -490,6 +504,54 @@ EXPORT_TARGETS = st.sampled_from([".", "..", "/", "", "user", "user/", "userfile
                                   "x.png", "x.json", "new/deeper/bag", "a" * 300, "a" * 300 + ".mcap", "userfile/bag",
                                   "bag\nname", "-", "--force", "user/inner", "ourbag", "ourbag/", "link_to_user", "~",
                                   "fifo.mcap", "fifo"])
+
+
+# ------------------------------------------------------------------ descriptions a plan or trajectory names
+NAMED_FIELDS = st.sampled_from(["urdf", "srdf", "joint_limits", "packages"])
+NAMED_TARGETS = st.sampled_from(["{o}/x", "../outside/x", "sub/x", "/", "link", "loop", "x", "fifo", "/etc/passwd",
+                                 "{o}", "..", "."])
+
+
+@settings(max_examples=COUNTS["named_descriptions"], **SETTINGS)
+@given(data=st.data())
+def test_fuzz_descriptions_named_by_a_file(tmp_path_factory, data):
+    """A sidecar a plan names, or the robot.yaml a trajectory carries, whose file fields point anywhere (outside,
+    through symlinks, at a FIFO or a loop): never a read outside its folder (the outside files' marker word
+    never shows), never exit 1."""
+    work = tmp_path_factory.mktemp("named", numbered=True)
+    o, d = work / "outside", work / "desc"
+    o.mkdir(), d.mkdir()
+    m3 = (bundled_dir() / "roarm_m3_pro.urdf").read_text()
+    for name in ("x", "jl.yaml"):
+        (o / name).write_text("joint_limits: {OUTSIDE_4711: {has_velocity_limits: true, max_velocity: 1}}\n")
+    (o / "arm.urdf").write_text(m3.replace('name="roarm_m3_pro"', 'name="OUTSIDE_4711"', 1))
+    (d / "arm.urdf").write_text(m3)
+    (d / "sub").symlink_to(o)
+    (d / "link").symlink_to(o / "x")
+    (d / "loop").symlink_to(d / "loop")
+    hostile.fifo(d, "fifo")
+    (d / "x").write_text("joint_limits: {}\n")
+    fields = {}
+    for _ in range(data.draw(st.integers(1, 3))):
+        key, target = data.draw(NAMED_FIELDS), data.draw(NAMED_TARGETS).replace("{o}", str(o))
+        fields[key] = {"p": target} if key == "packages" else target
+    if data.draw(st.booleans()):
+        hostile.sidecar(d, fields.pop("urdf", "arm.urdf"), **fields)
+        (d / "p.yaml").write_text("robot: arm.yaml\nstart: [0, 0, 1.57, 0, 0, 0]\ntasks: [{wait: 0.2}]\n")
+        out = d / "p.traj.json"
+        code, err = run_case(["plan", str(d / "p.yaml"), "-o", str(out)], out, work)
+    else:
+        side = yaml.safe_load((bundled_dir() / "roarm_m3_pro.yaml").read_text())
+        side.update({"urdf": "robot.urdf", **fields})
+        doc = hostile.trajectory_doc("custom")
+        doc["robot_description"] = {"format": "roarmctl.robot-bundle/1",
+                                    "files": {"robot.yaml": yaml.safe_dump(side), "robot.urdf": m3}}
+        (d / "t.traj.json").write_text(json.dumps(doc))
+        out = d / "t.png"
+        code, err = run_case(["visualize-path", str(d / "t.traj.json"), "-o", str(out)], out, work)
+    assert "OUTSIDE_4711" not in err
+    if out.suffix == ".json" and code == 0:
+        assert "OUTSIDE_4711" not in out.read_text()
 
 
 @settings(max_examples=COUNTS["export_paths"], **SETTINGS)
