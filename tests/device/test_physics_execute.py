@@ -62,3 +62,8 @@ def test_the_default_strategy_follows_the_plan_on_the_physics_arm(planned, capsy
     # bench_stream: 2.8 mm RMS with the lead (10.0 mm without, its lag 44 ms); aligned within the lateness
     # measured on the busy machine
     assert res["simulator"]["rms_aligned_mm"] < 6.0, res["simulator"]
+    # what the streamer measured from the feedback (each frame dated when its servos were read) agrees
+    # with the simulator's truth: a poll sent behind a command's bytes is dated from when it left the UART
+    print(f"\nfeedback: RMS {res['tracking_mm']['rms']:.2f} mm over {res['tracking_mm']['samples']}; "
+          f"truth: RMS {res['simulator']['rms_mm']:.2f} mm")
+    assert abs(res["tracking_mm"]["rms"] - res["simulator"]["rms_mm"]) < 2.0, (res["tracking_mm"], res["simulator"])
