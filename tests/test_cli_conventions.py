@@ -175,7 +175,8 @@ def test_commands_mean_the_same_in_output_json_text_and_sim(tmp_path):
     text = roarmctl("execute", str(traj), "--output", str(tmp_path / "c.jsonl")).stderr
     assert f"wrote {out['commands']} motion commands" in text
     sim = json.loads(roarmctl("execute", str(traj), "--sim", "--yes", "--json", "--log", str(tmp_path / "l.json")).stdout)
-    assert sim["commands"] == out["commands"]
+    # a tick the pacing skipped on a busy machine (counted in "skipped") is not a command sent
+    assert sim["commands"] + sum(sim["skipped"].values()) == out["commands"]
 
 
 def test_json_failure_after_a_json_success_in_the_same_process(traj, tmp_path, capsys):
