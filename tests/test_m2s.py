@@ -23,14 +23,20 @@ needs_vendor = pytest.mark.skipif(not VENDOR.is_dir(), reason=f"Waveshare's M2-S
 
 
 def vendor_sidecar(tmp_path: Path) -> Path:
-    """What MoveIt lacks: the wire map (and the package folder); everything else from the package."""
+    """What MoveIt lacks: the wire map (and the package folder); everything else from the package. The package
+    is copied beside the sidecar: a description named by a plan or a trajectory reads only inside its own folder."""
+    import shutil
+
+    pkg = tmp_path / "roarm_description"
+    if not pkg.exists():
+        shutil.copytree(VENDOR, pkg)
     side = {
         "format": "roarmctl.robot/1",
         "name": "m2s_moveit",
-        "urdf": str(VENDOR / "urdf" / "roarm_description.urdf"),
-        "srdf": str(VENDOR / "config" / "roarm_description.srdf"),
-        "joint_limits": str(VENDOR / "config" / "joint_limits.yaml"),
-        "packages": {"roarm_description": str(VENDOR)},
+        "urdf": str(pkg / "urdf" / "roarm_description.urdf"),
+        "srdf": str(pkg / "config" / "roarm_description.srdf"),
+        "joint_limits": str(pkg / "config" / "joint_limits.yaml"),
+        "packages": {"roarm_description": str(pkg)},
         "ik": "roarm3",
         "base_links": ["base_link", "link1"],
         "limits": {"velocity": [2.0, 1.5, 1.8, 2.5], "acceleration": [5.0, 4.0, 5.0, 6.0]},
