@@ -5,9 +5,10 @@
 Per plan, as execute sends it by default and with ``--sag`` (goals offset by the servos' sag under
 gravity and payload): each picked object's placement error (mm, deg) against its place pose, the TCP
 tracking error (RMS, max) and the largest sag at rest (mm), unintended contacts, and the real-time
-factor (simulated seconds per wall second; the median over the repeats). The simulation is one thread: the
-figure holds on a 2-core machine as long as one core is free. Target (issue 23): every object placed
-within 10 mm, no unintended contact, real-time factor above 5.
+factor (simulated seconds per wall second, and per second of the simulating thread's CPU time; medians over
+the repeats). The simulation is one thread: on a 2-core machine shared with other work the wall figure
+includes waiting for a core, the CPU figure is what one free core gives. Target (issue 23): every object
+placed within 10 mm, no unintended contact, real-time factor above 5 (checked on the CPU figure; both printed).
 """
 
 from __future__ import annotations
@@ -33,8 +34,8 @@ def main() -> int:
 
     print(f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; MuJoCo time step 1 ms; {args.repeats} repeats")
     print(f"{'plan':16} {'sag comp.':9} {'object':8} {'placed':>6} {'error mm':>9} {'deg':>6} {'TCP RMS':>8} {'max':>6} "
-          f"{'sag':>5} {'contacts':>8} {'sim s':>6} {'wall s':>7} {'RTF':>6}")
-    worst_rtf = float("inf")
+          f"{'sag':>5} {'contacts':>8} {'sim s':>6} {'wall s':>7} {'RTF':>6} {'CPU RTF':>7}")
+    worst_rtf = worst_cpu = float("inf")
     ok = {False: True, True: True}
     with tempfile.TemporaryDirectory() as tmp:
         for plan in sorted((ROOT / "plans").glob("*.yaml")):
@@ -47,23 +48,25 @@ def main() -> int:
             robot = load_robot(traj.robot)
             for sag in (False, True):
                 opts = Options(sag=sag)
-                rtfs, rep = [], None
+                rtfs, cpus, rep = [], [], None
                 for _ in range(args.repeats):
                     setup, rec = simulate(traj, robot, opts)
                     rep = measure(traj, robot, setup, rec, opts)
                     rtfs.append(rep["run"]["simulated_s"] / rep["run"]["wall_s"])
-                rtf = statistics.median(rtfs)
-                worst_rtf = min(worst_rtf, rtf)
+                    cpus.append(rep["run"]["simulated_s"] / max(rep["run"]["cpu_s"], 1e-9))
+                rtf, cpu = statistics.median(rtfs), statistics.median(cpus)
+                worst_rtf, worst_cpu = min(worst_rtf, rtf), min(worst_cpu, cpu)
                 ok[sag] &= rep["ok"]
                 tcp = rep["tcp"]
                 for k, o in enumerate(rep["objects"] or [{"name": "-", "placed": True, "error_mm": 0.0, "error_deg": 0.0}]):
                     lead = (f"{tcp['rms_mm']:8.1f} {tcp['max_mm']:6.1f} {tcp['sag_mm'] or 0:5.1f} {len(rep['contacts']):8d} "
-                            f"{rep['run']['simulated_s']:6.2f} {rep['run']['wall_s']:7.2f} {rtf:6.1f}") if k == 0 else ""
+                            f"{rep['run']['simulated_s']:6.2f} {rep['run']['wall_s']:7.2f} {rtf:6.1f} {cpu:7.1f}") if k == 0 else ""
                     print(f"{plan.stem if k == 0 and not sag else '':16} {('--sag' if sag else 'off') if k == 0 else '':9} "
                           f"{o['name']:8} {'yes' if o['placed'] else 'NO':>6} {o['error_mm']:9.1f} {o['error_deg']:6.1f} {lead}")
-    print(f"slowest real-time factor {worst_rtf:.1f} (target > 5); every object placed, no unintended contact: "
+    print(f"slowest real-time factor {worst_cpu:.1f} on the CPU time of one core (target > 5), {worst_rtf:.1f} on the wall clock "
+          f"at load average {os.getloadavg()[0]:.1f}; every object placed, no unintended contact: "
           f"{ok[False]} as execute sends by default, {ok[True]} with --sag")
-    return 0 if ok[True] and worst_rtf > 5 else 1
+    return 0 if ok[True] and worst_cpu > 5 else 1
 
 
 if __name__ == "__main__":

@@ -32,7 +32,7 @@ def simulate(
     tolerance: float = typer.Option(10.0, "--tolerance", help="An object counts as placed within this distance of its place pose (mm)."),
     rate: float = typer.Option(50.0, "--rate", help="Commands per second, as execute would send them."),
     speed_scale: float = typer.Option(1.0, "--speed-scale", help="Slow the motion down, as execute would: 0.5 = half speed."),
-    strategy: str = typer.Option("timed", "--strategy", help=STRATEGY_HELP),
+    strategy: str = typer.Option("timed-lead", "--strategy", help=STRATEGY_HELP),  # execute's default
     sag: bool = typer.Option(False, "--sag/--no-sag", help=SAG_HELP + " As execute --sag."),
     settle: float = typer.Option(1.0, "--settle", help="Seconds simulated after the last command (the arm and objects come to rest)."),
     robot_desc: str | None = typer.Option(None, "--robot", help="Simulate on this description instead of the trajectory's robot (same joint names), e.g. one with its CAD meshes."),
@@ -95,8 +95,11 @@ def simulate(
             c = report["contacts"][0]
             who = c.get("link") or c.get("item")
             parts.append(f"{len(report['contacts'])} unintended contact(s), first {who} with {c['with']} at {c['start_s']:.2f} s")
-        raise InfeasibleError("simulate: " + "; ".join(parts),
-                              f"tolerance {tolerance:g} mm; see the report" + (f" and {output}" if output else ""))
+        hint = f"tolerance {tolerance:g} mm; see the report" + (f" and {output}" if output else "")
+        sag_mm = report["tcp"]["sag_mm"]
+        if not sag and any(o["lifted"] for o in bad) and sag_mm is not None and sag_mm > tolerance / 2:
+            hint = f"the servos sag up to {sag_mm:.0f} mm at rest: try --sag (as execute --sag); " + hint
+        raise InfeasibleError("simulate: " + "; ".join(parts), hint)
 
 
 def _with_progress(work, total: float, quiet: bool):

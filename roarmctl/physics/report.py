@@ -74,6 +74,7 @@ def measure(traj, robot: Robot, setup: Setup, rec: Recording, options: Options) 
     out["ok"] = bool(all(o["placed"] for o in out["objects"]) and not out["contacts"])
     sim = float(rec.t[-1]) if len(rec.t) else 0.0
     out["run"] = {"simulated_s": _r(sim), "wall_s": _r(rec.wall), "real_time_factor": _r(sim / rec.wall, 1) if rec.wall > 0 else None,
+                  "cpu_s": _r(rec.cpu), "cpu_real_time_factor": _r(sim / rec.cpu, 1) if rec.cpu > 0 else None,
                   "timestep_s": rec.dt, "steps": int(len(rec.t)), "commands": len(rec.commands),
                   "rate": options.rate, "strategy": options.strategy, "speed_scale": scale,
                   "tolerance_mm": _r(options.tolerance * 1e3, 1)}

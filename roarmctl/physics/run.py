@@ -25,7 +25,7 @@ import numpy as np
 
 from roarmctl.device.fwmath import command_to_goal
 from roarmctl.device.protocol import M3_FIELDS
-from roarmctl.device.schedule import build_schedule, default_latency, sample
+from roarmctl.device.schedule import DEFAULT_STRATEGY, build_schedule, default_latency, sample
 from roarmctl.errors import RoarmError
 from roarmctl.physics.actuation import Actuation
 from roarmctl.physics.contacts import Episode, Episodes, Policy
@@ -45,7 +45,7 @@ class Options:
     ``feedback_rate`` (Hz) of its feedback lines."""
 
     rate: float = 50.0  # roarmctl.device.schedule.DEFAULT_RATE
-    strategy: str = "timed"  # roarmctl.device.schedule.DEFAULT_STRATEGY
+    strategy: str = DEFAULT_STRATEGY  # what execute sends by default
     speed_scale: float = 1.0
     settle: float = 1.0
     tolerance: float = 0.010
@@ -59,7 +59,8 @@ class Recording:
     """What a run recorded. Physics times (s) from the start of the motion; ``t``/``q``/``qd`` (N, dof)
     every physics step, ``duty`` (N, channels); ``track_t`` (M,) and ``objects``: name -> (xyz (M, 3) m,
     quat (M, 4) w x y z) at the track rate; ``commands``: (time, command dict, tick) applied; ``episodes``:
-    unintended contacts; ``wall`` s the run took."""
+    unintended contacts; ``wall`` s the run took, ``cpu`` s of this thread's CPU time (the run is one thread: on
+    a shared machine ``wall`` includes waiting for a core, ``cpu`` is what one free core would take)."""
 
     dt: float
     t: np.ndarray
@@ -71,6 +72,7 @@ class Recording:
     commands: list[tuple[float, dict[str, Any], int]]
     episodes: list[Episode]
     wall: float = 0.0
+    cpu: float = 0.0
 
 
 def simulate(traj, robot: Robot, options: Options | None = None, *, setup: Setup | None = None,
@@ -83,13 +85,14 @@ def simulate(traj, robot: Robot, options: Options | None = None, *, setup: Setup
     scene_roles = {o[1]: r for o, r in _roles(traj).items()}
     policy = Policy(robot.jaw_links, scene_roles, setup.holds, 1.0 / options.speed_scale)
     rec = _Recorder(world, act, policy, options)
-    t_wall = time.perf_counter()
+    t_wall, t_cpu = time.perf_counter(), time.thread_time()
     if act.streamed:
         _drive_streamed(traj, robot, setup, options, rec, progress)
     else:
         _drive_generic(traj, robot, setup, options, rec, progress)
     out = rec.result()
     out.wall = time.perf_counter() - t_wall
+    out.cpu = time.thread_time() - t_cpu
     setup.notes.extend(w for w in world.warnings() if w not in setup.notes)
     return setup, out
 
