@@ -42,6 +42,7 @@ from roarmctl.physics.run import Options, Recording
 from roarmctl.physics.setup import Setup
 from roarmctl.robot.bundle import make_bundle
 from roarmctl.robot.dynamics import inverse_dynamics
+from roarmctl.robot.loader import bundled_robots
 from roarmctl.robot.model import Inertial, Robot
 
 REST_MIN = 0.3  # s: a rest shorter than this is not measured
@@ -283,8 +284,6 @@ def _description(traj, source: str | None) -> dict[str, Any]:
     """The run file's ``robot_description`` (``roarmctl.robot.bundle``): the trajectory's, or the bundle of the
     description ``source`` that the run used instead (``simulate --robot``), so that ``export`` reads the run
     by itself; nothing for a bundled robot."""
-    from roarmctl.robot.loader import bundled_robots
-
     if source is not None:
         return {} if source in bundled_robots() else {"robot_description": make_bundle(source)}
     desc = getattr(traj, "robot_description", None)

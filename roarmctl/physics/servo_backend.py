@@ -25,6 +25,7 @@ from roarmctl.physics.actuation import Actuation, for_robot
 from roarmctl.physics.servo import ACC_UNIT, ST3235, ServoBank, profile_step, quantise_speed
 from roarmctl.physics.setup import build
 from roarmctl.physics.world import World
+from roarmctl.robot.loader import load_robot
 
 N_FIRMWARE_JOINTS = 6
 
@@ -181,6 +182,4 @@ def for_firmware(robot, traj=None) -> Callable[[], PhysicsServos]:
 def roarm_m3_pro() -> PhysicsServos:
     """Physics servos of the bundled RoArm-M3 Pro in an empty world: a zero-argument factory for
     ``bench/bench_stream.py --servos roarmctl.physics.servo_backend:roarm_m3_pro``."""
-    from roarmctl.robot.loader import load_robot
-
     return for_firmware(load_robot("roarm_m3_pro"))()
