@@ -355,8 +355,8 @@ def test_m2s_with_waveshares_meshes_builds_and_simulates_its_plan(tmp_path, caps
     robot = load_robot(str(side))
     world = World(robot, Scene([]))
     assert world.model.nmesh == 5  # the five STL meshes, as convex hulls
-    # --strategy timed: with the default timed-lead (goals aimed 46 ms ahead) the meshes' hulls lose the cube at the
-    # grasp (lifted 5 mm of 50; found 2026-12-02, left to the streaming work); the bundled M2-S below places it either way
+    # --strategy timed: the forearm-and-jaw mesh's hull holds the cube on edges, and with the default timed-lead (which
+    # lifts 46 ms sooner) it turns out of the grip (docs/physics.md, Figures); the bundled M2-S places it either way
     _, rep = _simulate(capsys, str(traj), "--robot", str(side), "--strategy", "timed")
     (cube,) = rep["objects"]
     assert cube["lifted"] and rep["run"]["steps"] > 1000
