@@ -64,20 +64,19 @@ _TABLES = ("_parts", "_items", "_item_objs", "_item_lo", "_item_hi", "_item_c", 
            "_pairs", "_pair_r2", "_ki", "_kf", "_q_template", "_kfm", "_kim")
 
 
-#: The kernel's output buffers (``CollisionChecker._buffers``): "n" (int, states they hold), "valid", "near", "scene",
-#: "self", "pose", "idx" (arrays), "near_bytes" (the bytearray under "near"), "views" and "seg_views" (memoryviews
-#: of the arrays, as ``_kernel.check`` and ``_kernel.segment`` take them); {} before the first check.
+#: The kernel's output buffers (``CollisionChecker._buffers``): "n" (states they hold), arrays "valid", "near", "scene",
+#: "self", "pose", "idx", "near_bytes" (under "near"), "views"/"seg_views" (memoryviews as the kernel takes them).
 _Buffers = dict[str, Any]
 
 _FCL_REQUEST = fcl.CollisionRequest()  # FCL's defaults (what fcl.collide makes when given none), made once
 _SWEEP_GAINS: dict[tuple, tuple[Robot, float]] = {}  # see CollisionChecker._cached_sweep_gain
-# Set-up shared by the checkers of one process (a plan makes one checker, and every api.plan call or Planner query
-# another, for the same robot and mostly the same scene): the arm's shapes per robot and padding, and the tables of
-# the last _STATE_CACHE collision states, each with the robot it was made for (ids are compared only while it lives).
+# Set-up shared by the checkers of a process (every plan, api.plan call or query makes one, mostly for the same robot
+# and scene): the arm's shapes per robot and padding, the tables of the last _STATE_CACHE collision states (with the
+# robot each was made for: ids are compared only while it lives).
 _ARM_SHAPES: dict[tuple, tuple[Robot, list[_Moving]]] = {}
 _STATE_TABLES: dict[tuple, tuple[Robot, dict[str, Any]]] = {}
-# One check at a time in the process: checkers share the FCL objects of their shapes (a check sets their poses) and
-# the kernel's tables; the kernel and FCL hold the GIL while they work, so no parallelism is lost.
+# One check at a time in the process: checkers share FCL objects (a check sets their poses) and the kernel's tables;
+# the kernel and FCL hold the GIL while they work, so no parallelism is lost.
 _LOCK = threading.RLock()
 
 
@@ -107,8 +106,8 @@ class CollisionChecker:
     The checker keeps its own copy of the scene (``self.scene``): ``detach`` moves items in it.
     """
 
-    _parts: list[Part]  # the scene's collision parts (an item has one or more), set by _build_tables
-    _items: list[SceneItem]  # one entry per part: the item it belongs to
+    _parts: list[Part]  # the scene's collision parts (_build_tables); _items: the item of each part
+    _items: list[SceneItem]
     _kf: np.ndarray  # the kernel's float table (_pack); this checker's own copy
 
     def __init__(self, robot: Robot, scene: Scene, *, padding: float = 0.005,
@@ -138,13 +137,12 @@ class CollisionChecker:
         self._grasp_target: str | None = None
         self._jaw_strict = False  # set_grasp_target(..., moving_jaw_clear=True)
         self._attached: dict[str, tuple[SceneItem, np.ndarray]] = {}  # name -> (item, pose in TCP frame)
-        self._arm_shapes = self._shared_arm_shapes()
-        with self._lock:
+        with self._lock:  # the shapes and tables kept for every checker of the process
+            self._arm_shapes = self._shared_arm_shapes()
             self._rebuild()
 
     def _shared_arm_shapes(self) -> list[_Moving]:
-        """The arm's collision shapes (padded by ``self.padding`` where the description gives a link none), made once
-        per process for the same robot and padding (``_ARM_SHAPES``)."""
+        """The arm's collision shapes (padded), made once per process for the same robot and padding (``_ARM_SHAPES``)."""
         robot, kin = self.robot, self.robot.kin
         key = (id(robot), self.padding)
         hit = _ARM_SHAPES.get(key)
@@ -263,11 +261,14 @@ class CollisionChecker:
     def _rebuild(self) -> None:
         """Recompute the static tables (items, moving shapes, pair masks) after a scene change.
 
-        The tables of the last few collision states are kept for every checker of the process (``_STATE_CACHE``,
-        ``_STATE_TABLES``): a plan switches back and forth between a handful (grasp target, moving-jaw check,
-        attached object), every plan of the same scene starts from the same one, and building them costs ~0.5 ms
-        (5 ms with 200 boxes). A kept state gets a copy of its float table with this checker's joint template (the
-        gripper value), as a new build would; the rest is only read."""
+        The last few collision states' tables are kept for every checker of the process (``_STATE_TABLES``): a plan
+        switches between a handful (grasp target, moving-jaw check, attached object), plans of one scene start from
+        the same one, and a build costs ~0.5 ms (5 ms with 200 boxes). A kept state gets a copy of its float table with
+        this checker's joint template (the gripper value); the rest is only read. Under the lock: they are shared."""
+        with self._lock:
+            self._rebuild_locked()
+
+    def _rebuild_locked(self) -> None:
         key = (id(self.robot), *self._state_key())
         hit = _STATE_TABLES.get(key)
         if hit is None or hit[0] is not self.robot:
