@@ -914,3 +914,68 @@ def test_a_carried_robot_holds_no_visuals_and_is_drawn_from_its_collision_shapes
     (d / "visual.stl").unlink()
     code, _, err = cli(["visualize-path", str(d / "p.traj.json"), "-o", str(d / "t.png")])
     assert code == 0 and (d / "t.png").stat().st_size > 0, err
+
+
+# --------------------------------------------------------------------------- descriptions large in structure
+def _fixed_chain(n: int) -> str:
+    return "".join(f'<link name="x{i}"/><joint name="jx{i}" type="fixed"><parent link="{"base_link" if i == 0 else f"x{i - 1}"}"/>'
+                   f'<child link="x{i}"/></joint>' for i in range(n))
+
+
+@pytest.mark.parametrize("kind, extra, needle", [
+    ("urdf", "<a/>" * 2_000_000, "more than 100,000 XML elements"),
+    ("xacro", "<a/>" * 2_000_000, "more than 100,000 XML elements"),
+    ("urdf", _fixed_chain(400), "<link>: more than 300 of them"),
+], ids=["URDF of 2 million elements", "xacro of 2 million elements", "400 links"])
+def test_a_description_large_in_structure_is_refused_before_it_is_walked(tmp_path, kind, extra, needle):
+    """Before: a 7.8 MB xacro of empty elements took 12 s and 537 MB before the element budget stopped it
+    (minidom's tree), and a URDF with a chain of 1,000 frames hung (adjacent pairs in cubic time)."""
+    urdf = (hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text().replace("</robot>", extra + "</robot>")
+    (tmp_path / f"arm.{kind}").write_text(urdf)
+    refused(["kin", "fk", str(tmp_path / f"arm.{kind}"), *hostile.M3_Q], f"arm.{kind}", needle)
+
+
+def test_a_chain_of_frames_without_geometry_loads_and_makes_its_ends_adjacent(tmp_path):
+    """290 geometry-less frames in a chain (under the cap): loads (it hung before), and the links at both ends are
+    adjacent through them (robot.implied.adjacent_pairs, MoveIt Setup Assistant's rule)."""
+    urdf = (hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text()
+    urdf = urdf.replace("</robot>", _fixed_chain(290) + '<link name="end"><collision><geometry><box size="0.01 0.01 0.01"/>'
+                        '</geometry></collision></link><joint name="jend" type="fixed"><parent link="x289"/>'
+                        '<child link="end"/><origin xyz="0 0 -0.5"/></joint></robot>')
+    (tmp_path / "arm.urdf").write_text(urdf)
+    code, _, err = cli(["kin", "fk", str(tmp_path / "arm.urdf"), *hostile.M3_Q])
+    assert code == 0, err
+    from roarmctl.robot.loader import load_robot
+
+    assert frozenset(("base_link", "end")) in load_robot(str(tmp_path / "arm.urdf")).allowed_collisions
+
+
+def test_adjacent_pairs_are_those_of_joining_each_geometry_less_link_s_neighbours_in_turn():
+    """The grouped computation against the rule as MoveIt states it, applied link by link (cubic, fine for small
+    trees): random trees of up to 12 links, random link order, random links without geometry."""
+    import random
+    from types import SimpleNamespace as NS
+
+    from roarmctl.robot.implied import adjacent_pairs
+
+    def one_at_a_time(r):
+        near = {name: set() for name in r.link_names}
+        for j in r.joints:
+            near[j.parent].add(j.child)
+            near[j.child].add(j.parent)
+        solid = {s.link for s in r.collision}
+        for link in (x for x in r.link_names if x not in solid):
+            for a in list(near[link]):
+                for b in list(near[link]):
+                    if a != b:
+                        near[a].add(b)
+                        near[b].add(a)
+        return {frozenset((a, b)) for a, bs in near.items() for b in bs}
+
+    rng = random.Random(3)
+    for _ in range(2000):
+        names = [f"l{i}" for i in range(rng.randint(1, 12))]
+        joints = [NS(parent=names[rng.randrange(i)], child=names[i]) for i in range(1, len(names))]
+        order = rng.sample(names, len(names))
+        r = NS(link_names=order, joints=joints, collision=[NS(link=x) for x in names if rng.random() < 0.5])
+        assert adjacent_pairs(r) == one_at_a_time(r), (order, [(j.parent, j.child) for j in joints])

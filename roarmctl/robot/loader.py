@@ -47,6 +47,7 @@ from roarmctl.robot.padding import sidecar_padding
 from roarmctl.robot.singularity import MODELS
 from roarmctl.robot.srdf import parse_srdf, read_joint_limits, read_srdf
 from roarmctl.robot.xacro_input import TRUST_ALL, expand
+from roarmctl.validation import check_markup
 
 FORMAT = "roarmctl.robot/1"
 MESH_SCALE = (1e-5, 1e5)  # a mesh's scale factors (a mesh in mm has 0.001); beyond, a link's shape vanishes or explodes
@@ -425,7 +426,7 @@ def _read_urdf(urdf: Path, side: dict, sidecar: Path) -> ET.Element:
             return ET.fromstring(text)
         except ET.ParseError as exc:
             raise DescriptionError(f"{urdf}: xacro output is not valid XML ({exc})") from None
-    text = read_text(urdf, None, URDF_BYTES, roots=roots, error=DescriptionError)
+    text = check_markup(read_text(urdf, None, URDF_BYTES, roots=roots, error=DescriptionError), str(urdf), DescriptionError)
     try:
         return ET.fromstring(text)
     except ET.ParseError as exc:

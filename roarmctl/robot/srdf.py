@@ -37,7 +37,7 @@ from typing import Any
 from roarmctl.errors import DescriptionError
 from roarmctl.fileio import Roots, read_text
 from roarmctl.robot.xacro_input import expand
-from roarmctl.validation import load_yaml
+from roarmctl.validation import check_markup, load_yaml
 
 SRDF_BYTES = 16 * 1024 * 1024  # an SRDF may have (MoveIt's of published arms: < 100 KiB)
 _KNOWN = {"group", "group_state", "disable_collisions", "end_effector", "virtual_joint", "disable_default_collisions",
@@ -223,8 +223,8 @@ def parse_srdf(path: Path, side: dict, sidecar: Path, where: str) -> tuple[ET.El
             return ET.fromstring(text), str(path)
         except ET.ParseError as exc:
             raise DescriptionError(f"{path}: xacro output is not valid XML ({exc})") from None
-    text = read_text(path, f"{where}: srdf", SRDF_BYTES, roots=roots, error=DescriptionError,
-                     hint="the path is relative to the sidecar YAML")
+    text = check_markup(read_text(path, f"{where}: srdf", SRDF_BYTES, roots=roots, error=DescriptionError,
+                                  hint="the path is relative to the sidecar YAML"), str(path), DescriptionError)
     try:
         return ET.fromstring(text), str(path)
     except ET.ParseError as exc:

@@ -246,10 +246,18 @@ def _unique_name(element, kind: str, k: int, seen: dict[str, Any], where: str) -
     return name
 
 
+#: Links (and joints) a URDF may have: published arms have tens (the corpus's most: 19); what a
+#: description implies is computed over pairs of links.
+MAX_LINKS = 300
+
+
 def check_urdf(root, where: str) -> None:
     """The URDF's structure and numbers (``root`` is the parsed XML root element)."""
     if root.tag != "robot":
         _fail(where, "root element", f"<{root.tag}> is not <robot>")
+    for tag in ("link", "joint"):
+        if len(root.findall(tag)) > MAX_LINKS:
+            _fail(where, f"<{tag}>", f"more than {MAX_LINKS} of them", "is this the right file?")
     links: dict[str, Any] = {}
     for k, link in enumerate(root.findall("link")):
         name = _unique_name(link, "link", k, links, where)

@@ -536,6 +536,8 @@ def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
         return f"{UNKNOWN_PACKAGE}/{pkg}"  # fails when something under it is read (Roots.check), not before
 
     def parse(inp: Any, filename: str | None = None) -> Any:
+        from roarmctl.validation import check_markup  # PyYAML: not at start-up
+
         if inp is None:  # the top file, then each include
             budget.spend("includes")
             if len(xacro.filestack or ()) > MAX_INCLUDE_DEPTH:
@@ -543,6 +545,7 @@ def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
             what = f"{where}: xacro include" if budget.used["includes"] > 1 else None
             inp = read_text(os.path.join(xacro.root_dir, filename or ""), what, MAX_FILE_BYTES, roots=roots,
                             error=DescriptionError)
+            check_markup(inp, str(filename), DescriptionError)  # before minidom builds its tree
         return orig_parse(inp, filename)
 
     def eval_all(node: Any, macros: Any, symbols: Any) -> Any:
