@@ -127,6 +127,7 @@ def main() -> None:
     ap.add_argument("--servos", default=None, help="MODULE:FACTORY of another servo model (default: the kinematic servos)")
     ap.add_argument("--strategies", default="timed,timed-lead,timed-acc,per-joint,dense")
     ap.add_argument("--builds", default="m3-0.84,m3-2026", help="firmware builds, comma-separated")
+    ap.add_argument("--no-hold-choice", action="store_true", help="skip the comparison of where to hold")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
     traj_path = args.traj or bundled_trajectory(tmp / "pick_place.traj.json")
@@ -145,6 +146,8 @@ def main() -> None:
             print(f"{firmware:<9}{strategy:<11}{med(full, 'rms'):>8.2f}{med(full, 'max'):>7.1f}{med(full, 'lag'):>6.0f}"
                   f"{med(full, 'p99'):>6.1f}{med(full, 'link'):>6.0%}{med(full, 'lines'):>8.0f}{med(stop, 'hold_ms'):>6.0f}",
                   flush=True)
+    if args.no_hold_choice:
+        return
     print(f"\nthe hold, stopped at 30/45/60/75 % of the run (0.84 build, {DEFAULT_STRATEGY}): joint motion after the hold was sent")
     print(f"{'hold at':<12}{'moved':>8}{'back':>8}{'TCP':>8}   (rad, rad against the travel, mm)")
     for mode in ("path", "setpoint", "measured"):

@@ -93,7 +93,7 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
             from roarmctl.device.schedule import link_budget
 
             on_info(f"firmware: {info.describe()}")
-            budget = link_budget(streamer.schedule, cfg.feedback_rate, line_time=info.line_time if info.queued else None)
+            budget = link_budget(streamer.schedule, streamer.poll_rate(), line_time=info.line_time if info.queued else None)
             on_info(budget.describe())
         try:
             result = streamer.run()
