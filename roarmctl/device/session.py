@@ -90,11 +90,8 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
         opened = True
         info = link.connect()
         if on_info is not None:
-            from roarmctl.device.schedule import link_budget
-
             on_info(f"firmware: {info.describe()}")
-            budget = link_budget(streamer.schedule, streamer.poll_rate(), line_time=info.line_time if info.queued else None)
-            on_info(budget.describe())
+            on_info(streamer.link_budget().describe())
         try:
             result = streamer.run()
         finally:

@@ -44,6 +44,7 @@ from roarmctl.device.schedule import (
     MAX_LINK_RATE,
     STRATEGIES,
     T105_BYTES,
+    LinkBudget,
     Strategy,
     Tick,
     build_schedule,
@@ -221,6 +222,14 @@ class Streamer:
     def _schedule(self, traj) -> list[Tick]:
         return build_schedule(traj, self.robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale, sag=self.cfg.sag,
                               strategy=self.cfg.strategy)
+
+    def link_budget(self) -> LinkBudget:
+        """The schedule's ``LinkBudget`` on this link: its poll rate, the length of the feedback lines it
+        has seen (0.84: about 230 bytes; 20260701: about 324) and, on a queuing build, its line time."""
+        info = getattr(self.link, "info", None)
+        seen = [len(r.line) + 2 for r in getattr(self.link, "received", [])[-20:] if r.feedback is not None]
+        return link_budget(self.schedule, self.poll_rate(), reply_bytes=max(seen) if seen else 230,
+                           line_time=info.line_time if info is not None and info.queued else None)
 
     # ------------------------------------------------------------------ helpers
     def poll_rate(self) -> float:
@@ -633,7 +642,7 @@ class Streamer:
                     e["tcp_world_m"] = [round(float(v), 6) for v in self._tcp(self.wm.from_wire(r.feedback.joints))]
             received.append(e)
         info = getattr(self.link, "info", None)
-        budget = link_budget(self.schedule, self.poll_rate(), line_time=info.line_time if info and info.queued else None)
+        budget = self.link_budget()
         hold = None if self.hold_info is None else dict(self.hold_info, t=round(self.hold_info["t"] - t0, 6))
         return {
             "format": "roarmctl.execlog/1",
