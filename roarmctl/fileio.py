@@ -130,10 +130,7 @@ class Roots:
               hint: str | None = None) -> Path:
         """``path`` resolved; raises ``error`` if it resolves outside every root (or in a symlink loop)."""
         p = Path(path)
-        try:
-            real = p.resolve(strict=False)
-        except (RuntimeError, OSError) as exc:  # a symlink loop: RuntimeError before Python 3.13, OSError after
-            raise error(f"{what}: '{_short(p)}' cannot be resolved ({_reason(exc)})", "remove the symlink loop") from None
+        real = resolved(p, what, error)
         if str(p).startswith(UNKNOWN_PACKAGE + "/"):
             name = str(p)[len(UNKNOWN_PACKAGE) + 1:].split("/")[0]
             raise error(f"{what}: $(find {name}): package '{name}' is unknown",
@@ -146,6 +143,16 @@ class Roots:
 
     def __repr__(self) -> str:
         return f"Roots({[str(f) for f in self.folders]}, packages={sorted(self.packages)})"
+
+
+def resolved(path: str | os.PathLike, what: str, error: type[InputError] = InputError) -> Path:
+    """``path`` with symlinks followed and ``..`` removed; ``error`` naming ``what`` for a symlink loop or a
+    name the OS refuses (``Path.resolve`` raises RuntimeError for a loop before Python 3.13, OSError after)."""
+    p = Path(path)
+    try:
+        return p.resolve(strict=False)
+    except (RuntimeError, OSError, ValueError) as exc:
+        raise error(f"{what}: '{_short(p)}' cannot be resolved ({_reason(exc)})", "remove the symlink loop") from None
 
 
 def _short(p: str | os.PathLike, n: int = 120) -> str:

@@ -321,7 +321,8 @@ def test_a_sparse_3_gib_mesh_is_refused_by_its_size_before_it_is_read(tmp_path):
     (b"- a\n- b\n", "expected a mapping"),
     (b"x: " + b"a" * (2 * 2 ** 20) + b"\n", "more than the 1 MiB allowed"),
     (None, "a FIFO"),
-], ids=["nested 5000", "not UTF-8", "list at the top", "over the size cap", "FIFO"])
+    (b"joint_limits: [{j: 1}]\n", "joint_limits: expected a mapping joint -> limits, got a list"),
+], ids=["nested 5000", "not UTF-8", "list at the top", "over the size cap", "FIFO", "a list of joints"])
 def test_bad_joint_limits_yaml_is_exit_2_naming_the_file(tmp_path, content, needle):
     d = _desc_dir(tmp_path)
     if content is None:
@@ -979,3 +980,14 @@ def test_adjacent_pairs_are_those_of_joining_each_geometry_less_link_s_neighbour
         order = rng.sample(names, len(names))
         r = NS(link_names=order, joints=joints, collision=[NS(link=x) for x in names if rng.random() < 0.5])
         assert adjacent_pairs(r) == one_at_a_time(r), (order, [(j.parent, j.child) for j in joints])
+
+
+@pytest.mark.parametrize("field", ["urdf", "srdf", "joint_limits", "packages"])
+def test_a_sidecar_field_naming_a_symlink_loop_is_exit_2(tmp_path, field):
+    """Found by the full fuzz profile (packages: {p: loop} through a plan was exit 1); urdf and srdf named a loop
+    were exit 1 from the command line too (Path.resolve raises RuntimeError for a loop)."""
+    (tmp_path / "loop").symlink_to(tmp_path / "loop")
+    (tmp_path / "arm.urdf").write_text((hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text())
+    value = {"p": "loop"} if field == "packages" else "loop"
+    side = hostile.sidecar(tmp_path, "loop" if field == "urdf" else "arm.urdf", **({} if field == "urdf" else {field: value}))
+    refused(["kin", "fk", str(side), *hostile.M3_Q[:5]], f"{field}{'.p' if field == 'packages' else ''}: ", "cannot be resolved")

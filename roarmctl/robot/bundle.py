@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from roarmctl.errors import DescriptionError, InputError, TrajectoryFileError
-from roarmctl.fileio import Roots, read_bytes, read_text
+from roarmctl.fileio import Roots, read_bytes, read_text, resolved
 from roarmctl.robot.meshes import CONFINED_HINT, MESH_BYTES, PACKAGE_PATHS, description_roots, package_map, resolve
 from roarmctl.robot.model import Robot
 from roarmctl.robot.xacro_input import expand
@@ -73,7 +73,7 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
         if "dh" in side:
             files["robot.yaml"] = yaml.safe_dump(_plain(side), sort_keys=False)
             return {"format": FORMAT, "files": files}
-        urdf = (path.parent / str(side["urdf"])).resolve()
+        urdf = resolved(path.parent / str(side["urdf"]), f"{path}: urdf", DescriptionError)
     roots = description_roots(side, path, confined=confine)
     side["_roots"] = roots
     root = loader._read_urdf(urdf, side, path)

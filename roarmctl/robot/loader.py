@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from roarmctl.errors import DescriptionError, InputError
-from roarmctl.fileio import read_text
+from roarmctl.fileio import read_text, resolved
 from roarmctl.robot import validate as checks
 from roarmctl.robot import visuals
 from roarmctl.robot.frames import UNITS, Frame
@@ -103,7 +103,7 @@ def load_robot(spec: str, trust_sidecar: bool = False, confine: bool = False) ->
         elif "urdf" in data:
             data["_roots"] = description_roots(data, path, confined=confine)
             data["_trusted"] = trust_sidecar and data.get("trust") is True
-            urdf = (path.parent / str(data["urdf"])).resolve()
+            urdf = resolved(path.parent / str(data["urdf"]), f"{path}: urdf", DescriptionError)
             if not urdf.exists():  # anything else (a FIFO, a folder) is refused by the reader
                 raise DescriptionError(f"{path}: urdf: file '{data['urdf']}' not found", "the path is relative to the YAML file")
             robot = _from_urdf(urdf, data, path)
@@ -447,7 +447,8 @@ def _moveit(side: dict, sidecar: Path, ordered: list[Joint], links: dict, actuat
     if side.get("srdf") is None:
         return side, jl
     jinfo = {j.name: (j.kind, j.child, j.mimic, j.parent) for j in ordered}
-    root, src = parse_srdf((sidecar.parent / str(side["srdf"])).resolve(), side, sidecar, str(sidecar))
+    root, src = parse_srdf(resolved(sidecar.parent / str(side["srdf"]), f"{sidecar}: srdf", DescriptionError), side, sidecar,
+                           str(sidecar))
     got = read_srdf(root, src, jinfo, set(links), side, str(sidecar))
     side["_notes"] = list(got["notes"])
     driven = [a for a in actuated if a not in got["passive_joints"]]

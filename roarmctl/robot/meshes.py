@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from roarmctl.errors import DescriptionError, InputError
-from roarmctl.fileio import Roots, read_bytes
+from roarmctl.fileio import Roots, read_bytes, resolved
 
 #: NAME -> folder for ``package://NAME/...``, filled by the CLI's ``--package-path`` option.
 PACKAGE_PATHS: dict[str, Path] = {}
@@ -303,7 +303,7 @@ def package_map(value, sidecar: Path, where: str) -> dict[str, Path]:
         raise DescriptionError(f"{where}: packages: expected a mapping NAME -> folder")
     out = {}
     for name, folder in value.items():
-        p = (sidecar.parent / Path(folder).expanduser()).resolve()
+        p = resolved(sidecar.parent / Path(folder).expanduser(), f"{where}: packages.{name}", DescriptionError)
         if not p.is_dir():
             raise DescriptionError(f"{where}: packages.{name}: folder '{folder}' not found (resolved to {p})",
                                    "the path is relative to the sidecar YAML")

@@ -34,7 +34,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from roarmctl.errors import DescriptionError
+from roarmctl.errors import DescriptionError, describe_value
 from roarmctl.fileio import Roots, read_text
 from roarmctl.robot.xacro_input import expand
 from roarmctl.validation import check_markup, load_yaml
@@ -252,7 +252,10 @@ def read_joint_limits(path: Path, joints: set[str], where: str, roots: Roots | N
     if unknown:
         raise DescriptionError(f"{src}: unknown key(s) {sorted(unknown)}")
     out: dict[str, dict[str, float]] = {}
-    for jname, spec in (data.get("joint_limits") or {}).items():
+    limits = data.get("joint_limits") or {}
+    if not isinstance(limits, dict):
+        raise DescriptionError(f"{src}: joint_limits: expected a mapping joint -> limits, got {describe_value(limits)}")
+    for jname, spec in limits.items():
         loc = f"{src}: joint_limits.{jname}"
         if jname not in joints:
             raise DescriptionError(f"{loc}: not a joint of the URDF")
