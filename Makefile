@@ -19,7 +19,8 @@ $(STAMP): pyproject.toml setup.py roarmctl/_kernel.c
 
 install: $(STAMP)
 
-# The whole suite on every core (pytest-xdist; the simulated-arm tests share one worker: tests/conftest.py).
+# The whole suite on every core (pytest-xdist; the browser-view tests share one worker; the real-time
+# simulated-arm tests spread over the workers like the rest: tests/conftest.py says why that is safe).
 test: $(STAMP)
 	$(BIN)/python -m pytest -n auto --dist loadgroup
 

@@ -46,3 +46,18 @@ def pick_place(robot: str = "roarm_m3_pro") -> Trajectory:
     wps = [HOME, above, down, grasp, up, over, down2, rel, HOME]
     durs = [1.1, 0.65, 0.95, 0.7, 1.3, 0.65, 0.95, 1.1]  # each within the M3 Pro's velocity and acceleration limits
     return min_jerk(wps, durs, robot=robot)
+
+
+def host_lateness(log: dict) -> float:
+    """The largest lateness (s) the streaming host measured in a run's execution log: each motion tick's own,
+    and each gap in the sending beyond one period (ticks skipped while a busy machine stalled the process: the
+    tick after them is less than a period late, but nothing went out meanwhile), up to the hold (the last T:102)."""
+    dt = 1.0 / float(log["rate"])
+    ticks = [s for s in log["sent"] if "tick" in s]
+    late = max((s["lateness"] for s in ticks), default=0.0)
+    for a, b in zip(ticks, ticks[1:]):
+        late = max(late, b["t"] - (a["t"] - a["lateness"] + dt))
+    holds = [s for s in log["sent"] if s["cmd"].get("T") == 102 and "tick" not in s]
+    if ticks and holds:
+        late = max(late, holds[-1]["t"] - (ticks[-1]["t"] + dt))  # a stall before the hold
+    return late

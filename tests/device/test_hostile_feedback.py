@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from devtraj import min_jerk, pick_place
+from devtraj import host_lateness, min_jerk, pick_place
 
 from roarmctl.cli import run as run_cli
 from roarmctl.device.simulator import Bogus, PtySimulator, SimConfig
@@ -125,8 +125,8 @@ def test_feedback_that_stops_ends_the_stream_within_half_a_second_with_a_hold_on
     err = capsys.readouterr().err
     assert rc == 4 and "no feedback for" in err
     assert log["hold"]["kind"] == "path"
-    late = max(e["lateness"] for e in log["sent"] if "tick" in e)
-    assert t_hold - muted_at < 0.5 + late  # not 1 s of blind streaming
+    # not 1 s of blind streaming: 0.3 s without feedback plus what the host measured late (gaps included)
+    assert t_hold - muted_at < 0.5 + host_lateness(log)
 
 
 def test_on_the_queuing_build_the_hold_reaches_the_servos_within_60_ms(tmp_path, capsys):
