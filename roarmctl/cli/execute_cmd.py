@@ -300,7 +300,9 @@ def sim_device(
 
         arm = load_robot(model, trust_sidecar=True) if model is not None else load_robot("roarm_m2_s" if firmware == "m2" else "roarm_m3_pro")
         factory = for_firmware(arm)
-    simulator = PtySimulator(config, servos=factory).start()
+    # the firmware in a process of its own (its own clock, real-time priority where allowed): a serving thread still
+    # stepping MuJoCo when a stop signal ended this interpreter crashed it (SIGSEGV) on a busy machine
+    simulator = PtySimulator(config, servos=factory, process=True).start()
     made_link = False
     try:  # Ctrl-C, SIGTERM and SIGHUP (roarmctl.cli.signals) end it the same way: exit 0, link removed
         path = simulator.path
