@@ -8,3 +8,16 @@ time), and the streamer's tracking check widens only by lateness it measured (la
 answers), so a busy machine, a second stream beside it included, makes a run late, not wrong. Putting them all
 on one worker made their ~4 minutes the floor of the whole suite.
 """
+
+from __future__ import annotations
+
+import pytest
+
+
+@pytest.hookimpl(tryfirst=True)  # before -m "not slow" deselects
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """A test that starts the headless browser (the ``chromium`` fixture of tests/test_view.py) is slow: left out
+    of ``make test-fast``."""
+    for item in items:
+        if "chromium" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.slow)

@@ -178,6 +178,7 @@ def test_a_mesh_and_a_cloud_block_the_straight_path_and_the_planner_goes_around(
     assert box.first_invalid(densify(path, 0.002)) is None
 
 
+@pytest.mark.slow  # plans around a mesh and a point cloud, then draws it: CPU-heavy
 def test_a_plan_file_with_a_mesh_and_a_cloud_plans_and_draws(tmp_path):
     import yaml
 

@@ -16,6 +16,8 @@ from roarmctl.cli import run as run_cli
 from roarmctl.device.link import Link
 from roarmctl.device.simulator import PtySimulator, SimConfig
 
+pytestmark = pytest.mark.slow  # real time: connects to the simulated arm, its setup and silent windows included
+
 MOTION = (101, 102, 104, 1041, 121, 122)
 
 

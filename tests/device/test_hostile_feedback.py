@@ -18,6 +18,8 @@ from devtraj import host_lateness, min_jerk, pick_place
 from roarmctl.cli import run as run_cli
 from roarmctl.device.simulator import Bogus, PtySimulator, SimConfig
 
+pytestmark = pytest.mark.slow  # real time: hostile feedback from the simulated arm, mid-motion cases streamed
+
 MOTION = (101, 102, 104, 1041, 121, 122)
 HUGE = "1" * 400
 
