@@ -8,14 +8,11 @@ checks of what was read live in ``roarmctl.validation``.
 
 from __future__ import annotations
 
-import ctypes
 import errno
 import json
 import os
-import secrets
 import shutil
 import stat
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -40,6 +37,8 @@ def atomic_write_json(path: str | os.PathLike, obj: Any, indent: int | None = 1)
 
 def atomic_write_with(path: str | os.PathLike, writer: Callable[[Any], Any]) -> Path:
     """Call ``writer(binary_file)`` on a temporary file next to ``path``, then rename it into place."""
+    import tempfile  # here, not at the top: it loads random, ~2.5 ms of every start-up
+
     target = check_output_file(path)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
@@ -308,6 +307,8 @@ def check_output_folder(path: str | os.PathLike, force: bool = False, made_by_us
 def new_folder_beside(target: str | os.PathLike) -> Path:
     """An empty hidden temporary folder next to ``target`` (same file system, for the final rename),
     holding ``MARKER``."""
+    import tempfile
+
     target = Path(target)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
@@ -321,7 +322,7 @@ def note_output_folder(target: str | os.PathLike) -> None:
     """Say that a folder is being written to ``target`` (before the work starts), so that a signal
     until ``replace_folder`` finishes is reported with what is at ``target`` (``interrupted_write_state``)."""
     target = Path(target)
-    _PENDING[:] = [[target, secrets.token_hex(8), os.path.lexists(target), None]]
+    _PENDING[:] = [[target, os.urandom(8).hex(), os.path.lexists(target), None]]
 
 
 def replace_folder(new: str | os.PathLike, target: str | os.PathLike) -> Path:
@@ -329,8 +330,10 @@ def replace_folder(new: str | os.PathLike, target: str | os.PathLike) -> Path:
     rename (Linux ``renameat2(RENAME_EXCHANGE)``) and deleted only afterwards, so a signal at any
     moment leaves at ``target`` either the old folder or the new one, whole. ``MARKER`` is written into
     ``new`` first; after a signal ``interrupted_write_state()`` says which folder is at ``target``."""
+    import tempfile
+
     new, target = Path(new), Path(target)
-    token = secrets.token_hex(8)
+    token = os.urandom(8).hex()  # as secrets.token_hex(8), without loading hmac and OpenSSL's hashlib at start-up
     (new / MARKER).write_text(f"written by roarmctl ({token}); replacing this folder deletes nothing else\n")
     existed = os.path.lexists(target)
     _PENDING[:] = [[target, token, existed, None]]
@@ -353,6 +356,8 @@ def replace_folder(new: str | os.PathLike, target: str | os.PathLike) -> Path:
 
 def _exchange(a: Path, b: Path) -> bool:
     """Swap the paths ``a`` and ``b`` atomically; False where the system cannot (then nothing changed)."""
+    import ctypes
+
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         renameat2 = libc.renameat2

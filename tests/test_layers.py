@@ -167,6 +167,32 @@ def test_an_upward_import_inside_a_function_is_found():
 
 
 STDLIB = set(sys.stdlib_module_names) | {"__future__"}
+# Standard-library modules that count as libraries here: each costs a noticeable share of `roarmctl --help`
+# (about 120 ms in all on an idle 2-core machine), so a command that needs one imports it (or the roarmctl
+# module that does) inside a function. Costs measured with the typer-based CLI already loaded
+# (bench/bench_startup.py's machine; docs/benchmarks.md, start-up): http.server ~25 ms (ssl, email, socket),
+# hashlib ~5 ms (OpenSSL's libcrypto), tempfile ~2.5 ms (random), html ~2.5 ms (html.entities),
+# ctypes, importlib.resources and webbrowser ~1.5-2 ms each.
+START_UP_STDLIB = {"http", "hashlib", "hmac", "secrets", "tempfile", "html", "ctypes", "importlib.resources", "webbrowser"}
+
+
+def _library(module: str) -> str | None:
+    """The library an imported module counts as: its top-level package for a third-party one, the START_UP_STDLIB
+    entry it falls under for a standard-library one, None for the rest of the standard library and roarmctl."""
+    top = module.split(".")[0]
+    if top == "roarmctl":
+        return None
+    if top not in STDLIB:
+        return top
+    return next((s for s in START_UP_STDLIB if module == s or module.startswith(s + ".")), None)
+
+
+def _imported_names(node: ast.Import | ast.ImportFrom) -> list[str]:
+    """The dotted names an import statement may load: ``from importlib import resources`` -> importlib and
+    importlib.resources (which of them is a module is not known without importing)."""
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names]
+    return [node.module or ""] + [f"{node.module}.{a.name}" for a in node.names]
 
 
 def _module_level_libraries() -> dict[str, set[str]]:
@@ -180,10 +206,10 @@ def _module_level_libraries() -> dict[str, set[str]]:
         for node in ast.walk(tree):
             if id(node) in skip or not isinstance(node, (ast.Import, ast.ImportFrom)) or getattr(node, "level", 0):
                 continue
-            for m in [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module]:
-                top = m.split(".")[0]
-                if top not in STDLIB and top != "roarmctl":
-                    libs.add(top)
+            for m in _imported_names(node):
+                lib = _library(m)
+                if lib is not None:
+                    libs.add(lib)
         out[name] = libs
     return out
 
@@ -210,9 +236,18 @@ def libraries_loaded() -> dict[str, set[str]]:
     return {m: closure(m, set()) for m in MODULES}
 
 
+@pytest.mark.parametrize("module, library", [
+    ("numpy.linalg", "numpy"), ("http.server", "http"), ("importlib.resources", "importlib.resources"),
+    ("importlib.util", None), ("json", None), ("roarmctl.fileio", None),
+])
+def test_what_counts_as_a_library_for_start_up(module, library):
+    assert _library(module) == library
+
+
 def test_imports_inside_functions_are_there_for_start_up_time():
-    """An import sits inside a function only to keep a library out of start-up: it loads a third-party library
-    (directly, or through the roarmctl module it names) that its module does not load at module level."""
+    """An import sits inside a function only to keep a library out of start-up: it loads a third-party library or
+    a costly standard-library module (START_UP_STDLIB; directly, or through the roarmctl module it names) that its
+    module does not load at module level."""
     loaded = libraries_loaded()
     needless = []
     for name, path in MODULES.items():
@@ -228,11 +263,10 @@ def test_imports_inside_functions_are_there_for_start_up_time():
                     continue
                 new = set()
                 for t in targets_of(node, package):
-                    top = t.split(".")[0]
-                    if top == "roarmctl":
+                    if t.split(".")[0] == "roarmctl":
                         new |= loaded.get(t, {"(extension)"} if t in EXTENSIONS else set()) - loaded[name]
-                    elif top not in STDLIB:
-                        new |= {top} - loaded[name]
+                if not getattr(node, "level", 0):
+                    new |= {lib for m in _imported_names(node) if (lib := _library(m)) is not None} - loaded[name]
                 if not new:
                     needless.append(f"{name}:{node.lineno} {ast.unparse(node)}")
     assert not needless, "imports inside functions that load no library their module lacks (move them up):\n" + "\n".join(needless)

@@ -17,7 +17,11 @@ def test_help_loads_no_numeric_or_planning_library():
     mods = _imported("import sys; sys.argv = ['roarmctl', '--help']\n"
                      "from roarmctl.launch import main\ntry:\n    main()\nexcept SystemExit:\n    pass")
     assert "roarmctl.cli" in mods
-    assert not mods & {"numpy", "ompl", "fcl", "toppra", "matplotlib", "scipy"}
+    assert not mods & {"numpy", "ompl", "fcl", "toppra", "matplotlib", "scipy", "mujoco", "yaml", "rich"}
+    # nor the standard library's costly modules that only some commands use (tests/test_layers.py, START_UP_STDLIB):
+    # http.server (view: ssl, email, socket), hashlib (OpenSSL), tempfile, the web page's html and resources
+    assert not mods & {"http.server", "ssl", "email", "hashlib", "secrets", "tempfile", "html", "ctypes", "importlib.resources",
+                       "webbrowser"}
 
 
 def test_toppra_is_imported_as_it_is_with_no_stand_in_modules():

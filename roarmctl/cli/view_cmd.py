@@ -7,14 +7,11 @@ memory and answers only on the loopback interface. Ctrl-C stops it (exit 130, as
 from __future__ import annotations
 
 import sys
-import webbrowser
 from pathlib import Path
 
 import typer
 
 from roarmctl.cli import common
-from roarmctl.viz.web.page import render_page
-from roarmctl.viz.web.server import ViewServer
 
 
 def register(app: typer.Typer) -> None:
@@ -31,6 +28,11 @@ def view(
     open_browser: bool = typer.Option(False, "--open", help="Also open the page in the default web browser."),
 ) -> None:
     """Serve an interactive 3D view (robot, scene, TCP path, timeline) at http://127.0.0.1:PORT/ until Ctrl-C."""
+    # here, not at the top: http.server (ssl, email, socket) and the page's modules cost ~30 ms of every --help
+    import webbrowser
+
+    from roarmctl.viz.web.page import render_page
+    from roarmctl.viz.web.server import ViewServer
     from roarmctl.viz.web.sources import load_view_source, source_document
 
     src = load_view_source(source, trajectory)

@@ -13,7 +13,6 @@ import typer
 from roarmctl.cli import common
 from roarmctl.errors import InfeasibleError, InputError
 from roarmctl.viz.formats import picture_format
-from roarmctl.viz.web.page import write_page
 
 VIEW_NAMES = ("iso", "top", "front", "side")
 MAX_PIXELS = 12000  # per side; beyond this a PNG is a mistake, not a picture
@@ -96,6 +95,7 @@ def visualize_path(
 def _write_html(source: Path, out: Path) -> None:
     """``visualize-path SOURCE -o out.html``: the browser view as one file; a failing plan is drawn up to the
     failure, then reported (exit 3) as for a picture."""
+    from roarmctl.viz.web.page import write_page
     from roarmctl.viz.web.sources import load_view_source, source_document
 
     src = load_view_source(source)
