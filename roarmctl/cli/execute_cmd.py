@@ -1,8 +1,6 @@
 """``roarmctl execute`` (stream a trajectory to the arm, the simulator, or a file), ``sim-device``
 (the firmware simulator on a pseudo-terminal) and ``ports`` (serial ports, likely arm marked)."""
 
-from __future__ import annotations
-
 import re
 import sys
 from pathlib import Path

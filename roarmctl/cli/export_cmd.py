@@ -1,7 +1,5 @@
 """``roarmctl export``: a trajectory or an execution log as MCAP, a ROS 2 bag folder, or CSV."""
 
-from __future__ import annotations
-
 from pathlib import Path
 
 import typer

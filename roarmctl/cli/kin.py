@@ -4,8 +4,6 @@ Every command takes ``--deg`` (angles in and out in degrees) and ``--json`` (one
 stdout, nothing else); without ``--json`` a readable table is printed.
 """
 
-from __future__ import annotations
-
 import math
 from typing import TYPE_CHECKING, Any
 
@@ -49,7 +47,7 @@ def _looks_like_degrees(what: str, values, deg: bool) -> None:
                     f"radians; pass --deg if they are degrees")
 
 
-def _joint_input(r, values: list[str], deg: bool, what: str = "joint value") -> np.ndarray:
+def _joint_input(r, values: list[str], deg: bool, what: str = "joint value") -> "np.ndarray":
     """The full configuration (rad, m) from joint values on the command line (arm joints, the gripper may
     follow; degrees for revolute joints with --deg, prismatic ones always in metres). Warns when values
     without --deg look like degrees, and when a value is outside its joint's limits."""
@@ -62,7 +60,7 @@ def _joint_input(r, values: list[str], deg: bool, what: str = "joint value") -> 
     return q
 
 
-def _outside_limits(r, q: np.ndarray, deg: bool, cols: list[int]) -> None:
+def _outside_limits(r, q: "np.ndarray", deg: bool, cols: list[int]) -> None:
     """Warn for every given joint value outside its joint's limits, in the units it was given in."""
     out = [c for c in cols if not (r.lower[c] - 1e-9 <= q[c] <= r.upper[c] + 1e-9)]
     if not out:
@@ -95,7 +93,7 @@ def _table(title: str, rows: list[tuple[str, str]]) -> None:
     common.console().print(t)
 
 
-def _columns_table(title: str, columns: list[str], rows: list[tuple[str, np.ndarray]], digits: int = 4,
+def _columns_table(title: str, columns: list[str], rows: "list[tuple[str, np.ndarray]]", digits: int = 4,
                    caption: str | None = None) -> None:
     """One row per quantity, one column per joint (fits 80 columns for up to 6 joints)."""
     import numpy as np
@@ -219,7 +217,7 @@ def jacobian(
     ])
 
 
-def _split_numbers(text: str | None, what: str, deg: bool) -> np.ndarray | None:
+def _split_numbers(text: str | None, what: str, deg: bool) -> "np.ndarray | None":
     """'0 0.5 1.2' or '0,0.5,1.2' -> array (rad when ``deg``); None stays None."""
     if text is None:
         return None
@@ -399,7 +397,7 @@ def dynamics(
                    [(f"row q{i + 1}", mm[i]) for i in range(r.dof)], digits=5)
 
 
-def _pad(r, v: np.ndarray) -> np.ndarray:
+def _pad(r, v: "np.ndarray") -> "np.ndarray":
     import numpy as np
 
     out = np.zeros(r.dof)

@@ -1,7 +1,5 @@
 """``roarmctl plan``: plan file -> collision-free, singularity-aware, time-optimal trajectory file."""
 
-from __future__ import annotations
-
 import sys
 from pathlib import Path
 

@@ -1,8 +1,6 @@
 """``roarmctl simulate``: play a trajectory's commands into the physics model (MuJoCo) and report what
 the arm and the objects did: tracking, torque, sag, unintended contacts, placements."""
 
-from __future__ import annotations
-
 from pathlib import Path
 
 import typer

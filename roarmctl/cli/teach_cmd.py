@@ -2,8 +2,6 @@
 actions, save them as a plan. Leaving (q, Ctrl-C, SIGTERM, a lost link) never moves the arm: the measured
 pose becomes every servo's goal, then torque goes on; the recording is saved."""
 
-from __future__ import annotations
-
 import math
 import os
 import select

@@ -4,8 +4,6 @@ The page is the one ``visualize-path -o NAME.html`` writes (``roarmctl.viz.web``
 memory and answers only on the loopback interface. Ctrl-C stops it (exit 130, as every command).
 """
 
-from __future__ import annotations
-
 import sys
 from pathlib import Path
 

@@ -4,8 +4,6 @@ matplotlib is imported inside the commands (through ``roarmctl.viz.*_figure``), 
 ``roarmctl.cli``, so ``roarmctl --help`` stays fast.
 """
 
-from __future__ import annotations
-
 from pathlib import Path
 
 import typer
