@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 
 def _imported(code: str) -> set[str]:
@@ -141,3 +142,17 @@ def test_the_commands_annotations_are_not_strings():
     assert len(seen) >= 15  # every command is walked
     stringly = [f"{f.__module__}.{f.__qualname__}: {name}" for f in seen for name, a in f.__annotations__.items() if isinstance(a, str)]
     assert not stringly, stringly
+
+
+def test_plan_loads_what_planning_needs_and_nothing_of_the_other_commands(tmp_path):
+    """``roarmctl plan ... --json`` in a fresh process: the planning libraries load (toppra with scipy.interpolate and
+    matplotlib.pyplot, which toppra's package __init__ imports: docs/benchmarks.md, start-up), but nothing that only
+    other commands use: no physics (MuJoCo), no table rendering (rich, with --json), no web view (http.server), no
+    meshes (trimesh: the plan has only primitive shapes), no device session's serial port."""
+    out, plan = tmp_path / "p.traj.json", Path(__file__).resolve().parents[1] / "plans" / "pick_place.yaml"
+    mods = _imported(f"import sys; sys.argv = ['roarmctl', 'plan', {str(plan)!r}, '-o', {str(out)!r}, '--json']\n"
+                     "from roarmctl.launch import main\ntry:\n    main()\nexcept SystemExit as e:\n    assert not e.code, e.code")
+    assert {"toppra", "ompl", "fcl", "numpy", "scipy.interpolate", "matplotlib.pyplot"} <= mods
+    assert out.is_file()
+    assert not mods & {"mujoco", "rich", "http.server", "trimesh", "serial", "pydantic", "roarmctl.physics", "roarmctl.viz.web.page",
+                       "roarmctl.viz.path_figure", "roarmctl.api"}
