@@ -4,9 +4,10 @@ Run: .venv/bin/python bench/bench_startup.py [--rounds 20]
 
 Each round runs, one after the other (interleaved, so machine load hits every command alike):
 ``python -c pass``; ``roarmctl --help``; ``roarmctl plan plans/pick_place.yaml`` (whole process,
-planning included; its own ``planning_time`` in this fresh process is reported too, with its stage split); a bare
-``import toppra`` (scipy.interpolate and matplotlib.pyplot inside, see ``timing.import_toppra``); and the same
-after numpy (what toppra adds to a process that has numpy already).
+planning included; its own ``planning_time`` in this fresh process is reported too, with its stage split); ``import numpy``; a bare
+``import toppra`` (scipy.interpolate and matplotlib.pyplot inside, see ``timing.import_toppra``); what the plan
+command imports beside toppra (the CLI, the planning pipeline, FCL, Ruckig, OMPL: the floor of a ``plan`` whose
+timing loaded no toppra); and scipy.interpolate and matplotlib.pyplot alone.
 Targets (issue 25): plan <= 0.5 s, --help <= 0.12 s on an idle 2-core machine. CPU time (user + sys) is printed
 beside the wall time: on a machine shared with other work it moves far less than the wall time.
 Bytecode: a user's install has every module's .pyc (pip writes them; Python writes the missing ones on the
@@ -59,6 +60,8 @@ def main() -> None:
         "roarmctl --help": CLI + ["--help"],
         "roarmctl plan pick_place": CLI + ["plan", "plans/pick_place.yaml", "-o", str(out), "--json"],
         "import numpy": [PY, "-c", "import numpy"],
+        # what the plan command imports beside toppra: the floor of a plan whose timing needed no toppra
+        "plan's imports but toppra": [PY, "-c", "import roarmctl.cli, roarmctl.motion.pipeline, fcl, ruckig, ompl.base, ompl.geometric"],
         "import toppra": [PY, "-c", "import toppra, toppra.algorithm, toppra.constraint"],
         "import scipy.interpolate": [PY, "-c", "import scipy.interpolate"],
         "import matplotlib.pyplot": [PY, "-c", "import matplotlib.pyplot"],
