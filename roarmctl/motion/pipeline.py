@@ -97,7 +97,8 @@ _LIBRARIES_LOADED = False  # load_planning_libraries has imported them all
 
 
 def load_planning_libraries() -> None:
-    """Import toppra (about 0.5 s, mostly scipy), OMPL and FCL up front, so stage timings measure work, not imports
+    """Import toppra (about 1.1 s on an idle 2-core machine: scipy.interpolate and matplotlib.pyplot, which its package
+    imports; docs/benchmarks.md, start-up), OMPL and FCL up front, so stage timings measure work, not imports
     (also Ruckig, the blend's corner moves: 1-2 ms that a fresh process otherwise counted as blend time; RNEA's
     module comes with this one's imports).
 
