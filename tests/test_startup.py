@@ -25,6 +25,15 @@ def test_help_loads_no_numeric_or_planning_library():
                        "webbrowser"}
 
 
+def test_help_imports_a_bounded_number_of_modules():
+    """A count of work rather than a clock (which the machine's load moves): `--help` imported 236 modules before issue
+    25's cuts and 175 after (``python -c pass`` 64), most of them Python's and typer's. A command module that imports
+    something costly at its top shows here; 190 leaves room for a few small modules."""
+    mods = _imported("import sys; sys.argv = ['roarmctl', '--help']\n"
+                     "from roarmctl.launch import main\ntry:\n    main()\nexcept SystemExit:\n    pass")
+    assert len(mods) <= 190, len(mods)
+
+
 def test_toppra_is_imported_as_it_is_with_no_stand_in_modules():
     """No module is replaced or deferred behind the import system's back: after import_toppra the matplotlib
     modules (toppra imports pyplot itself) are plain modules whose code has run."""
