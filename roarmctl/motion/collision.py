@@ -50,7 +50,7 @@ from roarmctl.motion.geometry import Part, item_parts
 from roarmctl.motion.geometry import fcl_geometry as _geometry
 from roarmctl.motion.geometry import half_extents as _half_extents
 from roarmctl.motion.geometry import second_box as _second_box  # noqa: F401 (tests reach it here)
-from roarmctl.motion.scene import Scene, SceneItem
+from roarmctl.motion.scene import Scene, SceneItem, settled
 from roarmctl.robot.model import Robot
 
 _EPS = 1e-9  # rad: joint-limit tolerance (the kernel uses the same)
@@ -218,12 +218,12 @@ class CollisionChecker:
         self._attached[name] = (item, rel)
         self._rebuild()
 
-    def detach(self, name: str, q_arm) -> SceneItem:
-        """Put attached object ``name`` back into the scene at its pose for ``q_arm``; returns the item."""
+    def detach(self, name: str, q_arm, step: float = 0.0) -> SceneItem:
+        """Put attached object ``name`` back into the scene at its pose for ``q_arm`` (``scene.settled`` to ``step``, m and rad, if > 0); returns the item."""
         if name not in self._attached:
             raise InputError(f"'{name}' is not attached (attached: {', '.join(self._attached) or 'none'})")
         item, rel = self._attached.pop(name)
-        item.pose = self.tcp_pose(q_arm) @ rel
+        item.pose = self.tcp_pose(q_arm) @ rel if step <= 0.0 else settled(self.tcp_pose(q_arm) @ rel, step)
         self.scene.items.append(item)
         self._rebuild()
         return item

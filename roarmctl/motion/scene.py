@@ -233,6 +233,19 @@ class Scene:
         return cls([SceneItem.from_dict(i) for i in d.get("items", [])])
 
 
+def settled(pose: np.ndarray, step: float) -> np.ndarray:
+    """``pose`` (4, 4) with its position (m) and roll-pitch-yaw (rad) rounded to multiples of ``step`` (> 0), and no
+    negative zeros: the same for poses that differ by less than ``step`` (unless they straddle a rounding boundary).
+
+    The planner records where an object is put down this way (``roarmctl.motion.planning.grasp``): where the jaws
+    leave it differs between repeats of one placement by rounding (1e-16 m) and by the fixed jaw's iteration (about
+    1e-9 rad a time); rounded to a micrometre and a microradian, far below any arm's repeatability, repeated cycles of
+    a plan meet bit for bit the same world and reuse what they computed (timings keyed by exact waypoints)."""
+    xyz = np.round(pose[:3, 3] / step) * step + 0.0
+    rpy = np.round(rpy_from_matrix(pose[:3, :3]) / step) * step + 0.0
+    return transform(xyz, rpy)
+
+
 def example_scene() -> Scene:
     """The RoArm example used by tests and benchmarks: table, a cube, a wall between pick and place.
 

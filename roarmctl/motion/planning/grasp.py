@@ -24,6 +24,7 @@ from roarmctl.motion.planning.pieces import (
     split_at,
     superpose,
 )
+from roarmctl.motion.scene import settled
 from roarmctl.motion.timing import TimedPath, time_parameterise
 from roarmctl.motion.trajectory import Event, Segment
 from roarmctl.robot.dynamics import inverse_dynamics
@@ -95,6 +96,10 @@ def grip_value(ctx: PlanContext, task: PickTask, g_open: float, where: str) -> f
     ctx.notes.append(f"{where}: grip '{task.object}' ({width * 1000:.1f} mm) at {want * 1000:.1f} mm: gripper {closed:.3f} rad")
     return closed
 
+# m and rad: where a released object lands is recorded to this step (``scene.settled``: repeated cycles of a plan then
+# meet the same world bit for bit and reuse their timings)
+PLACED_STEP = 1e-6
+
 
 # ------------------------------------------------------------------ gripper actions
 def gripper_motion(ctx: PlanContext, q: np.ndarray, target: float, label: str, start: float | None = None) -> TimedPath:
@@ -154,12 +159,13 @@ def gripper_event(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> None:
         elif step.event.kind == "release":
             released = ctx.held
             assert released is not None  # a release follows a grasp
-            item = ctx.checker.detach(released, q[ctx.arm])
+            item = ctx.checker.detach(released, q[ctx.arm], step=PLACED_STEP)
             if ctx.held_local is not None:  # carried against the fixed jaw: where the jaws put it, turned with them
                 ctx.object_pose[released] = item.pose.copy()
                 ctx.held_local = None
             else:
                 ctx.object_pose[released][:3, 3] = tcp - ctx.held_offset
+                ctx.object_pose[released] = settled(ctx.object_pose[released], PLACED_STEP)
             ctx.held, ctx.held_offset = None, np.zeros(3)
             ctx.payload, ctx.payload_label = None, ""
             ctx.set_state(b, grasp_target=released)
