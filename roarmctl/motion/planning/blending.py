@@ -6,12 +6,13 @@ jerk-limited Ruckig move). Every blended sample keeps every limit and is collisi
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from roarmctl.motion.planning.grasp import GripperDoesNotFit, gripper_action, open_during_transit, overlap_jaw_action
-from roarmctl.motion.planning.motions import time_motion
+from roarmctl.motion.planning.motions import _copied, payload_key, time_motion
 from roarmctl.motion.planning.payloads import torque_model
 from roarmctl.motion.planning.pieces import (
     LIMIT_TOL,
@@ -40,9 +41,58 @@ Bounds = list[tuple[float, float]]  # each motion's (start, end) s in a blended 
 
 def time_chain(ctx: PlanContext, motions: list[UntimedMotion]) -> list[TimedPiece]:
     """Time a chain of motions: each from rest to rest, then, when ``limits.blend``, joined without a stop at
-    every join (``blend_join``) and the gripper opened during its free motion."""
+    every join (``blend_join``) and the gripper opened during its free motion.
+
+    The result is a function of the motions (their kinds, lines, grasp targets, gripper openings and exact
+    waypoints), of the collision world (the checker's scene, attached objects and state) and of the held payload:
+    the limits are fixed per plan. A plan keeps what it timed (``ctx.chains``, keyed by all of these, its labels
+    aside): the cycles of a plan that repeat a chain in the same world (a cube carried there and back, cycle after
+    cycle) take its pieces, checked when they were made, relabelled with the new motions' labels."""
     if not motions:
         return []
+    key = chain_key(ctx, motions)
+    known = ctx.chains.get(key) if key is not None else None
+    if known is not None:
+        pieces, labels, (gripper, target) = known
+        ctx.set_state(gripper, grasp_target=target)  # the collision state the chain was left in
+        names = dict(zip(labels, chain_labels(motions)))
+        return [replace(p, tp=_copied(p.tp), blends=list(p.blends),
+                        segments=[replace(sg, label=names.get(sg.label, sg.label)) for sg in p.segments]) for p in pieces]
+    out = _time_chain(ctx, motions)
+    labels = chain_labels(motions)
+    if key is not None and len(set(labels)) == len(labels):  # relabelling needs each label once
+        if len(ctx.chains) >= CHAINS_KEPT:
+            ctx.chains.clear()
+        c = ctx.checker
+        state = (None if c._gripper_index is None else float(c._q_template[c._gripper_index]), c._grasp_target)
+        ctx.chains[key] = ([replace(p, tp=_copied(p.tp), blends=list(p.blends), segments=list(p.segments)) for p in out],
+                           labels, state)
+    return out
+
+
+CHAINS_KEPT = 64  # timed chains a plan keeps (time_chain)
+
+
+def chain_labels(motions: list[UntimedMotion]) -> list[str]:
+    """Every label a chain's pieces can carry: each motion's, and its gripper opening's (at rest, ``at_rest``)."""
+    return [lab for m in motions for lab in (m.step.label, m.step.open_label or f"{m.step.label}: open gripper")]
+
+
+def chain_key(ctx: PlanContext, motions: list[UntimedMotion]) -> tuple | None:
+    """What ``time_chain``'s result depends on, as exact bytes (labels aside); None if a motion's step holds what
+    the key does not cover (its own waypoints, times or events: not a free or straight motion's)."""
+    parts = []
+    for m in motions:
+        s = m.step
+        if s.waypoints is not None or s.q_from is not None or s.event is not None or s.kind not in ("free", "cartesian"):
+            return None
+        line = None if s.line is None else (np.asarray(s.line[0], dtype=float).tobytes(), np.asarray(s.line[1], dtype=float).tobytes())
+        parts.append((s.kind, s.grasp_target, s.open_to, line, m.wps.shape, np.ascontiguousarray(m.wps, dtype=float).tobytes()))
+    return (tuple(parts), payload_key(ctx), ctx.held, ctx.checker._state_key())
+
+
+def _time_chain(ctx: PlanContext, motions: list[UntimedMotion]) -> list[TimedPiece]:
+    """``time_chain`` itself (not kept)."""
     singles = [time_motion(ctx, m) for m in motions]
     if not ctx.plan.limits.blend:
         return at_rest(ctx, motions, singles)

@@ -70,6 +70,7 @@ class PlanContext:
         self.payload_label = ""
         self.free_count = 0  # free motions planned so far (each gets its own OMPL seed)
         self.timed: dict[tuple, TimedPath] = {}  # what motions.time_path timed, by its waypoints and payload
+        self.chains: dict[tuple, tuple] = {}  # what blending.time_chain timed, by its motions and world (chain_key)
 
     def set_state(self, gripper: float | None, grasp_target: str | None = None) -> None:
         """Put the checker in a motion's collision state: the gripper at ``gripper`` (rad; None: as it is) and

@@ -86,6 +86,13 @@ def _copied(tp: TimedPath) -> TimedPath:
                      None if tp.s is None else tp.s.copy())
 
 
+def payload_key(ctx: PlanContext) -> tuple | None:
+    """The held payload as exact bytes (None: nothing held), for keys of what a plan keeps."""
+    return None if ctx.payload is None else tuple(
+        (link, float(i.mass), np.asarray(i.com, dtype=float).tobytes(), np.asarray(i.inertia, dtype=float).tobytes())
+        for link, i in ctx.payload.items())
+
+
 def time_path(ctx: PlanContext, wps: np.ndarray, label: str) -> TimedPath:
     """TOPP-RA timing of the arm joints along the waypoints ``wps`` (K, dof), rest to rest, under the scaled
     joint limits, the jerk limits, the torque limits (with the held payload) and ``max_tcp_speed``.
@@ -95,10 +102,7 @@ def time_path(ctx: PlanContext, wps: np.ndarray, label: str) -> TimedPath:
     straight approaches and retreats again in every cycle, and times them once (``label`` only names a failure,
     which is never kept)."""
     t0 = time.perf_counter()
-    payload = None if ctx.payload is None else tuple(
-        (link, float(i.mass), np.asarray(i.com, dtype=float).tobytes(), np.asarray(i.inertia, dtype=float).tobytes())
-        for link, i in ctx.payload.items())
-    key = (wps.shape, np.ascontiguousarray(wps, dtype=float).tobytes(), payload)
+    key = (wps.shape, np.ascontiguousarray(wps, dtype=float).tobytes(), payload_key(ctx))
     known = ctx.timed.get(key)
     if known is not None:
         ctx.timer.add("toppra", t0)
