@@ -71,6 +71,8 @@ class PlanContext:
         self.free_count = 0  # free motions planned so far (each gets its own OMPL seed)
         self.timed: dict[tuple, TimedPath] = {}  # what motions.time_path timed, by its waypoints and payload
         self.chains: dict[tuple, tuple] = {}  # what blending.time_chain timed, by its motions and world (chain_key)
+        self.iks: dict[tuple, list[np.ndarray]] = {}  # what tasks.choose_ik found, by its targets, q and world
+        self.lines: dict[tuple, np.ndarray] = {}  # what motions.geometry solved along straight lines, by q and the end
 
     def set_state(self, gripper: float | None, grasp_target: str | None = None) -> None:
         """Put the checker in a motion's collision state: the gripper at ``gripper`` (rad; None: as it is) and

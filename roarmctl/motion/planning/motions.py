@@ -37,9 +37,16 @@ def geometry(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> UntimedMotion:
     if step.kind == "cartesian":
         assert step.line is not None
         t0 = time.perf_counter()
-        wps = cartesian_line(ctx.robot, q, step.line[1], pitch=step.pitch, roll=step.roll, label=step.label)
+        # a function of the robot, q and the line's end alone (no collision check): a plan keeps what it solved
+        key = (np.asarray(q, dtype=float).tobytes(), np.asarray(step.line[1], dtype=float).tobytes(), step.pitch, step.roll)
+        wps = ctx.lines.get(key)
+        if wps is None:
+            wps = cartesian_line(ctx.robot, q, step.line[1], pitch=step.pitch, roll=step.roll, label=step.label)
+            if len(ctx.lines) >= TIMED_KEPT:
+                ctx.lines.clear()
+            ctx.lines[key] = wps
         ctx.timer.add("ik", t0)
-        return UntimedMotion(step, wps)
+        return UntimedMotion(step, wps.copy())
     return UntimedMotion(step, free_path(ctx, step, q))
 
 

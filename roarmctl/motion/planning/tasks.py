@@ -259,11 +259,33 @@ def choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, fl
     g = q[ctx.gi] if gripper is None and ctx.gi is not None else gripper
     if g is not None:  # the chain is checked with the gripper value it carries
         ctx.checker.set_gripper(float(g))
+    # the answer is a function of the targets, q, g and the collision world alone: a plan keeps what it found
+    key = (tuple((np.asarray(p, dtype=float).tobytes(), pt, rl) for p, pt, rl in targets), np.asarray(q, dtype=float).tobytes(),
+           None if g is None else float(g), ctx.checker._state_key())
+    known = ctx.iks.get(key)
+    if known is not None:
+        ctx.timer.add("ik", t0)
+        return [c.copy() for c in known]
+    try:
+        best = _choose_ik(ctx, targets, q, at, g)
+    finally:
+        ctx.timer.add("ik", t0)
+    if len(ctx.iks) >= IKS_KEPT:
+        ctx.iks.clear()
+    ctx.iks[key] = [c.copy() for c in best]
+    return best
+
+
+IKS_KEPT = 256  # IK answers a plan keeps (choose_ik)
+
+
+def _choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, float | None]], q: np.ndarray, at: str,
+               g: float | None) -> list[np.ndarray]:
+    """``choose_ik`` itself (not kept), the gripper at ``g`` (None: no gripper)."""
     first, pitch, roll = targets[0]
     try:
         candidates = solve_ik(ctx.robot, first, pitch=pitch, roll=roll, q_ref=q, all_solutions=True)
     except UnreachableError as exc:
-        ctx.timer.add("ik", t0)
         p = first
         raise UnreachableError(f"{at}: target ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m is unreachable: {exc.message}",
                                exc.reason, exc.hint) from None
@@ -289,7 +311,6 @@ def choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, fl
         cost = float(np.sum(np.abs(chain[-1][ctx.arm] - q[ctx.arm])))
         if cost < best_cost:
             best, best_cost = chain, cost
-    ctx.timer.add("ik", t0)
     if best is None:
         p = first
         why = reasons[0] if reasons else "no IK solution"
