@@ -148,14 +148,26 @@ def against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_gr
     up = np.array([0.0, 0.0, task.approach_height])
     grasp = centre + lift
     roll_index = ctx.arm[-1] if takes_pitch(ctx.robot) else None
-    for _ in range(jaws.ITERATIONS):
+    grasp = None
+    for _ in range(jaws.ITERATIONS):  # until the target settles (jaws.ITERATIONS), then rounded and solved once more
+        new_roll = roll
         if task.roll is None and roll_index is not None and spec.shape == "box":
             aligned = jaws.aligned_roll(ctx.robot, q_grasp, roll_index, pose[:3, :3], spec.size, width)
-            roll = aligned if aligned is not None else roll
-            if roll is not None:
-                roll = math.remainder(roll, 2 * math.pi)
-        grasp = centre + lift - jaws.object_offset(ctx.robot, q_grasp, width)
+            new_roll = aligned if aligned is not None else roll
+            if new_roll is not None:
+                new_roll = math.remainder(new_roll, 2 * math.pi)
+        new_grasp = centre + lift - jaws.object_offset(ctx.robot, q_grasp, width)
+        settled = grasp is not None and float(np.max(np.abs(new_grasp - grasp))) < jaws.SETTLE and (
+            new_roll is None or roll is None or abs(new_roll - roll) < jaws.SETTLE)
+        grasp, roll = new_grasp, new_roll
+        if settled:
+            break
         (q_grasp, q_above), _ = choose_ik_pitch(ctx, [grasp, grasp + up], pitch, False, roll, q, at, gripper=g_open)
+    assert grasp is not None  # jaws.ITERATIONS > 0
+    grasp = jaws.rounded(grasp)
+    if roll is not None and task.roll is None:  # a roll the plan gives is kept as written
+        roll = float(jaws.rounded(roll))
+    (q_grasp, q_above), _ = choose_ik_pitch(ctx, [grasp, grasp + up], pitch, False, roll, q, at, gripper=g_open)
     ctx.notes.append(f"{at}: '{task.object}' against the fixed jaw: TCP {np.linalg.norm(grasp - centre - lift) * 1e3:.1f} mm "
                      f"from its centre" + (f", roll {math.degrees(roll):.1f} deg" if roll is not None else ""))
     return q_grasp, q_above, grasp, grasp + up, roll
@@ -188,9 +200,15 @@ def expand_place(ctx: PlanContext, task: PlaceTask, q: np.ndarray, at: str) -> l
     if ctx.held_local is not None:
 
         up = np.array([0.0, 0.0, task.approach_height])
-        for _ in range(jaws.ITERATIONS):
-            target = np.asarray(task.xyz, dtype=float) - ctx.robot.kin.fk(q_place)[:3, :3] @ ctx.held_local
+        for _ in range(jaws.ITERATIONS):  # until the target settles, then rounded and solved once more (as a pick's)
+            new_target = np.asarray(task.xyz, dtype=float) - ctx.robot.kin.fk(q_place)[:3, :3] @ ctx.held_local
+            settled = float(np.max(np.abs(new_target - target))) < jaws.SETTLE
+            target = new_target
+            if settled:
+                break
             (q_place, q_above), _ = choose_ik_pitch(ctx, [target, target + up], pitch, False, task.roll, q, at)
+        target = jaws.rounded(target)
+        (q_place, q_above), _ = choose_ik_pitch(ctx, [target, target + up], pitch, False, task.roll, q, at)
         above = target + up
     lab = pitch_label(pitch, task.pitch_auto and pitch is not None)
     return [
