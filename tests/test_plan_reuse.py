@@ -46,7 +46,8 @@ def test_reuse_gives_the_same_bytes_as_planning_everything_afresh(monkeypatch):
 
     def forgetful(self, *args, **kwargs):
         init(self, *args, **kwargs)
-        self.timed, self.chains, self.iks, self.lines = _Forgetful(), _Forgetful(), _Forgetful(), _Forgetful()
+        for name in ("timed", "chains", "iks", "lines", "jaw_targets"):
+            setattr(self, name, _Forgetful())
 
     monkeypatch.setattr(context.PlanContext, "__init__", forgetful)
     afresh = plan_file(copy.deepcopy(doc), seed=7, base_dir=PLANS)

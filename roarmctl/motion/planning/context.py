@@ -73,6 +73,7 @@ class PlanContext:
         self.chains: dict[tuple, tuple] = {}  # what blending.time_chain timed, by its motions and world (chain_key)
         self.iks: dict[tuple, list[np.ndarray]] = {}  # what tasks.choose_ik found, by its targets, q and world
         self.lines: dict[tuple, np.ndarray] = {}  # what motions.geometry solved along straight lines, by q and the end
+        self.jaw_targets: dict[tuple, tuple] = {}  # what tasks.against_fixed_jaw found, by its task, poses and world
 
     def set_state(self, gripper: float | None, grasp_target: str | None = None) -> None:
         """Put the checker in a motion's collision state: the gripper at ``gripper`` (rad; None: as it is) and

@@ -138,8 +138,32 @@ def against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_gr
                       q: np.ndarray, at: str, g_open: float):
     """The grasp and approach configurations (and points) that put the object's side ``fixed_jaw.MARGIN`` from
     the fixed jaw's face, the jaws closing across a box's narrow side (``roarmctl.motion.planning.fixed_jaw``):
-    (q_grasp, q_above, grasp point, above point, roll)."""
+    (q_grasp, q_above, grasp point, above point, roll).
 
+    A function of the task, the object's pose, the first IK answer ``q_grasp``, ``q``, the gripper and the collision
+    world alone: a plan keeps what it found (``ctx.jaw_targets``), as ``choose_ik`` keeps its answers."""
+    t0 = time.perf_counter()
+    key = (task.object, task.grasp_offset, task.approach_height, task.roll, pitch, float(g_open),
+           *(np.asarray(v, dtype=float).tobytes() for v in (centre, ctx.object_pose[task.object], q_grasp, q)),
+           ctx.checker._state_key())
+    known = ctx.jaw_targets.get(key)
+    if known is None:
+        known = _against_fixed_jaw(ctx, task, centre, q_grasp, pitch, q, at, g_open)
+        if len(ctx.jaw_targets) >= IKS_KEPT:
+            ctx.jaw_targets.clear()
+        ctx.jaw_targets[key] = known
+    else:
+        ctx.checker.set_gripper(float(g_open))  # as the last IK of the search left it
+        ctx.timer.add("ik", t0)
+    q_grasp, q_above, grasp, above, roll = known
+    ctx.notes.append(f"{at}: '{task.object}' against the fixed jaw: TCP {np.linalg.norm(grasp - centre - np.array([0.0, 0.0, task.grasp_offset])) * 1e3:.1f} mm "
+                     f"from its centre" + (f", roll {math.degrees(roll):.1f} deg" if roll is not None else ""))
+    return q_grasp.copy(), q_above.copy(), grasp.copy(), above.copy(), roll
+
+
+def _against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_grasp: np.ndarray, pitch: float | None,
+                       q: np.ndarray, at: str, g_open: float):
+    """``against_fixed_jaw`` itself (not kept, no note)."""
     spec = next(o for o in ctx.plan.objects if o.name == task.object)
     width = grasp_width(spec)
     pose = ctx.object_pose[task.object]
@@ -168,8 +192,6 @@ def against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_gr
     if roll is not None and task.roll is None:  # a roll the plan gives is kept as written
         roll = float(jaws.rounded(roll))
     (q_grasp, q_above), _ = choose_ik_pitch(ctx, [grasp, grasp + up], pitch, False, roll, q, at, gripper=g_open)
-    ctx.notes.append(f"{at}: '{task.object}' against the fixed jaw: TCP {np.linalg.norm(grasp - centre - lift) * 1e3:.1f} mm "
-                     f"from its centre" + (f", roll {math.degrees(roll):.1f} deg" if roll is not None else ""))
     return q_grasp, q_above, grasp, grasp + up, roll
 
 
