@@ -61,14 +61,19 @@ PLATEAU_TRIGGER, PLATEAU_SHARES, PLATEAU_GROWTH = 1.2, (1.1, 1.3), 1.04
 TORQUE_LAZY_SHARE = 0.9
 
 InverseDynamics = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
-# TOPP-RA grid: at least GRID_MIN points over the path (10 per waypoint, up to GRID_MAX) and at
+# TOPP-RA grid: at least GRID_MIN points over the path (GRID_PER_WAYPOINT per waypoint, up to GRID_MAX) and at
 # least GRID_PER_SEGMENT intervals between any two waypoints. A cubic spline changes curvature
 # fastest over a short segment between long ones; a uniform grid with one or two points there let
 # sampled accelerations overshoot by 25 % (obstacle.yaml, seeds 15, 27, 44). TOPP-RA's own Python costs
-# ~14 us per grid point and run; 80 points rather than 100 cost 0.02-0.06 % of summed motion time on the
-# wall and post queries of bench/bench_vs_mplib.py (40 seeds each; single motions -0.6 .. +2.2 %, as 150
-# points also give: the jerk filter's width flips between choices) for 15-20 % less timing work.
-GRID_MIN, GRID_MAX, GRID_PER_SEGMENT = 80, 800, 4
+# ~14 us per grid point and run. The samples are checked against every limit after TOPP-RA (and slowed
+# down where over), so a coarser grid can only cost motion time (or, too coarse, a margin): 5 points per
+# waypoint rather than 10 (a straight line's 13 waypoints get 80 points, not 130) changed the summed motion
+# time of obstacle, multi_object, pick_place and payload.yaml over seeds 1-15 (60 plans) by -0.000 % (single
+# plans -0.07 .. +0.19 %), with the same TOPP-RA runs and 21 % fewer grid points; GRID_MIN 40 changed little
+# more there (+0.02 %) but failed a built case of a short segment between long ones (tests/test_timing.py) at
+# every margin. Earlier, 80 rather than 100 points cost 0.02-0.06 % on the wall and post queries of
+# bench/bench_vs_mplib.py.
+GRID_MIN, GRID_MAX, GRID_PER_SEGMENT, GRID_PER_WAYPOINT = 80, 800, 4, 5
 
 
 @dataclass
@@ -144,9 +149,9 @@ def _quiet_toppra() -> None:
 
 def toppra_grid(ss: np.ndarray) -> np.ndarray:
     """TOPP-RA grid (G,) over path parameters ``ss`` (K,) of the waypoints (strictly increasing):
-    about uniform at ``ss[-1] / clip(10 K, GRID_MIN, GRID_MAX)``, with the waypoints on the grid
+    about uniform at ``ss[-1] / clip(GRID_PER_WAYPOINT K, GRID_MIN, GRID_MAX)``, with the waypoints on the grid
     and at least ``GRID_PER_SEGMENT`` intervals per segment."""
-    h = ss[-1] / int(np.clip(10 * len(ss), GRID_MIN, GRID_MAX))
+    h = ss[-1] / int(np.clip(GRID_PER_WAYPOINT * len(ss), GRID_MIN, GRID_MAX))
     d = np.diff(ss)
     m = np.maximum(GRID_PER_SEGMENT, np.rint(d / h)).astype(int)
     seg = np.repeat(np.arange(len(d)), m)
