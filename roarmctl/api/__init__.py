@@ -8,7 +8,7 @@
     rc.save_trajectory(traj, "pick_place.traj.json")
     q = rc.sample(traj, [0.0, 1.5])                    # (2, dof) joint positions, rad
     msg = rc.to_joint_trajectory(traj)                 # a trajectory_msgs/JointTrajectory-shaped dict
-    summary = rc.execute(traj, sim=True)               # or port="/dev/ttyUSB0"
+    summary = rc.execute(traj, sim=True)               # physics servos (servos="ideal"), or port="/dev/ttyUSB0"
     rc.draw(traj, "pick_place.png")                    # .png, .svg or .pdf
     rc.export(traj, "pick_place.mcap")                 # .mcap, .csv or a bag folder name
 
@@ -148,7 +148,7 @@ def to_joint_trajectory(traj: Trajectory, frame_id: str = "") -> dict[str, Any]:
 def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False, rate: float = 50.0,
             speed_scale: float = 1.0, move_to_start: bool = False, max_error: float = 0.03,
             log: PathLike | None = None, confirm: Callable[[str], bool] | None = None,
-            from_current: bool = False) -> dict[str, Any]:
+            from_current: bool = False, servos: str = "physics", sag: bool | None = None) -> dict[str, Any]:
     """Stream ``traj`` to the arm on ``port`` or to the built-in firmware simulator (``sim=True``,
     over a real pseudo-terminal). Blocks until the motion is done (real time).
 
@@ -158,19 +158,35 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
     When the arm is not at the start, ``move_to_start`` plans a checked motion there first and
     ``from_current`` plans the first free motion again from where it is (as ``roarmctl execute``);
     a start that differs only in the gripper is always opened/closed first.
+    ``servos`` (with ``sim``), as ``execute --sim --servos``: ``"physics"`` (default: MuJoCo, the ST3235 model
+    with its lag, gravity, torque limits and the trajectory's scene and payload; docs/physics.md) or
+    ``"ideal"`` (each servo runs its trapezoid exactly: for a test that needs an arm doing exactly what it is told).
+    ``sag``: goals offset by the servos' sag under gravity and payload (``roarmctl.device.sag``), as
+    ``--sag/--no-sag``: None (default) compensates, except on ideal servos.
     Writes the execution log to ``log`` when given. Returns the summary: ``outcome``, ``commands``
-    (T:102/T:101 lines sent while streaming), ``lateness_ms``, ``tracking_mm``, ``final_error_mm``, ``log``.
+    (T:102/T:101 lines sent while streaming), ``lateness_ms``, ``tracking_mm``, ``final_error_mm``, ``log``;
+    with ``sim``, ``simulator``: the simulated servos' true tracking.
     """
+    from roarmctl.device.sag import wanted
 
+    if servos not in ("physics", "ideal"):
+        raise InputError(f"servos: '{servos}' is not physics or ideal")
+    if servos != "physics" and not sim:
+        raise InputError("servos: only with sim=True (a real arm has its own servos)")
     t = _trajectory(traj)
     robot = robot_of(t)
     cfg = StreamConfig(rate=rate, speed_scale=speed_scale, max_error=max_error, move_to_start=move_to_start,
-                       from_current=from_current)
-    build_schedule(t, robot, rate=rate, speed_scale=speed_scale, strategy=cfg.strategy)  # refuse before opening
+                       from_current=from_current, sag=wanted(sag, ideal=sim and servos == "ideal"))
+    build_schedule(t, robot, rate=rate, speed_scale=speed_scale, strategy=cfg.strategy, sag=cfg.sag)  # refuse before opening
+    factory = None
     if sim:
         confirm = confirm or (lambda message: True)
+        if servos == "physics":
+            from roarmctl.physics.servo_backend import for_firmware
+
+            factory = for_firmware(robot, t)
     run = run_execution(t, robot, cfg, port=None if port is None else str(port), sim=sim, log_path=None if log is None else Path(log),
-                        confirm=confirm or (lambda message: False))
+                        confirm=confirm or (lambda message: False), sim_servos=factory)
     summary = run.result.summary() | {"log": None if log is None else str(log), "port": run.port}
     if run.simulator is not None:
         summary["simulator"] = run.simulator

@@ -17,7 +17,7 @@ from roarmctl.fileio import atomic_write_bytes
 SERVOS_HELP = ("The simulated servos: physics (default: MuJoCo, the ST3235 model with lag, gravity and torque limits; "
                "docs/physics.md) or ideal (each servo runs its trapezoid exactly, no lag, no gravity).")
 SAG_HELP = ("Offset each goal by the servos' sag under gravity and the held payload (the ST3235's P-only loop; "
-            "see docs/physics.md).")
+            "docs/physics.md): on by default, --no-sag sends the plan's own goals.")
 STRATEGY_HELP = ("Streaming strategy: timed-lead, timed, timed-acc, per-joint, timed-shared, dense, dense-ahead "
                  "(compared in docs/guide.md, 'Talking to the firmware').")
 
@@ -49,7 +49,7 @@ def execute(
     move_to_start: bool = typer.Option(False, "--move-to-start", help="If the arm is not at the first point, plan a collision-checked, timed motion there first (the trajectory's scene, limits and planner)."),
     from_current: bool = typer.Option(False, "--from-current", help="If the arm is not at the first point, plan the first free motion again from where it is."),
     max_error: float = typer.Option(30.0, "--max-error", help="Abort (and hold) when the TCP tracking error exceeds this (mm)."),
-    sag: bool = typer.Option(False, "--sag/--no-sag", help=SAG_HELP + " (With --sim only with --servos physics: ideal servos do not sag.)"),
+    sag: bool | None = typer.Option(None, "--sag/--no-sag", help=SAG_HELP + " With --sim --servos ideal off by default (ideal servos do not sag)."),
     servos: str | None = typer.Option(None, "--servos", help="With --sim: the simulated servos, physics (the default: MuJoCo, "
                                       "the ST3235 model with its 46 ms lag, gravity, the trajectory's scene and payload; "
                                       "docs/physics.md) or ideal (each runs its trapezoid exactly, no lag, no gravity)."),
@@ -79,6 +79,9 @@ def execute(
     servos = servos or "physics"
     if servos not in ("physics", "ideal"):
         raise InputError(f"--servos: '{servos}' is not physics or ideal")
+    from roarmctl.device.sag import wanted
+
+    sag = wanted(sag, ideal=sim and servos == "ideal")
     traj = validate_trajectory(traj_path)  # limits, speeds and steps: nothing unchecked reaches the port
     robot = robot_of(traj, str(traj_path))
     if move_to_start and from_current:

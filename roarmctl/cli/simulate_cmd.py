@@ -31,7 +31,7 @@ def simulate(
     rate: float = typer.Option(50.0, "--rate", help="Commands per second, as execute would send them."),
     speed_scale: float = typer.Option(1.0, "--speed-scale", help="Slow the motion down, as execute would: 0.5 = half speed."),
     strategy: str = typer.Option("timed-lead", "--strategy", help=STRATEGY_HELP),  # execute's default
-    sag: bool = typer.Option(False, "--sag/--no-sag", help=SAG_HELP + " As execute --sag."),
+    sag: bool | None = typer.Option(None, "--sag/--no-sag", help=SAG_HELP + " As execute sends it."),
     settle: float = typer.Option(1.0, "--settle", help="Seconds simulated after the last command (the arm and objects come to rest)."),
     robot_desc: str | None = typer.Option(None, "--robot", help="Simulate on this description instead of the trajectory's robot (same joint names), e.g. one with its CAD meshes."),
 ) -> None:
@@ -63,11 +63,13 @@ def simulate(
         from roarmctl.motion.validate import check_against_robot
 
         check_against_robot(traj, robot, str(traj_path))
+    from roarmctl.device.sag import wanted
     from roarmctl.physics.report import measure, run_log
     from roarmctl.physics.run import Options
     from roarmctl.physics.run import simulate as run
     from roarmctl.physics.setup import build
 
+    sag = wanted(sag)  # execute's default: the physics servos sag
     options = Options(rate=rate, strategy=strategy, speed_scale=speed_scale, settle=settle, tolerance=tolerance / 1e3, sag=sag)
     if robot.wire:
         from roarmctl.device.schedule import build_schedule
@@ -96,7 +98,7 @@ def simulate(
         hint = f"tolerance {tolerance:g} mm; see the report" + (f" and {output}" if output else "")
         sag_mm = report["tcp"]["sag_mm"]
         if not sag and any(o["lifted"] for o in bad) and sag_mm is not None and sag_mm > tolerance / 2:
-            hint = f"the servos sag up to {sag_mm:.0f} mm at rest: try --sag (as execute --sag); " + hint
+            hint = f"the servos sag up to {sag_mm:.0f} mm at rest: drop --no-sag (execute compensates by default); " + hint
         raise InfeasibleError("simulate: " + "; ".join(parts), hint)
 
 
@@ -137,7 +139,8 @@ def _render(report: dict, output: Path | None) -> None:
               + (f"; sag at rest up to {tcp['sag_mm']:.1f} mm" if tcp["sag_mm"] is not None else ""))
     for r in tcp["rests"]:
         out.print(f"  at rest {r['start_s']:.2f}-{r['end_s']:.2f} s ({r['label']}): {r['error_mm']:.1f} mm off, "
-                  f"{r['below_mm']:.1f} mm below")
+                  f"{r['below_mm']:.1f} mm below" + (f" (goals raised {r['compensated_mm']:.1f} mm against the sag)"
+                                                     if "compensated_mm" in r else ""))
     for o in report["objects"]:
         verdict = "[green]placed[/]" if o["placed"] else ("[red]not lifted[/]" if not o["lifted"] else "[red]not placed[/]")
         out.print(f"object {o['name']} ({o['mass_kg'] * 1e3:.0f} g): {verdict}, {o['error_mm']:.1f} mm and {o['error_deg']:.1f} deg "

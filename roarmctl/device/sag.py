@@ -10,6 +10,11 @@ cancelled (the loop still lags a moving goal); the gripper's own load is left al
 
 ``offsets(robot, traj, times, q)``: the offsets (N, dof) rad for planned poses ``q`` (N, dof) at
 trajectory times ``times`` (N,) s; zeros for a robot without inertias or without a RoArm wire map.
+
+``wanted(sag, ideal=...)``: whether a run compensates. The one default of ``execute`` (CLI and
+``roarmctl.api``) and ``simulate``: on, unless asked otherwise (``--no-sag``, ``sag=False``) or the servos
+are the simulator's ideal ones (they do not sag, so an offset would only move them off the plan). Why on:
+docs/physics.md, "Sag, and --sag".
 """
 
 from __future__ import annotations
@@ -21,6 +26,12 @@ from roarmctl.device.protocol import WireMap
 from roarmctl.errors import RoarmError
 from roarmctl.robot.dynamics import inverse_dynamics
 from roarmctl.robot.model import Inertial, Robot
+
+
+def wanted(sag: bool | None, *, ideal: bool = False) -> bool:
+    """Whether goals are sag-compensated: ``sag`` when given (True/False); by default (None) on, except for
+    ``ideal`` servos (the firmware simulator's kinematic ones, which stand exactly at their goals)."""
+    return (not ideal) if sag is None else bool(sag)
 
 
 def _set_down(traj, release: float) -> float:
@@ -36,7 +47,8 @@ def offsets(robot: Robot, traj, times, q) -> np.ndarray:
     """Goal offsets (N, dof) rad that cancel the servos' sag under gravity at the planned poses ``q``
     (N, dof) at trajectory times ``times`` (N,) s, the payloads of ``traj`` held from their grasp until
     they are set down (the release's gripper segment starts); zero for the gripper, and everywhere when the
-    robot has no inertias."""
+    robot has no inertias. Each offset is at most the loop's full-duty error (``1 / (KP * steps per rad)``,
+    141 steps, 12.4 deg at P = 16)."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     times = np.atleast_1d(np.asarray(times, dtype=float))
     out = np.zeros_like(q)
@@ -63,6 +75,10 @@ def offsets(robot: Robot, traj, times, q) -> np.ndarray:
             n = int(np.count_nonzero(rows))
             tau = inverse_dynamics(robot, q[rows], np.tile(zero, (n, 1)), np.tile(zero, (n, 1)), payload=load)
             out[rows] = np.atleast_2d(tau) / stiff
+        # never more than the error at which the loop gives full duty: a load beyond stall (a payload mass the
+        # planner would refuse) is not held by a larger offset, only driven harder into the limit
+        full = 1.0 / (st3235.KP * st3235.STEPS_PER_RAD)
+        np.clip(out, -full, full, out=out)
     except RoarmError:  # no inertial data: nothing to compensate with
         return np.zeros_like(q)
     return out

@@ -12,7 +12,9 @@
   the lag that explains it best (``lag_ms``, and the RMS error against the plan delayed by it),
   the sag at rest (``rests``: for each stretch of at least ``REST_MIN`` s where the plan holds the arm
   still, the TCP error over its last ``REST_WINDOW`` s and how far below the plan, mm; ``sag_mm`` the
-  largest) and the final error after settling;
+  largest; with sag compensation also ``compensated_mm``, how far the compensation raised the commanded TCP
+  there: the sag the servos would have without it, ``compensated_mm`` at the top the largest) and the final
+  error after settling;
 * ``contacts``: the unintended contacts (``roarmctl.physics.contacts``);
 * ``objects``: per picked object, whether it was lifted (while held it rose at least half as high as
   the plan carries it), where it came to rest against its place pose (the plan's: where the jaws put it at the
@@ -34,6 +36,7 @@ import numpy as np
 
 from roarmctl.device.fwmath import firmware_fk, position_to_rad
 from roarmctl.device.protocol import M3_FEEDBACK_KEYS, M3_FIELDS, WireMap
+from roarmctl.device.sag import offsets as sag_offsets
 from roarmctl.device.schedule import sample
 from roarmctl.errors import RoarmError
 from roarmctl.motion.scene import Scene
@@ -69,7 +72,7 @@ def measure(traj, robot: Robot, setup: Setup, rec: Recording, options: Options) 
     moving = rec.t <= t_end + 1e-9
     plan = _plan_at(traj, rec.t, scale)
     out: dict[str, Any] = {"joints": _joints(robot, setup, rec, plan, moving, _needed(traj, robot, setup))}
-    out["tcp"] = _tcp(traj, robot, rec, plan, moving, scale)
+    out["tcp"] = _tcp(traj, robot, rec, plan, moving, scale, options.sag)
     out["contacts"] = [e.to_dict() for e in rec.episodes]
     out["objects"] = _objects(traj, robot, setup, rec, options)
     out["ok"] = bool(all(o["placed"] for o in out["objects"]) and not out["contacts"])
@@ -77,7 +80,7 @@ def measure(traj, robot: Robot, setup: Setup, rec: Recording, options: Options) 
     out["run"] = {"simulated_s": _r(sim), "wall_s": _r(rec.wall), "real_time_factor": _r(sim / rec.wall, 1) if rec.wall > 0 else None,
                   "cpu_s": _r(rec.cpu), "cpu_real_time_factor": _r(sim / rec.cpu, 1) if rec.cpu > 0 else None,
                   "timestep_s": rec.dt, "steps": int(len(rec.t)), "commands": len(rec.commands),
-                  "rate": options.rate, "strategy": options.strategy, "speed_scale": scale,
+                  "rate": options.rate, "strategy": options.strategy, "speed_scale": scale, "sag_compensation": options.sag,
                   "tolerance_mm": _r(options.tolerance * 1e3, 1)}
     out["model"] = {"notes": list(setup.notes), "servos": _servos(robot, setup), "masses_kg": setup.world.doc.masses}
     return out
@@ -159,7 +162,8 @@ def _longest(mask: np.ndarray) -> int:
     return best
 
 
-def _tcp(traj, robot: Robot, rec: Recording, plan: np.ndarray, moving: np.ndarray, scale: float) -> dict[str, Any]:
+def _tcp(traj, robot: Robot, rec: Recording, plan: np.ndarray, moving: np.ndarray, scale: float,
+         sag: bool) -> dict[str, Any]:
     stride = max(1, int(round(0.01 / rec.dt)))  # the TCP error every 10 ms
     idx = np.flatnonzero(moving)[::stride]
     sim = robot.kin.fk(rec.q[idx])[:, :3, 3]
@@ -174,11 +178,17 @@ def _tcp(traj, robot: Robot, rec: Recording, plan: np.ndarray, moving: np.ndarra
         d = (robot.kin.fk(rec.q[k])[:, :3, 3] - robot.kin.fk(plan[k])[:, :3, 3]).mean(axis=0)
         rests.append({"start_s": _r(a), "end_s": _r(b), "label": s[2], "error_mm": _r(float(np.linalg.norm(d)) * 1e3, 2),
                       "below_mm": _r(-d[2] * 1e3, 2)})
+        if sag and robot.wire:  # what the schedule's offsets (the same function) did to the commanded TCP there
+            tm = s[1] - REST_WINDOW / 2
+            q = sample(traj, tm)[None, :]
+            lift = robot.kin.fk(q + sag_offsets(robot, traj, [tm], q))[0, :3, 3] - robot.kin.fk(q)[0, :3, 3]
+            rests[-1]["compensated_mm"] = _r(float(np.linalg.norm(lift)) * 1e3, 2)
     final = float(np.linalg.norm(robot.kin.fk(rec.q[-1])[:3, 3] - robot.kin.fk(traj.positions[-1])[:3, 3]) * 1e3)
     lag, lagged = _lag(traj, robot, rec.t[idx], sim, scale)
     return {"rms_mm": _r(np.sqrt(np.mean(e ** 2)), 2) if len(e) else None, "max_mm": _r(np.max(e), 2) if len(e) else None,
             "lag_ms": lag, "rms_after_lag_mm": lagged,
-            "sag_mm": max((float(r["error_mm"]) for r in rests), default=None), "final_mm": _r(final, 2), "rests": rests}
+            "sag_mm": max((float(r["error_mm"]) for r in rests), default=None), "final_mm": _r(final, 2), "rests": rests,
+            "compensated_mm": max((float(r["compensated_mm"]) for r in rests if "compensated_mm" in r), default=None)}
 
 
 def _lag(traj, robot: Robot, t: np.ndarray, sim: np.ndarray, scale: float) -> tuple[float | None, float | None]:

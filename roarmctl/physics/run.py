@@ -51,7 +51,7 @@ class Options:
     tolerance: float = 0.010
     track_rate: float = 50.0
     feedback_rate: float = 25.0
-    sag: bool = False  # the schedule's sag compensation (roarmctl.device.sag), as execute --sag sends it
+    sag: bool = True  # the schedule's sag compensation (roarmctl.device.sag), on as execute sends it by default
 
 
 @dataclass
