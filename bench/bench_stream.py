@@ -1,7 +1,7 @@
 """Streaming benchmark: the bundled pick-and-place streamed to the simulated firmware (its own
 process, over a real pseudo-terminal), per firmware build and spd/acc strategy, and the hold.
 
-    .venv/bin/python bench/bench_stream.py [--repeats 2] [--traj FILE] [--servos MODULE:FACTORY]
+    .venv/bin/python bench/bench_stream.py [--repeats 2] [--traj FILE] [--servos MODULE:FACTORY] [--sag]
 
 Per build (0.84: every waiting line each loop pass; 20260701: one queued line per pass) and
 strategy it prints, medians over the repeats:
@@ -14,7 +14,9 @@ Then the hold choice: where to hold when a run is stopped mid-motion (path point
 arrival, last set-point, last measured pose), by how far the arm still moves and whether it moves back.
 
 ``--servos MODULE:FACTORY`` plugs another servo model into the simulated firmware (a zero-argument
-callable returning a ``roarmctl.device.servos.ServoModel``; e.g. the physics servos).
+callable returning a ``roarmctl.device.servos.ServoModel``; e.g. the physics servos). ``--sag`` offsets the
+goals by the servos' sag as ``execute`` does by default (``roarmctl.device.sag``; without it the plan's own
+goals, as ``execute --no-sag``).
 """
 
 from __future__ import annotations
@@ -51,7 +53,7 @@ def servo_factory(spec: str | None):
 
 
 def run_one(traj, robot, firmware: str, strategy: str, *, rate: float = 50.0, servos=None, stop_at: float | None = None,
-            hold: str = "auto") -> dict:
+            hold: str = "auto", sag: bool = False) -> dict:
     """One run; ``stop_at``: fraction of the schedule at which a Ctrl-C is simulated (the hold)."""
     from roarmctl.device.link import Link
     from roarmctl.device.simulator import PtySimulator, SimConfig
@@ -63,7 +65,7 @@ def run_one(traj, robot, firmware: str, strategy: str, *, rate: float = 50.0, se
         link = Link(sim.path).open()
         info = link.connect()
         # the measured pose is held only when fresh (50 ms); the bench takes any age to show what it does
-        cfg = StreamConfig(rate=rate, strategy=strategy, max_error=1.0, hold=hold,
+        cfg = StreamConfig(rate=rate, strategy=strategy, max_error=1.0, hold=hold, sag=sag,
                            hold_max_age=0.5 if hold == "measured" else 0.05)
         st = Streamer(link, robot, traj, cfg, extra_lateness=sim.recent_lateness)
         stop_k = None if stop_at is None else int(len(st.schedule) * stop_at)
@@ -128,6 +130,7 @@ def main() -> None:
     ap.add_argument("--strategies", default="timed,timed-lead,timed-acc,per-joint,dense")
     ap.add_argument("--builds", default="m3-0.84,m3-2026", help="firmware builds, comma-separated")
     ap.add_argument("--no-hold-choice", action="store_true", help="skip the comparison of where to hold")
+    ap.add_argument("--sag", action="store_true", help="goals offset by the servos' sag, as execute sends them by default")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
     traj_path = args.traj or bundled_trajectory(tmp / "pick_place.traj.json")
@@ -136,13 +139,14 @@ def main() -> None:
     servos = servo_factory(args.servos)
     strategies = [s for s in args.strategies.split(",") if s in STRATEGIES]
     print(f"trajectory: {traj_path.name}, {traj.duration:.2f} s; servos: {args.servos or 'kinematic (ideal trapezoids)'}; "
+          f"sag compensation {'on' if args.sag else 'off'}; "
           f"{args.repeats} runs each, medians")
     print(f"{'build':<9}{'strategy':<11}{'TCP RMS':>8}{'max':>7}{'lag':>6}{'p99':>6}{'link':>6}{'lines/s':>8}{'hold':>6}"
           "   (mm, mm, ms, ms, share, -, ms)")
     for firmware in args.builds.split(","):
         for strategy in strategies:
-            full = [run_one(traj, robot, firmware, strategy, servos=servos) for _ in range(args.repeats)]
-            stop = [run_one(traj, robot, firmware, strategy, servos=servos, stop_at=0.5) for _ in range(args.repeats)]
+            full = [run_one(traj, robot, firmware, strategy, servos=servos, sag=args.sag) for _ in range(args.repeats)]
+            stop = [run_one(traj, robot, firmware, strategy, servos=servos, stop_at=0.5, sag=args.sag) for _ in range(args.repeats)]
             print(f"{firmware:<9}{strategy:<11}{med(full, 'rms'):>8.2f}{med(full, 'max'):>7.1f}{med(full, 'lag'):>6.0f}"
                   f"{med(full, 'p99'):>6.1f}{med(full, 'link'):>6.0%}{med(full, 'lines'):>8.0f}{med(stop, 'hold_ms'):>6.0f}",
                   flush=True)
