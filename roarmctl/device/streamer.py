@@ -106,7 +106,7 @@ class StreamConfig:
     feedback_rate: float | None = None  # T:105 polls/s; None: FEEDBACK_RATE, half that on a build that queues
     max_unconfirmed: int = 12  # command lines sent but not yet confirmed by a poll answer
     behind_after: float = 0.04  # a poll answered this much later than the round trip: the firmware is behind
-    sag: bool = False  # goals offset by the servos' sag under gravity and payload (roarmctl.device.sag)
+    sag: bool = False  # goals offset by the servos' sag (roarmctl.device.sag); execute and the API default on: sag.wanted
 
 
 @dataclass
