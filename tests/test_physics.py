@@ -525,7 +525,7 @@ def test_a_robot_without_servo_data_gets_generic_drives_that_follow_its_plan(tmp
 @pytest.mark.slow  # two more bundled plans, about 2 s each on the model
 @pytest.mark.parametrize("name", ["obstacle", "multi_object"])
 def test_the_other_bundled_plans_place_every_object_without_contact(name, tmp_path, capsys):
-    """With pick_place, payload (--sag), m2s_pick_place and scan_desk above: every bundled plan's objects land
+    """With pick_place, payload, m2s_pick_place and scan_desk above: every bundled plan's objects land
     within the 10 mm tolerance with no unintended contact, as execute sends them by default."""
     traj = _plan(ROOT / "plans" / f"{name}.yaml", tmp_path / f"{name}.traj.json")
     code, rep = _simulate(capsys, str(traj))
