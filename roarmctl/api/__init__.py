@@ -38,6 +38,7 @@ import numpy as np
 
 from roarmctl.api.planner import IKResult, JointPath, Planner, Pose, Validity
 from roarmctl.api.scene import Scene
+from roarmctl.device.sag import wanted
 from roarmctl.device.session import run_execution
 from roarmctl.device.streamer import StreamConfig, build_schedule
 from roarmctl.device.streamer import sample as _sample
@@ -60,6 +61,7 @@ from roarmctl.motion.pipeline import plan_file
 from roarmctl.motion.scene import SceneItem
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
 from roarmctl.motion.validate import robot_of, validate_trajectory
+from roarmctl.physics.servo_backend import for_firmware
 from roarmctl.robot.loader import load_robot as _load
 from roarmctl.viz.formats import picture_format
 
@@ -167,8 +169,6 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
     (T:102/T:101 lines sent while streaming), ``lateness_ms``, ``tracking_mm``, ``final_error_mm``, ``log``;
     with ``sim``, ``simulator``: the simulated servos' true tracking.
     """
-    from roarmctl.device.sag import wanted
-
     if servos not in ("physics", "ideal"):
         raise InputError(f"servos: '{servos}' is not physics or ideal")
     if servos != "physics" and not sim:
@@ -182,8 +182,6 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
     if sim:
         confirm = confirm or (lambda message: True)
         if servos == "physics":
-            from roarmctl.physics.servo_backend import for_firmware
-
             factory = for_firmware(robot, t)
     run = run_execution(t, robot, cfg, port=None if port is None else str(port), sim=sim, log_path=None if log is None else Path(log),
                         confirm=confirm or (lambda message: False), sim_servos=factory)
