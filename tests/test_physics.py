@@ -479,7 +479,7 @@ def test_m2s_with_waveshares_meshes_builds_and_simulates_its_plan(tmp_path, caps
     world = World(robot, Scene([]))
     assert world.model.nmesh == 5  # the five STL meshes, as convex hulls
     # as execute sends it (timed-lead, sag compensated): placed, though the forearm-and-jaw mesh's hull holds the cube
-    # on edges (docs/physics.md, Figures: with --no-sag it turns out of the grip while lifting)
+    # on edges (docs/physics.md, Figures: a marginal grip, lost under --no-sag with an earlier timing of this plan)
     code, rep = _simulate(capsys, str(traj), "--robot", str(side))
     (cube,) = rep["objects"]
     assert code == 0 and cube["lifted"] and cube["placed"] and rep["run"]["steps"] > 1000
