@@ -41,7 +41,8 @@ from roarmctl.fileio import Roots, read_bytes
 class LocatedDict(dict):
     """A dict that knows the source line of each key (and its own)."""
 
-    line: int = 0
+    __slots__ = ("line", "lines")  # set by whoever makes one (no per-instance __dict__: a big scene has thousands)
+    line: int
     lines: dict
 
     def line_of(self, key: Any) -> int:
@@ -52,7 +53,8 @@ class LocatedDict(dict):
 class LocatedList(list):
     """A list that knows the source line of each item (and its own)."""
 
-    line: int = 0
+    __slots__ = ("line", "lines")
+    line: int
     lines: list
 
     def line_of(self, index: int) -> int:
@@ -60,17 +62,23 @@ class LocatedList(list):
         return self.lines[index] if 0 <= index < len(self.lines) else self.line
 
 
-_PLAIN = (int, float, str, bool, type(None))  # values locate leaves as they are
+_PLAIN = frozenset((int, float, str, bool, type(None)))  # values locate leaves as they are
 
 
 def locate(value: Any) -> Any:
     """Plain Python values (from a dict built in code) -> located containers with line 0 everywhere."""
     if isinstance(value, dict):
-        out = LocatedDict((k, v if type(v) in _PLAIN else locate(v)) for k, v in value.items())
+        out = LocatedDict(value)
+        for k, v in value.items():
+            if type(v) not in _PLAIN:
+                out[k] = locate(v)
         out.line, out.lines = 0, {}
         return out
     if isinstance(value, (list, tuple)):
-        lst = LocatedList(v if type(v) in _PLAIN else locate(v) for v in value)
+        if set(map(type, value)) <= _PLAIN:  # a list of numbers (most of a plan): as it is
+            lst = LocatedList(value)
+        else:
+            lst = LocatedList(v if type(v) in _PLAIN else locate(v) for v in value)
         lst.line, lst.lines = 0, []
         return lst
     if hasattr(value, "tolist"):  # numpy arrays and scalars

@@ -289,6 +289,25 @@ def test_scene_round_trip():
         SceneItem("x", "wall", "box", np.eye(4), size=(1, 1, 1))
 
 
+def test_a_checked_primitive_is_the_item_the_constructor_makes():
+    """``SceneItem.checked_primitive`` (a plan's items, checked by the plan's reader) gives what ``SceneItem(...)`` gives,
+    field for field and type for type; its pose is its own copy. A copied scene keeps its items' names and poses."""
+    pose = transform((0.1, -0.2, 0.3), (0.3, -0.4, 1.2))
+    for shape, size, radius, length in (("box", (np.float64(0.1), 1, 0.2), 0.0, 0.0), ("cylinder", (0.0, 0.0, 0.0), 0.02, 1),
+                                        ("sphere", (0.0, 0.0, 0.0), 3, 0.0)):
+        made = SceneItem("it", "obstacle", shape, pose, size=size, radius=radius, length=length)
+        quick = SceneItem.checked_primitive("it", "obstacle", shape, pose, size, radius, length)
+        assert [f.name for f in dataclasses.fields(SceneItem)] == list(vars(quick))
+        for f in dataclasses.fields(SceneItem):
+            a, b = getattr(quick, f.name), getattr(made, f.name)
+            assert type(a) is type(b) and (np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b), f.name
+        assert [type(v) for v in quick.size] == [float] * 3 and not np.shares_memory(quick.pose, pose)
+    scene = example_scene()
+    twin = scene.copy()
+    assert twin.names() == scene.names() and all(a.pose is not b.pose and np.array_equal(a.pose, b.pose)
+                                                 for a, b in zip(twin.items, scene.items))
+
+
 # ----------------------------------------------------------------------------- motion segments
 def test_segment_refinement_catches_what_the_coarse_grid_skips(robot):
     a = HOME + [-0.25, 0, 0, 0, 0]

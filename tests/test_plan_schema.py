@@ -163,3 +163,14 @@ def test_plain_primitives_read_at_once_give_the_spec_the_full_reader_gives():
             assert type(a) is type(b) and (np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b), (raw, f.name)
         assert fast.pose.tobytes() == slow.pose.tobytes() and [type(v) for v in fast.size] == [type(v) for v in slow.size]
     assert quick >= 40  # the quick reading did take the plain ones (48 of these)
+    # all of them in one list (as a plan's obstacles are read): each gets what it got alone, in its place
+    for role in ("obstacle", "table"):
+        located = [locate(raw) for raw in items]
+        wheres = [f"scene.obstacles[{i}]" for i in range(len(items))]
+        together = schema._plain_primitives(ctx, located, role, wheres)
+        alone = [schema._plain_primitive(ctx, raw, where, role) for raw, where in zip(located, wheres)]
+        assert [a is None for a in together] == [a is None for a in alone]
+        for a, b in zip(together, alone):
+            if a is not None:
+                assert a.where == b.where and a.pose.tobytes() == b.pose.tobytes() and a.size == b.size
+                assert (a.name, a.shape, a.radius, a.length, a.line) == (b.name, b.shape, b.radius, b.length, b.line)

@@ -150,7 +150,7 @@ class Planner:
         scene = Scene([scene_item(s) for s in plan.scene + plan.objects])
         checker = CollisionChecker(robot, scene, padding=plan.planner.padding,
                                    singularity_margin=plan.planner.singularity_margin or None)
-        self.ctx = PlanContext(plan, robot, checker)
+        self.ctx = PlanContext(plan, robot, checker, initial_scene=scene)  # the checker copied it: nothing else moves it
         self.ctx.notes.extend(robot.notes)  # what the description lacks or leaves out, said once with the plan
         thin = thin_parts(robot, plan.planner.padding)
         if thin is not None:

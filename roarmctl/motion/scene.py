@@ -76,6 +76,17 @@ class SceneItem:
             raise InputError(f"scene item '{self.name}': {self.shape} dimensions must be positive, got {dims}")
 
     @classmethod
+    def checked_primitive(cls, name: str, role: Role, shape: Shape, pose: np.ndarray, size: tuple[float, float, float],
+                          radius: float, length: float) -> SceneItem:
+        """A box, cylinder or sphere whose fields a reader has checked already (a plan's: ``roarmctl.plan.schema``):
+        the item ``cls(...)`` makes of them (``pose`` copied, numbers as floats) without checking them again."""
+        item = object.__new__(cls)
+        item.__dict__.update(name=name, role=role, shape=shape, pose=np.array(pose, dtype=float),
+                             size=(float(size[0]), float(size[1]), float(size[2])), radius=float(radius),
+                             length=float(length), mesh=None, cloud=None)
+        return item
+
+    @classmethod
     def box(cls, name: str, size, xyz, rpy=(0.0, 0.0, 0.0), role: Role = "obstacle") -> SceneItem:
         """A box of full edge lengths ``size`` (m) centred at ``xyz`` (m) with URDF ``rpy`` (rad)."""
         return cls(name, role, "box", transform(xyz, rpy), size=tuple(size))
@@ -219,7 +230,9 @@ class Scene:
             twin.__dict__.update(item.__dict__)
             twin.pose = item.pose.copy()
             items.append(twin)
-        return Scene(items)
+        out = object.__new__(Scene)  # its names are this scene's: unique, no need to check them again
+        out.items = items
+        return out
 
     def to_dict(self) -> dict:
         """``{"items": [...]}`` of the items' ``to_dict`` forms."""

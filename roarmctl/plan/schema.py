@@ -8,6 +8,7 @@ Lengths are metres; angles radians, or degrees when written as ``{deg: value}`` 
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import math
 from dataclasses import dataclass, field
@@ -312,45 +313,81 @@ _PLAIN_KEYS = {"box": frozenset(("name", "shape", "size", "xyz", "rpy")),
                "sphere": frozenset(("name", "shape", "radius", "xyz", "rpy"))}
 
 
-def _numbers_within(value: Any, lo: float, hi: float, positive: bool = False) -> bool:
-    """``value`` is a list of 3 plain numbers (no bool), each in [lo, hi] (> lo when ``positive``; NaN fails)."""
-    return (type(value) is LocatedList and len(value) == 3
-            and all(type(v) in (int, float) and lo <= v <= hi and (not positive or v > lo) for v in value))
+_NUMBER_TYPES = frozenset((int, float))  # a plain number (bool is not one)
+_ONE = 1.0  # stands for a dimension a cylinder or sphere lacks (within every bound below)
+# A plain primitive's numbers in one row: xyz, rpy, then size (box) or radius, length (cylinder) or radius (sphere)
+_ROW_LO = np.array([FIELD_BOUNDS["xyz"][0]] * 3 + [FIELD_BOUNDS["rpy"][0]] * 3 + [0.0] * 3)
+_ROW_HI = np.array([FIELD_BOUNDS["xyz"][1]] * 3 + [FIELD_BOUNDS["rpy"][1]] * 3 + [FIELD_BOUNDS["size"][1]] * 3)
+assert FIELD_BOUNDS["radius"] == FIELD_BOUNDS["length"] == FIELD_BOUNDS["size"] == (0.0, 10.0)
 
 
 def _plain_primitive(ctx: _Ctx, raw: Any, where: str, role: str) -> ItemSpec | None:
-    """The spec ``_item_spec`` makes of an obstacle or the table written as a box, cylinder or sphere with nothing but
-    its name, shape, size (radius, length), xyz as [x, y, z] and rpy as [r, p, y], every field well-formed and
-    within its ``FIELD_BOUNDS``: the same checks all at once (the common case of a scene of many items), the same
-    spec. None for anything else, which ``_item_spec`` reads field by field (and names what is wrong)."""
-    if role == "object" or type(raw) is not LocatedDict:
-        return None
-    shape = raw.get("shape")
-    if type(shape) is not str:
-        return None
-    keys = _PLAIN_KEYS.get(shape)
-    if keys is None or not keys.issuperset(raw) or "xyz" not in raw or (role != "table" and "name" not in raw):
-        return None
-    xyz, rpy = raw["xyz"], raw.get("rpy", _NO_ROTATION)
-    if not _numbers_within(xyz, *FIELD_BOUNDS["xyz"]) or ("rpy" in raw and not _numbers_within(rpy, *FIELD_BOUNDS["rpy"])):
-        return None
-    top = FIELD_BOUNDS["size"][1]  # radius and length have the same bounds: (0, 10] m
-    if shape == "box":
-        if not _numbers_within(raw.get("size"), 0.0, top, positive=True):
-            return None
-    else:
-        dims: tuple[Any, ...] = (raw.get("radius"), raw.get("length")) if shape == "cylinder" else (raw.get("radius"),)
-        if not all(type(v) in (int, float) and 0.0 < v <= top for v in dims):
-            return None
-    spec = ItemSpec(name=str(raw.get("name", "table")), role=role, shape=shape, pose=transform(xyz, rpy), line=raw.line)
-    spec.where = f"{ctx.where(raw.line)}: {where}"
-    if shape == "box":
-        spec.size = tuple(np.array(raw["size"], dtype=float))
-    else:
-        spec.radius = float(raw["radius"])
-        if shape == "cylinder":
-            spec.length = float(raw["length"])
-    return spec
+    """``_plain_primitives`` of one item."""
+    return _plain_primitives(ctx, [raw], role, [where])[0]
+
+
+def _plain_primitives(ctx: _Ctx, raws: list, role: str, wheres: list[str]) -> list[ItemSpec | None]:
+    """The specs ``_item_spec`` makes of the obstacles (or the table) ``raws`` (``wheres``: their paths) written as a
+    box, cylinder or sphere with nothing but its name, shape, size (radius, length), xyz as [x, y, z] and rpy as
+    [r, p, y], every field well-formed and within its ``FIELD_BOUNDS``: the same checks on all of them at once (one
+    numpy pass over their numbers: the common case of a scene of many items), the same specs. None for any other
+    item (and one read before: ``ctx.known``), which ``_item_spec`` reads field by field (and names what is wrong)."""
+    out: list[ItemSpec | None] = [None] * len(raws)
+    if role == "object":
+        return out
+    rows, picked = [], []
+    for i, raw in enumerate(raws):
+        if type(raw) is not LocatedDict or id(raw) in ctx.known:
+            continue
+        shape = raw.get("shape")
+        keys = _PLAIN_KEYS.get(shape) if type(shape) is str else None
+        if keys is None or not keys.issuperset(raw) or (role != "table" and "name" not in raw):
+            continue
+        xyz, rpy = raw.get("xyz"), raw.get("rpy", _NO_ROTATION)
+        if shape == "box":
+            dims = raw.get("size")
+            if type(dims) is not LocatedList or len(dims) != 3:
+                continue
+        else:
+            dims = (raw.get("radius"), raw.get("length"), _ONE) if shape == "cylinder" else (raw.get("radius"), _ONE, _ONE)
+        if type(xyz) is not LocatedList or len(xyz) != 3 or (rpy is not _NO_ROTATION and (type(rpy) is not LocatedList or len(rpy) != 3)):
+            continue
+        rows.append((*xyz, *rpy, *dims))
+        picked.append(i)
+    if not set(map(type, itertools.chain.from_iterable(rows))) <= _NUMBER_TYPES:  # a string, bool, None... somewhere
+        keep = [k for k, row in enumerate(rows) if set(map(type, row)) <= _NUMBER_TYPES]
+        rows, picked = [rows[k] for k in keep], [picked[k] for k in keep]
+    if not rows:
+        return out
+    try:
+        a = np.array(rows, dtype=float)
+    except OverflowError:  # an integer beyond a float: the field-by-field reader names it
+        return out
+    ok = np.all((a >= _ROW_LO) & (a <= _ROW_HI), axis=1) & np.all(a[:, 6:] > 0.0, axis=1)  # NaN fails every test
+    a = a[ok]
+    picked = [i for i, good in zip(picked, ok.tolist(), strict=True) if good]
+    # poses: without rotation (rpy +0.0 everywhere, most items) the matrix ``transform`` makes, bit for bit; else its own
+    poses = np.zeros((len(a), 4, 4))
+    poses[:, range(4), range(4)] = 1.0
+    poses[:, 2, 0] = -0.0
+    poses[:, :3, 3] = a[:, :3]
+    turned = np.flatnonzero(np.any((a[:, 3:6] != 0.0) | np.signbit(a[:, 3:6]), axis=1))
+    for k in turned.tolist():
+        raw = raws[picked[k]]
+        poses[k] = transform(raw["xyz"], raw["rpy"])
+    for k, i in enumerate(picked):
+        raw = raws[i]
+        shape = raw["shape"]
+        spec = ItemSpec(name=str(raw.get("name", "table")), role=role, shape=shape, pose=poses[k], line=raw.line)
+        spec.where = f"{ctx.where(raw.line)}: {wheres[i]}"
+        if shape == "box":
+            spec.size = tuple(a[k, 6:9])
+        else:
+            spec.radius = float(raw["radius"])
+            if shape == "cylinder":
+                spec.length = float(raw["length"])
+        out[i] = spec
+    return out
 
 
 def _item_spec(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: dict | None = None) -> ItemSpec:
@@ -574,8 +611,13 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
         if "table" in sc and sc["table"] is not None:
             scene.append(_item(ctx, sc["table"], sc.line_of("table"), "scene.table", "table", frames))
         obs = ctx.listed(sc.get("obstacles") or [], sc.line_of("obstacles"), "scene.obstacles", MAX_ITEMS, "obstacles")
-        for i, o in enumerate(obs):
-            scene.append(_item(ctx, o, obs.line_of(i), f"scene.obstacles[{i}]", "obstacle", frames))
+        wheres = [f"scene.obstacles[{i}]" for i in range(len(obs))]
+        for i, (o, spec) in enumerate(zip(obs, _plain_primitives(ctx, obs, "obstacle", wheres), strict=True)):
+            if spec is None:  # anything but a plain primitive read before: field by field
+                spec = _item(ctx, o, obs.line_of(i), wheres[i], "obstacle", frames)
+            else:
+                ctx.specs[id(o)] = spec
+            scene.append(spec)
 
     objects: list[ItemSpec] = []
     objs = ctx.listed(top.get("objects") or [], top.line_of("objects"), "objects", MAX_ITEMS, "objects")

@@ -20,7 +20,7 @@ from roarmctl.robot.meshes import PACKAGE_PATHS
 
 if TYPE_CHECKING:
     from roarmctl.motion.collision import CollisionChecker
-    from roarmctl.motion.scene import Role, SceneItem, Shape
+    from roarmctl.motion.scene import Role, Scene, SceneItem, Shape
     from roarmctl.motion.timing import TimedPath
     from roarmctl.plan.schema import ItemSpec, Plan
     from roarmctl.robot.model import Robot
@@ -47,9 +47,11 @@ class PlanContext:
     gripper joint (None without a gripper).
     """
 
-    def __init__(self, plan: Plan, robot: Robot, checker: CollisionChecker) -> None:
+    def __init__(self, plan: Plan, robot: Robot, checker: CollisionChecker, initial_scene: Scene | None = None) -> None:
         self.plan, self.robot, self.checker = plan, robot, checker
-        self.initial_scene = checker.scene.copy()  # the plan's scene before anything moved (the trajectory records it)
+        # the plan's scene before anything moved (the trajectory records it): ``initial_scene`` when the caller hands
+        # over one that nothing else moves (the scene the checker was made from: it keeps its own copy)
+        self.initial_scene = checker.scene.copy() if initial_scene is None else initial_scene
         self.timer = StageTimer()
         self.warnings: list[str] = []
         self.notes: list[str] = []
@@ -139,5 +141,5 @@ def scene_item(spec: ItemSpec) -> SceneItem:
     if spec.shape == "cloud":
         cloud = spec.data or read_cloud_item(spec.file, spec.resolution, f"{spec.where}.file", PlanFileError)
         return SceneItem(name=spec.name, role=role, shape="cloud", pose=pose, cloud=cloud)
-    return SceneItem(name=spec.name, role=role, shape=cast("Shape", spec.shape), pose=pose,
-                     size=cast("tuple[float, float, float]", tuple(spec.size)), radius=spec.radius, length=spec.length)
+    return SceneItem.checked_primitive(spec.name, role, cast("Shape", spec.shape), pose,
+                                       spec.size, spec.radius, spec.length)
