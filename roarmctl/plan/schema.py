@@ -375,17 +375,17 @@ def _plain_primitives(ctx: _Ctx, raws: list, role: str, wheres: list[str]) -> li
     for k in turned.tolist():
         raw = raws[picked[k]]
         poses[k] = transform(raw["xyz"], raw["rpy"])
-    for k, i in enumerate(picked):
+    for i, pose, (_, _, _, _, _, _, d0, d1, d2) in zip(picked, poses, a.tolist(), strict=True):
         raw = raws[i]
         shape = raw["shape"]
-        spec = ItemSpec(name=str(raw.get("name", "table")), role=role, shape=shape, pose=poses[k], line=raw.line)
+        spec = ItemSpec(name=str(raw.get("name", "table")), role=role, shape=shape, pose=pose, line=raw.line)
         spec.where = f"{ctx.where(raw.line)}: {wheres[i]}"
         if shape == "box":
-            spec.size = tuple(a[k, 6:9])
+            spec.size = (d0, d1, d2)
         else:
-            spec.radius = float(raw["radius"])
+            spec.radius = d0
             if shape == "cylinder":
-                spec.length = float(raw["length"])
+                spec.length = d1
         out[i] = spec
     return out
 
@@ -407,7 +407,7 @@ def _item_spec(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: di
     if shape == "box":
         if "size" not in d:
             ctx.fail(d.line, where, "a box needs 'size: [x, y, z]' (m)")
-        spec.size = tuple(ctx.vector(d["size"], d.line_of("size"), f"{where}.size", 3, positive=True))
+        spec.size = tuple(ctx.vector(d["size"], d.line_of("size"), f"{where}.size", 3, positive=True).tolist())
     else:
         if "radius" not in d:
             ctx.fail(d.line, where, f"a {shape} needs 'radius' (m)")
