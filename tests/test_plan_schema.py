@@ -123,6 +123,22 @@ def test_plan_from_a_dict_names_the_task_from_1():
     assert load_plan({"robot": "roarm_m3_pro", "tasks": [{"wait": 0.5}]}).tasks[0].seconds == 0.5
 
 
+def test_a_plan_dicts_digest_is_its_located_json_and_an_odd_key_is_named():
+    """The digest of a plan dict (the trajectory's provenance) is the sha256 of its JSON with numpy values as lists and
+    numbers, as before; a key that JSON cannot sort beside the names is a plan error naming it, not a TypeError."""
+    import hashlib
+    import json
+
+    from roarmctl.validation import locate
+
+    d = {"robot": "roarm_m3_pro", "start": np.zeros(6), "tasks": [{"wait": np.float32(0.5)}, {"wait": np.int64(1)}],
+         "planner": {"seed": 3, "padding": np.float64(0.004)}, "x-notes": (1, np.bool_(True), {2, 3})}
+    expected = hashlib.sha256(json.dumps(locate(d), sort_keys=True, default=str).encode()).hexdigest()
+    assert load_plan(d).sha256 == expected
+    with pytest.raises(PlanFileError, match=r"^<plan dict>: 5: unknown key"):
+        load_plan({"robot": "roarm_m3_pro", "tasks": [{"wait": 1}], 5: 1})
+
+
 def test_plain_primitives_read_at_once_give_the_spec_the_full_reader_gives():
     """The quick reading of plain boxes, cylinders and spheres (most of a big scene) gives the same spec, field for
     field, as the field-by-field reader; whatever that reader refuses, or anything else, the quick one leaves to it."""

@@ -580,9 +580,9 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
     if parsed is not None and parsed.document is not None:
         raw, path, digest = parsed.document, parsed.path, parsed.sha256
     elif isinstance(source, dict):
+        digest = _dict_digest(source)
         raw = locate(source)
         path = Path(base_dir or ".") / DICT_NAME
-        digest = hashlib.sha256(json.dumps(raw, sort_keys=True, default=str).encode()).hexdigest()
     else:
         path = Path(source)
         raw, digest = load_yaml(path, PlanFileError, digest=True)
@@ -692,6 +692,22 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
 
     return Plan(path=path, sha256=digest, robot=robot, start=start, scene=scene, objects=objects, tasks=tasks,
                 cycles=cycles, limits=limits, planner=planner, lines=dict(top.lines), document=raw, item_specs=ctx.specs)
+
+
+def _json_value(value: Any) -> Any:
+    """What ``locate`` makes of a value JSON has no form for (numpy arrays and scalars: lists and numbers), else its text."""
+    return value.tolist() if hasattr(value, "tolist") else str(value)
+
+
+def _dict_digest(source: dict) -> str:
+    """sha256 of a plan dict: of its JSON, keys sorted, numpy values as ``locate`` makes them (the text of the located
+    dict, without walking it twice). A key JSON cannot sort or write (a number beside names) makes it the dict's
+    repr; the checks name such a key."""
+    try:
+        text = json.dumps(source, sort_keys=True, default=_json_value)
+    except (TypeError, ValueError):
+        text = repr(source)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def _least_duration(task: Any, limits: Limits) -> float:
