@@ -163,7 +163,9 @@ def messages(streams: Streams) -> Iterator[tuple[str, str, int, Any]]:
     """Every message of the export as ``(topic, msgtype, log time ns, message)``, topic by topic."""
     mk = _Messages()
     robot, names = streams.robot, streams.joint_names
-    offset = -min(0.0, *(float(s.times[0]) for s in streams.joint_states.values() if len(s.times)))
+    # the earliest sample of any stream, not each stream's first: a log's measured states are stamped when the
+    # servos were read (arrival minus the reply's wire time), so lines that arrived together can be out of order
+    offset = -min(0.0, *(float(np.min(s.times)) for s in streams.joint_states.values() if len(s.times)))
     ns_of = lambda t: int(round((float(t) + offset) * 1e9))  # noqa: E731
     root = robot.root
 
