@@ -119,15 +119,24 @@ def test_kin_ik_solutions_reach_the_target_by_fk(arm, capsys):
         assert t[:3, 0] @ [0, 0, -1] > np.cos(1e-4)
 
 
+class _Planned(dict):
+    """Each arm's plan planned with ``roarmctl plan`` the first time a test asks for it: arm -> (exit code,
+    trajectory file). Only the arms this worker's tests read are planned (all of them took ~15 s of CPU per worker)."""
+
+    def __init__(self, folder: Path) -> None:
+        super().__init__()
+        self.folder = folder
+
+    def __missing__(self, arm: str) -> tuple[int, Path]:
+        traj = self.folder / f"{arm}.traj.json"
+        self[arm] = (run_cli(["plan", str(CORPUS / arm / "plan.yaml"), "-o", str(traj), "--json"]), traj)
+        return self[arm]
+
+
 @pytest.fixture(scope="module")
-def planned(tmp_path_factory) -> dict[str, Path]:
-    """Every arm's plan planned once with ``roarmctl plan``: arm -> (exit code, trajectory file)."""
-    out = {}
-    d = tmp_path_factory.mktemp("corpus")
-    for arm in ARMS:
-        traj = d / f"{arm}.traj.json"
-        out[arm] = (run_cli(["plan", str(CORPUS / arm / "plan.yaml"), "-o", str(traj), "--json"]), traj)
-    return out
+def planned(tmp_path_factory) -> dict[str, tuple[int, Path]]:
+    """Every arm's plan, planned once per worker when first read (``_Planned``)."""
+    return _Planned(tmp_path_factory.mktemp("corpus"))
 
 
 def planned_file(planned: dict, arm: str) -> Path:
@@ -137,8 +146,14 @@ def planned_file(planned: dict, arm: str) -> Path:
     return traj
 
 
+# The two tests that read an arm's trajectory run on one xdist worker (--dist loadgroup): each arm is planned once.
+PLANNED = [pytest.param(a, marks=[pytest.mark.xdist_group(f"corpus-{a}"),
+                                  *([pytest.mark.xfail(reason=PENDING[a], strict=True)] if a in PENDING else [])])
+           for a in ARMS]
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("arm", LOADING)
+@pytest.mark.parametrize("arm", PLANNED)
 def test_plan_picks_over_the_wall_within_every_limit(arm, planned):
     """The trajectory, checked against the robot by the validator execute uses and by hand: every sample
     within the joint limits, the velocities within the scaled limits, the grasp and the release where the
@@ -173,7 +188,7 @@ def test_plan_picks_over_the_wall_within_every_limit(arm, planned):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("arm", LOADING)
+@pytest.mark.parametrize("arm", PLANNED)
 def test_export_writes_an_mcap_with_every_joint(arm, planned, tmp_path):
     """``export`` writes the MCAP; read back with rosbags, its joint states name every movable joint of the
     URDF, the mimic joints at multiplier x leader + offset (the URDF's own <mimic> numbers, read here)."""

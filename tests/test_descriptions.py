@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import copy
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from clirun import roarmctl
 import yaml
 
 from roarmctl.errors import DescriptionError, InputError
@@ -177,8 +176,7 @@ def test_bad_urdf_or_sidecar_names_the_field(tmp_path, urdf_edit, side_edit, nee
 # ------------------------------------------------------------------------------- through the CLI
 def test_bad_description_through_cli_exit_2_one_line(tmp_path):
     path = _write_dh(tmp_path, _set(["convention"], "craig"))
-    proc = subprocess.run([sys.executable, "-m", "roarmctl", "kin", "fk", str(path), "0", "0"],
-                          capture_output=True, text=True, timeout=60)
+    proc = roarmctl("kin", "fk", str(path), "0", "0")
     assert proc.returncode == 2
     assert proc.stdout == ""
     lines = proc.stderr.strip().splitlines()

@@ -4,13 +4,12 @@ or as triangles (``mesh_collision: exact``); every bad mesh input is exit 2 nami
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import fcl
 import numpy as np
 import pytest
+from clirun import roarmctl
 import trimesh
 import yaml
 
@@ -121,8 +120,7 @@ def test_scale_and_package_paths(tmp_path):
     data = yaml.safe_load(side.read_text())
     del data["packages"]
     side.write_text(yaml.safe_dump(data))
-    proc = subprocess.run([sys.executable, "-m", "roarmctl", "--package-path", f"armpkg={tmp_path}", "kin", "fk",
-                           str(side), "0", "0", "0", "0", "0", "--json"], capture_output=True, text=True, timeout=60)
+    proc = roarmctl("--package-path", f"armpkg={tmp_path}", "kin", "fk", str(side), "0", "0", "0", "0", "0", "--json")
     assert proc.returncode == 0, proc.stderr
 
 
@@ -143,8 +141,7 @@ def test_bad_mesh_input_is_exit_2_naming_file_and_field(tmp_path, xml, extra, ne
     (tmp_path / "meshes" / "garbage.stl").write_bytes(b"solid x\nthis is not an stl\n")
     with pytest.raises(DescriptionError, match=needle):
         load_robot(str(side))
-    proc = subprocess.run([sys.executable, "-m", "roarmctl", "kin", "fk", str(side), "0", "0", "0", "0", "0"],
-                          capture_output=True, text=True, timeout=60)
+    proc = roarmctl("kin", "fk", str(side), "0", "0", "0", "0", "0")
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr and re.search(needle, proc.stderr.replace("\n", " ")), proc.stderr
 

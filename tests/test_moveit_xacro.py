@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from clirun import roarmctl
 import yaml
 
 from roarmctl.errors import DescriptionError
@@ -86,8 +85,7 @@ def test_bad_moveit_input_is_exit_2_naming_file_and_field(tmp_path, srdf_extra, 
     side = setup(tmp_path, srdf_extra, limits, side_extra)
     with pytest.raises(DescriptionError, match=needle):
         load_robot(str(side))
-    proc = subprocess.run([sys.executable, "-m", "roarmctl", "kin", "fk", str(side), "0", "0", "0", "0", "0"],
-                          capture_output=True, text=True, timeout=60)
+    proc = roarmctl("kin", "fk", str(side), "0", "0", "0", "0", "0")
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
 
 
@@ -100,8 +98,7 @@ def test_bad_xacro_is_exit_2_naming_the_file(tmp_path, body, needle):
     (tmp_path / "bad.xacro").write_text(body)
     with pytest.raises(DescriptionError, match=needle):
         load_robot(str(tmp_path / "bad.xacro"))
-    proc = subprocess.run([sys.executable, "-m", "roarmctl", "kin", "fk", str(tmp_path / "bad.xacro"), "0"],
-                          capture_output=True, text=True, timeout=60)
+    proc = roarmctl("kin", "fk", str(tmp_path / "bad.xacro"), "0")
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert "bad.xacro" in proc.stderr
 

@@ -1,12 +1,11 @@
 """The plan file: every mistake of form names the file, the line and the field, and exits 2."""
 
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from clirun import roarmctl
 
 from roarmctl.errors import PlanFileError
 from roarmctl.plan.schema import PickTask, PlaceTask, load_plan
@@ -88,8 +87,7 @@ def test_missing_file_and_missing_tasks(tmp_path):
 def test_cli_reports_one_line_and_exit_2_without_traceback(tmp_path):
     path = _variant(tmp_path, "velocity_scale: 0.6", "velocity_scal: 0.6")
     out = tmp_path / "out.traj.json"
-    proc = subprocess.run([sys.executable, "-m", "roarmctl", "plan", str(path), "-o", str(out)],
-                          capture_output=True, text=True, timeout=60)
+    proc = roarmctl("plan", str(path), "-o", str(out))
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and "limits.velocity_scal" in lines[0]

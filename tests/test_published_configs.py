@@ -7,12 +7,11 @@ published arms themselves are in tests/test_arm_corpus.py."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from clirun import roarmctl
 import yaml
 
 from roarmctl.errors import DescriptionError
@@ -113,8 +112,7 @@ def test_a_movable_joint_not_listed_is_held_at_rest_and_moves_nothing(tmp_path):
     assert "spin" not in r.joint_names
     f = r.kin.link_frames(np.array([0.0, 0.0, 0.0]))
     np.testing.assert_allclose(f[r.kin.link_index["spinner"]][:3, 3], [0.3, 0, 0.15], atol=1e-12)
-    proc = subprocess.run([sys.executable, "-m", "roarmctl", "kin", "fk", str(tmp_path / "arm.yaml"), "0", "0", "0"],
-                          capture_output=True, text=True, timeout=60)
+    proc = roarmctl("kin", "fk", str(tmp_path / "arm.yaml"), "0", "0", "0")
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr.count("spin at 0 rad") == 1  # said once
 

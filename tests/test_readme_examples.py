@@ -1,6 +1,12 @@
 """Every command line the README and docs/*.md show runs here, as written (in a scratch folder with the
 bundled plans), and does what the text says next to it; the README fits a screen and every relative
-link of README and docs/ leads to a file (and a heading) that exists."""
+link of README and docs/ leads to a file (and a heading) that exists.
+
+The commands run in this process (tests/clirun.py: the same ``roarmctl.cli.run`` the console script calls, with
+the shell's view of exit code, stdout and stderr): what a command line does is the point here, not the fresh
+interpreter, whose start-up, console script and signals tests/test_startup.py and tests/device/test_signals.py
+check. The commands that serve until Ctrl-C (``sim-device``, ``view``) and the one that needs a terminal on stdin
+(``--port /dev/ttyUSB0``, which asks before moving) still run as a user's shell runs them, in a process of their own."""
 
 from __future__ import annotations
 
@@ -14,6 +20,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from clirun import roarmctl
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
@@ -82,7 +89,7 @@ def workdir(tmp_path_factory) -> Path:
     shutil.copytree(ROOT / "plans", d / "plans")
     (d / "tests" / "data").mkdir(parents=True)  # the corpus of published arms, read in place
     (d / "tests" / "data" / "arms").symlink_to(ROOT / "tests" / "data" / "arms")
-    r = run("roarmctl plan plans/pick_place.yaml -o pick_place.traj.json", d)
+    r = roarmctl("plan", "plans/pick_place.yaml", "-o", "pick_place.traj.json", cwd=d)
     assert r.returncode == 0, r.stderr
     return d
 
@@ -93,7 +100,7 @@ def test_the_readme_shows_the_main_commands():
     assert {"plan", "visualize-path", "execute", "kin", "export", "ports", "sim-device", "workspace", "robots"} <= verbs
 
 
-@pytest.mark.slow  # each command in a fresh interpreter, as a user types it; execute --sim runs in real time
+@pytest.mark.slow  # execute --sim runs in real time; three commands start an interpreter of their own
 @pytest.mark.parametrize("cmd", COMMANDS)
 def test_readme_command(cmd, workdir):
     if "--port /dev/ttyUSB0" in cmd:  # no arm here: a clean one-line device error (exit 4) after the checks
@@ -128,8 +135,8 @@ def test_readme_command(cmd, workdir):
         assert proc.returncode == 130
         return
     if "pick_place.exec.json" in cmd and not (workdir / "pick_place.exec.json").exists():
-        assert run("roarmctl execute pick_place.traj.json --sim --yes", workdir).returncode == 0
-    r = run(cmd, workdir)
+        assert roarmctl("execute", "pick_place.traj.json", "--sim", "--yes", cwd=workdir).returncode == 0
+    r = roarmctl(*cmd.split()[1:], cwd=workdir)
     assert r.returncode == 0, f"{cmd}: {r.stderr}"
     if cmd.startswith("roarmctl kin jacobian scara_2r 0 0 --json"):  # "singular: ellipsoid radii (0.7616, 0)"
         out = json.loads(r.stdout)

@@ -4,14 +4,12 @@ and IK at the neighbouring pitch, not with the planner's own bookkeeping."""
 
 from __future__ import annotations
 
-import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from clirun import roarmctl
 
 from roarmctl.errors import InfeasibleError, InputError, UnreachableError
 from roarmctl.motion.pipeline import plan_file
@@ -145,6 +143,5 @@ def test_start_current_needs_the_arm(tmp_path):
     q0[GI] = 0.4
     res = plan_file(write(tmp_path, "  - move: {pose: home, gripper: closed}\n", start="current"), current=lambda robot: q0)
     assert res.trajectory.positions[0] == pytest.approx(q0)
-    proc = subprocess.run([sys.executable, "-m", "roarmctl", "plan", str(tmp_path / "plan.yaml"), "-o",
-                           str(tmp_path / "x.traj.json")], capture_output=True, text=True)
+    proc = roarmctl("plan", str(tmp_path / "plan.yaml"), "-o", str(tmp_path / "x.traj.json"))
     assert proc.returncode == 2 and "--port" in proc.stderr

@@ -5,12 +5,11 @@ from __future__ import annotations
 
 import math
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from clirun import roarmctl
 import yaml
 
 from roarmctl.errors import DescriptionError
@@ -126,8 +125,7 @@ def test_ur6_refuses_a_table_it_cannot_serve(tmp_path, mutate, needle):
     path = _ur10_std(tmp_path, mutate)
     with pytest.raises(DescriptionError, match=needle):
         load_robot(str(path))
-    proc = subprocess.run([sys.executable, "-m", "roarmctl", "kin", "fk", str(path), "0", "0", "0", "0", "0", "0"],
-                          capture_output=True, text=True, timeout=60)
+    proc = roarmctl("kin", "fk", str(path), "0", "0", "0", "0", "0", "0")
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
 

@@ -9,13 +9,12 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import fcl
 import numpy as np
 import pytest
+from clirun import roarmctl
 
 from roarmctl.errors import InputError, PlanFileError
 from roarmctl.motion.collision import CollisionChecker, densify
@@ -191,17 +190,16 @@ def test_a_plan_file_with_a_mesh_and_a_cloud_plans_and_draws(tmp_path):
     ]
     (tmp_path / "p.yaml").write_text(yaml.safe_dump(plan))
     out = tmp_path / "p.traj.json"
-    cli = [sys.executable, "-m", "roarmctl"]
-    run = subprocess.run(cli + ["plan", str(tmp_path / "p.yaml"), "-o", str(out), "--json"], capture_output=True, text=True)
+    run = roarmctl("plan", str(tmp_path / "p.yaml"), "-o", str(out), "--json")
     assert run.returncode == 0, run.stderr
     scene = {i["name"]: i for i in json.loads(out.read_text())["scene"]["items"]}
     assert scene["wall"]["shape"] == "mesh" and scene["post"]["shape"] == "cloud"
     assert scene["post"]["resolution"] == 0.005 and len(scene["post"]["cells"]) > 50
     png = tmp_path / "p.png"
-    run = subprocess.run(cli + ["visualize-path", str(out), "-o", str(png)], capture_output=True, text=True)
+    run = roarmctl("visualize-path", str(out), "-o", str(png))
     assert run.returncode == 0, run.stderr
     assert png.stat().st_size > 10_000
-    run = subprocess.run(cli + ["export", str(out), "-o", str(tmp_path / "p.mcap")], capture_output=True, text=True)
+    run = roarmctl("export", str(out), "-o", str(tmp_path / "p.mcap"))
     assert run.returncode == 0, run.stderr
     from mcap.reader import make_reader
     from rosbags.typesys import Stores, get_typestore
@@ -230,8 +228,7 @@ def test_mesh_and_cloud_mistakes_exit_2_naming_the_line(tmp_path, item, message)
     (tmp_path / "plans").mkdir()
     path = tmp_path / "plans" / "p.yaml"
     path.write_text(yaml.safe_dump(plan, default_flow_style=False))
-    run = subprocess.run([sys.executable, "-m", "roarmctl", "plan", str(path), "-o", str(tmp_path / "x.json")],
-                         capture_output=True, text=True)
+    run = roarmctl("plan", str(path), "-o", str(tmp_path / "x.json"))
     assert run.returncode == 2, run.stderr
     assert message in run.stderr and "p.yaml:" in run.stderr and "Traceback" not in run.stderr
 

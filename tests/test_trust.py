@@ -649,14 +649,32 @@ def test_the_execution_log_of_a_carried_robot_exports_by_itself(tmp_path):
     assert code == 0, err
 
 
+@pytest.fixture(scope="module")
+def big_export(tmp_path_factory) -> tuple[Path, list[str], float, int]:
+    """A large execution log and its export run alone once, in a fresh interpreter: (log, the command without its
+    output folder, wall seconds of the whole run, messages of its bag). Shared by the six SIGTERM moments below
+    (one xdist group): the reference run each of them repeated was half their CPU."""
+    import subprocess
+    import sys
+    import time
+
+    d = tmp_path_factory.mktemp("bigexport")
+    big = d / "run.exec.json"
+    big.write_text(json.dumps(hostile.execlog_doc(n=3000)))
+    cmd = [sys.executable, "-m", "roarmctl", "export", str(big), "-o"]
+    t = time.perf_counter()
+    subprocess.run([*cmd, str(d / "alone")], capture_output=True, check=True, timeout=300)
+    return big, cmd, time.perf_counter() - t, _bag_messages(d / "alone")
+
+
 @pytest.mark.slow
+@pytest.mark.xdist_group("bag-replacement")
 @pytest.mark.parametrize("fraction", [0.5, 0.7, 0.8, 0.9, 0.95, 1.0])
-def test_sigterm_during_a_bag_replacement_leaves_a_whole_bag_and_says_which(tmp_path, fraction):
+def test_sigterm_during_a_bag_replacement_leaves_a_whole_bag_and_says_which(tmp_path, fraction, big_export):
     """A real SIGTERM to ``roarmctl export`` at six moments of a bag replacement (the issue's 6 of 6
     tries), as fractions of the time one whole run takes here: the bag folder is always a whole bag -
     the old one or the new one - and the message says which."""
     import subprocess
-    import sys
     import time
 
     bag = tmp_path / "bag"
@@ -664,13 +682,7 @@ def test_sigterm_during_a_bag_replacement_leaves_a_whole_bag_and_says_which(tmp_
     small.write_text(json.dumps(hostile.trajectory_doc()))
     assert cli(["export", str(small), "-o", str(bag)])[0] == 0
     old = _bag_messages(bag)
-    big = tmp_path / "run.exec.json"
-    big.write_text(json.dumps(hostile.execlog_doc(n=3000)))
-    cmd = [sys.executable, "-m", "roarmctl", "export", str(big), "-o"]
-    t = time.perf_counter()
-    subprocess.run([*cmd, str(tmp_path / "alone")], capture_output=True, check=True, timeout=300)
-    whole = time.perf_counter() - t
-    new = _bag_messages(tmp_path / "alone")
+    _, cmd, whole, new = big_export
     proc = subprocess.Popen([*cmd, str(bag)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     time.sleep(fraction * whole)
     proc.send_signal(signal.SIGTERM)
