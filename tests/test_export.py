@@ -13,7 +13,8 @@ import pytest
 
 from roarmctl.cli import run as run_cli
 
-pytestmark = pytest.mark.slow  # the demo run on the simulated arm (real time) is exported
+# the demo run on the simulated arm (real time) is exported; the module on one xdist worker, so the run is made once
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("export-demo")]
 
 ROOT = Path(__file__).resolve().parents[1]
 PLAN = ROOT / "plans" / "pick_place.yaml"
@@ -25,11 +26,12 @@ CUBE_SIZE = (0.04, 0.04, 0.04)
 
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):
-    """The `make demo` commands: plan the bundled pick-and-place and run it on the simulator."""
+    """The `make demo` commands: plan the bundled pick-and-place and run it on the simulator (with ideal servos:
+    these tests are about what export makes of a log, not about how the arm follows, tests/device's subject)."""
     d = tmp_path_factory.mktemp("demo")
     traj, log = d / "pick_place.traj.json", d / "pick_place.exec.json"
     assert run_cli(["plan", str(PLAN), "-o", str(traj), "--json"]) == 0
-    assert run_cli(["execute", str(traj), "--sim", "--yes", "--json", "--log", str(log)]) == 0
+    assert run_cli(["execute", str(traj), "--sim", "--servos", "ideal", "--yes", "--json", "--log", str(log)]) == 0
     return d, traj, log
 
 

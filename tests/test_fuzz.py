@@ -200,6 +200,7 @@ BASE_PLANS = [
 ]
 
 
+@pytest.mark.slow  # CPU: generated cases through the CLI (make test-fast keeps the execution-log fuzz)
 @settings(max_examples=COUNTS["plans"], **SETTINGS)
 @given(data=st.data())
 def test_fuzz_plan_files(tmp_path_factory, data):
@@ -246,6 +247,7 @@ TRAJ_KEYS = ["format", "robot", "joint_names", "sample_rate", "points", "events"
              "time_from_start", "positions", "velocities", "accelerations", "items", "size", "radius", "kind"]
 
 
+@pytest.mark.slow  # CPU: generated cases through the CLI (make test-fast keeps the execution-log fuzz)
 @settings(max_examples=COUNTS["trajectories"], **SETTINGS)
 @given(data=st.data())
 def test_fuzz_trajectory_files(tmp_path_factory, data):
@@ -298,6 +300,7 @@ def _urdf_mutation(text: str, data) -> str:
     return text
 
 
+@pytest.mark.slow  # CPU: generated cases through the CLI (make test-fast keeps the execution-log fuzz)
 @settings(max_examples=COUNTS["descriptions"], **SETTINGS)
 @given(data=st.data())
 def test_fuzz_robot_descriptions(tmp_path_factory, data):
@@ -381,6 +384,7 @@ def _xacro_case(work: Path, data) -> Path:
     return corpus[data.draw(st.sampled_from(sorted(corpus)))]()
 
 
+@pytest.mark.slow  # CPU: generated cases through the CLI (make test-fast keeps the execution-log fuzz)
 @settings(max_examples=COUNTS["xacro"], **SETTINGS)
 @given(data=st.data())
 def test_fuzz_xacro(tmp_path_factory, data):
@@ -422,6 +426,7 @@ def _mesh_folder(work: Path) -> Path:
     return d
 
 
+@pytest.mark.slow  # CPU: generated cases through the CLI (make test-fast keeps the execution-log fuzz)
 @settings(max_examples=COUNTS["meshes"], **SETTINGS)
 @given(data=st.data())
 def test_fuzz_mesh_paths(tmp_path_factory, data):
@@ -448,6 +453,7 @@ SRDF_VALUES = st.sampled_from(["nan", "inf", "-inf", "1e400", "", "abc", "0", "1
                                "fixed", "planar", "floating"])
 
 
+@pytest.mark.slow  # CPU: generated cases through the CLI (make test-fast keeps the execution-log fuzz)
 @settings(max_examples=COUNTS["srdf"], **SETTINGS)
 @given(data=st.data())
 def test_fuzz_srdf(tmp_path_factory, data):
@@ -476,6 +482,7 @@ JL_KEYS = ["joint_limits", "has_velocity_limits", "max_velocity", "has_accelerat
            "base_link_to_link1", "no_joint"]
 
 
+@pytest.mark.slow  # CPU: generated cases through the CLI (make test-fast keeps the execution-log fuzz)
 @settings(max_examples=COUNTS["joint_limits"], **SETTINGS)
 @given(data=st.data())
 def test_fuzz_joint_limits(tmp_path_factory, data):
@@ -512,6 +519,7 @@ NAMED_TARGETS = st.sampled_from(["{o}/x", "../outside/x", "sub/x", "/", "link", 
                                  "{o}", "..", "."])
 
 
+@pytest.mark.slow  # CPU: generated cases through the CLI (make test-fast keeps the execution-log fuzz)
 @settings(max_examples=COUNTS["named_descriptions"], **SETTINGS)
 @given(data=st.data())
 def test_fuzz_descriptions_named_by_a_file(tmp_path_factory, data):
@@ -554,6 +562,7 @@ def test_fuzz_descriptions_named_by_a_file(tmp_path_factory, data):
         assert "OUTSIDE_4711" not in out.read_text()
 
 
+@pytest.mark.slow  # CPU: generated cases through the CLI (make test-fast keeps the execution-log fuzz)
 @settings(max_examples=COUNTS["export_paths"], **SETTINGS)
 @given(data=st.data())
 def test_fuzz_export_paths(tmp_path_factory, data):

@@ -165,6 +165,7 @@ def test_pick_place_places_the_cube_and_writes_a_run_file_export_reads(trajs, tm
     assert cli(["export", str(run), "-o", str(tmp_path / "run.csv")]) == 0  # the run file is an execution log
 
 
+@pytest.mark.slow  # CPU: the payload plan simulated twice (with and without --sag); make test-fast keeps the pick_place placement
 def test_the_0_2_kg_weight_holds_its_sag_is_reported_and_sag_compensation_cancels_it(trajs, capsys):
     """The weight held still (the plan's 'wait') pulls the P-only servos down about 2.5 cm: with --no-sag the
     report's rest there says so (off and below the plan). By default (as execute sends it) each goal is offset by
@@ -449,6 +450,7 @@ def test_cloud_cells_become_boxes_whose_union_is_the_cells():
     assert lo.tolist() == [[0, 0, 0]] and hi.tolist() == [[4, 5, 6]]
 
 
+@pytest.mark.slow  # CPU: the mesh-and-cloud plan planned and simulated; make test-fast keeps the pick_place placement
 def test_scan_desk_the_cloud_table_and_the_mesh_wall_simulate(tmp_path, capsys):
     """plans/scan_desk.yaml: the desk a point cloud (role table), the wall an STL; the cube is placed, the
     base stands on the cloud without a contact, and the wall's convex piece is in the model."""
@@ -469,6 +471,7 @@ VENDOR = next((d / "shared" / "reference" / "roarm_m3" / "m2s_roarm_ws_em0" for 
                if (d / "shared" / "reference" / "roarm_m3" / "m2s_roarm_ws_em0").is_dir()), None)
 
 
+@pytest.mark.slow  # CPU: the CAD-mesh M2-S built and simulated; make test-fast keeps the pick_place placement
 @pytest.mark.skipif(VENDOR is None, reason="Waveshare's M2-S package (../shared) is not beside the clone")
 def test_m2s_with_waveshares_meshes_builds_and_simulates_its_plan(tmp_path, capsys):
     traj = _plan(ROOT / "plans" / "m2s_pick_place.yaml", tmp_path / "m2s.traj.json")

@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 
 def _imported(code: str) -> set[str]:
     """Modules imported by running ``code`` in a fresh interpreter (from -X importtime)."""
@@ -34,6 +36,7 @@ def test_help_imports_a_bounded_number_of_modules():
     assert len(mods) <= 190, len(mods)
 
 
+@pytest.mark.slow  # fresh interpreters loading the planning libraries
 def test_toppra_is_imported_as_it_is_with_no_stand_in_modules():
     """No module is replaced or deferred behind the import system's back: after import_toppra the matplotlib
     modules (toppra imports pyplot itself) are plain modules whose code has run."""
@@ -96,6 +99,7 @@ main()
     assert not marker.exists()
 
 
+@pytest.mark.slow  # fresh interpreters loading the planning libraries
 def test_a_stop_while_the_planning_libraries_load_waits_until_they_have_loaded(tmp_path):
     """A stop signal that arrives while load_planning_libraries imports the native modules is delivered once
     they have loaded (a Python handler raising inside a nanobind module's initialisation, OMPL's or Ruckig's,

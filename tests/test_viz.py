@@ -238,7 +238,8 @@ def test_cli_option_errors_exit_2(traj_file):
         assert proc.stderr.startswith("error: ")
 
 
-@pytest.mark.parametrize("plan", PLANS, ids=[p.stem for p in PLANS])
+@pytest.mark.parametrize("plan", [p if p.stem == "pick_place" else pytest.param(p, marks=pytest.mark.slow) for p in PLANS],
+                         ids=[p.stem for p in PLANS])  # make test-fast draws pick_place; make test every plan (planned: CPU)
 def test_bundled_plans_render(tmp_path, plan):
     from roarmctl.motion.pipeline import plan_file
 

@@ -131,10 +131,8 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
 def simulator_tracking(simulator, robot, traj, cfg, result) -> dict[str, Any]:
     """TCP error (mm) of the simulator's true servo positions against the plan, over the motion:
     raw, and aligned within the lateness measured on both sides (``roarmctl.device.tracking``)."""
-    import numpy as np
+    from roarmctl.device.tracking import host_lateness, true_tracking
 
-    from roarmctl.device.tracking import true_tracking
-
-    host = np.array([[e["t"], e["lateness"]] for e in result.log.get("sent", []) if "tick" in e]).reshape(-1, 2)
+    host = host_lateness(result.log.get("sent", []), result.log["rate"])
     return true_tracking(robot, traj, simulator.recording(), result.t0, cfg.speed_scale, host_late=host,
                          device_late=simulator.lateness())

@@ -43,6 +43,21 @@ def lateness_at(t: np.ndarray, events: np.ndarray) -> np.ndarray:
     return out
 
 
+def host_lateness(sent: list[dict[str, Any]], rate: float) -> np.ndarray:
+    """(K, 2) (s after the stream's start, lateness s) of an execution log's ``sent`` motion ticks: each tick's own
+    measured lateness, and each gap in the sending beyond one period (ticks the pacing skipped while a busy machine
+    stalled the host: the tick after the gap is barely late, yet nothing went out meanwhile and the arm held the
+    last command), spread over the gap so that every moment of it is covered."""
+    dt = 1.0 / float(rate)
+    ticks = [(int(e["tick"]), float(e["t"]), float(e["lateness"])) for e in sent if "tick" in e]
+    events = [(t, late) for _, t, late in ticks]
+    for (ka, ta, la), (kb, tb, _) in zip(ticks, ticks[1:]):
+        due = ta - la + dt  # when the next command was due
+        if kb > ka + 1 and tb > due:  # ticks skipped in between
+            events += [(t, tb - due) for t in np.arange(due, tb, WINDOW / 2)] + [(tb, tb - due)]
+    return np.array(events, dtype=float).reshape(-1, 2)
+
+
 def true_tracking(robot, traj, recording, t0: float, speed_scale: float = 1.0,
                   host_late: np.ndarray | None = None, device_late: np.ndarray | None = None,
                   lag: bool = False) -> dict[str, Any]:
