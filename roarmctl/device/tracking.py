@@ -9,6 +9,7 @@ the time shift of the plan that fits the executed path best.
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import Any
 
@@ -51,7 +52,7 @@ def host_lateness(sent: list[dict[str, Any]], rate: float) -> np.ndarray:
     dt = 1.0 / float(rate)
     ticks = [(int(e["tick"]), float(e["t"]), float(e["lateness"])) for e in sent if "tick" in e]
     events = [(t, late) for _, t, late in ticks]
-    for (ka, ta, la), (kb, tb, _) in zip(ticks, ticks[1:]):
+    for (ka, ta, la), (kb, tb, _) in itertools.pairwise(ticks):
         due = ta - la + dt  # when the next command was due
         if kb > ka + 1 and tb > due:  # ticks skipped in between
             events += [(t, tb - due) for t in np.arange(due, tb, WINDOW / 2)] + [(tb, tb - due)]
