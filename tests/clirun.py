@@ -28,9 +28,14 @@ def roarmctl(*args: str, env: dict[str, str] | None = None, cwd: str | Path | No
     """Run ``roarmctl ARGS`` in this process (80 columns wide, as the subprocess helpers set it), with ``env``
     added to the environment and ``cwd`` as the working directory for the call."""
     from roarmctl.cli import run
+    from roarmctl.robot import xacro_input
+    from roarmctl.robot.meshes import PACKAGE_PATHS
 
     extra = {"COLUMNS": "80", **(env or {})}
     saved = {k: os.environ.get(k) for k in extra}
+    # what the global options set for the process (--package-path, --trust-xacro) ends with the call, as it ends
+    # with a process: a later call must not find a package folder an earlier test named
+    packages, trust = dict(PACKAGE_PATHS), xacro_input.TRUST_ALL
     out, err = io.StringIO(), io.StringIO()
     try:
         os.environ.update(extra)
@@ -41,6 +46,9 @@ def roarmctl(*args: str, env: dict[str, str] | None = None, cwd: str | Path | No
             stack.enter_context(contextlib.redirect_stderr(err))
             code = run(list(args))
     finally:
+        PACKAGE_PATHS.clear()
+        PACKAGE_PATHS.update(packages)
+        xacro_input.TRUST_ALL = trust
         for k, v in saved.items():
             if v is None:
                 os.environ.pop(k, None)

@@ -402,7 +402,8 @@ def _box_triangles(size) -> tuple[np.ndarray, np.ndarray]:
     return v, np.array(f)
 
 
-@pytest.mark.parametrize("shape", ["box", "mesh", "cloud"])
+@pytest.mark.parametrize("shape", ["box", pytest.param("mesh", marks=pytest.mark.slow),
+                                   pytest.param("cloud", marks=pytest.mark.slow)])  # make test-fast: the box
 def test_a_box_the_checker_saw_lower_than_it_is_is_hit_by_the_held_cube(trajs, tmp_path, capsys, shape):
     """A thin plate across the carry path whose top the checker saw (clearance + 1 mm) lower than it is: the
     held cube, carried over it as planned, drags through its top 1 mm; simulate reports that contact. The

@@ -40,6 +40,7 @@ def planned(tmp_path_factory) -> dict[str, tuple[Path, dict]]:
     return out
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 def test_every_example_plan_is_planned(planned):
     assert {p.stem for p in PLANS} >= {"pick_place", "obstacle", "multi_object"}
     for name, (path, summary) in planned.items():
@@ -100,6 +101,7 @@ def _fine(q: np.ndarray, substeps: int) -> np.ndarray:
     return q[i] * (1 - f) + q[i + 1] * f
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 @pytest.mark.parametrize("name", ["pick_place", "obstacle", "multi_object"])
 def test_samples_are_within_limits_and_collision_free(planned, name):
     traj = load_trajectory(planned[name][0])
@@ -115,6 +117,7 @@ def test_samples_are_within_limits_and_collision_free(planned, name):
     assert hit is None, f"{name}: collision at fine sample {hit}"
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 def test_the_obstacle_forces_a_detour(planned):
     """In obstacle.yaml the wall stands between pick and place: the TCP must pass above or around it."""
     traj = load_trajectory(planned["obstacle"][0])
@@ -130,6 +133,7 @@ def test_the_obstacle_forces_a_detour(planned):
     assert np.all((tcp[crossing, 2] > top) | (radial < front) | (radial > back))
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 @pytest.mark.parametrize("name", ["pick_place", "obstacle", "multi_object"])
 def test_objects_sit_against_the_fixed_jaw_and_reach_their_place(planned, name):
     """The RoArm's jaws: one fixed (its face in the description), one swinging toward it. At a grasp the
@@ -178,6 +182,7 @@ def test_objects_sit_against_the_fixed_jaw_and_reach_their_place(planned, name):
             assert traj.positions[k, gi] > before
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 def test_cartesian_segments_follow_the_line_within_1mm(planned):
     for name in ("pick_place", "multi_object"):
         traj = load_trajectory(planned[name][0])
@@ -194,6 +199,7 @@ def test_cartesian_segments_follow_the_line_within_1mm(planned):
             assert abs(d[2]) > 0.99  # approach and lift are vertical in these plans
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 def test_max_tcp_speed_holds_on_the_samples(planned):
     traj = load_trajectory(planned["obstacle"][0])
     robot = load_robot(traj.robot)
@@ -371,6 +377,7 @@ def _payload_torques(robot, traj, plan_path: Path) -> np.ndarray:
     return tau
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 @pytest.mark.parametrize("name", ["pick_place", "payload", "obstacle"])
 def test_jerk_by_finite_differences_is_within_the_limits(planned, name):
     traj = load_trajectory(planned[name][0])
@@ -381,6 +388,7 @@ def test_jerk_by_finite_differences_is_within_the_limits(planned, name):
     assert np.max(np.abs(np.diff(traj.accelerations, axis=0))) <= np.max(robot.jerk_limits) * 0.01 + 1e-6
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 @pytest.mark.parametrize("name", ["pick_place", "payload"])
 def test_torque_by_rnea_with_the_held_load_is_within_the_limits(planned, name):
     traj = load_trajectory(planned[name][0])
@@ -389,6 +397,7 @@ def test_torque_by_rnea_with_the_held_load_is_within_the_limits(planned, name):
     assert np.all(np.abs(tau) <= robot.effort_limits + 1e-6), np.max(np.abs(tau) / robot.effort_limits, axis=0)
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 def test_the_payload_example_lifts_0_2_kg_at_0_4_m_reach(planned):
     traj = load_trajectory(planned["payload"][0])
     robot = load_robot(traj.robot)
@@ -415,6 +424,7 @@ def test_a_load_the_arm_cannot_hold_exits_3_naming_joint_torque_and_limit(tmp_pa
 
 
 # ------------------------------------------------------------------ blending (issue 11)
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 def test_blended_joins_keep_moving_with_continuous_velocity(planned):
     traj = load_trajectory(planned["pick_place"][0])
     robot = load_robot(traj.robot)
@@ -438,6 +448,7 @@ def test_blended_joins_keep_moving_with_continuous_velocity(planned):
     assert moving >= len(traj.blends) - 1
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 def test_the_gripper_opens_during_the_transit(planned):
     traj = load_trajectory(planned["pick_place"][0])
     robot = load_robot(traj.robot)
@@ -453,6 +464,7 @@ def test_the_gripper_opens_during_the_transit(planned):
     assert traj.positions[k, gi] == pytest.approx(1.0)  # open before the straight approach starts
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 def test_blend_false_keeps_the_stops_and_takes_longer(tmp_path, planned):
     text = BASE.replace("limits: {velocity_scale: 0.6, acceleration_scale: 0.6, gripper_time: 0.5}",
                         "limits: {velocity_scale: 0.6, acceleration_scale: 0.6, gripper_time: 0.5, blend: false}")
@@ -474,6 +486,7 @@ def test_blend_false_keeps_the_stops_and_takes_longer(tmp_path, planned):
     assert blended.duration <= 0.72 * 9.51
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 @pytest.mark.parametrize("name", ["pick_place", "payload"])
 def test_no_acceleration_chatter(planned, name):
     """Within each segment a joint's jerk changes sign only a few times: a jerk-limited rest-to-rest move
@@ -505,6 +518,7 @@ def _moving_jaw_boxes(robot) -> list:
     return [(s, _box(s.size)) for s in robot.collision if s.link in moved and s.kind == "box"]
 
 
+@pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 def test_the_jaws_close_during_the_descent_and_open_during_the_retreat_but_never_into_the_object(planned):
     """The gripper moves while the arm descends to the grasp and while it retreats from the place, but the moving
     jaw stays at least the planner's padding away from the cube (python-fcl distance, generic FK) whenever the

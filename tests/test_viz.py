@@ -187,7 +187,8 @@ def test_cli_writes_png_of_requested_size(traj_file):
     assert not list(traj_file.parent.glob(".*.tmp"))  # the atomic write left nothing behind
 
 
-@pytest.mark.parametrize("view", ["iso", "front", "side"])
+@pytest.mark.parametrize("view", ["iso", pytest.param("front", marks=pytest.mark.slow),
+                                  pytest.param("side", marks=pytest.mark.slow)])  # make test-fast draws iso
 def test_every_view_renders(tmp_path, pick_place, view):
     out = visualize_trajectory(pick_place, tmp_path / f"{view}.png", view=view, dpi=25, size=(16, 10))
     assert imread(out).shape[:2] == (250, 400)
