@@ -26,7 +26,6 @@ GRIPPERLESS = {"ur5e", "irb2400"}  # published without a gripper: their plans mo
 # Published descriptions roarmctl does not load yet: known defects, strict xfails (an arm that starts to load turns
 # its xfail into a failure: remove it here then). None at the moment.
 PENDING: dict[str, str] = {}
-LOADING = [pytest.param(a, marks=pytest.mark.xfail(reason=PENDING[a], strict=True)) if a in PENDING else a for a in ARMS]
 # make test-fast loads the three arms; make test every arm (each load ~0.5-1 s of CPU)
 INNER = {"xarm6", "wx250s", "gen3_lite"}
 LOADING_FAST = [pytest.param(a, marks=[*([pytest.mark.xfail(reason=PENDING[a], strict=True)] if a in PENDING else []),
