@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -83,14 +82,38 @@ def test_examples_are_numbered_one_concept_each():
     assert names == [f"{i:02d}" for i in range(1, len(EXAMPLES) + 1)] and len(EXAMPLES) >= 4
 
 
-@pytest.mark.slow  # each example in a fresh interpreter; 03 runs on the simulated arm in real time
+def run_script(script: Path, args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    """``python SCRIPT ARGS`` in ``cwd``, run in this process as ``__main__`` (runpy) with its own ``sys.argv``:
+    an example's point is what it does with the API, not the interpreter's start-up (about a second of imports per
+    example). Exit code, stdout and stderr as a shell sees them."""
+    import contextlib
+    import io
+    import runpy
+
+    out, err, argv = io.StringIO(), io.StringIO(), sys.argv
+    code: int | str | None = 0
+    try:
+        sys.argv = [str(script), *args]
+        with contextlib.chdir(cwd), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                runpy.run_path(str(script), run_name="__main__")
+            except SystemExit as exc:
+                code = exc.code
+    finally:
+        sys.argv = argv
+    if isinstance(code, str):
+        err.write(code + "\n")
+    return subprocess.CompletedProcess([str(script), *args], code if isinstance(code, int) else int(code is not None),
+                                       out.getvalue(), err.getvalue())
+
+
+@pytest.mark.slow  # 03 runs on the simulated arm in real time
 @pytest.mark.parametrize("script", EXAMPLES, ids=lambda p: p.name)
 def test_example_runs(script, short_traj, tmp_path):
     """Every example runs as `python examples/NN_x.py`, on the short trajectory where it takes one."""
     args = {"01": [str(tmp_path)], "02": [str(short_traj)], "03": [str(short_traj), str(tmp_path / "run.exec.json")],
             "04": [str(short_traj), str(tmp_path)]}.get(script.name[:2], [str(tmp_path)])
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    r = subprocess.run([sys.executable, str(script), *args], capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env)
+    r = run_script(script, args, tmp_path)
     assert r.returncode == 0, r.stderr
     if script.name.startswith("01"):
         traj = rc.load_trajectory(tmp_path / "from_dict.traj.json")
