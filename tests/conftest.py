@@ -17,7 +17,10 @@ import pytest
 @pytest.hookimpl(tryfirst=True)  # before -m "not slow" deselects
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """A test that starts the headless browser (the ``chromium`` fixture of tests/test_view.py) is slow: left out
-    of ``make test-fast``."""
+    of ``make test-fast``; the browser-view group goes first."""
     for item in items:
         if "chromium" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.slow)
+    # The browser-view tests are one xdist group (one worker, about two minutes of mostly waiting on Chromium): handed
+    # out first, they run beside the rest instead of after it (collected last, they were the suite's tail).
+    items.sort(key=lambda item: not any(m.args == ("browser-view",) for m in item.iter_markers("xdist_group")))
