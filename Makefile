@@ -21,11 +21,8 @@ install: $(STAMP)
 
 # The whole suite on every core (pytest-xdist; the browser-view tests share one worker; the real-time
 # simulated-arm tests spread over the workers like the rest: tests/conftest.py says why that is safe).
-# One worker more than cores: a real-time test mostly waits on the simulated arm's clock, and the extra
-# worker uses the core it leaves idle (the CPU-bound rest keeps every core busy either way).
-TEST_JOBS ?= $(shell $(PYTHON) -c 'import os; print(len(os.sched_getaffinity(0)) + 1)')
 test: $(STAMP)
-	$(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadgroup
+	$(BIN)/python -m pytest -n auto --dist loadgroup
 
 # The inner loop: everything but the tests marked slow (real-time runs on the simulated arm, fresh
 # interpreters, CPU-heavy sweeps); under a minute.
