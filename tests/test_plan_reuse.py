@@ -32,8 +32,8 @@ def cycles_plan(cycles: int) -> dict:
     return doc
 
 
-class _Forgetful(dict):
-    """A dict whose lookups always miss: nothing kept is ever reused."""
+class _Forgetful(context.Kept):
+    """A store whose lookups always miss: nothing kept is ever reused."""
 
     def get(self, key, default=None):
         return None
@@ -47,7 +47,7 @@ def test_reuse_gives_the_same_bytes_as_planning_everything_afresh(monkeypatch):
     def forgetful(self, *args, **kwargs):
         init(self, *args, **kwargs)
         for name in ("timed", "chains", "iks", "lines", "jaw_targets"):
-            setattr(self, name, _Forgetful())
+            setattr(self, name, _Forgetful(256))
 
     monkeypatch.setattr(context.PlanContext, "__init__", forgetful)
     afresh = plan_file(copy.deepcopy(doc), seed=7, base_dir=PLANS)

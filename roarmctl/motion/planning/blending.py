@@ -61,16 +61,12 @@ def time_chain(ctx: PlanContext, motions: list[UntimedMotion]) -> list[TimedPiec
     out = _time_chain(ctx, motions)
     labels = chain_labels(motions)
     if key is not None and len(set(labels)) == len(labels):  # relabelling needs each label once
-        if len(ctx.chains) >= CHAINS_KEPT:
-            ctx.chains.clear()
         c = ctx.checker
         state = (None if c._gripper_index is None else float(c._q_template[c._gripper_index]), c._grasp_target)
-        ctx.chains[key] = ([replace(p, tp=_copied(p.tp), blends=list(p.blends), segments=list(p.segments)) for p in out],
-                           labels, state)
+        ctx.chains.keep(key, ([replace(p, tp=_copied(p.tp), blends=list(p.blends), segments=list(p.segments)) for p in out],
+                              labels, state))
     return out
 
-
-CHAINS_KEPT = 64  # timed chains a plan keeps (time_chain)
 
 
 def chain_labels(motions: list[UntimedMotion]) -> list[str]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, TypeVar, cast
 
 import numpy as np
 
@@ -35,6 +35,24 @@ class StageTimer:
     def add(self, key: str, since: float) -> None:
         """Add the time since ``since`` (a ``time.perf_counter()`` value) to stage ``key``."""
         self.t[key] = self.t.get(key, 0.0) + time.perf_counter() - since
+
+
+V = TypeVar("V")
+
+
+class Kept(dict[tuple, V]):
+    """Results a plan keeps by their exact key (what the result is a function of, as bytes), at most ``limit``:
+    when full, all are forgotten, so a plan that never repeats itself does not grow."""
+
+    def __init__(self, limit: int) -> None:
+        super().__init__()
+        self.limit = limit
+
+    def keep(self, key: tuple, value: V) -> None:
+        """Keep ``value`` under ``key``."""
+        if len(self) >= self.limit:
+            self.clear()
+        self[key] = value
 
 
 class PlanContext:
@@ -71,11 +89,11 @@ class PlanContext:
         self.payload: dict | None = None  # link -> Inertial of the held object, from grasp to release
         self.payload_label = ""
         self.free_count = 0  # free motions planned so far (each gets its own OMPL seed)
-        self.timed: dict[tuple, TimedPath] = {}  # what motions.time_path timed, by its waypoints and payload
-        self.chains: dict[tuple, tuple] = {}  # what blending.time_chain timed, by its motions and world (chain_key)
-        self.iks: dict[tuple, list[np.ndarray]] = {}  # what tasks.choose_ik found, by its targets, q and world
-        self.lines: dict[tuple, np.ndarray] = {}  # what motions.geometry solved along straight lines, by q and the end
-        self.jaw_targets: dict[tuple, tuple] = {}  # what tasks.against_fixed_jaw found, by its task, poses and world
+        self.timed: Kept[TimedPath] = Kept(256)  # what motions.time_path timed, by its waypoints and payload
+        self.chains: Kept[tuple] = Kept(64)  # what blending.time_chain timed, by its motions and world (chain_key)
+        self.iks: Kept[list[np.ndarray]] = Kept(256)  # what tasks.choose_ik found, by its targets, q and world
+        self.lines: Kept[np.ndarray] = Kept(256)  # what motions.geometry solved along straight lines, by q and the end
+        self.jaw_targets: Kept[tuple] = Kept(256)  # what tasks.against_fixed_jaw found, by its task, poses and world
 
     def set_state(self, gripper: float | None, grasp_target: str | None = None) -> None:
         """Put the checker in a motion's collision state: the gripper at ``gripper`` (rad; None: as it is) and

@@ -42,9 +42,7 @@ def geometry(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> UntimedMotion:
         wps = ctx.lines.get(key)
         if wps is None:
             wps = cartesian_line(ctx.robot, q, step.line[1], pitch=step.pitch, roll=step.roll, label=step.label)
-            if len(ctx.lines) >= TIMED_KEPT:
-                ctx.lines.clear()
-            ctx.lines[key] = wps
+            ctx.lines.keep(key, wps)
         ctx.timer.add("ik", t0)
         return UntimedMotion(step, wps.copy())
     return UntimedMotion(step, free_path(ctx, step, q))
@@ -82,9 +80,6 @@ def free_path(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> np.ndarray:
     vertices = np.repeat(q[None, :], len(path), axis=0)
     vertices[:, ctx.arm] = path
     return vertices
-
-
-TIMED_KEPT = 256  # timed paths a plan keeps (time_path)
 
 
 def _copied(tp: TimedPath) -> TimedPath:
@@ -133,9 +128,7 @@ def time_path(ctx: PlanContext, wps: np.ndarray, label: str) -> TimedPath:
     qd, qdd = np.zeros_like(q), np.zeros_like(q)
     qd[:, arm], qdd[:, arm] = tp_arm.qd, tp_arm.qdd
     timed = TimedPath(tp_arm.times, q, qd, qdd, tp_arm.jerk_filter, tp_arm.s)
-    if len(ctx.timed) >= TIMED_KEPT:
-        ctx.timed.clear()
-    ctx.timed[key] = _copied(timed)
+    ctx.timed.keep(key, _copied(timed))
     ctx.timer.add("toppra", t0)
     return timed
 

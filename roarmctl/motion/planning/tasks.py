@@ -149,9 +149,7 @@ def against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_gr
     known = ctx.jaw_targets.get(key)
     if known is None:
         known = _against_fixed_jaw(ctx, task, centre, q_grasp, pitch, q, at, g_open)
-        if len(ctx.jaw_targets) >= IKS_KEPT:
-            ctx.jaw_targets.clear()
-        ctx.jaw_targets[key] = known
+        ctx.jaw_targets.keep(key, known)
     else:
         ctx.checker.set_gripper(float(g_open))  # as the last IK of the search left it
         ctx.timer.add("ik", t0)
@@ -310,13 +308,9 @@ def choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, fl
         best = _choose_ik(ctx, targets, q, at, g)
     finally:
         ctx.timer.add("ik", t0)
-    if len(ctx.iks) >= IKS_KEPT:
-        ctx.iks.clear()
-    ctx.iks[key] = [c.copy() for c in best]
+    ctx.iks.keep(key, [c.copy() for c in best])
     return best
 
-
-IKS_KEPT = 256  # IK answers a plan keeps (choose_ik)
 
 
 def _choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, float | None]], q: np.ndarray, at: str,
