@@ -8,11 +8,15 @@ order" in docs/design.md, so the document and this test cannot disagree.
 from __future__ import annotations
 
 import ast
+import functools
 import re
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+
+pytestmark = pytest.mark.xdist_group("layers")  # one worker reads the package's imports, once
 
 ROOT = Path(__file__).resolve().parents[1]
 PKG = ROOT / "roarmctl"
@@ -50,16 +54,47 @@ def module_name(path: Path) -> str:
 
 
 MODULES = {module_name(p): p for p in sorted(PKG.rglob("*.py"))}
-TREES = {name: ast.parse(path.read_text(), str(path)) for name, path in MODULES.items()}  # each file parsed once
 EXTENSIONS = {module_name(p).split(".cpython")[0] for p in PKG.rglob("*.c")}
 
 
-def _type_checking_nodes(tree: ast.AST) -> set[int]:
-    """ids of the import nodes inside an ``if TYPE_CHECKING:`` block (no run-time dependency)."""
-    out: set[int] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
-            out |= {id(n) for stmt in node.body for n in ast.walk(stmt)}
+@dataclass(frozen=True)
+class ImportSite:
+    """One import statement of a module and where it sits."""
+
+    node: ast.Import | ast.ImportFrom
+    in_function: bool  # inside a def (runs when the function is called)
+    typing_only: bool  # inside ``if TYPE_CHECKING:`` (no run-time dependency)
+    fallback: bool  # inside a ``try: ... except ImportError:``
+
+
+def _sites(node: ast.AST, in_function: bool, typing_only: bool, fallback: bool, out: list[ImportSite]) -> None:
+    """Collect the import statements under ``node`` (one recursive pass, flags carried down)."""
+    for child in ast.iter_child_nodes(node):
+        if isinstance(child, (ast.Import, ast.ImportFrom)):
+            out.append(ImportSite(child, in_function, typing_only, fallback))
+        elif isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            _sites(child, True, typing_only, fallback, out)
+        elif isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+            for stmt in child.body:
+                _sites(ast.Module(body=[stmt], type_ignores=[]), in_function, True, fallback, out)
+            for stmt in child.orelse:
+                _sites(ast.Module(body=[stmt], type_ignores=[]), in_function, typing_only, fallback, out)
+        elif isinstance(child, ast.Try) and any("ImportError" in ast.unparse(h.type or ast.Name(""))
+                                                for h in child.handlers):
+            _sites(child, in_function, typing_only, True, out)
+        elif isinstance(child, (ast.stmt, ast.excepthandler, ast.match_case)):
+            _sites(child, in_function, typing_only, fallback, out)
+
+
+@functools.cache
+def import_sites() -> dict[str, list[ImportSite]]:
+    """Every import statement of every module of the package, read once per test process (each file parsed once;
+    computed on first use, not at collection, so a worker that runs none of these tests pays nothing)."""
+    out: dict[str, list[ImportSite]] = {}
+    for name, path in MODULES.items():
+        sites: list[ImportSite] = []
+        _sites(ast.parse(path.read_text(), str(path)), False, False, False, sites)
+        out[name] = sites
     return out
 
 
@@ -77,25 +112,18 @@ def targets_of(node: ast.Import | ast.ImportFrom, package: str) -> list[str]:
     return subs if len(subs) == len(node.names) else [mod, *subs]
 
 
+@functools.cache
 def imports() -> list[tuple[str, str, int, bool, bool]]:
     """(importer, imported module, line, inside a function, run time) for every import of a roarmctl module."""
     edges = []
     for name, path in MODULES.items():
-        tree = TREES[name]
         package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
-        in_function = {id(n) for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
-                       for n in ast.walk(f) if n is not f}
-        typing_only = _type_checking_nodes(tree)
-        for node in ast.walk(tree):
-            if not isinstance(node, (ast.Import, ast.ImportFrom)):
-                continue
-            for t in targets_of(node, package):
+        for site in import_sites()[name]:
+            for t in targets_of(site.node, package):
                 if t == "roarmctl" or t.startswith("roarmctl."):
-                    edges.append((name, t, node.lineno, id(node) in in_function, id(node) not in typing_only))
+                    edges.append((name, t, site.node.lineno, site.in_function, not site.typing_only))
     return edges
 
-
-EDGES = imports()
 
 # Upward imports being removed by a change in flight, each with who removes it. Strict: an entry whose import
 # has gone fails the test, so the list only shrinks.
@@ -110,7 +138,7 @@ def test_the_layer_table_is_read_and_covers_every_module():
 
 
 def test_no_import_points_up():
-    found = [(a, b, line, f) for a, b, line, f, _ in EDGES if b != "roarmctl" and layer_of(b) > layer_of(a)]
+    found = [(a, b, line, f) for a, b, line, f, _ in imports() if b != "roarmctl" and layer_of(b) > layer_of(a)]
     up = [f"{a}:{line} imports {b} ({'in a function' if f else 'at module level'}): layer {layer_of(a) + 1} -> {layer_of(b) + 1}"
           for a, b, line, f in found if (a, b) not in PENDING]
     assert not up, "imports that point up the layers of docs/design.md:\n" + "\n".join(up)
@@ -120,7 +148,7 @@ def test_no_import_points_up():
 
 def test_no_import_circles():
     graph: dict[str, set[str]] = {}
-    for a, b, _, _, run_time in EDGES:
+    for a, b, _, _, run_time in imports():
         if run_time and b in MODULES and b != a:
             graph.setdefault(a, set()).add(b)
     cycles = []
@@ -199,12 +227,10 @@ def _module_level_libraries() -> dict[str, set[str]]:
     """The third-party libraries each module imports at module level (run time), directly."""
     out = {}
     for name, path in MODULES.items():
-        tree = TREES[name]
-        skip = _type_checking_nodes(tree) | {id(n) for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
-                                             for n in ast.walk(f) if n is not f}
         libs = set()
-        for node in ast.walk(tree):
-            if id(node) in skip or not isinstance(node, (ast.Import, ast.ImportFrom)) or getattr(node, "level", 0):
+        for site in import_sites()[name]:
+            node = site.node
+            if site.in_function or site.typing_only or getattr(node, "level", 0):
                 continue
             for m in _imported_names(node):
                 lib = _library(m)
@@ -219,7 +245,7 @@ def libraries_loaded() -> dict[str, set[str]]:
     of every roarmctl module it imports at module level, transitively."""
     direct = _module_level_libraries()
     graph = {m: set() for m in MODULES}
-    for a, b, _, in_function, run_time in EDGES:
+    for a, b, _, in_function, run_time in imports():
         if not in_function and run_time:
             graph[a] |= {t for t in [b] + [".".join(b.split(".")[:i]) for i in range(2, b.count(".") + 1)] if t in MODULES and t != a}
 
@@ -251,24 +277,19 @@ def test_imports_inside_functions_are_there_for_start_up_time():
     loaded = libraries_loaded()
     needless = []
     for name, path in MODULES.items():
-        tree = TREES[name]
         package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
-        fallbacks = {id(n) for t in ast.walk(tree) if isinstance(t, ast.Try)  # try: import a / except ImportError: import b
-                     and any("ImportError" in ast.unparse(h.type or ast.Name("")) for h in t.handlers) for n in ast.walk(t)}
-        for f in ast.walk(tree):
-            if not isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef)):
+        for site in import_sites()[name]:
+            node = site.node
+            if not site.in_function or site.fallback:
                 continue
-            for node in ast.walk(f):
-                if node is f or not isinstance(node, (ast.Import, ast.ImportFrom)) or id(node) in fallbacks:
-                    continue
-                new = set()
-                for t in targets_of(node, package):
-                    if t.split(".")[0] == "roarmctl":
-                        new |= loaded.get(t, {"(extension)"} if t in EXTENSIONS else set()) - loaded[name]
-                if not getattr(node, "level", 0):
-                    new |= {lib for m in _imported_names(node) if (lib := _library(m)) is not None} - loaded[name]
-                if not new:
-                    needless.append(f"{name}:{node.lineno} {ast.unparse(node)}")
+            new = set()
+            for t in targets_of(node, package):
+                if t.split(".")[0] == "roarmctl":
+                    new |= loaded.get(t, {"(extension)"} if t in EXTENSIONS else set()) - loaded[name]
+            if not getattr(node, "level", 0):
+                new |= {lib for m in _imported_names(node) if (lib := _library(m)) is not None} - loaded[name]
+            if not new:
+                needless.append(f"{name}:{node.lineno} {ast.unparse(node)}")
     assert not needless, "imports inside functions that load no library their module lacks (move them up):\n" + "\n".join(needless)
 
 
