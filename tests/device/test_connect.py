@@ -75,7 +75,9 @@ def test_quiet_confirmed_esp_now_left_build_measured_and_feedback_restored():
     assert info.streamed and during["info_print"] == 0 and frames == 0  # quiet, and quiet it stayed
     assert during["esp_now_mode"] == 0
     assert after["info_print"] == 2  # the firmware got its factory feedback stream back
-    assert not info.queued and info.line_time < 0.002
+    # the build is told by its answers, not by the host's clock: its measured line time (about 0 idle) once read
+    # 3.76 ms beside two CPU hogs, and 3.3 ms as the least of four tries, where the queuing build reads 4.4-5 ms
+    assert not info.queued and info.firmware == "m3-0.84"
     # the round trip: a T:105 in, one loop pass, six servo reads, a ~230-byte line out (~20 ms of wire)
     assert 0.02 < info.rtt < 0.06
     assert info.voltage is None and "reports neither torque nor supply voltage" in info.describe()

@@ -140,9 +140,12 @@ def test_link_lost_mid_motion_exits_4_with_log(tmp_path):
     traj.save(p)
     sim = PtySimulator(SimConfig(), process=True).start()
     proc = spawn(["execute", str(p), "--port", sim.path, "--yes", "--log", str(tmp_path / "lost.json")])
-    deadline = time.monotonic() + 10
-    while time.monotonic() < deadline and sum(c.get("T") == 102 for _, c in sim.received()) < 30:
+    # the cut comes mid-motion: after 30 motion commands, however long a fresh interpreter takes to get there on a
+    # busy machine (with 10 s allowed, two CPU hogs once made the cut land during its connect: outcome "failed")
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and sum(c.get("T") == 102 for _, c in sim.received()) < 30 and proc.poll() is None:
         time.sleep(0.02)
+    assert sum(c.get("T") == 102 for _, c in sim.received()) >= 30, "the run never got 30 motion commands out"
     sim.disconnect()
     t_cut = time.monotonic()
     _, err = proc.communicate(timeout=10)
