@@ -289,6 +289,29 @@ def test_scene_round_trip():
         SceneItem("x", "wall", "box", np.eye(4), size=(1, 1, 1))
 
 
+def test_a_scene_written_at_once_is_each_item_written_alone():
+    """``Scene.to_dict`` (the primitives' poses read in one pass) gives each item's own ``to_dict``, bit for bit as JSON:
+    unturned items with either sign of zero in their rotation, turned ones, one at gimbal lock, a mesh among them."""
+    import json
+
+    rng = np.random.default_rng(1)
+    items = []
+    for k in range(60):
+        rpy = [(0.0, 0.0, 0.0), (-0.0, 0.0, 0.0), (0.0, -0.0, -0.0), tuple(rng.uniform(-3, 3, 3)), (0.0, np.pi / 2, 0.0),
+               (0.0, -np.pi / 2, 0.3)][k % 6]
+        shape = ("box", "cylinder", "sphere")[k % 3]
+        items.append(SceneItem(f"i{k}", "obstacle", shape, transform(rng.uniform(-1, 1, 3), rpy), size=(0.1, 0.2, 0.3),
+                               radius=0.05, length=0.2))
+    items[5].pose = np.eye(4)  # +0.0 below the diagonal (transform writes -0.0 there)
+    items[7].pose[2, 0] = items[7].pose[1, 0] = -0.0
+    items[8].pose[1, 0] = -0.0
+    items.append(SceneItem.from_mesh("m", [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]],
+                                     xyz=(0.1, 0.2, 0.3), rpy=(0.1, 0.2, 0.3)))
+    scene = Scene(items)
+    assert json.dumps(scene.to_dict()) == json.dumps({"items": [it.to_dict() for it in items]})
+    assert Scene([]).to_dict() == {"items": []}
+
+
 def test_a_checked_primitive_is_the_item_the_constructor_makes():
     """``SceneItem.checked_primitive`` (a plan's items, checked by the plan's reader) gives what ``SceneItem(...)`` gives,
     field for field and type for type; its pose is its own copy. A copied scene keeps its items' names and poses."""

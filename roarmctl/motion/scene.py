@@ -235,8 +235,29 @@ class Scene:
         return out
 
     def to_dict(self) -> dict:
-        """``{"items": [...]}`` of the items' ``to_dict`` forms."""
-        return {"items": [i.to_dict() for i in self.items]}
+        """``{"items": [...]}`` of the items' ``to_dict`` forms (the same dicts, bit for bit), the primitives' positions
+        and rotations read in one numpy pass over the scene rather than item by item (a trajectory records the
+        scene: 200 boxes took about 5 ms item by item)."""
+        items = self.items
+        poses = np.array([it.pose for it in items]).reshape(len(items), 4, 4)
+        xyz = poses[:, :3, 3].tolist()
+        rpy = _rpy_all(poses[:, :3, :3])
+        out = []
+        for it, p, r in zip(items, xyz, rpy, strict=True):
+            if it.mesh is not None or it.cloud is not None:
+                out.append(it.to_dict())
+                continue
+            d: dict = {"name": it.name, "role": it.role, "shape": it.shape}
+            if it.shape == "box":
+                d["size"] = [float(v) for v in it.size]
+            else:
+                d["radius"] = float(it.radius)
+                if it.shape == "cylinder":
+                    d["length"] = float(it.length)
+            d["xyz"] = p
+            d["rpy"] = r
+            out.append(d)
+        return {"items": out}
 
     @classmethod
     def from_dict(cls, d: dict) -> Scene:
@@ -244,6 +265,18 @@ class Scene:
         if not isinstance(d, dict) or not isinstance(d.get("items", []), list):
             raise InputError("scene: expected {'items': [...]}")
         return cls([SceneItem.from_dict(i) for i in d.get("items", [])])
+
+
+_EYE3 = np.eye(3)
+
+
+def _rpy_all(rot: np.ndarray) -> list[list[float]]:
+    """``rpy_from_matrix`` of each rotation of ``rot`` (N, 3, 3), as lists of floats: a rotation that is the identity
+    by value (either sign of its zeros: most scene items) gives its zeros back as the arctangents do (atan2(+-0, 1)
+    is +-0, hypot(1, +-0) is 1), so only the turned ones are computed one by one."""
+    plain = np.all(rot == _EYE3, axis=(1, 2)).tolist()
+    zeros = np.stack([rot[:, 2, 1], -rot[:, 2, 0], rot[:, 1, 0]], axis=1).tolist()  # roll, pitch, yaw of a plain one
+    return [z if flat else [float(v) for v in rpy_from_matrix(r)] for z, flat, r in zip(zeros, plain, rot, strict=True)]
 
 
 def settled(pose: np.ndarray, step: float) -> np.ndarray:
