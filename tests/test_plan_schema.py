@@ -188,3 +188,46 @@ def test_plain_primitives_read_at_once_give_the_spec_the_full_reader_gives():
             if a is not None:
                 assert a.where == b.where and a.pose.tobytes() == b.pose.tobytes() and a.size == b.size
                 assert (a.name, a.shape, a.radius, a.length, a.line) == (b.name, b.shape, b.radius, b.length, b.line)
+
+
+def test_a_plan_dicts_obstacles_read_as_they_are_give_the_files_specs(tmp_path):
+    """A plan dict's obstacles are read without a located copy of each: the specs are those of the same plan read from
+    its YAML text (field for field but the line), plain primitives or not (numpy numbers, tuples, a mesh); the second
+    reading (with the robot's poses) takes the first one's specs; a bad field is still named."""
+    import dataclasses
+
+    import yaml
+
+    from roarmctl.plan import schema
+
+    (tmp_path / "tri.stl").write_text("solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 0.01 0 0\n"
+                                      "vertex 0 0.01 0\nendloop\nendfacet\nendsolid t\n")
+    obstacles = [{"name": f"b{i}", "shape": "box", "size": [0.02, 0.02, 0.04], "xyz": [0.5 + i * 0.01, -0.3, 0.02]}
+                 for i in range(30)]
+    obstacles += [{"name": "turned", "shape": "cylinder", "radius": 0.01, "length": 0.1, "xyz": [0.4, 0.3, 0.05],
+                   "rpy": [0.1, 0.2, 0.3]},
+                  {"name": "ball", "shape": "sphere", "radius": 0.02, "xyz": [-0.3, 0.3, 0.02]},
+                  {"name": "deg", "shape": "box", "size": [0.1, 0.1, 0.1], "xyz": [-0.3, -0.3, 0.05], "rpy": {"deg": [0, 0, 10]}},
+                  {"name": "mesh", "shape": "mesh", "file": "tri.stl", "xyz": [-0.3, 0.0, 0.0]}]
+    d = {"robot": "roarm_m3_pro", "scene": {"obstacles": obstacles}, "tasks": [{"wait": 1.0}]}
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(d))
+    as_code = dict(d, scene={"obstacles": [dict(o) for o in obstacles]})
+    as_code["scene"]["obstacles"][3] = dict(obstacles[3], xyz=np.array(obstacles[3]["xyz"]))  # numpy: read field by field
+    as_code["scene"]["obstacles"][4] = dict(obstacles[4], size=tuple(obstacles[4]["size"]))
+    from_file = load_plan(tmp_path / "p.yaml")
+    from_dict = load_plan(as_code, base_dir=tmp_path)
+    assert len(from_dict.scene) == len(from_file.scene) == len(obstacles)
+    for a, b in zip(from_dict.scene, from_file.scene):
+        for f in dataclasses.fields(a):
+            if f.name in ("line", "where"):
+                continue
+            x, y = getattr(a, f.name), getattr(b, f.name)
+            assert type(x) is type(y) and (x.tobytes() == y.tobytes() if isinstance(x, np.ndarray) else x == y), (a.name, f.name)
+        assert a.line == 0 and a.where.startswith("<plan dict>: scene.obstacles[")
+    again = load_plan(as_code, base_dir=tmp_path, parsed=from_dict, named_poses=["home"])
+    assert all(x is y for x, y in zip(again.scene, from_dict.scene))
+    assert type(as_code["scene"]["obstacles"][33]) is dict  # the caller's dicts are left as they were
+    bad = dict(as_code, scene={"obstacles": [*obstacles[:20], dict(obstacles[20], size=[0.02, -1, 0.04]), *obstacles[21:]]})
+    with pytest.raises(PlanFileError, match=r"^<plan dict>: scene\.obstacles\[20\]\.size\[1\]: "):
+        load_plan(bad, base_dir=tmp_path)
+    assert schema._plain_primitives(schema._Ctx(tmp_path / "p.yaml"), obstacles[:3], "obstacle", ["a", "b", "c"])[2].size == (0.02, 0.02, 0.04)

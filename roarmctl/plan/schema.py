@@ -154,7 +154,7 @@ class Plan:
     limits: Limits = field(default_factory=Limits)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     lines: dict[str, int] = field(default_factory=dict)  # top-level key -> line, for later messages
-    document: Any = None  # the parsed file (located containers): ``load_plan(..., parsed=plan)`` reads it again
+    document: Any = None  # the parsed file (located containers; a dict's obstacles may be its own): ``load_plan(..., parsed=plan)`` reads it again
     item_specs: dict = field(default_factory=dict, repr=False)  # id(raw item) -> its ItemSpec, when no frame is used
 
 
@@ -326,32 +326,38 @@ def _plain_primitive(ctx: _Ctx, raw: Any, where: str, role: str) -> ItemSpec | N
     return _plain_primitives(ctx, [raw], role, [where])[0]
 
 
+_PLAIN_ITEM = (LocatedDict, dict)  # an item _plain_primitives reads: located, or a plan dict's own (``_locate_plan``)
+_PLAIN_SEQ = (LocatedList, list, tuple)  # its xyz, rpy and size
+
+
 def _plain_primitives(ctx: _Ctx, raws: list, role: str, wheres: list[str]) -> list[ItemSpec | None]:
     """The specs ``_item_spec`` makes of the obstacles (or the table) ``raws`` (``wheres``: their paths) written as a
     box, cylinder or sphere with nothing but its name, shape, size (radius, length), xyz as [x, y, z] and rpy as
     [r, p, y], every field well-formed and within its ``FIELD_BOUNDS``: the same checks on all of them at once (one
     numpy pass over their numbers: the common case of a scene of many items), the same specs. None for any other
-    item (and one read before: ``ctx.known``), which ``_item_spec`` reads field by field (and names what is wrong)."""
+    item (and one read before: ``ctx.known``), which ``_item_spec`` reads field by field (and names what is wrong).
+    An item may be a located dict or a plan dict's own (not located: its line is 0, as locate would say)."""
     out: list[ItemSpec | None] = [None] * len(raws)
     if role == "object":
         return out
     rows, picked = [], []
+    known, plain_keys, seq, no_rotation = ctx.known, _PLAIN_KEYS, _PLAIN_SEQ, _NO_ROTATION
     for i, raw in enumerate(raws):
-        if type(raw) is not LocatedDict or id(raw) in ctx.known:
+        if type(raw) not in _PLAIN_ITEM or id(raw) in known:
             continue
         shape = raw.get("shape")
-        keys = _PLAIN_KEYS.get(shape) if type(shape) is str else None
+        keys = plain_keys.get(shape) if type(shape) is str else None
         if keys is None or not keys.issuperset(raw) or (role != "table" and "name" not in raw):
             continue
-        xyz, rpy = raw.get("xyz"), raw.get("rpy", _NO_ROTATION)
+        xyz, rpy = raw.get("xyz"), raw.get("rpy", no_rotation)
+        if type(xyz) not in seq or len(xyz) != 3 or (rpy is not no_rotation and (type(rpy) not in seq or len(rpy) != 3)):
+            continue
         if shape == "box":
             dims = raw.get("size")
-            if type(dims) is not LocatedList or len(dims) != 3:
+            if type(dims) not in seq or len(dims) != 3:
                 continue
         else:
             dims = (raw.get("radius"), raw.get("length"), _ONE) if shape == "cylinder" else (raw.get("radius"), _ONE, _ONE)
-        if type(xyz) is not LocatedList or len(xyz) != 3 or (rpy is not _NO_ROTATION and (type(rpy) is not LocatedList or len(rpy) != 3)):
-            continue
         rows.append((*xyz, *rpy, *dims))
         picked.append(i)
     if not set(map(type, itertools.chain.from_iterable(rows))) <= _NUMBER_TYPES:  # a string, bool, None... somewhere
@@ -364,8 +370,9 @@ def _plain_primitives(ctx: _Ctx, raws: list, role: str, wheres: list[str]) -> li
     except OverflowError:  # an integer beyond a float: the field-by-field reader names it
         return out
     ok = np.all((a >= _ROW_LO) & (a <= _ROW_HI), axis=1) & np.all(a[:, 6:] > 0.0, axis=1)  # NaN fails every test
-    a = a[ok]
-    picked = [i for i, good in zip(picked, ok.tolist(), strict=True) if good]
+    if not ok.all():
+        a = a[ok]
+        picked = [i for i, good in zip(picked, ok.tolist(), strict=True) if good]
     # poses: without rotation (rpy +0.0 everywhere, most items) the matrix ``transform`` makes, bit for bit; else its own
     poses = np.zeros((len(a), 4, 4))
     poses[:, range(4), range(4)] = 1.0
@@ -375,19 +382,59 @@ def _plain_primitives(ctx: _Ctx, raws: list, role: str, wheres: list[str]) -> li
     for k in turned.tolist():
         raw = raws[picked[k]]
         poses[k] = transform(raw["xyz"], raw["rpy"])
-    for i, pose, (_, _, _, _, _, _, d0, d1, d2) in zip(picked, poses, a.tolist(), strict=True):
+    at = ctx.where(0) if ctx.is_dict else None  # a dict's items all name the dict
+    for i, pose, dims in zip(picked, poses, a[:, 6:].tolist(), strict=True):
         raw = raws[i]
-        shape = raw["shape"]
-        spec = ItemSpec(name=str(raw.get("name", "table")), role=role, shape=shape, pose=pose, line=raw.line)
-        spec.where = f"{ctx.where(raw.line)}: {wheres[i]}"
+        shape, name = raw["shape"], str(raw.get("name", "table"))
+        line = raw.line if type(raw) is LocatedDict else 0
+        where = f"{at or ctx.where(line)}: {wheres[i]}"
         if shape == "box":
-            spec.size = (d0, d1, d2)
+            out[i] = ItemSpec(name, role, shape, pose, tuple(dims), line=line, where=where)
         else:
-            spec.radius = d0
-            if shape == "cylinder":
-                spec.length = d1
-        out[i] = spec
+            out[i] = ItemSpec(name, role, shape, pose, radius=dims[0], length=dims[1] if shape == "cylinder" else 0.0,
+                              line=line, where=where)
     return out
+
+
+def _obstacles(ctx: _Ctx, obs: LocatedList, frames: dict | None) -> list[ItemSpec]:
+    """The specs of the scene's obstacles ``obs``: those read before as they were (``ctx.known``), the plain primitives
+    in one batch (``_plain_primitives``), the others field by field (a plan dict's own item located first, in ``obs``,
+    so that the next reading of the document finds it)."""
+    specs: list[ItemSpec | None] = [None] * len(obs)
+    todo = []
+    for i, o in enumerate(obs):
+        known = ctx.known.get(id(o))
+        if known is not None and known.role == "obstacle":
+            ctx.specs[id(o)] = specs[i] = known
+        else:
+            todo.append(i)
+    if todo:
+        raws = [obs[i] for i in todo]
+        wheres = [f"scene.obstacles[{i}]" for i in todo]
+        for i, o, where, spec in zip(todo, raws, wheres, _plain_primitives(ctx, raws, "obstacle", wheres), strict=True):
+            if spec is None:  # anything but a plain primitive: field by field
+                if type(o) is dict:  # a plan dict's own (``_locate_plan``)
+                    o = obs[i] = locate(o)
+                spec = _item(ctx, o, obs.line_of(i), where, "obstacle", frames)
+            else:
+                ctx.specs[id(o)] = spec
+            specs[i] = spec
+    return specs  # type: ignore[return-value]  # every entry set above
+
+
+def _locate_plan(source: dict) -> Any:
+    """``locate(source)``, except that its scene's obstacles stay the dict's own dicts (in a located list):
+    ``_obstacles`` reads plain primitives as they are and locates the others (a scene of many boxes: locating them
+    all was a sixth of ``api.plan``'s set-up)."""
+    scene = source.get("scene")
+    if type(scene) is not dict or type(scene.get("obstacles")) is not list or not scene["obstacles"]:
+        return locate(source)
+    obstacles = scene["obstacles"]
+    raw = locate({**source, "scene": {**scene, "obstacles": []}})
+    lst = LocatedList(o if type(o) is dict else locate(o) for o in obstacles)
+    lst.line, lst.lines = 0, []
+    raw["scene"]["obstacles"] = lst
+    return raw
 
 
 def _item_spec(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: dict | None = None) -> ItemSpec:
@@ -581,7 +628,7 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
         raw, path, digest = parsed.document, parsed.path, parsed.sha256
     elif isinstance(source, dict):
         digest = _dict_digest(source)
-        raw = locate(source)
+        raw = _locate_plan(source)
         path = Path(base_dir or ".") / DICT_NAME
     else:
         path = Path(source)
@@ -611,13 +658,7 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
         if "table" in sc and sc["table"] is not None:
             scene.append(_item(ctx, sc["table"], sc.line_of("table"), "scene.table", "table", frames))
         obs = ctx.listed(sc.get("obstacles") or [], sc.line_of("obstacles"), "scene.obstacles", MAX_ITEMS, "obstacles")
-        wheres = [f"scene.obstacles[{i}]" for i in range(len(obs))]
-        for i, (o, spec) in enumerate(zip(obs, _plain_primitives(ctx, obs, "obstacle", wheres), strict=True)):
-            if spec is None:  # anything but a plain primitive read before: field by field
-                spec = _item(ctx, o, obs.line_of(i), wheres[i], "obstacle", frames)
-            else:
-                ctx.specs[id(o)] = spec
-            scene.append(spec)
+        scene.extend(_obstacles(ctx, obs, frames))
 
     objects: list[ItemSpec] = []
     objs = ctx.listed(top.get("objects") or [], top.line_of("objects"), "objects", MAX_ITEMS, "objects")
