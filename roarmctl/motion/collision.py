@@ -270,14 +270,14 @@ class CollisionChecker:
 
     def _rebuild_locked(self) -> None:
         key = (id(self.robot), *self._state_key())
-        hit = _STATE_TABLES.get(key)
+        hit = _STATE_TABLES.pop(key, None)  # put back below as the most recently used (a big scene's key hashes slowly)
         if hit is None or hit[0] is not self.robot:
             self._build_tables()
             if len(_STATE_TABLES) >= _STATE_CACHE:
                 _STATE_TABLES.pop(next(iter(_STATE_TABLES)))
             _STATE_TABLES[key] = (self.robot, {name: getattr(self, name) for name in _TABLES})
         else:
-            _STATE_TABLES[key] = _STATE_TABLES.pop(key)  # now the most recently used
+            _STATE_TABLES[key] = hit
             template = self._q_template.copy()
             for name, value in hit[1].items():
                 setattr(self, name, value)
