@@ -207,7 +207,7 @@ def test_a_plan_dicts_obstacles_read_as_they_are_give_the_files_specs(tmp_path):
     obstacles += [{"name": "turned", "shape": "cylinder", "radius": 0.01, "length": 0.1, "xyz": [0.4, 0.3, 0.05],
                    "rpy": [0.1, 0.2, 0.3]},
                   {"name": "ball", "shape": "sphere", "radius": 0.02, "xyz": [-0.3, 0.3, 0.02]},
-                  {"name": "deg", "shape": "box", "size": [0.1, 0.1, 0.1], "xyz": [-0.3, -0.3, 0.05], "rpy": {"deg": [0, 0, 10]}},
+                  {"name": "deg", "shape": "box", "size": [0.1, 0.1, 0.1], "xyz": [-0.3, -0.3, 0.05], "rpy": {"deg": [0, 0, 45]}},
                   {"name": "mesh", "shape": "mesh", "file": "tri.stl", "xyz": [-0.3, 0.0, 0.0]}]
     d = {"robot": "roarm_m3_pro", "scene": {"obstacles": obstacles}, "tasks": [{"wait": 1.0}]}
     (tmp_path / "p.yaml").write_text(yaml.safe_dump(d))
@@ -231,3 +231,21 @@ def test_a_plan_dicts_obstacles_read_as_they_are_give_the_files_specs(tmp_path):
     with pytest.raises(PlanFileError, match=r"^<plan dict>: scene\.obstacles\[20\]\.size\[1\]: "):
         load_plan(bad, base_dir=tmp_path)
     assert schema._plain_primitives(schema._Ctx(tmp_path / "p.yaml"), obstacles[:3], "obstacle", ["a", "b", "c"])[2].size == (0.02, 0.02, 0.04)
+
+
+def test_angles_in_degrees_are_bounded_as_angles():
+    """``rpy: {deg: [...]}`` is turned to radians before its bounds are checked (45 deg was refused as "45 is too large
+    (must be <= 12.5664)"): the pose is the one of the same angle in radians; an angle beyond the bound is named."""
+    from roarmctl.robot.model import transform
+
+    def plan(rpy):
+        return {"robot": "roarm_m3_pro", "tasks": [{"wait": 1.0}],
+                "scene": {"obstacles": [{"name": "w", "shape": "box", "size": [0.1, 0.1, 0.1], "xyz": [0.3, 0, 0.05], "rpy": rpy}]}}
+
+    pose = load_plan(plan({"deg": [10, -30, 45]})).scene[0].pose
+    np.testing.assert_allclose(pose, transform([0.3, 0, 0.05], np.radians([10, -30, 45])), atol=1e-15)
+    assert load_plan({"robot": "roarm_m3_pro", "start": {"deg": [0, 0, 90, 0, 0, 0]}, "tasks": [{"wait": 1}]}).start[2] == math.pi / 2
+    with pytest.raises(PlanFileError, match=r"scene\.obstacles\[0\]\.rpy\[2\]: .* too large"):
+        load_plan(plan({"deg": [0, 0, 800]}))
+    with pytest.raises(PlanFileError, match=r"scene\.obstacles\[0\]\.rpy: expected a list of 3 numbers of degrees"):
+        load_plan(plan({"deg": [0, 0]}))

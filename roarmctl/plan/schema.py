@@ -204,8 +204,12 @@ class _Ctx:
         return self.check.number(value, self.where(line), where, lo=lo, hi=hi, strict_lo=strict_lo, what=what)
 
     def vector(self, value: Any, line: int, where: str, n: int, *, angle: bool = False, positive: bool = False) -> np.ndarray:
-        if angle and isinstance(value, dict) and set(value) == {"deg"}:
-            return np.radians(self.vector(value["deg"], line, where, n, positive=positive))
+        if angle and isinstance(value, dict) and set(value) == {"deg"}:  # each in degrees, its bounds in radians (number)
+            degrees = value["deg"]
+            if not isinstance(degrees, list) or len(degrees) != n:
+                self.fail(line, where, f"expected a list of {n} numbers of degrees, got {_kind(degrees)}")
+            return np.array([self.number({"deg": v}, line, f"{where}[{i}]", angle=True, lo=0.0 if positive else None, strict_lo=positive)
+                             for i, v in enumerate(degrees)])
         if not isinstance(value, list) or len(value) != n:
             self.fail(line, where, f"expected a list of {n} numbers, got {_kind(value)}")
         lo, hi = _bounds(where, 0.0 if positive else None, None)
