@@ -444,15 +444,19 @@ def main() -> None:
     run_times: list[float] = []
     plain_run = pipeline.Planner.run
 
-    def timed_run(self):  # the planner's own time inside api.plan
-        t = time.perf_counter()
+    run_cpu: list[float] = []
+
+    def timed_run(self):  # the planner's own time inside api.plan (wall, and this thread's CPU)
+        t, c = time.perf_counter(), time.thread_time()
         try:
             return plain_run(self)
         finally:
             run_times.append(time.perf_counter() - t)
+            run_cpu.append(time.thread_time() - c)
 
     pipeline.Planner.run = timed_run
     api_ours = {k: ([], []) for k in api}  # (api.plan wall, Planner.run wall)
+    api_cpu = {k: ([], []) for k in api}  # the same, this thread's CPU time
     api_theirs = {k: ([], []) for k in api}  # (set-up + plan_qpos wall, set-up wall)
     api_clear = {k: ([], []) for k in api}
     api_fails = {k: [0, 0] for k in api}
@@ -474,10 +478,12 @@ def main() -> None:
         per_task.append((long_plan.planning_time / 20, long_plan.timings.get("toppra", 0.0) / long_plan.planning_time))
         for name, (doc, _, _) in api.items():
             try:
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.thread_time()
                 result = rc.plan(doc, seed=100 + r, base_dir=folder)
                 api_ours[name][0].append(time.perf_counter() - t0)
+                api_cpu[name][0].append(time.thread_time() - c0)
                 api_ours[name][1].append(run_times[-1])
+                api_cpu[name][1].append(run_cpu[-1])
                 if r < args.metric_rounds:
                     api_clear[name][0].append(clearance(robot, api_scenes[name], result.trajectory.positions))
             except Exception as exc:  # noqa: BLE001 (a bench counts failures)
@@ -540,15 +546,25 @@ def main() -> None:
               f"   {statistics.median(a) * 1000:.1f} / {statistics.median(b) * 1000:.1f}")
     print("\nthe public API, medians (ms): roarmctl.api.plan (plan dict -> checked, timed trajectory) against mplib "
           "(scene set up + plan_qpos); a plan starts with empty hands, so nothing is held here. api/run: ratio of the "
-          "medians; per call: median over the calls of each call's api.plan / its own Planner.run (no planner spread)")
-    print(f"{'query':<6}{'api.plan':>10}{'Planner.run':>13}{'api/run':>9}{'per call':>10}{'mplib':>10}{'its set-up':>12}{'ratio':>8}"
-          "   paths inside the padding ours / mplib   failures ours/mplib")
+          "medians; per call: median over the calls of each call's api.plan / its own Planner.run (paired: no planner "
+          "spread); outside: median of api.plan - Planner.run per call, wall | this thread's CPU; run p25-p75: the "
+          "planner's spread over the seeds, which moves the ratio of the medians when it is wider than the set-up (their "
+          "medians can be different calls); CPU per call: as per call, in CPU time")
+    print(f"{'query':<6}{'api.plan':>10}{'Planner.run':>13}{'run p25-p75':>14}{'outside':>14}{'api/run':>9}{'per call':>10}"
+          f"{'CPU per call':>14}{'mplib':>10}{'its set-up':>12}{'ratio':>8}   paths inside the padding ours / mplib   "
+          "failures ours/mplib")
     for name in api:
         a, run = (statistics.median(v) * 1000 for v in api_ours[name])
         per_call = statistics.median(x / y for x, y in zip(*api_ours[name]))  # each call against its own planner
+        outside = statistics.median(x - y for x, y in zip(*api_ours[name])) * 1000
+        outside_cpu = statistics.median(x - y for x, y in zip(*api_cpu[name])) * 1000
+        cpu_call = statistics.median(x / y for x, y in zip(*api_cpu[name]))
+        q1, _, q3 = (v * 1000 for v in statistics.quantiles(api_ours[name][1], n=4))
         b, setup = (statistics.median(v) * 1000 for v in api_theirs[name])
         ca, cb = api_clear[name]
-        print(f"{name:<6}{a:>10.1f}{run:>13.1f}{a / run:>8.2f}x{per_call:>9.2f}x{b:>10.1f}{setup:>12.1f}{a / b:>7.2f}x"
+        print(f"{name:<6}{a:>10.1f}{run:>13.1f}{f'{q1:.1f}-{q3:.1f}':>14}{f'{outside:.1f} | {outside_cpu:.1f}':>14}"
+              f"{a / run:>8.2f}x{per_call:>9.2f}x{cpu_call:>13.2f}x"
+              f"{b:>10.1f}{setup:>12.1f}{a / b:>7.2f}x"
               f"   {sum(c < padding - 1e-6 for c in ca)} of {len(ca)} / {sum(c < padding - 1e-6 for c in cb)} of {len(cb)}"
               f"{'':>16}{api_fails[name][0]}/{api_fails[name][1]}")
     print_issue_table(api, api_ours, api_theirs, fresh, fresh_planning, per_task)
@@ -599,9 +615,9 @@ def print_issue_table(api: dict, ours: dict, theirs: dict, fresh: dict, fresh_pl
         b, setup = (med(v) * 1000 for v in theirs[name])
         row(f"api.plan, {name}: {labels[name]}", a, b)
         per_call = med(x / y for x, y in zip(*ours[name]))
-        row(f"  its Planner.run (api.plan / run {a / run:.2f}x; per call {per_call:.2f}x)", run, b)
+        outside = med(x - y for x, y in zip(*ours[name])) * 1000
+        row(f"  its Planner.run (api.plan / run {a / run:.2f}x; per call {per_call:.2f}x; set-up {outside:.1f} ms)", run, b)
         if name in ("b200", "desk"):
-            outside = med(x - y for x, y in zip(*ours[name])) * 1000
             row("  api.plan outside Planner.run (set-up) | mplib's scene set-up", outside, setup)
     for name, v in fresh.items():
         row(f"{name}, fresh process (wall)", med(v) * 1000)
