@@ -93,7 +93,7 @@ def run_one(traj, robot, firmware: str, strategy: str, *, rate: float = 50.0, se
         print(f"  ({firmware}, {strategy}: stopped: {failed})", flush=True)
         return out
     if stop_at is None:
-        trk = true_tracking(robot, traj, rec, res.t0, host_late=host, device_late=late, lag=True)
+        trk = true_tracking(robot, traj, rec, res.t0, host_late=host, device_late=late, lag=True, paused=log["paused"])
         out |= {"rms": trk["rms_mm"], "max": trk["max_mm"], "lag": trk["lag_s"] * 1e3}
         return out
     hold = [e for e in log["sent"] if e["cmd"].get("T") == 102][-1]

@@ -209,23 +209,18 @@ def _clamp(field_name: str, v: float) -> float:
     return min(max(float(v), lo), hi)
 
 
-def catch_up(tick: Tick, last_wire: np.ndarray, dt: float, wm: WireMap) -> list[dict[str, Any]]:
-    """The commands of ``tick`` when earlier ticks were skipped: same targets, spd for the distance
-    from the last target actually sent (``last_wire``, firmware radians) in one interval ``dt``."""
-    if tick.wire is None:
-        return tick.commands
-    need = np.abs(tick.wire - last_wire) / dt * 1.05
-    out = []
-    for cmd in tick.commands:
-        c = dict(cmd)
-        if c.get("T") == 102 and c.get("spd", 0) > 0:
-            c["spd"] = max(int(c["spd"]), spd_register(float(np.max(need)), minimum=50))
-        elif c.get("T") == 101 and c.get("spd", 0) > 0:
-            j = int(c["joint"]) - 1
-            if 0 <= j < len(need):
-                c["spd"] = max(int(c["spd"]), spd_register(float(need[j]), minimum=20))
-        out.append(c)
-    return out
+def plan_clock(t, paused) -> Any:
+    """The plan's time (s) at stream times ``t`` (s after the stream's start; scalar or (M,)) when the plan waited
+    for a late host: ``paused`` is [(plan time at which its clock stopped, for how long), ...] in order (the
+    execution log's ``paused``). During a pause the plan's time stands still; after it, it is that much behind."""
+    tt = np.asarray(t, dtype=float)
+    out = tt.copy()
+    shift = 0.0
+    for at, d in paused:
+        start = float(at) + shift
+        out = np.where(tt >= start + float(d), tt - shift - float(d), np.where(tt >= start, float(at), out))
+        shift += float(d)
+    return float(out) if np.ndim(t) == 0 else out
 
 
 def _check_wire_range(traj, wm: WireMap) -> None:

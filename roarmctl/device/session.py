@@ -129,10 +129,15 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
 
 
 def simulator_tracking(simulator, robot, traj, cfg, result) -> dict[str, Any]:
-    """TCP error (mm) of the simulator's true servo positions against the plan, over the motion:
-    raw, and aligned within the lateness measured on both sides (``roarmctl.device.tracking``)."""
-    from roarmctl.device.tracking import host_lateness, true_tracking
+    """TCP error (mm) of the simulator's true servo positions against the plan, over the motion, on the plan's
+    time (its pauses for a late host taken out): raw, and aligned within the lateness measured on both sides and
+    the lead the servos keep through a pause (``roarmctl.device.tracking``)."""
+    from roarmctl.device.schedule import STRATEGIES, default_latency
+    from roarmctl.device.tracking import host_lateness, pause_events, true_tracking
 
     host = host_lateness(result.log.get("sent", []), result.log["rate"])
+    paused = result.log.get("paused", ())
+    strat = STRATEGIES.get(cfg.strategy) if isinstance(cfg.strategy, str) else cfg.strategy
+    ahead = pause_events(paused, default_latency(result.log["rate"]) + (strat.lead if strat is not None else 0.0))
     return true_tracking(robot, traj, simulator.recording(), result.t0, cfg.speed_scale, host_late=host,
-                         device_late=simulator.lateness())
+                         device_late=simulator.lateness(), paused=paused, ahead=ahead)

@@ -2,10 +2,13 @@
 
 The loop (``Streamer``) runs on an absolute monotonic schedule (``due = t0 + t_k``: no drift) from
 ``roarmctl.device.schedule``. It paces itself to the firmware: it polls ``T:105`` between commands,
-counts the command lines each answer confirms (the firmware answers in order), and skips motion ticks
-while the firmware is behind (answers later than the round trip measured at connect), so no backlog
-can build on either build; a tick that is already overdue when the next one is due is skipped too
-(every T:102 is absolute: the next one carries the arm on, with its speed raised to cover the gap).
+counts the command lines each answer confirms (the firmware answers in order), and waits while the
+firmware is behind (answers later than the round trip measured at connect), so no backlog can build on
+either build. Every tick is sent, in order: when the host (or a behind firmware) made a tick so late that
+the next one is due too, the plan waits (its clock pauses: ``paused``) rather than the stream jumping to
+the tick due by the clock. The servos run straight from one goal to the next (one ``spd`` for every
+joint), so a jump across a stall cut the planned path (a 0.3 s stall in a detour round a post touched the
+post); with the pause the arm stops on the path and goes on along it, late but where it was planned.
 Every feedback frame goes through the one validator (``roarmctl.device.feedback``); a run of refused
 frames, a tracking error beyond the bound (measured against the plan with the lateness the loop
 measured), lost feedback, Ctrl-C/SIGTERM/SIGHUP or a lost link end the stream with a hold.
@@ -48,9 +51,9 @@ from roarmctl.device.schedule import (
     Strategy,
     Tick,
     build_schedule,
-    catch_up,
     default_latency,
     link_budget,
+    plan_clock,
     sample,
     strategy_rate,
 )
@@ -148,7 +151,7 @@ class Result:
                             "max": float(trk.max()) if len(trk) else None, "samples": int(len(trk))},
             "final_error_mm": None if self.final_error is None else self.final_error * 1e3,
         }
-        for key in ("feedback", "skipped", "hold", "device", "link_budget"):
+        for key in ("feedback", "skipped", "waits", "hold", "device", "link_budget"):
             if key in self.log:
                 out[key] = self.log[key]
         return out
@@ -206,18 +209,17 @@ class Streamer:
         self.sent_lateness: list[tuple[int, float]] = []
         self.tracking: list[tuple[float, float]] = []
         self.notes: list[str] = []
-        self.skipped = {"late": 0, "behind": 0}
+        self.skipped = {"late": 0, "behind": 0}  # ticks not sent: none since the plan waits (kept for the log's readers)
+        # (plan time s at which the plan's clock stopped, for how long s): where the host, or a firmware behind, made a
+        # tick so late that the next was due too; the stream went on from that tick, everything after it that late
+        self.paused: list[tuple[float, float]] = []
+        self.shift = 0.0  # s: the pauses so far (tick k is due at t0 + shift + t_k)
+        self.waits = {"late": 0, "behind": 0}  # ticks waited for: the host came after the next was due; the firmware was behind
         self.hold_info: dict[str, Any] | None = None
         self.refused_lines: dict[int, str] = {}  # id(Received) -> reason, for the log
         self._tick_of: dict[int, int] = {}  # id(first command sent for a tick) -> tick
         self._asked_at: dict[int, float] = {}  # id(Reading) -> when its T:105 was sent
         self.device_late: deque[tuple[float, float]] = deque(maxlen=1000)  # (when seen, how late) of poll answers
-        # s after t0: the first tick skipped since the arm last followed normally (a stalled host or a busy
-        # firmware). The tick sent after a gap is less than a period late, but the arm had no newer goal for
-        # the whole gap, and each tick's spd is what the plan needs, not what catching up needs: a joint left
-        # behind stays behind by that distance (in time, more as the plan slows down) until the motion ends.
-        # Until a frame shows it caught up, the tracking check accepts the arm anywhere on the path since then.
-        self.behind_since: float | None = None
 
     def _schedule(self, traj) -> list[Tick]:
         return build_schedule(traj, self.robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale, sag=self.cfg.sag,
@@ -385,30 +387,30 @@ class Streamer:
         seen = max((x for _, x in self.device_late), default=0.0)
         return max(seen, self.extra_lateness() if self.extra_lateness is not None else 0.0)
 
+    def plan_time(self, t: float) -> float:
+        """The plan's time (s) at ``t`` s after t0: the clock's, less every pause before ``t`` (frozen during one)."""
+        return plan_clock(t, self.paused)
+
     def _track(self, reading: Reading) -> tuple[float, float] | None:
         """(TCP error against the plan at the frame's measurement time, the same with the plan
-        allowed to be up to the measured lateness later), m; None outside the motion."""
+        allowed to be up to the measured lateness later), m; None outside the motion. Times are the plan's
+        (``plan_time``): where the plan waited for a late host, the arm stopped on the path."""
         t_meas = reading.t - wire_seconds(reading.nbytes) - READ_BEFORE_PRINT - self.t0
         asked = self._asked_at.pop(id(reading), None)
         if asked is not None:  # read one round trip after the question, less the answer's wire time
             info = getattr(self.link, "info", None)
             rtt = info.rtt if info is not None else 0.03
             t_meas = min(t_meas, asked + rtt - wire_seconds(reading.nbytes) - READ_BEFORE_PRINT / 2 - self.t0)
-        if not 0.0 <= t_meas <= self.schedule[-1].t:
+        tp = self.plan_time(t_meas)
+        if not 0.0 <= tp <= self.schedule[-1].t:
             return None
         s = self.cfg.speed_scale
         p = self._tcp(reading.q)
-        err = float(np.linalg.norm(p - self._tcp(sample(self.traj, t_meas * s))))
+        err = float(np.linalg.norm(p - self._tcp(sample(self.traj, tp * s))))
         self.tracking.append((t_meas, err))
-        slack = self._lateness_window(t_meas) + max(0.0, SERVO_LAG - self.lead)
-        lo, hi = max(0.0, t_meas - slack - 0.01), t_meas + self.lead + 0.005
-        near = self._path_error(p, lo, hi)
-        if self.behind_since is not None:
-            if near <= self.cfg.max_error / 3:
-                self.behind_since = None  # caught up: where a normally following arm would be
-            else:
-                near = min(near, self._path_error(p, min(lo, self.behind_since), hi))
-        return err, min(err, near)
+        slack = self._lateness_window(tp) + max(0.0, SERVO_LAG - self.lead)
+        lo, hi = max(0.0, tp - slack - 0.01), tp + self.lead + 0.005
+        return err, min(err, self._path_error(p, lo, hi))
 
     def _path_error(self, p: np.ndarray, lo: float, hi: float) -> float:
         """The least distance (m) of TCP ``p`` from the plan's TCP at times ``lo..hi`` (s after t0, every 10 ms at least)."""
@@ -429,26 +431,37 @@ class Streamer:
         lines, confirmed = 0, 0
         polls: deque[tuple[float, int]] = deque()  # (on the wire from, lines sent up to and including it)
         wire_free = 0.0  # when the bytes sent so far will have left the host (115200 baud)
-        last_sent_k, last_wire = -1, None
         polled = self.clock()
-        for k, tick in enumerate(sched):
-            if self.hook is not None:
-                self.hook(k)
-            due = self.t0 + tick.t
+        k, hooked, waited, host_late = 0, -1, -1, False
+        while k < n:
+            tick = sched[k]
+            first = hooked != k
+            if first:
+                hooked = k
+                if self.hook is not None:
+                    self.hook(k)
+            due = self.t0 + self.shift + tick.t
             wait = due - self.clock()
             if wait > 0:
                 self.sleep(wait)
             now = self.clock()
-            send = True
-            if k + 1 < n and now >= self.t0 + sched[k + 1].t:
-                self.skipped["late"] += 1  # overdue and the next is due too: the next carries on
-                send = False
-            elif k + 1 < n and (lines - confirmed > cfg.max_unconfirmed
-                                or (polls and now - polls[0][0] > rtt + cfg.behind_after + self._device_late())):
-                self.skipped["behind"] += 1  # the firmware has not caught up: add nothing to its backlog
-                send = False
+            if first:
+                host_late = k + 1 < n and now >= due + dt  # the host itself came too late for this tick
+            send = not (k + 1 < n and (lines - confirmed > cfg.max_unconfirmed
+                                       or (polls and now - polls[0][0] > rtt + cfg.behind_after + self._device_late())))
+            if not send and waited != k and not host_late:
+                waited = k
+                self.waits["behind"] += 1  # the firmware has not caught up: add nothing to its backlog, wait
             if send:
-                cmds = tick.commands if (last_sent_k == k - 1 or last_wire is None) else catch_up(tick, last_wire, dt, self.wm)
+                if k + 1 < n and now >= due + dt:
+                    # so late that the next tick is due too: the plan waits here (its clock pauses) and this tick goes
+                    # out now. Jumping to the tick due by the clock would send the servos straight across the plan
+                    self.paused.append((tick.t, now - due))
+                    self.shift += now - due
+                    due = now
+                    if host_late:
+                        self.waits["late"] += 1
+                cmds = tick.commands
                 t_sent = link.send(cmds[0])
                 wire_free = max(wire_free, t_sent) + wire_seconds(len(protocol.encode(cmds[0])))
                 self._tick_of[id(cmds[0])] = k
@@ -456,9 +469,7 @@ class Streamer:
                     wire_free = max(wire_free, link.send(extra)) + wire_seconds(len(protocol.encode(extra)))
                 lines += len(cmds)
                 self.sent_lateness.append((k, t_sent - due))
-                if 0 <= last_sent_k < k - 1 and self.behind_since is None:
-                    self.behind_since = sched[last_sent_k + 1].t
-                self.setpoint, last_sent_k, last_wire = tick, k, tick.wire
+                self.setpoint = tick
                 if (k % poll_every == 0 or not polls) and len(polls) < 2:
                     # the T:105 leaves the host's UART after the command bytes still in flight ahead of it:
                     # its round trip starts then (the one measured at connect had nothing ahead of it)
@@ -481,7 +492,8 @@ class Streamer:
             # feedback is overdue when a question has gone unanswered too long, not when the host itself did not
             # ask: a busy machine that stopped this process for 0.33 s between two polls once ended a run here
             # as "link lost" while the arm had answered every question it was asked
-            if polls and self.clock() - polls[0][0] > cfg.stale_after + self._lateness_window(self.clock() - self.t0):
+            if polls and self.clock() - polls[0][0] > cfg.stale_after + self._lateness_window(
+                    self.plan_time(self.clock() - self.t0)):
                 raise DeviceError(f"link lost: no feedback for {self.clock() - polls[0][0]:.2f} s during motion",
                                   "check the USB cable and the arm's power; the arm may have rebooted")
             for reading in readings:
@@ -494,6 +506,10 @@ class Streamer:
                                  f"at t = {tick.t:.2f} s; aborted")
             if self.on_status is not None:
                 self.on_status(Status(k, n, tick.t, sched[-1].t, now - due, tick.target, self.measured, err))
+            if send:
+                k += 1
+            else:
+                self.sleep(min(0.25 * dt, 0.005))
 
     def _settle(self) -> None:
         end = self.clock() + self.cfg.settle
@@ -539,7 +555,7 @@ class Streamer:
         if mode == "setpoint" or math.isnan(self.t0):
             return "setpoint", sp.wire
         # the goals ran ``lead`` ahead on the plan: the hold stops them where they would be when it arrives
-        arrive = now - self.t0 + default_latency(self.rate) + self.lead
+        arrive = self.plan_time(now - self.t0) + default_latency(self.rate) + self.lead
         latest = min(arrive, sp.t + 1.0 / self.rate + default_latency(self.rate) + self.lead)
         q = sample(self.traj, max(0.0, latest) * self.cfg.speed_scale)
         return "path", self.wm.to_wire_array(q)[0]
@@ -651,6 +667,7 @@ class Streamer:
             "strategy": self.cfg.strategy, "rate": self.rate, "speed_scale": self.cfg.speed_scale,
             "t0_monotonic": t0, "duration": self.schedule[-1].t,
             "link_budget": budget.as_dict(), "feedback": self.validator.summary(), "skipped": dict(self.skipped),
+            "waits": dict(self.waits), "paused": [[round(at, 6), round(d, 6)] for at, d in self.paused],
             "hold": hold, "summary": res.summary(), "notes": self.notes, "final_pose": self.pose_in_frames(),
             "tracking": [{"t": round(t, 6), "error_m": round(e, 6)} for t, e in self.tracking],
             "sent": sent, "received": received,

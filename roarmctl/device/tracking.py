@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from roarmctl.device.protocol import WireMap
-from roarmctl.device.schedule import sample
+from roarmctl.device.schedule import plan_clock, sample
 from roarmctl.device.servos import JOINTS
 
 WINDOW = 0.25  # s: lateness this far back still delays the arm
@@ -59,43 +59,64 @@ def host_lateness(sent: list[dict[str, Any]], rate: float) -> np.ndarray:
     return np.array(events, dtype=float).reshape(-1, 2)
 
 
+def pause_events(paused, ahead: float) -> np.ndarray:
+    """(K, 2) (s after the stream's start, s) for ``true_tracking``'s ``ahead``: where the plan waited for a late host
+    (``paused``: the log's [(plan time, duration)]), the servos went on to the last goal sent, which lies up to
+    ``ahead`` s further on the plan (the link's latency plus the strategy's lead), and need a moment after the pause
+    to fall back into their usual lag: from each pause's start to ``WINDOW`` after its end the arm may be that much
+    (at most the pause's length) ahead of the plan's time."""
+    events: list[tuple[float, float]] = []
+    shift = 0.0
+    for at, d in paused:
+        start = float(at) + shift
+        amount = min(float(d), ahead)
+        events += [(t, amount) for t in np.arange(start, start + float(d), WINDOW / 2)] + [(start + float(d), amount)]
+        shift += float(d)
+    return np.array(events, dtype=float).reshape(-1, 2)
+
+
 def true_tracking(robot, traj, recording, t0: float, speed_scale: float = 1.0,
                   host_late: np.ndarray | None = None, device_late: np.ndarray | None = None,
-                  lag: bool = False) -> dict[str, Any]:
+                  lag: bool = False, paused=(), ahead: np.ndarray | None = None) -> dict[str, Any]:
     """TCP error (mm) of the recorded motion against ``traj`` over the motion's span.
 
     ``recording``: (times s, joints (N, 6), torque (N,)) as ``PtySimulator.recording()`` gives;
     ``t0``: the stream's start on the same clock; ``host_late``: (K, 2) (s after t0, lateness s) of
     the commands sent; ``device_late``: (M, 2) (s on the recording's clock, lateness s) of the
-    simulated firmware's wake-ups. Returns rms/max raw and aligned, the lateness used, the sample
-    count, whether torque stayed on, and with ``lag`` the best-fitting delay (s).
+    simulated firmware's wake-ups; ``paused``: where the plan waited for a late host (the execution
+    log's ``paused``), so that each sample is compared with the plan at the plan's own time; ``ahead``: (J, 2)
+    (s after t0, s) how far the arm may be ahead of the plan's time after such events (``pause_events``). Returns
+    rms/max raw and aligned, the lateness used, the sample count, whether torque stayed on, and with
+    ``lag`` the best-fitting delay (s).
     """
     ts, q_rec, torque = recording
-    tt = np.asarray(ts) - t0
-    m = (tt >= 0) & (tt <= traj.duration / speed_scale)
+    wall = np.asarray(ts, dtype=float) - t0
+    tt = plan_clock(wall, paused)
+    m = (wall >= 0) & (tt <= traj.duration / speed_scale)
     out: dict[str, Any] = {"rms_mm": None, "max_mm": None, "samples": int(m.sum()),
                            "torque_always_on": bool(np.asarray(torque).all())}
     if not m.any() or math.isnan(t0):
         return out
-    tt = tt[m]
+    tt, wall = tt[m], wall[m]
     q = recorded_joints(robot, np.asarray(q_rec)[m])
     p = robot.kin.fk(q)[:, :3, 3]
     e = np.linalg.norm(p - robot.kin.fk(sample(traj, tt * speed_scale))[:, :3, 3], axis=1)
     late = np.zeros(len(tt))
     if host_late is not None and len(host_late):
-        late = np.maximum(late, lateness_at(tt, host_late))
+        late = np.maximum(late, lateness_at(wall, host_late))
     if device_late is not None and len(device_late):
         dl = np.asarray(device_late, dtype=float).reshape(-1, 2).copy()
         dl[:, 0] -= t0
-        late = np.maximum(late, lateness_at(tt, dl))
+        late = np.maximum(late, lateness_at(wall, dl))
+    early = lateness_at(wall, ahead) if ahead is not None and len(ahead) else np.zeros(len(tt))
     aligned = e.copy()
     for frac in np.linspace(0.0, 1.0, 6)[1:]:
-        shifted = np.maximum(tt - frac * (late + 0.002), 0.0)
-        ep = np.linalg.norm(p - robot.kin.fk(sample(traj, shifted * speed_scale))[:, :3, 3], axis=1)
-        aligned = np.minimum(aligned, ep)
+        for shifted in (np.maximum(tt - frac * (late + 0.002), 0.0), tt + frac * early):
+            ep = np.linalg.norm(p - robot.kin.fk(sample(traj, shifted * speed_scale))[:, :3, 3], axis=1)
+            aligned = np.minimum(aligned, ep)
     out |= {"rms_mm": float(np.sqrt(np.mean(e ** 2))) * 1e3, "max_mm": float(e.max()) * 1e3,
             "rms_aligned_mm": float(np.sqrt(np.mean(aligned ** 2))) * 1e3, "max_aligned_mm": float(aligned.max()) * 1e3,
-            "lateness_max_ms": float(late.max()) * 1e3}
+            "lateness_max_ms": float(late.max()) * 1e3, "ahead_max_ms": float(early.max()) * 1e3}
     if lag:
         shifts = np.arange(0.0, 0.1501, 0.002)
         rms = [float(np.sqrt(np.mean(np.linalg.norm(

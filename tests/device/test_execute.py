@@ -64,12 +64,15 @@ def test_sim_run_follows_the_plan_and_keeps_time(traj_file, capsys):
     assert sim["torque_always_on"]
     log = json.loads(Path(out["log"]).read_text())
     ticks = [s for s in log["sent"] if "tick" in s]
-    # absolute schedule: command k goes out at k/50 s plus its own measured lateness: no drift over 7.4 s
+    # absolute schedule: command k goes out at k/50 s plus the pauses of the plan before it (where a busy host came
+    # after the next tick was due: logged) plus its own measured lateness: no drift over 7.4 s
     t = np.array([s["t"] for s in ticks])
     k = np.array([s["tick"] for s in ticks])
     late = np.array([s["lateness"] for s in ticks])
-    assert np.all(np.abs(t - np.minimum(k / 50.0, log["duration"]) - late) < 1e-3) and late.min() > -1e-3
-    assert len(ticks) + sum(log["skipped"].values()) == len(set(k)) + sum(log["skipped"].values()) >= 0.9 * (k.max() + 1)
+    due = np.minimum(k / 50.0, log["duration"])
+    waited = np.array([sum(d for at, d in log["paused"] if at <= tk + 1e-9) for tk in due])
+    assert np.all(np.abs(t - due - waited - late) < 1e-3) and late.min() > -1e-3
+    assert k.tolist() == list(range(len(ticks))) and sum(log["skipped"].values()) == 0  # every tick, in order
     assert any("feedback" in r for r in log["received"])
 
 
@@ -97,9 +100,10 @@ def test_speed_scale_slows_down(tmp_path, capsys):
     log = json.loads((tmp_path / "slow.json").read_text())
     assert rc == 0 and log["duration"] == pytest.approx(2.0)
     ticks = [s for s in log["sent"] if "tick" in s]
-    # every tick sent unless the pacing skipped it (counted); the last one always, on time
-    assert len(ticks) + sum(log["skipped"].values()) == 51 and ticks[-1]["tick"] == 50
-    assert ticks[-1]["t"] == pytest.approx(2.0, abs=0.01 + ticks[-1]["lateness"])
+    # every tick sent, in order; the last one on time, after whatever the plan waited for a busy host (logged)
+    assert [s["tick"] for s in ticks] == list(range(51))
+    waited = sum(d for _, d in log["paused"])
+    assert ticks[-1]["t"] == pytest.approx(2.0 + waited, abs=0.01 + ticks[-1]["lateness"])
     assert out["simulator"]["rms_aligned_mm"] < 5.0
 
 
