@@ -275,3 +275,32 @@ def test_a_robot_survives_pickling_and_deep_copy():
         assert np.array_equal(other.kin.link_frames(q), ROARM.kin.link_frames(q))
         assert np.array_equal(other.kin.jacobian(q), ROARM.kin.jacobian(q))
         assert np.array_equal(inverse_dynamics(other, q, q, q), inverse_dynamics(ROARM, q, q, q))
+
+
+def test_quaternions_agree_with_scipy_on_every_branch_of_shepperds_method():
+    """``robot.model.quaternions`` (what the ROS export and the MuJoCo model write) against scipy's Rotation, on
+    random rotations and on half-turns about x, y and z (each takes another of the method's four formulas)."""
+    from scipy.spatial.transform import Rotation
+
+    from roarmctl.robot.model import quaternions
+
+    rots = list(Rotation.random(200, random_state=7).as_matrix())
+    rots += [Rotation.from_rotvec(np.pi * np.array(a) + 1e-3 * np.array(b)).as_matrix()
+             for a, b in [((1, 0, 0), (0, 1, 0)), ((0, 1, 0), (1, 0, 0)), ((0, 0, 1), (1, 0, 0))]]
+    got = quaternions(np.array(rots).reshape(-1, 3, 3))
+    ref = Rotation.from_matrix(rots).as_quat()  # x, y, z, w
+    ref[ref[:, 3] < 0] *= -1
+    np.testing.assert_allclose(got, ref, atol=1e-12)
+    assert quaternions(np.array(rots[:6]).reshape(2, 3, 3, 3)).shape == (2, 3, 4)
+    np.testing.assert_allclose(quaternions(np.eye(3)), [0, 0, 0, 1])
+
+
+def test_rigid_inverse_is_the_matrix_inverse():
+    from scipy.spatial.transform import Rotation
+
+    from roarmctl.robot.model import rigid_inverse
+
+    t = np.tile(np.eye(4), (5, 1, 1))
+    t[:, :3, :3] = Rotation.random(5, random_state=3).as_matrix()
+    t[:, :3, 3] = np.random.default_rng(3).normal(size=(5, 3))
+    np.testing.assert_allclose(rigid_inverse(t), np.linalg.inv(t), atol=1e-12)

@@ -44,8 +44,10 @@ from roarmctl.fileio import (
     note_output_folder,
     replace_folder,
 )
+from roarmctl.robot.model import quaternions, rigid_inverse
 
 TYPESTORE = "ROS2_JAZZY"
+_TF_CHUNK = 1024  # samples whose link transforms are computed together (bounds the memory of a long log's export)
 COLORS = {"table": (0.55, 0.45, 0.35, 1.0), "obstacle": (0.85, 0.3, 0.25, 0.8), "object": (0.2, 0.5, 0.9, 1.0)}
 
 
@@ -53,28 +55,6 @@ def _typestore():
     from rosbags.typesys import Stores, get_typestore
 
     return get_typestore(getattr(Stores, TYPESTORE))
-
-
-def quaternion(rot: np.ndarray) -> tuple[float, float, float, float]:
-    """Unit quaternion (x, y, z, w) of a 3x3 rotation matrix (w >= 0)."""
-    m = np.asarray(rot, dtype=float)
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s)
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = (0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s)
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = ((m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s)
-    else:
-        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = ((m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s)
-    q = np.asarray(q) / np.linalg.norm(q)
-    if q[3] < 0:
-        q = -q
-    return tuple(float(v) for v in q)  # type: ignore[return-value]
 
 
 class _Messages:
@@ -115,16 +95,19 @@ class _Messages:
                           time_from_start=self.duration(float(times[i]))) for i in range(len(times))]
         return self.JointTrajectory(header=self.header(ns, frame), joint_names=list(names), points=pts)
 
-    def transform(self, ns: int, parent: str, child: str, pose: np.ndarray):
-        x, y, z, w = quaternion(pose[:3, :3])
-        tr = self.Transform(translation=self.Vector3(x=float(pose[0, 3]), y=float(pose[1, 3]), z=float(pose[2, 3])),
+    def transform(self, ns: int, parent: str, child: str, xyz, quat):
+        """A TransformStamped of ``child`` in ``parent``: translation ``xyz`` (3 floats, m) and rotation ``quat``
+        (4 floats, x y z w; ``robot.model.quaternions``, computed in bulk by the caller)."""
+        x, y, z, w = quat
+        tr = self.Transform(translation=self.Vector3(x=xyz[0], y=xyz[1], z=xyz[2]),
                             rotation=self.Quaternion(x=x, y=y, z=z, w=w))
         return self.TransformStamped(header=self.header(ns, parent), child_frame_id=child, transform=tr)
 
     def tf(self, transforms: list):
         return self.TFMessage(transforms=transforms)
 
-    def marker(self, ns: int, frame: str, marker_id: int, item: dict[str, Any], pose: np.ndarray):
+    def marker(self, ns: int, frame: str, marker_id: int, item: dict[str, Any], pose: np.ndarray, quat):
+        """A Marker of a scene item at ``pose`` (4, 4; m) whose rotation is ``quat`` (4 floats; x, y, z, w)."""
         M = self.Marker
         shape = item.get("shape")
         points: list = []
@@ -147,7 +130,7 @@ class _Messages:
         else:
             d = 2.0 * float(item.get("radius", 0.0))
             kind, scale = M.SPHERE, [d, d, d]
-        x, y, z, w = quaternion(pose[:3, :3])
+        x, y, z, w = quat
         r, g, b, a = COLORS.get(str(item.get("role")), (0.6, 0.6, 0.6, 1.0))
         return M(header=self.header(ns, frame), ns=str(item.get("role", "scene")), id=marker_id, type=kind, action=M.ADD,
                  pose=self.Pose(position=self.PointMsg(x=float(pose[0, 3]), y=float(pose[1, 3]), z=float(pose[2, 3])),
@@ -188,26 +171,37 @@ def messages(streams: Streams) -> Iterator[tuple[str, str, int, Any]]:
     link_names = kin.link_names
     st = streams.joint_states[streams.frames_from]
     if len(st.times):
-        frames = kin.link_frames(st.positions)  # (N, n_links, 4, 4)
-        rel = lambda f, j: np.linalg.inv(f[kin._parent[j]]) @ f[kin._child[j]]  # noqa: E731
+        def edges(q: np.ndarray, joints: list[int]) -> tuple[list, list]:
+            """Child link in parent link for ``joints`` at configurations ``q`` (K, dof): translations (K, J, 3)
+            and quaternions (K, J, 4; x y z w), as nested lists of floats."""
+            frames = kin.link_frames(q)  # (K, n_links, 4, 4)
+            rel = rigid_inverse(frames[:, [kin._parent[j] for j in joints]]) @ frames[:, [kin._child[j] for j in joints]]
+            return rel[..., :3, 3].tolist(), quaternions(rel[..., :3, :3]).tolist()
+
+        parents = [link_names[kin._parent[j]] for j in range(len(robot.joints))]
+        children = [link_names[kin._child[j]] for j in range(len(robot.joints))]
         if fixed:
             t0 = ns_of(st.times[0])
+            xyz, quat = edges(st.positions[:1], fixed)
             yield ("/tf_static", "tf2_msgs/msg/TFMessage", t0,
-                   mk.tf([mk.transform(t0, link_names[kin._parent[j]], link_names[kin._child[j]], rel(frames[0], j)) for j in fixed]))
-        for i, t in enumerate(st.times):
-            n = ns_of(t)
-            yield ("/tf", "tf2_msgs/msg/TFMessage", n,
-                   mk.tf([mk.transform(n, link_names[kin._parent[j]], link_names[kin._child[j]], rel(frames[i], j)) for j in moving]))
+                   mk.tf([mk.transform(t0, parents[j], children[j], xyz[0][k], quat[0][k]) for k, j in enumerate(fixed)]))
+        for start in range(0, len(st.times), _TF_CHUNK):
+            xyz, quat = edges(st.positions[start:start + _TF_CHUNK], moving)
+            for i, t in enumerate(st.times[start:start + _TF_CHUNK]):
+                n = ns_of(t)
+                yield ("/tf", "tf2_msgs/msg/TFMessage", n,
+                       mk.tf([mk.transform(n, parents[j], children[j], xyz[i][k], quat[i][k]) for k, j in enumerate(moving)]))
 
     if streams.items:
         # publish the whole scene whenever something in it moved (every carried sample)
         change_times = sorted({float(t) for tr in streams.items for t in tr.times})
+        item_quats = [quaternions(np.asarray(tr.poses)[:, :3, :3]).tolist() for tr in streams.items]
         for t in change_times:
             n = ns_of(t)
             markers = []
-            for k, tr in enumerate(streams.items):
+            for k, (tr, quats) in enumerate(zip(streams.items, item_quats)):
                 idx = int(np.searchsorted(tr.times, t + 1e-12, side="right")) - 1
-                markers.append(mk.marker(n, root, k, tr.item, tr.poses[max(idx, 0)]))
+                markers.append(mk.marker(n, root, k, tr.item, tr.poses[max(idx, 0)], quats[max(idx, 0)]))
             yield ("/scene", "visualization_msgs/msg/MarkerArray", n, mk.MarkerArray(markers=markers))
 
 

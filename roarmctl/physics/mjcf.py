@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from roarmctl.errors import InputError
-from roarmctl.robot.model import Robot
+from roarmctl.robot.model import Robot, quaternions
 
 GRAVITY = 9.81  # m/s^2, the same value as roarmctl.robot.dynamics.GRAVITY
 TIMESTEP = 0.001  # s: the servos' control loop and the contacts both need about 1 ms
@@ -102,23 +102,9 @@ class BuiltDocument:
 
 
 def quat(rot: np.ndarray) -> tuple[float, float, float, float]:
-    """Unit quaternion (w, x, y, z) of a 3x3 rotation matrix (Shepperd's method)."""
-    m = np.asarray(rot, dtype=float)
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0:
-        s = math.sqrt(tr + 1.0) * 2
-        q = (0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s)
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
-        q = ((m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s)
-    elif m[1, 1] > m[2, 2]:
-        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
-        q = ((m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s)
-    else:
-        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
-        q = ((m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s)
-    n = math.sqrt(sum(v * v for v in q))
-    return tuple(v / n for v in q)  # type: ignore[return-value]
+    """Unit quaternion (w, x, y, z), MuJoCo's order, of a 3x3 rotation matrix (``robot.model.quaternions``)."""
+    x, y, z, w = quaternions(rot)
+    return float(w), float(x), float(y), float(z)
 
 
 def _f(values) -> str:

@@ -59,6 +59,59 @@ def rpy_from_matrix(rot: np.ndarray) -> np.ndarray:
     return np.array([np.arctan2(rot[2, 1], rot[2, 2]), pitch, np.arctan2(rot[1, 0], rot[0, 0])])
 
 
+def quaternions(rot) -> np.ndarray:
+    """Unit quaternions (x, y, z, w), shape (..., 4), w >= 0, of rotation matrices, shape (..., 3, 3).
+
+    Shepperd's method: each matrix takes the formula of its largest of (trace, m00, m11, m22), so the square root
+    is of a number >= 1 and the division never by a small one (S. W. Shepperd, "Quaternion from rotation matrix",
+    J. Guidance and Control 1(3), 1978)."""
+    m = np.asarray(rot, dtype=float)
+    shape = m.shape[:-2]
+    m = m.reshape(-1, 3, 3)
+    m00, m11, m22 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
+    tr = m00 + m11 + m22
+    q = np.empty((len(m), 4))
+    cases = [tr > 0, (m00 > m11) & (m00 > m22), m11 > m22, np.ones(len(m), dtype=bool)]
+    taken = np.zeros(len(m), dtype=bool)
+    for k, case in enumerate(cases):
+        i = case & ~taken
+        taken |= i
+        if not i.any():
+            continue
+        a = m[i]
+        d = [a[:, 0, 0], a[:, 1, 1], a[:, 2, 2]]
+        if k == 0:
+            s = 2.0 * np.sqrt(d[0] + d[1] + d[2] + 1.0)
+            q[i] = np.stack([(a[:, 2, 1] - a[:, 1, 2]) / s, (a[:, 0, 2] - a[:, 2, 0]) / s,
+                             (a[:, 1, 0] - a[:, 0, 1]) / s, 0.25 * s], axis=1)
+        elif k == 1:
+            s = 2.0 * np.sqrt(1.0 + d[0] - d[1] - d[2])
+            q[i] = np.stack([0.25 * s, (a[:, 0, 1] + a[:, 1, 0]) / s, (a[:, 0, 2] + a[:, 2, 0]) / s,
+                             (a[:, 2, 1] - a[:, 1, 2]) / s], axis=1)
+        elif k == 2:
+            s = 2.0 * np.sqrt(1.0 + d[1] - d[0] - d[2])
+            q[i] = np.stack([(a[:, 0, 1] + a[:, 1, 0]) / s, 0.25 * s, (a[:, 1, 2] + a[:, 2, 1]) / s,
+                             (a[:, 0, 2] - a[:, 2, 0]) / s], axis=1)
+        else:
+            s = 2.0 * np.sqrt(1.0 + d[2] - d[0] - d[1])
+            q[i] = np.stack([(a[:, 0, 2] + a[:, 2, 0]) / s, (a[:, 1, 2] + a[:, 2, 1]) / s, 0.25 * s,
+                             (a[:, 1, 0] - a[:, 0, 1]) / s], axis=1)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[q[:, 3] < 0] *= -1.0
+    return q.reshape(*shape, 4)
+
+
+def rigid_inverse(t) -> np.ndarray:
+    """Inverse of rigid 4x4 transforms, shape (..., 4, 4): rotation transposed, translation -R^T p."""
+    t = np.asarray(t, dtype=float)
+    out = np.zeros_like(t)
+    rt = np.swapaxes(t[..., :3, :3], -1, -2)
+    out[..., :3, :3] = rt
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", rt, t[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
+
+
 @dataclass(frozen=True)
 class Joint:
     """One joint: child frame = parent frame @ origin @ motion(multiplier * q + offset) @ post.
