@@ -4,6 +4,7 @@ read back with rosbags (and the MCAP container with the independent ``mcap`` rea
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import math
 from pathlib import Path
@@ -35,12 +36,19 @@ def demo(tmp_path_factory):
     return d, traj, log
 
 
+@functools.cache
+def _jazzy():
+    """rosbags' ROS 2 Jazzy types, once per worker (each typestore compiles its deserialisers on first use)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
 def read_bag(path: Path) -> dict[str, list]:
     """topic -> [(log time ns, msgtype, message)] read with rosbags."""
     from rosbags.rosbag2 import Reader
-    from rosbags.typesys import Stores, get_typestore
 
-    ts = get_typestore(Stores.ROS2_JAZZY)
+    ts = _jazzy()
     out: dict[str, list] = {}
     with Reader(path) as reader:
         for conn, t, raw in reader.messages():

@@ -27,6 +27,7 @@ trajectory (an execution log: from its first entry, so nothing is negative).
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 from collections.abc import Iterator
@@ -51,7 +52,10 @@ _TF_CHUNK = 1024  # samples whose link transforms are computed together (bounds 
 COLORS = {"table": (0.55, 0.45, 0.35, 1.0), "obstacle": (0.85, 0.3, 0.25, 0.8), "object": (0.2, 0.5, 0.9, 1.0)}
 
 
+@functools.cache
 def _typestore():
+    """rosbags' message types of ROS 2 Jazzy, built once per process: a typestore compiles each message type's
+    serialiser on first use, which took as long as an export's messages when every export built a new one."""
     from rosbags.typesys import Stores, get_typestore
 
     return get_typestore(getattr(Stores, TYPESTORE))
