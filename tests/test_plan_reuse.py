@@ -18,6 +18,7 @@ import numpy as np
 import yaml
 
 import roarmctl.motion.planning.context as context
+from roarmctl.kept import Kept
 from roarmctl.motion.pipeline import plan_file
 from roarmctl.motion.timing import import_toppra
 
@@ -32,7 +33,7 @@ def cycles_plan(cycles: int) -> dict:
     return doc
 
 
-class _Forgetful(context.Kept):
+class _Forgetful(Kept):
     """A store whose lookups always miss: nothing kept is ever reused."""
 
     def get(self, key, default=None):

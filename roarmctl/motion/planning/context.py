@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeVar, cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from roarmctl.errors import InputError, PlanFileError
 from roarmctl.fileio import Roots
+from roarmctl.kept import Kept
 from roarmctl.motion.planning.pieces import UntimedMotion
 from roarmctl.motion.scene import SceneItem
 from roarmctl.motion.scenefiles import read_cloud_item, read_mesh_item
@@ -35,24 +36,6 @@ class StageTimer:
     def add(self, key: str, since: float) -> None:
         """Add the time since ``since`` (a ``time.perf_counter()`` value) to stage ``key``."""
         self.t[key] = self.t.get(key, 0.0) + time.perf_counter() - since
-
-
-V = TypeVar("V")
-
-
-class Kept(dict[tuple, V]):
-    """Results a plan keeps by their exact key (what the result is a function of, as bytes), at most ``limit``:
-    when full, all are forgotten, so a plan that never repeats itself does not grow."""
-
-    def __init__(self, limit: int) -> None:
-        super().__init__()
-        self.limit = limit
-
-    def keep(self, key: tuple, value: V) -> None:
-        """Keep ``value`` under ``key``."""
-        if len(self) >= self.limit:
-            self.clear()
-        self[key] = value
 
 
 class PlanContext:
