@@ -64,6 +64,16 @@ def test_the_payload_is_real_it_runs_when_the_user_trusts_the_file(tmp_path):
     assert marker.exists()
 
 
+def test_a_file_loaded_under_trust_is_not_handed_out_later_without_it(tmp_path):
+    """Loaded descriptions are kept per process (the API, or several commands in one process): one loaded under
+    --trust-xacro (its payload ran) is refused by the next command that does not trust it, not taken from the store."""
+    marker = tmp_path / "MARKER"
+    arm = hostile.m3_xacro(tmp_path, hostile.payload(marker))
+    code, _, err = cli(["--trust-xacro", "kin", "fk", str(arm), *hostile.M3_Q])
+    assert code == 0 and marker.exists(), err
+    refused(["kin", "fk", str(arm), *hostile.M3_Q])
+
+
 def _payload_route(tmp_path: Path, route: str) -> tuple[list[str], Path]:
     marker = tmp_path / "MARKER"
     arm = hostile.m3_xacro(tmp_path, hostile.payload(marker))

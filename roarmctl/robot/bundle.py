@@ -30,6 +30,7 @@ from typing import Any
 
 from roarmctl.errors import DescriptionError, InputError, TrajectoryFileError
 from roarmctl.fileio import Roots, read_bytes, read_text, resolved
+from roarmctl.kept import Kept
 from roarmctl.robot.meshes import CONFINED_HINT, MESH_BYTES, PACKAGE_PATHS, description_roots, package_map, resolve
 from roarmctl.robot.model import Robot
 from roarmctl.robot.xacro_input import expand
@@ -39,7 +40,7 @@ MAX_BUNDLE_BYTES = 64 * 1024 * 1024  # all files of a bundle together, decoded
 #: Files of a bundle (each is written to a temporary folder to be loaded: 100,000 empty meshes took 19 s).
 MAX_BUNDLE_FILES = 1000
 FILE_NAME = re.compile(r"^(robot\.yaml|robot\.urdf|robot\.srdf|joint_limits\.yaml|meshes/m\d{1,5}\.(stl|obj|dae|ply|off|glb))$")
-_LOADED: dict[str, Robot] = {}
+_LOADED: Kept[Robot] = Kept(64)  # robots of bundles, by their files' digests
 
 
 def _plain(value: Any) -> Any:
@@ -158,8 +159,8 @@ def load_bundle(doc: Any, where: str) -> Robot:
 
     files = _decoded(doc, where)
     key = hashlib.sha256(json.dumps({k: hashlib.sha256(v).hexdigest() for k, v in sorted(files.items())}).encode()).hexdigest()
-    if key in _LOADED:
-        return _LOADED[key]
+    if (key,) in _LOADED:
+        return _LOADED[(key,)]
     with tempfile.TemporaryDirectory(prefix="roarmctl-robot-") as tmp:
         folder = Path(tmp)
         for name, data in files.items():
@@ -170,8 +171,7 @@ def load_bundle(doc: Any, where: str) -> Robot:
         except InputError as exc:
             message = exc.message.replace(str(folder), f"{where}: robot_description")
             raise type(exc)(message, exc.hint) from None
-    _LOADED[key] = robot
-    return robot
+    return _LOADED.keep((key,), robot)
 
 
 def trajectory_robot(name: str, description: Any, where: str) -> Robot:

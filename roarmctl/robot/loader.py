@@ -16,8 +16,9 @@ import numpy as np
 
 from roarmctl.errors import DescriptionError, InputError
 from roarmctl.fileio import read_text, resolved
+from roarmctl.kept import Kept
 from roarmctl.robot import validate as checks
-from roarmctl.robot import visuals
+from roarmctl.robot import visuals, xacro_input
 from roarmctl.robot.frames import UNITS, Frame
 from roarmctl.robot.ik import IK_FAMILIES, ur6_params
 from roarmctl.robot.implied import (
@@ -46,7 +47,7 @@ from roarmctl.robot.model import (
 from roarmctl.robot.padding import sidecar_padding
 from roarmctl.robot.singularity import MODELS
 from roarmctl.robot.srdf import parse_srdf, read_joint_limits, read_srdf
-from roarmctl.robot.xacro_input import TRUST_ALL, expand
+from roarmctl.robot.xacro_input import expand
 from roarmctl.validation import check_markup
 
 FORMAT = "roarmctl.robot/1"
@@ -64,7 +65,7 @@ def bundled_robots() -> list[str]:
     return sorted(p.stem for p in bundled_dir().glob("*.yaml"))
 
 
-_CACHE: dict[tuple, Robot] = {}
+_CACHE: Kept[Robot] = Kept(64)  # loaded robots, by the spec, its file's stamp and the options
 
 
 def load_robot(spec: str, trust_sidecar: bool = False, confine: bool = False) -> Robot:
@@ -82,7 +83,7 @@ def load_robot(spec: str, trust_sidecar: bool = False, confine: bool = False) ->
         stamp: tuple = (st.st_mtime_ns, st.st_size)
     except (OSError, ValueError):
         stamp = ()
-    key = (spec, stamp, trust_sidecar, confine, TRUST_ALL, tuple(sorted((k, str(v)) for k, v in PACKAGE_PATHS.items())))
+    key = (spec, stamp, trust_sidecar, confine, xacro_input.TRUST_ALL, tuple(sorted((k, str(v)) for k, v in PACKAGE_PATHS.items())))
     if key in _CACHE:
         return _CACHE[key]
     path = bundled_dir() / f"{spec}.yaml"
@@ -124,8 +125,7 @@ def load_robot(spec: str, trust_sidecar: bool = False, confine: bool = False) ->
     robot.spec = spec if path == bundled_dir() / f"{spec}.yaml" else str(path.resolve())
     robot.allowed_collisions |= adjacent_pairs(robot)
     checks.check_robot(robot, str(path))
-    _CACHE[key] = robot
-    return robot
+    return _CACHE.keep(key, robot)
 
 
 def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
