@@ -23,6 +23,7 @@ import numpy as np
 
 from roarmctl.errors import DescriptionError, InputError
 from roarmctl.fileio import Roots, read_bytes, resolved
+from roarmctl.kept import Kept
 
 #: NAME -> folder for ``package://NAME/...``, filled by the CLI's ``--package-path`` option.
 PACKAGE_PATHS: dict[str, Path] = {}
@@ -130,7 +131,10 @@ def ball_points() -> np.ndarray:
 _BALL: np.ndarray | None = None
 
 
-_LOADED: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+# Meshes read, by (path, modification time, size, scale), and convex hulls taken, by the points' bytes: a process that
+# loads a description again (the API, a test suite) or two links that share a mesh pay for the file and qhull once
+_LOADED: Kept[tuple[np.ndarray, np.ndarray]] = Kept(512)
+_HULLS: Kept[tuple[np.ndarray, np.ndarray, np.ndarray]] = Kept(512)  # key -> (hull vertices, faces, the points)
 
 
 #: Why a description named by a plan, trajectory or log may not point elsewhere, and the fix.
@@ -220,10 +224,13 @@ def read_triangles(path: Path, scale, what: str, *, roots: Roots | None = None, 
     if kind not in MESH_TYPES:
         raise error(f"{what}: '{path.name}': .{kind} is not a mesh type roarmctl reads",
                     f"use one of {', '.join('.' + t for t in MESH_TYPES)}")
+    if roots is not None:  # before the lookup: a mesh read earlier under wider roots is not handed out here
+        path = roots.check(path, what, error, hint)
     try:
-        stamp = path.stat().st_mtime_ns
+        st = path.stat()
+        stamp = (st.st_mtime_ns, st.st_size)
     except (OSError, ValueError):
-        stamp = 0
+        stamp = (0, -1)
     scale3 = tuple(float(s) for s in np.broadcast_to(np.asarray(scale, dtype=float), 3))
     key = (str(path), stamp, scale3)
     if key not in _LOADED:
@@ -245,12 +252,26 @@ def read_triangles(path: Path, scale, what: str, *, roots: Roots | None = None, 
         vertices = np.asarray(loaded.vertices, dtype=float) * np.array(scale3)
         if not np.all(np.isfinite(vertices)):
             raise error(f"{what}: '{path}' has non-finite vertex coordinates")
-        _LOADED[key] = (vertices, np.asarray(loaded.faces, dtype=np.int64))
+        _LOADED.keep(key, (vertices, np.asarray(loaded.faces, dtype=np.int64)))
     return _LOADED[key]
 
 
 def convex_hull(vertices: np.ndarray, where: str, error: type[InputError] = DescriptionError) -> tuple[np.ndarray, np.ndarray]:
-    """Convex hull (vertices (H, 3), outward-wound faces (K, 3)) of a point set, by qhull (scipy)."""
+    """Convex hull (vertices (H, 3), outward-wound faces (K, 3)) of a point set, by qhull (scipy). The arrays
+    returned may be shared with an earlier call on the same points: read them, do not change them."""
+    points = np.ascontiguousarray(vertices, dtype=float)
+    key = (points.shape, hash(points.tobytes()))
+    if key in _HULLS and np.array_equal(_HULLS[key][2], points):
+        return _HULLS[key][0], _HULLS[key][1]
+    hv, hf = _convex_hull(points, where, error)
+    hv.setflags(write=False)
+    hf.setflags(write=False)
+    _HULLS.keep(key, (hv, hf, points))
+    return hv, hf
+
+
+def _convex_hull(vertices: np.ndarray, where: str, error: type[InputError]) -> tuple[np.ndarray, np.ndarray]:
+    """``convex_hull`` without the store."""
     from scipy.spatial import ConvexHull, QhullError
 
     try:
