@@ -518,8 +518,11 @@ def test_execution_log_shows_the_measured_arm_as_a_ghost(chromium, planned, tmp_
     times, ghost_tcp, error = dec(doc["times"]), dec(doc["ghost"]["tcp"]).reshape(-1, 3), dec(doc["ghost"]["error"])
     run = json.loads(log.read_text())
     # a feedback line describes the servos as read before its bytes crossed the wire (115200 baud 8N1: 11520 B/s)
-    # and about 4 ms of firmware work earlier
-    fb = [(r["t"] - (len(r["line"]) + 2) / 11520 - 0.004, r["tcp_world_m"]) for r in run["received"] if "tcp_world_m" in r]
+    # and about 4 ms of firmware work earlier, and an answer to a T:105 at most a round trip after the question: the
+    # log's read_t where the stream judged it (a busy host reads lines late; dated by their arrival, the page's error
+    # was once 4.9 mm RMS off the streamer's in a run under load)
+    fb = [(r.get("read_t", r["t"] - (len(r["line"]) + 2) / 11520 - 0.004), r["tcp_world_m"]) for r in run["received"]
+          if "tcp_world_m" in r]
     t = np.array([a for a, _ in fb])
     world = np.array([b for _, b in fb])
     inside = (times > t[0]) & (times < t[-1])

@@ -223,6 +223,16 @@ def plan_clock(t, paused) -> Any:
     return float(out) if np.ndim(t) == 0 else out
 
 
+def run_clock(t, paused) -> Any:
+    """The stream's time (s after its start) at which the plan, paused as ``plan_clock`` says, reached plan time ``t``
+    (a pause's own point: when it started); the inverse of ``plan_clock`` outside the pauses."""
+    tt = np.asarray(t, dtype=float)
+    out = tt.copy()
+    for at, d in paused:
+        out = out + np.where(tt > float(at), float(d), 0.0)
+    return float(out) if np.ndim(t) == 0 else out
+
+
 def _check_wire_range(traj, wm: WireMap) -> None:
     """Refuse a trajectory the firmware would clamp: the arm would not follow the plan."""
     for w, i in zip(wm.fields, wm.index):

@@ -218,7 +218,8 @@ class Streamer:
         self.hold_info: dict[str, Any] | None = None
         self.refused_lines: dict[int, str] = {}  # id(Received) -> reason, for the log
         self._tick_of: dict[int, int] = {}  # id(first command sent for a tick) -> tick
-        self._asked_at: dict[int, float] = {}  # id(Reading) -> when its T:105 was sent
+        self._read_at: dict[int, float] = {}  # id(Received) -> when its servos were read (s, clock): the log's read_t
+        self._reading_at: dict[int, float] = {}  # the same by id(Reading), for the tracking check
         self.device_late: deque[tuple[float, float]] = deque(maxlen=1000)  # (when seen, how late) of poll answers
 
     def _schedule(self, traj) -> list[Tick]:
@@ -256,11 +257,10 @@ class Streamer:
             if r.feedback is None:
                 continue
             reading = self.validator.check(r.feedback, r.t, r.line)
-            if reading is not None and asked and id(r) in asked:
-                self._asked_at[id(reading)] = asked[id(r)]
             if reading is None:
                 self.refused_lines[id(r)] = self.validator.refusals[-1].reason
                 continue
+            self._read_at[id(r)] = self._reading_at[id(reading)] = self._servos_read_at(reading, (asked or {}).get(id(r)))
             self.measured = reading.q
             out.append(reading)
         return out
@@ -391,16 +391,22 @@ class Streamer:
         """The plan's time (s) at ``t`` s after t0: the clock's, less every pause before ``t`` (frozen during one)."""
         return plan_clock(t, self.paused)
 
+    def _servos_read_at(self, reading: Reading, asked: float | None) -> float:
+        """When (s, on the clock) the firmware read the servos a frame reports: before its line's wire time and
+        the firmware's work; for an answer to a T:105 sent at ``asked``, at most one round trip after the
+        question (a busy host reads the answer late; the firmware did not read the servos later)."""
+        t = reading.t - wire_seconds(reading.nbytes) - READ_BEFORE_PRINT
+        if asked is not None:
+            info = getattr(self.link, "info", None)
+            rtt = info.rtt if info is not None else 0.03
+            t = min(t, asked + rtt - wire_seconds(reading.nbytes) - READ_BEFORE_PRINT / 2)
+        return t
+
     def _track(self, reading: Reading) -> tuple[float, float] | None:
         """(TCP error against the plan at the frame's measurement time, the same with the plan
         allowed to be up to the measured lateness later), m; None outside the motion. Times are the plan's
         (``plan_time``): where the plan waited for a late host, the arm stopped on the path."""
-        t_meas = reading.t - wire_seconds(reading.nbytes) - READ_BEFORE_PRINT - self.t0
-        asked = self._asked_at.pop(id(reading), None)
-        if asked is not None:  # read one round trip after the question, less the answer's wire time
-            info = getattr(self.link, "info", None)
-            rtt = info.rtt if info is not None else 0.03
-            t_meas = min(t_meas, asked + rtt - wire_seconds(reading.nbytes) - READ_BEFORE_PRINT / 2 - self.t0)
+        t_meas = self._reading_at.pop(id(reading)) - self.t0
         tp = self.plan_time(t_meas)
         if not 0.0 <= tp <= self.schedule[-1].t:
             return None
@@ -650,6 +656,8 @@ class Streamer:
             e: dict[str, Any] = {"t": round(r.t - t0, 6), "line": r.line[:protocol.MAX_FEEDBACK_LINE]}
             if r.feedback is not None:
                 e["feedback"] = r.feedback.raw  # x, y, z: the firmware's frame (mm)
+                if id(r) in self._read_at:  # when its servos were read, as the stream judged it (s after t0)
+                    e["read_t"] = round(self._read_at[id(r)] - t0, 6)
                 reason = self.refused_lines.get(id(r))
                 if reason is not None or r.feedback.problems:
                     e["refused"] = reason or r.feedback.problems[0]

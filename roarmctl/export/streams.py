@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.device.protocol import M3_FIELDS, WireMap, feedback_read_time, parse_feedback
+from roarmctl.device.schedule import run_clock, sample
 from roarmctl.errors import InputError, TrajectoryFileError
 from roarmctl.motion.trajectory import carried_item
 from roarmctl.robot.model import transform
@@ -120,16 +121,18 @@ def trajectory_streams(traj: Trajectory, robot: Robot) -> Streams:
     return Streams(robot, list(traj.joint_names), {"": states}, "", traj, item_tracks(traj, robot))
 
 
-def log_streams(log: dict[str, Any], robot: Robot, traj: Trajectory | None = None) -> Streams:
+def log_streams(log: dict[str, Any], robot: Robot, traj: Trajectory | None = None, read_times: bool = False) -> Streams:
     """See ``_log_streams``; a malformed entry is an input error (exit 2), not a crash.
 
     ``traj``: the trajectory that was executed. Its samples are added as the ``planned`` joint
     states and its scene as markers, on the log's clock: plan time / the run's ``speed_scale``
-    (the log's time 0 is the first scheduled command, which targets the plan's time 0).
+    (the log's time 0 is the first scheduled command, which targets the plan's time 0), later by each
+    pause of the plan for a late host before it (the log's ``paused``; the plan holds through one).
     """
     try:
-        streams = _log_streams(log, robot)
+        streams = _log_streams(log, robot, read_times)
         scale = float(log.get("speed_scale", 1.0) or 1.0)
+        paused = _pauses(log)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise TrajectoryFileError(f"execution log: malformed entry ({type(exc).__name__}: {exc})",
                                   "export a log written by 'roarmctl execute'") from None
@@ -140,19 +143,42 @@ def log_streams(log: dict[str, Any], robot: Robot, traj: Trajectory | None = Non
         if not 0 < scale <= 1:
             raise TrajectoryFileError(f"execution log: speed_scale {scale!r} is not in (0, 1]")
         t = np.asarray(traj.times, dtype=float) / scale
-        streams.joint_states["planned"] = JointStates(t, np.asarray(traj.positions, dtype=float),
-                                                      np.asarray(traj.velocities, dtype=float) * scale)
+        pos, vel = np.asarray(traj.positions, dtype=float), np.asarray(traj.velocities, dtype=float) * scale
+        if paused:  # the plan held where it paused: a sample at each pause's start and end, at rest
+            hold_t = np.array([at for at, _ in paused])
+            hold_q = sample(traj, hold_t * scale)
+            ends = run_clock(hold_t, paused) + np.array([d for _, d in paused])
+            t = np.concatenate([run_clock(t, paused), run_clock(hold_t, paused), ends])
+            pos = np.concatenate([pos, hold_q, hold_q])
+            vel = np.concatenate([vel, np.zeros_like(hold_q), np.zeros_like(hold_q)])
+            order = np.argsort(t, kind="stable")
+            t, pos, vel = t[order], pos[order], vel[order]
+        streams.joint_states["planned"] = JointStates(t, pos, vel)
         streams.trajectory = None  # no /joint_trajectory: the log's topics are about the run
-        streams.items = [ItemTrack(tr.item, tr.times / scale, tr.poses, [(a / scale, b / scale) for a, b in tr.held])
+        on_run = lambda x: run_clock(np.asarray(x, dtype=float) / scale, paused)  # noqa: E731
+        streams.items = [ItemTrack(tr.item, on_run(tr.times), tr.poses, [(float(on_run(a)), float(on_run(b))) for a, b in tr.held])
                          for tr in item_tracks(traj, robot)]
     return streams
 
 
-def _log_streams(log: dict[str, Any], robot: Robot) -> Streams:
+def _pauses(log: dict[str, Any]) -> list[tuple[float, float]]:
+    """The log's ``paused`` ([[plan time s, duration s], ...]: where the plan waited for a late host), checked."""
+    out = []
+    for e in log.get("paused", []) or []:
+        at, d = float(e[0]), float(e[1])
+        if not (np.isfinite(at) and np.isfinite(d) and d >= 0):
+            raise ValueError(f"paused entry {e!r}")
+        out.append((at, d))
+    return out
+
+
+def _log_streams(log: dict[str, Any], robot: Robot, read_times: bool = False) -> Streams:
     """An execution log (``roarmctl.execlog/1``): commanded joints (every T:102 / T:101 sent) and
     measured joints (every T:1051 feedback received), converted from wire values with the robot's
     wire map. Times are s after the log's start of motion (negative before it); a measured state's time is
-    when the firmware read the servos (``device.protocol.feedback_read_time``), not when its line arrived."""
+    when the firmware read the servos (``device.protocol.feedback_read_time``), not when its line arrived;
+    with ``read_times``, the log's ``read_t`` where the stream judged it (an answer to a T:105 is dated at most a
+    round trip after the question: a busy host reads lines late, the firmware did not read the servos later)."""
     wm = WireMap(robot)
     cmd_t, cmd_q = [], []
     wire: dict[str, float] | None = None
@@ -173,8 +199,11 @@ def _log_streams(log: dict[str, Any], robot: Robot) -> Streams:
         fb = parse_feedback(entry["feedback"]) if isinstance(entry, dict) and isinstance(entry.get("feedback"), dict) else None
         if fb is None or not fb.joints:
             continue
-        line = entry.get("line")
-        meas_t.append(feedback_read_time(float(entry["t"]), line) if isinstance(line, str) else float(entry["t"]))
+        line, read_t = entry.get("line"), entry.get("read_t")
+        if read_times and isinstance(read_t, (int, float)) and not isinstance(read_t, bool):
+            meas_t.append(float(read_t))  # when the stream judged the servos were read (a late host reads lines late)
+        else:
+            meas_t.append(feedback_read_time(float(entry["t"]), line) if isinstance(line, str) else float(entry["t"]))
         meas_q.append(wm.from_wire(fb.joints))
     if not cmd_t and not meas_t:
         raise InputError("the execution log holds no joint commands and no feedback", "export a log of a run that moved the arm")

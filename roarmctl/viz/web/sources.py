@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from roarmctl.device.schedule import plan_clock
 from roarmctl.errors import InfeasibleError, InputError, TrajectoryFileError
 from roarmctl.export import load_source, log_robot
 from roarmctl.export.streams import log_streams
@@ -115,7 +116,7 @@ def _log_source(log: dict[str, Any], path: Path, trajectory: str | os.PathLike |
         if tkind != "trajectory":
             raise InputError(f"--trajectory {trajectory}: not a trajectory file", "give the .traj.json that was executed")
     robot = log_robot(log, str(path), traj, str(trajectory))
-    streams = log_streams(log, robot, traj)
+    streams = log_streams(log, robot, traj, read_times=True)
     measured = streams.joint_states["measured"]
     notes = [f"execution log {path.name}: {len(streams.joint_states['commanded'].times)} commands, {len(measured.times)} feedback frames"]
     if traj is not None:
@@ -131,7 +132,15 @@ def _log_source(log: dict[str, Any], path: Path, trajectory: str | os.PathLike |
         notes.append("no scene: give --trajectory with the .traj.json this run executed")
     ghost = _physics_ghost(log, robot, path)
     if ghost is None and len(measured.times):
-        ghost = Ghost("measured", measured.times, measured.positions)
+        times, positions = measured.times, measured.positions
+        paused = [(float(a), float(d)) for a, d in log.get("paused", []) or []]
+        if traj is not None and paused:  # the plan waited for a late host: the measured arm on the plan's time
+            times = plan_clock(times, paused)
+            keep = np.concatenate([[True], np.diff(times) > 0])  # a pause's frames stand at its start
+            times, positions = times[keep], positions[keep]
+            notes.append(f"the run waited {sum(d for _, d in paused):.2f} s for a busy host ({len(paused)} pauses): "
+                         "the measured arm is shown on the plan's time")
+        ghost = Ghost("measured", times, positions)
     if ghost is None:
         notes.append("no feedback in the log: only the commanded arm is shown")
     return ViewSource(main, robot, path.name, ghost=ghost, notes=notes)
