@@ -452,14 +452,14 @@ class Streamer:
                 self.sleep(wait)
             now = self.clock()
             if first:
-                host_late = k + 1 < n and now >= due + dt  # the host itself came too late for this tick
+                host_late = k + 1 < n and now >= due + sched[k + 1].t - tick.t  # the host came after the next was due
             send = not (k + 1 < n and (lines - confirmed > cfg.max_unconfirmed
                                        or (polls and now - polls[0][0] > rtt + cfg.behind_after + self._device_late())))
             if not send and waited != k and not host_late:
                 waited = k
                 self.waits["behind"] += 1  # the firmware has not caught up: add nothing to its backlog, wait
             if send:
-                if k + 1 < n and now >= due + dt:
+                if k + 1 < n and now >= due + sched[k + 1].t - tick.t:
                     # so late that the next tick is due too: the plan waits here (its clock pauses) and this tick goes
                     # out now. Jumping to the tick due by the clock would send the servos straight across the plan
                     self.paused.append((tick.t, now - due))

@@ -17,7 +17,9 @@ from roarmctl.device.schedule import plan_clock
 from roarmctl.errors import InfeasibleError, InputError, TrajectoryFileError
 from roarmctl.export import load_source, log_robot
 from roarmctl.export.streams import log_streams
+from roarmctl.motion.pipeline import plan_file
 from roarmctl.motion.trajectory import Trajectory
+from roarmctl.motion.validate import validate_trajectory
 from roarmctl.viz.data import robot_for
 from roarmctl.viz.web.document import Ghost, view_document
 
@@ -51,11 +53,7 @@ def trajectory_or_plan(path: str | os.PathLike) -> Trajectory:
     A plan that fails raises the planner's ``InfeasibleError`` (with ``.partial`` when part was planned)."""
     path = Path(path)
     if path.suffix.lower() in PLAN_SUFFIXES:
-        from roarmctl.motion.pipeline import plan_file
-
         return plan_file(path, seed=None).trajectory
-    from roarmctl.motion.validate import validate_trajectory
-
     return validate_trajectory(path)
 
 
