@@ -495,12 +495,12 @@ class Streamer:
                     if late > 0.002:
                         self.device_late.append((polled, late))
             readings = self._judge(new, asked)
-            # feedback is overdue when a question has gone unanswered too long, not when the host itself did not
-            # ask: a busy machine that stopped this process for 0.33 s between two polls once ended a run here
-            # as "link lost" while the arm had answered every question it was asked
-            if polls and self.clock() - polls[0][0] > cfg.stale_after + self._lateness_window(
-                    self.plan_time(self.clock() - self.t0)):
-                raise DeviceError(f"link lost: no feedback for {self.clock() - polls[0][0]:.2f} s during motion",
+            # feedback is overdue when a question had gone unanswered too long when the link was last read, not
+            # when the host itself did not ask or did not look: a busy machine that stopped this process for
+            # 0.33 s between two polls, or for 0.36 s between reading the link and this check, ended runs here as
+            # "link lost" while the arm had answered every question in time
+            if polls and polled - polls[0][0] > cfg.stale_after + self._lateness_window(self.plan_time(polled - self.t0)):
+                raise DeviceError(f"link lost: no feedback for {polled - polls[0][0]:.2f} s during motion",
                                   "check the USB cable and the arm's power; the arm may have rebooted")
             for reading in readings:
                 tracked = self._track(reading)

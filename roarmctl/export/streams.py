@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.device.protocol import M3_FIELDS, WireMap, feedback_read_time, parse_feedback
-from roarmctl.device.schedule import run_clock, sample
+from roarmctl.device.schedule import run_clock
 from roarmctl.errors import InputError, TrajectoryFileError
 from roarmctl.motion.trajectory import carried_item
 from roarmctl.robot.model import transform
@@ -127,7 +127,7 @@ def log_streams(log: dict[str, Any], robot: Robot, traj: Trajectory | None = Non
     ``traj``: the trajectory that was executed. Its samples are added as the ``planned`` joint
     states and its scene as markers, on the log's clock: plan time / the run's ``speed_scale``
     (the log's time 0 is the first scheduled command, which targets the plan's time 0), later by each
-    pause of the plan for a late host before it (the log's ``paused``; the plan holds through one).
+    pause of the plan for a late host before it (the log's ``paused``).
     """
     try:
         streams = _log_streams(log, robot, read_times)
@@ -144,16 +144,7 @@ def log_streams(log: dict[str, Any], robot: Robot, traj: Trajectory | None = Non
             raise TrajectoryFileError(f"execution log: speed_scale {scale!r} is not in (0, 1]")
         t = np.asarray(traj.times, dtype=float) / scale
         pos, vel = np.asarray(traj.positions, dtype=float), np.asarray(traj.velocities, dtype=float) * scale
-        if paused:  # the plan held where it paused: a sample at each pause's start and end, at rest
-            hold_t = np.array([at for at, _ in paused])
-            hold_q = sample(traj, hold_t * scale)
-            ends = run_clock(hold_t, paused) + np.array([d for _, d in paused])
-            t = np.concatenate([run_clock(t, paused), run_clock(hold_t, paused), ends])
-            pos = np.concatenate([pos, hold_q, hold_q])
-            vel = np.concatenate([vel, np.zeros_like(hold_q), np.zeros_like(hold_q)])
-            order = np.argsort(t, kind="stable")
-            t, pos, vel = t[order], pos[order], vel[order]
-        streams.joint_states["planned"] = JointStates(t, pos, vel)
+        streams.joint_states["planned"] = JointStates(run_clock(t, paused), pos, vel)  # the plan's samples, on the run's clock
         streams.trajectory = None  # no /joint_trajectory: the log's topics are about the run
         on_run = lambda x: run_clock(np.asarray(x, dtype=float) / scale, paused)  # noqa: E731
         streams.items = [ItemTrack(tr.item, on_run(tr.times), tr.poses, [(float(on_run(a)), float(on_run(b))) for a, b in tr.held])
