@@ -21,13 +21,15 @@ install: $(STAMP)
 
 # The whole suite on every core (pytest-xdist; the browser-view tests share one worker; the real-time
 # simulated-arm tests spread over the workers like the rest: tests/conftest.py says why that is safe).
+# TEST_JOBS: the number of xdist workers (a number, or auto: one per core).
+TEST_JOBS ?= auto
 test: $(STAMP)
-	$(BIN)/python -m pytest -n auto --dist loadgroup
+	$(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadgroup
 
 # The inner loop: everything but the tests marked slow (real-time runs on the simulated arm, fresh
 # interpreters, CPU-heavy sweeps); under a minute.
 test-fast: $(STAMP)
-	$(BIN)/python -m pytest -n auto --dist loadgroup -m "not slow"
+	$(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadgroup -m "not slow"
 
 # Lint and types (rules and why: pyproject.toml, docs/design.md "Lint and types").
 lint: $(STAMP)
