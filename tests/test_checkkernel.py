@@ -125,7 +125,7 @@ def _hold_a_box(checker: CollisionChecker) -> None:
     checker.attach("held", q0)
 
 
-@pytest.mark.parametrize("attached", [False, True])
+@pytest.mark.parametrize("attached", [False, pytest.param(True, marks=pytest.mark.slow)])  # CPU: make test-fast sweeps the bare arm
 def test_pairs_the_kernel_clears_are_apart_for_fcl(attached):
     """On 1500 random RoArm states in the example scene (padding 5 mm, with and without a held box), every
     (shape, item) and (shape, shape) pair that the kernel does not hand to FCL is apart for FCL too."""

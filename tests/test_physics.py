@@ -195,6 +195,7 @@ def test_the_0_2_kg_weight_holds_its_sag_is_reported_and_sag_compensation_cancel
     assert code == 0 and default["run"]["sag_compensation"] and default["objects"] == reps["--sag"]["objects"]
 
 
+@pytest.mark.slow  # CPU: the payload plan executed and simulated; make test-fast keeps the pick_place placement
 def test_execute_and_simulate_send_the_same_compensated_commands(trajs, tmp_path, capsys):
     """One sag compensation for both: ``execute --output`` (what a real arm gets) and ``simulate``'s run file
     hold the same lines, compensated by default; ``--no-sag`` gives the plan's own goals. The compensation
@@ -232,6 +233,7 @@ def _heavy(trajs, tmp_path: Path, mass: float) -> Path:
     return heavy
 
 
+@pytest.mark.slow  # CPU: a 2 kg plan simulated; make test-fast keeps the pick_place placement
 def test_2_kg_is_over_the_shoulders_stall_and_the_jaws_let_go_first(trajs, tmp_path, capsys):
     """The planner refuses 2 kg (the shoulder's 2.94 N m planning limit): the trajectory's payload is edited
     instead (a test-only route). The plan then needs more of the shoulder's two servos than their 5.88 N m
@@ -297,6 +299,7 @@ def _weld_at_grasp(setup, traj) -> list[float]:
     return drift
 
 
+@pytest.mark.slow  # CPU: a 2 kg plan simulated; make test-fast keeps the pick_place placement
 def test_2_kg_held_rigidly_drives_the_shoulder_into_stall(trajs, tmp_path):
     """The same 2 kg trajectory with the weight welded to the jaws at the grasp (``_weld_at_grasp``, test-only):
     now the arm carries all of it. Sent as execute sends it (sag compensation on: the goals ask each servo for
@@ -336,6 +339,7 @@ def _grasp_q(traj_path: Path) -> np.ndarray:
     return traj.positions[int(np.argmin(np.abs(traj.times - grasp.time)))]
 
 
+@pytest.mark.slow  # CPU: a plan planned and simulated; make test-fast keeps the pick_place placement
 def test_jaws_closing_5_mm_short_of_a_30_mm_cube_do_not_lift_it(tmp_path, capsys):
     import mujoco
 

@@ -15,6 +15,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 
 import roarmctl.motion.planning.context as context
@@ -40,6 +41,7 @@ class _Forgetful(Kept):
         return None
 
 
+@pytest.mark.slow  # CPU: a 12-task plan planned twice
 def test_reuse_gives_the_same_bytes_as_planning_everything_afresh(monkeypatch):
     doc = cycles_plan(3)
     kept = plan_file(copy.deepcopy(doc), seed=7, base_dir=PLANS)

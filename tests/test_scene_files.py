@@ -77,6 +77,7 @@ def test_a_point_inside_an_occupied_cell_collides_and_one_a_resolution_away_does
         assert _hits(item, pose[:3, :3] @ inside + pose[:3, 3])
 
 
+@pytest.mark.slow  # CPU: a 100,000-point cloud read and split
 def test_a_large_cloud_is_split_into_blocks_whose_boxes_hold_their_cells():
     rng = np.random.default_rng(4)
     points = rng.uniform([-0.4, -0.3, 0.0], [0.4, 0.3, 0.2], (20000, 3))

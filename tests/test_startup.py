@@ -157,6 +157,7 @@ def test_the_commands_annotations_are_not_strings():
     assert not stringly, stringly
 
 
+@pytest.mark.slow  # a fresh interpreter loading the planning libraries
 def test_plan_loads_what_planning_needs_and_nothing_of_the_other_commands(tmp_path):
     """``roarmctl plan ... --json`` in a fresh process: the planning libraries load (toppra with scipy.interpolate and
     matplotlib.pyplot, which toppra's package __init__ imports: docs/benchmarks.md, start-up), but nothing that only
