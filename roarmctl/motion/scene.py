@@ -156,8 +156,9 @@ class SceneItem:
             c = c + self.pose[:3, :3] @ data.local_box()[0]
         return c - h, c + h
 
-    def to_dict(self) -> dict:
-        """The item as the trajectory file's ``scene`` entry (name, role, shape, sizes, xyz, rpy)."""
+    def to_dict(self, xyz: list[float] | None = None, rpy: list[float] | None = None) -> dict:
+        """The item as the trajectory file's ``scene`` entry (name, role, shape, sizes, xyz, rpy). ``xyz`` (m) and
+        ``rpy`` (rad): the pose's, when the caller read them already (``Scene.to_dict``, for all items at once)."""
         d: dict = {"name": self.name, "role": self.role, "shape": self.shape}
         if self.mesh is not None:
             d["collision"] = "exact" if self.mesh.exact else "convex"
@@ -173,8 +174,8 @@ class SceneItem:
             d["radius"] = float(self.radius)
             if self.shape == "cylinder":
                 d["length"] = float(self.length)
-        d["xyz"] = [float(v) for v in self.pose[:3, 3]]
-        d["rpy"] = [float(v) for v in rpy_from_matrix(self.pose[:3, :3])]
+        d["xyz"] = [float(v) for v in self.pose[:3, 3]] if xyz is None else xyz
+        d["rpy"] = [float(v) for v in rpy_from_matrix(self.pose[:3, :3])] if rpy is None else rpy
         return d
 
     @classmethod
@@ -242,21 +243,9 @@ class Scene:
         poses = np.array([it.pose for it in items]).reshape(len(items), 4, 4)
         xyz = poses[:, :3, 3].tolist()
         rpy = _rpy_all(poses[:, :3, :3])
-        out = []
-        for it, p, r in zip(items, xyz, rpy, strict=True):
-            if it.mesh is not None or it.cloud is not None:
-                out.append(it.to_dict())
-                continue
-            d: dict = {"name": it.name, "role": it.role, "shape": it.shape}
-            if it.shape == "box":
-                d["size"] = [float(v) for v in it.size]
-            else:
-                d["radius"] = float(it.radius)
-                if it.shape == "cylinder":
-                    d["length"] = float(it.length)
-            d["xyz"] = p
-            d["rpy"] = r
-            out.append(d)
+        # meshes and clouds read their own pose: their dicts are the item's alone, as before
+        out = [it.to_dict() if it.mesh is not None or it.cloud is not None else it.to_dict(p, r)
+               for it, p, r in zip(items, xyz, rpy, strict=True)]
         return {"items": out}
 
     @classmethod
