@@ -58,8 +58,9 @@ def grasp_width(spec: ItemSpec) -> float:
     return 2.0 * float(spec.radius)
 
 
-def grip_value(ctx: PlanContext, task: PickTask, g_open: float, where: str) -> float:
-    """The gripper value (rad) at the grasp; checks that the open jaws clear the object (jaw widths known)."""
+def grasp_closed_q(ctx: PlanContext, task: PickTask, g_open: float, where: str) -> float:
+    """The gripper joint value (rad) that closes the jaws on the picked object (``gripper_closed``, else from the
+    object's width less the squeeze); checks that ``g_open`` (rad) clears the object (jaw widths known)."""
     gr = ctx.robot.gripper
     assert gr is not None  # a plan with picks needs a gripper (checked by the Planner)
     if not gr.has_widths:

@@ -13,7 +13,7 @@ import numpy as np
 
 from roarmctl.errors import InfeasibleError, PlanFileError, UnreachableError
 from roarmctl.motion.planning import fixed_jaw as jaws
-from roarmctl.motion.planning.grasp import grasp_width, grip_value
+from roarmctl.motion.planning.grasp import grasp_closed_q, grasp_width
 from roarmctl.motion.planning.pieces import TaskStep, with_value
 from roarmctl.motion.trajectory import Event
 from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask, WaitTask
@@ -42,7 +42,7 @@ def expand(ctx: PlanContext, task, q: np.ndarray, index: int) -> list[TaskStep]:
     if isinstance(task, MoveTask):
         goal, label = move_goal(ctx, task, q, at)
         steps = [TaskStep("free", f"{at}: move{label}", q_to=goal)]
-        g = gripper_value(ctx, task.gripper)
+        g = move_gripper_q(ctx, task.gripper)
         if g is not None and abs(g - q[ctx.gi]) > 1e-9:
             word = {"open": "open", "closed": "close"}.get(task.gripper, "set") if isinstance(task.gripper, str) else "set"
             if np.max(np.abs(goal[ctx.arm] - q[ctx.arm])) < 1e-9:  # the arm is there already
@@ -55,8 +55,9 @@ def expand(ctx: PlanContext, task, q: np.ndarray, index: int) -> list[TaskStep]:
     return expand_place(ctx, task, q, at)
 
 
-def gripper_value(ctx: PlanContext, value: float | str | None) -> float | None:
-    """A move's ``gripper:`` as a joint value (rad), or None (keep it)."""
+def move_gripper_q(ctx: PlanContext, value: float | str | None) -> float | None:
+    """A move's ``gripper:`` (``open``, ``closed`` or a joint value in rad) as a gripper joint value (rad), or None
+    (keep it)."""
     if value is None:
         return None
     if ctx.gi is None:
@@ -103,7 +104,7 @@ def expand_pick(ctx: PlanContext, task: PickTask, q: np.ndarray, at: str) -> lis
     grasp = centre + np.array([0.0, 0.0, task.grasp_offset])
     above = grasp + np.array([0.0, 0.0, task.approach_height])
     g_open = task.gripper_open if task.gripper_open is not None else gr.open
-    g_closed = grip_value(ctx, task, g_open, at)
+    g_closed = grasp_closed_q(ctx, task, g_open, at)
     ctx.set_state(g_open, grasp_target=task.object)
     (q_grasp, q_above), pitch = choose_ik_pitch(ctx, [grasp, above], held_pitch(ctx, task, at), task.pitch_auto,
                                                 task.roll, q, at, gripper=g_open)

@@ -61,8 +61,9 @@ def default_ref(robot: Robot) -> np.ndarray:
     return robot.full_q(home) if home is not None else robot.full_q(np.zeros(robot.arm_dof))
 
 
-def gripper_value(robot: Robot, qr: np.ndarray | None) -> float | None:
-    """The gripper value solutions carry: the reference's, else closed; None without a gripper."""
+def ref_gripper_q(robot: Robot, qr: np.ndarray | None) -> float | None:
+    """The gripper joint value (rad) IK solutions carry: the reference configuration's ``qr``, else the closed
+    value; None without a gripper (IK solves the arm; the gripper is copied, not chosen)."""
     if robot.gripper is None:
         return None
     gi = robot.joint_index(robot.gripper.joint)

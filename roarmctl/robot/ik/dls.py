@@ -17,7 +17,7 @@ from roarmctl.robot.ik.common import (
     default_ref,
     fit_limits,
     gripper_index,
-    gripper_value,
+    ref_gripper_q,
     rot_angle,
     rot_vec,
     wrap_angle,
@@ -130,7 +130,7 @@ def dls_solve(robot: Robot, p: np.ndarray, rot: np.ndarray | None, qr: np.ndarra
     n_starts = restarts if restarts is not None else (48 if all_solutions else 24)
     starts = np.concatenate([[qr if qr is not None else default_ref(robot)],
                              robot.full_q(rng.uniform(lo, hi, size=(n_starts, len(arm))))]).astype(float)
-    grip = gripper_value(robot, qr)
+    grip = ref_gripper_q(robot, qr)
     if grip is not None:
         starts[:, gripper_index(robot)] = grip
     # Rows after the reference start do not depend on q_ref (same seed, same random starts), so their

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from roarmctl.robot.ik.common import dedupe, fit_limits, gripper_value
+from roarmctl.robot.ik.common import dedupe, fit_limits, ref_gripper_q
 from roarmctl.robot.ik.roarm5 import roarm5_solver
 from roarmctl.robot.ik.solve import solve_ik_near
 from roarmctl.robot.model import Robot
@@ -39,7 +39,7 @@ class LineIK:
     def _key(self, q: np.ndarray) -> tuple:
         """What of ``prev`` the batch assumed: the gripper value and, roll left out, the wrist roll."""
         robot = self.robot
-        grip = gripper_value(robot, q)
+        grip = ref_gripper_q(robot, q)
         return (grip, None if self.roll is not None else float(q[robot.arm_indices[4]]))
 
     def near(self, k: int, prev: np.ndarray) -> np.ndarray:

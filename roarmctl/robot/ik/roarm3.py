@@ -13,8 +13,8 @@ from roarmctl.robot.ik.common import (
     dedupe,
     fit_limits,
     gripper_index,
-    gripper_value,
     newton,
+    ref_gripper_q,
     wrap_angle,
 )
 from roarmctl.robot.model import Robot
@@ -76,7 +76,7 @@ class Roarm3IK:
         ref_base = float(qr[self.arm[0]]) if qr is not None else 0.0
         az = math.atan2(rel[1], rel[0]) if rho > 1e-9 else math.atan2(*(self._u(ref_base)[1::-1]))
         az0 = math.atan2(self.u0[1], self.u0[0])
-        grip = gripper_value(robot, qr)
+        grip = ref_gripper_q(robot, qr)
         raw, reach = [], False
         for flip in (0.0, math.pi):
             base = wrap_angle(self.sb * (az + flip - az0))

@@ -17,9 +17,9 @@ from roarmctl.robot.ik.common import (
     fit_limits,
     fit_limits_rows,
     gripper_index,
-    gripper_value,
     newton,
     newton_rows,
+    ref_gripper_q,
     rot_angle,
     wrap_angle,
 )
@@ -158,7 +158,7 @@ class Roarm5IK:
         on_axis = rho < 1e-9
         az = ref_base if on_axis else math.atan2(rel[1], rel[0])
         u_h = np.array([math.cos(az), math.sin(az), 0.0])  # outward horizontal direction
-        grip = gripper_value(robot, qr)
+        grip = ref_gripper_q(robot, qr)
 
         want_roll = None
         if rot is not None:
@@ -309,7 +309,7 @@ class Roarm5IK:
                 return out
         else:
             want_roll = float(q0[ri])
-        grip = gripper_value(robot, q0)
+        grip = ref_gripper_q(robot, q0)
         rows, rhos, zs, azs = [], [], [], []
         for i, p in enumerate(points):  # solve's scalar prologue, point by point
             rel = p.copy()

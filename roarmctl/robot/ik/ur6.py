@@ -13,8 +13,8 @@ from roarmctl.robot.ik.common import (
     dedupe,
     fit_limits,
     gripper_index,
-    gripper_value,
     newton,
+    ref_gripper_q,
     rot_angle,
     wrap_angle,
 )
@@ -143,7 +143,7 @@ def ur6_solve(robot: Robot, p: np.ndarray, rot: np.ndarray, qr: np.ndarray | Non
         raise UnreachableError(f"{where} is out of reach: the elbow cannot span the distance to the wrist point",
                                "out_of_reach")
     arm = robot.arm_indices
-    grip = gripper_value(robot, qr)
+    grip = ref_gripper_q(robot, qr)
 
     def res(qq):  # position error and the small-angle rotation error (vee of the skew part)
         tt = robot.kin.fk(qq)
