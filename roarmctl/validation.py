@@ -396,13 +396,18 @@ class Checker:
     """Field checks that raise ``error`` with ``"{where}: {field}: {message}"``.
 
     ``json``: name values as a JSON reader expects (``an object``, ``null``) in messages. Every
-    number must be finite and within ``bound`` unless a tighter range is given.
+    number must be finite and within ``bound`` unless a tighter range is given. ``number_word``: how
+    ``number`` names what it expected (``expected a number, got ...``); ``max_name``: the longest
+    ``name`` (characters) unless a call says otherwise.
     """
 
-    def __init__(self, error: type[InputError], *, json: bool = False, bound: float = 1e6) -> None:
+    def __init__(self, error: type[InputError], *, json: bool = False, bound: float = 1e6,
+                 number_word: str = "a number", max_name: int = 255) -> None:
         self.error = error
         self.json = json
         self.bound = bound
+        self.number_word = number_word
+        self.max_name = max_name
 
     def kind(self, value: Any) -> str:
         """How an unexpected value reads in a message."""
@@ -413,8 +418,10 @@ class Checker:
         raise self.error(f"{where}: {field}: {message}" if field else f"{where}: {message}", hint)
 
     def number(self, value: Any, where: str, field: str, *, lo: float | None = None, hi: float | None = None,
-               strict_lo: bool = False, what: str = "a number") -> float:
-        """A finite number (not a bool, not a string) within [lo, hi] (default: +-``bound``)."""
+               strict_lo: bool = False, what: str | None = None) -> float:
+        """A finite number (not a bool, not a string) within [lo, hi] (default: +-``bound``); ``what``: its
+        name in the message (default: ``number_word``)."""
+        what = self.number_word if what is None else what
         if isinstance(value, HugeNumber):
             self.fail(where, field, f"the number {value!r} is too large")
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -440,9 +447,11 @@ class Checker:
             self.fail(where, field, f"expected a list of {count}numbers, got {self.kind(value)}")
         return [self.number(x, where, f"{field}[{i}]", **bounds) for i, x in enumerate(value)]
 
-    def name(self, value: Any, where: str, field: str, *, empty: bool = False, max_len: int = 255,
+    def name(self, value: Any, where: str, field: str, *, empty: bool = False, max_len: int | None = None,
              choices: tuple[str, ...] | list[str] | None = None) -> str:
-        """A string of at most ``max_len`` characters (non-empty unless ``empty``), one of ``choices`` if given."""
+        """A string of at most ``max_len`` characters (default: ``max_name``; non-empty unless ``empty``), one of
+        ``choices`` if given."""
+        max_len = self.max_name if max_len is None else max_len
         if not isinstance(value, str) or (not value and not empty):
             self.fail(where, field, f"expected a name, got {self.kind(value)}")
         if len(value) > max_len:

@@ -55,28 +55,7 @@ MAX_MESH_PIECES, MAX_MESH_VERTICES = 256, 2_000_000  # a scene mesh item: convex
 MAX_CLOUD_CELLS = 2_000_000  # a scene cloud item's occupied cells
 
 
-CHECK = Checker(TrajectoryFileError, json=True, bound=math.inf)
-_fail = CHECK.fail
-_kind = CHECK.kind
-
-
-def _number(v: Any, where: str, field: str, *, lo: float | None = None, hi: float | None = None,
-            strict_lo: bool = False) -> float:
-    """A finite JSON number (not a bool, not a string) within [lo, hi]."""
-    return CHECK.number(v, where, field, lo=lo, hi=hi, strict_lo=strict_lo)
-
-
-def _numbers(v: Any, n: int, where: str, field: str, *, lo: float | None = None, hi: float | None = None,
-             strict_lo: bool = False) -> list[float]:
-    return CHECK.numbers(v, n, where, field, lo=lo, hi=hi, strict_lo=strict_lo)
-
-
-def _name(v: Any, where: str, field: str, *, empty: bool = False) -> str:
-    return CHECK.name(v, where, field, empty=empty, max_len=MAX_NAME)
-
-
-def _mapping(v: Any, where: str, field: str) -> dict:
-    return CHECK.mapping(v, where, field)
+CHECK = Checker(TrajectoryFileError, json=True, bound=math.inf, max_name=MAX_NAME)
 
 
 # --------------------------------------------------------------------------- reading
@@ -92,67 +71,67 @@ def parse_document(data: Any, where: str = "trajectory"):
     Raises ``TrajectoryFileError`` (exit 2) naming the field; nothing here needs the robot.
     """
     if not isinstance(data, dict):
-        raise TrajectoryFileError(f"{where}: expected a JSON object, got {_kind(data)}")
+        raise TrajectoryFileError(f"{where}: expected a JSON object, got {CHECK.kind(data)}")
     if data.get("format") != FORMAT:
-        _fail(where, "format", f"expected '{FORMAT}', got {_kind(data.get('format'))}")
+        CHECK.fail(where, "format", f"expected '{FORMAT}', got {CHECK.kind(data.get('format'))}")
     for key in ("robot", "joint_names", "points"):
         if key not in data:
             raise TrajectoryFileError(f"{where}: '{key}' is missing")
     robot = data["robot"]
     if not isinstance(robot, str) or not robot or len(robot) > 4096 or "\0" in robot:
-        _fail(where, "robot", f"expected a robot name or path, got {_kind(robot)}")
+        CHECK.fail(where, "robot", f"expected a robot name or path, got {CHECK.kind(robot)}")
     names = data["joint_names"]
     if not isinstance(names, list) or not names or len(names) > 64:
-        _fail(where, "joint_names", f"expected a list of 1 to 64 joint names, got {_kind(names)}")
-    names = [_name(n, where, f"joint_names[{i}]") for i, n in enumerate(names)]
+        CHECK.fail(where, "joint_names", f"expected a list of 1 to 64 joint names, got {CHECK.kind(names)}")
+    names = [CHECK.name(n, where, f"joint_names[{i}]") for i, n in enumerate(names)]
     if len(set(names)) != len(names):
-        _fail(where, "joint_names", "a joint is named twice")
-    rate = _number(data.get("sample_rate", 100.0), where, "sample_rate", lo=SAMPLE_RATE_RANGE[0], hi=SAMPLE_RATE_RANGE[1])
+        CHECK.fail(where, "joint_names", "a joint is named twice")
+    rate = CHECK.number(data.get("sample_rate", 100.0), where, "sample_rate", lo=SAMPLE_RATE_RANGE[0], hi=SAMPLE_RATE_RANGE[1])
     pts = data["points"]
     if not isinstance(pts, list) or not pts:
-        _fail(where, "points", f"expected a non-empty list, got {_kind(pts)}")
+        CHECK.fail(where, "points", f"expected a non-empty list, got {CHECK.kind(pts)}")
     if len(pts) > MAX_POINTS:
-        _fail(where, "points", f"{len(pts)} points are more than {MAX_POINTS}", "split the plan into shorter ones")
+        CHECK.fail(where, "points", f"{len(pts)} points are more than {MAX_POINTS}", "split the plan into shorter ones")
     dof = len(names)
     n = len(pts)
     times = np.empty(n)
     arrays = {k: np.zeros((n, dof)) for k in ("positions", "velocities", "accelerations")}
     for i, p in enumerate(pts):
         if not isinstance(p, dict):
-            _fail(where, f"points[{i}]", f"expected an object, got {_kind(p)}")
+            CHECK.fail(where, f"points[{i}]", f"expected an object, got {CHECK.kind(p)}")
         if "time_from_start" not in p:
-            _fail(where, f"points[{i}]", "'time_from_start' is missing")
+            CHECK.fail(where, f"points[{i}]", "'time_from_start' is missing")
         t = p["time_from_start"]
         if isinstance(t, bool) or not isinstance(t, (int, float)):
-            _fail(where, f"points[{i}].time_from_start", f"expected a number, got {_kind(t)}")
-        times[i] = _number(t, where, f"points[{i}].time_from_start", lo=0.0, hi=MAX_DURATION)
+            CHECK.fail(where, f"points[{i}].time_from_start", f"expected a number, got {CHECK.kind(t)}")
+        times[i] = CHECK.number(t, where, f"points[{i}].time_from_start", lo=0.0, hi=MAX_DURATION)
         for k, arr in arrays.items():
             if k not in p:
                 if k == "positions":
-                    _fail(where, f"points[{i}]", "'positions' is missing")
+                    CHECK.fail(where, f"points[{i}]", "'positions' is missing")
                 continue
             vals = p[k]
             if not isinstance(vals, list) or len(vals) != dof:
-                _fail(where, f"points[{i}].{k}", f"expected {dof} numbers (one per joint), got {_kind(vals)}")
+                CHECK.fail(where, f"points[{i}].{k}", f"expected {dof} numbers (one per joint), got {CHECK.kind(vals)}")
             for j, x in enumerate(vals):
                 if type(x) is not float and type(x) is not int:  # bool and str are not numbers here
-                    _number(x, where, f"points[{i}].{k}[{j}] ({names[j]})")
+                    CHECK.number(x, where, f"points[{i}].{k}[{j}] ({names[j]})")
             try:
                 row = np.array(vals, dtype=float)
             except OverflowError:
                 row = np.array([x if abs(x) < 1e308 else math.inf for x in vals], dtype=float)
             if not np.all(np.isfinite(row)):
                 j = int(np.argmin(np.isfinite(row)))
-                _fail(where, f"points[{i}].{k}[{j}] ({names[j]})", f"expected a finite number, got {vals[j]!r:.40}")
+                CHECK.fail(where, f"points[{i}].{k}[{j}] ({names[j]})", f"expected a finite number, got {vals[j]!r:.40}")
             arr[i] = row
     if abs(times[0]) > TIME_TOL:
-        _fail(where, "points[0].time_from_start", f"{times[0]:g} s: the first point must be at 0 s")
+        CHECK.fail(where, "points[0].time_from_start", f"{times[0]:g} s: the first point must be at 0 s")
     if n > 1:
         steps = np.diff(times)
         if np.any(steps <= 0):
             bad = int(np.argmax(steps <= 0)) + 1
-            _fail(where, f"points[{bad}].time_from_start", f"{times[bad]:g} s: times must increase strictly "
-                  f"(the point before is at {times[bad - 1]:g} s)")
+            CHECK.fail(where, f"points[{bad}].time_from_start", f"{times[bad]:g} s: times must increase strictly "
+                       f"(the point before is at {times[bad - 1]:g} s)")
     duration = float(times[-1])
 
     events = []
@@ -160,87 +139,87 @@ def parse_document(data: Any, where: str = "trajectory"):
     if raw_events is None:
         raw_events = []
     if not isinstance(raw_events, list) or len(raw_events) > MAX_EVENTS:
-        _fail(where, "events", f"expected a list of at most {MAX_EVENTS}, got {_kind(raw_events)}")
+        CHECK.fail(where, "events", f"expected a list of at most {MAX_EVENTS}, got {CHECK.kind(raw_events)}")
     for i, e in enumerate(raw_events):
         f = f"events[{i}]"
-        _mapping(e, where, f)
+        CHECK.mapping(e, where, f)
         if "time_from_start" not in e or "kind" not in e:
-            _fail(where, f, "needs 'time_from_start' and 'kind'")
-        t = _number(e["time_from_start"], where, f"{f}.time_from_start", lo=-TIME_TOL, hi=duration + TIME_TOL)
+            CHECK.fail(where, f, "needs 'time_from_start' and 'kind'")
+        t = CHECK.number(e["time_from_start"], where, f"{f}.time_from_start", lo=-TIME_TOL, hi=duration + TIME_TOL)
         pos = e.get("position")
         if pos is not None:
-            pos = _numbers(pos, 3, where, f"{f}.position", lo=-MAX_COORD, hi=MAX_COORD)
+            pos = CHECK.numbers(pos, 3, where, f"{f}.position", lo=-MAX_COORD, hi=MAX_COORD)
         kind = CHECK.name(e["kind"], where, f"{f}.kind", choices=EVENT_KINDS)
-        events.append(Event(t, kind, _name(e.get("label", ""), where, f"{f}.label", empty=True), pos))
+        events.append(Event(t, kind, CHECK.name(e.get("label", ""), where, f"{f}.label", empty=True), pos))
 
     segments = []
     raw_segments = data.get("segments", [])
     if raw_segments is None:
         raw_segments = []
     if not isinstance(raw_segments, list) or len(raw_segments) > MAX_EVENTS:
-        _fail(where, "segments", f"expected a list of at most {MAX_EVENTS}, got {_kind(raw_segments)}")
+        CHECK.fail(where, "segments", f"expected a list of at most {MAX_EVENTS}, got {CHECK.kind(raw_segments)}")
     for i, s in enumerate(raw_segments):
         f = f"segments[{i}]"
-        _mapping(s, where, f)
+        CHECK.mapping(s, where, f)
         if "start" not in s or "end" not in s or "kind" not in s:
-            _fail(where, f, "needs 'start', 'end' and 'kind'")
-        a = _number(s["start"], where, f"{f}.start", lo=-TIME_TOL, hi=duration + TIME_TOL)
-        b = _number(s["end"], where, f"{f}.end", lo=-TIME_TOL, hi=duration + TIME_TOL)
+            CHECK.fail(where, f, "needs 'start', 'end' and 'kind'")
+        a = CHECK.number(s["start"], where, f"{f}.start", lo=-TIME_TOL, hi=duration + TIME_TOL)
+        b = CHECK.number(s["end"], where, f"{f}.end", lo=-TIME_TOL, hi=duration + TIME_TOL)
         if b < a:
-            _fail(where, f"{f}.end", f"{b:g} s is before its start {a:g} s")
-        kind = _name(s["kind"], where, f"{f}.kind")
+            CHECK.fail(where, f"{f}.end", f"{b:g} s is before its start {a:g} s")
+        kind = CHECK.name(s["kind"], where, f"{f}.kind")
         if kind not in SEGMENT_KINDS:
-            _fail(where, f"{f}.kind", f"'{kind}' is not one of {', '.join(SEGMENT_KINDS)}")
-        segments.append(Segment(a, b, kind, _name(s.get("label", ""), where, f"{f}.label", empty=True)))
+            CHECK.fail(where, f"{f}.kind", f"'{kind}' is not one of {', '.join(SEGMENT_KINDS)}")
+        segments.append(Segment(a, b, kind, CHECK.name(s.get("label", ""), where, f"{f}.label", empty=True)))
 
     raw_blends = data.get("blends") or []
     if not isinstance(raw_blends, list) or len(raw_blends) > MAX_EVENTS:
-        _fail(where, "blends", f"expected a list of at most {MAX_EVENTS} times, got {_kind(raw_blends)}")
-    blends = [_number(b, where, f"blends[{i}]", lo=-TIME_TOL, hi=duration + TIME_TOL) for i, b in enumerate(raw_blends)]
+        CHECK.fail(where, "blends", f"expected a list of at most {MAX_EVENTS} times, got {CHECK.kind(raw_blends)}")
+    blends = [CHECK.number(b, where, f"blends[{i}]", lo=-TIME_TOL, hi=duration + TIME_TOL) for i, b in enumerate(raw_blends)]
 
     payloads = data.get("payloads") or []
     if not isinstance(payloads, list) or len(payloads) > MAX_EVENTS:
-        _fail(where, "payloads", f"expected a list of at most {MAX_EVENTS}, got {_kind(payloads)}")
+        CHECK.fail(where, "payloads", f"expected a list of at most {MAX_EVENTS}, got {CHECK.kind(payloads)}")
     for i, p in enumerate(payloads):
         f = f"payloads[{i}]"
-        _mapping(p, where, f)
+        CHECK.mapping(p, where, f)
         for key in ("start", "end", "link", "mass", "com", "inertia"):
             if key not in p:
-                _fail(where, f, f"'{key}' is missing")
-        _number(p["start"], where, f"{f}.start", lo=-TIME_TOL, hi=duration + TIME_TOL)
-        _number(p["end"], where, f"{f}.end", lo=-TIME_TOL, hi=duration + TIME_TOL)
-        _name(p["link"], where, f"{f}.link")
-        _number(p["mass"], where, f"{f}.mass", lo=0.0, hi=1e4)
-        _numbers(p["com"], 3, where, f"{f}.com", lo=-MAX_COORD, hi=MAX_COORD)
+                CHECK.fail(where, f, f"'{key}' is missing")
+        CHECK.number(p["start"], where, f"{f}.start", lo=-TIME_TOL, hi=duration + TIME_TOL)
+        CHECK.number(p["end"], where, f"{f}.end", lo=-TIME_TOL, hi=duration + TIME_TOL)
+        CHECK.name(p["link"], where, f"{f}.link")
+        CHECK.number(p["mass"], where, f"{f}.mass", lo=0.0, hi=1e4)
+        CHECK.numbers(p["com"], 3, where, f"{f}.com", lo=-MAX_COORD, hi=MAX_COORD)
         if not isinstance(p["inertia"], list) or len(p["inertia"]) != 3:
-            _fail(where, f"{f}.inertia", f"expected a 3x3 matrix, got {_kind(p['inertia'])}")
+            CHECK.fail(where, f"{f}.inertia", f"expected a 3x3 matrix, got {CHECK.kind(p['inertia'])}")
         for r, row in enumerate(p["inertia"]):
-            _numbers(row, 3, where, f"{f}.inertia[{r}]", lo=-1e4, hi=1e4)
+            CHECK.numbers(row, 3, where, f"{f}.inertia[{r}]", lo=-1e4, hi=1e4)
 
     limits = data.get("limits") or {}
-    _mapping(limits, where, "limits")
+    CHECK.mapping(limits, where, "limits")
     for key in ("velocity", "acceleration"):
         if limits.get(key) is not None:
-            _numbers(limits[key], dof, where, f"limits.{key}", lo=0.0, hi=1e6, strict_lo=True)
+            CHECK.numbers(limits[key], dof, where, f"limits.{key}", lo=0.0, hi=1e6, strict_lo=True)
     for key in ("velocity_scale", "acceleration_scale"):
         if limits.get(key) is not None:
-            _number(limits[key], where, f"limits.{key}", lo=0.0, hi=1.0, strict_lo=True)
+            CHECK.number(limits[key], where, f"limits.{key}", lo=0.0, hi=1.0, strict_lo=True)
     if limits.get("max_tcp_speed") is not None:
-        _number(limits["max_tcp_speed"], where, "limits.max_tcp_speed", lo=0.0, hi=100.0, strict_lo=True)
+        CHECK.number(limits["max_tcp_speed"], where, "limits.max_tcp_speed", lo=0.0, hi=100.0, strict_lo=True)
 
     margin = data.get("singularity_margin")
     if margin is not None:
-        _mapping(margin, where, "singularity_margin")
+        CHECK.mapping(margin, where, "singularity_margin")
         if margin.get("min_singular_value") is not None:
-            _number(margin["min_singular_value"], where, "singularity_margin.min_singular_value", lo=0.0, hi=10.0)
+            CHECK.number(margin["min_singular_value"], where, "singularity_margin.min_singular_value", lo=0.0, hi=10.0)
 
     scene = data.get("scene") or {"items": []}
-    _mapping(scene, where, "scene")
+    CHECK.mapping(scene, where, "scene")
     items = scene.get("items", [])
     if items is None:
         items = []
     if not isinstance(items, list) or len(items) > MAX_SCENE_ITEMS:
-        _fail(where, "scene.items", f"expected a list of at most {MAX_SCENE_ITEMS} items, got {_kind(items)}")
+        CHECK.fail(where, "scene.items", f"expected a list of at most {MAX_SCENE_ITEMS} items, got {CHECK.kind(items)}")
     seen: set[str] = set()
     for i, it in enumerate(items):
         _scene_item(it, where, f"scene.items[{i}]", seen)
@@ -250,7 +229,7 @@ def parse_document(data: Any, where: str = "trajectory"):
         _plan_meta(plan, where)
     description = data.get("robot_description")  # checked file by file when loaded (robot.bundle)
     if description is not None:
-        _mapping(description, where, "robot_description")
+        CHECK.mapping(description, where, "robot_description")
     return Trajectory(robot=robot, joint_names=names, times=times, events=events, segments=segments, blends=blends, payloads=[dict(p) for p in payloads],
                       limits=dict(limits), singularity_margin=margin, scene={**scene, "items": items}, plan=plan,
                       sample_rate=rate, robot_description=description, **arrays)
@@ -259,64 +238,64 @@ def parse_document(data: Any, where: str = "trajectory"):
 def _plan_meta(plan: Any, where: str) -> None:
     """The ``plan`` a trajectory came from (``execute --from-current`` plans it again): ``path``,
     ``sha256`` (64 hex digits), ``planner`` (one OMPL planner roarmctl offers), ``seed``, ``padding``."""
-    _mapping(plan, where, "plan")
+    CHECK.mapping(plan, where, "plan")
     if plan.get("path") is not None:
         CHECK.name(plan["path"], where, "plan.path", max_len=4096)
     sha = plan.get("sha256")
     if sha is not None and not (isinstance(sha, str) and len(sha) == 64 and all(c in "0123456789abcdef" for c in sha)):
-        _fail(where, "plan.sha256", f"expected 64 hex digits, got {_kind(sha)}")
+        CHECK.fail(where, "plan.sha256", f"expected 64 hex digits, got {CHECK.kind(sha)}")
     if plan.get("planner") is not None:
         CHECK.name(plan["planner"], where, "plan.planner", choices=PLANNERS)
     if plan.get("seed") is not None:
         seed = plan["seed"]
         if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2 ** 63:
-            _fail(where, "plan.seed", f"expected a whole number from 0 to 2**63 - 1, got {_kind(seed)}")
+            CHECK.fail(where, "plan.seed", f"expected a whole number from 0 to 2**63 - 1, got {CHECK.kind(seed)}")
     if plan.get("padding") is not None:
-        _number(plan["padding"], where, "plan.padding", lo=0.0, hi=0.05)
+        CHECK.number(plan["padding"], where, "plan.padding", lo=0.0, hi=0.05)
 
 
 def _scene_item(it: Any, where: str, f: str, seen: set) -> None:
-    _mapping(it, where, f)
-    name = _name(it.get("name"), where, f"{f}.name")
+    CHECK.mapping(it, where, f)
+    name = CHECK.name(it.get("name"), where, f"{f}.name")
     if name in seen:
-        _fail(where, f"{f}.name", f"'{name}' is used twice")
+        CHECK.fail(where, f"{f}.name", f"'{name}' is used twice")
     seen.add(name)
     role = it.get("role")
     if role not in ROLES:
-        _fail(where, f"{f}.role", f"expected one of {', '.join(ROLES)}, got {_kind(role)}")
+        CHECK.fail(where, f"{f}.role", f"expected one of {', '.join(ROLES)}, got {CHECK.kind(role)}")
     shape = it.get("shape")
     if shape not in SHAPES:
-        _fail(where, f"{f}.shape", f"expected one of {', '.join(SHAPES)}, got {_kind(shape)}")
+        CHECK.fail(where, f"{f}.shape", f"expected one of {', '.join(SHAPES)}, got {CHECK.kind(shape)}")
     if shape == "mesh":
         _mesh_pieces(it.get("pieces"), where, f"{f}.pieces")
     elif shape == "cloud":
-        _number(it.get("resolution"), where, f"{f}.resolution", lo=1e-4, hi=1.0)
+        CHECK.number(it.get("resolution"), where, f"{f}.resolution", lo=1e-4, hi=1.0)
         _int_rows(it.get("cells"), where, f"{f}.cells", MAX_CLOUD_CELLS, -2 ** 15, 2 ** 15 - 1)
     elif shape == "box":
-        _numbers(it.get("size"), 3, where, f"{f}.size", lo=0.0, hi=MAX_SIZE, strict_lo=True)
+        CHECK.numbers(it.get("size"), 3, where, f"{f}.size", lo=0.0, hi=MAX_SIZE, strict_lo=True)
     else:
-        _number(it.get("radius"), where, f"{f}.radius", lo=0.0, hi=MAX_SIZE, strict_lo=True)
+        CHECK.number(it.get("radius"), where, f"{f}.radius", lo=0.0, hi=MAX_SIZE, strict_lo=True)
         if shape == "cylinder":
-            _number(it.get("length"), where, f"{f}.length", lo=0.0, hi=MAX_SIZE, strict_lo=True)
+            CHECK.number(it.get("length"), where, f"{f}.length", lo=0.0, hi=MAX_SIZE, strict_lo=True)
     if "xyz" not in it:
-        _fail(where, f"{f}.xyz", "is missing", "every scene item has a position [x, y, z] in m")
-    _numbers(it["xyz"], 3, where, f"{f}.xyz", lo=-MAX_COORD, hi=MAX_COORD)
-    _numbers(it.get("rpy", [0, 0, 0]), 3, where, f"{f}.rpy", lo=-100.0, hi=100.0)
+        CHECK.fail(where, f"{f}.xyz", "is missing", "every scene item has a position [x, y, z] in m")
+    CHECK.numbers(it["xyz"], 3, where, f"{f}.xyz", lo=-MAX_COORD, hi=MAX_COORD)
+    CHECK.numbers(it.get("rpy", [0, 0, 0]), 3, where, f"{f}.rpy", lo=-100.0, hi=100.0)
 
 
 def _int_rows(v: Any, where: str, f: str, most: int, lo: int, hi: int) -> np.ndarray:
     """A list of at most ``most`` rows of 3 whole numbers in [lo, hi], as an (N, 3) int64 array."""
     if not isinstance(v, list) or not 0 < len(v) <= most:
-        _fail(where, f, f"expected a list of 1 to {most} rows [i, j, k], got {_kind(v)}")
+        CHECK.fail(where, f, f"expected a list of 1 to {most} rows [i, j, k], got {CHECK.kind(v)}")
     try:
         a = np.array(v, dtype=object)
         if a.ndim != 2 or a.shape[1] != 3 or any(isinstance(x, bool) or not isinstance(x, int) for x in a.ravel()):
             raise ValueError
         rows = a.astype(np.int64)
     except (ValueError, TypeError, OverflowError):
-        _fail(where, f, "expected rows of 3 whole numbers")
+        CHECK.fail(where, f, "expected rows of 3 whole numbers")
     if rows.min() < lo or rows.max() > hi:
-        _fail(where, f, f"a value lies outside {lo} .. {hi}")
+        CHECK.fail(where, f, f"a value lies outside {lo} .. {hi}")
     return rows
 
 
@@ -324,20 +303,20 @@ def _mesh_pieces(v: Any, where: str, f: str) -> None:
     """A mesh item's ``pieces``: [{"vertices": [[x, y, z], ...] (m), "faces": [[i, j, k], ...]}], each face naming
     vertices of its piece."""
     if not isinstance(v, list) or not 0 < len(v) <= MAX_MESH_PIECES:
-        _fail(where, f, f"expected a list of 1 to {MAX_MESH_PIECES} pieces, got {_kind(v)}")
+        CHECK.fail(where, f, f"expected a list of 1 to {MAX_MESH_PIECES} pieces, got {CHECK.kind(v)}")
     total = 0
     for i, piece in enumerate(v):
-        _mapping(piece, where, f"{f}[{i}]")
+        CHECK.mapping(piece, where, f"{f}[{i}]")
         verts = piece.get("vertices")
         if not isinstance(verts, list) or not 0 < len(verts) <= MAX_MESH_VERTICES - total:
-            _fail(where, f"{f}[{i}].vertices", f"expected a list of vertices, at most {MAX_MESH_VERTICES} in all")
+            CHECK.fail(where, f"{f}[{i}].vertices", f"expected a list of vertices, at most {MAX_MESH_VERTICES} in all")
         total += len(verts)
         try:
             arr = np.array(verts, dtype=float)
         except (ValueError, TypeError):
-            _fail(where, f"{f}[{i}].vertices", "expected rows [x, y, z] of numbers")
+            CHECK.fail(where, f"{f}[{i}].vertices", "expected rows [x, y, z] of numbers")
         if arr.ndim != 2 or arr.shape[1] != 3 or not np.all(np.abs(arr) <= MAX_COORD):
-            _fail(where, f"{f}[{i}].vertices", f"expected rows [x, y, z] of finite numbers within {MAX_COORD:g} m")
+            CHECK.fail(where, f"{f}[{i}].vertices", f"expected rows [x, y, z] of finite numbers within {MAX_COORD:g} m")
         _int_rows(piece.get("faces"), where, f"{f}[{i}].faces", 4 * MAX_MESH_VERTICES, 0, len(verts) - 1)
 
 
@@ -353,32 +332,32 @@ def parse_log(data: Any, where: str = "execution log") -> dict:
     an export reads: ``robot``, ``speed_scale`` in (0, 1], ``sent`` and ``received`` lists of entries
     whose ``t`` (s) are finite, within +-``MAX_LOG_TIME`` and never decreasing, commands and feedback
     as objects of finite numbers. Returns ``data``; raises ``TrajectoryFileError`` naming the field."""
-    _mapping(data, where, "log")
+    CHECK.mapping(data, where, "log")
     if data.get("format") != LOG_FORMAT:
-        _fail(where, "format", f"expected '{LOG_FORMAT}', got {_kind(data.get('format'))}")
-    _name(data.get("robot"), where, "robot")
+        CHECK.fail(where, "format", f"expected '{LOG_FORMAT}', got {CHECK.kind(data.get('format'))}")
+    CHECK.name(data.get("robot"), where, "robot")
     if data.get("speed_scale") is not None:
-        _number(data["speed_scale"], where, "speed_scale", lo=MIN_SPEED_SCALE, hi=1.0)
+        CHECK.number(data["speed_scale"], where, "speed_scale", lo=MIN_SPEED_SCALE, hi=1.0)
     for key in ("sent", "received"):
         entries = data.get(key)
         if not isinstance(entries, list) or len(entries) > MAX_LOG_ENTRIES:
-            _fail(where, key, f"expected a list of at most {MAX_LOG_ENTRIES} entries, got {_kind(entries)}")
+            CHECK.fail(where, key, f"expected a list of at most {MAX_LOG_ENTRIES} entries, got {CHECK.kind(entries)}")
         last = -math.inf
         inner = "cmd" if key == "sent" else "feedback"
         for i, e in enumerate(entries):
             f = f"{key}[{i}]"
-            _mapping(e, where, f)
-            t = _number(e.get("t"), where, f"{f}.t", lo=-MAX_LOG_TIME, hi=MAX_LOG_TIME)
+            CHECK.mapping(e, where, f)
+            t = CHECK.number(e.get("t"), where, f"{f}.t", lo=-MAX_LOG_TIME, hi=MAX_LOG_TIME)
             if t < last:
-                _fail(where, f"{f}.t", f"{t:g} s is before the entry before it ({last:g} s)", "entries are in time order")
+                CHECK.fail(where, f"{f}.t", f"{t:g} s is before the entry before it ({last:g} s)", "entries are in time order")
             last = t
             body = e.get(inner)
             if body is None and key == "received":
                 continue
-            _mapping(body, where, f"{f}.{inner}")
+            CHECK.mapping(body, where, f"{f}.{inner}")
             for k, v in body.items():
                 if isinstance(v, (int, float, HugeNumber)) and not isinstance(v, bool):
-                    _number(v, where, f"{f}.{inner}.{k}", lo=-1e6, hi=1e6)
+                    CHECK.number(v, where, f"{f}.{inner}.{k}", lo=-1e6, hi=1e6)
     return data
 
 
@@ -386,8 +365,8 @@ def parse_log(data: Any, where: str = "execution log") -> dict:
 def check_against_robot(traj, robot, where: str = "trajectory") -> None:
     """Joint names, limits, speeds and sample steps of ``traj`` against ``robot``; raises TrajectoryFileError."""
     if list(traj.joint_names) != list(robot.joint_names):
-        _fail(where, "joint_names", f"{', '.join(traj.joint_names)} do not match robot '{robot.name}'",
-              f"expected {', '.join(robot.joint_names)}")
+        CHECK.fail(where, "joint_names", f"{', '.join(traj.joint_names)} do not match robot '{robot.name}'",
+                   f"expected {', '.join(robot.joint_names)}")
     names = robot.joint_names
     q, v, a, t = traj.positions, traj.velocities, traj.accelerations, traj.times
     lo, hi = np.asarray(robot.lower, dtype=float), np.asarray(robot.upper, dtype=float)
@@ -402,9 +381,9 @@ def check_against_robot(traj, robot, where: str = "trajectory") -> None:
     bad = first((q < lo - POS_TOL) | (q > hi + POS_TOL))
     if bad:
         i, j = bad
-        _fail(where, f"points[{i}].positions ({names[j]})",
-              f"{q[i, j]:.4f} at t = {t[i]:.3f} s is outside the joint limits [{lo[j]:.4f}, {hi[j]:.4f}]",
-              "plan it again with the robot's joint limits")
+        CHECK.fail(where, f"points[{i}].positions ({names[j]})",
+                   f"{q[i, j]:.4f} at t = {t[i]:.3f} s is outside the joint limits [{lo[j]:.4f}, {hi[j]:.4f}]",
+                   "plan it again with the robot's joint limits")
     vlim = vmax * (1 + VEL_TOL) + 1e-6
     alim = amax * (1 + ACC_TOL) + 1e-6
     for values, limit, bound, field in ((v, vmax, vlim, "velocities"), (a, amax, alim, "accelerations")):
@@ -412,9 +391,9 @@ def check_against_robot(traj, robot, where: str = "trajectory") -> None:
         if bad:
             i, j = bad
             kind = "velocity" if field == "velocities" else "acceleration"
-            _fail(where, f"points[{i}].{field} ({names[j]})",
-                  f"{values[i, j]:.4f} at t = {t[i]:.3f} s exceeds the {kind} limit {limit[j]:.4f}",
-                  "plan it again; the robot's limits are in its description")
+            CHECK.fail(where, f"points[{i}].{field} ({names[j]})",
+                       f"{values[i, j]:.4f} at t = {t[i]:.3f} s exceeds the {kind} limit {limit[j]:.4f}",
+                       "plan it again; the robot's limits are in its description")
     if len(t) < 2:
         return
     dt = np.diff(t)
@@ -422,9 +401,9 @@ def check_against_robot(traj, robot, where: str = "trajectory") -> None:
     k = np.flatnonzero(dt > step_max * (1 + 1e-6) + TIME_TOL)
     if len(k):
         i = int(k[0]) + 1
-        _fail(where, f"points[{i}].time_from_start",
-              f"{dt[i - 1]:g} s after the point before, more than one sample at the declared sample_rate "
-              f"{traj.sample_rate:g} Hz", "a trajectory must be sampled at least at its sample_rate")
+        CHECK.fail(where, f"points[{i}].time_from_start",
+                   f"{dt[i - 1]:g} s after the point before, more than one sample at the declared sample_rate "
+                   f"{traj.sample_rate:g} Hz", "a trajectory must be sampled at least at its sample_rate")
     dq = np.diff(q, axis=0)
     # Position steps must agree with the velocities: with |acceleration| <= A over the step,
     # |dq - v0 dt| and |dq - v1 dt| are at most A dt^2 / 2; the mean speed is at most the limit.
@@ -434,10 +413,10 @@ def check_against_robot(traj, robot, where: str = "trajectory") -> None:
     bad = first((worst > 0) | (mean > 0))
     if bad:
         i, j = bad
-        _fail(where, f"points[{i + 1}].positions ({names[j]})",
-              f"a step of {dq[i, j]:+.4f} in {dt[i]:g} s from {q[i, j]:.4f} does not follow from the velocities "
-              f"{v[i, j]:.4f} -> {v[i + 1, j]:.4f} within the acceleration limit {amax[j]:.4f}",
-              "the file was edited or damaged; plan it again")
+        CHECK.fail(where, f"points[{i + 1}].positions ({names[j]})",
+                   f"a step of {dq[i, j]:+.4f} in {dt[i]:g} s from {q[i, j]:.4f} does not follow from the velocities "
+                   f"{v[i, j]:.4f} -> {v[i + 1, j]:.4f} within the acceleration limit {amax[j]:.4f}",
+                   "the file was edited or damaged; plan it again")
 
 
 def validate_trajectory(traj_or_doc: Any, robot: Any = None, where: str | None = None):

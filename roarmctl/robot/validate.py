@@ -30,9 +30,7 @@ AXIS_TOL = 1e-3  # |axis| must be 1 within this (URDF axes are unit vectors)
 MAX_VALUE = 1e6  # any length (m), angle (rad), limit or mass in a description
 
 
-CHECK = Checker(DescriptionError, bound=MAX_VALUE)
-_fail = CHECK.fail
-_kind = CHECK.kind
+CHECK = Checker(DescriptionError, bound=MAX_VALUE, number_word="a finite number", max_name=4096)
 
 
 # --------------------------------------------------------------------------- YAML
@@ -41,27 +39,11 @@ def read_yaml(path: Path, what: str | None = None, roots=None) -> Any:
     return load_yaml(path, DescriptionError, what=what, roots=roots)
 
 
-def _num(v: Any, where: str, field: str) -> None:
-    CHECK.number(v, where, field, what="a finite number")
-
-
-def _nums(v: Any, where: str, field: str, n: int | None = None) -> None:
-    CHECK.numbers(v, n, where, field, what="a finite number")
-
-
-def _str(v: Any, where: str, field: str, choices: tuple[str, ...] | None = None) -> None:
-    CHECK.name(v, where, field, choices=choices, max_len=4096)
-
-
-def _map(v: Any, where: str, field: str) -> dict:
-    return CHECK.mapping(v, where, field)
-
-
 def _xyz_rpy(v: Any, where: str, field: str) -> None:
-    _map(v, where, field)
+    CHECK.mapping(v, where, field)
     for k in ("xyz", "rpy"):
         if k in v:
-            _nums(v[k], where, f"{field}.{k}", 3)
+            CHECK.numbers(v[k], 3, where, f"{field}.{k}")
 
 
 # Every field a description may have. A key outside these is refused rather than ignored: a typo such
@@ -81,17 +63,12 @@ NESTED_KEYS = {
 }
 
 
-def _known(mapping: dict, allowed: tuple[str, ...], where: str, field: str | None) -> None:
-    """Refuse a key of ``mapping`` outside ``allowed``, suggesting the closest allowed one."""
-    CHECK.known_keys(mapping, allowed, where, field)
-
-
 def check_keys(data: dict, where: str) -> None:
     """Refuse unknown fields of a sidecar (URDF) or DH description, at the top level and one level down."""
     if "dh" in data:
-        _known(data, COMMON_KEYS + DH_KEYS, where, None)
+        CHECK.known_keys(data, COMMON_KEYS + DH_KEYS, where, None)
     elif "urdf" in data:
-        _known(data, COMMON_KEYS + URDF_KEYS, where, None)
+        CHECK.known_keys(data, COMMON_KEYS + URDF_KEYS, where, None)
     # neither: the loader says that it needs one of them
     for field, allowed in NESTED_KEYS.items():
         head, _, tail = field.partition(".")
@@ -99,125 +76,125 @@ def check_keys(data: dict, where: str) -> None:
         if tail and isinstance(value, dict):
             value = value.get(tail)
         if isinstance(value, dict):
-            _known(value, allowed, where, field)
+            CHECK.known_keys(value, allowed, where, field)
     for i, w in enumerate(data.get("wire") or []):
         if isinstance(w, dict):
-            _known(w, ("joint", "field", "sign", "offset", "clamp"), where, f"wire[{i}]")
+            CHECK.known_keys(w, ("joint", "field", "sign", "offset", "clamp"), where, f"wire[{i}]")
     for i, it in enumerate(data.get("inertials") or []):
         if isinstance(it, dict):
-            _known(it, ("link", "mass", "com", "inertia"), where, f"inertials[{i}]")
+            CHECK.known_keys(it, ("link", "mass", "com", "inertia"), where, f"inertials[{i}]")
     frames = data.get("frames")
     for name, f in (frames.items() if isinstance(frames, dict) else ()):
         if isinstance(f, dict):
-            _known(f, ("origin", "unit", "point"), where, f"frames.{name}")
+            CHECK.known_keys(f, ("origin", "unit", "point"), where, f"frames.{name}")
             if isinstance(f.get("point"), dict):
-                _known(f["point"], ("link", "xyz"), where, f"frames.{name}.point")
+                CHECK.known_keys(f["point"], ("link", "xyz"), where, f"frames.{name}.point")
 
 
 def check_document(data: Any, where: str) -> None:
     """Types of every field the loader reads from a sidecar or DH YAML (``where`` names the file)."""
     if not isinstance(data, dict):
-        raise DescriptionError(f"{where}: expected a mapping at the top level, got {_kind(data)}")
+        raise DescriptionError(f"{where}: expected a mapping at the top level, got {CHECK.kind(data)}")
     if data.get("trust") is not None and not isinstance(data["trust"], bool):
-        _fail(where, "trust", f"expected true or false, got {_kind(data['trust'])}")
+        CHECK.fail(where, "trust", f"expected true or false, got {CHECK.kind(data['trust'])}")
     for key in ("name", "source", "description", "urdf", "tcp_link", "singularity_model", "format"):
         if data.get(key) is not None:
-            _str(data[key], where, key)
+            CHECK.name(data[key], where, key)
     if data.get("name") is not None and len(data["name"]) > 255:
-        _fail(where, "name", "longer than 255 characters")
+        CHECK.fail(where, "name", "longer than 255 characters")
     for key, choices in (("length_unit", ("m", "mm")), ("angle_unit", ("rad", "deg")), ("convention", ("standard", "modified"))):
         if data.get(key) is not None:
-            _str(data[key], where, key, choices)
+            CHECK.name(data[key], where, key, choices=choices)
     if data.get("joints") is not None:
         j = data["joints"]
         if not isinstance(j, list) or not j:
-            _fail(where, "joints", f"expected a list of joint names, got {_kind(j)}")
+            CHECK.fail(where, "joints", f"expected a list of joint names, got {CHECK.kind(j)}")
         for i, n in enumerate(j):
-            _str(n, where, f"joints[{i}]")
+            CHECK.name(n, where, f"joints[{i}]")
         if len(set(j)) != len(j):
-            _fail(where, "joints", "a joint is listed twice")
+            CHECK.fail(where, "joints", "a joint is listed twice")
     limits = data.get("limits")
     if limits is not None:
-        _map(limits, where, "limits")
+        CHECK.mapping(limits, where, "limits")
         for key, v in limits.items():
             if isinstance(v, list):
-                _nums(v, where, f"limits.{key}")
+                CHECK.numbers(v, None, where, f"limits.{key}")
             elif isinstance(v, dict):
                 for name, x in v.items():
-                    _str(name, where, f"limits.{key}")
-                    _num(x, where, f"limits.{key}.{name}")
+                    CHECK.name(name, where, f"limits.{key}")
+                    CHECK.number(x, where, f"limits.{key}.{name}")
             elif v is not None:
-                _fail(where, f"limits.{key}", f"expected a list or a mapping joint -> value, got {_kind(v)}")
+                CHECK.fail(where, f"limits.{key}", f"expected a list or a mapping joint -> value, got {CHECK.kind(v)}")
     g = data.get("gripper")
     if g is not None:
-        _map(g, where, "gripper")
-        _str(g.get("joint"), where, "gripper.joint")
-        _num(g.get("open"), where, "gripper.open")
-        _num(g.get("closed"), where, "gripper.closed")
+        CHECK.mapping(g, where, "gripper")
+        CHECK.name(g.get("joint"), where, "gripper.joint")
+        CHECK.number(g.get("open"), where, "gripper.open")
+        CHECK.number(g.get("closed"), where, "gripper.closed")
     poses = data.get("named_poses")
     if poses is not None:
-        _map(poses, where, "named_poses")
+        CHECK.mapping(poses, where, "named_poses")
         for name, vals in poses.items():
-            _str(name, where, "named_poses")
-            _nums(vals, where, f"named_poses.{name}")
+            CHECK.name(name, where, "named_poses")
+            CHECK.numbers(vals, None, where, f"named_poses.{name}")
     wire = data.get("wire")
     if wire is not None:
         if not isinstance(wire, list):
-            _fail(where, "wire", f"expected a list of {{joint, field, sign, offset, clamp}}, got {_kind(wire)}")
+            CHECK.fail(where, "wire", f"expected a list of {{joint, field, sign, offset, clamp}}, got {CHECK.kind(wire)}")
         for i, w in enumerate(wire):
-            _map(w, where, f"wire[{i}]")
-            _str(w.get("joint"), where, f"wire[{i}].joint")
-            _str(w.get("field"), where, f"wire[{i}].field")
+            CHECK.mapping(w, where, f"wire[{i}]")
+            CHECK.name(w.get("joint"), where, f"wire[{i}].joint")
+            CHECK.name(w.get("field"), where, f"wire[{i}].field")
             for k in ("sign", "offset"):
                 if k in w:
-                    _num(w[k], where, f"wire[{i}].{k}")
+                    CHECK.number(w[k], where, f"wire[{i}].{k}")
             if "clamp" in w:
-                _nums(w["clamp"], where, f"wire[{i}].clamp", 2)
+                CHECK.numbers(w["clamp"], 2, where, f"wire[{i}].clamp")
     pairs = data.get("allowed_collisions")
     if pairs is not None:
         if not isinstance(pairs, list):
-            _fail(where, "allowed_collisions", f"expected a list of link pairs, got {_kind(pairs)}")
+            CHECK.fail(where, "allowed_collisions", f"expected a list of link pairs, got {CHECK.kind(pairs)}")
         for i, p in enumerate(pairs):
             if not isinstance(p, list) or len(p) != 2:
-                _fail(where, f"allowed_collisions[{i}]", f"expected a pair of link names, got {_kind(p)}")
+                CHECK.fail(where, f"allowed_collisions[{i}]", f"expected a pair of link names, got {CHECK.kind(p)}")
             for j, link in enumerate(p):
-                _str(link, where, f"allowed_collisions[{i}][{j}]")
+                CHECK.name(link, where, f"allowed_collisions[{i}][{j}]")
     for key in ("base", "tool"):
         if data.get(key) is not None:
             _xyz_rpy(data[key], where, key)
     if "dh" in data:
         rows = data["dh"]
         if not isinstance(rows, list) or not rows or len(rows) > 64:
-            _fail(where, "dh", f"expected a list of 1 to 64 rows, got {_kind(rows)}")
+            CHECK.fail(where, "dh", f"expected a list of 1 to 64 rows, got {CHECK.kind(rows)}")
         for i, row in enumerate(rows):
-            _map(row, where, f"dh[{i}]")
+            CHECK.mapping(row, where, f"dh[{i}]")
             for k in ("a", "alpha", "d", "theta", "offset", "lower", "upper"):
                 if k in row:
-                    _num(row[k], where, f"dh[{i}].{k}")
+                    CHECK.number(row[k], where, f"dh[{i}].{k}")
             if "name" in row:
-                _str(row["name"], where, f"dh[{i}].name")
+                CHECK.name(row["name"], where, f"dh[{i}].name")
             if "type" in row:
-                _str(row["type"], where, f"dh[{i}].type", ("revolute", "prismatic"))
+                CHECK.name(row["type"], where, f"dh[{i}].type", choices=("revolute", "prismatic"))
     items = data.get("inertials")
     if items is not None:
         if not isinstance(items, list):
-            _fail(where, "inertials", f"expected a list, got {_kind(items)}")
+            CHECK.fail(where, "inertials", f"expected a list, got {CHECK.kind(items)}")
         for i, it in enumerate(items):
-            _map(it, where, f"inertials[{i}]")
+            CHECK.mapping(it, where, f"inertials[{i}]")
             if "link" in it:
-                _str(it["link"], where, f"inertials[{i}].link")
-            _num(it.get("mass"), where, f"inertials[{i}].mass")
+                CHECK.name(it["link"], where, f"inertials[{i}].link")
+            CHECK.number(it.get("mass"), where, f"inertials[{i}].mass")
             if it["mass"] < 0:
-                _fail(where, f"inertials[{i}].mass", f"{it['mass']} must not be negative")
+                CHECK.fail(where, f"inertials[{i}].mass", f"{it['mass']} must not be negative")
             if "com" in it:
-                _nums(it["com"], where, f"inertials[{i}].com", 3)
+                CHECK.numbers(it["com"], 3, where, f"inertials[{i}].com")
             inertia = it.get("inertia")
             if inertia is not None:
                 if isinstance(inertia, list) and len(inertia) == 3 and all(isinstance(r, list) for r in inertia):
                     for r, row in enumerate(inertia):
-                        _nums(row, where, f"inertials[{i}].inertia[{r}]", 3)
+                        CHECK.numbers(row, 3, where, f"inertials[{i}].inertia[{r}]")
                 else:
-                    _nums(inertia, where, f"inertials[{i}].inertia", 3)
+                    CHECK.numbers(inertia, 3, where, f"inertials[{i}].inertia")
     check_keys(data, where)
 
 
@@ -226,23 +203,23 @@ def _attr_floats(elem, key: str, n: int, where: str, field: str, required: bool 
     text = elem.get(key)
     if text is None:
         if required:
-            _fail(where, field, f"'{key}' is missing")
+            CHECK.fail(where, field, f"'{key}' is missing")
         return
     try:
         vals = [float(t) for t in text.split()]
     except ValueError:
-        _fail(where, field, f"'{text[:40]}' is not {n} number(s)")
+        CHECK.fail(where, field, f"'{text[:40]}' is not {n} number(s)")
     if len(vals) != n or not all(math.isfinite(v) and abs(v) <= MAX_VALUE for v in vals):
-        _fail(where, field, f"'{text[:40]}' is not {n} finite number(s)")
+        CHECK.fail(where, field, f"'{text[:40]}' is not {n} finite number(s)")
 
 
 def _unique_name(element, kind: str, k: int, seen: dict[str, Any], where: str) -> str:
     """The ``name`` of the k-th URDF <link> or <joint>, required and not already in ``seen``."""
     name = element.get("name")
     if not name:
-        _fail(where, f"{kind}[{k}]", "has no name")
+        CHECK.fail(where, f"{kind}[{k}]", "has no name")
     if name in seen:
-        _fail(where, f"{kind} '{name}'", "the name is used twice")
+        CHECK.fail(where, f"{kind} '{name}'", "the name is used twice")
     return name
 
 
@@ -254,10 +231,10 @@ MAX_LINKS = 300
 def check_urdf(root, where: str) -> None:
     """The URDF's structure and numbers (``root`` is the parsed XML root element)."""
     if root.tag != "robot":
-        _fail(where, "root element", f"<{root.tag}> is not <robot>")
+        CHECK.fail(where, "root element", f"<{root.tag}> is not <robot>")
     for tag in ("link", "joint"):
         if len(root.findall(tag)) > MAX_LINKS:
-            _fail(where, f"<{tag}>", f"more than {MAX_LINKS} of them", "is this the right file?")
+            CHECK.fail(where, f"<{tag}>", f"more than {MAX_LINKS} of them", "is this the right file?")
     links: dict[str, Any] = {}
     for k, link in enumerate(root.findall("link")):
         name = _unique_name(link, "link", k, links, where)
@@ -269,7 +246,7 @@ def check_urdf(root, where: str) -> None:
                 _attr_floats(mass, "value", 1, where, f"link '{name}' mass value", required=True)
                 # 0 is a massless frame link (Franka's panda_link8, many tool frames); only negative is wrong
                 if float(mass.get("value")) < 0:
-                    _fail(where, f"link '{name}' mass value", f"{mass.get('value')} must not be negative")
+                    CHECK.fail(where, f"link '{name}' mass value", f"{mass.get('value')} must not be negative")
             for tag, keys in (("origin", ("xyz", "rpy")), ("inertia", ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))):
                 e = inn.find(tag)
                 if e is not None:
@@ -277,7 +254,7 @@ def check_urdf(root, where: str) -> None:
                         _attr_floats(e, key, 3 if tag == "origin" else 1, where, f"link '{name}' inertial {tag} {key}")
             e = inn.find("inertia")
             if e is not None and any(e.get(k) is not None and float(e.get(k)) < 0 for k in ("ixx", "iyy", "izz")):
-                _fail(where, f"link '{name}' inertia", "principal moments ixx, iyy, izz must not be negative")
+                CHECK.fail(where, f"link '{name}' inertia", "principal moments ixx, iyy, izz must not be negative")
         for c, col in enumerate(link.findall("collision")):
             _check_geometry(col, where, f"link '{name}' collision[{c}]")
     joints: dict[str, Any] = {}
@@ -289,12 +266,12 @@ def check_urdf(root, where: str) -> None:
         for tag in ("parent", "child"):
             e = j.find(tag)
             if e is None or e.get("link") not in links:
-                _fail(where, f"joint '{name}' {tag}", f"<{tag} link=...> is missing or names no link")
+                CHECK.fail(where, f"joint '{name}' {tag}", f"<{tag} link=...> is missing or names no link")
             ends[tag] = e.get("link")
         if ends["parent"] == ends["child"]:
-            _fail(where, f"joint '{name}'", f"link '{ends['parent']}' is its own parent")
+            CHECK.fail(where, f"joint '{name}'", f"link '{ends['parent']}' is its own parent")
         if ends["child"] in parent_of:
-            _fail(where, f"joint '{name}' child", f"link '{ends['child']}' already has a parent joint (a URDF is a tree)")
+            CHECK.fail(where, f"joint '{name}' child", f"link '{ends['child']}' already has a parent joint (a URDF is a tree)")
         parent_of[ends["child"]] = ends["parent"]
         o = j.find("origin")
         if o is not None:
@@ -306,7 +283,7 @@ def check_urdf(root, where: str) -> None:
             if j.get("type") != "fixed" and a.get("xyz") is not None:
                 n = float(np.linalg.norm([float(t) for t in a.get("xyz").split()]))
                 if abs(n - 1.0) > AXIS_TOL:
-                    _fail(where, f"joint '{name}' axis", f"'{a.get('xyz')}' has length {n:g}, not 1", "give a unit vector")
+                    CHECK.fail(where, f"joint '{name}' axis", f"'{a.get('xyz')}' has length {n:g}, not 1", "give a unit vector")
         lim = j.find("limit")
         if lim is not None:
             for key in ("lower", "upper", "velocity", "effort"):
@@ -315,16 +292,16 @@ def check_urdf(root, where: str) -> None:
             # lower="0" upper="0" on its fixed end_effector joint) and a continuous one's bounds mean nothing
             if lim.get("lower") is not None and lim.get("upper") is not None and j.get("type") in ("revolute", "prismatic"):
                 if not float(lim.get("lower")) < float(lim.get("upper")):
-                    _fail(where, f"joint '{name}' limit", f"lower {lim.get('lower')} must be below upper {lim.get('upper')}")
+                    CHECK.fail(where, f"joint '{name}' limit", f"lower {lim.get('lower')} must be below upper {lim.get('upper')}")
             for key in ("velocity", "effort"):
                 if lim.get(key) is not None and float(lim.get(key)) < 0:
-                    _fail(where, f"joint '{name}' limit {key}", f"{lim.get(key)} must not be negative")
+                    CHECK.fail(where, f"joint '{name}' limit {key}", f"{lim.get(key)} must not be negative")
     for start in parent_of:  # walking up from every link must reach the root: no cycles
         seen, link = {start}, start
         while link in parent_of:
             link = parent_of[link]
             if link in seen:
-                _fail(where, f"link '{start}'", "the joints form a cycle (a URDF is a tree)")
+                CHECK.fail(where, f"link '{start}'", "the joints form a cycle (a URDF is a tree)")
             seen.add(link)
 
 
@@ -335,14 +312,14 @@ def _check_geometry(col, where: str, field: str) -> None:
             _attr_floats(o, key, 3, where, f"{field} origin {key}")
     geom = col.find("geometry")
     if geom is None or len(geom) == 0:
-        _fail(where, field, "missing <geometry>")
+        CHECK.fail(where, field, "missing <geometry>")
     g = geom[0]
     need = {"box": (("size", 3),), "cylinder": (("radius", 1), ("length", 1)), "sphere": (("radius", 1),),
             "capsule": (("radius", 1), ("length", 1))}.get(g.tag, ())
     for key, n in need:
         _attr_floats(g, key, n, where, f"{field} {g.tag} {key}", required=True)
         if any(float(t) <= 0 for t in g.get(key).split()):
-            _fail(where, f"{field} {g.tag} {key}", f"'{g.get(key)}' must be positive")
+            CHECK.fail(where, f"{field} {g.tag} {key}", f"'{g.get(key)}' must be positive")
 
 
 # --------------------------------------------------------------------------- the loaded robot
@@ -350,24 +327,24 @@ def check_robot(robot, where: str) -> None:
     """Semantic checks of a loaded ``Robot`` (see the module docstring)."""
     names = list(robot.joint_names)
     if len(set(names)) != len(names):
-        _fail(where, "joints", "a joint is named twice")
+        CHECK.fail(where, "joints", "a joint is named twice")
     jn = [j.name for j in robot.joints]
     if len(set(jn)) != len(jn):
-        _fail(where, "joints", f"joint '{next(n for n in jn if jn.count(n) > 1)}' is defined twice")
+        CHECK.fail(where, "joints", f"joint '{next(n for n in jn if jn.count(n) > 1)}' is defined twice")
     links = robot.link_names
     if len(set(links)) != len(links):
-        _fail(where, "links", f"link '{next(n for n in links if links.count(n) > 1)}' appears twice")
+        CHECK.fail(where, "links", f"link '{next(n for n in links if links.count(n) > 1)}' appears twice")
     for j in robot.joints:
         if not (np.all(np.isfinite(j.origin)) and np.all(np.isfinite(j.post))):
-            _fail(where, f"joint '{j.name}' origin", "must be finite numbers")
+            CHECK.fail(where, f"joint '{j.name}' origin", "must be finite numbers")
         if j.kind != "fixed":
             n = float(np.linalg.norm(j.axis))
             if not math.isfinite(n) or abs(n - 1.0) > AXIS_TOL:
-                _fail(where, f"joint '{j.name}' axis", f"length {n:g}, must be a unit vector")
+                CHECK.fail(where, f"joint '{j.name}' axis", f"length {n:g}, must be a unit vector")
             if not (math.isfinite(j.lower) and math.isfinite(j.upper) and j.lower < j.upper):
-                _fail(where, f"joint '{j.name}' limits", f"lower {j.lower:g} must be below upper {j.upper:g}, both finite")
+                CHECK.fail(where, f"joint '{j.name}' limits", f"lower {j.lower:g} must be below upper {j.upper:g}, both finite")
             if not math.isfinite(j.offset):
-                _fail(where, f"joint '{j.name}' offset", "must be finite")
+                CHECK.fail(where, f"joint '{j.name}' offset", "must be finite")
     for key in ("velocity_limits", "acceleration_limits", "jerk_limits"):
         arr = getattr(robot, key, None)
         if arr is None:
@@ -375,49 +352,49 @@ def check_robot(robot, where: str) -> None:
         arr = np.asarray(arr, dtype=float)
         bad = np.flatnonzero(~np.isfinite(arr) | (arr <= 0))
         if len(bad):
-            _fail(where, f"limits.{key.split('_')[0]}.{names[int(bad[0])]}", f"{arr[bad[0]]:g} must be a positive finite number")
+            CHECK.fail(where, f"limits.{key.split('_')[0]}.{names[int(bad[0])]}", f"{arr[bad[0]]:g} must be a positive finite number")
     eff = getattr(robot, "effort_limits", None)
     if eff is not None:
         eff = np.asarray(eff, dtype=float)
         bad = np.flatnonzero(np.isnan(eff) | (eff <= 0))
         if len(bad):
-            _fail(where, f"limits.effort.{names[int(bad[0])]}", f"{eff[bad[0]]:g} must be positive")
+            CHECK.fail(where, f"limits.effort.{names[int(bad[0])]}", f"{eff[bad[0]]:g} must be positive")
     for link, inn in robot.inertials.items():
         if not (math.isfinite(inn.mass) and inn.mass >= 0):
-            _fail(where, f"link '{link}' mass", f"{inn.mass:g} must be a finite number, not negative")
+            CHECK.fail(where, f"link '{link}' mass", f"{inn.mass:g} must be a finite number, not negative")
         if not (np.all(np.isfinite(inn.com)) and np.all(np.isfinite(inn.inertia))):
-            _fail(where, f"link '{link}' inertial", "centre of mass and inertia must be finite")
+            CHECK.fail(where, f"link '{link}' inertial", "centre of mass and inertia must be finite")
     for k, s in enumerate(robot.collision):
         f = f"link '{s.link}' collision '{s.name or k}'"
         if not np.all(np.isfinite(s.origin)):
-            _fail(where, f"{f} origin", "must be finite")
+            CHECK.fail(where, f"{f} origin", "must be finite")
         if s.kind == "mesh":  # its largest extent (an exact mesh may be flat); the mesh reader checked the rest
             dims = [float(np.max(2 * s.mesh.half_extents))]
         else:
             dims = {"box": list(s.size), "sphere": [s.radius], "cylinder": [s.radius, s.length], "capsule": [s.radius]}[s.kind]
         if not all(math.isfinite(d) and 0 < d <= MAX_VALUE for d in dims):
-            _fail(where, f, f"sizes {dims} must be positive finite numbers")
+            CHECK.fail(where, f, f"sizes {dims} must be positive finite numbers")
         if s.kind == "capsule" and not (math.isfinite(s.length) and s.length >= 0):
-            _fail(where, f, "a capsule's length must be finite and not negative")
+            CHECK.fail(where, f, "a capsule's length must be finite and not negative")
     known = set(links)
     for pair in sorted(robot.allowed_collisions, key=sorted):
         unknown = sorted(set(pair) - known)
         if unknown:
-            _fail(where, "allowed_collisions", f"pair ({', '.join(sorted(pair))}): '{unknown[0]}' is not a link of "
-                  f"{robot.name}", "name two links of the URDF")
+            CHECK.fail(where, "allowed_collisions", f"pair ({', '.join(sorted(pair))}): '{unknown[0]}' is not a link of "
+                       f"{robot.name}", "name two links of the URDF")
     lo, hi = np.asarray(robot.lower, dtype=float), np.asarray(robot.upper, dtype=float)
     if robot.gripper is not None:
         gi = robot.joint_index(robot.gripper.joint)
         for key in ("open", "closed"):
             v = getattr(robot.gripper, key)
             if not (lo[gi] - 1e-9 <= v <= hi[gi] + 1e-9):
-                _fail(where, f"gripper.{key}", f"{v:g} is outside the joint's limits [{lo[gi]:g}, {hi[gi]:g}]")
+                CHECK.fail(where, f"gripper.{key}", f"{v:g} is outside the joint's limits [{lo[gi]:g}, {hi[gi]:g}]")
     for pname, q in robot.named_poses.items():
         q = np.asarray(q, dtype=float)
         bad = np.flatnonzero((q < lo - 1e-6) | (q > hi + 1e-6))
         if len(bad):
             i = int(bad[0])
-            _fail(where, f"named_poses.{pname}", f"{names[i]} = {q[i]:g} is outside its limits [{lo[i]:g}, {hi[i]:g}]")
+            CHECK.fail(where, f"named_poses.{pname}", f"{names[i]} = {q[i]:g} is outside its limits [{lo[i]:g}, {hi[i]:g}]")
     if robot.wire:
         _check_wire(robot, where, set(WIRE_FIELDS))
 
@@ -428,19 +405,19 @@ def _check_wire(robot, where: str, fields: set[str]) -> None:
     for i, w in enumerate(robot.wire):
         f = f"wire[{i}]"
         if w.field not in fields:
-            _fail(where, f"{f}.field", f"'{w.field}' is not a field of the device protocol", f"fields: {', '.join(sorted(fields))}")
+            CHECK.fail(where, f"{f}.field", f"'{w.field}' is not a field of the device protocol", f"fields: {', '.join(sorted(fields))}")
         if w.field in seen_f:
-            _fail(where, f"{f}.field", f"'{w.field}' is mapped twice")
+            CHECK.fail(where, f"{f}.field", f"'{w.field}' is mapped twice")
         if w.joint in seen_j:
-            _fail(where, f"{f}.joint", f"'{w.joint}' is mapped twice")
+            CHECK.fail(where, f"{f}.joint", f"'{w.joint}' is mapped twice")
         seen_f.add(w.field)
         seen_j.add(w.joint)
         if w.sign not in (1.0, -1.0):
-            _fail(where, f"{f}.sign", f"{w.sign:g} must be 1 or -1")
+            CHECK.fail(where, f"{f}.sign", f"{w.sign:g} must be 1 or -1")
         if not math.isfinite(w.offset):
-            _fail(where, f"{f}.offset", "must be finite")
+            CHECK.fail(where, f"{f}.offset", "must be finite")
         if math.isnan(w.lower) or math.isnan(w.upper) or not w.lower < w.upper:
-            _fail(where, f"{f}.clamp", f"[{w.lower:g}, {w.upper:g}] must be ordered: lower below upper")
+            CHECK.fail(where, f"{f}.clamp", f"[{w.lower:g}, {w.upper:g}] must be ordered: lower below upper")
     missing = [n for n in robot.joint_names if n not in seen_j]
     if missing:
-        _fail(where, "wire", f"no entry for joint(s) {', '.join(missing)}", "map every actuated joint to a device field once")
+        CHECK.fail(where, "wire", f"no entry for joint(s) {', '.join(missing)}", "map every actuated joint to a device field once")
