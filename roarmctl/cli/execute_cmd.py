@@ -235,7 +235,7 @@ def sim_device(
     info_print: int = typer.Option(2, "--info-print", help="InfoPrint level at start (factory 2 = continuous feedback)."),
     boot: bool = typer.Option(True, "--boot/--no-boot", help="Start like a powered-on arm: boot text, silence, boot moves."),
     link: Path | None = typer.Option(None, "--link", help="Also make this symlink to the pseudo-terminal (e.g. /tmp/ttyROARM)."),
-    json_out: bool = typer.Option(False, "--json", help="Print {\"port\": PATH} as JSON."),
+    json_out: bool = typer.Option(False, "--json", help="Print {\"port\": PATH, \"pty\": PTY, \"firmware\": NAME} as JSON (port: the --link if given)."),
     fail_reads: list[str] = typer.Option([], "--fail-reads", metavar="JOINT=P", help="Fault: each read of JOINT's servo fails "
                                          "with probability P (it then keeps its old value, 0 steps if it never read; 100 ms lost). Repeatable."),
     unpowered: bool = typer.Option(False, "--unpowered", help="Fault: servo supply off (every read fails; 20260701: v = 0, torque flags 0)."),

@@ -52,8 +52,8 @@ def default_output(source: Path, suffix: str = ".png") -> Path:
 
 
 def visualize_path(
-    source: Path = typer.Argument(..., help="Trajectory file (*.traj.json), or a plan file (.yaml) to plan first.",
-                                  show_default=False),
+    source: Path = typer.Argument(..., help="Trajectory file (*.traj.json), or a plan file (.yaml) to plan first; "
+                                  "with -o NAME.html also an execution log (*.exec.json).", show_default=False),
     output: Path | None = typer.Option(None, "-o", "--output",
                                        help="Picture to write: .png, .svg or .pdf, or .html for the interactive 3D page (default: next to SOURCE, same name, .png)."),
     view: str = typer.Option("iso", "--view", help="3D view: iso, top, front or side."),
@@ -61,7 +61,8 @@ def visualize_path(
     size: str = typer.Option("16x10", "--size", help="Sheet size WxH in inches (pixels = size x dpi)."),
 ) -> None:
     """Draw a planned trajectory (PNG, SVG or PDF): 3D scene and TCP path, joint curves, TCP speed, manipulability.
-    With -o NAME.html: the interactive 3D view as one self-contained page (no server, no network)."""
+    With -o NAME.html: the interactive 3D view as one self-contained page (no server, no network), also of an
+    execution log (what the arm was told and what it reported)."""
     out = output if output is not None else default_output(source)
     if out.suffix.lower() == ".html":
         _write_html(source, out)
