@@ -17,9 +17,14 @@ their own work, in the same rounds, one query after the other (so machine load h
 mplib's model is built here from the bundled robot: a URDF whose collision geometry is exactly
 roarmctl's collision boxes (the same link frames and joint limits), an SRDF whose
 disable_collisions are roarmctl's allowed pairs, the scene as FCL boxes and cylinders, the table
-allowed against the base links (as roarmctl's checker does). mplib gets no padding and no
-singularity margin; roarmctl keeps both (plan padding, 0.02 m/rad), so it does more per state.
-The held object (obstacle.yaml, multi_object.yaml) is attached in roarmctl only.
+allowed against the base links (as roarmctl's checker does). mplib cannot pad the arm, so the worker grows its
+scene by the plan's padding instead (boxes and cylinders by the padding on every side, spheres in radius, the desk
+cloud by whole cells, ceil(padding / resolution)); mplib has no singularity margin, roarmctl keeps the plans' (0.02 m/rad),
+so it does a little more per state. On the planner-level queries that carry an object (wall, post, tray, posts)
+the worker attaches it to mplib's TCP link as a box where roarmctl carries it, at the size roarmctl checks it at
+(shrunk by the contact tolerance) less the padding on each side, which the grown scene already adds; the API
+queries hold nothing on either side (a plan starts with empty hands). Both sides' paths are judged by one metric,
+``clearance``: the FCL distance of the unpadded arm to the unpadded scene, against the padding.
 
 Queries (the start and goal configurations are the ones the pipeline plans, captured from a run):
   free  pick_place.yaml, home -> above the cube (the straight joint move is valid)
