@@ -172,6 +172,9 @@ def test_a_mesh_and_a_cloud_block_the_straight_path_and_the_planner_goes_around(
     assert "wall" in checker.explain(Q_MID)
     path = plan_joint_path(checker, Q_START, Q_GOAL, seed=1, time_budget=20.0)
     assert len(path) > 2
+    # from the start to the goal: a path that stops short (or begins elsewhere) does not go around the wall
+    assert np.allclose(path[0], Q_START, rtol=0, atol=1e-12) and np.allclose(path[-1], Q_GOAL, rtol=0, atol=1e-12), \
+        (path[0], path[-1])
     # the same solid as a plain FCL box (a cloud's cells reach out to whole cells: the box grown to them)
     lo, hi = item.aabb()
     box = CollisionChecker(robot, Scene([TABLE, SceneItem.box("wall", hi - lo, (lo + hi) / 2)]))
