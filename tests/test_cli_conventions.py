@@ -63,6 +63,18 @@ def test_unknown_picture_format_is_exit_2_and_writes_nothing(traj, tmp_path, arg
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("name", ["run.png", None])
+def test_an_execution_log_as_a_picture_is_exit_2_pointing_to_the_html_page(tmp_path, name):
+    """Only the 3D page draws a run (README and docs run `visualize-path pick_place.exec.json -o run.html`); a
+    picture of one says so and how, not the trajectory reader's 'format: expected ...'."""
+    log = tmp_path / "run.exec.json"
+    log.write_text(json.dumps({"format": "roarmctl.execlog/1"}))
+    r = roarmctl("visualize-path", str(log), *(["-o", str(tmp_path / name)] if name else []))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "execution log is drawn only as the 3D page" in r.stderr and "-o run.exec.html" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.exec.json"]
+
+
 def test_failing_plan_is_drawn_with_the_failing_target_and_exits_3(far_plan, tmp_path):
     out = tmp_path / "far.svg"
     r = roarmctl("visualize-path", str(far_plan), "-o", str(out))

@@ -86,9 +86,26 @@ def visualize_path(
         written = visualize_trajectory(partial.trajectory, out, view=view, dpi=dpi, size=figsize, name=source.name, failure=partial)
         exc.hint = (f"{exc.hint}; " if exc.hint else "") + f"drawn up to the failure in {written}"
         raise
+    except InputError:
+        if _is_log(source):  # the trajectory reader's "format: expected ..." would not say what to do
+            raise InputError(f"{source}: an execution log is drawn only as the 3D page",
+                             f"use -o {default_output(source, '.html').name}, or roarmctl view {source.name}") from None
+        raise
     written = visualize_trajectory(traj, out, view=view, dpi=dpi, size=figsize, name=source.name)
     w, h = round(figsize[0] * dpi), round(figsize[1] * dpi)
     common.console().print(f"wrote {written} ({w} x {h} px)")
+
+
+def _is_log(source: Path) -> bool:
+    """Whether ``source`` is an execution log (read again only on this error path)."""
+    from roarmctl.export import EXECLOG_FORMAT
+    from roarmctl.motion.validate import read_document
+
+    try:
+        data = read_document(source)
+    except InputError:
+        return False
+    return isinstance(data, dict) and data.get("format") == EXECLOG_FORMAT
 
 
 def _write_html(source: Path, out: Path) -> None:
