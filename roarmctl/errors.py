@@ -8,7 +8,7 @@ only ``roarmctl.cli`` turns them into output and exit codes.
 from __future__ import annotations
 
 import signal
-from typing import Any
+from typing import Any, Literal
 
 
 def describe_value(value: Any, *, json: bool = False) -> str:
@@ -68,10 +68,14 @@ class InfeasibleError(RoarmError):
     partial: Any = None
 
 
-class UnreachableError(InfeasibleError):
-    """IK found no solution. ``reason`` is one of 'out_of_reach', 'joint_limit', 'orientation'."""
+UnreachableReason = Literal["out_of_reach", "joint_limit", "orientation", "collision"]
 
-    def __init__(self, message: str, reason: str = "out_of_reach", hint: str | None = None) -> None:
+
+class UnreachableError(InfeasibleError):
+    """IK found no (valid) solution. ``reason`` is one of 'out_of_reach', 'joint_limit', 'orientation' or
+    'collision' (solutions exist, but each collides or comes too near a singularity)."""
+
+    def __init__(self, message: str, reason: UnreachableReason = "out_of_reach", hint: str | None = None) -> None:
         super().__init__(message, hint)
         self.reason = reason
 

@@ -75,6 +75,15 @@ def test_is_valid_says_why():
     assert not v and "table" in v.reason
 
 
+def test_best_of_no_valid_solution_raises_with_the_reason_and_the_hint():
+    found = rc.Planner(ROBOT, scene_with_wall()).ik(rc.Pose((0.28, 0.0, 0.075), pitch=DOWN), q_ref=HOME)  # in the wall
+    assert not found.ok and found.rejected and all("wall" in why for why in found.rejected)
+    with pytest.raises(rc.UnreachableError) as ei:
+        found.best  # noqa: B018
+    assert ei.value.reason == "collision"
+    assert ei.value.hint == "move the target or change the orientation asked for"
+
+
 def test_plan_to_joints_goes_around_the_wall_and_the_path_is_free_for_another_checker():
     planner = rc.Planner(ROBOT, scene_with_wall(), seed=3)
     path = planner.plan_to_joints(LEFT, RIGHT)

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.api.scene import Scene
 from roarmctl.errors import InputError, PlanningError, UnreachableError
@@ -69,7 +70,7 @@ class Pose:
                 raise InputError(f"Pose.{key}: expected a finite number (rad), got {v!r}")
 
     @classmethod
-    def from_matrix(cls, t) -> Pose:
+    def from_matrix(cls, t: npt.ArrayLike) -> Pose:
         """The pose of a 4x4 homogeneous transform (m, root frame): position and full orientation."""
         t = np.asarray(t, dtype=float)
         if t.shape != (4, 4):
@@ -96,7 +97,7 @@ class IKResult:
         """The first valid solution (raises ``UnreachableError`` when there is none)."""
         if not self.solutions:
             raise UnreachableError("IK: no valid solution" + (f" ({self.rejected[0]})" if self.rejected else ""),
-                                   "move the target or change the orientation asked for")
+                                   "collision" if self.rejected else "out_of_reach", "move the target or change the orientation asked for")
         return self.solutions[0]
 
 
@@ -186,14 +187,14 @@ class Planner:
         self._version = self.scene.version
         return self._ctx
 
-    def _full(self, q, what: str) -> np.ndarray:
+    def _full(self, q: npt.ArrayLike, what: str) -> np.ndarray:
         try:
             return self.robot.full_q(np.asarray(q, dtype=float)).copy()
         except InputError as exc:
             raise InputError(f"{what}: {exc.message}", exc.hint) from None
 
     # ------------------------------------------------------------------ queries
-    def is_valid(self, q, *, touching: str | None = None) -> Validity:
+    def is_valid(self, q: npt.ArrayLike, *, touching: str | None = None) -> Validity:
         """Whether configuration ``q`` (dof or arm joints, rad/m) is within the joint limits, free of collisions
         with itself and the scene (carried items included) and clear of the singularity margin. ``touching``:
         an object of the scene the jaws may touch (the one being grasped)."""
@@ -212,7 +213,7 @@ class Planner:
             return Validity(True)
         return Validity(False, ctx.checker.explain(full[ctx.arm]))
 
-    def ik(self, pose: Pose, q_ref=None, *, touching: str | None = None) -> IKResult:
+    def ik(self, pose: Pose, q_ref: npt.ArrayLike | None = None, *, touching: str | None = None) -> IKResult:
         """Every IK solution for ``pose`` that ``is_valid`` (with ``touching``), nearest to ``q_ref`` (dof or arm
         joints; its gripper value is kept) first. Raises ``UnreachableError`` when the pose has no solution at
         all (out of reach, only outside the limits, orientation not reachable)."""
@@ -230,7 +231,7 @@ class Planner:
                 rejected.append(v.reason)
         return IKResult(tuple(good), tuple(rejected))
 
-    def plan_to_joints(self, q_from, q_to, *, touching: str | None = None) -> JointPath:
+    def plan_to_joints(self, q_from: npt.ArrayLike, q_to: npt.ArrayLike, *, touching: str | None = None) -> JointPath:
         """A collision-free joint path from ``q_from`` to ``q_to`` (dof or arm joints, rad/m): the straight joint
         move when it is valid, else OMPL's (the shortest of a few tries, shortcut). The gripper stays at
         ``q_from``'s value; ``touching`` as for ``is_valid``. Raises ``PlanningError`` when either end is
@@ -249,7 +250,7 @@ class Planner:
         wps = motions.free_path(ctx, TaskStep("free", "plan_to_joints", q_to=qt, grasp_target=touching), qf)
         return JointPath(wps, int(getattr(ctx.checker, "check_count", 0)) - before)
 
-    def plan_to_pose(self, q_from, pose: Pose, *, touching: str | None = None) -> JointPath:
+    def plan_to_pose(self, q_from: npt.ArrayLike, pose: Pose, *, touching: str | None = None) -> JointPath:
         """A collision-free joint path from ``q_from`` to a configuration that puts the TCP at ``pose``: the IK's
         valid solutions are tried nearest first. Raises ``UnreachableError`` when no valid solution exists and
         ``PlanningError`` when no solution can be reached."""

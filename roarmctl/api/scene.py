@@ -18,11 +18,13 @@ arm. Every change bumps ``version`` so a ``Planner`` using the scene rebuilds it
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.errors import InputError
 from roarmctl.motion.scene import Role, SceneItem
@@ -56,29 +58,37 @@ class Scene:
         self.version += 1
         return item
 
-    def add_box(self, name: str, size, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *, role: Role = "obstacle") -> SceneItem:
+    def add_box(self, name: str, size: Iterable[float], xyz: Iterable[float] = (0.0, 0.0, 0.0),
+                rpy: Iterable[float] = (0.0, 0.0, 0.0), *, role: Role = "obstacle") -> SceneItem:
         """A box of full edge lengths ``size`` (3,) m, centred at ``xyz`` (m), turned by URDF ``rpy`` (rad)."""
         return self.add(SceneItem.box(name, size, xyz, rpy, role=role))
 
-    def add_cylinder(self, name: str, radius: float, length: float, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *,
-                     role: Role = "obstacle") -> SceneItem:
+    def add_cylinder(self, name: str, radius: float, length: float, xyz: Iterable[float] = (0.0, 0.0, 0.0),
+                     rpy: Iterable[float] = (0.0, 0.0, 0.0), *, role: Role = "obstacle") -> SceneItem:
         """A cylinder of ``radius`` and ``length`` (m) along its local z, centred at ``xyz``, turned by ``rpy``."""
         return self.add(SceneItem.cylinder(name, radius, length, xyz, rpy, role=role))
 
-    def add_sphere(self, name: str, radius: float, xyz=(0.0, 0.0, 0.0), *, role: Role = "obstacle") -> SceneItem:
+    def add_sphere(self, name: str, radius: float, xyz: Iterable[float] = (0.0, 0.0, 0.0), *,
+                   role: Role = "obstacle") -> SceneItem:
         """A sphere of ``radius`` (m) centred at ``xyz``."""
         return self.add(SceneItem.sphere(name, radius, xyz, role=role))
 
-    def add_mesh(self, name: str, mesh, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *, faces=None, scale=1.0,
-                 exact: bool = False, role: Role = "obstacle") -> SceneItem:
+    def add_mesh(self, name: str, mesh: str | Path | npt.ArrayLike, xyz: Iterable[float] = (0.0, 0.0, 0.0),
+                 rpy: Iterable[float] = (0.0, 0.0, 0.0), *, faces: npt.ArrayLike | None = None,
+                 scale: npt.ArrayLike = 1.0, exact: bool = False, role: Role = "obstacle") -> SceneItem:
         """A mesh: ``mesh`` a file (STL, OBJ, PLY, DAE; its units times ``scale``) or, with ``faces`` (F, 3), the
         vertices (V, 3) m in the item frame; placed at ``xyz`` (m) with URDF ``rpy`` (rad). Checked as the convex
         hulls of its connected parts, or its triangles with ``exact`` (``SceneItem.mesh_file`` / ``from_mesh``)."""
-        if faces is not None:
-            return self.add(SceneItem.from_mesh(name, mesh, faces, xyz, rpy, exact=exact, role=role))
-        return self.add(SceneItem.mesh_file(name, mesh, xyz, rpy, scale=scale, exact=exact, role=role))
+        if isinstance(mesh, (str, Path)):
+            if faces is not None:
+                raise InputError(f"scene: mesh '{name}': a mesh file has its own faces", "leave faces out")
+            return self.add(SceneItem.mesh_file(name, mesh, xyz, rpy, scale=scale, exact=exact, role=role))
+        if faces is None:
+            raise InputError(f"scene: mesh '{name}': vertices (V, 3) need their faces (F, 3)", "give faces=")
+        return self.add(SceneItem.from_mesh(name, mesh, faces, xyz, rpy, exact=exact, role=role))
 
-    def add_point_cloud(self, name: str, points, resolution: float, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *,
+    def add_point_cloud(self, name: str, points: str | Path | npt.ArrayLike, resolution: float,
+                        xyz: Iterable[float] = (0.0, 0.0, 0.0), rpy: Iterable[float] = (0.0, 0.0, 0.0), *,
                         role: Role = "obstacle") -> SceneItem:
         """A point cloud: ``points`` a file (PLY, PCD, .npy; m) or an (N, 3) array (m, item frame), each point
         occupying its cubic cell of side ``resolution`` (m); placed at ``xyz`` with ``rpy``
@@ -99,13 +109,13 @@ class Scene:
         return item
 
     # ------------------------------------------------------------------ carrying
-    def _tcp(self, q) -> np.ndarray:
+    def _tcp(self, q: npt.ArrayLike) -> np.ndarray:
         if self.robot is None:
             raise InputError("scene: attach/detach place the item with the robot's FK, and this scene has no robot",
                              "pass the scene to Planner(robot, scene) first, or build it with Scene(robot=robot)")
         return self.robot.kin.fk(self.robot.full_q(np.asarray(q, dtype=float)))
 
-    def attach(self, name: str, q) -> None:
+    def attach(self, name: str, q: npt.ArrayLike) -> None:
         """The TCP carries item ``name`` from configuration ``q`` (rad/m, dof or arm joints) on: the item keeps
         its pose relative to the TCP as it is at ``q``."""
         if name in self._carried:
@@ -118,7 +128,7 @@ class Scene:
         self._carried[name] = (item, rel)
         self.version += 1
 
-    def detach(self, name: str, q) -> SceneItem:
+    def detach(self, name: str, q: npt.ArrayLike) -> SceneItem:
         """Put carried item ``name`` down where the TCP has carried it at configuration ``q``; returns it (its
         new pose in ``.pose``)."""
         if name not in self._carried:
@@ -154,7 +164,7 @@ class Scene:
         """Carried item name -> its pose (4, 4) in the TCP frame."""
         return {name: rel.copy() for name, (_, rel) in self._carried.items()}
 
-    def world(self, q=None) -> _WorldScene:
+    def world(self, q: npt.ArrayLike | None = None) -> _WorldScene:
         """The items as a ``roarmctl.motion.scene.Scene`` (what the checker and the trajectory file take); with
         ``q``, the carried items too, where the TCP holds them at ``q``."""
         items = [replace(i, pose=i.pose.copy()) for i in self._items.values()]

@@ -50,6 +50,7 @@ def arm_reader(port: str | None, sim: bool, notes: list[str]):
             with PtySimulator(SimConfig()) as simulator:
                 q, fb = read_configuration(simulator.path, robot)
         else:
+            assert port is not None  # one of --port and --sim (checked above)
             q, fb = read_configuration(port, robot)
         notes.append("start: current = the arm's measured pose: " + ", ".join(f"{v:.4f}" for v in q) + " rad; "
                      f"firmware x/y/z ({fb.xyz[0]:.1f}, {fb.xyz[1]:.1f}, {fb.xyz[2]:.1f}) mm")

@@ -54,7 +54,7 @@ from roarmctl.motion.scene import Scene, SceneItem, settled
 from roarmctl.robot.model import Robot
 
 _EPS = 1e-9  # rad: joint-limit tolerance (the kernel uses the same)
-_NO_GRIP = memoryview(np.zeros(0))  # "every state at the set_gripper value"
+_NO_GRIP = np.zeros(0).data  # "every state at the set_gripper value"
 _NO_IDX = np.zeros(0, dtype=np.int64)
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
 _STATE_CACHE = 64  # collision states whose tables are kept (for every checker of the process: _rebuild), least recently used out
@@ -282,7 +282,7 @@ class CollisionChecker:
             for name, value in hit[1].items():
                 setattr(self, name, value)
             self._kf = self._kf.copy()  # this checker's own: set_gripper writes the template in it
-            self._kfm = memoryview(self._kf)
+            self._kfm = self._kf.data
             self._q_template = self._template_view()
             self._q_template[:] = template
             by_name = {it.name: it for it in self.scene.items}
@@ -451,7 +451,7 @@ class CollisionChecker:
                   g_r, lp_r, np.array(sph_c, dtype=float).ravel()]
         self._kf = np.concatenate([np.asarray(f, dtype=float).ravel() for f in floats])
         self._q_template = self._template_view()  # set_gripper writes the kernel's table
-        self._kfm, self._kim = memoryview(self._kf), memoryview(self._ki)  # cheaper to pass than the arrays
+        self._kfm, self._kim = self._kf.data, self._ki.data  # cheaper to pass than the arrays
         self._bufs = {}
 
     def _template_view(self) -> np.ndarray:
@@ -537,8 +537,8 @@ class CollisionChecker:
                               "scene": np.empty((n * max(len(self._active) * m, 1), 3), dtype=np.int64),
                               "self": np.empty((n * max(len(self._pairs), 1), 2), dtype=np.int64),
                               "pose": np.empty((n, max(s, 1), 12)), "idx": np.empty(n, dtype=np.int64)}
-            b["views"] = tuple(memoryview(b[k]) for k in ("valid", "near", "scene", "self", "pose"))
-            b["seg_views"] = b["views"] + (memoryview(b["idx"]),)  # _kernel.segment's
+            b["views"] = tuple(b[k].data for k in ("valid", "near", "scene", "self", "pose"))
+            b["seg_views"] = b["views"] + (b["idx"].data,)  # _kernel.segment's
         return b
 
     def _evaluate(self, q: np.ndarray, stop_at_first: bool, sweep: float = 0.0,

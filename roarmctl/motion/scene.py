@@ -15,10 +15,13 @@ spans [i r, (i + 1) r) along x in the item frame, and so on) and ``"source"``.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Literal
+from pathlib import Path
+from typing import Literal, cast
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.errors import InputError
 from roarmctl.motion.scenefiles import CloudData, MeshData, cloud_data, mesh_data, read_cloud_item, read_mesh_item
@@ -87,45 +90,50 @@ class SceneItem:
         return item
 
     @classmethod
-    def box(cls, name: str, size, xyz, rpy=(0.0, 0.0, 0.0), role: Role = "obstacle") -> SceneItem:
+    def box(cls, name: str, size: Iterable[float], xyz: Iterable[float], rpy: Iterable[float] = (0.0, 0.0, 0.0),
+            role: Role = "obstacle") -> SceneItem:
         """A box of full edge lengths ``size`` (m) centred at ``xyz`` (m) with URDF ``rpy`` (rad)."""
-        return cls(name, role, "box", transform(xyz, rpy), size=tuple(size))
+        three = cast("tuple[float, float, float]", tuple(size))  # __post_init__ refuses another length
+        return cls(name, role, "box", transform(xyz, rpy), size=three)
 
     @classmethod
-    def cylinder(cls, name: str, radius: float, length: float, xyz, rpy=(0.0, 0.0, 0.0), role: Role = "obstacle") -> SceneItem:
+    def cylinder(cls, name: str, radius: float, length: float, xyz: Iterable[float],
+                 rpy: Iterable[float] = (0.0, 0.0, 0.0), role: Role = "obstacle") -> SceneItem:
         """A cylinder of ``radius`` and ``length`` (m) along its local z, centred at ``xyz`` (m), turned by ``rpy`` (rad)."""
         return cls(name, role, "cylinder", transform(xyz, rpy), radius=radius, length=length)
 
     @classmethod
-    def sphere(cls, name: str, radius: float, xyz, role: Role = "obstacle") -> SceneItem:
+    def sphere(cls, name: str, radius: float, xyz: Iterable[float], role: Role = "obstacle") -> SceneItem:
         """A sphere of ``radius`` (m) centred at ``xyz`` (m)."""
         return cls(name, role, "sphere", transform(xyz), radius=radius)
 
     @classmethod
-    def from_mesh(cls, name: str, vertices, faces, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *, exact: bool = False,
-                  role: Role = "obstacle", source: str = "") -> SceneItem:
+    def from_mesh(cls, name: str, vertices: npt.ArrayLike, faces: npt.ArrayLike, xyz: Iterable[float] = (0.0, 0.0, 0.0),
+                  rpy: Iterable[float] = (0.0, 0.0, 0.0), *, exact: bool = False, role: Role = "obstacle",
+                  source: str = "") -> SceneItem:
         """A mesh from triangles: ``vertices`` (V, 3) m in the item frame, ``faces`` (F, 3) vertex indices; placed at
         ``xyz`` (m) with URDF ``rpy`` (rad). ``exact`` False: the convex hulls of its connected parts (what FCL
         checks fastest); True: the triangles as they are (a BVH: hollows and holes stay open)."""
         return cls(name, role, "mesh", transform(xyz, rpy), mesh=mesh_data(vertices, faces, exact, source, f"scene item '{name}'"))
 
     @classmethod
-    def mesh_file(cls, name: str, path, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *, scale=1.0, exact: bool = False,
+    def mesh_file(cls, name: str, path: str | Path, xyz: Iterable[float] = (0.0, 0.0, 0.0),
+                  rpy: Iterable[float] = (0.0, 0.0, 0.0), *, scale: npt.ArrayLike = 1.0, exact: bool = False,
                   role: Role = "obstacle") -> SceneItem:
         """A mesh read from an STL, OBJ, PLY or DAE file (its units times ``scale``, a number or (3,)); see ``from_mesh``."""
         return cls(name, role, "mesh", transform(xyz, rpy), mesh=read_mesh_item(path, scale, exact, f"scene item '{name}'"))
 
     @classmethod
-    def from_points(cls, name: str, points, resolution: float, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *,
-                    role: Role = "obstacle", source: str = "") -> SceneItem:
+    def from_points(cls, name: str, points: npt.ArrayLike, resolution: float, xyz: Iterable[float] = (0.0, 0.0, 0.0),
+                    rpy: Iterable[float] = (0.0, 0.0, 0.0), *, role: Role = "obstacle", source: str = "") -> SceneItem:
         """A point cloud: ``points`` (N, 3) m in the item frame (e.g. a camera's), each occupying the cubic cell of
         edge ``resolution`` (m) it falls in; placed at ``xyz`` (m) with URDF ``rpy`` (rad). Role "table" keeps it
         from being checked against the robot's base links (a scan of the desk under the arm)."""
         return cls(name, role, "cloud", transform(xyz, rpy), cloud=cloud_data(points, resolution, source, f"scene item '{name}'"))
 
     @classmethod
-    def cloud_file(cls, name: str, path, resolution: float, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0), *,
-                   role: Role = "obstacle") -> SceneItem:
+    def cloud_file(cls, name: str, path: str | Path, resolution: float, xyz: Iterable[float] = (0.0, 0.0, 0.0),
+                   rpy: Iterable[float] = (0.0, 0.0, 0.0), *, role: Role = "obstacle") -> SceneItem:
         """A point cloud read from a PLY, PCD or .npy file (m); see ``from_points``."""
         return cls(name, role, "cloud", transform(xyz, rpy), cloud=read_cloud_item(path, resolution, f"scene item '{name}'"))
 

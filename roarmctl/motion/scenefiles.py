@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.errors import InputError
 from roarmctl.fileio import read_bytes
@@ -92,7 +93,8 @@ def _remember(key: tuple, value):
     return value
 
 
-def mesh_data(vertices, faces, exact: bool, source: str, where: str, error: type[InputError] = InputError) -> MeshData:
+def mesh_data(vertices: npt.ArrayLike, faces: npt.ArrayLike, exact: bool, source: str, where: str,
+              error: type[InputError] = InputError) -> MeshData:
     """``MeshData`` of triangles ``vertices`` (V, 3) m, ``faces`` (F, 3): the triangles as they are when ``exact``,
     else the convex hull of each connected part (at most ``MAX_PIECES``)."""
     v = np.asarray(vertices, dtype=float)
@@ -122,7 +124,8 @@ def mesh_data(vertices, faces, exact: bool, source: str, where: str, error: type
     return MeshData(tuple(pieces), False, source)
 
 
-def read_mesh_item(path, scale, exact: bool, where: str, error: type[InputError] = InputError) -> MeshData:
+def read_mesh_item(path: str | Path, scale: npt.ArrayLike, exact: bool, where: str,
+                   error: type[InputError] = InputError) -> MeshData:
     """``MeshData`` of the mesh file ``path`` (its units times ``scale``, a number or (3,)), see ``mesh_data``."""
     path = Path(path)
     scale3 = tuple(float(s) for s in np.broadcast_to(np.asarray(scale, dtype=float), 3))
@@ -136,7 +139,8 @@ def read_mesh_item(path, scale, exact: bool, where: str, error: type[InputError]
     return _remember(key, mesh_data(v, f, exact, str(path), where, error))
 
 
-def cloud_data(points, resolution: float, source: str, where: str, error: type[InputError] = InputError) -> CloudData:
+def cloud_data(points: npt.ArrayLike, resolution: float, source: str, where: str,
+               error: type[InputError] = InputError) -> CloudData:
     """``CloudData`` of ``points`` (N, 3) m at cells of edge ``resolution`` (m); points with a NaN or infinite
     coordinate (a depth camera's missing returns) are dropped."""
     p = np.asarray(points, dtype=float)
@@ -160,7 +164,7 @@ def cloud_data(points, resolution: float, source: str, where: str, error: type[I
     return CloudData(cells, float(resolution), len(p), source)
 
 
-def read_points(path, where: str, error: type[InputError] = InputError) -> np.ndarray:
+def read_points(path: str | Path, where: str, error: type[InputError] = InputError) -> np.ndarray:
     """Points (N, 3) m of a PLY (vertices, with or without faces), PCD (fields x, y, z) or .npy (N, 3) file."""
     path = Path(path)
     suffix = path.suffix.lower()
@@ -194,7 +198,7 @@ def read_points(path, where: str, error: type[InputError] = InputError) -> np.nd
     return pts[:, :3].astype(float)
 
 
-def read_cloud_item(path, resolution: float, where: str, error: type[InputError] = InputError) -> CloudData:
+def read_cloud_item(path: str | Path, resolution: float, where: str, error: type[InputError] = InputError) -> CloudData:
     """``CloudData`` of the point cloud file ``path`` at ``resolution`` (m); see ``cloud_data``."""
     path = Path(path)
     try:

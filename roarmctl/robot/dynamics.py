@@ -20,7 +20,10 @@ with any payload combined into its link (``combine_inertials``).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl import _kernel
 from roarmctl.errors import DescriptionError, InputError
@@ -121,7 +124,8 @@ def _scatter_arm(robot: Robot, a: np.ndarray) -> np.ndarray:
     return out
 
 
-def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payload: dict[str, Inertial] | None = None) -> np.ndarray:
+def inverse_dynamics(robot: Robot, q: npt.ArrayLike, qd: npt.ArrayLike, qdd: npt.ArrayLike, *, gravity: float = GRAVITY,
+                     payload: dict[str, Inertial] | None = None) -> np.ndarray:
     """Joint torques/forces that produce accelerations ``qdd`` at state (``q``, ``qd``).
 
     Args:
@@ -148,7 +152,7 @@ def inverse_dynamics(robot: Robot, q, qd, qdd, *, gravity: float = GRAVITY, payl
     return tau[0] if single else tau
 
 
-def mass_matrix(robot: Robot, q) -> np.ndarray:
+def mass_matrix(robot: Robot, q: npt.ArrayLike) -> np.ndarray:
     """Joint-space inertia matrix M(q), (dof, dof), symmetric positive definite (kg m^2 for revolute joints)."""
     q = _complete(robot, q, "q", True)
     zero = np.zeros((robot.dof, robot.dof))
@@ -156,18 +160,19 @@ def mass_matrix(robot: Robot, q) -> np.ndarray:
     return 0.5 * (m + m.T)
 
 
-def gravity_vector(robot: Robot, q, *, gravity: float = GRAVITY) -> np.ndarray:
+def gravity_vector(robot: Robot, q: npt.ArrayLike, *, gravity: float = GRAVITY) -> np.ndarray:
     """Torques (dof,) that hold the robot still at ``q`` against gravity (N m)."""
     zero = np.zeros(robot.dof)
     return inverse_dynamics(robot, q, zero, zero, gravity=gravity)
 
 
-def coriolis_vector(robot: Robot, q, qd) -> np.ndarray:
+def coriolis_vector(robot: Robot, q: npt.ArrayLike, qd: npt.ArrayLike) -> np.ndarray:
     """Centrifugal and Coriolis torques C(q, qd) qd, (dof,) (N m)."""
     return inverse_dynamics(robot, q, qd, np.zeros(robot.dof), gravity=0.0)
 
 
-def solid_inertia(shape: str, mass: float, size=(0.0, 0.0, 0.0), radius: float = 0.0, length: float = 0.0) -> np.ndarray:
+def solid_inertia(shape: str, mass: float, size: Iterable[float] = (0.0, 0.0, 0.0), radius: float = 0.0,
+                  length: float = 0.0) -> np.ndarray:
     """(3, 3) inertia (kg m^2) of a uniform solid about its centre, in its own axes.
 
     box ``size`` (x, y, z) m: m/12 (y^2 + z^2, x^2 + z^2, x^2 + y^2); cylinder along z:

@@ -15,8 +15,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.errors import InputError
+from roarmctl.robot.model import Robot
 
 UNITS = {"m": 1.0, "mm": 1000.0}
 
@@ -37,7 +39,7 @@ class Frame:
         return UNITS[self.unit]
 
 
-def get_frame(robot, name: str) -> Frame:
+def get_frame(robot: Robot, name: str) -> Frame:
     """The robot's frame ``name`` ("world" is the identity); InputError names the ones it has."""
     if name == "world":
         return Frame("world", np.zeros(3))
@@ -48,17 +50,17 @@ def get_frame(robot, name: str) -> Frame:
     return frames[name]
 
 
-def to_frame(frame: Frame, p_world) -> np.ndarray:
+def to_frame(frame: Frame, p_world: npt.ArrayLike) -> np.ndarray:
     """World positions (..., 3) m -> frame coordinates (..., 3) in the frame's unit."""
     return (np.asarray(p_world, dtype=float) - frame.origin) * frame.scale
 
 
-def from_frame(frame: Frame, p) -> np.ndarray:
+def from_frame(frame: Frame, p: npt.ArrayLike) -> np.ndarray:
     """Frame coordinates (..., 3) in the frame's unit -> world positions (..., 3) m."""
     return np.asarray(p, dtype=float) / frame.scale + frame.origin
 
 
-def device_point(robot, frame: Frame, q) -> np.ndarray:
+def device_point(robot: Robot, frame: Frame, q: npt.ArrayLike) -> np.ndarray:
     """World position (..., 3) m of the frame's device end point at ``q`` ((dof,) or (N, dof));
     the TCP when the frame names none."""
     if frame.point_link is None:
@@ -67,6 +69,6 @@ def device_point(robot, frame: Frame, q) -> np.ndarray:
     return t[..., :3, :3] @ frame.point_xyz + t[..., :3, 3]
 
 
-def tcp_offset(robot, frame: Frame, q) -> np.ndarray:
+def tcp_offset(robot: Robot, frame: Frame, q: npt.ArrayLike) -> np.ndarray:
     """Device end point minus TCP (world, m) at ``q``: (3,) or (N, 3)."""
     return device_point(robot, frame, q) - robot.kin.fk(q)[..., :3, 3]

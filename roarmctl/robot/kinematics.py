@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl import _kernel
 
@@ -164,7 +165,7 @@ class Kinematics:
         self._views()
 
     def _views(self) -> None:
-        self._kim, self._kfm = memoryview(self._ki), memoryview(self._kf)  # cheaper to pass than the arrays
+        self._kim, self._kfm = self._ki.data, self._kf.data  # cheaper to pass than the arrays
 
     def __getstate__(self) -> dict:
         """Picklable (a robot can go to another process, or be deep-copied): the memoryviews are left out."""
@@ -190,7 +191,7 @@ class Kinematics:
         t = self.frames4(q)
         return t[..., :3, :3], t[..., :3, 3]
 
-    def link_frames(self, q) -> np.ndarray:
+    def link_frames(self, q: npt.ArrayLike) -> np.ndarray:
         """Every link frame in the root frame: (N, n_links, 4, 4), or (n_links, 4, 4) for one q.
 
         ``q`` is (N, dof) or (dof,); arm-only vectors are completed with the gripper closed.
@@ -200,13 +201,13 @@ class Kinematics:
             return self.frames4(q[None])[0]
         return self.frames4(q)
 
-    def fk(self, q, link: str | None = None) -> np.ndarray:
+    def fk(self, q: npt.ArrayLike, link: str | None = None) -> np.ndarray:
         """Pose of ``link`` (default: the TCP) in the root frame: (4, 4) or (N, 4, 4)."""
         idx = self.tcp_index if link is None else self.link_index[link]
         return self.link_frames(q)[..., idx, :, :]
 
     # ------------------------------------------------------------ Jacobian
-    def jacobian(self, q) -> np.ndarray:
+    def jacobian(self, q: npt.ArrayLike) -> np.ndarray:
         """Geometric Jacobian at the TCP in the root frame: (6, arm_dof) or (N, 6, arm_dof).
 
         Rows are (vx, vy, vz, wx, wy, wz); columns follow ``robot.arm_indices``.
@@ -229,7 +230,7 @@ class Kinematics:
         _kernel.jacobian(self._kfm, self._kim, q, tcp, jac)
         return tcp, jac
 
-    def tcp_velocity(self, q, qd_arm) -> np.ndarray:
+    def tcp_velocity(self, q: npt.ArrayLike, qd_arm: npt.ArrayLike) -> np.ndarray:
         """Linear TCP velocity (N, 3) m/s = J_v(q) @ qd_arm, for q (N, dof or arm_dof) and
         qd_arm (N, arm_dof) rad/s (or any path derivative, giving the TCP derivative per unit)."""
         q = self.robot.full_q(np.atleast_2d(q))
@@ -242,7 +243,7 @@ class Kinematics:
         _kernel.tcp_velocity(self._kfm, self._kim, q, qd, out)
         return out
 
-    def manipulability(self, q) -> ManipulabilityReport:
+    def manipulability(self, q: npt.ArrayLike) -> ManipulabilityReport:
         """Manipulability figures at one configuration (see ``ManipulabilityReport``)."""
         jac = self.jacobian(np.asarray(q, dtype=float))
         sv = np.linalg.svd(jac, compute_uv=False)

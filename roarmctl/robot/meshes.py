@@ -18,8 +18,10 @@ from __future__ import annotations
 import io
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.errors import DescriptionError, InputError
 from roarmctl.fileio import Roots, read_bytes, resolved
@@ -193,7 +195,8 @@ def resolve(filename: str, urdf: Path, packages: dict[str, Path], where: str, ro
         raise DescriptionError(f"{where} mesh filename: '{filename}' cannot be resolved ({exc})") from None
 
 
-def load_mesh(path: Path, scale: np.ndarray, exact: bool, where: str, roots: Roots | None = None) -> tuple[MeshGeometry, np.ndarray]:
+def load_mesh(path: Path, scale: np.ndarray, exact: bool, where: str,
+              roots: Roots | None = None) -> tuple[MeshGeometry, np.ndarray]:
     """Read ``path`` (a regular file of at most ``MESH_BYTES``, inside ``roots`` when given), scale it,
     and return (centred geometry, centre (3,) in the element's frame). trimesh reads the bytes alone: an
     OBJ's ``mtllib`` or a COLLADA file's images are never opened."""
@@ -210,8 +213,9 @@ def centred(vertices: np.ndarray, faces: np.ndarray, exact: bool, source: str) -
     return MeshGeometry(vertices - centre, faces, exact, source), centre
 
 
-def read_triangles(path: Path, scale, what: str, *, roots: Roots | None = None, error: type[InputError] = DescriptionError,
-                   hint: str | None = None, limit: int = MESH_BYTES) -> tuple[np.ndarray, np.ndarray]:
+def read_triangles(path: Path, scale: npt.ArrayLike, what: str, *, roots: Roots | None = None,
+                   error: type[InputError] = DescriptionError, hint: str | None = None,
+                   limit: int = MESH_BYTES) -> tuple[np.ndarray, np.ndarray]:
     """The triangles of the mesh file ``path`` (``MESH_TYPES``), vertices times ``scale`` (a number or (3,)):
     (vertices (V, 3) m, faces (F, 3) int64), every mesh of the file concatenated in its frame. The one mesh
     reader of robots and scenes: through ``fileio.read_bytes`` (regular file, at most ``limit`` bytes, inside
@@ -256,7 +260,8 @@ def read_triangles(path: Path, scale, what: str, *, roots: Roots | None = None, 
     return _LOADED[key]
 
 
-def convex_hull(vertices: np.ndarray, where: str, error: type[InputError] = DescriptionError) -> tuple[np.ndarray, np.ndarray]:
+def convex_hull(vertices: np.ndarray, where: str,
+                error: type[InputError] = DescriptionError) -> tuple[np.ndarray, np.ndarray]:
     """Convex hull (vertices (H, 3), outward-wound faces (K, 3)) of a point set, by qhull (scipy). The arrays
     returned may be shared with an earlier call on the same points: read them, do not change them."""
     points = np.ascontiguousarray(vertices, dtype=float)
@@ -291,7 +296,7 @@ def _convex_hull(vertices: np.ndarray, where: str, error: type[InputError]) -> t
     return np.asarray(v, dtype=float), np.asarray(f, dtype=np.int64)
 
 
-def mesh_modes(value, links: list[str], where: str) -> dict[str, str]:
+def mesh_modes(value: Any, links: list[str], where: str) -> dict[str, str]:
     """The sidecar's ``mesh_collision``: one mode for every link, or ``{link: mode}`` (with an
     optional ``default``). Returns link -> mode for every link."""
     if value is None:
@@ -316,7 +321,7 @@ def mesh_modes(value, links: list[str], where: str) -> dict[str, str]:
     return out
 
 
-def package_map(value, sidecar: Path, where: str) -> dict[str, Path]:
+def package_map(value: Any, sidecar: Path, where: str) -> dict[str, Path]:
     """The sidecar's ``packages: {NAME: folder}``, folders relative to the sidecar."""
     if value is None:
         return {}

@@ -7,19 +7,24 @@ actuated joint in ``Robot.joint_names`` order; where the robot has a gripper, it
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.errors import InputError
 from roarmctl.robot.kinematics import Kinematics
+
+if TYPE_CHECKING:
+    from roarmctl.robot.meshes import MeshGeometry
 
 JointKind = Literal["revolute", "prismatic", "fixed"]
 ShapeKind = Literal["box", "cylinder", "sphere", "capsule", "mesh"]
 
 
-def transform(xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
+def transform(xyz: Iterable[float] = (0.0, 0.0, 0.0), rpy: Iterable[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
     """4x4 homogeneous transform from a translation (m) and URDF roll-pitch-yaw (rad).
 
     URDF convention: R = Rz(yaw) @ Ry(pitch) @ Rx(roll).
@@ -42,7 +47,7 @@ def transform(xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
     return t
 
 
-def axis_angle(axis, angle: float) -> np.ndarray:
+def axis_angle(axis: npt.ArrayLike, angle: float) -> np.ndarray:
     """4x4 rotation by ``angle`` (rad) about the unit 3-vector ``axis`` (Rodrigues' formula)."""
     k = np.asarray(axis, dtype=float)
     kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
@@ -59,7 +64,7 @@ def rpy_from_matrix(rot: np.ndarray) -> np.ndarray:
     return np.array([np.arctan2(rot[2, 1], rot[2, 2]), pitch, np.arctan2(rot[1, 0], rot[0, 0])])
 
 
-def quaternions(rot) -> np.ndarray:
+def quaternions(rot: npt.ArrayLike) -> np.ndarray:
     """Unit quaternions (x, y, z, w), shape (..., 4), w >= 0, of rotation matrices, shape (..., 3, 3).
 
     Shepperd's method: each matrix takes the formula of its largest of (trace, m00, m11, m22), so the square root
@@ -101,7 +106,7 @@ def quaternions(rot) -> np.ndarray:
     return q.reshape(*shape, 4)
 
 
-def rigid_inverse(t) -> np.ndarray:
+def rigid_inverse(t: npt.ArrayLike) -> np.ndarray:
     """Inverse of rigid 4x4 transforms, shape (..., 4, 4): rotation transposed, translation -R^T p."""
     t = np.asarray(t, dtype=float)
     out = np.zeros_like(t)
@@ -162,7 +167,7 @@ class CollisionShape:
     radius: float = 0.0
     length: float = 0.0
     name: str = ""
-    mesh: object | None = None
+    mesh: MeshGeometry | None = None
 
 
 #: The joint fields of the RoArm firmware's ``T:102`` command, in its joint order (Waveshare RoArm-M3 example
@@ -334,7 +339,7 @@ class Robot:
         base = "m" if prismatic else ("deg" if deg else "rad")
         return base + ("" if power == 0 else "/s" if power == 1 else f"/s^{power}")
 
-    def to_user(self, values, deg: bool, columns=None) -> np.ndarray:
+    def to_user(self, values: npt.ArrayLike, deg: bool, columns: npt.ArrayLike | None = None) -> np.ndarray:
         """Joint values (rad / m) -> what the user asked for: degrees for revolute joints when ``deg``,
         metres stay metres. ``values``: (..., n) with n = dof, or the joints ``columns`` (indices) name."""
         arr = np.asarray(values, dtype=float)
@@ -343,7 +348,7 @@ class Robot:
         mask = self.prismatic if columns is None else self.prismatic[np.asarray(columns)]
         return np.where(mask, arr, np.degrees(arr))
 
-    def from_user(self, values, deg: bool) -> np.ndarray:
+    def from_user(self, values: npt.ArrayLike, deg: bool) -> np.ndarray:
         """User joint values (dof or arm_dof of them; degrees for revolute joints when ``deg``) -> rad / m."""
         arr = np.asarray(values, dtype=float)
         if not deg:
@@ -354,7 +359,8 @@ class Robot:
         mask = self.prismatic if cols is None else self.prismatic[np.asarray(cols)]
         return np.where(mask, arr, np.radians(arr))
 
-    def joint_states(self, q, qd=None) -> tuple[list[str], np.ndarray, np.ndarray | None]:
+    def joint_states(self, q: npt.ArrayLike,
+                     qd: npt.ArrayLike | None = None) -> tuple[list[str], np.ndarray, np.ndarray | None]:
         """Every movable joint of the description with its value, for a complete ``sensor_msgs/JointState``:
         the actuated joints (``q`` (N, dof), ``qd`` (N, dof) or None), then each mimic joint (its leader's
         value times its multiplier plus its offset; velocity times the multiplier), then the held joints (their
@@ -380,7 +386,7 @@ class Robot:
         """Index of the actuated joint ``name`` in ``joint_names``."""
         return self.joint_names.index(name)
 
-    def full_q(self, q) -> np.ndarray:
+    def full_q(self, q: npt.ArrayLike) -> np.ndarray:
         """Accept either an arm-only vector (arm_dof) or a full one (dof); return the full vector.
 
         The gripper, when not given, takes its closed value.
@@ -401,7 +407,7 @@ class Robot:
             + f", got {q.shape[-1]}"
         )
 
-    def within_limits(self, q, tol: float = 1e-9) -> bool:
+    def within_limits(self, q: npt.ArrayLike, tol: float = 1e-9) -> bool:
         """Whether ``q`` (arm or full joint vector, rad) is within the joint limits, up to ``tol``."""
         q = self.full_q(q)
         return bool(np.all(q >= self.lower - tol) and np.all(q <= self.upper + tol))

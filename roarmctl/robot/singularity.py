@@ -8,6 +8,7 @@ classified as ``"unclassified"`` only when the Jacobian's smallest singular valu
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.robot.ik import ur6_params
 from roarmctl.robot.model import Robot
@@ -61,7 +62,7 @@ def _planar2r(robot: Robot, q: np.ndarray) -> str | None:
 MODELS = {"roarm5": _roarm5, "ur6": _ur6, "planar2r": _planar2r}
 
 
-def classify_singularity(robot: Robot, q) -> str | None:
+def classify_singularity(robot: Robot, q: npt.ArrayLike) -> str | None:
     """The singularity class at configuration ``q`` (full or arm-only vector), or None."""
     q = robot.full_q(q)
     model = MODELS.get(robot.singularity_model or "")

@@ -17,13 +17,15 @@ Every failure raises ``DescriptionError`` (exit 2) with the file and the field.
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from roarmctl.errors import DescriptionError
-from roarmctl.robot.model import WIRE_FIELDS
+from roarmctl.fileio import Roots
+from roarmctl.robot.model import WIRE_FIELDS, Robot
 from roarmctl.validation import Checker, load_yaml
 
 AXIS_TOL = 1e-3  # |axis| must be 1 within this (URDF axes are unit vectors)
@@ -34,7 +36,7 @@ CHECK = Checker(DescriptionError, bound=MAX_VALUE, number_word="a finite number"
 
 
 # --------------------------------------------------------------------------- YAML
-def read_yaml(path: Path, what: str | None = None, roots=None) -> Any:
+def read_yaml(path: Path, what: str | None = None, roots: Roots | None = None) -> Any:
     """A description YAML within the shared limits (``roarmctl.validation.load_yaml``)."""
     return load_yaml(path, DescriptionError, what=what, roots=roots)
 
@@ -199,21 +201,23 @@ def check_document(data: Any, where: str) -> None:
 
 
 # --------------------------------------------------------------------------- URDF
-def _attr_floats(elem, key: str, n: int, where: str, field: str, required: bool = False) -> None:
+def _attr_floats(elem: ET.Element, key: str, n: int, where: str, field: str, required: bool = False) -> list[float] | None:
+    """The ``n`` finite numbers of attribute ``key`` of ``elem`` (None when it is absent and not ``required``)."""
     text = elem.get(key)
     if text is None:
         if required:
             CHECK.fail(where, field, f"'{key}' is missing")
-        return
+        return None
     try:
         vals = [float(t) for t in text.split()]
     except ValueError:
         CHECK.fail(where, field, f"'{text[:40]}' is not {n} number(s)")
     if len(vals) != n or not all(math.isfinite(v) and abs(v) <= MAX_VALUE for v in vals):
         CHECK.fail(where, field, f"'{text[:40]}' is not {n} finite number(s)")
+    return vals
 
 
-def _unique_name(element, kind: str, k: int, seen: dict[str, Any], where: str) -> str:
+def _unique_name(element: ET.Element, kind: str, k: int, seen: dict[str, Any], where: str) -> str:
     """The ``name`` of the k-th URDF <link> or <joint>, required and not already in ``seen``."""
     name = element.get("name")
     if not name:
@@ -228,7 +232,7 @@ def _unique_name(element, kind: str, k: int, seen: dict[str, Any], where: str) -
 MAX_LINKS = 300
 
 
-def check_urdf(root, where: str) -> None:
+def check_urdf(root: ET.Element, where: str) -> None:
     """The URDF's structure and numbers (``root`` is the parsed XML root element)."""
     if root.tag != "robot":
         CHECK.fail(where, "root element", f"<{root.tag}> is not <robot>")
@@ -243,9 +247,9 @@ def check_urdf(root, where: str) -> None:
         if inn is not None:
             mass = inn.find("mass")
             if mass is not None:
-                _attr_floats(mass, "value", 1, where, f"link '{name}' mass value", required=True)
+                value = _attr_floats(mass, "value", 1, where, f"link '{name}' mass value", required=True)
                 # 0 is a massless frame link (Franka's panda_link8, many tool frames); only negative is wrong
-                if float(mass.get("value")) < 0:
+                if value is not None and value[0] < 0:
                     CHECK.fail(where, f"link '{name}' mass value", f"{mass.get('value')} must not be negative")
             for tag, keys in (("origin", ("xyz", "rpy")), ("inertia", ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))):
                 e = inn.find(tag)
@@ -253,7 +257,7 @@ def check_urdf(root, where: str) -> None:
                     for key in keys:
                         _attr_floats(e, key, 3 if tag == "origin" else 1, where, f"link '{name}' inertial {tag} {key}")
             e = inn.find("inertia")
-            if e is not None and any(e.get(k) is not None and float(e.get(k)) < 0 for k in ("ixx", "iyy", "izz")):
+            if e is not None and any(float(e.get(k, "0")) < 0 for k in ("ixx", "iyy", "izz")):
                 CHECK.fail(where, f"link '{name}' inertia", "principal moments ixx, iyy, izz must not be negative")
         for c, col in enumerate(link.findall("collision")):
             _check_geometry(col, where, f"link '{name}' collision[{c}]")
@@ -262,12 +266,13 @@ def check_urdf(root, where: str) -> None:
     for k, j in enumerate(root.findall("joint")):
         name = _unique_name(j, "joint", k, joints, where)
         joints[name] = j
-        ends = {}
+        ends: dict[str, str] = {}
         for tag in ("parent", "child"):
             e = j.find(tag)
-            if e is None or e.get("link") not in links:
+            end = e.get("link") if e is not None else None
+            if end is None or end not in links:
                 CHECK.fail(where, f"joint '{name}' {tag}", f"<{tag} link=...> is missing or names no link")
-            ends[tag] = e.get("link")
+            ends[tag] = end
         if ends["parent"] == ends["child"]:
             CHECK.fail(where, f"joint '{name}'", f"link '{ends['parent']}' is its own parent")
         if ends["child"] in parent_of:
@@ -279,9 +284,9 @@ def check_urdf(root, where: str) -> None:
                 _attr_floats(o, key, 3, where, f"joint '{name}' origin {key}")
         a = j.find("axis")
         if a is not None:
-            _attr_floats(a, "xyz", 3, where, f"joint '{name}' axis")
-            if j.get("type") != "fixed" and a.get("xyz") is not None:
-                n = float(np.linalg.norm([float(t) for t in a.get("xyz").split()]))
+            axis = _attr_floats(a, "xyz", 3, where, f"joint '{name}' axis")
+            if j.get("type") != "fixed" and axis is not None:
+                n = float(np.linalg.norm(axis))
                 if abs(n - 1.0) > AXIS_TOL:
                     CHECK.fail(where, f"joint '{name}' axis", f"'{a.get('xyz')}' has length {n:g}, not 1", "give a unit vector")
         lim = j.find("limit")
@@ -290,19 +295,21 @@ def check_urdf(root, where: str) -> None:
                 _attr_floats(lim, key, 1, where, f"joint '{name}' limit {key}")
             # URDF reads <limit> on revolute and prismatic joints only: a fixed joint's (Kinova writes
             # lower="0" upper="0" on its fixed end_effector joint) and a continuous one's bounds mean nothing
-            if lim.get("lower") is not None and lim.get("upper") is not None and j.get("type") in ("revolute", "prismatic"):
-                if not float(lim.get("lower")) < float(lim.get("upper")):
-                    CHECK.fail(where, f"joint '{name}' limit", f"lower {lim.get('lower')} must be below upper {lim.get('upper')}")
+            lower, upper = lim.get("lower"), lim.get("upper")
+            if lower is not None and upper is not None and j.get("type") in ("revolute", "prismatic"):
+                if not float(lower) < float(upper):
+                    CHECK.fail(where, f"joint '{name}' limit", f"lower {lower} must be below upper {upper}")
             for key in ("velocity", "effort"):
-                if lim.get(key) is not None and float(lim.get(key)) < 0:
-                    CHECK.fail(where, f"joint '{name}' limit {key}", f"{lim.get(key)} must not be negative")
+                value_text = lim.get(key)
+                if value_text is not None and float(value_text) < 0:
+                    CHECK.fail(where, f"joint '{name}' limit {key}", f"{value_text} must not be negative")
     for start in parent_of:  # walking up from every link must reach the root: no cycles
-        seen, link = {start}, start
-        while link in parent_of:
-            link = parent_of[link]
-            if link in seen:
+        seen, up = {start}, start
+        while up in parent_of:
+            up = parent_of[up]
+            if up in seen:
                 CHECK.fail(where, f"link '{start}'", "the joints form a cycle (a URDF is a tree)")
-            seen.add(link)
+            seen.add(up)
 
 
 def _check_geometry(col, where: str, field: str) -> None:
@@ -323,7 +330,7 @@ def _check_geometry(col, where: str, field: str) -> None:
 
 
 # --------------------------------------------------------------------------- the loaded robot
-def check_robot(robot, where: str) -> None:
+def check_robot(robot: Robot, where: str) -> None:
     """Semantic checks of a loaded ``Robot`` (see the module docstring)."""
     names = list(robot.joint_names)
     if len(set(names)) != len(names):
@@ -368,7 +375,7 @@ def check_robot(robot, where: str) -> None:
         f = f"link '{s.link}' collision '{s.name or k}'"
         if not np.all(np.isfinite(s.origin)):
             CHECK.fail(where, f"{f} origin", "must be finite")
-        if s.kind == "mesh":  # its largest extent (an exact mesh may be flat); the mesh reader checked the rest
+        if s.mesh is not None:  # its largest extent (an exact mesh may be flat); the mesh reader checked the rest
             dims = [float(np.max(2 * s.mesh.half_extents))]
         else:
             dims = {"box": list(s.size), "sphere": [s.radius], "cylinder": [s.radius, s.length], "capsule": [s.radius]}[s.kind]

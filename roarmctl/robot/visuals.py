@@ -19,7 +19,7 @@ import numpy as np
 
 from roarmctl.errors import DescriptionError
 from roarmctl.robot.meshes import MeshGeometry
-from roarmctl.robot.model import CollisionShape
+from roarmctl.robot.model import CollisionShape, Robot
 
 #: Triangles of all the visual meshes of one robot that a picture takes; beyond it the rest are left out
 #: (said), so a high-resolution CAD export cannot make a page of hundreds of MB.
@@ -77,7 +77,7 @@ def source_of(elements: Iterable[tuple[str, int, ET.Element]], meshes: dict[str,
     return VisualSource(kept, dict(meshes), parse, named_materials(root)) if kept else None
 
 
-def visual_shapes(robot) -> tuple[list[Visual], list[str]]:
+def visual_shapes(robot: Robot) -> tuple[list[Visual], list[str]]:
     """The robot's visual shapes (empty without a ``visual_source``) and notes on those left out."""
     src: VisualSource | None = getattr(robot, "visual_source", None)
     if src is None:

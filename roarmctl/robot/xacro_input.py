@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 from contextlib import redirect_stderr
 from pathlib import Path
+from typing import Any
 
 from roarmctl.errors import DescriptionError
 from roarmctl.fileio import Roots
@@ -20,8 +21,8 @@ from roarmctl.robot.xacro_safe import Refused, find_refusal, hooks
 TRUST_ALL = False
 
 
-def expand(path: Path, args, where: str, packages: dict[str, Path] | None = None, *, roots: Roots | None = None,
-           trusted: bool = False) -> str:
+def expand(path: Path, args: dict[str, Any] | None, where: str, packages: dict[str, Path] | None = None, *,
+           roots: Roots | None = None, trusted: bool = False) -> str:
     """The URDF text of xacro file ``path``; any xacro error is a ``DescriptionError`` naming the file.
 
     ``packages``: NAME -> folder for ``$(find NAME)`` (then ``--package-path``). ``roots``: the folders

@@ -130,6 +130,12 @@ def robot_spec(plan: Plan) -> str:
         return plan.robot
 
 
+def _file_of(spec: ItemSpec) -> Path:
+    """The file of a mesh or cloud item that carries no data (the schema asks for one then)."""
+    assert spec.file is not None
+    return spec.file
+
+
 def scene_item(spec: ItemSpec) -> SceneItem:
     """The scene item of a plan's table, obstacle or object (at its start pose): a primitive as written; a mesh
     or point cloud from the data it carries (a trajectory's scene) or else read from its file
@@ -137,10 +143,10 @@ def scene_item(spec: ItemSpec) -> SceneItem:
     # the plan's schema checked role and shape against the scene's
     role, pose = cast("Role", spec.role), spec.pose  # SceneItem keeps a copy of it
     if spec.shape == "mesh":
-        mesh = spec.data or read_mesh_item(spec.file, spec.scale, spec.exact, f"{spec.where}.file", PlanFileError)
+        mesh = spec.data or read_mesh_item(_file_of(spec), spec.scale, spec.exact, f"{spec.where}.file", PlanFileError)
         return SceneItem(name=spec.name, role=role, shape="mesh", pose=pose, mesh=mesh)
     if spec.shape == "cloud":
-        cloud = spec.data or read_cloud_item(spec.file, spec.resolution, f"{spec.where}.file", PlanFileError)
+        cloud = spec.data or read_cloud_item(_file_of(spec), spec.resolution, f"{spec.where}.file", PlanFileError)
         return SceneItem(name=spec.name, role=role, shape="cloud", pose=pose, cloud=cloud)
     return SceneItem.checked_primitive(spec.name, role, cast("Shape", spec.shape), pose,
                                        spec.size, spec.radius, spec.length)

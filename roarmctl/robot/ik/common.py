@@ -7,6 +7,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.errors import InputError
 from roarmctl.robot.model import Robot
@@ -16,7 +17,7 @@ POS_TOL = 1e-6  # m: every returned solution reaches the target position this cl
 ORI_TOL = 1e-5  # rad: orientation check; covers the few-urad axis tilt of the rounded RoArm URDF
 
 
-def vec3(v, what: str) -> np.ndarray:
+def vec3(v: npt.ArrayLike, what: str) -> np.ndarray:
     """``v`` as a finite (3,) float array; anything else raises InputError naming ``what``."""
     a = np.asarray(v, dtype=float).reshape(-1)
     if a.shape != (3,) or not np.all(np.isfinite(a)):
@@ -50,7 +51,7 @@ def rot_vec(m: np.ndarray) -> np.ndarray:
 TWO_PI_SHIFTS = np.array([2 * np.pi * k for k in (-1, 0, 1)])
 
 
-def wrap_angle(a):
+def wrap_angle(a: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """Angles (rad, scalar or array) wrapped to [-pi, pi)."""
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 

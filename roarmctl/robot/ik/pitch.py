@@ -6,12 +6,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.robot.ik.common import wrap_angle
 from roarmctl.robot.model import Robot
 
 
-def tool_pitch(robot: Robot, q: np.ndarray, position=None) -> float:
+def tool_pitch(robot: Robot, q: np.ndarray, position: npt.ArrayLike | None = None) -> float:
     """RoArm tool pitch (rad) of configuration ``q``: the approach axis (TCP +x) below the horizontal,
     in the vertical plane through the base axis and ``position`` (default: the TCP), as ``solve_ik``'s
     ``pitch`` means it (pi/2 = straight down)."""

@@ -5,14 +5,15 @@ that continues a configuration), the pitch search (``solve_ik_auto_pitch``), tar
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from roarmctl.errors import InputError, UnreachableError
-from roarmctl.robot.frames import device_point, from_frame
+from roarmctl.robot.frames import Frame, device_point, from_frame
 from roarmctl.robot.ik.common import POS_TOL, default_ref, rot_angle, vec3
 from roarmctl.robot.ik.dls import dls_solve, pitch_aim
 from roarmctl.robot.ik.pitch import pitch_candidates, tool_pitch
@@ -111,7 +112,7 @@ def solve_ik(
     return sols if all_solutions else sols[:1]
 
 
-def solve_ik_near(robot: Robot, position, q_ref, *, pitch: float | None = None,
+def solve_ik_near(robot: Robot, position: npt.ArrayLike, q_ref: npt.ArrayLike, *, pitch: float | None = None,
                   roll: float | None = None) -> np.ndarray:
     """The IK solution (full q, rad) that continues ``q_ref``: the one with the smallest largest joint change.
 
@@ -126,8 +127,9 @@ def solve_ik_near(robot: Robot, position, q_ref, *, pitch: float | None = None,
     return min(sols, key=lambda s: float(np.max(np.abs(s[arm] - qr[arm]))))
 
 
-def solve_ik_auto_pitch(robot: Robot, position, *, preferred: float, accept: Callable[[np.ndarray], bool],
-                        roll: float | None = None, q_ref=None, all_solutions: bool = False,
+def solve_ik_auto_pitch(robot: Robot, position: npt.ArrayLike, *, preferred: float,
+                        accept: Callable[[np.ndarray], bool], roll: float | None = None,
+                        q_ref: npt.ArrayLike | None = None, all_solutions: bool = False,
                         solve: Callable | None = None) -> tuple[list[np.ndarray], float]:
     """RoArm IK with the pitch chosen: the pitch nearest to ``preferred`` (rad, 1 deg steps) at which
     some solution is within the limits and ``accept``-ed (e.g. collision-free and clear of the
@@ -156,7 +158,7 @@ def solve_ik_auto_pitch(robot: Robot, position, *, preferred: float, accept: Cal
                            "move the target")
 
 
-def solve_ik_frame(robot: Robot, frame, position, **kw) -> list[np.ndarray]:
+def solve_ik_frame(robot: Robot, frame: Frame, position: npt.ArrayLike, **kw: Any) -> list[np.ndarray]:
     """``solve_ik`` for a target given in a robot frame (``roarmctl.robot.frames.Frame``, its unit)
     for the frame's device end point (e.g. the RoArm firmware's own TCP, 2-3 mm from ``hand_tcp``).
 
@@ -194,7 +196,7 @@ class IKCheck:
     orientation_error: float | None
 
 
-def check_solution(robot: Robot, q: np.ndarray, position, rpy=None) -> IKCheck:
+def check_solution(robot: Robot, q: np.ndarray, position: npt.ArrayLike, rpy: Iterable[float] | None = None) -> IKCheck:
     """Position and orientation error of configuration ``q`` against a target, by FK."""
     t = robot.kin.fk(robot.full_q(q))
     perr = float(np.linalg.norm(t[:3, 3] - np.asarray(position, dtype=float)))

@@ -24,7 +24,7 @@ WRIST_SINGULAR = 1e-6  # |sin theta5| below this is the UR wrist singularity (th
 _UR6_ALPHA = (0.0, math.pi / 2, 0.0, 0.0, -math.pi / 2, math.pi / 2)  # modified-DH alpha_{i-1} of robots/ur10.yaml
 
 
-def ur6_params(robot: Robot):
+def ur6_params(robot: Robot) -> tuple[np.ndarray, float, float, float, float, float, float, np.ndarray, np.ndarray]:
     """(T_base, d1, a2, a3, d4, d5, d6, offsets, T_tool) of a UR-type arm, read from its DH table.
 
     Either convention is accepted. A standard row i (theta_i, d_i, a_i, alpha_i) is the modified
