@@ -270,7 +270,8 @@ def interrupted_write_state(clear: bool = True) -> str | None:
     return "nothing was written"
 
 
-def check_output_folder(path: str | os.PathLike, force: bool = False, made_by_us=None) -> Path:
+def check_output_folder(path: str | os.PathLike, force: bool = False,
+                        made_by_us: Callable[[Path], bool] | None=None) -> Path:
     """``path`` as a folder roarmctl may (re)write, else ``InputError`` (exit 2); returns the path.
 
     Refused: a name longer than ``MAX_NAME_BYTES`` bytes, ``.``/``..``/``/`` or any folder holding the

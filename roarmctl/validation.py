@@ -21,7 +21,7 @@ import hashlib
 import importlib
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -114,7 +114,8 @@ def _short_tag(tag: str) -> str:
     return tag.replace("tag:yaml.org,2002:", "!!")[:60]
 
 
-def _construct(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError], budget: _Budget, depth: int = 0) -> Any:
+def _construct(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError], budget: _Budget,
+               depth: int = 0) -> Any:
     budget.nodes += 1
     line = node.start_mark.line + 1
     if budget.nodes > MAX_NODES:
@@ -386,7 +387,7 @@ def load_json(path: str | Path, error: type[InputError] = InputError, *, what: s
 
 
 # --------------------------------------------------------------------------- fields
-def closest(word: str, options) -> str | None:
+def closest(word: str, options: Iterable[object]) -> str | None:
     """The option most like ``word`` (a typo's fix), or None."""
     match = difflib.get_close_matches(str(word), [str(o) for o in options], n=1, cutoff=0.6)
     return match[0] if match else None
@@ -468,7 +469,8 @@ class Checker:
             self.fail(where, field, f"expected {'an object' if self.json else 'a mapping'}, got {self.kind(value)}")
         return value
 
-    def known_keys(self, value: dict, allowed, where: str, field: str | None, line_of=None) -> None:
+    def known_keys(self, value: dict, allowed: Sequence[str], where: str, field: str | None,
+                   line_of: Callable[[Any], str] | None=None) -> None:
         """Refuse a key of ``value`` outside ``allowed``, suggesting the closest; ``line_of(key)`` -> the
         ``where`` of that key (a file and line), else ``where``."""
         for key in value:
@@ -478,7 +480,7 @@ class Checker:
                 self.fail(line_of(key) if line_of else where, at, "unknown key",
                           f"did you mean '{close}'?" if close else f"allowed: {', '.join(allowed)}")
 
-    def required(self, value: dict, keys, where: str, field: str) -> None:
+    def required(self, value: dict, keys: Iterable[str], where: str, field: str) -> None:
         """Refuse ``value`` if a key of ``keys`` is missing."""
         for key in keys:
             if key not in value:

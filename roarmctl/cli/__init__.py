@@ -10,7 +10,7 @@ import os
 import sys
 import traceback
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
@@ -31,6 +31,9 @@ from roarmctl.cli.signals import exit_code
 from roarmctl.errors import InputError, RoarmError, signal_name
 from roarmctl.fileio import interrupted_write_state
 from roarmctl.robot import xacro_input
+
+if TYPE_CHECKING:
+    import click
 
 app = typer.Typer(
     name="roarmctl",
@@ -156,7 +159,7 @@ def _on_disk() -> str | None:
     return interrupted_write_state()
 
 
-def command():
+def command() -> "click.Command":
     """The click command behind ``app``, with boolean flags shown as flags in ``--help`` (typer
     would print ``--json <bool>``, which reads as if it took a value)."""
     cmd = typer.main.get_command(app)

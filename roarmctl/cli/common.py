@@ -12,6 +12,9 @@ from roarmctl.errors import InputError
 
 if TYPE_CHECKING:
     import numpy as np
+    from rich.console import Console
+
+    from roarmctl.robot.model import Robot
 
 
 @dataclass
@@ -24,7 +27,7 @@ class _State:
 STATE = _State()
 
 
-def console(stderr: bool = False):
+def console(stderr: bool = False) -> Console:
     """A rich console on stdout (or stderr) without highlighting: what every command renders with."""
     from rich.console import Console
 
@@ -74,7 +77,7 @@ def one_line(text: str) -> str:
 _NOTED: set[int] = set()
 
 
-def load_robot(spec: str):
+def load_robot(spec: str) -> Robot:
     """The robot ``spec`` (``roarmctl.robot.loader.load_robot``), its loader notes (held joints, massless
     links, defaults used for limits the description lacks) written to stderr the first time it loads."""
     from roarmctl.robot.loader import load_robot as _load

@@ -4,7 +4,7 @@
 import re
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
@@ -13,6 +13,11 @@ from roarmctl.device.ports import list_ports, port_holders
 from roarmctl.device.session import run_execution
 from roarmctl.errors import InputError
 from roarmctl.fileio import atomic_write_bytes
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from roarmctl.device.servos import ServoModel
 
 SERVOS_HELP = ("The simulated servos: physics (default: MuJoCo, the ST3235 model with lag, gravity and torque limits; "
                "docs/physics.md) or ideal (each servo runs its trapezoid exactly, no lag, no gravity).")
@@ -288,7 +293,7 @@ def sim_device(
     servos = servos or ("ideal" if guide is not None else "physics")
     if servos not in ("physics", "ideal"):
         raise InputError(f"--servos: '{servos}' is not physics or ideal")
-    factory = None
+    factory: Callable[[], ServoModel] | None = None
     if guide is not None:
         from roarmctl.device.guide import guided_servos, load_guide
 

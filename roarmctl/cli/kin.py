@@ -5,7 +5,7 @@ stdout, nothing else); without ``--json`` a readable table is printed.
 """
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, overload
 
 import typer
 
@@ -215,6 +215,14 @@ def jacobian(
         ("ellipsoid axes (base frame)", "\n".join(" ".join(f"{v:+.4f}" for v in a) for a in m.ellipsoid_axes.T)),
         ("singularity", sing if sing is not None else "none (no known singular configuration)"),
     ])
+
+
+@overload
+def _split_numbers(text: str, what: str, deg: bool) -> "np.ndarray": ...
+
+
+@overload
+def _split_numbers(text: None, what: str, deg: bool) -> None: ...
 
 
 def _split_numbers(text: str | None, what: str, deg: bool) -> "np.ndarray | None":

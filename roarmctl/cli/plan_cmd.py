@@ -2,11 +2,20 @@
 
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from roarmctl.cli import common
 from roarmctl.errors import InputError
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    import numpy as np
+
+    from roarmctl.motion.pipeline import PlanResult
+    from roarmctl.robot.model import Robot
 
 
 def default_output(plan_path: Path) -> Path:
@@ -14,7 +23,8 @@ def default_output(plan_path: Path) -> Path:
     return plan_path.with_name(plan_path.stem + ".traj.json")
 
 
-def run_planner(plan: Path, seed: int | None, quiet: bool, current=None):
+def run_planner(plan: Path, seed: int | None, quiet: bool,
+                current: "Callable[[Robot], np.ndarray] | None" = None) -> "PlanResult":
     """Plan with a rich progress display on stderr (none when ``quiet``); returns the PlanResult.
 
     ``current(robot)`` measures the arm for ``start: current``."""
@@ -34,7 +44,7 @@ def run_planner(plan: Path, seed: int | None, quiet: bool, current=None):
         return plan_file(plan, seed=seed, progress=progress, current=current)
 
 
-def arm_reader(port: str | None, sim: bool, notes: list[str]):
+def arm_reader(port: str | None, sim: bool, notes: list[str]) -> "Callable[[Robot], np.ndarray] | None":
     """``current(robot)`` for ``start: current``: reads the arm on ``port`` (or a fresh simulator)."""
     if port is not None and sim:
         raise InputError("give one of --port PORT and --sim, not both")

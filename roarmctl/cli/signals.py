@@ -19,8 +19,12 @@ import signal
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import TYPE_CHECKING
 
 from roarmctl.errors import StopRequested
+
+if TYPE_CHECKING:
+    from types import FrameType
 
 SIGNALS = tuple(s for s in (getattr(signal, "SIGINT", None), getattr(signal, "SIGTERM", None),
                             getattr(signal, "SIGHUP", None)) if s is not None)
@@ -35,7 +39,7 @@ class Guard:
         self.live = True  # False once the command has finished: record only
         self.shield = 0
 
-    def handle(self, signum: int, frame) -> None:
+    def handle(self, signum: int, frame: FrameType | None) -> None:
         """The signal handler: record the signal; raise StopRequested for the first one unless shielded."""
         self.received.append(signum)
         if self.raised or not self.live or self.shield:

@@ -8,7 +8,7 @@ import select
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
@@ -21,6 +21,11 @@ except ImportError:  # pragma: no cover - Windows
 from roarmctl.cli import common, signals
 from roarmctl.errors import DeviceError, InputError, Interrupted, signal_name
 from roarmctl.fileio import atomic_write_json, check_output_file
+
+if TYPE_CHECKING:
+    from rich.panel import Panel
+
+    from roarmctl.device.teach import Judge, TeachSession
 
 KEYS_HELP = "Enter record a waypoint · g grasp/release here · u undo · s save · q quit"
 BAND_STYLE = {"clear": "bold green", "near": "bold yellow", "inside": "bold red"}
@@ -295,7 +300,7 @@ def _joint_labels(session) -> list[str]:
     return names
 
 
-def render(session, judge):
+def render(session: "TeachSession", judge: "Judge") -> "Panel":
     """The live frame: joints, TCP (desk and firmware frames), singularity measure with its band, clearance,
     recorded waypoints, the last events and the keys."""
     from rich.panel import Panel
@@ -305,6 +310,7 @@ def render(session, judge):
     from roarmctl.device.teach import NEAR_FACTOR
 
     f = session.frame
+    assert f is not None  # shown once the first frame has arrived (_View.show)
     m = f.measures
     grid = Table.grid(padding=(0, 2))
     joints = Table(*["", *_joint_labels(session)], box=None, pad_edge=False)

@@ -28,13 +28,17 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from roarmctl.device import protocol
 from roarmctl.device.protocol import SAFE_WIRE_RANGE, STEPS_PER_RAD, Feedback, WireMap, wire_seconds
 from roarmctl.errors import DeviceError
+
+if TYPE_CHECKING:
+    from roarmctl.device.link import Link
+    from roarmctl.robot.model import Robot
 
 COUNT = 1.0 / STEPS_PER_RAD  # one servo step, rad
 #: The servos' top speed with margin: ST3235 no-load 0.222 s per 60 deg at 12 V = 4.72 rad/s, x 1.25.
@@ -91,7 +95,7 @@ class FeedbackValidator:
     before :class:`FeedbackRefused`.
     """
 
-    def __init__(self, robot, *, firmware: str | None = None, expect_torque: bool | None = True,
+    def __init__(self, robot: Robot, *, firmware: str | None = None, expect_torque: bool | None = True,
                  max_speed: float = MAX_JOINT_SPEED, run_limit: int = 5, range_margin: float = 0.1,
                  slack: float = 0.03, keep: int = 1000) -> None:
         self.robot = robot
@@ -221,7 +225,7 @@ def _field_of(problem: str) -> str | None:
     return head if head in protocol.M3_FIELDS else None
 
 
-def read_valid(link, validator: FeedbackValidator, n: int = 2, tries: int = 8, timeout: float = 0.5,
+def read_valid(link: Link, validator: FeedbackValidator, n: int = 2, tries: int = 8, timeout: float = 0.5,
                on_refused: Callable[[Any, Refusal], None] | None = None) -> Reading:
     """Ask ``link`` (``request(timeout) -> Received | None``) for frames until ``n`` in a row were
     accepted (the speed check makes consecutive frames agree); return the last. ``on_refused``

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.device.protocol import MIDDLE
 
@@ -91,7 +92,7 @@ def firmware_ik(x: float, y: float, z: float, pitch: float) -> tuple[float, floa
     return b, s, e, phi - e - s
 
 
-def urdf_from_firmware(rad6) -> np.ndarray:
+def urdf_from_firmware(rad6: npt.ArrayLike) -> np.ndarray:
     """Firmware radians (base..hand) -> URDF joint vector of the M3 (identity, gripper pi - hand)."""
     q = np.array(rad6, dtype=float)
     q[..., 5] = math.pi - q[..., 5]

@@ -19,7 +19,7 @@ servo takes torque again it stands where the hand left it.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -142,12 +142,12 @@ class GuidedServos:
         self._limp[joints] = False
 
     # ------------------------------------------------------------------ ServoModel
-    def command(self, joints, goal, spd, acc) -> None:
+    def command(self, joints: Sequence[int], goal: Sequence[float], spd: Sequence[float], acc: Sequence[float]) -> None:
         """A position write: a limp servo takes torque where the hand left it, then drives to the goal."""
         self._take_torque(list(joints))
         self.inner.command(joints, goal, spd, acc)
 
-    def set_torque(self, on: bool, joints=None) -> None:
+    def set_torque(self, on: bool, joints: Sequence[int] | None = None) -> None:
         """Torque on: the servo stands where the hand left it (then drives to its kept goal). Off: the hand
         takes the servos from where they stand, and its script starts again."""
         js = list(range(N_JOINTS)) if joints is None else list(joints)
@@ -179,7 +179,7 @@ class GuidedServos:
         return np.asarray(self.inner.loads())
 
 
-def guided_servos(guide: Guide, max_speed: float | None = None):
+def guided_servos(guide: Guide, max_speed: float | None = None) -> Callable[[], GuidedServos]:
     """A zero-argument factory (for ``PtySimulator(servos=...)``, also in its own process) of the ideal
     kinematic servos, started as the firmware's default ones, with ``guide``'s hand on the limp ones."""
     def make() -> GuidedServos:

@@ -186,7 +186,7 @@ class Link:
     def __enter__(self) -> Link:
         return self.open()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     # ------------------------------------------------------------------ I/O

@@ -6,16 +6,21 @@ Used by ``plan --port/--sim`` for ``start: current``. The arm does not move.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from roarmctl.device.feedback import FeedbackValidator, read_valid
 from roarmctl.device.link import Link
 from roarmctl.device.protocol import Feedback, WireMap
 
+if TYPE_CHECKING:
+    from roarmctl.robot.model import Robot
+
 COUNT = 2 * np.pi / 4096  # one servo step (rad)
 
 
-def within_limits(robot, q: np.ndarray) -> np.ndarray:
+def within_limits(robot: Robot, q: np.ndarray) -> np.ndarray:
     """(dof,) rad: a reading up to two servo counts beyond a joint limit (the 2047 middle reads 0
     as one count off; the 6-decimal rounding of pi) taken as the limit itself; anything further is
     left as it is (the planner then refuses a start outside the limits, naming the joint)."""
@@ -24,13 +29,13 @@ def within_limits(robot, q: np.ndarray) -> np.ndarray:
     return np.where(near, np.clip(q, lo, hi), q)
 
 
-def configuration_from_feedback(robot, fb: Feedback) -> np.ndarray:
+def configuration_from_feedback(robot: Robot, fb: Feedback) -> np.ndarray:
     """(dof,) rad in the robot's convention (URDF; gripper included) from a parsed ``T:1051``
     already accepted by the validator, with ``within_limits``."""
     return within_limits(robot, WireMap(robot).from_wire(fb.joints))
 
 
-def read_configuration(port: str, robot) -> tuple[np.ndarray, Feedback]:
+def read_configuration(port: str, robot: Robot) -> tuple[np.ndarray, Feedback]:
     """Open ``port``, connect, and return (configuration (dof,) rad, feedback) from two consecutive
     frames the validator accepted (torque may be off: the arm is not moved).
 

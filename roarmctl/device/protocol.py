@@ -18,12 +18,16 @@ import json
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.errors import DescriptionError
 from roarmctl.robot.model import WIRE_FIELDS
+
+if TYPE_CHECKING:
+    from roarmctl.robot.model import Robot
 
 BAUDRATE = 115200
 BYTES_PER_SECOND = BAUDRATE / 10.0  # 8N1: 10 bits per byte on the wire
@@ -121,7 +125,7 @@ class WireMap:
     ``q`` is (dof,) in ``robot.joint_names`` order (gripper last), radians, URDF convention.
     """
 
-    def __init__(self, robot) -> None:
+    def __init__(self, robot: Robot) -> None:
         self.robot = robot
         by_field = {w.field: w for w in robot.wire}
         self.model = next((m for m, (fields, _) in MODELS.items() if set(by_field) == set(fields)), None)
@@ -137,12 +141,12 @@ class WireMap:
         self.fields = [by_field[f] for f in self.field_names]
         self.index = [robot.joint_index(w.joint) for w in self.fields]
 
-    def to_wire(self, q) -> dict[str, float]:
+    def to_wire(self, q: npt.ArrayLike) -> dict[str, float]:
         """Joint values (dof,) rad -> {device field: firmware radians}, clamped."""
         q = np.asarray(q, dtype=float)
         return {w.field: w.to_wire(float(q[i])) for w, i in zip(self.fields, self.index)}
 
-    def to_wire_array(self, q) -> np.ndarray:
+    def to_wire_array(self, q: npt.ArrayLike) -> np.ndarray:
         """(N, dof) joint values -> (N, fields) firmware radians in ``field_names`` order, clamped."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         out = np.empty((q.shape[0], len(self.fields)))
@@ -161,7 +165,7 @@ class WireMap:
             q[i] = w.from_wire(v)
         return q
 
-    def command(self, q, spd: int, acc: int) -> dict[str, Any]:
+    def command(self, q: npt.ArrayLike, spd: int, acc: int) -> dict[str, Any]:
         """The joints command (``T:102``) that drives the arm to ``q`` (dof,) rad with these ``spd``/``acc``."""
         return joints_command(self.to_wire(q), spd, acc, self.field_names)
 

@@ -19,13 +19,19 @@ docs/physics.md, "Sag, and --sag".
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.device import st3235
 from roarmctl.device.protocol import WireMap
 from roarmctl.errors import RoarmError
 from roarmctl.robot.dynamics import inverse_dynamics
 from roarmctl.robot.model import Inertial, Robot
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
 
 
 def wanted(sag: bool | None, *, ideal: bool = False) -> bool:
@@ -43,7 +49,7 @@ def _set_down(traj, release: float) -> float:
     return release
 
 
-def offsets(robot: Robot, traj, times, q) -> np.ndarray:
+def offsets(robot: Robot, traj: Trajectory, times: npt.ArrayLike, q: np.ndarray) -> np.ndarray:
     """Goal offsets (N, dof) rad that cancel the servos' sag under gravity at the planned poses ``q``
     (N, dof) at trajectory times ``times`` (N,) s, the payloads of ``traj`` held from their grasp until
     they are set down (the release's gripper segment starts); zero for the gripper, and everywhere when the

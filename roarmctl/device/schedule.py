@@ -13,16 +13,22 @@ the table.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.device import protocol, st3235
 from roarmctl.device.protocol import WireMap, acc_register, spd_register, wire_seconds
 from roarmctl.device.sag import offsets as sag_offsets
 from roarmctl.errors import InputError
 from roarmctl.motion.validate import MIN_SPEED_SCALE
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.model import Robot
 
 MAX_LINK_RATE = 90.0  # T:102 lines/s the 115200 link can carry at all (about 10.4 ms each)
 DEFAULT_RATE = 50.0
@@ -34,7 +40,7 @@ LINK_BUDGET = 0.85  # share of the 11520 B/s host->arm direction the stream may 
 
 
 # ----------------------------------------------------------------------------- sampling
-def sample(traj, t) -> np.ndarray:
+def sample(traj: Trajectory, t: npt.ArrayLike) -> np.ndarray:
     """Positions at times ``t`` (scalar or (M,), s, clamped to [0, T]) by cubic Hermite interpolation
     of the samples and their velocities: (dof,) or (M, dof)."""
     ts = traj.times
@@ -129,7 +135,7 @@ def strategy_rate(strategy: str | Strategy, rate: float) -> float:
     return strat.rate if strat.rate is not None else rate
 
 
-def build_schedule(traj, robot, *, rate: float = DEFAULT_RATE, speed_scale: float = 1.0,
+def build_schedule(traj: Trajectory, robot: Robot, *, rate: float = DEFAULT_RATE, speed_scale: float = 1.0,
                    strategy: str | Strategy = DEFAULT_STRATEGY, latency: float | None = None,
                    sag: bool = False) -> list[Tick]:
     """Every command the streamer will send for ``traj``, with its time (s from the start).
@@ -209,7 +215,7 @@ def _clamp(field_name: str, v: float) -> float:
     return min(max(float(v), lo), hi)
 
 
-def plan_clock(t, paused) -> Any:
+def plan_clock(t: npt.ArrayLike, paused: Iterable[Sequence[float]]) -> Any:
     """The plan's time (s) at stream times ``t`` (s after the stream's start; scalar or (M,)) when the plan waited
     for a late host: ``paused`` is [(plan time at which its clock stopped, for how long), ...] in order (the
     execution log's ``paused``). During a pause the plan's time stands still; after it, it is that much behind."""
@@ -223,7 +229,7 @@ def plan_clock(t, paused) -> Any:
     return float(out) if np.ndim(t) == 0 else out
 
 
-def run_clock(t, paused) -> Any:
+def run_clock(t: npt.ArrayLike, paused: Iterable[Sequence[float]]) -> Any:
     """The stream's time (s after its start) at which the plan, paused as ``plan_clock`` says, reached plan time ``t``
     (a pause's own point: when it started); the inverse of ``plan_clock`` outside the pauses."""
     tt = np.asarray(t, dtype=float)

@@ -96,7 +96,7 @@ class KinematicServos:
     acc = property(lambda self: np.array(self._acc))
 
     # ------------------------------------------------------------------ ServoModel
-    def command(self, joints, goal, spd, acc) -> None:
+    def command(self, joints: Sequence[int], goal: Sequence[float], spd: Sequence[float], acc: Sequence[float]) -> None:
         """See ``ServoModel.command``."""
         for j, g, s, a in zip(joints, goal, spd, acc):
             self._goal[j] = float(g)
@@ -104,13 +104,13 @@ class KinematicServos:
             self._acc[j] = float(a)
             self._on[j] = True
 
-    def set_torque(self, on: bool, joints=None) -> None:
+    def set_torque(self, on: bool, joints: Sequence[int] | None = None) -> None:
         """See ``ServoModel.set_torque``."""
         for j in (range(N_JOINTS) if joints is None else joints):
             self._on[j] = bool(on)
             self._vel[j] = 0.0
 
-    def place(self, joints, positions) -> None:
+    def place(self, joints: Sequence[int], positions: Sequence[float]) -> None:
         """An outside force (a hand) moved these servos while limp: they stand at ``positions`` (steps), at rest."""
         for j, p in zip(joints, positions):
             self._pos[j] = float(p)

@@ -14,9 +14,15 @@ from collections.abc import Callable
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from roarmctl.errors import InputError, RoarmError, signal_name
+
+if TYPE_CHECKING:
+    from roarmctl.device.simulator import PtySimulator
+    from roarmctl.device.streamer import Result, StreamConfig
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.model import Robot
 
 
 @dataclass
@@ -31,7 +37,7 @@ class Execution:
     simulator: dict[str, Any] | None
 
 
-def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = False,
+def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: str | None = None, sim: bool = False,
                   log_path: str | Path | None = None, confirm: Callable[[str], bool],
                   on_status: Callable | None = None, on_start: Callable | None = None,
                   on_note: Callable[[str], None] | None = None, on_end: Callable[[], None] | None = None,
@@ -128,7 +134,8 @@ def run_execution(traj, robot, cfg, *, port: str | None = None, sim: bool = Fals
     return Execution(result, streamer.traj, str(port), tracking)
 
 
-def simulator_tracking(simulator, robot, traj, cfg, result) -> dict[str, Any]:
+def simulator_tracking(simulator: PtySimulator, robot: Robot, traj: Trajectory, cfg: StreamConfig,
+                       result: Result) -> dict[str, Any]:
     """TCP error (mm) of the simulator's true servo positions against the plan, over the motion, on the plan's
     time (its pauses for a late host taken out): raw, and aligned within the lateness measured on both sides and
     the lead the servos keep through a pause (``roarmctl.device.tracking``)."""

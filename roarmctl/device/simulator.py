@@ -254,7 +254,7 @@ class PtySimulator:
     def __enter__(self) -> PtySimulator:
         return self.start()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
     def alive(self) -> bool:

@@ -32,7 +32,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -60,6 +60,11 @@ from roarmctl.device.schedule import (
 from roarmctl.errors import DeviceError, InfeasibleError, Interrupted, signal_name
 from roarmctl.fileio import atomic_write_json
 from roarmctl.robot.frames import device_point, to_frame
+
+if TYPE_CHECKING:
+    from roarmctl.device.link import Link
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.model import Robot
 
 __all__ = [
     "DEFAULT_RATE",
@@ -174,7 +179,7 @@ class Streamer:
     real ESP32 has none), added to the tracking check's time window.
     """
 
-    def __init__(self, link, robot, traj, config: StreamConfig | None = None, *,
+    def __init__(self, link: Link, robot: Robot, traj: Trajectory, config: StreamConfig | None = None, *,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                  on_status: Callable[[Status], None] | None = None, hook: Callable[[int], None] | None = None,
                  confirm: Callable[[str], bool] | None = None, on_start: Callable[[], None] | None = None,

@@ -26,7 +26,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -41,6 +41,9 @@ from roarmctl.motion.clearance import clearance
 from roarmctl.motion.collision import CollisionChecker
 from roarmctl.motion.scene import Scene, SceneItem
 from roarmctl.robot.frames import device_point, to_frame
+
+if TYPE_CHECKING:
+    from roarmctl.robot.model import Robot
 
 NEAR_FACTOR = 2.0  # warn within this factor of the planning margin
 TORQUE_OFF = {"T": 210, "cmd": 0}
@@ -79,7 +82,8 @@ class Judge:
     scene (``SceneItem``; empty: no clearance); ``padding`` m: the planner's collision padding.
     """
 
-    def __init__(self, robot, margin: float, items: list[SceneItem] | None = None, padding: float = 0.005) -> None:
+    def __init__(self, robot: Robot, margin: float, items: list[SceneItem] | None = None,
+                 padding: float = 0.005) -> None:
         self.robot = robot
         self.margin = float(margin)
         self.items = list(items or [])
@@ -141,7 +145,7 @@ class TeachSession:
     is a lost link (``DeviceError``, exit 4). Times from ``clock`` (s).
     """
 
-    def __init__(self, link: Link, robot, judge: Judge, *, clock: Callable[[], float] = time.monotonic,
+    def __init__(self, link: Link, robot: Robot, judge: Judge, *, clock: Callable[[], float] = time.monotonic,
                  lost_after: float = 1.0, grace: float = 20.0, ask_again: float = 0.25, keep_raw: bool = False) -> None:
         self.link = link
         self.robot = robot
@@ -362,6 +366,6 @@ class TeachSession:
         }
 
 
-def gripper_index(robot) -> int:
+def gripper_index(robot: Robot) -> int:
     """Index of the gripper joint in ``robot``'s joint vector (the last joint when it names none)."""
     return robot.joint_index(robot.gripper.joint) if robot.gripper is not None else robot.dof - 1

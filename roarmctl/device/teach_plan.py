@@ -15,7 +15,8 @@ in a comment above their task.
 from __future__ import annotations
 
 import math
-from typing import Any
+import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -25,6 +26,9 @@ from roarmctl.fileio import atomic_write_text
 from roarmctl.motion.geometry import half_extents
 from roarmctl.motion.planning.context import scene_item
 from roarmctl.robot.ik.pitch import tool_pitch
+
+if TYPE_CHECKING:
+    from roarmctl.robot.model import Robot
 
 GRASP_REACH = 0.015  # m: a grasp with the TCP this close to an object's box picks that object
 GRIPPER_MOVED = 0.02  # rad: a waypoint sets the gripper when it moved more than this since the last one that did
@@ -48,7 +52,7 @@ def _numbers(values) -> str:
     return "[" + ", ".join(f"{float(v):.6f}" for v in values) + "]"
 
 
-def plan_text(robot, waypoints: list[Waypoint], margin: float, source: Any = None) -> str:
+def plan_text(robot: Robot, waypoints: list[Waypoint], margin: float, source: Any = None) -> str:
     """The taught plan as YAML text. ``robot``: the taught ``Robot``; ``margin`` m/rad: the singularity
     margin the waypoints were judged against; ``source``: the ``Plan`` given with ``--plan`` (its parsed
     document supplies scene, objects, limits and planner), or None."""
@@ -143,6 +147,7 @@ def _picks(robot, waypoints: list[Waypoint], source: Any) -> dict[int, str]:
     return out
 
 
-def save_plan(path, robot, waypoints: list[Waypoint], margin: float, source: Any = None) -> None:
+def save_plan(path: str | os.PathLike[str], robot: Robot, waypoints: list[Waypoint], margin: float,
+              source: Any = None) -> None:
     """Write :func:`plan_text` to ``path`` atomically."""
     atomic_write_text(path, plan_text(robot, waypoints, margin, source))

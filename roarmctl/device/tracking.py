@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import itertools
 import math
-from typing import Any
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -19,10 +20,14 @@ from roarmctl.device.protocol import WireMap
 from roarmctl.device.schedule import plan_clock, sample
 from roarmctl.device.servos import JOINTS
 
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.model import Robot
+
 WINDOW = 0.25  # s: lateness this far back still delays the arm
 
 
-def recorded_joints(robot, q_rec: np.ndarray) -> np.ndarray:
+def recorded_joints(robot: Robot, q_rec: np.ndarray) -> np.ndarray:
     """The simulator's recording (N, 6; firmware joints in the M3's URDF view, hand = pi - q) as
     joint vectors (N, dof) of ``robot``, through its wire map."""
     wm = WireMap(robot)
@@ -59,7 +64,7 @@ def host_lateness(sent: list[dict[str, Any]], rate: float) -> np.ndarray:
     return np.array(events, dtype=float).reshape(-1, 2)
 
 
-def pause_events(paused, ahead: float) -> np.ndarray:
+def pause_events(paused: Iterable[Sequence[float]], ahead: float) -> np.ndarray:
     """(K, 2) (s after the stream's start, s) for ``true_tracking``'s ``ahead``: where the plan waited for a late host
     (``paused``: the log's [(plan time, duration)]), the servos went on to the last goal sent, which lies up to
     ``ahead`` s further on the plan (the link's latency plus the strategy's lead), and need a moment after the pause
@@ -75,9 +80,10 @@ def pause_events(paused, ahead: float) -> np.ndarray:
     return np.array(events, dtype=float).reshape(-1, 2)
 
 
-def true_tracking(robot, traj, recording, t0: float, speed_scale: float = 1.0,
-                  host_late: np.ndarray | None = None, device_late: np.ndarray | None = None,
-                  lag: bool = False, paused=(), ahead: np.ndarray | None = None) -> dict[str, Any]:
+def true_tracking(robot: Robot, traj: Trajectory, recording: tuple[np.ndarray, np.ndarray, np.ndarray], t0: float,
+                  speed_scale: float = 1.0, host_late: np.ndarray | None = None, device_late: np.ndarray | None = None,
+                  lag: bool = False, paused: Iterable[Sequence[float]] = (),
+                  ahead: np.ndarray | None = None) -> dict[str, Any]:
     """TCP error (mm) of the recorded motion against ``traj`` over the motion's span.
 
     ``recording``: (times s, joints (N, 6), torque (N,)) as ``PtySimulator.recording()`` gives;

@@ -11,10 +11,14 @@ from __future__ import annotations
 import os
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from roarmctl.errors import InputError, TrajectoryFileError
 from roarmctl.fileio import atomic_write_text, check_output_folder, note_output_folder
+
+if TYPE_CHECKING:
+    from roarmctl.export.streams import Streams
+    from roarmctl.robot.model import Robot
 
 FORMATS = ("mcap", "bag", "csv")
 EXECLOG_FORMAT = "roarmctl.execlog/1"
@@ -57,7 +61,7 @@ def load_source(path: str | os.PathLike | Any) -> tuple[str, Any]:
                               "give a file written by 'roarmctl plan' or 'roarmctl execute'")
 
 
-def streams_for(source: str | os.PathLike | Any, trajectory: str | os.PathLike | Any | None = None):
+def streams_for(source: str | os.PathLike | Any, trajectory: str | os.PathLike | Any | None = None) -> Streams:
     """The ``Streams`` of a trajectory or execution-log file (robot loaded by the name in the file).
     ``trajectory`` (logs only): the executed trajectory, exported beside the run as ``planned``."""
     from roarmctl.export.streams import log_streams, trajectory_streams
@@ -77,7 +81,7 @@ def streams_for(source: str | os.PathLike | Any, trajectory: str | os.PathLike |
     return log_streams(data, log_robot(data, str(source), traj, str(trajectory)), traj)
 
 
-def log_robot(log: dict[str, Any], where: str, traj: Any = None, traj_where: str = "trajectory"):
+def log_robot(log: dict[str, Any], where: str, traj: Any = None, traj_where: str = "trajectory") -> Robot:
     """The ``Robot`` of an execution log: the description it carries, else the one of the trajectory it ran
     (``traj``) when that carries one, else the bundled robot the log names."""
     from roarmctl.motion.validate import robot_of
@@ -105,7 +109,7 @@ def export(source: str | os.PathLike | Any, path: str | os.PathLike, fmt: str | 
     return write(streams, path, fmt, force)
 
 
-def write(streams, path: str | os.PathLike, fmt: str, force: bool = False) -> dict[str, Any]:
+def write(streams: Streams, path: str | os.PathLike, fmt: str, force: bool = False) -> dict[str, Any]:
     """Write already-built ``Streams`` in format ``fmt`` ('mcap', 'bag', 'csv'); see ``export``."""
     if fmt == "csv":
         from roarmctl.export.table import csv_text

@@ -201,14 +201,14 @@ class CollisionChecker:
         joints = self.robot.joints_moved_by(self.robot.gripper.joint)  # with the fingers that mimic it
         return tuple(name for name in kin.link_names if any(self._moves_with(kin, kin.link_index[name], j) for j in joints))
 
-    def tcp_pose(self, q_arm) -> np.ndarray:
+    def tcp_pose(self, q_arm: np.typing.ArrayLike) -> np.ndarray:
         """TCP pose (4, 4) at arm configuration ``q_arm`` (arm_dof,) with the current gripper value."""
         rot, pos = self._fk.frames(self._full(np.atleast_2d(np.asarray(q_arm, dtype=float))))
         t = np.eye(4)
         t[:3, :3], t[:3, 3] = rot[0, self._tcp], pos[0, self._tcp]
         return t
 
-    def attach(self, name: str, q_arm) -> None:
+    def attach(self, name: str, q_arm: np.typing.ArrayLike) -> None:
         """Attach scene object ``name`` rigidly to the TCP at its current relative pose at ``q_arm``."""
         item = self.scene[name]
         if item.role == "table":
@@ -218,7 +218,7 @@ class CollisionChecker:
         self._attached[name] = (item, rel)
         self._rebuild()
 
-    def detach(self, name: str, q_arm, step: float = 0.0) -> SceneItem:
+    def detach(self, name: str, q_arm: np.typing.ArrayLike, step: float = 0.0) -> SceneItem:
         """Put attached object ``name`` back into the scene at its pose for ``q_arm`` (``scene.settled`` to ``step``, m and rad, if > 0); returns the item."""
         if name not in self._attached:
             raise InputError(f"'{name}' is not attached (attached: {', '.join(self._attached) or 'none'})")
@@ -511,7 +511,7 @@ class CollisionChecker:
         full[:, self._arm] = q
         return full
 
-    def margin_measure(self, Q, gripper=None) -> np.ndarray:
+    def margin_measure(self, Q: np.typing.ArrayLike, gripper: float | np.typing.ArrayLike | None = None) -> np.ndarray:
         """Smallest singular value (N,) of the translational Jacobian (3 x arm_dof), m/rad, at arm
         configurations ``Q`` (N, arm_dof): the quantity the singularity margin bounds."""
         Q = np.ascontiguousarray(np.atleast_2d(Q), dtype=float)
@@ -596,7 +596,7 @@ class CollisionChecker:
                 if stop_at_first:
                     break
 
-    def validity_batch(self, Q, gripper=None) -> np.ndarray:
+    def validity_batch(self, Q: np.typing.ArrayLike, gripper: float | np.typing.ArrayLike | None = None) -> np.ndarray:
         """Validity (N,) bool of arm configurations ``Q`` (N, arm_dof), rad; ``gripper`` (N,) as in ``first_invalid``."""
         with self._lock:
             Q = np.atleast_2d(np.asarray(Q, dtype=float))
@@ -606,7 +606,7 @@ class CollisionChecker:
                 raise InputError(f"{self.robot.name} has no gripper")
             return self._evaluate(Q, stop_at_first=False, gripper=None if gripper is None else np.asarray(gripper, dtype=float))[0]
 
-    def is_valid(self, q_arm) -> bool:
+    def is_valid(self, q_arm: np.typing.ArrayLike) -> bool:
         """True when arm configuration ``q_arm`` (arm_dof,) is within limits, margin and collision-free."""
         with self._lock:
             q = np.ascontiguousarray(q_arm, dtype=float)
@@ -623,7 +623,7 @@ class CollisionChecker:
             self._narrow(valid, b, ns, npairs, True)
             return bool(valid[0])
 
-    def first_invalid(self, Q, gripper=None) -> int | None:
+    def first_invalid(self, Q: np.typing.ArrayLike, gripper: float | np.typing.ArrayLike | None = None) -> int | None:
         """Index of the first invalid row of ``Q`` (N, arm_dof), or None when all are valid; ``gripper`` (N,)
         gives each row its own gripper value (rad; default: the value of ``set_gripper``)."""
         with self._lock:
@@ -635,7 +635,7 @@ class CollisionChecker:
             valid = self._evaluate(Q, stop_at_first=True, gripper=None if gripper is None else np.asarray(gripper, dtype=float))[0]
             return None if valid.all() else int(np.argmin(valid))
 
-    def segment_valid(self, q0, q1, resolution: float = 0.01, refine: int = 4) -> bool:
+    def segment_valid(self, q0: np.typing.ArrayLike, q1: np.typing.ArrayLike, resolution: float = 0.01, refine: int = 4) -> bool:
         """True when the straight joint-space segment q0 -> q1 (arm_dof,) is valid.
 
         States are checked at steps of at most ``resolution`` rad (Euclidean norm over the arm
@@ -692,8 +692,8 @@ class CollisionChecker:
         n = len(idx) * (refine - 1)
         return self._line_ok(b if b["n"] >= n else self._buffers(n), q0, d, steps, 0, 1, 0.0, idx, refine)
 
-    def _line_ok(self, b: _Buffers, q0: np.ndarray, d: np.ndarray, steps: int, start: int, stride: int, sweep: float = 0.0,
-                 idx: np.ndarray = _NO_IDX, refine: int = 1, skip: int = 0) -> bool:
+    def _line_ok(self, b: _Buffers, q0: np.ndarray, d: np.ndarray, steps: int, start: int, stride: int,
+                 sweep: float = 0.0, idx: np.ndarray = _NO_IDX, refine: int = 1, skip: int = 0) -> bool:
         """True when the states of the segment q0 -> q0 + d that ``_kernel.check_line`` makes (see there) are
         all valid; stops at the first invalid one. ``b``: output buffers (``_buffers``) large enough for them; with
         ``sweep`` > 0 the "near" flags stay in ``b``. ``idx``: int64 step indices (refinement), as the kernel takes.
@@ -728,7 +728,7 @@ class CollisionChecker:
         ns, npairs, limit = _kernel.check(self._kfm, self._kim, q, _NO_GRIP, *b["views"], float(sweep), True)
         return self._all_clear(b, n, ns, npairs, limit)
 
-    def explain(self, q_arm) -> str:
+    def explain(self, q_arm: np.typing.ArrayLike) -> str:
         """Why ``q_arm`` (arm_dof,) is invalid, in words; "valid" when it is not."""
         with self._lock:
             q = np.asarray(q_arm, dtype=float).reshape(1, -1)
@@ -772,7 +772,7 @@ class CollisionChecker:
             return "valid"
 
 
-def interpolate(q0, q1, resolution: float) -> np.ndarray:
+def interpolate(q0: np.typing.ArrayLike, q1: np.typing.ArrayLike, resolution: float) -> np.ndarray:
     """States (K, n) on the straight segment q0 -> q1, both ends included, at most ``resolution``
     apart (Euclidean norm, rad); K >= 2."""
     q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)

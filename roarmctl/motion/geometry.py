@@ -11,7 +11,9 @@ geometry (meshes' polytopes and BVHs, clouds' octrees) is built once per item da
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import fcl
 import numpy as np
@@ -22,14 +24,19 @@ from roarmctl.motion.scene import SceneItem
 from roarmctl.motion.scenefiles import CloudData, MeshData
 from roarmctl.robot.meshes import centred
 
+if TYPE_CHECKING:
+    from roarmctl.robot.meshes import MeshGeometry
 
-def fcl_geometry(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0, mesh=None):
+
+def fcl_geometry(kind: str, size: Sequence[float] = (0, 0, 0), radius: float = 0.0, length: float = 0.0,
+                 grow: float = 0.0, mesh: MeshGeometry | None = None) -> fcl.CollisionGeometry:
     """An FCL geometry, every surface moved outwards by ``grow`` (m; negative shrinks).
 
     A mesh (``MeshGeometry``) becomes an FCL convex polytope (its hull), or a BVH of its triangles
     when ``mesh.exact``; ``grow`` > 0 pads it (``MeshGeometry.grown``).
     """
     if kind == "mesh":
+        assert mesh is not None  # a mesh shape carries its MeshGeometry
         v, f = mesh.grown(max(grow, 0.0))
         if mesh.exact:
             bvh = fcl.BVHModel()
@@ -49,9 +56,11 @@ def fcl_geometry(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float 
     raise InputError(f"collision shape kind '{kind}' is not supported")
 
 
-def half_extents(kind: str, size=(0, 0, 0), radius=0.0, length=0.0, grow: float = 0.0, mesh=None) -> np.ndarray:
+def half_extents(kind: str, size: Sequence[float] = (0, 0, 0), radius: float = 0.0, length: float = 0.0,
+                 grow: float = 0.0, mesh: MeshGeometry | None = None) -> np.ndarray:
     """Half extents (3,) of the shape's local bounding box, grown by ``grow``."""
     if kind == "mesh":
+        assert mesh is not None  # a mesh shape carries its MeshGeometry
         h = np.max(np.abs(mesh.grown(max(grow, 0.0))[0]), axis=0)
         return np.maximum(h, 1e-6)
     if kind == "box":

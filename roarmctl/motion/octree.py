@@ -20,7 +20,12 @@ children's largest, so a part of the tree is occupied exactly where one of its c
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    import fcl
 
 TREE_DEPTH = 16  # OctoMap's (and so FCL's) fixed tree depth
 KEY_OFFSET = 1 << (TREE_DEPTH - 1)  # key of cell index 0
@@ -79,7 +84,7 @@ def octree_stream(cells: np.ndarray) -> bytes:
     return out.tobytes()
 
 
-def fcl_octree(cells: np.ndarray, resolution: float):
+def fcl_octree(cells: np.ndarray, resolution: float) -> fcl.OcTree:
     """An ``fcl.OcTree`` whose occupied leaves are ``cells`` (K, 3) of edge ``resolution`` (m)."""
     import fcl
 

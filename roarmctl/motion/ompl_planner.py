@@ -30,6 +30,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.errors import InputError, PlanningError
 from roarmctl.motion.collision import CollisionChecker, densify
@@ -198,7 +199,7 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
     return path[keep]
 
 
-def simplify_path(checker: CollisionChecker, path, *, seed: int = 0, resolution: float = 0.01,
+def simplify_path(checker: CollisionChecker, path: npt.ArrayLike, *, seed: int = 0, resolution: float = 0.01,
                   attempts: int = SHORTCUT_ATTEMPTS, time_budget: float = 5.0) -> np.ndarray:
     """Shorten a valid joint path (K, arm_dof): greedy vertex removal plus ``attempts`` seeded random
     shortcuts, every new segment checked with ``checker.segment_valid`` at ``resolution`` (rad).
@@ -209,7 +210,8 @@ def simplify_path(checker: CollisionChecker, path, *, seed: int = 0, resolution:
     return _random_shortcuts(checker, path, resolution, np.random.default_rng(seed), attempts, time_budget)
 
 
-def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, planner: str = "RRTConnect",
+def plan_joint_path_with_stats(checker: CollisionChecker, q_start: npt.ArrayLike, q_goal: npt.ArrayLike, *,
+                               planner: str = "RRTConnect",
                                time_budget: float = 10.0, simplify_budget: float = 5.0, seed: int = 0,
                                resolution: float = 0.01, max_step: float | None = 0.1,
                                try_direct: bool = True, simplify_attempts: int = SHORTCUT_ATTEMPTS,
@@ -259,7 +261,8 @@ def plan_joint_path_with_stats(checker: CollisionChecker, q_start, q_goal, *, pl
     return path, stats
 
 
-def plan_joint_path(checker: CollisionChecker, q_start, q_goal, *, planner: str = "RRTConnect",
+def plan_joint_path(checker: CollisionChecker, q_start: npt.ArrayLike, q_goal: npt.ArrayLike, *,
+                    planner: str = "RRTConnect",
                     time_budget: float = 10.0, simplify_budget: float = 5.0, seed: int = 0,
                     resolution: float = 0.01, max_step: float | None = 0.1,
                     simplify_attempts: int = SHORTCUT_ATTEMPTS, max_checks: int = MAX_SOLVE_CHECKS) -> np.ndarray:

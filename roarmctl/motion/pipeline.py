@@ -58,7 +58,7 @@ class PlanResult:
 
 
 def plan_file(path: str | Path | dict, seed: int | None = None, progress: ProgressFn | None = None,
-              base_dir: str | Path | None = None, current: Callable[[object], np.ndarray] | None = None,
+              base_dir: str | Path | None = None, current: Callable[[Robot], np.ndarray] | None = None,
               start_here: bool = False) -> PlanResult:
     """Load the plan at ``path`` (or a plan dict of the same form) and plan it (``seed`` overrides
     ``planner.seed``; ``base_dir`` resolves a dict's relative robot path).

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,6 +25,9 @@ from roarmctl.errors import InfeasibleError, InputError
 from roarmctl.fileio import read_bytes
 from roarmctl.motion.scene import Scene
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
+
+if TYPE_CHECKING:
+    from roarmctl.robot.model import Robot
 
 MODES = ("gripper", "move_to_start", "from_current")
 
@@ -54,7 +58,7 @@ def _plan_for(traj: Trajectory, robot, q_from: np.ndarray, q_to: np.ndarray):
                 tasks=[task], limits=limits, planner=cfg)
 
 
-def plan_between(traj: Trajectory, robot, q_from: np.ndarray, q_to: np.ndarray, label: str) -> Trajectory:
+def plan_between(traj: Trajectory, robot: Robot, q_from: np.ndarray, q_to: np.ndarray, label: str) -> Trajectory:
     """Plan ``q_from`` -> ``q_to`` (full configurations, rad): a free motion (if the arm must move),
     then the gripper (if it must move), in the trajectory's scene; segments labelled ``label``."""
     from roarmctl.motion.pipeline import Planner, load_planning_libraries
@@ -115,7 +119,7 @@ def _plan_again(traj: Trajectory, q: np.ndarray) -> Trajectory | None:
     return plan_file(path, seed=meta.get("seed"), current=lambda robot: q, start_here=True).trajectory
 
 
-def replan_start(traj: Trajectory, robot, q_measured: np.ndarray, mode: str) -> tuple[Trajectory, str]:
+def replan_start(traj: Trajectory, robot: Robot, q_measured: np.ndarray, mode: str) -> tuple[Trajectory, str]:
     """The trajectory to run from ``q_measured`` (dof,) rad, and one sentence saying what was planned.
 
     ``mode`` is one of ``MODES``. Raises InfeasibleError/PlanningError like ``roarmctl plan``.

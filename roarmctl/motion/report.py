@@ -8,15 +8,19 @@ fixed to its link from grasp to release.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from roarmctl.robot.dynamics import inverse_dynamics
 from roarmctl.robot.model import Inertial
 
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.model import Robot
 
-def payload_bodies(traj) -> list[tuple[float, float, dict]]:
+
+def payload_bodies(traj: Trajectory) -> list[tuple[float, float, dict]]:
     """The trajectory's payload spans as (start s, end s, {link: Inertial})."""
     out = []
     for p in traj.payloads:
@@ -25,7 +29,7 @@ def payload_bodies(traj) -> list[tuple[float, float, dict]]:
     return out
 
 
-def joint_torques(traj, robot) -> np.ndarray | None:
+def joint_torques(traj: Trajectory, robot: Robot) -> np.ndarray | None:
     """RNEA torques (N, dof) N m at every sample, held objects included; None without inertial data."""
     if not robot.inertials:
         return None
@@ -37,14 +41,14 @@ def joint_torques(traj, robot) -> np.ndarray | None:
     return tau
 
 
-def joint_jerks(traj) -> np.ndarray:
+def joint_jerks(traj: Trajectory) -> np.ndarray:
     """Jerk (N-1, dof) rad/s^3 between consecutive samples (finite differences of the accelerations)."""
     if len(traj.times) < 2:
         return np.zeros((0, traj.positions.shape[1]))
     return np.diff(traj.accelerations, axis=0) / np.diff(traj.times)[:, None]
 
 
-def motion_peaks(traj, robot) -> dict[str, Any]:
+def motion_peaks(traj: Trajectory, robot: Robot) -> dict[str, Any]:
     """Per joint (in ``joint_names`` order): peaks and peak/limit fractions (None where no limit).
 
     Keys: ``joints``, ``cycle_time`` (s), ``velocity``/``acceleration``/``jerk``/``torque`` (peaks in

@@ -32,10 +32,14 @@ import functools
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from roarmctl.errors import InfeasibleError, PlanningError
+
+if TYPE_CHECKING:
+    from types import ModuleType
 
 # Limits handed to TOPP-RA are this fraction of the true ones, so that the sampled (and filtered)
 # trajectory stays inside the true limits; tightened step by step if not.
@@ -122,7 +126,7 @@ def dedupe(waypoints: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     return waypoints[keep]
 
 
-def import_toppra():
+def import_toppra() -> ModuleType:
     """``import toppra`` (returns the module), with the submodules timing uses.
 
     What it costs in a fresh process (bench/bench_startup.py): toppra's package ``__init__`` imports all of
@@ -254,7 +258,8 @@ def _geometric_jerk_constraint(at: np.ndarray, jmax: np.ndarray):
     return _sdot_bound_constraint(np.minimum(bound, 1e12))
 
 
-def _torque_terms(model: TorqueModel, path, gridpoints: np.ndarray, gravity: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _torque_terms(model: TorqueModel, path, gridpoints: np.ndarray,
+                  gravity: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """toppra's canonical torque form on the grid, tau = a(s) sddot + b(s) sdot^2 + c(s), each (G, n) N m.
 
     Same form as ``toppra.constraint.JointTorqueConstraint`` (which calls the dynamics once per grid

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -33,6 +34,7 @@ from roarmctl.validation import Checker, HugeNumber, load_json
 
 if TYPE_CHECKING:
     from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.model import Robot
 
 MAX_FILE_BYTES = 256 * 1024 * 1024  # a one-hour trajectory at 100 Hz is about 80 MB
 MAX_POINTS = 1_000_000
@@ -65,7 +67,7 @@ def read_document(path: str | Path) -> Any:
 
 
 # --------------------------------------------------------------------------- the document
-def parse_document(data: Any, where: str = "trajectory"):
+def parse_document(data: Any, where: str = "trajectory") -> Trajectory:
     """A ``roarmctl.trajectory/1`` document (the parsed JSON) -> ``Trajectory``, checking its form.
 
     Raises ``TrajectoryFileError`` (exit 2) naming the field; nothing here needs the robot.
@@ -362,7 +364,7 @@ def parse_log(data: Any, where: str = "execution log") -> dict:
 
 
 # --------------------------------------------------------------------------- against the robot
-def check_against_robot(traj, robot, where: str = "trajectory") -> None:
+def check_against_robot(traj: Trajectory, robot: Robot, where: str = "trajectory") -> None:
     """Joint names, limits, speeds and sample steps of ``traj`` against ``robot``; raises TrajectoryFileError."""
     if list(traj.joint_names) != list(robot.joint_names):
         CHECK.fail(where, "joint_names", f"{', '.join(traj.joint_names)} do not match robot '{robot.name}'",
@@ -419,7 +421,7 @@ def check_against_robot(traj, robot, where: str = "trajectory") -> None:
                    "the file was edited or damaged; plan it again")
 
 
-def validate_trajectory(traj_or_doc: Any, robot: Any = None, where: str | None = None):
+def validate_trajectory(traj_or_doc: Any, robot: Any = None, where: str | None = None) -> Trajectory:
     """The one validator: a ``Trajectory``, a parsed document (dict) or a path -> a checked ``Trajectory``.
 
     ``robot``: a loaded ``Robot``, a robot name/path, or None for the trajectory's own ``robot``.
@@ -443,7 +445,7 @@ def validate_trajectory(traj_or_doc: Any, robot: Any = None, where: str | None =
     return traj
 
 
-def robot_of(traj, where: str = "trajectory"):
+def robot_of(traj: Trajectory | SimpleNamespace, where: str = "trajectory") -> Robot:
     """The ``Robot`` a trajectory (or an execution log's fields) was planned for: its carried
     ``robot_description``, else the bundled robot it names (``roarmctl.robot.bundle.trajectory_robot``);
     an unknown robot is an input error naming the file."""

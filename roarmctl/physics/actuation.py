@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,6 +27,9 @@ from roarmctl.physics.mjcf import JointDynamics
 from roarmctl.physics.servo import ST3235, ServoBank, ServoSpec, generic_spec
 from roarmctl.robot.dynamics import inverse_dynamics
 from roarmctl.robot.model import Robot
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
 
 
 @dataclass
@@ -61,7 +65,7 @@ def _feedback_line(index: int) -> tuple[float, float]:
     return a, position_to_rad(index, 1.0) - a
 
 
-def for_robot(robot: Robot, traj=None) -> Actuation:
+def for_robot(robot: Robot, traj: Trajectory | None = None) -> Actuation:
     """The servos of ``robot``; ``traj`` (optional) sizes generic drives without effort limits."""
 
     try:
@@ -69,7 +73,8 @@ def for_robot(robot: Robot, traj=None) -> Actuation:
     except DescriptionError:
         wm = None
     if wm is not None:
-        joint, spec, count, sign, zero, limit, fields, fw = [], [], [], [], [], [], [], []
+        joint, spec, count, sign, zero, limit, fw = [], [], [], [], [], [], []
+        fields: list[str | None] = []
         for w, i in zip(wm.fields, wm.index):
             k = M3_FIELDS.index(w.field)
             alpha, beta = _feedback_line(k)

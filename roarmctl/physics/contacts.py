@@ -14,9 +14,15 @@ which link or item, which item, from when to when, how deep at most.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.physics.world import Contact
 
 LAG = 0.3  # s a window stays open after its planned end (the servos' lag, settling of a released object)
 GAP = 0.02  # s: contacts of one pair less than this apart are one episode
@@ -57,7 +63,7 @@ class Episode:
                 "point_m": [round(float(v), 4) for v in self.point]}
 
 
-def holds_from(traj, object_of_payload: list[str | None]) -> list[Hold]:
+def holds_from(traj: Trajectory, object_of_payload: list[str | None]) -> list[Hold]:
     """The holds of a trajectory: one per payload (grasp to release) whose object is known
     (``object_of_payload[k]`` names payload k's object or is None). Times from the trajectory's segments:
     the segment before the grasp's gripper segment is the descent, the one after it the lift; likewise
@@ -94,7 +100,8 @@ class Policy:
     ``holds``: the trajectory's holds; ``time_scale``: physics seconds per trajectory second (1/speed_scale).
     """
 
-    def __init__(self, jaw_links, roles: dict[str, str], holds: list[Hold], time_scale: float = 1.0) -> None:
+    def __init__(self, jaw_links: Iterable[str], roles: dict[str, str], holds: list[Hold],
+                 time_scale: float = 1.0) -> None:
         self.jaw_links = set(jaw_links)
         self.roles = roles
         self.holds = holds
@@ -136,7 +143,7 @@ class Episodes:
     open: dict = field(default_factory=dict)
     done: list[Episode] = field(default_factory=list)
 
-    def add(self, t: float, contacts) -> None:
+    def add(self, t: float, contacts: Iterable[Contact]) -> None:
         """Contacts (``roarmctl.physics.world.Contact``) of the step at physics time ``t`` (s)."""
         for c in contacts:
             key = (c.a, c.b) if c.a <= c.b else (c.b, c.a)

@@ -31,11 +31,16 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.errors import InputError
 from roarmctl.robot.model import Robot, quaternions
+
+if TYPE_CHECKING:
+    from roarmctl.motion.scene import Scene
 
 GRAVITY = 9.81  # m/s^2, the same value as roarmctl.robot.dynamics.GRAVITY
 TIMESTEP = 0.001  # s: the servos' control loop and the contacts both need about 1 ms
@@ -137,7 +142,7 @@ def _geom_shape(el: ET.Element, kind: str, size=(0.0, 0.0, 0.0), radius: float =
         raise InputError(f"physics: a '{kind}' shape has no physics model yet", "use boxes, cylinders, spheres or meshes")
 
 
-def build_document(robot: Robot, scene, masses: dict[str, float] | None = None,
+def build_document(robot: Robot, scene: Scene, masses: dict[str, float] | None = None,
                    dynamics: dict[str, JointDynamics] | None = None, *, timestep: float = TIMESTEP,
                    friction: tuple[float, float, float] = FRICTION) -> BuiltDocument:
     """The MJCF of ``robot`` in ``scene`` (a ``roarmctl.motion.scene.Scene``).
@@ -342,7 +347,7 @@ def _off_cloud_tables(robot: Robot, base: list[str], bodies: dict[str, ET.Elemen
             g.set("conaffinity", str(EVERY_BIT & ~TABLE_BIT))
 
 
-def cell_boxes(cells) -> tuple[np.ndarray, np.ndarray]:
+def cell_boxes(cells: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Boxes whose union is exactly the occupied cells ``cells`` (K, 3) int (unique): cells merged into runs
     along x, runs of equal extent into rectangles along y, rectangles into blocks along z. Returns
     (lo (B, 3), hi (B, 3)) int: box b spans cells lo[b] .. hi[b] - 1 (multiply by the resolution for m)."""

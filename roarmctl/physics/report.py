@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -47,6 +47,9 @@ from roarmctl.robot.bundle import make_bundle
 from roarmctl.robot.dynamics import inverse_dynamics
 from roarmctl.robot.loader import bundled_robots
 from roarmctl.robot.model import Inertial, Robot
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
 
 REST_MIN = 0.3  # s: a rest shorter than this is not measured
 REST_WINDOW = 0.1  # s at the end of a rest over which its error is averaged
@@ -65,7 +68,7 @@ def _plan_at(traj, t_physics: np.ndarray, scale: float) -> np.ndarray:
     return sample(traj, np.clip(t_physics * scale, 0.0, traj.duration))
 
 
-def measure(traj, robot: Robot, setup: Setup, rec: Recording, options: Options) -> dict[str, Any]:
+def measure(traj: Trajectory, robot: Robot, setup: Setup, rec: Recording, options: Options) -> dict[str, Any]:
     """The report of one run (see the module doc)."""
     scale = options.speed_scale
     t_end = traj.duration / scale
@@ -257,7 +260,7 @@ def _angle(quat_wxyz, rot: np.ndarray) -> float:
 
 
 # ----------------------------------------------------------------------------- the run file
-def run_log(traj, robot: Robot, setup: Setup, rec: Recording, options: Options, report: dict[str, Any],
+def run_log(traj: Trajectory, robot: Robot, setup: Setup, rec: Recording, options: Options, report: dict[str, Any],
             source: str | None = None) -> dict[str, Any]:
     """The run file: ``roarmctl.execlog/1`` (as ``execute`` writes it) plus ``physics``."""
     sent = [{"t": _r(t, 6), "cmd": cmd, "tick": k, "lateness": 0.0} for t, cmd, k in rec.commands]

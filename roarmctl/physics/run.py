@@ -19,7 +19,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,6 +34,9 @@ from roarmctl.physics.setup import Setup, build
 from roarmctl.physics.world import World
 from roarmctl.robot.dynamics import inverse_dynamics
 from roarmctl.robot.model import Robot
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
 
 CONTACT_EVERY = 2  # physics steps between two looks at the contacts (2 ms: an episode shorter than that is missed)
 
@@ -75,7 +78,7 @@ class Recording:
     cpu: float = 0.0
 
 
-def simulate(traj, robot: Robot, options: Options | None = None, *, setup: Setup | None = None,
+def simulate(traj: Trajectory, robot: Robot, options: Options | None = None, *, setup: Setup | None = None,
              progress: Callable[[float, float], None] | None = None) -> tuple[Setup, Recording]:
     """Run ``traj`` on the physics model of ``robot``; ``progress(done_s, total_s)`` is called about every
     0.1 s of simulated time. Returns the setup and what was recorded."""

@@ -39,9 +39,12 @@ joint.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.device import st3235
 
@@ -96,7 +99,7 @@ def generic_spec(name: str, effort: float, velocity: float, *, error_at_full: fl
                      deadband=0.0, speed_quantum=0.0, armature=MECH_TIME_CONSTANT * effort / no_load, feedforward=True)
 
 
-def with_limit(spec: ServoSpec, **changes) -> ServoSpec:
+def with_limit(spec: ServoSpec, **changes: Any) -> ServoSpec:
     """A copy of ``spec`` with some fields changed (for tests and studies)."""
     return replace(spec, **changes)
 
@@ -140,7 +143,8 @@ class ServoBank:
     reference and speed, torque on/off, torque limit (0..1 of full duty) and the last duty.
     """
 
-    def __init__(self, joint, spec: list[ServoSpec], count, sign, zero, torque_limit=None) -> None:
+    def __init__(self, joint: npt.ArrayLike, spec: list[ServoSpec], count: Iterable[float], sign: Iterable[float],
+                 zero: Iterable[float], torque_limit: Iterable[float] | None = None) -> None:
         self.joint = np.asarray(joint, dtype=int)
         self.spec = list(spec)
         n = len(self.spec)
@@ -167,12 +171,12 @@ class ServoBank:
         """Number of channels."""
         return len(self.spec)
 
-    def steps(self, q) -> np.ndarray:
+    def steps(self, q: npt.ArrayLike) -> np.ndarray:
         """Servo positions (n,) steps of joint values ``q`` (dof,) rad."""
         q = np.asarray(q, dtype=float)
         return np.array([z + k * q[j] for z, k, j in zip(self.zero, self._ks, self.joint)])
 
-    def joint_value(self, steps) -> np.ndarray:
+    def joint_value(self, steps: Iterable[float]) -> np.ndarray:
         """Joint values (n,) rad of servo positions (n,) steps."""
         return np.array([(float(p) - z) / k for p, z, k in zip(steps, self.zero, self._ks)])
 
@@ -184,7 +188,7 @@ class ServoBank:
         """(n,) rotor inertia the servos add at each channel's joint, kg m^2."""
         return np.array([c * s.armature for c, s in zip(self.count, self.spec)])
 
-    def reset(self, q) -> None:
+    def reset(self, q: npt.ArrayLike) -> None:
         """Torque on, everything at rest at ``q``: goal and reference = the present position."""
         p = self.steps(q).tolist()
         n = self.n
@@ -193,14 +197,15 @@ class ServoBank:
         self.enabled = [True] * n
         self._limits()
 
-    def command(self, channels, goal, spd, acc) -> None:
+    def command(self, channels: Sequence[int], goal: Sequence[float], spd: Sequence[float],
+                acc: Sequence[float]) -> None:
         """Write goal (steps), speed register (steps/s) and acceleration register (100 steps/s^2) of
         ``channels``; a servo whose torque was off is switched on from where it stands (``set_torque``)."""
         for c, g, s, a in zip(channels, goal, spd, acc):
             self.goal[c], self.spd[c], self.acc[c] = float(g), float(s), float(a)
         self._limits()
 
-    def set_torque(self, on: bool, channels, q) -> None:
+    def set_torque(self, on: bool, channels: Iterable[int], q: npt.ArrayLike) -> None:
         """Torque enable of ``channels``; switched on, the profile starts at the present position."""
         p = self.steps(q)
         for c in channels:
@@ -216,7 +221,8 @@ class ServoBank:
             self._vmax[c] = v if v > 0 else s.max_speed
             self._amax[c] = self.acc[c] * ACC_UNIT if self.acc[c] > 0 else math.inf
 
-    def follow(self, q_ref, qd_ref, tau_ref=None) -> None:
+    def follow(self, q_ref: Sequence[float] | np.ndarray, qd_ref: Sequence[float] | np.ndarray,
+               tau_ref: Sequence[float] | np.ndarray | None = None) -> None:
         """Generic drives: the reference is the planned motion itself (positions (dof,) rad, speeds rad/s) and,
         with ``tau_ref`` (dof,) N m, the torque it needs (fed forward)."""
         for c, j in enumerate(self.joint):

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.device.fwmath import INIT_RAD
 from roarmctl.device.protocol import M3_FIELDS, WireMap
@@ -26,6 +28,10 @@ from roarmctl.physics.servo import ACC_UNIT, ST3235, ServoBank, profile_step, qu
 from roarmctl.physics.setup import build
 from roarmctl.physics.world import World
 from roarmctl.robot.loader import load_robot
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.model import Robot
 
 N_FIRMWARE_JOINTS = 6
 
@@ -37,7 +43,7 @@ class PhysicsServos:
     ``advance``); ``q0`` (dof,) the arm's pose at that time (torque on, at rest).
     """
 
-    def __init__(self, world: World, actuation: Actuation, q0, t0: float | None = 0.0,
+    def __init__(self, world: World, actuation: Actuation, q0: npt.ArrayLike, t0: float | None = 0.0,
                  recorder: Callable[[PhysicsServos], None] | None = None) -> None:
         self.world = world
         self.act = actuation
@@ -157,7 +163,7 @@ def physics_step(world: World, bank: ServoBank, dt: float, profile: bool = True)
     world.step()
 
 
-def for_firmware(robot, traj=None) -> Callable[[], PhysicsServos]:
+def for_firmware(robot: Robot, traj: Trajectory | None = None) -> Callable[[], PhysicsServos]:
     """A zero-argument factory of physics servos for the firmware simulator (``roarmctl.device``'s
     ``PtySimulator(servos=...)``; called in its process): ``robot`` in ``traj``'s scene with its payload
     masses (an empty world without ``traj``), standing at the firmware's boot pose (``INIT_RAD``: elbow

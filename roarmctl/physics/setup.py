@@ -5,6 +5,7 @@ into it; ``servo_backend`` puts it behind the firmware simulator."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,6 +15,9 @@ from roarmctl.physics.actuation import Actuation, for_robot
 from roarmctl.physics.contacts import Hold, holds_from
 from roarmctl.physics.world import World
 from roarmctl.robot.model import Robot
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
 
 MATCH_TOLERANCE = 0.005  # m: a payload's centre at its grasp names the object within this distance
 
@@ -29,7 +33,7 @@ class Setup:
     notes: list[str] = field(default_factory=list)
 
 
-def payload_objects(traj, robot: Robot, scene) -> list[str | None]:
+def payload_objects(traj: Trajectory, robot: Robot, scene: Scene) -> list[str | None]:
     """The object each payload of ``traj`` carries: the scene object whose centre lies where the payload's
     centre of mass is at its grasp (planned pose), or None."""
 
@@ -44,7 +48,7 @@ def payload_objects(traj, robot: Robot, scene) -> list[str | None]:
     return out
 
 
-def build(traj, robot: Robot, *, masses: dict[str, float] | None = None) -> Setup:
+def build(traj: Trajectory, robot: Robot, *, masses: dict[str, float] | None = None) -> Setup:
     """The physics model of ``traj``'s robot and scene, its servos, and the trajectory's holds; ``masses``
     (object name -> kg) overrides the payloads' masses."""
 

@@ -9,8 +9,10 @@ of each free object. Units: m, kg, s, rad.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.errors import DescriptionError
 from roarmctl.physics.mjcf import (
@@ -23,6 +25,9 @@ from roarmctl.physics.mjcf import (
     joint_name,
 )
 from roarmctl.robot.model import Robot
+
+if TYPE_CHECKING:
+    from roarmctl.motion.scene import Scene
 
 #: MuJoCo's own warning texts (it would otherwise append them to MUJOCO_LOG.TXT in the working directory).
 MESSAGES: list[str] = []
@@ -55,7 +60,7 @@ class World:
     needed. Joint order everywhere is ``robot.joint_names``.
     """
 
-    def __init__(self, robot: Robot, scene, masses: dict[str, float] | None = None,
+    def __init__(self, robot: Robot, scene: Scene, masses: dict[str, float] | None = None,
                  dynamics: dict[str, JointDynamics] | None = None, *, timestep: float | None = None) -> None:
         import mujoco
 
@@ -108,7 +113,7 @@ class World:
         """Physics time, s."""
         return float(self.data.time)
 
-    def set_q(self, q, qd=None) -> None:
+    def set_q(self, q: npt.ArrayLike, qd: npt.ArrayLike | None = None) -> None:
         """Put the arm at ``q`` (dof,) rad (velocities ``qd`` or zero), mimic joints with it; recompute positions."""
         q = np.asarray(q, dtype=float)
         d = self.data
@@ -126,7 +131,7 @@ class World:
         """Joint speeds (dof,) rad/s."""
         return self.data.qvel[self.dof_adr].copy()
 
-    def apply(self, torque) -> None:
+    def apply(self, torque: npt.ArrayLike) -> None:
         """Joint torques (dof,) N m (N for prismatic) for the next steps."""
         self.data.qfrc_applied[self.dof_adr] = torque
 

@@ -201,7 +201,8 @@ def check_document(data: Any, where: str) -> None:
 
 
 # --------------------------------------------------------------------------- URDF
-def _attr_floats(elem: ET.Element, key: str, n: int, where: str, field: str, required: bool = False) -> list[float] | None:
+def _attr_floats(elem: ET.Element, key: str, n: int, where: str, field: str,
+                 required: bool = False) -> list[float] | None:
     """The ``n`` finite numbers of attribute ``key`` of ``elem`` (None when it is absent and not ``required``)."""
     text = elem.get(key)
     if text is None:
@@ -375,7 +376,8 @@ def check_robot(robot: Robot, where: str) -> None:
         f = f"link '{s.link}' collision '{s.name or k}'"
         if not np.all(np.isfinite(s.origin)):
             CHECK.fail(where, f"{f} origin", "must be finite")
-        if s.mesh is not None:  # its largest extent (an exact mesh may be flat); the mesh reader checked the rest
+        if s.kind == "mesh":  # its largest extent (an exact mesh may be flat); the mesh reader checked the rest
+            assert s.mesh is not None  # a mesh shape carries its MeshGeometry
             dims = [float(np.max(2 * s.mesh.half_extents))]
         else:
             dims = {"box": list(s.size), "sphere": [s.radius], "cylinder": [s.radius, s.length], "capsule": [s.radius]}[s.kind]

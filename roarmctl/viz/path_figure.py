@@ -8,9 +8,10 @@ find it (``tcp_path``, ``arm:<kind>:<i>``, ``event:<kind>:<axes>``, ``vlim:<join
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 import numpy as np
@@ -30,8 +31,15 @@ from roarmctl.viz.data import GRASP_RADIUS, EventMark, PathData, path_data, robo
 from roarmctl.viz.formats import picture_format
 from roarmctl.viz.shapes import item_extent, item_faces
 
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from mpl_toolkits.mplot3d import Axes3D
+
+    from roarmctl.motion.planning.assembly import PartialPlan
+    from roarmctl.motion.trajectory import Trajectory
+
 VIEWS = {"iso": (26.0, -38.0), "top": (90.0, -90.0), "front": (0.0, 0.0), "side": (0.0, -90.0)}
-ROLE_STYLE = {
+ROLE_STYLE: dict[str, dict[str, Any]] = {
     "table": dict(facecolor=(0.80, 0.72, 0.60, 0.35), edgecolor=(0.55, 0.45, 0.35, 0.5), linewidth=0.4),
     "obstacle": dict(facecolor=(0.85, 0.20, 0.15, 0.22), edgecolor=(0.65, 0.10, 0.08, 0.8), linewidth=0.7),
     "object": dict(facecolor=(0.15, 0.45, 0.85, 0.55), edgecolor=(0.05, 0.25, 0.60, 0.9), linewidth=0.7),
@@ -57,7 +65,7 @@ class Label:
     priority: int = 1
 
 
-def place_labels(ax, labels: list[Label]) -> list[tuple[float, float]]:
+def place_labels(ax: Axes3D, labels: list[Label]) -> list[tuple[float, float]]:
     """Put each label near its projected anchor without overlapping the ones already placed.
 
     Works in points on the axes' 2D projection of the final view; candidate offsets go up first,
@@ -129,7 +137,7 @@ def _segments(points: np.ndarray) -> np.ndarray:
     return np.stack([points[:-1], points[1:]], axis=1)
 
 
-def draw_scene_3d(ax, data: PathData, view: str) -> tuple[Normalize, Colormap]:
+def draw_scene_3d(ax: Axes3D, data: PathData, view: str) -> tuple[Normalize, Colormap]:
     """The 3D panel: scene items, arm at key moments, TCP path coloured by speed, targets; returns the speed
     colouring (norm, colormap) for the colour bar."""
     ax.computed_zorder = False  # draw in our order: scene, arm, path, markers (path stays visible)
@@ -305,7 +313,7 @@ def _draw_torque(ax, data: PathData) -> None:
     ax.set_title("dashed: joint torque limit; dotted orange: blended joins", fontsize=8, loc="right", pad=2)
 
 
-def draw_time_plots(axes, data: PathData) -> None:
+def draw_time_plots(axes: Sequence[Axes], data: PathData) -> None:
     """Joint position/velocity/acceleration, joint torque, TCP speed, manipulability against time (shared x)."""
     ax_q, ax_v, ax_a, ax_t, ax_s, ax_m = axes
     colors = colormaps["tab10"]
@@ -369,7 +377,7 @@ def draw_time_plots(axes, data: PathData) -> None:
         _blend_lines(ax, data, name)
         ax.grid(True, lw=0.4, alpha=0.5)
         ax.tick_params(labelsize=7.5)
-        ax.yaxis.label.set_size(8.5)
+        ax.yaxis.label.set_fontsize(8.5)
         ax.set_xlim(t[0], t[-1] if t[-1] > t[0] else t[0] + 1.0)
         if k < len(axes) - 1:
             ax.tick_params(labelbottom=False)
@@ -424,8 +432,9 @@ def describe(data: PathData, name: str) -> tuple[str, str]:
     return title, " · ".join(bits)
 
 
-def visualize_trajectory(traj, out: str | Path, *, view: str = "iso", dpi: float = 100.0,
-                         size: tuple[float, float] = (16.0, 10.0), name: str | None = None, failure=None) -> Path:
+def visualize_trajectory(traj: Trajectory, out: str | Path, *, view: str = "iso", dpi: float = 100.0,
+                         size: tuple[float, float] = (16.0, 10.0), name: str | None = None,
+                         failure: PartialPlan | None = None) -> Path:
     """Render ``traj`` (a ``Trajectory``) to ``out`` (.png, .svg or .pdf); returns the path written.
 
     ``failure``: a ``motion.pipeline.PartialPlan`` when planning failed: ``traj`` is what was planned

@@ -8,10 +8,16 @@ browser view. The PNG (``path_figure``) and the browser view (``viz.web``) draw 
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from roarmctl.errors import TrajectoryFileError
 from roarmctl.robot.model import transform
+
+if TYPE_CHECKING:
+    from roarmctl.robot.model import CollisionShape
 
 SHAPES = ("box", "cylinder", "sphere", "mesh", "cloud")
 ROLES = ("table", "obstacle", "object")
@@ -21,7 +27,7 @@ def _place(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
     return points @ pose[:3, :3].T + pose[:3, 3]
 
 
-def box_faces(size, pose: np.ndarray) -> list[np.ndarray]:
+def box_faces(size: Iterable[float], pose: np.ndarray) -> list[np.ndarray]:
     """Six quads of a box of ``size`` (x, y, z) m centred at ``pose`` (4x4)."""
     hx, hy, hz = (0.5 * float(s) for s in size)
     c = np.array([[sx * hx, sy * hy, sz * hz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
@@ -67,7 +73,7 @@ def capsule_faces(radius: float, length: float, pose: np.ndarray, n: int = 16) -
     return out
 
 
-def robot_shape_faces(shape) -> list[np.ndarray]:
+def robot_shape_faces(shape: CollisionShape) -> list[np.ndarray]:
     """Faces of one robot collision shape (``robot.model.CollisionShape``) in its link's frame, as the checker
     sees it: box, cylinder, sphere, capsule, or the mesh the checker uses (its convex hull, or the triangles)."""
     pose = np.asarray(shape.origin, dtype=float)
@@ -80,6 +86,7 @@ def robot_shape_faces(shape) -> list[np.ndarray]:
     if shape.kind == "capsule":
         return capsule_faces(shape.radius, shape.length, pose)
     if shape.kind == "mesh":
+        assert shape.mesh is not None  # a mesh shape carries its MeshGeometry
         v = _place(np.asarray(shape.mesh.vertices, dtype=float), pose)
         return list(v[np.asarray(shape.mesh.faces)])
     raise ValueError(f"collision shape kind '{shape.kind}' cannot be drawn")

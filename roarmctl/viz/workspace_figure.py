@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from matplotlib import colormaps
@@ -16,6 +17,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from roarmctl.viz.data import WorkspaceData, workspace_data
+
+if TYPE_CHECKING:
+    from roarmctl.robot.model import Robot
 
 MEASURES = {"sigma": ("σ_min of J_v (m/rad)", "smallest singular value"), "w": ("w = Πσ of J_v", "Yoshikawa manipulability")}
 
@@ -141,8 +145,9 @@ def render_workspace(data: WorkspaceData, *, measure: str = "sigma", height: flo
     return fig
 
 
-def visualize_workspace(robot, out: str | Path, *, samples: int = 80000, seed: int = 0, measure: str = "sigma",
-                        height: float | None = None, dpi: float = 100.0, size: tuple[float, float] = (13.0, 6.0)) -> Path:
+def visualize_workspace(robot: Robot, out: str | Path, *, samples: int = 80000, seed: int = 0, measure: str = "sigma",
+                        height: float | None = None, dpi: float = 100.0,
+                        size: tuple[float, float] = (13.0, 6.0)) -> Path:
     """Sample ``robot``'s workspace and write the PNG ``out``; returns the path written."""
     from roarmctl.viz.path_figure import save_png
 

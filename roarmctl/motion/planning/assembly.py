@@ -20,6 +20,7 @@ from roarmctl.robot.loader import bundled_robots
 
 if TYPE_CHECKING:
     from roarmctl.motion.planning.context import PlanContext
+    from roarmctl.plan.schema import WaitTask
 
 
 @dataclass
@@ -99,7 +100,8 @@ def initial_scene_dict(ctx: PlanContext) -> dict:
     return ctx.initial_scene.to_dict()
 
 
-def partial(ctx: PlanContext, pieces: list[TimedPiece], q: np.ndarray, task, index: int) -> PartialPlan:
+def partial(ctx: PlanContext, pieces: list[TimedPiece], q: np.ndarray, task: PickTask | PlaceTask | MoveTask | WaitTask,
+            index: int) -> PartialPlan:
     """The trajectory timed before the failure (just the pose ``q`` if nothing was) and the failing task's target."""
     if not pieces:
         z = np.zeros((1, len(q)))

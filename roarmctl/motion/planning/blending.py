@@ -28,6 +28,8 @@ from roarmctl.motion.timing import TimedPath
 from roarmctl.motion.trajectory import Segment
 
 if TYPE_CHECKING:
+    import ruckig
+
     from roarmctl.motion.planning.context import PlanContext
 
 LINE_KEEP = 0.5  # a blend may round the corner over at most the first (last) half of a straight line
@@ -303,7 +305,8 @@ def corner_move(ctx: PlanContext, ta: TimedPath, tb: TimedPath, ia: int, bounds:
     return None
 
 
-def splice_corner(ta: TimedPath, tb: TimedPath, i: int, k: int, steps: int, traj, arm: list[int]) -> TimedPath:
+def splice_corner(ta: TimedPath, tb: TimedPath, i: int, k: int, steps: int, traj: ruckig.Trajectory,
+                  arm: list[int]) -> TimedPath:
     """``ta`` up to its sample ``i``, then the Ruckig trajectory ``traj`` (``steps`` samples of SAMPLE_DT, joints
     ``arm``; the others held), then ``tb`` from its sample ``k`` on (displaced to start where ``ta`` ends: ``tb``
     starts at rest at ``ta``'s last sample)."""
@@ -356,7 +359,8 @@ def first_invalid_under(ctx: PlanContext, motion: UntimedMotion, q: np.ndarray) 
     return ctx.first_invalid(q)
 
 
-def line_time(ctx: PlanContext, motion: UntimedMotion, tp: TimedPath, span: tuple[float, float], fraction: float) -> float:
+def line_time(ctx: PlanContext, motion: UntimedMotion, tp: TimedPath, span: tuple[float, float],
+              fraction: float) -> float:
     """Time (s, in ``tp``) when the TCP has covered ``fraction`` of the motion's straight line."""
     assert motion.step.line is not None
     p0, p1 = ctx.robot.kin.fk(motion.wps[0])[:3, 3], motion.step.line[1]
@@ -367,7 +371,8 @@ def line_time(ctx: PlanContext, motion: UntimedMotion, tp: TimedPath, span: tupl
     return float(np.interp(fraction, np.maximum.accumulate(done), tp.times[sel]))
 
 
-def join_samples_ok(ctx: PlanContext, tp: TimedPath, lo: int, hi: int, prev: UntimedMotion, motion: UntimedMotion) -> bool:
+def join_samples_ok(ctx: PlanContext, tp: TimedPath, lo: int, hi: int, prev: UntimedMotion,
+                    motion: UntimedMotion) -> bool:
     """Limits and validity of the samples lo..hi (the join: an overlap or a corner move) of two joined motions, one
     sample either side: joint limits, velocity, acceleration, jerk, TCP speed, torque, and collisions (4x finer)
     under each motion's own collision state (the stricter one decides)."""

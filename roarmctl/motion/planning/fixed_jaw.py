@@ -19,8 +19,10 @@ Units: m, rad.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.robot.model import Robot
 
@@ -36,12 +38,12 @@ MARGIN = 0.001
 ITERATIONS, SETTLE, STEP = 24, 1e-9, 1e-6
 
 
-def rounded(v, step: float = STEP):
+def rounded(v: npt.ArrayLike, step: float = STEP) -> npt.NDArray[np.float64]:
     """``v`` (a float or an array) rounded to a multiple of ``step``, without negative zeros."""
     return np.round(np.asarray(v, dtype=float) / step) * step + 0.0
 
 
-def closing_axis(robot: Robot, q) -> np.ndarray:
+def closing_axis(robot: Robot, q: npt.ArrayLike) -> np.ndarray:
     """The fixed jaw's face normal (toward the moving jaw) in the world frame at ``q`` (3,)."""
     jaw = robot.gripper.fixed_jaw if robot.gripper is not None else None
     assert jaw is not None  # called for a gripper with a fixed jaw only
@@ -49,7 +51,7 @@ def closing_axis(robot: Robot, q) -> np.ndarray:
     return t[:3, :3] @ np.asarray(jaw.normal, dtype=float)
 
 
-def object_offset(robot: Robot, q, width: float, margin: float = MARGIN) -> np.ndarray:
+def object_offset(robot: Robot, q: npt.ArrayLike, width: float, margin: float = MARGIN) -> np.ndarray:
     """World vector (3,) from the TCP to the centre of a ``width``-wide object resting ``margin`` from the
     fixed jaw's face, at configuration ``q``."""
     jaw = robot.gripper.fixed_jaw if robot.gripper is not None else None
@@ -62,7 +64,8 @@ def object_offset(robot: Robot, q, width: float, margin: float = MARGIN) -> np.n
     return n * (0.5 * width + margin - float(n @ (tcp - face)))
 
 
-def aligned_roll(robot: Robot, q, roll_index: int, box_rotation: np.ndarray, box_size, across: float) -> float | None:
+def aligned_roll(robot: Robot, q: npt.ArrayLike, roll_index: int, box_rotation: np.ndarray,
+                 box_size: Sequence[float] | np.ndarray, across: float) -> float | None:
     """The roll joint value (rad) that puts the closing axis on the nearest box face normal whose box side
     is ``across`` long (the width the jaws close on), turning about the roll joint's axis; None when no
     such face normal is square to that axis (the approach is not along a box axis)."""

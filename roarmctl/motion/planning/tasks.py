@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from roarmctl.motion.planning.context import PlanContext
 
 
-def where(task, index: int) -> str:
+def where(task: PickTask | PlaceTask | MoveTask | WaitTask, index: int) -> str:
     """How messages name a task: ``task 2 (place, line 14)`` (counted from 1); a plan given as a dict (no
     lines) ``task 2 (place)``."""
     return f"task {index + 1} ({task.kind}" + (f", line {task.line})" if task.line else ")")
@@ -34,7 +34,8 @@ def pitch_label(pitch: float | None, auto: bool) -> str:
     return f" (pitch {math.degrees(pitch):.1f} deg, auto)" if auto and pitch is not None else ""
 
 
-def expand(ctx: PlanContext, task, q: np.ndarray, index: int) -> list[TaskStep]:
+def expand(ctx: PlanContext, task: PickTask | PlaceTask | MoveTask | WaitTask, q: np.ndarray,
+           index: int) -> list[TaskStep]:
     """The steps of ``task`` (the ``index``-th, counted from 0) starting at ``q`` (dof,) rad."""
     at = where(task, index)
     if isinstance(task, WaitTask):
@@ -136,7 +137,8 @@ def jaw_fixed(ctx: PlanContext, name: str) -> bool:
 
 
 def against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_grasp: np.ndarray, pitch: float | None,
-                      q: np.ndarray, at: str, g_open: float):
+                      q: np.ndarray, at: str,
+                      g_open: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]:
     """The grasp and approach configurations (and points) that put the object's side ``fixed_jaw.MARGIN`` from
     the fixed jaw's face, the jaws closing across a box's narrow side (``roarmctl.motion.planning.fixed_jaw``):
     (q_grasp, q_above, grasp point, above point, roll).

@@ -14,6 +14,7 @@ Only numpy and the library here (matplotlib only for the speed colour map, the s
 from __future__ import annotations
 
 import base64
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -26,6 +27,7 @@ from roarmctl.viz.data import PathData, path_data, robot_for
 from roarmctl.viz.shapes import item_extent, item_faces, item_pose, robot_shape_faces, triangles
 
 if TYPE_CHECKING:
+    from roarmctl.motion.planning.assembly import PartialPlan
     from roarmctl.motion.trajectory import Trajectory
     from roarmctl.robot.model import Robot
 
@@ -67,7 +69,7 @@ def _thin(times: np.ndarray, keep: list[int], max_samples: int) -> np.ndarray:
     return np.array(sorted(idx), dtype=int)
 
 
-def hex_color(rgba) -> str:
+def hex_color(rgba: Sequence[float]) -> str:
     """'#rrggbb' of an RGB(A) colour with components in [0, 1] (alpha dropped)."""
     r, g, b = (int(round(255 * float(c))) for c in rgba[:3])
     return f"#{r:02x}{g:02x}{b:02x}"
@@ -131,7 +133,8 @@ def _bounds(data: PathData, link_origins: np.ndarray, items: list[dict], extra: 
     return np.stack([allp.min(axis=0), allp.max(axis=0)])
 
 
-def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "trajectory", failure=None,
+def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "trajectory",
+                  failure: PartialPlan | None = None,
                   ghost: Ghost | None = None, max_samples: int = MAX_SAMPLES, notes: list[str] | None = None) -> dict[str, Any]:
     """Everything the page shows of ``traj`` (see the module doc).
 
