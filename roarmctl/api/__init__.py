@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.api.planner import IKResult, JointPath, Planner, Pose, Validity
 from roarmctl.api.scene import Scene
@@ -120,7 +121,7 @@ def _trajectory(traj: TrajectoryLike) -> Trajectory:
     return traj if isinstance(traj, Trajectory) else load_trajectory(traj)
 
 
-def sample(traj: Trajectory, t: float | Sequence[float] | np.ndarray) -> np.ndarray:
+def sample(traj: Trajectory, t: float | Sequence[float] | np.ndarray) -> npt.NDArray[np.float64]:
     """Joint positions (rad) at time(s) ``t`` (s, clamped to [0, duration]): (dof,) for a scalar,
     (M, dof) for M times. Cubic Hermite interpolation of the samples and their velocities, the
     same interpolation the streamer uses to command the arm."""

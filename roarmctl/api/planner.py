@@ -84,7 +84,7 @@ class IKResult:
     collision-free in the scene and clear of the singularity margin, nearest to the reference first;
     ``rejected``: why each other solution of the IK was not valid."""
 
-    solutions: tuple[np.ndarray, ...]
+    solutions: tuple[npt.NDArray[np.float64], ...]
     rejected: tuple[str, ...] = ()
 
     @property
@@ -93,7 +93,7 @@ class IKResult:
         return bool(self.solutions)
 
     @property
-    def best(self) -> np.ndarray:
+    def best(self) -> npt.NDArray[np.float64]:
         """The first valid solution (raises ``UnreachableError`` when there is none)."""
         if not self.solutions:
             raise UnreachableError("IK: no valid solution" + (f" ({self.rejected[0]})" if self.rejected else ""),
@@ -119,7 +119,7 @@ class JointPath:
     straight joint-space step between them checked (at 0.01 rad resolution); ``checks`` the state checks it
     took. ``Planner.time`` times it."""
 
-    waypoints: np.ndarray
+    waypoints: npt.NDArray[np.float64]
     checks: int = 0
     length: float = field(init=False)
 
@@ -221,7 +221,7 @@ class Planner:
             raise InputError(f"ik: expected a Pose, got {type(pose).__name__}", "e.g. Pose((0.25, 0, 0.1), pitch=math.pi / 2)")
         ref = None if q_ref is None else self._full(q_ref, "ik: q_ref")
         sols = solve_ik(self.robot, pose.xyz, pitch=pose.pitch, roll=pose.roll, rpy=pose.rpy, q_ref=ref, all_solutions=True)
-        good: list[np.ndarray] = []
+        good: list[npt.NDArray[np.float64]] = []
         rejected: list[str] = []
         for q in sols:
             v = self.is_valid(q, touching=touching)

@@ -160,7 +160,7 @@ class Scene:
         return list(self._items.values())
 
     @property
-    def carried(self) -> dict[str, np.ndarray]:
+    def carried(self) -> dict[str, npt.NDArray[np.float64]]:
         """Carried item name -> its pose (4, 4) in the TCP frame."""
         return {name: rel.copy() for name, (_, rel) in self._carried.items()}
 
