@@ -15,7 +15,7 @@ import shutil
 import stat
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from roarmctl.errors import InputError
 
@@ -176,7 +176,7 @@ def read_bytes(path: str | os.PathLike, what: str | None = None, limit: int = DE
     """
     p = Path(path)
 
-    def fail(text: str, fix: str | None = None):
+    def fail(text: str, fix: str | None = None) -> NoReturn:
         raise error(f"{what}: file '{_short(p)}' {text}" if what else f"{_short(p)}: {text}", hint or fix)
 
     if roots is not None:

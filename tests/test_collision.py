@@ -388,7 +388,7 @@ def test_second_box_of_a_cylinder_never_clears_what_fcl_finds_touching():
     around the touching distance: whenever the separating-axis test calls a box apart from it, FCL finds the box
     apart from the cylinder; and it clears about half of the pairs that FCL finds apart but the first box does not."""
     from roarmctl import _kernel as kernel
-    from roarmctl.motion.collision import _second_box
+    from roarmctl.motion.geometry import second_box as _second_box
 
     rng = np.random.default_rng(8)
     cleared = corner = 0

@@ -55,7 +55,7 @@ import math
 import random
 import threading
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -498,11 +498,11 @@ class Firmware:
     def _rad(self, j: int) -> float:
         return position_to_rad(j, float(self.read_pos[j]))
 
-    def _set_goals(self, joints, rads, spd: float, acc: float) -> None:
+    def _set_goals(self, joints: Sequence[int], rads: Sequence[float], spd: float, acc: float) -> None:
         goals = [command_to_goal(j, r, self.queued_build) for j, r in zip(joints, rads)]
         self._set_goals_steps(joints, goals, spd, acc)
 
-    def _set_goals_steps(self, joints, goals, spd: float, acc: float) -> None:
+    def _set_goals_steps(self, joints: Sequence[int], goals: Sequence[float], spd: float, acc: float) -> None:
         stuck = [JOINTS.index(name) for name in self.cfg.stuck]
         pairs = [(j, g) for j, g in zip(joints, goals) if j not in stuck]
         joints, goals = [j for j, _ in pairs], [g for _, g in pairs]
@@ -526,7 +526,8 @@ class Firmware:
         goal = np.array(getattr(self.servos, "goal", self.servos.positions()), dtype=float)
         return float(np.max(np.abs(goal - self.servos.positions()) / 600.0)) + 0.05
 
-    def _cartesian(self, x, y, z, pitch, roll, g, spd, t, interpolate: bool) -> None:
+    def _cartesian(self, x: float, y: float, z: float, pitch: float, roll: float, g: float, spd: float, t: float,
+                   interpolate: bool) -> None:
         """T:104 (blocking cosine interpolation, here in joint space; [fw26] StopFlag ends it) and T:1041."""
         sol = firmware_ik(x, y, z, pitch)
         if sol is None:

@@ -19,7 +19,7 @@ servo takes torque again it stands where the hand left it.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -82,7 +82,7 @@ def load_guide(path: str | Path) -> Guide:
     return Guide(np.array(ts), np.array(qs))
 
 
-def _number(v, where: str) -> float:
+def _number(v: object, where: str) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
         raise InputError(f"{where}: expected a number, got {v!r}")
     return float(v)
@@ -132,7 +132,7 @@ class GuidedServos:
             pos[self._limp] = self.hand(self.t)[self._limp]
         return pos
 
-    def _take_torque(self, joints) -> None:
+    def _take_torque(self, joints: Iterable[int]) -> None:
         """Joints that get torque again stand where the hand left them."""
         joints = [j for j in joints if self._limp[j]]
         if not joints:

@@ -40,7 +40,7 @@ def wanted(sag: bool | None, *, ideal: bool = False) -> bool:
     return (not ideal) if sag is None else bool(sag)
 
 
-def _set_down(traj, release: float) -> float:
+def _set_down(traj: Trajectory, release: float) -> float:
     """When the held object is set down (s): the start of the gripper segment that ends with its release
     (the table carries it while the jaws open), else the release itself."""
     for s in traj.segments:

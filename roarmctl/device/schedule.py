@@ -239,7 +239,7 @@ def run_clock(t: npt.ArrayLike, paused: Iterable[Sequence[float]]) -> Any:
     return float(out) if np.ndim(t) == 0 else out
 
 
-def _check_wire_range(traj, wm: WireMap) -> None:
+def _check_wire_range(traj: Trajectory, wm: WireMap) -> None:
     """Refuse a trajectory the firmware would clamp: the arm would not follow the plan."""
     for w, i in zip(wm.fields, wm.index):
         raw = w.offset + w.sign * traj.positions[:, i]

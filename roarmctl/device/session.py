@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING, Any
 from roarmctl.errors import InputError, RoarmError, signal_name
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from roarmctl.device.simulator import PtySimulator
     from roarmctl.device.streamer import Result, StreamConfig
     from roarmctl.motion.trajectory import Trajectory
@@ -77,7 +79,7 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
                                  process=True).start()
         port = simulator.path
 
-    def replan(q, mode: str):
+    def replan(q: np.ndarray, mode: str) -> tuple[Trajectory, str]:
         from roarmctl.motion.replan import replan_start
 
         return replan_start(traj, robot, q, mode)

@@ -25,7 +25,7 @@ import time
 import tty
 from collections import deque
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -41,6 +41,10 @@ from roarmctl.device.fwmath import (
     urdf_from_firmware,
 )
 from roarmctl.device.servos import JOINTS, KinematicServos, ServoModel
+
+if TYPE_CHECKING:
+    from multiprocessing.connection import Connection
+    from multiprocessing.sharedctypes import Synchronized
 
 __all__ = [
     "INIT_RAD",
@@ -154,7 +158,8 @@ def _raise_priority() -> str:
         return "normal"
 
 
-def _child(config: SimConfig, servos: ServoModel | Callable[[], ServoModel] | None, conn, recent) -> None:
+def _child(config: SimConfig, servos: ServoModel | Callable[[], ServoModel] | None, conn: Connection,
+           recent: Synchronized[float]) -> None:
     """The simulated firmware's own process: serve until told to stop or the parent is gone."""
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)  # the parent's Ctrl-C must not kill the arm before its hold

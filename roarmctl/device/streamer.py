@@ -29,7 +29,7 @@ import math
 import signal
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -62,7 +62,7 @@ from roarmctl.fileio import atomic_write_json
 from roarmctl.robot.frames import device_point, to_frame
 
 if TYPE_CHECKING:
-    from roarmctl.device.link import Link
+    from roarmctl.device.link import Link, Received
     from roarmctl.motion.trajectory import Trajectory
     from roarmctl.robot.model import Robot
 
@@ -227,7 +227,7 @@ class Streamer:
         self._reading_at: dict[int, float] = {}  # the same by id(Reading), for the tracking check
         self.device_late: deque[tuple[float, float]] = deque(maxlen=1000)  # (when seen, how late) of poll answers
 
-    def _schedule(self, traj) -> list[Tick]:
+    def _schedule(self, traj: Trajectory) -> list[Tick]:
         return build_schedule(traj, self.robot, rate=self.cfg.rate, speed_scale=self.cfg.speed_scale, sag=self.cfg.sag,
                               strategy=self.cfg.strategy)
 
@@ -254,7 +254,7 @@ class Streamer:
     def _tcp(self, q: np.ndarray) -> np.ndarray:
         return self.robot.kin.fk(self.robot.full_q(q))[:3, 3]
 
-    def _judge(self, received, asked: dict[int, float] | None = None) -> list[Reading]:
+    def _judge(self, received: Iterable[Received], asked: dict[int, float] | None = None) -> list[Reading]:
         """Every T:1051 of ``received`` through the validator (raises FeedbackRefused on a run).
         ``asked``: id(Received) -> when the T:105 it answers was sent (its servo reads are dated from that)."""
         out = []
@@ -616,7 +616,7 @@ class Streamer:
         except DeviceError:
             self.notes.append("hold could not be sent: the link is gone")
 
-    def _judge_quietly(self, r) -> None:
+    def _judge_quietly(self, r: Received) -> None:
         try:
             self._judge([r])
         except FeedbackRefused:

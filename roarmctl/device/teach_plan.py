@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -48,7 +49,7 @@ def _dump(key: str, value: Any) -> str:
     return yaml.safe_dump({key: _plain(value)}, sort_keys=False, default_flow_style=None, width=110)
 
 
-def _numbers(values) -> str:
+def _numbers(values: Iterable[float]) -> str:
     return "[" + ", ".join(f"{float(v):.6f}" for v in values) + "]"
 
 
@@ -101,7 +102,7 @@ def plan_text(robot: Robot, waypoints: list[Waypoint], margin: float, source: An
     return "\n".join(lines) + "\n"
 
 
-def _picks(robot, waypoints: list[Waypoint], source: Any) -> dict[int, str]:
+def _picks(robot: Robot, waypoints: list[Waypoint], source: Any) -> dict[int, str]:
     """Grasps with the TCP at one of ``source``'s objects (inside its box grown by ``GRASP_REACH``) as
     ``pick`` tasks, and their releases as ``place`` tasks: {waypoint index: task text}.
 

@@ -30,7 +30,7 @@ from __future__ import annotations
 import functools
 import os
 import shutil
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -53,7 +53,7 @@ COLORS = {"table": (0.55, 0.45, 0.35, 1.0), "obstacle": (0.85, 0.3, 0.25, 0.8), 
 
 
 @functools.cache
-def _typestore():
+def _typestore() -> Any:
     """rosbags' message types of ROS 2 Jazzy, built once per process: a typestore compiles each message type's
     serialiser on first use, which took as long as an export's messages when every export built a new one."""
     from rosbags.typesys import Stores, get_typestore
@@ -78,28 +78,29 @@ class _Messages:
         self.ColorRGBA, self.MeshFile = t["std_msgs/msg/ColorRGBA"], t["visualization_msgs/msg/MeshFile"]
         self.CompressedImage = t["sensor_msgs/msg/CompressedImage"]
 
-    def stamp(self, ns: int):
+    def stamp(self, ns: int) -> Any:
         return self.Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
 
-    def duration(self, seconds: float):
+    def duration(self, seconds: float) -> Any:
         ns = int(round(seconds * 1e9))
         return self.Duration(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000))
 
-    def header(self, ns: int, frame: str = ""):
+    def header(self, ns: int, frame: str = "") -> Any:
         return self.Header(stamp=self.stamp(ns), frame_id=frame)
 
-    def joint_state(self, ns: int, names: list[str], q: np.ndarray, qd: np.ndarray | None):
+    def joint_state(self, ns: int, names: list[str], q: np.ndarray, qd: np.ndarray | None) -> Any:
         empty = np.zeros(0)
         return self.JointState(header=self.header(ns), name=list(names), position=np.asarray(q, dtype=np.float64),
                                velocity=empty if qd is None else np.asarray(qd, dtype=np.float64), effort=empty)
 
-    def trajectory(self, ns: int, frame: str, names: list[str], times, q, qd, qdd):
+    def trajectory(self, ns: int, frame: str, names: list[str], times: np.ndarray, q: np.ndarray, qd: np.ndarray,
+                   qdd: np.ndarray) -> Any:
         pts = [self.Point(positions=np.asarray(q[i], dtype=np.float64), velocities=np.asarray(qd[i], dtype=np.float64),
                           accelerations=np.asarray(qdd[i], dtype=np.float64), effort=np.zeros(0),
                           time_from_start=self.duration(float(times[i]))) for i in range(len(times))]
         return self.JointTrajectory(header=self.header(ns, frame), joint_names=list(names), points=pts)
 
-    def transform(self, ns: int, parent: str, child: str, xyz, quat):
+    def transform(self, ns: int, parent: str, child: str, xyz: Sequence[float], quat: Sequence[float]) -> Any:
         """A TransformStamped of ``child`` in ``parent``: translation ``xyz`` (3 floats, m) and rotation ``quat``
         (4 floats, x y z w; ``robot.model.quaternions``, computed in bulk by the caller)."""
         x, y, z, w = quat
@@ -107,10 +108,11 @@ class _Messages:
                             rotation=self.Quaternion(x=x, y=y, z=z, w=w))
         return self.TransformStamped(header=self.header(ns, parent), child_frame_id=child, transform=tr)
 
-    def tf(self, transforms: list):
+    def tf(self, transforms: list) -> Any:
         return self.TFMessage(transforms=transforms)
 
-    def marker(self, ns: int, frame: str, marker_id: int, item: dict[str, Any], pose: np.ndarray, quat):
+    def marker(self, ns: int, frame: str, marker_id: int, item: dict[str, Any], pose: np.ndarray,
+               quat: Sequence[float]) -> Any:
         """A Marker of a scene item at ``pose`` (4, 4; m) whose rotation is ``quat`` (4 floats; x, y, z, w)."""
         M = self.Marker
         shape = item.get("shape")
@@ -219,7 +221,8 @@ def is_bag_we_wrote(folder: Path) -> bool:
     return names in ({"metadata.yaml", f"{folder.name}.db3"}, {"metadata.yaml", f"{folder.name}.mcap"})
 
 
-def write_bag(streams: Streams, path: str | os.PathLike, storage: str, force: bool = False) -> tuple[Path, dict[str, int]]:
+def write_bag(streams: Streams, path: str | os.PathLike, storage: str,
+              force: bool = False) -> tuple[Path, dict[str, int]]:
     """Write ``streams`` as a ROS 2 bag. ``storage``: 'mcap' -> the single MCAP file ``path``;
     'sqlite3' -> the bag folder ``path`` (metadata.yaml + .db3). Built in a temporary folder beside the
     target, then renamed into place: an existing MCAP file is replaced, an existing bag folder is

@@ -16,6 +16,7 @@ sample costs a few FCL calls, not one per pair.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import fcl
 import numpy as np
@@ -23,6 +24,9 @@ import numpy as np
 from roarmctl.motion.geometry import fcl_geometry, half_extents, item_parts
 from roarmctl.motion.scene import SceneItem
 from roarmctl.robot.model import Robot
+
+if TYPE_CHECKING:
+    from roarmctl.robot.model import CollisionShape
 
 
 @dataclass
@@ -66,7 +70,7 @@ def _item_solids(item: SceneItem, owner: int) -> list[_Solid]:
     return out
 
 
-def _shape_radius(shape) -> float:
+def _shape_radius(shape: CollisionShape) -> float:
     """Radius (m) of a sphere about the shape's origin that holds the shape."""
     if shape.mesh is not None:
         return float(np.max(np.linalg.norm(shape.mesh.vertices, axis=1)))

@@ -49,9 +49,9 @@ from roarmctl.errors import InputError
 from roarmctl.motion.geometry import Part, item_parts
 from roarmctl.motion.geometry import fcl_geometry as _geometry
 from roarmctl.motion.geometry import half_extents as _half_extents
-from roarmctl.motion.geometry import second_box as _second_box  # noqa: F401 (tests reach it here)
 from roarmctl.motion.scene import Scene, SceneItem, settled
-from roarmctl.robot.model import Robot
+from roarmctl.robot.meshes import MeshGeometry
+from roarmctl.robot.model import Joint, Kinematics, Robot
 
 _EPS = 1e-9  # rad: joint-limit tolerance (the kernel uses the same)
 _NO_GRIP = np.zeros(0).data  # "every state at the set_gripper value"
@@ -157,8 +157,8 @@ class CollisionChecker:
         return shapes
 
     # ------------------------------------------------------------------ configuration
-    def _moving(self, name, link, origin, kind, size, radius, length, grow_scene, grow_self, attached=False,
-                mesh=None) -> _Moving:
+    def _moving(self, name: str, link: int, origin: np.ndarray, kind: str, size: tuple[float, ...], radius: float,
+                length: float, grow_scene: float, grow_self: float, attached: bool = False, mesh: MeshGeometry | None = None) -> _Moving:
         half = _half_extents(kind, size, radius, length, grow_scene, mesh)
         radius_bound = float(np.linalg.norm(half))
         if mesh is not None:  # the farthest vertex bounds the mesh more tightly than the box corner
@@ -496,7 +496,7 @@ class CollisionChecker:
         return 1.1 * float(np.sqrt(np.sum(np.square(rho))))
 
     @staticmethod
-    def _moves_with(kin, link: int, joint) -> bool:
+    def _moves_with(kin: Kinematics, link: int, joint: Joint) -> bool:
         """True when ``link`` is ``joint``'s child or a descendant of it."""
         child = kin.link_index[joint.child]
         while link != 0:
@@ -519,7 +519,7 @@ class CollisionChecker:
         _kernel.sigma(self._kf, self._ki, Q, self._grip_arg(gripper, Q.shape[0]), out)
         return out
 
-    def _grip_arg(self, gripper, n: int) -> np.ndarray | memoryview:
+    def _grip_arg(self, gripper: float | np.typing.ArrayLike | None, n: int) -> np.ndarray | memoryview:
         if gripper is None:
             return _NO_GRIP
         if self._gripper_index is None:

@@ -27,13 +27,18 @@ from __future__ import annotations
 import bisect
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from roarmctl.errors import InputError, PlanningError
 from roarmctl.motion.collision import CollisionChecker, densify
+
+if TYPE_CHECKING:
+    import ompl.base
 
 PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
 # Work budgets in single-state checks (deterministic, unlike the clock). Planners that stop at their
@@ -75,7 +80,7 @@ def _fmt(q: np.ndarray) -> str:
     return "[" + ", ".join(f"{v:.3f}" for v in q) + "]"
 
 
-def _allocate(name: str, si):
+def _allocate(name: str, si: ompl.base.SpaceInformation) -> ompl.base.Planner:
     from ompl import geometric as og
 
     if name == "RRTConnect":
@@ -106,7 +111,8 @@ def _allocate(name: str, si):
 _SEGMENT_VALIDATOR = None  # the MotionValidator subclass, made at the first OMPL plan (class creation costs ~60 us)
 
 
-def _segment_validator(si, checker: CollisionChecker, n: int, resolution: float):
+def _segment_validator(si: ompl.base.SpaceInformation, checker: CollisionChecker, n: int,
+                       resolution: float) -> ompl.base.MotionValidator:
     """OMPL's MotionValidator for ``si`` that checks a whole motion in one ``checker.segment_valid`` call."""
     global _SEGMENT_VALIDATOR
     if _SEGMENT_VALIDATOR is None:
@@ -115,7 +121,7 @@ def _segment_validator(si, checker: CollisionChecker, n: int, resolution: float)
         class SegmentValidator(ob.MotionValidator):
             """Checks a whole motion in one batched call (the pre-filter and FK run once per segment)."""
 
-            def checkMotion(self, s1, s2) -> bool:  # noqa: N802 (OMPL's name)
+            def checkMotion(self, s1: ompl.base.State, s2: ompl.base.State) -> bool:  # noqa: N802 (OMPL's name)
                 n = self.n
                 a = np.array([s1[i] for i in range(n)])
                 b = np.array([s2[i] for i in range(n)])
@@ -295,12 +301,12 @@ def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarra
 
     buf = np.empty(n)
 
-    def to_np(state) -> np.ndarray:
+    def to_np(state: ompl.base.State) -> np.ndarray:
         for i in range(n):
             buf[i] = state[i]
         return buf
 
-    def state_valid(state) -> bool:
+    def state_valid(state: ompl.base.State) -> bool:
         return checker.is_valid(to_np(state))
 
     si.setStateValidityChecker(state_valid)
@@ -327,7 +333,7 @@ def _plan_ompl(checker: CollisionChecker, q_start: np.ndarray, q_goal: np.ndarra
     first_check = checker.check_count
     ceiling_hit = False
 
-    def budget(n_checks: int):
+    def budget(n_checks: int) -> Callable[[], bool]:
         """Termination after ``n_checks`` more state checks (deterministic), or at the ceiling."""
         stop_at = checker.check_count + n_checks
 

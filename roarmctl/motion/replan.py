@@ -27,12 +27,13 @@ from roarmctl.motion.scene import Scene
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
 
 if TYPE_CHECKING:
+    from roarmctl.plan.schema import Plan
     from roarmctl.robot.model import Robot
 
 MODES = ("gripper", "move_to_start", "from_current")
 
 
-def _plan_for(traj: Trajectory, robot, q_from: np.ndarray, q_to: np.ndarray):
+def _plan_for(traj: Trajectory, robot: Robot, q_from: np.ndarray, q_to: np.ndarray) -> Plan:
     """A ``Plan`` with the trajectory's scene, limits and planner: one move from ``q_from`` to ``q_to``."""
     from roarmctl.plan.schema import ItemSpec, Limits, MoveTask, Plan, PlannerConfig
 

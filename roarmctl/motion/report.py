@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from roarmctl.robot.dynamics import inverse_dynamics
 from roarmctl.robot.model import Inertial
@@ -63,7 +64,7 @@ def motion_peaks(traj: Trajectory, robot: Robot) -> dict[str, Any]:
     def peak(a: np.ndarray) -> np.ndarray:
         return np.max(np.abs(a), axis=0) if len(a) else np.zeros(len(traj.joint_names))
 
-    def frac(p: np.ndarray, limit) -> list[float | None]:
+    def frac(p: np.ndarray, limit: npt.ArrayLike | None) -> list[float | None]:
         if limit is None:
             return [None] * len(p)
         return [float(x / m) if np.isfinite(m) and m > 0 else None for x, m in zip(p, np.asarray(limit, dtype=float))]

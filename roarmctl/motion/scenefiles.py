@@ -16,6 +16,7 @@ import functools
 import io
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -81,12 +82,15 @@ _CACHE: dict[tuple, MeshData | CloudData] = {}
 _CACHE_MAX = 32
 
 
-def _key(path: Path, *options) -> tuple:
+def _key(path: Path, *options: object) -> tuple:
     st = path.stat()
     return (str(path.resolve()), st.st_mtime_ns, st.st_size) + options
 
 
-def _remember(key: tuple, value):
+_T = TypeVar("_T", "MeshData", "CloudData")
+
+
+def _remember(key: tuple, value: _T) -> _T:
     if len(_CACHE) >= _CACHE_MAX:
         _CACHE.pop(next(iter(_CACHE)))
     _CACHE[key] = value

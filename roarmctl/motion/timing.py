@@ -41,6 +41,8 @@ from roarmctl.errors import InfeasibleError, PlanningError
 if TYPE_CHECKING:
     from types import ModuleType
 
+    import toppra
+
 # Limits handed to TOPP-RA are this fraction of the true ones, so that the sampled (and filtered)
 # trajectory stays inside the true limits; tightened step by step if not.
 SAFETY_STEPS = (0.995, 0.98, 0.95, 0.9, 0.8, 0.7, 0.6)
@@ -170,7 +172,7 @@ _LIMIT_CONSTRAINTS: dict[tuple[bytes, bytes], tuple] = {}
 _ONE_JOINT_LINES: dict[tuple, tuple] = {}
 
 
-def _joint_limit_constraints(constraint, vlim: np.ndarray, alim: np.ndarray) -> list:
+def _joint_limit_constraints(constraint: ModuleType, vlim: np.ndarray, alim: np.ndarray) -> list:
     """toppra's joint velocity and acceleration constraints for limits ``vlim``/``alim`` (n,), reused across
     calls (they hold only the limits; building one formats every limit into a string, about 0.5 ms)."""
     key = (vlim.tobytes(), alim.tobytes())
@@ -197,7 +199,8 @@ def _own_constraint_types() -> tuple[type, type]:
             self.discretization_type = DiscretizationType.Collocation
             self.x_upper = x_upper
 
-        def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
+        def compute_constraint_params(self, path: toppra.interpolator.AbstractGeometricPath, gridpoints: np.ndarray,
+                                      *args: object, **kwargs: object) -> tuple:
             self.dof = path.dof
             xbound = np.empty((len(gridpoints), 2))
             xbound[:, 0], xbound[:, 1] = 0.0, self.x_upper
@@ -212,7 +215,8 @@ def _own_constraint_types() -> tuple[type, type]:
             self.identical = True  # F, g are the same at every grid point
             self.terms, self.limits = terms, limits
 
-        def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
+        def compute_constraint_params(self, path: toppra.interpolator.AbstractGeometricPath, gridpoints: np.ndarray,
+                                      *args: object, **kwargs: object) -> tuple:
             self.dof = path.dof
             n = path.dof
             F = np.vstack([np.eye(n), -np.eye(n)])
@@ -223,13 +227,13 @@ def _own_constraint_types() -> tuple[type, type]:
     return SdotBoundConstraint, TorqueConstraint
 
 
-def _sdot_bound_constraint(x_upper: np.ndarray):
+def _sdot_bound_constraint(x_upper: np.ndarray) -> toppra.constraint.LinearConstraint:
     """A toppra constraint bounding the path speed alone: x = sdot^2 <= ``x_upper`` (G,) at every
     grid point (computed once per path by the caller, not per margin)."""
     return _own_constraint_types()[0](x_upper)
 
 
-def _tcp_speed_constraint(speed_per_ds: np.ndarray, max_speed: float):
+def _tcp_speed_constraint(speed_per_ds: np.ndarray, max_speed: float) -> toppra.constraint.LinearConstraint:
     """The TCP speed bound |dp/ds| * sdot <= max_speed; ``speed_per_ds`` (G,) is |dp/ds| (m per unit of s) on the grid."""
     with np.errstate(divide="ignore"):
         return _sdot_bound_constraint(np.where(speed_per_ds > 1e-12, (max_speed / np.maximum(speed_per_ds, 1e-12)) ** 2, 1e12))
@@ -238,14 +242,14 @@ def _tcp_speed_constraint(speed_per_ds: np.ndarray, max_speed: float):
 GEOMETRIC_JERK_SHARE = 0.5  # of each jerk limit, for the path's own term q3(s) * sdot^3
 
 
-def _path_jerk(path, gridpoints: np.ndarray) -> np.ndarray:
+def _path_jerk(path: toppra.interpolator.AbstractGeometricPath, gridpoints: np.ndarray) -> np.ndarray:
     """|q3(s)| (G, n) at each grid point: the slope of q2 per grid interval, the larger of the two
     intervals at each point (the spline's q3 is constant between knots; toppra's spline gives up to q2)."""
     d3 = np.abs(np.diff(path(gridpoints, 2), axis=0)) / np.maximum(np.diff(gridpoints), 1e-12)[:, None]
     return np.maximum(np.vstack([d3[:1], d3]), np.vstack([d3, d3[-1:]]))
 
 
-def _geometric_jerk_constraint(at: np.ndarray, jmax: np.ndarray):
+def _geometric_jerk_constraint(at: np.ndarray, jmax: np.ndarray) -> toppra.constraint.LinearConstraint:
     """Bound the path speed where the path itself turns fast: |q3(s)| * sdot^3 <= share * jerk limit.
 
     Joint jerk is q1 s3 + 3 q2 s1 s2 + q3 s1^3 (qk, sk: k-th derivatives of the path and of s(t)):
@@ -258,7 +262,7 @@ def _geometric_jerk_constraint(at: np.ndarray, jmax: np.ndarray):
     return _sdot_bound_constraint(np.minimum(bound, 1e12))
 
 
-def _torque_terms(model: TorqueModel, path, gridpoints: np.ndarray,
+def _torque_terms(model: TorqueModel, path: toppra.interpolator.AbstractGeometricPath, gridpoints: np.ndarray,
                   gravity: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """toppra's canonical torque form on the grid, tau = a(s) sddot + b(s) sdot^2 + c(s), each (G, n) N m.
 
@@ -273,7 +277,8 @@ def _torque_terms(model: TorqueModel, path, gridpoints: np.ndarray,
     return a, b, gravity
 
 
-def _torque_constraint(terms: tuple[np.ndarray, np.ndarray, np.ndarray], limits: np.ndarray):
+def _torque_constraint(terms: tuple[np.ndarray, np.ndarray, np.ndarray],
+                       limits: np.ndarray) -> toppra.constraint.LinearConstraint:
     """A toppra constraint |a sddot + b sdot^2 + c| <= ``limits`` (n,) N m from ``_torque_terms``."""
     return _own_constraint_types()[1](terms, limits)
 
@@ -369,14 +374,16 @@ class _Profile:
         return s, (s1 - s0) / w, (v1 - v0) / w
 
 
-def _sample(path, prof: _Profile, times: np.ndarray, w: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _sample(path: toppra.interpolator.AbstractGeometricPath, prof: _Profile, times: np.ndarray,
+            w: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """q, qd, qdd (N, n) and s (N,) at ``times``."""
     s, sd, sdd = prof.filtered(times, w)
     ps = path(s, 1)
     return path(s), ps * sd[:, None], ps * sdd[:, None] + path(s, 2) * (sd**2)[:, None], s
 
 
-def _ends_at_rest(samples: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], wp: np.ndarray, s_end: float):
+def _ends_at_rest(samples: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], wp: np.ndarray,
+                  s_end: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``_sample``'s q, qd, qdd, s with the exact end waypoints of ``wp`` (K, n), velocity and acceleration 0 there,
     and the path parameter exactly 0 and ``s_end`` (the filtered s can end an ulp short, after a sample already at
     ``s_end``)."""
@@ -387,7 +394,7 @@ def _ends_at_rest(samples: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     return q, qd, qdd, s
 
 
-def _jerk_ok(path, prof: _Profile, w: float, jmax: np.ndarray) -> bool:
+def _jerk_ok(path: toppra.interpolator.AbstractGeometricPath, prof: _Profile, w: float, jmax: np.ndarray) -> bool:
     """Whether the jerk of ``prof`` filtered at width ``w`` (s), sampled every FINE_DT, keeps ``jmax`` (n,):
     with s, sdot, sddot of ``prof.filtered`` on the grid t = 0, FINE_DT, ... past ``prof.T + w``, the joint
     accelerations qdd = q'(s) sddot + q''(s) sdot^2 (as in ``_sample``) change by at most jmax * FINE_DT
@@ -407,8 +414,8 @@ def _jerk_ok(path, prof: _Profile, w: float, jmax: np.ndarray) -> bool:
     return memo[key]
 
 
-def _filter_width(path, prof: _Profile, w0: float, jm: np.ndarray, growth: float = FILTER_GROWTH,
-                  tries: int = FILTER_TRIES) -> float | None:
+def _filter_width(path: toppra.interpolator.AbstractGeometricPath, prof: _Profile, w0: float, jm: np.ndarray,
+                  growth: float = FILTER_GROWTH, tries: int = FILTER_TRIES) -> float | None:
     """The narrowest filter width (s, from ``w0`` up by factors of ``growth``, then narrowed to within about
     3 % of a step) for which the sampled jerk of ``prof`` is inside ``jm``; None if none within ``tries``."""
     w, lo = w0, 0.0
@@ -451,7 +458,8 @@ def _plateau_cap(prof: _Profile, hold: float) -> float | None:
     return lo if lo > 0.0 else None
 
 
-def _plateau_profile(algo, constraints: list, path, gridpoints: np.ndarray, prof: _Profile, hold: float,
+def _plateau_profile(algo: ModuleType, constraints: list, path: toppra.interpolator.AbstractGeometricPath,
+                     gridpoints: np.ndarray, prof: _Profile, hold: float,
                      alim: np.ndarray | None = None) -> _Profile | None:
     """``prof`` timed again under a path speed cap that gives it a cruise of about ``hold`` s at its top speed.
 
@@ -493,7 +501,8 @@ def _plateau_profile(algo, constraints: list, path, gridpoints: np.ndarray, prof
     return _Profile(np.asarray(data.gridpoints, dtype=float), np.asarray(data.sd_vec, dtype=float))
 
 
-def _plateau(algo, constraints: list, path, gridpoints: np.ndarray, prof: _Profile, w0: float, jm: np.ndarray,
+def _plateau(algo: ModuleType, constraints: list, path: toppra.interpolator.AbstractGeometricPath,
+             gridpoints: np.ndarray, prof: _Profile, w0: float, jm: np.ndarray,
              alim: np.ndarray | None) -> tuple[_Profile, float] | None:
     """``_plateau_profile`` with a cruise of PLATEAU_SHARES times ``w0`` (the next share if no filter up to the
     cruise's length passes) and its filter width; None if none passes."""
@@ -508,8 +517,8 @@ def _plateau(algo, constraints: list, path, gridpoints: np.ndarray, prof: _Profi
     return None
 
 
-def _slowed(path, prof: _Profile, w: float, factor: float, jm: np.ndarray | None,
-            keep_width: bool = True) -> tuple[_Profile, float] | None:
+def _slowed(path: toppra.interpolator.AbstractGeometricPath, prof: _Profile, w: float, factor: float,
+            jm: np.ndarray | None, keep_width: bool = True) -> tuple[_Profile, float] | None:
     """``prof`` (filtered at width ``w`` s) run ``factor`` (> 1) times slower on the same path, and its filter width.
 
     The path speed sdot / factor at every grid point makes the unfiltered motion exactly ``factor`` times longer:
@@ -532,7 +541,7 @@ def _jerk_slowdown_factor(ratio: float) -> float:
     return max(ratio, 1.0) ** (1.0 / 3.0) * (1.0 + SLOWDOWN_SLACK)
 
 
-def _jerk_ratio(path, prof: _Profile, w: float, jm: np.ndarray) -> float:
+def _jerk_ratio(path: toppra.interpolator.AbstractGeometricPath, prof: _Profile, w: float, jm: np.ndarray) -> float:
     """The largest sampled joint jerk of ``prof`` filtered at width ``w`` (s) as a share of ``jm`` (n,): on the grid
     of ``_jerk_ok`` (every FINE_DT from 0 past the end), the largest change of a joint acceleration per FINE_DT over
     jm * FINE_DT."""
@@ -541,7 +550,8 @@ def _jerk_ratio(path, prof: _Profile, w: float, jm: np.ndarray) -> float:
     return float(np.max(np.abs(np.diff(qdd, axis=0)) / (FINE_DT * jm)))
 
 
-def _jerk_slowdown(path, prof: _Profile, w0: float, jm: np.ndarray) -> tuple[_Profile, float] | None:
+def _jerk_slowdown(path: toppra.interpolator.AbstractGeometricPath, prof: _Profile, w0: float,
+                   jm: np.ndarray) -> tuple[_Profile, float] | None:
     """For a profile whose jerk no filter width of ``_filter_width``'s search brings inside ``jm`` (n,): the path's
     own shape (a sharp bend on a tiny segment) makes jerk that filtering does not remove, only a lower speed does.
 
@@ -561,8 +571,9 @@ def _jerk_slowdown(path, prof: _Profile, w0: float, jm: np.ndarray) -> tuple[_Pr
     return None
 
 
-def _jerk_filtered(algo, constraints: list, path, gridpoints: np.ndarray, prof: _Profile, alim: np.ndarray,
-                   jm: np.ndarray, alim_known: bool) -> tuple[_Profile, float] | None:
+def _jerk_filtered(algo: ModuleType, constraints: list, path: toppra.interpolator.AbstractGeometricPath,
+                   gridpoints: np.ndarray, prof: _Profile, alim: np.ndarray, jm: np.ndarray,
+                   alim_known: bool) -> tuple[_Profile, float] | None:
     """TOPP-RA's profile ``prof`` (under ``constraints``, joint accelerations ``alim`` (n,)) made jerk-limited: the
     profile and the narrowest filter width (s) whose sampled jerk keeps ``jm`` (n,), or the profile with a cruise at
     its top speed (``_plateau``) when that ends sooner, or, when no width passes, the profile slowed down in time for
@@ -591,9 +602,13 @@ def _jerk_filtered(algo, constraints: list, path, gridpoints: np.ndarray, prof: 
     return prof, w
 
 
-def _sampled_within_limits(path, prof: _Profile, w: float, wp: np.ndarray, sample_dt: float, vmax: np.ndarray,
-                           amax: np.ndarray, jm: np.ndarray | None,
-                           tcp: tuple[Callable[[np.ndarray, np.ndarray], np.ndarray], float] | None):
+# (profile, filter width s, times (N,), (q, qd, qdd (N, n), s (N,)), within the limits, slowed by)
+_Sampled = tuple[_Profile, float, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], bool, float]
+
+
+def _sampled_within_limits(path: toppra.interpolator.AbstractGeometricPath, prof: _Profile, w: float, wp: np.ndarray,
+                           sample_dt: float, vmax: np.ndarray, amax: np.ndarray, jm: np.ndarray | None,
+                           tcp: tuple[Callable[[np.ndarray, np.ndarray], np.ndarray], float] | None) -> _Sampled:
     """``prof`` filtered at width ``w`` (s) sampled every ``sample_dt`` s, at rest at the end waypoints of ``wp``
     (K, n), and slowed down in time (``_slowed``, at most SLOWDOWN_TRIES times) until the samples keep the joint
     velocity, acceleration and jerk limits ``vmax``, ``amax``, ``jm`` (n,; jm None: no jerk limit) and, with

@@ -92,7 +92,7 @@ def for_robot(robot: Robot, traj: Trajectory | None = None) -> Actuation:
     return _generic(robot, traj)
 
 
-def _generic(robot: Robot, traj) -> Actuation:
+def _generic(robot: Robot, traj: Trajectory | None) -> Actuation:
     notes: list[str] = []
     actuated = [i for i, n in enumerate(robot.joint_names)]
     effort = np.full(robot.dof, np.inf) if robot.effort_limits is None else np.asarray(robot.effort_limits, dtype=float)
@@ -112,7 +112,7 @@ def _generic(robot: Robot, traj) -> Actuation:
     return Actuation(bank, [None] * n, [-1] * n, streamed=False, notes=notes)
 
 
-def _needed_torque(robot: Robot, traj) -> np.ndarray:
+def _needed_torque(robot: Robot, traj: Trajectory | None) -> np.ndarray:
     """Largest |torque| (dof,) N m of the planned motion (zeros without a trajectory or inertias)."""
     if traj is None:
         return np.zeros(robot.dof)

@@ -14,14 +14,14 @@ which link or item, which item, from when to when, how deep at most.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 if TYPE_CHECKING:
-    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.motion.trajectory import Segment, Trajectory
     from roarmctl.physics.world import Contact
 
 LAG = 0.3  # s a window stays open after its planned end (the servos' lag, settling of a released object)
@@ -84,7 +84,7 @@ def holds_from(traj: Trajectory, object_of_payload: list[str | None]) -> list[Ho
     return out
 
 
-def _segment_ending(segs, t: float) -> int | None:
+def _segment_ending(segs: Sequence[Segment], t: float) -> int | None:
     """Index of the gripper segment that ends at ``t`` (or contains it)."""
     best = None
     for i, s in enumerate(segs):

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -40,7 +41,7 @@ from roarmctl.errors import InputError
 from roarmctl.robot.model import Robot, quaternions
 
 if TYPE_CHECKING:
-    from roarmctl.motion.scene import Scene
+    from roarmctl.motion.scene import Scene, SceneItem
 
 GRAVITY = 9.81  # m/s^2, the same value as roarmctl.robot.dynamics.GRAVITY
 TIMESTEP = 0.001  # s: the servos' control loop and the contacts both need about 1 ms
@@ -112,7 +113,7 @@ def quat(rot: np.ndarray) -> tuple[float, float, float, float]:
     return float(w), float(x), float(y), float(z)
 
 
-def _f(values) -> str:
+def _f(values: Iterable[float]) -> str:
     return " ".join(repr(float(v) + 0.0) for v in values)
 
 
@@ -125,7 +126,8 @@ def _place(el: ET.Element, pose: np.ndarray) -> None:
         el.set("quat", _f(quat(pose[:3, :3])))
 
 
-def _geom_shape(el: ET.Element, kind: str, size=(0.0, 0.0, 0.0), radius: float = 0.0, length: float = 0.0) -> None:
+def _geom_shape(el: ET.Element, kind: str, size: npt.ArrayLike = (0.0, 0.0, 0.0), radius: float = 0.0,
+                length: float = 0.0) -> None:
     if kind == "box":
         el.set("type", "box")
         el.set("size", _f(np.asarray(size, dtype=float) / 2))
@@ -256,7 +258,7 @@ def _inertial(doc: BuiltDocument, robot: Robot, link: str, body: ET.Element, has
                      f"{r * 1e3:g} mm sphere (assumed)")
 
 
-def _scene(doc: BuiltDocument, robot: Robot, scene, world: ET.Element, contact: ET.Element, asset: ET.Element,
+def _scene(doc: BuiltDocument, robot: Robot, scene: Scene, world: ET.Element, contact: ET.Element, asset: ET.Element,
            bodies: dict[str, ET.Element], masses: dict[str, float]) -> None:
     base = [link for link in robot.base_links if link in bodies]
     for item in scene.items:
@@ -297,9 +299,10 @@ def _scene(doc: BuiltDocument, robot: Robot, scene, world: ET.Element, contact: 
                     ET.SubElement(contact, "exclude", body1=body_name(link), body2=item_body_name(item.name))
 
 
-def _mesh_item(doc: BuiltDocument, item, body: ET.Element, asset: ET.Element, rgba: str) -> None:
+def _mesh_item(doc: BuiltDocument, item: SceneItem, body: ET.Element, asset: ET.Element, rgba: str) -> None:
     """A mesh scene item: one mesh geom per convex piece (the checker's pieces); an ``exact`` mesh (FCL checks
     its triangles) collides as its convex hull in MuJoCo, as a robot's exact mesh does, and a note says so."""
+    assert item.mesh is not None  # a mesh item carries its MeshData
     for k, (v, f) in enumerate(item.mesh.pieces):
         mname, gname = f"mesh:item:{item.name}:{k}", f"item:{item.name}:{k}"
         ET.SubElement(asset, "mesh", name=mname, vertex=_f(np.asarray(v).ravel()),
@@ -311,11 +314,12 @@ def _mesh_item(doc: BuiltDocument, item, body: ET.Element, asset: ET.Element, rg
                          "(a concave part is filled)")
 
 
-def _cloud_item(doc: BuiltDocument, item, world: ET.Element, rgba: str, table: bool) -> None:
+def _cloud_item(doc: BuiltDocument, item: SceneItem, world: ET.Element, rgba: str, table: bool) -> None:
     """A point-cloud scene item: its occupied cells (the checker's octree leaves) as boxes, runs of cells
     merged into one box each (``cell_boxes``: the same volume, far fewer geoms). The boxes are geoms of the
     world body itself: MuJoCo's broad phase then passes over them (hundreds of boxes in a static body of their
     own cost every step 40 us). A table's boxes touch no geom of a base link (``TABLE_BIT``)."""
+    assert item.cloud is not None  # a cloud item carries its CloudData
     r = item.cloud.resolution
     lo, hi = cell_boxes(item.cloud.cells)
     if len(lo) > MAX_CLOUD_BOXES:
@@ -369,7 +373,7 @@ def cell_boxes(cells: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def _volume(item) -> float:
+def _volume(item: SceneItem) -> float:
     if item.shape == "box":
         return float(np.prod(item.size))
     if item.shape == "cylinder":

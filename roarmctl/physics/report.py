@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -63,7 +64,7 @@ def _r(x: float, n: int = 3) -> float:
     return round(float(x), n) + 0.0
 
 
-def _plan_at(traj, t_physics: np.ndarray, scale: float) -> np.ndarray:
+def _plan_at(traj: Trajectory, t_physics: np.ndarray, scale: float) -> np.ndarray:
 
     return sample(traj, np.clip(t_physics * scale, 0.0, traj.duration))
 
@@ -95,7 +96,7 @@ def _servos(robot: Robot, setup: Setup) -> list[dict[str, Any]]:
              "field": f} for j, s, c, lim, f in zip(bank.joint, bank.spec, bank.count, bank.limit, setup.actuation.fields)]
 
 
-def _needed(traj, robot: Robot, setup: Setup) -> np.ndarray | None:
+def _needed(traj: Trajectory, robot: Robot, setup: Setup) -> np.ndarray | None:
     """Peak |torque| (dof,) N m the plan asks of each joint with the masses the physics carries (RNEA of the
     planned motion; a payload from its grasp to its release, with the mass the model gives its object), or
     None without inertias."""
@@ -165,7 +166,7 @@ def _longest(mask: np.ndarray) -> int:
     return best
 
 
-def _tcp(traj, robot: Robot, rec: Recording, plan: np.ndarray, moving: np.ndarray, scale: float,
+def _tcp(traj: Trajectory, robot: Robot, rec: Recording, plan: np.ndarray, moving: np.ndarray, scale: float,
          sag: bool) -> dict[str, Any]:
     stride = max(1, int(round(0.01 / rec.dt)))  # the TCP error every 10 ms
     idx = np.flatnonzero(moving)[::stride]
@@ -194,7 +195,8 @@ def _tcp(traj, robot: Robot, rec: Recording, plan: np.ndarray, moving: np.ndarra
             "compensated_mm": max((float(r["compensated_mm"]) for r in rests if "compensated_mm" in r), default=None)}
 
 
-def _lag(traj, robot: Robot, t: np.ndarray, sim: np.ndarray, scale: float) -> tuple[float | None, float | None]:
+def _lag(traj: Trajectory, robot: Robot, t: np.ndarray, sim: np.ndarray,
+         scale: float) -> tuple[float | None, float | None]:
     """The time (ms, 0-``MAX_LAG``) by which the simulated TCP follows the plan best, and the RMS error (mm)
     against the plan delayed by it: how much of the tracking error is lag along the path."""
     if len(t) < 2:
@@ -206,7 +208,7 @@ def _lag(traj, robot: Robot, t: np.ndarray, sim: np.ndarray, scale: float) -> tu
     return _r(shifts[k] * 1e3, 1), _r(rms[k] * 1e3, 2)
 
 
-def _rests(traj, robot: Robot) -> list[tuple[float, float, str]]:
+def _rests(traj: Trajectory, robot: Robot) -> list[tuple[float, float, str]]:
     """(start, end, label) of the trajectory's segments (s) in which no arm joint moves, at least ``REST_MIN`` long."""
     arm = robot.arm_indices
     out = []
@@ -220,7 +222,7 @@ def _rests(traj, robot: Robot) -> list[tuple[float, float, str]]:
     return out
 
 
-def _objects(traj, robot: Robot, setup: Setup, rec: Recording, options: Options) -> list[dict[str, Any]]:
+def _objects(traj: Trajectory, robot: Robot, setup: Setup, rec: Recording, options: Options) -> list[dict[str, Any]]:
 
     scene = Scene.from_dict(traj.scene)
     scale = options.speed_scale
@@ -251,7 +253,7 @@ def _objects(traj, robot: Robot, setup: Setup, rec: Recording, options: Options)
     return rows
 
 
-def _angle(quat_wxyz, rot: np.ndarray) -> float:
+def _angle(quat_wxyz: Sequence[float], rot: np.ndarray) -> float:
     """Angle (deg) between the rotation of a unit quaternion (w, x, y, z) and a rotation matrix."""
 
     q2 = np.array(quat(rot))
@@ -293,7 +295,7 @@ def run_log(traj: Trajectory, robot: Robot, setup: Setup, rec: Recording, option
     return log
 
 
-def _description(traj, source: str | None) -> dict[str, Any]:
+def _description(traj: Trajectory, source: str | None) -> dict[str, Any]:
     """The run file's ``robot_description`` (``roarmctl.robot.bundle``): the trajectory's, or the bundle of the
     description ``source`` that the run used instead (``simulate --robot``), so that ``export`` reads the run
     by itself; nothing for a bundled robot."""
@@ -313,7 +315,7 @@ def _failure(report: dict[str, Any]) -> str:
     return "; ".join(parts)
 
 
-def _tracking(traj, robot: Robot, rec: Recording, options: Options) -> list[dict[str, float]]:
+def _tracking(traj: Trajectory, robot: Robot, rec: Recording, options: Options) -> list[dict[str, float]]:
     """TCP error samples at the feedback rate during the motion: {"t", "error_m"} as execute logs them."""
     step = max(1, int(round(1.0 / (options.feedback_rate * rec.dt))))
     t_end = traj.duration / options.speed_scale

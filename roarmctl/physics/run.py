@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -100,7 +100,7 @@ def simulate(traj: Trajectory, robot: Robot, options: Options | None = None, *, 
     return setup, out
 
 
-def _roles(traj) -> dict[tuple[str, str], str]:
+def _roles(traj: Trajectory) -> dict[tuple[str, str], str]:
     return {("item", str(i["name"])): str(i["role"]) for i in traj.scene.get("items", [])}
 
 
@@ -121,7 +121,7 @@ class _Recorder:
         self.commands: list[tuple[float, dict[str, Any], int]] = []
         self._n = 0
 
-    def __call__(self, _servos=None) -> None:
+    def __call__(self, _servos: object = None) -> None:
         w = self.world
         t = w.time
         self.t.append(t)
@@ -147,13 +147,15 @@ class _Recorder:
             self.commands, self.episodes.result())
 
 
-def _progress_every(total: float, progress, done: float, last: list[float]) -> None:
+def _progress_every(total: float, progress: Callable[[float, float], None] | None, done: float,
+                    last: list[float]) -> None:
     if progress is not None and done - last[0] >= 0.1:
         last[0] = done
         progress(done, total)
 
 
-def _drive_streamed(traj, robot: Robot, setup: Setup, options: Options, rec: _Recorder, progress) -> None:
+def _drive_streamed(traj: Trajectory, robot: Robot, setup: Setup, options: Options, rec: _Recorder,
+                    progress: Callable[[float, float], None] | None) -> None:
 
     schedule = build_schedule(traj, robot, rate=options.rate, speed_scale=options.speed_scale, strategy=options.strategy,
                               sag=options.sag)
@@ -173,7 +175,8 @@ def _drive_streamed(traj, robot: Robot, setup: Setup, options: Options, rec: _Re
         progress(total, total)
 
 
-def _advance(servos, t: float, total: float, progress, last: list[float]) -> None:
+def _advance(servos: PhysicsServos, t: float, total: float, progress: Callable[[float, float], None] | None,
+             last: list[float]) -> None:
     """``servos.advance(t)`` in slices of 0.1 s so that progress is reported."""
     w = servos.world
     while w.time + 1e-9 < t - servos.dt * 0.5:
@@ -181,7 +184,8 @@ def _advance(servos, t: float, total: float, progress, last: list[float]) -> Non
         _progress_every(total, progress, w.time, last)
 
 
-def _apply(servos, cmd: dict[str, Any], fields, to_goal) -> None:
+def _apply(servos: PhysicsServos, cmd: dict[str, Any], fields: Sequence[str],
+           to_goal: Callable[[int, float], float]) -> None:
     """One T:102 (every field given) or T:101 (one joint, 1-based) as the firmware writes it to the servos."""
     code = cmd.get("T")
     if code == 102:
@@ -193,7 +197,8 @@ def _apply(servos, cmd: dict[str, Any], fields, to_goal) -> None:
         servos.command([k], [float(to_goal(k, float(cmd["rad"])))], [float(cmd.get("spd", 0))], [float(cmd.get("acc", 0))])
 
 
-def _drive_generic(traj, robot: Robot, setup: Setup, options: Options, rec: _Recorder, progress) -> None:
+def _drive_generic(traj: Trajectory, robot: Robot, setup: Setup, options: Options, rec: _Recorder,
+                   progress: Callable[[float, float], None] | None) -> None:
     """Generic drives: the reference is the planned position and speed at every physics step."""
 
     w, bank = setup.world, setup.actuation.bank

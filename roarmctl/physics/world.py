@@ -27,13 +27,15 @@ from roarmctl.physics.mjcf import (
 from roarmctl.robot.model import Robot
 
 if TYPE_CHECKING:
+    from types import ModuleType
+
     from roarmctl.motion.scene import Scene
 
 #: MuJoCo's own warning texts (it would otherwise append them to MUJOCO_LOG.TXT in the working directory).
 MESSAGES: list[str] = []
 
 
-def _quiet_warnings(mujoco) -> None:
+def _quiet_warnings(mujoco: ModuleType) -> None:
     """Keep MuJoCo's warnings in ``MESSAGES`` instead of a file in the user's working directory."""
     if mujoco.get_mju_user_warning() is None:
         mujoco.set_mju_user_warning(lambda text: MESSAGES.append(str(text)) if len(MESSAGES) < 100 else None)

@@ -32,7 +32,7 @@ from roarmctl.robot.model import Inertial, Robot
 GRAVITY = 9.81  # m/s^2, along -z of the root frame
 
 
-def _complete(robot: Robot, v, what: str, is_position: bool) -> np.ndarray:
+def _complete(robot: Robot, v: npt.ArrayLike, what: str, is_position: bool) -> np.ndarray:
     a = np.asarray(v, dtype=float).reshape(-1)
     if a.size == robot.dof:
         return a
@@ -72,7 +72,7 @@ def combine_inertials(a: Inertial, b: Inertial) -> Inertial:
     return Inertial(float(m), com, shifted(a) + shifted(b))
 
 
-def _batch(robot: Robot, v, what: str, is_position: bool) -> np.ndarray:
+def _batch(robot: Robot, v: npt.ArrayLike, what: str, is_position: bool) -> np.ndarray:
     """(N, dof) from (dof,), (arm_dof,), (N, dof) or (N, arm_dof)."""
     a = np.asarray(v, dtype=float)
     if a.ndim <= 1:

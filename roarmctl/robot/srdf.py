@@ -46,8 +46,8 @@ _OPEN = ("open",)
 _CLOSED = ("close", "closed")
 
 
-def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, str | None, str]], links: set[str], side: dict,
-              where: str) -> dict[str, Any]:
+def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, str | None, str]], links: set[str],
+              side: dict, where: str) -> dict[str, Any]:
     """Sidecar fields from a parsed SRDF (``root``; ``src`` names its file in messages).
 
     ``joints``: URDF joint name -> (type, child link, joint it mimics or None, parent link); ``links``: URDF link
@@ -97,7 +97,7 @@ def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, s
                       check_link(el.get("link2"), "disable_collisions link2")])
     out["allowed_collisions"] = pairs
 
-    def group_joints(name: str, seen=()) -> list[str]:
+    def group_joints(name: str, seen: tuple[str, ...] = ()) -> list[str]:
         g = groups.get(name)
         if g is None:
             raise DescriptionError(f"{src}: group '{name}' is not defined")
@@ -236,7 +236,8 @@ _JL_KEYS = {"has_velocity_limits", "max_velocity", "has_acceleration_limits", "m
             "has_effort_limits", "max_effort", "angle_wraparound"}
 
 
-def read_joint_limits(path: Path, joints: set[str], where: str, roots: Roots | None = None) -> dict[str, dict[str, float]]:
+def read_joint_limits(path: Path, joints: set[str], where: str,
+                      roots: Roots | None = None) -> dict[str, dict[str, float]]:
     """MoveIt joint_limits.yaml -> {joint: {velocity, acceleration, lower, upper}} (only the limits in force).
 
     Read by ``roarmctl.validation.load_yaml`` (size, nesting, UTF-8, inside ``roots``)."""

@@ -313,7 +313,7 @@ def check_urdf(root: ET.Element, where: str) -> None:
             seen.add(up)
 
 
-def _check_geometry(col, where: str, field: str) -> None:
+def _check_geometry(col: ET.Element, where: str, field: str) -> None:
     o = col.find("origin")
     if o is not None:
         for key in ("xyz", "rpy"):
@@ -325,8 +325,8 @@ def _check_geometry(col, where: str, field: str) -> None:
     need = {"box": (("size", 3),), "cylinder": (("radius", 1), ("length", 1)), "sphere": (("radius", 1),),
             "capsule": (("radius", 1), ("length", 1))}.get(g.tag, ())
     for key, n in need:
-        _attr_floats(g, key, n, where, f"{field} {g.tag} {key}", required=True)
-        if any(float(t) <= 0 for t in g.get(key).split()):
+        values = _attr_floats(g, key, n, where, f"{field} {g.tag} {key}", required=True)
+        if values is not None and any(v <= 0 for v in values):
             CHECK.fail(where, f"{field} {g.tag} {key}", f"'{g.get(key)}' must be positive")
 
 
@@ -408,7 +408,7 @@ def check_robot(robot: Robot, where: str) -> None:
         _check_wire(robot, where, set(WIRE_FIELDS))
 
 
-def _check_wire(robot, where: str, fields: set[str]) -> None:
+def _check_wire(robot: Robot, where: str, fields: set[str]) -> None:
     seen_f: set[str] = set()
     seen_j: set[str] = set()
     for i, w in enumerate(robot.wire):

@@ -9,7 +9,7 @@ Only numpy here: no matplotlib.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -134,7 +134,7 @@ def arm_segments(robot: Robot) -> list[tuple[int, int]]:
     return pairs
 
 
-def _limit_vector(value, default: np.ndarray, name: str) -> np.ndarray:
+def _limit_vector(value: Any, default: np.ndarray, name: str) -> np.ndarray:
     if value is None:
         return default
     arr = np.asarray(value, dtype=float)
@@ -143,7 +143,7 @@ def _limit_vector(value, default: np.ndarray, name: str) -> np.ndarray:
     return arr
 
 
-def _scale(value, name: str) -> float:
+def _scale(value: Any, name: str) -> float:
     if value is None:
         return 1.0
     try:

@@ -33,6 +33,7 @@ from roarmctl.viz.shapes import item_extent, item_faces
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
+    from matplotlib.gridspec import GridSpec
     from mpl_toolkits.mplot3d import Axes3D
 
     from roarmctl.motion.planning.assembly import PartialPlan
@@ -101,7 +102,7 @@ def place_labels(ax: Axes3D, labels: list[Label]) -> list[tuple[float, float]]:
 MAX_CLOUD_MARKS = 20_000  # points drawn of a cloud item (every n-th cell beyond)
 
 
-def _add_solid(ax, item: dict, index: int, zorder: int, gid: str, style: dict) -> None:
+def _add_solid(ax: Axes3D, item: dict, index: int, zorder: int, gid: str, style: dict) -> None:
     """One scene item as translucent faces; curved sides without edges (only the cap rims are outlined)."""
     faces = item_faces(item, index)
     if item.get("shape") == "cloud":  # its occupied cells as small squares, at most MAX_CLOUD_MARKS of them
@@ -236,7 +237,7 @@ def draw_scene_3d(ax: Axes3D, data: PathData, view: str) -> tuple[Normalize, Col
     return norm, cmap
 
 
-def _event_lines(ax, data: PathData, name: str, labels: bool = False) -> None:
+def _event_lines(ax: Axes, data: PathData, name: str, labels: bool = False) -> None:
     for e in data.events:
         line = ax.axvline(e.time, color=EVENT_COLOR.get(e.kind, "k"), lw=1.0, ls="-.", alpha=0.9, zorder=1)
         line.set_gid(f"event:{e.kind}:{name}")
@@ -245,7 +246,7 @@ def _event_lines(ax, data: PathData, name: str, labels: bool = False) -> None:
                         textcoords="offset points", fontsize=7.5, color=EVENT_COLOR.get(e.kind, "k"), va="bottom")
 
 
-def _shade_cartesian(ax, data: PathData) -> None:
+def _shade_cartesian(ax: Axes, data: PathData) -> None:
     kinds = data.segment_kind
     t = data.times
     i = 0
@@ -260,12 +261,12 @@ def _shade_cartesian(ax, data: PathData) -> None:
             i += 1
 
 
-def _blend_lines(ax, data: PathData, name: str) -> None:
+def _blend_lines(ax: Axes, data: PathData, name: str) -> None:
     for tb in data.blends:
         ax.axvline(tb, color="#ff7f0e", lw=0.9, ls=":", alpha=0.9, zorder=1, gid=f"blend:{name}")
 
 
-def _axis_for(ax, data: PathData, j: int, twins: dict, label: str):
+def _axis_for(ax: Axes, data: PathData, j: int, twins: dict, label: str) -> Axes:
     """The axes joint ``j`` is drawn on: ``ax`` for a revolute joint, a twin axis on the right (made once,
     labelled ``label``) for a prismatic one (metres and radians do not share a scale)."""
     if data.prismatic is None or not data.prismatic[j]:
@@ -278,7 +279,7 @@ def _axis_for(ax, data: PathData, j: int, twins: dict, label: str):
     return twins[ax]
 
 
-def _draw_torque(ax, data: PathData) -> None:
+def _draw_torque(ax: Axes, data: PathData) -> None:
     """Joint torques by RNEA (held objects included) with each joint's limit dashed; the forces of prismatic
     joints (N) on their own axis."""
     colors = colormaps["tab10"]
@@ -397,7 +398,8 @@ def render_path(data: PathData, *, view: str = "iso", size: tuple[float, float] 
     return fig
 
 
-def _draw_right(fig: Figure, gs, data: PathData, norm, cmap, title: str, subtitle: str) -> None:
+def _draw_right(fig: Figure, gs: GridSpec, data: PathData, norm: Normalize, cmap: Colormap, title: str,
+                subtitle: str) -> None:
     """Time plots in the right column, the speed colour bar, title and subtitle."""
     right = gs[0, 1].subgridspec(6, 1, hspace=0.36)
     axes = [fig.add_subplot(right[0, 0])]
@@ -408,7 +410,7 @@ def _draw_right(fig: Figure, gs, data: PathData, norm, cmap, title: str, subtitl
     cb = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=cax, orientation="horizontal")
     cb.set_label("TCP speed (m/s)", fontsize=8.5)
     cb.ax.tick_params(labelsize=7.5)
-    if data.max_tcp_speed is not None and data.max_tcp_speed <= norm.vmax:
+    if data.max_tcp_speed is not None and norm.vmax is not None and data.max_tcp_speed <= norm.vmax:
         cb.ax.axvline(data.max_tcp_speed, color="#d62728", lw=1.2, ls="--")
     if title:
         fig.suptitle(title, x=0.02, y=0.985, ha="left", fontsize=13, fontweight="bold")

@@ -6,6 +6,7 @@ jerk-limited Ruckig move). Every blended sample keeps every limit and is collisi
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
@@ -278,7 +279,7 @@ def corner_move(ctx: PlanContext, ta: TimedPath, tb: TimedPath, ia: int, bounds:
 
     # shortest first; among equals the earliest end in the second motion and the latest start in the first (a
     # straight line stays exact for longer)
-    def ranked(keys) -> list[tuple[int, int]]:
+    def ranked(keys: Iterable[tuple[int, int]]) -> list[tuple[int, int]]:
         keys = list(keys)
         if not keys:
             return []

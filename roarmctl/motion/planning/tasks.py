@@ -163,7 +163,8 @@ def against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_gr
 
 
 def _against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_grasp: np.ndarray, pitch: float | None,
-                       q: np.ndarray, at: str, g_open: float):
+                       q: np.ndarray, at: str,
+                       g_open: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]:
     """``against_fixed_jaw`` itself (not kept, no note)."""
     spec = next(o for o in ctx.plan.objects if o.name == task.object)
     width = grasp_width(spec)

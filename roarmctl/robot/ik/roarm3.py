@@ -101,7 +101,7 @@ class Roarm3IK:
                                    f"[{abs(self.la - self.lb):.3f}, {self.la + self.lb:.3f}] m", "out_of_reach",
                                    "move the target closer to the arm")
 
-        def res(qq):
+        def res(qq: np.ndarray) -> np.ndarray:
             return robot.kin.fk(qq)[:, :3, 3] - p
 
         out, limit_fail = [], 0

@@ -61,7 +61,7 @@ class Roarm5IK:
         self.z_s = float(sh[2])
         self.base_xy = sh[:2].copy()
 
-        def polar(v):  # (across=x, along=z) -> (length, angle from vertical)
+        def polar(v: np.ndarray) -> tuple[float, float]:  # (across=x, along=z) -> (length, angle from vertical)
             return math.hypot(v[0], v[2]), math.atan2(v[0], v[2])
 
         self.l2, self.t2 = polar(el - sh)
@@ -72,7 +72,8 @@ class Roarm5IK:
         self.reach = self.l2 + self.l3 + self.l4
 
     # -- the planar sub-problem, vectorised over pitch (phi) -------------------------------------
-    def _planar(self, r: float | np.ndarray, z: float | np.ndarray, phi: np.ndarray, elbow_sign: float | np.ndarray):
+    def _planar(self, r: float | np.ndarray, z: float | np.ndarray, phi: np.ndarray,
+                elbow_sign: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Shoulder, elbow, wrist (arrays) for TCP at (r, z) in the plane and approach angle phi.
 
         ``r`` is signed (negative: behind the base axis), ``z`` is height above the shoulder axis.
@@ -95,7 +96,8 @@ class Roarm5IK:
         w = phi - self.a0 - s - e
         return s, e, w, ok
 
-    def _branch_q(self, base: float | np.ndarray, s, e, w, roll: float, grip: float | None) -> np.ndarray:
+    def _branch_q(self, base: float | np.ndarray, s: np.ndarray, e: np.ndarray, w: np.ndarray, roll: float,
+                  grip: float | None) -> np.ndarray:
         n = np.size(s)
         q = np.zeros((n, self.robot.dof))
         q[:, self.arm[0]] = base
@@ -384,13 +386,13 @@ class Roarm5IK:
         if rot is not None:
             want = pitch_of_rot(rot, u_h)
 
-            def res(qq):
+            def res(qq: np.ndarray) -> np.ndarray:
                 t = kin.fk(qq)
                 m = rot.T @ t[:, :3, :3]
                 return np.column_stack([t[:, :3, 3] - p, wrap_angle(approach_pitches(t, u_h) - want),
                                         np.arctan2(m[:, 2, 1] - m[:, 1, 2], m[:, 1, 1] + m[:, 2, 2])])
             return newton(res, q, self.arm)
-        def res_pitch(qq):
+        def res_pitch(qq: np.ndarray) -> np.ndarray:
             t = kin.fk(qq)
             return np.column_stack([t[:, :3, 3] - p, wrap_angle(approach_pitches(t, u_h) - pitch)])
         return newton(res_pitch, q, self.arm[:4])

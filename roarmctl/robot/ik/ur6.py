@@ -145,7 +145,7 @@ def ur6_solve(robot: Robot, p: np.ndarray, rot: np.ndarray, qr: np.ndarray | Non
     arm = robot.arm_indices
     grip = ref_gripper_q(robot, qr)
 
-    def res(qq):  # position error and the small-angle rotation error (vee of the skew part)
+    def res(qq: np.ndarray) -> np.ndarray:  # position error and the small-angle rotation error (vee of the skew part)
         tt = robot.kin.fk(qq)
         m = rot.T @ tt[:, :3, :3]
         w = 0.5 * np.stack([m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]], axis=1)

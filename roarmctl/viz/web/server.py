@@ -51,7 +51,7 @@ class ViewServer:
                 ok = self.path.split("?", 1)[0] in PATHS
                 self._head(200 if ok else 404, len(server.page) if ok else 0)
 
-            def log_message(self, format: str, *args) -> None:  # the library never prints
+            def log_message(self, format: str, *args: object) -> None:  # the library never prints
                 pass
 
         try:
