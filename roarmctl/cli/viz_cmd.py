@@ -10,6 +10,7 @@ import typer
 
 from roarmctl.cli import common
 from roarmctl.errors import InfeasibleError, InputError
+from roarmctl.export import EXECLOG_FORMAT
 from roarmctl.viz.formats import picture_format
 
 VIEW_NAMES = ("iso", "top", "front", "side")
@@ -98,7 +99,6 @@ def visualize_path(
 
 def _is_log(source: Path) -> bool:
     """Whether ``source`` is an execution log (read again only on this error path)."""
-    from roarmctl.export import EXECLOG_FORMAT
     from roarmctl.motion.validate import read_document
 
     try:
