@@ -263,15 +263,19 @@ class Link:
         r = self.request(timeout)
         return None if r is None else r.feedback
 
-    def request(self, timeout: float = 0.3, ahead: list[dict[str, Any]] | None = None) -> Received | None:
-        """Send ``T:105`` (after the lines ``ahead``, in the same write) and wait for the next ``T:1051`` line (its
-        time and text too); None on timeout."""
+    def request(self, timeout: float = 0.3, ahead: list[dict[str, Any]] | None = None,
+                earlier: int = 0) -> Received | None:
+        """Send ``T:105`` (after the lines ``ahead``, in the same write) and wait for its ``T:1051`` line (its time
+        and text too); None on timeout. ``earlier``: answers still due to ``T:105`` lines sent before this one; the
+        firmware answers in order, so that many frames come first and are passed over (they stay in ``received``)."""
         self.send_lines([*(ahead or []), protocol.feedback_request()])
         end = self.clock() + timeout
         while self.clock() < end:
             for r in self.read_for(min(0.02, max(0.0, end - self.clock()))):
                 if r.feedback is not None:
-                    return r
+                    if earlier <= 0:
+                        return r
+                    earlier -= 1
         return None
 
     # ------------------------------------------------------------------ connect

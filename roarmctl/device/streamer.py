@@ -18,7 +18,9 @@ collision-checked path the arm reaches when the hold arrives (never beyond the l
 no reversal), or, when the arm is not following its commands (tracking abort), at its last validated
 measured pose if that is at most 50 ms old. On the 20260701 build the firmware's command queue is
 flushed first with the bytes ``"T":0`` (which on that build only flushes and sets StopFlag; on the
-0.84 build ``T:0`` cuts torque for 10 s and is never sent), then ``"T":999`` clears the flag.
+0.84 build ``T:0`` cuts torque for 10 s and is never sent), then ``"T":999`` clears the flag. The hold goes
+out twice, the second copy once the firmware has read what came before: a full receive buffer loses the newest
+bytes, which can be the hold.
 The choice and its figures: ``docs/guide.md``, "Talking to the firmware".
 """
 
@@ -221,6 +223,7 @@ class Streamer:
         self.shift = 0.0  # s: the pauses so far (tick k is due at t0 + shift + t_k)
         self.waits = {"late": 0, "behind": 0}  # ticks waited for: the host came after the next was due; the firmware was behind
         self.hold_info: dict[str, Any] | None = None
+        self._polls: deque[tuple[float, int]] = deque()  # the stream's T:105 polls not answered yet
         self.refused_lines: dict[int, str] = {}  # id(Received) -> reason, for the log
         self._tick_of: dict[int, int] = {}  # id(first command sent for a tick) -> tick
         self._read_at: dict[int, float] = {}  # id(Received) -> when its servos were read (s, clock): the log's read_t
@@ -441,6 +444,7 @@ class Streamer:
         err = None
         lines, confirmed = 0, 0
         polls: deque[tuple[float, int]] = deque()  # (on the wire from, lines sent up to and including it)
+        self._polls = polls  # the hold waits for the answers still due to these
         wire_free = 0.0  # when the bytes sent so far will have left the host (115200 baud)
         polled = self.clock()
         k, hooked, waited, host_late = 0, -1, -1, False
@@ -607,12 +611,25 @@ class Streamer:
             cmd = self.wm.hold(dict(zip(self.wm.field_names, (float(v) for v in wire))), spd, 0)
             t_hold = link.send(cmd, fresh_line=not flushed)
             self.hold_info = {"kind": kind, "cause": cause, "flushed_queue": flushed, "t": t_hold,
-                              "wire": [protocol.r4(v) for v in wire]}
+                              "wire": [protocol.r4(v) for v in wire], "copies": 1}
             self.notes.append(f"hold sent ({kind}{', queue flushed first' if flushed else ''})")
-            r = link.request(0.3)  # answered after the hold ran: bounds the hold's latency
+            # answered after the firmware read the hold's line: bounds the hold's latency (the stream's own polls
+            # still unanswered are answered first)
+            r = link.request(0.3, earlier=len(self._polls))
             if r is not None:
                 self.hold_info["answered_after_s"] = round(r.t - t_hold, 4)
                 self._judge_quietly(r)
+            # The firmware's receive buffer (256 + 128 bytes on the ESP32) loses the newest bytes when it is full:
+            # lines that queued up while its loop was busy (a slow pass, long feedback lines) can cost the hold,
+            # while a later line is read. A second copy, sent when the firmware has read all that came before (or
+            # nothing answered in 0.3 s), finds the buffer empty; the hold is a fixed goal, so running it twice
+            # changes nothing.
+            link.send(cmd, fresh_line=True)
+            self.hold_info["copies"] = 2
+            r2 = link.request(0.3)
+            self.hold_info["confirmed"] = r2 is not None
+            if r2 is not None:
+                self._judge_quietly(r2)
         except DeviceError:
             self.notes.append("hold could not be sent: the link is gone")
 

@@ -273,7 +273,7 @@ def test_stalled_arm_aborts_on_tracking_error_and_holds_where_it_is(traj_file, c
     assert data["summary"]["outcome"] == "aborted"
     # the arm is not where it was told to go: the hold is its last measured pose (stop pushing)
     assert data["hold"]["kind"] == "measured" and torque.all()
-    hold = [s for s in data["sent"] if s["cmd"]["T"] == 102][-1]
+    hold = [s for s in data["sent"] if s["cmd"]["T"] == 102][-data["hold"]["copies"]]  # its first copy
     measured = [e for e in data["received"] if "tcp_world_m" in e and e["t"] <= hold["t"]][-1]
     for key, fb in (("base", "b"), ("elbow", "e"), ("wrist", "t")):
         assert hold["cmd"][key] == pytest.approx(measured["feedback"][fb], abs=1e-3)

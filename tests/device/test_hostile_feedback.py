@@ -70,8 +70,8 @@ def test_from_current_and_plan_port_refuse_it_too(away, tmp_path, capsys):
 
 
 def _hold_exec(sim, log: dict) -> tuple[float, dict]:
-    """(when the hold ran at the firmware, the hold) from the simulator's record and the log."""
-    hold = [s for s in log["sent"] if s["cmd"]["T"] == 102][-1]
+    """(when the hold ran at the firmware, the hold's first copy) from the simulator's record and the log."""
+    hold = [s for s in log["sent"] if s["cmd"]["T"] == 102][-log["hold"]["copies"]]
     t_sent = log["t0_monotonic"] + hold["t"]
     runs = [(t, c) for _, t, c in sim.executed() if c == hold["cmd"] and t >= t_sent - 1e-3]
     assert runs, "the hold never ran"

@@ -57,7 +57,7 @@ class FakeLink:
         self.received += out
         return out
 
-    def request(self, timeout: float = 0.3):
+    def request(self, timeout: float = 0.3, earlier: int = 0):
         from roarmctl.device.protocol import feedback_request
 
         self.send(feedback_request())
@@ -66,7 +66,9 @@ class FakeLink:
             self.clock.now += 0.005
             for r in self.poll():
                 if r.feedback is not None:
-                    return r
+                    if earlier <= 0:
+                        return r
+                    earlier -= 1
         return None
 
 
@@ -124,6 +126,32 @@ def test_interrupt_at_tick_k_holds_on_the_planned_path_never_beyond_the_last_set
     assert taus[i] >= st.schedule[19].t - 0.02  # and not behind where the arm was sent
     assert res.log["summary"]["outcome"] == "interrupted" and len(res.log["sent"]) == len(link.sent)
     assert res.log["hold"]["kind"] == "path"
+
+
+def test_a_hold_lost_to_a_full_receive_buffer_is_sent_again_and_runs():
+    """The firmware's loop slows to 200 ms a pass (long feedback lines, failing servo reads) while 800 bytes queue
+    up at its UART: the ESP32's receive buffer (256 + 128 bytes) loses the newest bytes, the hold's line among them,
+    and the T:105 behind it. The second copy of the hold, sent once the firmware has read what came before, runs.
+    (Before: one copy, lost; the arm went on to its last set-point.)"""
+    clock = FakeClock()
+    link = FakeLink(clock)
+
+    def hook(k):
+        if k == 20:
+            link.fw.cfg.loop_period = 0.2
+            link.fw.receive(b'{"junk":"' + b"x" * 390 + b'"}\n' + b'{"junk":"' + b"y" * 390 + b'"}\n', clock())
+            raise KeyboardInterrupt
+
+    st = Streamer(link, ROBOT, traj(), StreamConfig(rate=50), clock=clock, sleep=clock.sleep, hook=hook)
+    with pytest.raises(Interrupted) as info:
+        st.run()
+    ticks = {id(tk.cmd) for tk in st.schedule}
+    holds = [(t, c) for t, c in link.sent if c["T"] == 102 and id(c) not in ticks]
+    assert len(holds) == 2 and holds[0][1] == holds[1][1]  # the same goal twice
+    ran = [(t_line, c) for t_line, _, c in link.fw.executed if c == holds[0][1]]
+    assert link.fw._rx_dropped >= 2 and len(ran) == 1  # the first copy was lost, the second ran
+    assert ran[0][0] > holds[1][0]
+    assert info.value.result.log["hold"]["copies"] == 2 and info.value.result.log["hold"]["confirmed"]
 
 
 def test_stalled_arm_aborts_on_tracking_error():
