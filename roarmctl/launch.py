@@ -12,13 +12,17 @@ from __future__ import annotations
 import os
 import signal
 import sys
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from types import FrameType
 
 
 def main() -> None:
     """Console entry point (``roarmctl`` and ``python -m roarmctl``)."""
     received: list[int] = []
 
-    def early(signum: int, frame) -> None:
+    def early(signum: int, frame: FrameType | None) -> None:
         received.append(signum)
         if len(received) == 1:
             raise KeyboardInterrupt
@@ -28,7 +32,7 @@ def main() -> None:
     # the imports), and it is not printed.
     previous_hook = sys.unraisablehook
 
-    def unraisable(info) -> None:
+    def unraisable(info: sys.UnraisableHookArgs) -> None:
         if not (received and info.exc_type is not None and issubclass(info.exc_type, KeyboardInterrupt)):
             previous_hook(info)
 

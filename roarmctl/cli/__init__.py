@@ -33,6 +33,8 @@ from roarmctl.fileio import interrupted_write_state
 from roarmctl.robot import xacro_input
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     import click
 
 app = typer.Typer(
@@ -164,7 +166,7 @@ def command() -> "click.Command":
     would print ``--json <bool>``, which reads as if it took a value)."""
     cmd = typer.main.get_command(app)
 
-    def fix(c) -> None:
+    def fix(c: "click.Command") -> None:
         for param in getattr(c, "params", []):
             if getattr(param, "is_flag", False) and param.metavar is None:
                 param.metavar = ""
@@ -172,7 +174,8 @@ def command() -> "click.Command":
                 param.metavar = param.name.upper()  # "plan PLAN", not "plan {plan}"
         help_option = c.get_help_option
 
-        def get_help_option(ctx, _orig=help_option):
+        def get_help_option(ctx: "click.Context", _orig: "Callable[[click.Context], click.Option | None]" = help_option,
+                            ) -> "click.Option | None":
             opt = _orig(ctx)
             if opt is not None:
                 opt.metavar = ""
@@ -192,7 +195,7 @@ def _json_requested(argv: list[str] | None) -> bool:
     return "--json" in args[: args.index("--")] if "--" in args else "--json" in args
 
 
-def _run(argv: list[str] | None, guard) -> int:
+def _run(argv: list[str] | None, guard: "signals.Guard") -> int:
     common.STATE.json_printed, common.STATE.last_error = False, None  # main() may run more than once in a process
     _on_disk()  # forget an earlier command's interrupted output
     code = _run_command(argv, guard)
@@ -202,7 +205,7 @@ def _run(argv: list[str] | None, guard) -> int:
     return code
 
 
-def _run_command(argv: list[str] | None, guard) -> int:
+def _run_command(argv: list[str] | None, guard: "signals.Guard") -> int:
     code = 0
     try:
         # Without standalone mode typer *returns* the exit code of typer.Exit, and turns Ctrl-C
@@ -261,7 +264,7 @@ def _run_command(argv: list[str] | None, guard) -> int:
                 traceback.print_exc()
             common.error(f"internal error: {type(exc).__name__}: {exc}", f"this is a bug; the traceback is in {log}")
             code = 1
-    if code == 0 and guard.received and not guard.raised:
+    if code == 0 and guard.received and guard.first is not None and not guard.raised:
         # a signal arrived while the command was finishing its cleanup: it finished, but say so
         code = exit_code(guard.first)
         common.error(_stop_line(guard.first), "the command had finished its work")

@@ -17,7 +17,14 @@ from roarmctl.fileio import atomic_write_bytes
 if TYPE_CHECKING:
     from collections.abc import Callable
 
+    from rich.console import Console
+
+    from roarmctl.device.firmware import Bogus
+    from roarmctl.device.schedule import Tick
     from roarmctl.device.servos import ServoModel
+    from roarmctl.device.streamer import Status, StreamConfig
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.model import Robot
 
 SERVOS_HELP = ("The simulated servos: physics (default: MuJoCo, the ST3235 model with lag, gravity and torque limits; "
                "docs/physics.md) or ideal (each servo runs its trapezoid exactly, no lag, no gravity).")
@@ -118,7 +125,7 @@ def execute(
     _run(traj, traj_path, robot, cfg, port, sim, yes, log or default_log_path(traj_path), json_out, factory)
 
 
-def _write_output(path: Path, schedule) -> None:
+def _write_output(path: Path, schedule: "list[Tick]") -> None:
     from roarmctl.device.protocol import encode
 
     lines = [b'{"t":' + repr(round(tk.t, 6)).encode() + b',"cmd":' + encode(cmd)[:-1] + b"}\n"
@@ -126,8 +133,8 @@ def _write_output(path: Path, schedule) -> None:
     atomic_write_bytes(path, b"".join(lines))
 
 
-def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path: Path, json_out: bool,
-         sim_servos=None) -> None:
+def _run(traj: "Trajectory", traj_path: Path, robot: "Robot", cfg: "StreamConfig", port: "str | None", sim: bool,
+         yes: bool, log_path: Path, json_out: bool, sim_servos: "Callable[[], ServoModel] | None" = None) -> None:
     err = common.console(stderr=True)
     live = _Display(err, len(robot.joint_names), robot) if (err.is_terminal and not json_out) else None
 
@@ -137,6 +144,7 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
         return typer.confirm(message, default=False, err=True)
 
     if not sim:
+        assert port is not None  # one of --port, --sim, --output (checked by the command; --output does not stream)
         for pid, name in port_holders(port):
             common.warn(f"{port} is also open in process {pid} ({name}); it may swallow the arm's replies "
                         "(stop it, e.g. 'sudo systemctl stop ModemManager')")
@@ -182,7 +190,7 @@ def _run(traj, traj_path: Path, robot, cfg, port, sim: bool, yes: bool, log_path
 class _Display:
     """The live view on stderr: progress, time, lateness, tracking error, commanded vs measured joints."""
 
-    def __init__(self, console, dof: int, robot=None) -> None:
+    def __init__(self, console: "Console", dof: int, robot: "Robot | None" = None) -> None:
         self.console = console
         self.dof = dof
         self.robot = robot
@@ -199,7 +207,7 @@ class _Display:
         if self.live is not None:
             self.live.stop()
 
-    def update(self, st) -> None:
+    def update(self, st: "Status") -> None:
         self._n += 1
         if self.live is None or (self._n % 8 and st.k != st.n - 1):
             return  # about 6 redraws/s at 50 Hz: drawing costs time the schedule needs
@@ -363,7 +371,7 @@ def _joint_values(option: str, items: list[str]) -> dict[str, float]:
     return out
 
 
-def _bogus(text: str):
+def _bogus(text: str) -> "Bogus":
     from roarmctl.device.simulator import Bogus
 
     m = re.fullmatch(r"([A-Za-z]+)=([^@]+)(?:@(\d+)(?:x(\d+))?)?", text)

@@ -10,7 +10,12 @@ from typing import TYPE_CHECKING, Any, overload
 import typer
 
 if TYPE_CHECKING:  # numpy itself is imported where a command runs (start-up time)
+    from collections.abc import Iterable
+
     import numpy as np
+    import numpy.typing as npt
+
+    from roarmctl.robot.model import Robot
 
 from roarmctl.cli import common
 from roarmctl.errors import InputError, RoarmError, UnreachableError
@@ -31,7 +36,7 @@ def register(app: typer.Typer) -> None:
     app.add_typer(kin_app, name="kin")
 
 
-def _angles_out(values, deg: bool):
+def _angles_out(values: "npt.ArrayLike", deg: bool) -> "np.ndarray":
     """Angles that are not joint values (pitch, roll, rpy): degrees when ``deg``."""
     import numpy as np
 
@@ -39,7 +44,7 @@ def _angles_out(values, deg: bool):
     return np.degrees(arr) if deg else arr
 
 
-def _looks_like_degrees(what: str, values, deg: bool) -> None:
+def _looks_like_degrees(what: str, values: "Iterable[float | None]", deg: bool) -> None:
     """Warn when angles given without --deg are larger than a turn (2 pi rad): probably degrees."""
     big = [v for v in values if v is not None and abs(float(v)) > 2 * math.pi]
     if big and not deg:
@@ -47,7 +52,7 @@ def _looks_like_degrees(what: str, values, deg: bool) -> None:
                     f"radians; pass --deg if they are degrees")
 
 
-def _joint_input(r, values: list[str], deg: bool, what: str = "joint value") -> "np.ndarray":
+def _joint_input(r: "Robot", values: list[str], deg: bool, what: str = "joint value") -> "np.ndarray":
     """The full configuration (rad, m) from joint values on the command line (arm joints, the gripper may
     follow; degrees for revolute joints with --deg, prismatic ones always in metres). Warns when values
     without --deg look like degrees, and when a value is outside its joint's limits."""
@@ -60,7 +65,7 @@ def _joint_input(r, values: list[str], deg: bool, what: str = "joint value") -> 
     return q
 
 
-def _outside_limits(r, q: "np.ndarray", deg: bool, cols: list[int]) -> None:
+def _outside_limits(r: "Robot", q: "np.ndarray", deg: bool, cols: list[int]) -> None:
     """Warn for every given joint value outside its joint's limits, in the units it was given in."""
     out = [c for c in cols if not (r.lower[c] - 1e-9 <= q[c] <= r.upper[c] + 1e-9)]
     if not out:
@@ -71,12 +76,12 @@ def _outside_limits(r, q: "np.ndarray", deg: bool, cols: list[int]) -> None:
         f"{r.joint_names[c]} = {shown[c]:.4g} {r.joint_unit(c, deg=deg)} (limits [{lo[c]:.4g}, {hi[c]:.4g}])" for c in out))
 
 
-def _units(r, deg: bool, power: int = 0) -> list[str]:
+def _units(r: "Robot", deg: bool, power: int = 0) -> list[str]:
     """Per actuated joint, the unit its values are shown in."""
     return [r.joint_unit(i, power, deg) for i in range(r.dof)]
 
 
-def _unit_caption(r, deg: bool) -> str:
+def _unit_caption(r: "Robot", deg: bool) -> str:
     """'q1 = base, ...' plus which columns are in metres (prismatic joints), when any."""
     metres = [f"q{i + 1}" for i in range(r.dof) if r.prismatic[i]]
     return _joint_caption(r) + (f"; {', '.join(metres)} in m (prismatic)" if metres else "")
@@ -113,11 +118,11 @@ def _num(v: float, digits: int) -> str:
     return "0" if float(text) == 0 else text  # no "-0.0000"
 
 
-def _joint_caption(r) -> str:
+def _joint_caption(r: "Robot") -> str:
     return ", ".join(f"q{i + 1} = {name}" for i, name in enumerate(r.joint_names))
 
 
-def _fmt(a, digits: int = 6) -> str:
+def _fmt(a: "npt.ArrayLike", digits: int = 6) -> str:
     import numpy as np
 
     return np.array2string(np.asarray(a, dtype=float), precision=digits, suppress_small=True, max_line_width=120)
@@ -147,7 +152,7 @@ def fk(
         raise InputError(f"--link: '{link}' is not a link of {r.name}", f"links: {', '.join(r.link_names)}")
     t = r.kin.fk(qv, link)
     rpy = rpy_from_matrix(t[:3, :3])
-    out = {"robot": r.name, "link": link or r.tcp_link, "q": r.to_user(qv, deg), "q_units": _units(r, deg),
+    out: dict[str, Any] = {"robot": r.name, "link": link or r.tcp_link, "q": r.to_user(qv, deg), "q_units": _units(r, deg),
            "position": t[:3, 3], "rotation": t[:3, :3], "rpy": _angles_out(rpy, deg)}
     if frame != "world":
         point = t[:3, 3] if link is not None else device_point(r, fr, qv)
@@ -405,7 +410,7 @@ def dynamics(
                    [(f"row q{i + 1}", mm[i]) for i in range(r.dof)], digits=5)
 
 
-def _pad(r, v: "np.ndarray") -> "np.ndarray":
+def _pad(r: "Robot", v: "np.ndarray") -> "np.ndarray":
     import numpy as np
 
     out = np.zeros(r.dof)

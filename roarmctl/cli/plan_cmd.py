@@ -13,6 +13,7 @@ if TYPE_CHECKING:
     from collections.abc import Callable
 
     import numpy as np
+    from rich.table import Table
 
     from roarmctl.motion.pipeline import PlanResult
     from roarmctl.robot.model import Robot
@@ -51,7 +52,7 @@ def arm_reader(port: str | None, sim: bool, notes: list[str]) -> "Callable[[Robo
     if port is None and not sim:
         return None
 
-    def current(robot):
+    def current(robot: "Robot") -> "np.ndarray":
         from roarmctl.device.pose import read_configuration
 
         if sim:
@@ -130,11 +131,11 @@ def register(app: typer.Typer) -> None:
             common.console().print(_peaks_table(result.peaks))
 
 
-def _peaks_table(peaks: dict):
+def _peaks_table(peaks: dict) -> "Table":
     """Per joint: peak jerk and peak torque, each with its fraction of the robot's limit."""
     from rich.table import Table
 
-    def pct(f) -> str:
+    def pct(f: "float | None") -> str:
         return "-" if f is None else f"{100 * f:.0f} %"
 
     table = Table(title="Peaks per joint (fraction of the limit)")

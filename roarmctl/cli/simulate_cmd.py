@@ -2,6 +2,7 @@
 the arm and the objects did: tracking, torque, sag, unintended contacts, placements."""
 
 from pathlib import Path
+from typing import TYPE_CHECKING, TypeVar
 
 import typer
 
@@ -9,6 +10,11 @@ from roarmctl.cli import common
 from roarmctl.cli.execute_cmd import SAG_HELP, STRATEGY_HELP
 from roarmctl.errors import InfeasibleError, InputError
 from roarmctl.fileio import atomic_write_json, check_output_file
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+_W = TypeVar("_W")  # what the simulation work returns
 
 
 def register(app: typer.Typer) -> None:
@@ -102,7 +108,7 @@ def simulate(
         raise InfeasibleError("simulate: " + "; ".join(parts), hint)
 
 
-def _with_progress(work, total: float, quiet: bool):
+def _with_progress(work: "Callable[[Callable[[float, float], None] | None], _W]", total: float, quiet: bool) -> "_W":
     """Run ``work(progress)`` with a rich progress bar on stderr (a terminal only, not with --json)."""
     err = common.console(stderr=True)
     if quiet or not err.is_terminal:

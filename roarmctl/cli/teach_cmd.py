@@ -23,9 +23,14 @@ from roarmctl.errors import DeviceError, InputError, Interrupted, signal_name
 from roarmctl.fileio import atomic_write_json, check_output_file
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from rich.console import Console
     from rich.panel import Panel
 
-    from roarmctl.device.teach import Judge, TeachSession
+    from roarmctl.device.teach import Frame, Judge, TeachSession
+    from roarmctl.plan.schema import Plan
+    from roarmctl.robot.model import Robot
 
 KEYS_HELP = "Enter record a waypoint · g grasp/release here · u undo · s save · q quit"
 BAND_STYLE = {"clear": "bold green", "near": "bold yellow", "inside": "bold red"}
@@ -133,7 +138,8 @@ def teach(
                 _finish(session, output, raw, robot, judge, source, outcome, message, view)
 
 
-def _loop(session, keys, view, output: Path, robot, judge, source) -> tuple[str, str]:
+def _loop(session: "TeachSession", keys: "_Keys", view: "_View", output: Path, robot: "Robot", judge: "Judge",
+          source: "Plan | None") -> tuple[str, str]:
     """Feedback, keys and display until q; returns (outcome, message)."""
     from roarmctl.device.teach_plan import save_plan
 
@@ -163,14 +169,15 @@ def _loop(session, keys, view, output: Path, robot, judge, source) -> tuple[str,
         view.show(session, frame)
 
 
-def _safely(action, view) -> None:
+def _safely(action: "Callable[[], object]", view: "_View") -> None:
     try:
         action()
     except DeviceError as exc:  # no recent frame to record: said, teaching goes on
         view.line(f"[yellow]not recorded[/]: {exc.message}")
 
 
-def _finish(session, output: Path, raw: Path | None, robot, judge, source, outcome: str, message: str, view) -> None:
+def _finish(session: "TeachSession", output: Path, raw: Path | None, robot: "Robot", judge: "Judge",
+            source: "Plan | None", outcome: str, message: str, view: "_View") -> None:
     """Save the recording and the raw log (atomically), then say where they went."""
     from roarmctl.device.teach_plan import save_plan
 
@@ -239,7 +246,7 @@ class _View:
     """The live display (rich, on a terminal) or, when stderr is not one, the events and a status line
     five times a second (for logs and tests)."""
 
-    def __init__(self, console, robot, judge) -> None:
+    def __init__(self, console: "Console", robot: "Robot", judge: "Judge") -> None:
         self.console = console
         self.robot = robot
         self.judge = judge
@@ -265,14 +272,14 @@ class _View:
         """One line above the display."""
         self.console.print(text, highlight=False, soft_wrap=True)
 
-    def flush(self, session) -> None:
+    def flush(self, session: "TeachSession") -> None:
         """Events not yet printed (plain mode)."""
         if self.live is None:
             for t, text in session.events[self.shown:]:
                 self.line(f"[{t:7.2f} s] {text}")
             self.shown = len(session.events)
 
-    def show(self, session, frame) -> None:
+    def show(self, session: "TeachSession", frame: "Frame | None") -> None:
         """Redraw (about 10 times a second) and ring the bell on entering the warning band."""
         rang = any(t.startswith("warning") for _, t in session.events[self.shown:])
         if rang:
@@ -292,7 +299,7 @@ class _View:
             self.line(f"[{f.t:7.2f} s] q {q} | sigma {m.sigma:.4f} {m.band} | {f.rate:.0f} Hz")
 
 
-def _joint_labels(session) -> list[str]:
+def _joint_labels(session: "TeachSession") -> list[str]:
     """Column names: the firmware's names of the joints (base, shoulder, ...), else the description's."""
     names = list(session.robot.joint_names)
     for w, i in zip(session.wm.fields, session.wm.index):
