@@ -94,7 +94,7 @@ class IKResult:
 
     @property
     def best(self) -> npt.NDArray[np.float64]:
-        """The first valid solution (raises ``UnreachableError`` when there is none)."""
+        """The first valid solution (dof,) rad/m (raises ``UnreachableError`` when there is none)."""
         if not self.solutions:
             raise UnreachableError("IK: no valid solution" + (f" ({self.rejected[0]})" if self.rejected else ""),
                                    "collision" if self.rejected else "out_of_reach", "move the target or change the orientation asked for")
@@ -215,8 +215,8 @@ class Planner:
 
     def ik(self, pose: Pose, q_ref: npt.ArrayLike | None = None, *, touching: str | None = None) -> IKResult:
         """Every IK solution for ``pose`` that ``is_valid`` (with ``touching``), nearest to ``q_ref`` (dof or arm
-        joints; its gripper value is kept) first. Raises ``UnreachableError`` when the pose has no solution at
-        all (out of reach, only outside the limits, orientation not reachable)."""
+        joints, rad/m; its gripper value is kept) first. Raises ``UnreachableError`` when the pose has no solution
+        at all (out of reach, only outside the limits, orientation not reachable)."""
         if not isinstance(pose, Pose):
             raise InputError(f"ik: expected a Pose, got {type(pose).__name__}", "e.g. Pose((0.25, 0, 0.1), pitch=math.pi / 2)")
         ref = None if q_ref is None else self._full(q_ref, "ik: q_ref")
@@ -251,9 +251,9 @@ class Planner:
         return JointPath(wps, int(getattr(ctx.checker, "check_count", 0)) - before)
 
     def plan_to_pose(self, q_from: npt.ArrayLike, pose: Pose, *, touching: str | None = None) -> JointPath:
-        """A collision-free joint path from ``q_from`` to a configuration that puts the TCP at ``pose``: the IK's
-        valid solutions are tried nearest first. Raises ``UnreachableError`` when no valid solution exists and
-        ``PlanningError`` when no solution can be reached."""
+        """A collision-free joint path from ``q_from`` (dof or arm joints, rad/m) to a configuration that puts the
+        TCP at ``pose``: the IK's valid solutions are tried nearest first. Raises ``UnreachableError`` when no valid
+        solution exists and ``PlanningError`` when no solution can be reached."""
         qf = self._full(q_from, "plan_to_pose: q_from")
         found = self.ik(pose, q_ref=qf, touching=touching)
         if not found.ok:

@@ -65,12 +65,13 @@ class Scene:
 
     def add_cylinder(self, name: str, radius: float, length: float, xyz: Iterable[float] = (0.0, 0.0, 0.0),
                      rpy: Iterable[float] = (0.0, 0.0, 0.0), *, role: Role = "obstacle") -> SceneItem:
-        """A cylinder of ``radius`` and ``length`` (m) along its local z, centred at ``xyz``, turned by ``rpy``."""
+        """A cylinder of ``radius`` and ``length`` (m) along its local z, centred at ``xyz`` (3,) m, turned by URDF
+        ``rpy`` (3,) rad."""
         return self.add(SceneItem.cylinder(name, radius, length, xyz, rpy, role=role))
 
     def add_sphere(self, name: str, radius: float, xyz: Iterable[float] = (0.0, 0.0, 0.0), *,
                    role: Role = "obstacle") -> SceneItem:
-        """A sphere of ``radius`` (m) centred at ``xyz``."""
+        """A sphere of ``radius`` (m) centred at ``xyz`` (3,) m."""
         return self.add(SceneItem.sphere(name, radius, xyz, role=role))
 
     def add_mesh(self, name: str, mesh: str | Path | npt.ArrayLike, xyz: Iterable[float] = (0.0, 0.0, 0.0),
@@ -129,8 +130,8 @@ class Scene:
         self.version += 1
 
     def detach(self, name: str, q: npt.ArrayLike) -> SceneItem:
-        """Put carried item ``name`` down where the TCP has carried it at configuration ``q``; returns it (its
-        new pose in ``.pose``)."""
+        """Put carried item ``name`` down where the TCP has carried it at configuration ``q`` (rad/m, dof or arm
+        joints); returns it (its new pose in ``.pose``, (4, 4))."""
         if name not in self._carried:
             raise InputError(f"scene: '{name}' is not carried (carried: {', '.join(self._carried) or 'none'})")
         item, rel = self._carried.pop(name)
@@ -166,7 +167,7 @@ class Scene:
 
     def world(self, q: npt.ArrayLike | None = None) -> _WorldScene:
         """The items as a ``roarmctl.motion.scene.Scene`` (what the checker and the trajectory file take); with
-        ``q``, the carried items too, where the TCP holds them at ``q``."""
+        ``q`` (rad/m, dof or arm joints), the carried items too, where the TCP holds them at ``q``."""
         items = [replace(i, pose=i.pose.copy()) for i in self._items.values()]
         if q is not None and self._carried:
             tcp = self._tcp(q)
