@@ -294,10 +294,11 @@ def parse_feedback_report(line: bytes | str | dict[str, Any]) -> Feedback | None
                 joints[f] = v
     else:
         problems.append("a T:1051 line without the joint keys b s e t r g")
-    xyz = tuple(number(obj.get(k)) or 0.0 for k in ("x", "y", "z"))
+    x, y, z = (number(obj.get(k)) or 0.0 for k in ("x", "y", "z"))
+    xyz = (x, y, z)
     used = set(M2_FEEDBACK_KEYS if fw == "m2" else M3_FEEDBACK_KEYS)
     extra = {k: v for k, v in obj.items() if k not in used | {"T", "x", "y", "z"}}
-    return Feedback(raw=obj, joints=joints, xyz=xyz, firmware=fw, extra=extra, problems=problems)  # type: ignore[arg-type]
+    return Feedback(raw=obj, joints=joints, xyz=xyz, firmware=fw, extra=extra, problems=problems)
 
 
 def parse_feedback(line: bytes | str | dict[str, Any]) -> Feedback | None:

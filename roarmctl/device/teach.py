@@ -237,8 +237,11 @@ class TeachSession:
         for name, f in (getattr(self.robot, "frames", {}) or {}).items():
             fr[name] = (to_frame(f, device_point(self.robot, f, q)), f.unit)
         raw = reading.feedback.raw
-        fw = tuple(float(protocol.number(raw.get(k)) or 0.0) for k in "xyz") if all(k in raw for k in "xyz") else None
-        self.frame = Frame(self.elapsed(), q, self.robot.kin.fk(q)[:3, 3].copy(), fr, fw,  # type: ignore[arg-type]
+        fw: tuple[float, float, float] | None = None
+        if all(k in raw for k in "xyz"):
+            x, y, z = (float(protocol.number(raw.get(k)) or 0.0) for k in "xyz")
+            fw = (x, y, z)
+        self.frame = Frame(self.elapsed(), q, self.robot.kin.fk(q)[:3, 3].copy(), fr, fw,
                            m, float(len(self._accepted)))
         near = m.band != "clear"
         if near and not self.warned and self.torque_off:

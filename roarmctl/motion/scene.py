@@ -15,6 +15,7 @@ spans [i r, (i + 1) r) along x in the item frame, and so on) and ``"source"``.
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -66,8 +67,7 @@ class SceneItem:
         self.radius, self.length = float(self.radius), float(self.length)
         if self.shape in ("mesh", "cloud"):
             data = self.mesh if self.shape == "mesh" else self.cloud
-            if data is None or (self.shape == "mesh" and not self.mesh.pieces) or (  # type: ignore[union-attr]
-                    self.shape == "cloud" and len(self.cloud.cells) == 0):  # type: ignore[union-attr]
+            if data is None or len(data.pieces if isinstance(data, MeshData) else data.cells) == 0:
                 raise InputError(f"scene item '{self.name}': a {self.shape} item needs its "
                                  f"{'triangles' if self.shape == 'mesh' else 'occupied cells'}")
             if self.role == "object":
@@ -213,8 +213,7 @@ class Scene:
     items: list[SceneItem] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        seen: set[str] = set()
-        dup = sorted({i.name for i in self.items if i.name in seen or seen.add(i.name)})  # type: ignore[func-returns-value]
+        dup = sorted(name for name, n in Counter(i.name for i in self.items).items() if n > 1)
         if dup:
             raise InputError(f"scene: duplicate item name(s) {', '.join(dup)}")
 
