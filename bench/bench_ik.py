@@ -122,7 +122,7 @@ def main() -> None:
         for path in args.plan:
             tot, ik = [], []
             for _ in range(args.repeats):
-                for robot in loader._CACHE.values():  # loaded once per process: drop the kept DLS outcomes
+                for robot, _ in loader._CACHE.values():  # loaded once per process: drop the kept DLS outcomes
                     robot.derived.pop("dls_memo", None)
                 t = time.perf_counter()
                 res = rc.plan(path)

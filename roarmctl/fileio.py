@@ -163,6 +163,51 @@ def _reason(exc: BaseException) -> str:
     return getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
 
 
+class FilesRead:
+    """The files ``read_bytes`` read while this is open (a ``with`` block; blocks may nest, each sees every read):
+    ``stamps`` maps each file's absolute path, as named (symlinks not followed, so a retargeted link counts
+    as a change), to its stamp when it was read. ``unchanged()`` says whether every one is still the same
+    file with the same content stamp: what a result built from those files may be kept under."""
+
+    def __init__(self) -> None:
+        self.stamps: dict[str, tuple[int, ...]] = {}
+
+    def __enter__(self) -> FilesRead:
+        _RECORDING.append(self)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        _RECORDING.remove(self)
+
+    def unchanged(self) -> bool:
+        """True when every file read still has the stamp it had (one ``os.stat`` each); False when one was
+        edited, replaced, touched or removed."""
+        for name, stamp in self.stamps.items():
+            try:
+                if _stamp(os.stat(name)) != stamp:
+                    return False
+            except (OSError, ValueError):
+                return False
+        return True
+
+
+_RECORDING: list[FilesRead] = []  # the open FilesRead blocks (other threads' reads are recorded too: only extra stats)
+
+
+def _stamp(st: os.stat_result) -> tuple[int, ...]:
+    # ctime too: a copy that keeps the old mtime and size (cp -p, rsync -t, tar) still changes it
+    return (st.st_mtime_ns, st.st_ctime_ns, st.st_size, st.st_ino, st.st_dev)
+
+
+def note_read(path: str | os.PathLike, st: os.stat_result) -> None:
+    """Record that the file ``path`` (as named) was read with status ``st`` in every open ``FilesRead``: for a
+    reader that serves a file from its own store without ``read_bytes`` (it must still stat the file)."""
+    if _RECORDING:
+        name = os.path.abspath(path)
+        for files in _RECORDING:
+            files.stamps.setdefault(name, _stamp(st))
+
+
 def read_bytes(path: str | os.PathLike, what: str | None = None, limit: int = DEFAULT_LIMIT, *,
                roots: Roots | None = None, error: type[InputError] = InputError, hint: str | None = None) -> bytes:
     """The bytes of the regular file ``path``, at most ``limit`` of them: the ONE way roarmctl reads an input.
@@ -196,6 +241,7 @@ def read_bytes(path: str | os.PathLike, what: str | None = None, limit: int = DE
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):  # swapped between stat and open
             fail(f"is {_file_kind(st.st_mode)}, not a regular file", "give the path of a file")
+        note_read(path, st)
         chunks, total = [], 0
         while True:
             chunk = os.read(fd, min(_CHUNK, limit + 1 - total))

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from roarmctl.errors import DescriptionError, InputError
-from roarmctl.fileio import read_text, resolved
+from roarmctl.fileio import FilesRead, read_text, resolved
 from roarmctl.kept import Kept
 from roarmctl.robot import validate as checks
 from roarmctl.robot import visuals, xacro_input
@@ -65,7 +65,9 @@ def bundled_robots() -> list[str]:
     return sorted(p.stem for p in bundled_dir().glob("*.yaml"))
 
 
-_CACHE: Kept[Robot] = Kept(64)  # loaded robots, by the spec, its file's stamp and the options
+# loaded robots, by the spec (and the current folder for a relative one) and the options, with the files each
+# load read: a hit is handed out only while every one of them is unchanged
+_CACHE: Kept[tuple[Robot, FilesRead]] = Kept(64)
 
 
 def load_robot(spec: str, trust_sidecar: bool = False, confine: bool = False) -> Robot:
@@ -78,14 +80,19 @@ def load_robot(spec: str, trust_sidecar: bool = False, confine: bool = False) ->
     ``confine``: a plan, trajectory or log named it: it reads only inside its own folder and the
     ``--package-path`` folders (``meshes.description_roots``), whatever its sidecar names.
     """
-    try:  # a file edited since it was loaded is loaded again
-        st = os.stat(spec)
-        stamp: tuple = (st.st_mtime_ns, st.st_size)
-    except (OSError, ValueError):
-        stamp = ()
-    key = (spec, stamp, trust_sidecar, confine, xacro_input.TRUST_ALL, tuple(sorted((k, str(v)) for k, v in PACKAGE_PATHS.items())))
-    if key in _CACHE:
-        return _CACHE[key]
+    here = "" if os.path.isabs(spec) else os.getcwd()
+    key = (spec, here, trust_sidecar, confine, xacro_input.TRUST_ALL, tuple(sorted((k, str(v)) for k, v in PACKAGE_PATHS.items())))
+    hit = _CACHE.get(key)
+    if hit is not None and hit[1].unchanged():  # the URDF, an include, the SRDF, a mesh edited: loaded again
+        return hit[0]
+    _CACHE.pop(key, None)
+    with FilesRead() as files:
+        robot = _load(spec, trust_sidecar, confine)
+    return _CACHE.keep(key, (robot, files))[0]
+
+
+def _load(spec: str, trust_sidecar: bool, confine: bool) -> Robot:
+    """``load_robot`` itself (not kept)."""
     path = bundled_dir() / f"{spec}.yaml"
     if "/" in spec or os.sep in spec or not _is_file(path):  # a bundled name is a plain name
         path = Path(spec).expanduser()
@@ -125,7 +132,7 @@ def load_robot(spec: str, trust_sidecar: bool = False, confine: bool = False) ->
     robot.spec = spec if path == bundled_dir() / f"{spec}.yaml" else str(path.resolve())
     robot.allowed_collisions |= adjacent_pairs(robot)
     checks.check_robot(robot, str(path))
-    return _CACHE.keep(key, robot)
+    return robot
 
 
 def _link_roles(robot: Robot, data: dict, where: str) -> Robot:

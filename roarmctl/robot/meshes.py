@@ -16,6 +16,7 @@ modification time and scale).
 from __future__ import annotations
 
 import io
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from roarmctl.errors import DescriptionError, InputError
-from roarmctl.fileio import Roots, read_bytes, resolved
+from roarmctl.fileio import Roots, note_read, read_bytes, resolved
 from roarmctl.kept import Kept
 
 #: NAME -> folder for ``package://NAME/...``, filled by the CLI's ``--package-path`` option.
@@ -228,17 +229,19 @@ def read_triangles(path: Path, scale: npt.ArrayLike, what: str, *, roots: Roots 
     if kind not in MESH_TYPES:
         raise error(f"{what}: '{path.name}': .{kind} is not a mesh type roarmctl reads",
                     f"use one of {', '.join('.' + t for t in MESH_TYPES)}")
+    given = path
     if roots is not None:  # before the lookup: a mesh read earlier under wider roots is not handed out here
         path = roots.check(path, what, error, hint)
     try:
-        st = path.stat()
-        stamp = (st.st_mtime_ns, st.st_size)
+        st: os.stat_result | None = path.stat()
     except (OSError, ValueError):
-        stamp = (0, -1)
+        st = None
     scale3 = tuple(float(s) for s in np.broadcast_to(np.asarray(scale, dtype=float), 3))
-    key = (str(path), stamp, scale3)
-    if key not in _LOADED:
-        data = read_bytes(path, what, limit, roots=roots, error=error, hint=hint)
+    key = (str(path), (st.st_mtime_ns, st.st_size) if st is not None else (0, -1), scale3)
+    if st is not None and key in _LOADED:
+        note_read(given, st)  # served from the store: still a file the caller's result depends on
+    else:
+        data = read_bytes(given, what, limit, roots=roots, error=error, hint=hint)
         try:
             loaded = trimesh.load_mesh(io.BytesIO(data), file_type=kind, process=False)
             if isinstance(loaded, trimesh.Scene):  # several meshes (COLLADA, OBJ groups): in the file's frame

@@ -1,0 +1,107 @@
+"""``load_robot`` keeps what it loaded, and hands it out again only while every file the load read is unchanged.
+
+A long-lived process (a notebook, a Python user of ``roarmctl.api``) that edits a description between two loads
+must get the edited robot: the URDF, a xacro include, the SRDF, a mesh, the sidecar. A copy of the published
+OpenManipulator-X (tests/data/arms) is edited in place; the values asserted are the ones written into the files.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from roarmctl.errors import DescriptionError
+from roarmctl.robot.loader import load_robot
+from roarmctl.robot.model import Robot
+
+ARM = Path(__file__).parent / "data" / "arms" / "open_manipulator_x"
+TOP_XACRO = "open_manipulator_description/urdf/open_manipulator_x/open_manipulator_x.urdf.xacro"
+ARM_XACRO = "open_manipulator_description/urdf/open_manipulator_x/open_manipulator_x_arm.urdf.xacro"  # an include
+SRDF = "open_manipulator_moveit_config/config/open_manipulator_x/open_manipulator_x.srdf"
+MESHES = "open_manipulator_description/meshes/open_manipulator_x"
+
+
+@pytest.fixture
+def arm(tmp_path: Path) -> Path:
+    """The sidecar of a private copy of the OpenManipulator-X description."""
+    shutil.copytree(ARM, tmp_path / "arm")
+    return tmp_path / "arm" / "robot.yaml"
+
+
+def _edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert text.count(old) == 1, f"{old!r} not once in {path}"
+    path.write_text(text.replace(old, new))
+
+
+def _upper(robot: Robot, joint: str) -> float:
+    return float(robot.upper[robot.joint_names.index(joint)])
+
+
+def test_unchanged_files_give_the_same_robot(arm: Path) -> None:
+    first = load_robot(str(arm))
+    assert load_robot(str(arm)) is first
+
+
+def test_an_included_xacro_file_edited_is_seen(arm: Path) -> None:
+    first = load_robot(str(arm))
+    assert _upper(first, "joint3") == pytest.approx(1.4)  # as published
+    _edit(arm.parent / ARM_XACRO, 'lower="${-1.5}" upper="${1.4}"', 'lower="${-1.5}" upper="${1.25}"')
+    second = load_robot(str(arm))
+    assert second is not first
+    assert _upper(second, "joint3") == pytest.approx(1.25)
+    assert load_robot(str(arm)) is second  # and kept again
+
+
+def test_the_top_xacro_file_edited_is_seen(arm: Path) -> None:
+    first = load_robot(str(arm))
+    _edit(arm.parent / TOP_XACRO, '<robot name="open_manipulator_x"', '<robot name="edited_arm"')
+    assert first.name != "edited_arm"
+    assert load_robot(str(arm)).name == "edited_arm"
+
+
+def test_the_srdf_edited_is_seen(arm: Path) -> None:
+    first = load_robot(str(arm))
+    assert first.named_poses["home"][2] == pytest.approx(0.7)
+    _edit(arm.parent / SRDF, '<joint name="joint3" value="0.7"/>', '<joint name="joint3" value="0.55"/>')
+    assert load_robot(str(arm)).named_poses["home"][2] == pytest.approx(0.55)
+
+
+def test_the_sidecar_edited_is_seen(arm: Path) -> None:
+    load_robot(str(arm))
+    _edit(arm, "tool: {xyz: [0.012, 0, 0]}", "tool: {xyz: [0.012, 0, 0]}\nname: renamed")
+    assert load_robot(str(arm)).name == "renamed"
+
+
+def test_a_mesh_replaced_is_seen(arm: Path) -> None:
+    def mesh_of(robot: Robot, link: str) -> np.ndarray:
+        shape = next(s for s in robot.collision if s.link == link and s.kind == "mesh")
+        assert shape.mesh is not None
+        return np.asarray(shape.mesh.vertices)
+
+    first = load_robot(str(arm))
+    assert mesh_of(first, "link3").shape != mesh_of(first, "link2").shape  # two different meshes as published
+    shutil.copyfile(arm.parent / MESHES / "link2.stl", arm.parent / MESHES / "link3.stl")
+    second = load_robot(str(arm))
+    # link3's collision shape is now made from link2's mesh (same scale, both convex): the same hull
+    np.testing.assert_array_equal(mesh_of(second, "link3"), mesh_of(second, "link2"))
+
+
+def test_a_file_removed_is_not_served_from_the_store(arm: Path) -> None:
+    load_robot(str(arm))
+    (arm.parent / ARM_XACRO).unlink()
+    with pytest.raises(DescriptionError, match=r"xacro include: file .* not found"):
+        load_robot(str(arm))
+
+
+def test_a_relative_name_is_read_in_the_current_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    for name in ("a", "b"):
+        shutil.copytree(ARM, tmp_path / name)
+    _edit(tmp_path / "b" / ARM_XACRO, 'lower="${-1.5}" upper="${1.4}"', 'lower="${-1.5}" upper="${1.25}"')
+    monkeypatch.chdir(tmp_path / "a")
+    assert _upper(load_robot("robot.yaml"), "joint3") == pytest.approx(1.4)
+    monkeypatch.chdir(tmp_path / "b")
+    assert _upper(load_robot("robot.yaml"), "joint3") == pytest.approx(1.25)
