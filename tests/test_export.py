@@ -191,8 +191,9 @@ def test_demo_execution_log_commanded_and_measured(demo, suffix):
     assert np.allclose(cmd[k][2].position[:5], [s["cmd"][f] for f in ("base", "shoulder", "elbow", "wrist", "roll")])
     assert cmd[k][2].position[5] == pytest.approx(math.pi - s["cmd"]["hand"])
     # same spacing in time as the log (shifted so that nothing is negative); a measured state is stamped when the
-    # servos were read: before its reply crossed the wire (115200 baud 8N1: 11520 B/s) and ~4 ms of firmware work
-    read = np.array([x["t"] - (len(x["line"]) + 2) / 11520 - 0.004 for x in fb])
+    # servos were read: the log's read_t where the stream judged the frame, else before its reply crossed the wire
+    # (115200 baud 8N1: 11520 B/s) and ~4 ms of firmware work
+    read = np.array([x.get("read_t", x["t"] - (len(x["line"]) + 2) / 11520 - 0.004) for x in fb])
     t0 = min(min(x["t"] for x in sent), read.min())
     t_mid, m = meas[len(fb) // 2][0], meas[len(fb) // 2][2]
     same_time = [x["feedback"] for x, t in zip(fb, read) if abs((t - t0) * 1e9 - t_mid) < 1e3]
@@ -263,18 +264,25 @@ def test_log_with_its_trajectory_adds_planned_states_and_scene(demo, capsys):
     log = json.loads(log_path.read_text())
     assert {"/joint_states/planned", "/joint_states/commanded", "/joint_states/measured", "/scene"} <= set(bag)
     planned = bag["/joint_states/planned"]
-    assert len(planned) == len(traj.times)
-    assert np.allclose([m[2].position for m in planned], traj.positions)
+    # the plan's samples, and where the plan waited for a late host (the log's ``paused``: [plan time the clock
+    # stopped at (s, at the run's speed; rounded to 1 us), for how long (s)]; none on a quiet machine) its set-point
+    # standing still: a sample at the pause's start (unless one of the plan's is there) and one at its end
+    stream_t = np.asarray(traj.times) / log["speed_scale"]
+    pauses = [(at, d) for at, d in log.get("paused", []) if 0 <= at <= stream_t[-1] and d > 0]
+    before = lambda t: sum(d for at, d in log.get("paused", []) if t > at + 1e-6)  # noqa: E731
+    own = stream_t + np.array([before(t) for t in stream_t])
+    starts = [at + before(at) for at, _ in pauses if np.abs(stream_t - at).min() > 1e-6]
+    ends = [at + before(at) + d for at, d in pauses]
+    expected = np.sort(np.concatenate([own, starts, ends]))
+    assert len(planned) == len(expected)
+    held = np.isin(np.round(expected, 9), np.round(np.concatenate([starts, ends]), 9))
+    assert np.allclose([m[2].position for m, h in zip(planned, held) if not h], traj.positions)
     # on the log's clock: the plan's time 0 is when tick 0 was sent (within its lateness)
     sent = [s for s in log["sent"] if s["cmd"].get("T") in (101, 102)]
     k0 = next(k for k, s in enumerate(sent) if s.get("tick") == 0)
     t_tick0 = bag["/joint_states/commanded"][k0][0] * 1e-9
     assert abs(planned[0][0] * 1e-9 - t_tick0) < 0.05
-    # spaced as the plan at the run's speed, plus every pause the plan's clock made for a late host before a sample
-    # (the log's ``paused``: [plan time the clock stopped at (s, at the run's speed), for how long (s)]; none on a
-    # quiet machine)
-    stream_t = np.asarray(traj.times) / log["speed_scale"]
-    expected = stream_t + np.array([sum(d for at, d in log.get("paused", []) if t > at) for t in stream_t])
+    # spaced as the plan at the run's speed, plus every pause the plan's clock made before a sample
     assert np.allclose(np.diff([m[0] for m in planned]) * 1e-9, np.diff(expected), atol=1e-6)
     assert run_cli(["export", str(traj_path), "-t", str(traj_path), "-o", str(d / "x.mcap")]) == 2
     assert "goes with an execution log" in capsys.readouterr().err

@@ -1,11 +1,17 @@
-"""Exporting an execution log whose feedback lines arrived together: each measured state is stamped when the
-servos were read (arrival minus the reply's wire time at 115200 baud 8N1 and the firmware's work), so a long
-line that arrived with a short one was read earlier, and the earliest state need not be the first in the log."""
+"""The times of an exported execution log. Each measured state is stamped when the servos were read: the log's
+``read_t`` where the stream judged the frame, else (a log without it) arrival minus the reply's wire time at 115200
+baud 8N1 and the firmware's work, so a long line that arrived with a short one was read earlier, and the earliest
+state need not be the first in the log. Every stream of one export is on the log's clock (the run's time), so the
+planned and the measured arm at one stamp give the streamer's own tracking error."""
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
+
+import numpy as np
+import pytest
 
 from roarmctl.cli import run as run_cli
 from roarmctl.device.protocol import feedback_read_time
@@ -44,3 +50,75 @@ def test_out_of_order_read_times_export_from_the_earliest(tmp_path: Path) -> Non
     t0 = min(reads)  # every time is shifted by the earliest sample, so nothing is negative
     assert sorted(times["/joint_states/measured"]) == sorted(round((r - t0) * 1e9) for r in reads)
     assert times["/joint_states/commanded"] == [round(-t0 * 1e9)]
+
+
+def test_a_run_exports_measured_states_at_read_t_and_the_logs_tracking_error(tmp_path: Path) -> None:
+    """A short run on the simulator (real time, its physics servos), exported as MCAP, bag folder and CSV with the
+    trajectory it ran: each measured stamp is the frame's read_t (plus the bag's stated offset), and the planned
+    set-point at a measured stamp is the one the streamer judged that frame against (its logged tracking error)."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    from roarmctl.motion.pipeline import plan_file
+    from roarmctl.robot.loader import load_robot
+
+    plan = tmp_path / "short.yaml"
+    plan.write_text("robot: roarm_m3_pro\nstart: home\ntasks:\n  - move: {xyz: [0.25, 0.10, 0.08]}\n"
+                    "  - move: {xyz: [0.20, -0.10, 0.15]}\n")
+    traj, log_path = tmp_path / "short.traj.json", tmp_path / "short.exec.json"
+    plan_file(plan, seed=None).trajectory.save(traj)
+    assert run_cli(["execute", str(traj), "--sim", "--yes", "--log", str(log_path)]) == 0
+    log = json.loads(log_path.read_text())
+    frames = [r for r in log["received"] if "feedback" in r and "tcp_world_m" in r]
+    judged = [r for r in frames if "read_t" in r]
+    assert len(judged) > 20 and log["tracking"]
+    # a frame the stream did not judge (before it started) has no read_t: its arrival less the line's wire time and
+    # the firmware's 4 ms
+    read = np.sort([r.get("read_t", r["t"] - (len(r["line"]) + 2) / 11520 - 0.004) for r in frames])
+    assert min(r["t"] - r["read_t"] for r in judged) > (len(judged[0]["line"]) + 2) / 11520  # never the arrival
+    robot = load_robot("roarm_m3_pro")
+    tracked = {round(e["t"], 6): e["error_m"] for e in log["tracking"]}  # its t: when the servos were read
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    for out in (tmp_path / "run.mcap", tmp_path / "run_bag"):
+        assert run_cli(["export", str(log_path), "-t", str(traj), "-o", str(out), "--json"]) == 0
+        topics: dict[str, list] = {}
+        with Reader(out) as reader:
+            for conn, t, raw in reader.messages():
+                if conn.topic.startswith("/joint_states/"):
+                    msg = ts.deserialize_cdr(raw, conn.msgtype)
+                    assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == t
+                    topics.setdefault(conn.topic, []).append((t * 1e-9, np.array(msg.position[:robot.dof])))
+        # the bag starts at its earliest sample: here the feedback read before the motion
+        offset = -min(0.0, read[0], min(s["t"] for s in log["sent"]))
+        measured = sorted(topics["/joint_states/measured"], key=lambda m: m[0])
+        assert np.abs(np.array([t for t, _ in measured]) - offset - read).max() < 2e-9  # s: the bag's 1 ns
+        planned_t = np.array([t for t, _ in topics["/joint_states/planned"]]) - offset
+        planned_q = np.array([q for _, q in topics["/joint_states/planned"]])
+        ours, theirs = [], []
+        for t, q in measured:
+            logged = tracked.get(round(t - offset, 6))
+            if logged is None:
+                continue
+            qp = np.array([np.interp(t - offset, planned_t, planned_q[:, j]) for j in range(robot.dof)])
+            ours.append(np.linalg.norm(robot.kin.fk(q)[:3, 3] - robot.kin.fk(qp)[:3, 3]))
+            theirs.append(logged)
+        assert len(ours) == len(tracked)  # every tracked frame found at its read_t
+        # mm: the streamer interpolates the plan (cubic Hermite), the export's planned samples are 10 ms apart
+        # (linear here), and the log rounds to 1 um; measured 0.008 mm at most
+        assert np.abs(np.array(ours) - np.array(theirs)).max() < 0.05e-3
+    assert run_cli(["export", str(log_path), "-t", str(traj), "-o", str(tmp_path / "run.csv")]) == 0
+    with open(tmp_path / "run.csv") as f:
+        rows = list(csv.DictReader(f))
+    csv_t = np.sort([float(r["time_s"]) for r in rows if r["source"] == "measured"])  # the log's own times
+    assert np.abs(csv_t - read).max() < 1e-6  # its 6 decimals
+
+
+def test_a_read_t_after_its_line_arrived_is_a_damaged_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    line, fb = feedback_line(0)
+    for bad, said in ((0.02, "read_t: 0.02 is too large (must be <= 0.01)"), ("soon", "read_t: expected a number")):
+        log = {"format": "roarmctl.execlog/1", "robot": "roarm_m3_pro", "sent": [],
+               "received": [{"t": 0.01, "read_t": bad, "line": line, "feedback": fb}]}
+        src = tmp_path / "bad.exec.json"
+        src.write_text(json.dumps(log))
+        assert run_cli(["export", str(src), "-o", str(tmp_path / "bad.csv")]) == 2
+        assert f"received[0].{said}" in capsys.readouterr().err

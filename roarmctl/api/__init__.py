@@ -211,7 +211,8 @@ def draw(traj: TrajectoryLike, output: PathLike, *, view: str = "iso", dpi: floa
 def export(source: TrajectoryLike, output: PathLike, *, trajectory: TrajectoryLike | None = None) -> dict[str, Any]:
     """Export a trajectory (or a trajectory / execution-log file) like ``roarmctl export``: ``.mcap``
     (ROS 2 messages for Foxglove), ``.csv``, or a name without extension (a ROS 2 bag folder).
-    Returns ``{"output", "format", "topics": {topic: count}}`` (CSV: ``"rows"``). For an execution
+    Returns ``{"output", "format", "topics": {topic: count}, "time_offset_s"}`` (s added to every time of the
+    source in the bag) (CSV: ``"rows"``; its times are the source's). For an execution
     log, ``trajectory`` (the one it ran) adds its planned joint states and the scene."""
     format_for(output)  # refuse an unknown extension before any work
     return _export(source, output, trajectory=trajectory)

@@ -347,3 +347,20 @@ def feedback_read_time(t_received: float, line: str | bytes) -> float:
     clock): the reply's wire time (the line and its ``\r\n``) and ``READ_BEFORE_PRINT`` earlier. (The streamer
     narrows this further with the time it asked, which a log does not keep.)"""
     return t_received - wire_seconds(len(line) + 2) - READ_BEFORE_PRINT
+
+
+def frame_read_time(entry: dict[str, Any]) -> float:
+    """When the firmware read the servos for one ``received`` entry of an execution log (s on the log's clock: the
+    stream's time since its start, pauses included): the ``read_t`` the streamer logged for a frame it judged (an
+    answer to a T:105 dated at most a round trip after the question: a busy host reads lines late, the firmware did
+    not read the servos later), else, for a frame it did not judge or a log written before ``read_t``, arrival less
+    the reply's wire time and the firmware's work (``feedback_read_time``), else the arrival ``t``.
+
+    The one measured-frame time: the browser view (on the plan's time, ``schedule.plan_clock`` of it) and every
+    export (bag, MCAP, CSV: on the log's clock) stamp a measured frame with it."""
+    read_t, line = entry.get("read_t"), entry.get("line")
+    if isinstance(read_t, (int, float)) and not isinstance(read_t, bool):
+        return float(read_t)
+    if isinstance(line, str):
+        return feedback_read_time(float(entry["t"]), line)
+    return float(entry["t"])

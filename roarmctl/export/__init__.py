@@ -94,7 +94,8 @@ def log_robot(log: dict[str, Any], where: str, traj: Any = None, traj_where: str
 def export(source: str | os.PathLike | Any, path: str | os.PathLike, fmt: str | None = None,
            trajectory: str | os.PathLike | Any | None = None, force: bool = False) -> dict[str, Any]:
     """Export the trajectory or execution log at ``source`` (or a ``Trajectory``) to ``path``; returns a summary
-    (``output``, ``format``, ``topics``: message count per topic, or ``rows`` for CSV). For a log,
+    (``output``, ``format``, ``topics``: message count per topic and ``time_offset_s``: s added to every time of
+    the source in the bag, or ``rows`` for CSV, whose times are the source's). For a log,
     ``trajectory`` adds the executed plan (``planned`` joint states and the scene). An existing bag
     folder that roarmctl did not write is replaced only with ``force``."""
     fmt = fmt or format_for(path)
@@ -117,7 +118,7 @@ def write(streams: Streams, path: str | os.PathLike, fmt: str, force: bool = Fal
         text = csv_text(streams)
         out = atomic_write_text(path, text)
         return {"output": str(out), "format": fmt, "rows": text.count("\n") - 1}
-    from roarmctl.export.ros import write_bag
+    from roarmctl.export.ros import time_offset, write_bag
 
     out, counts = write_bag(streams, path, "mcap" if fmt == "mcap" else "sqlite3", force)
-    return {"output": str(out), "format": fmt, "topics": counts}
+    return {"output": str(out), "format": fmt, "topics": counts, "time_offset_s": time_offset(streams)}

@@ -22,7 +22,11 @@ prismatic joint), then each mimic joint (its leader's value x multiplier + offse
 still (its held value), so a URDF viewer places every link.
 
 Message times: the log time and ``header.stamp`` are the sample time in s from the start of the
-trajectory (an execution log: from its first entry, so nothing is negative).
+trajectory. An execution log's streams are all on its clock, the run's own time (s after the stream's start,
+pauses included): a command when it was sent, a measured state when the firmware read the servos
+(``device.protocol.frame_read_time``, the log's ``read_t``), a planned sample when the plan, paused for a late host,
+reached it; the bag starts at the earliest of them (``time_offset``: added to every log time, so nothing is
+negative).
 """
 
 from __future__ import annotations
@@ -148,13 +152,19 @@ class _Messages:
                  mesh_file=self.MeshFile(filename="", data=np.zeros(0, dtype=np.uint8)), mesh_use_embedded_materials=False)
 
 
+def time_offset(streams: Streams) -> float:
+    """s added to every time of ``streams`` in a bag: minus the earliest sample of any stream when that is before 0
+    (a log's feedback before the motion), else 0. The earliest of all, not each stream's first: a log's measured
+    states are stamped when the servos were read, so lines that arrived together can be out of order."""
+    return -min(0.0, *(float(np.min(s.times)) for s in streams.joint_states.values() if len(s.times)))
+
+
 def messages(streams: Streams) -> Iterator[tuple[str, str, int, Any]]:
-    """Every message of the export as ``(topic, msgtype, log time ns, message)``, topic by topic."""
+    """Every message of the export as ``(topic, msgtype, log time ns, message)``, topic by topic; times are the
+    streams' plus ``time_offset(streams)``."""
     mk = _Messages()
     robot, names = streams.robot, streams.joint_names
-    # the earliest sample of any stream, not each stream's first: a log's measured states are stamped when the
-    # servos were read (arrival minus the reply's wire time), so lines that arrived together can be out of order
-    offset = -min(0.0, *(float(np.min(s.times)) for s in streams.joint_states.values() if len(s.times)))
+    offset = time_offset(streams)
     ns_of = lambda t: int(round((float(t) + offset) * 1e9))  # noqa: E731
     root = robot.root
 

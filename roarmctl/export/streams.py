@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roarmctl.device.protocol import M3_FIELDS, WireMap, feedback_read_time, parse_feedback
-from roarmctl.device.schedule import run_clock
+from roarmctl.device.protocol import M3_FIELDS, WireMap, frame_read_time, parse_feedback
+from roarmctl.device.schedule import run_clock, sample
 from roarmctl.errors import InputError, TrajectoryFileError
 from roarmctl.motion.trajectory import carried_item
 from roarmctl.robot.model import transform
@@ -121,16 +121,18 @@ def trajectory_streams(traj: Trajectory, robot: Robot) -> Streams:
     return Streams(robot, list(traj.joint_names), {"": states}, "", traj, item_tracks(traj, robot))
 
 
-def log_streams(log: dict[str, Any], robot: Robot, traj: Trajectory | None = None, read_times: bool = False) -> Streams:
+def log_streams(log: dict[str, Any], robot: Robot, traj: Trajectory | None = None) -> Streams:
     """See ``_log_streams``; a malformed entry is an input error (exit 2), not a crash.
 
-    ``traj``: the trajectory that was executed. Its samples are added as the ``planned`` joint
-    states and its scene as markers, on the log's clock: plan time / the run's ``speed_scale``
-    (the log's time 0 is the first scheduled command, which targets the plan's time 0), later by each
-    pause of the plan for a late host before it (the log's ``paused``).
+    Every stream is on the log's clock: s after the stream's start (the first scheduled command), the run's own
+    time, pauses included. ``traj``: the trajectory that was executed. Its samples are added as the ``planned``
+    joint states and its scene as markers, on that clock: plan time / the run's ``speed_scale`` (the log's time 0
+    is the first scheduled command, which targets the plan's time 0), later by each pause of the plan for a late
+    host before it (the log's ``paused``); through a pause the planned set-point stands still (a sample at each
+    end of it), so the planned and the measured arm at one stamp are the plan and the arm at one instant.
     """
     try:
-        streams = _log_streams(log, robot, read_times)
+        streams = _log_streams(log, robot)
         scale = float(log.get("speed_scale", 1.0) or 1.0)
         paused = _pauses(log)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
@@ -142,14 +144,43 @@ def log_streams(log: dict[str, Any], robot: Robot, traj: Trajectory | None = Non
                              "give the trajectory this log executed")
         if not 0 < scale <= 1:
             raise TrajectoryFileError(f"execution log: speed_scale {scale!r} is not in (0, 1]")
-        t = np.asarray(traj.times, dtype=float) / scale
-        pos, vel = np.asarray(traj.positions, dtype=float), np.asarray(traj.velocities, dtype=float) * scale
-        streams.joint_states["planned"] = JointStates(run_clock(t, paused), pos, vel)  # the plan's samples, on the run's clock
+        streams.joint_states["planned"] = planned_states(traj, scale, paused)
         streams.trajectory = None  # no /joint_trajectory: the log's topics are about the run
-        on_run = lambda x: run_clock(np.asarray(x, dtype=float) / scale, paused)  # noqa: E731
+        on_run = lambda x: _run_clock(np.asarray(x, dtype=float) / scale, paused)  # noqa: E731
         streams.items = [ItemTrack(tr.item, on_run(tr.times), tr.poses, [(float(on_run(a)), float(on_run(b))) for a, b in tr.held])
                          for tr in item_tracks(traj, robot)]
     return streams
+
+
+def planned_states(traj: Trajectory, scale: float, paused: list[tuple[float, float]]) -> JointStates:
+    """The plan's samples on the run's clock (s after the stream's start): plan time / ``scale``, later by each pause
+    before it (``schedule.run_clock``), and the set-point held through each pause (``paused``: [(run-speed plan time
+    s at which the plan's clock stopped, for how long s)]): a sample at each end of it, at the plan's pose there
+    (``schedule.sample``) with velocity 0. Positions (N, dof) rad, velocities (N, dof) rad/s."""
+    t = np.asarray(traj.times, dtype=float) / scale
+    pos, vel = np.asarray(traj.positions, dtype=float), np.asarray(traj.velocities, dtype=float) * scale
+    run_t = _run_clock(t, paused)
+    at = np.array([a for a, d in paused if 0.0 <= a <= t[-1] and d > 0], dtype=float)
+    if not len(at):
+        return JointStates(run_t, pos, vel)
+    d = np.array([d for a, d in paused if 0.0 <= a <= t[-1] and d > 0], dtype=float)
+    start = _run_clock(at, paused)  # a pause's own point: when it started
+    q = sample(traj, at * scale).reshape(len(at), -1)
+    # the set-point where the pause starts: a plan sample already there (a tick on the plan's 10 ms grid) keeps its
+    # own velocity, the clock stopping after it; otherwise one is added
+    new = np.min(np.abs(t[:, None] - at[None, :]), axis=0) > 1e-6
+    times = np.concatenate([run_t, start[new], start + d])
+    order = np.argsort(times, kind="stable")
+    zeros = np.zeros_like(q)
+    return JointStates(times[order], np.concatenate([pos, q[new], q])[order],
+                       np.concatenate([vel, zeros[new], zeros])[order])
+
+
+def _run_clock(t: np.ndarray, paused: list[tuple[float, float]]) -> np.ndarray:
+    """``schedule.run_clock`` of run-speed plan times ``t`` (s), a time within 1 us of a pause's start counted at it:
+    the log rounds the pause's time to 1 us, and a plan sample there (a tick on the plan's grid) is the set-point
+    the plan stopped at, not one after the pause."""
+    return np.asarray(run_clock(t, [(a + 1e-6, d) for a, d in paused]), dtype=float)
 
 
 def _pauses(log: dict[str, Any]) -> list[tuple[float, float]]:
@@ -163,13 +194,12 @@ def _pauses(log: dict[str, Any]) -> list[tuple[float, float]]:
     return out
 
 
-def _log_streams(log: dict[str, Any], robot: Robot, read_times: bool = False) -> Streams:
+def _log_streams(log: dict[str, Any], robot: Robot) -> Streams:
     """An execution log (``roarmctl.execlog/1``): commanded joints (every T:102 / T:101 sent) and
     measured joints (every T:1051 feedback received), converted from wire values with the robot's
-    wire map. Times are s after the log's start of motion (negative before it); a measured state's time is
-    when the firmware read the servos (``device.protocol.feedback_read_time``), not when its line arrived;
-    with ``read_times``, the log's ``read_t`` where the stream judged it (an answer to a T:105 is dated at most a
-    round trip after the question: a busy host reads lines late, the firmware did not read the servos later)."""
+    wire map. Times are s after the log's start of motion (negative before it); a commanded state's time is when
+    its line was sent, a measured state's when the firmware read the servos (``device.protocol.frame_read_time``:
+    the log's ``read_t``), not when its line arrived."""
     wm = WireMap(robot)
     cmd_t, cmd_q = [], []
     wire: dict[str, float] | None = None
@@ -190,11 +220,7 @@ def _log_streams(log: dict[str, Any], robot: Robot, read_times: bool = False) ->
         fb = parse_feedback(entry["feedback"]) if isinstance(entry, dict) and isinstance(entry.get("feedback"), dict) else None
         if fb is None or not fb.joints:
             continue
-        line, read_t = entry.get("line"), entry.get("read_t")
-        if read_times and isinstance(read_t, (int, float)) and not isinstance(read_t, bool):
-            meas_t.append(float(read_t))  # when the stream judged the servos were read (a late host reads lines late)
-        else:
-            meas_t.append(feedback_read_time(float(entry["t"]), line) if isinstance(line, str) else float(entry["t"]))
+        meas_t.append(frame_read_time(entry))
         meas_q.append(wm.from_wire(fb.joints))
     if not cmd_t and not meas_t:
         raise InputError("the execution log holds no joint commands and no feedback", "export a log of a run that moved the arm")

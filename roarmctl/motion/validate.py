@@ -332,8 +332,8 @@ MAX_LOG_TIME = 2 * MAX_DURATION + 600.0  # s, |t| of any entry: the slowest run 
 def parse_log(data: Any, where: str = "execution log") -> dict:
     """An execution log (``roarmctl.execlog/1``, written by ``roarmctl execute``) checked in the fields
     an export reads: ``robot``, ``speed_scale`` in (0, 1], ``sent`` and ``received`` lists of entries
-    whose ``t`` (s) are finite, within +-``MAX_LOG_TIME`` and never decreasing, commands and feedback
-    as objects of finite numbers. Returns ``data``; raises ``TrajectoryFileError`` naming the field."""
+    whose ``t`` (s) are finite, within +-``MAX_LOG_TIME`` and never decreasing (a received entry's ``read_t``, when
+    there, finite and not after its ``t``), commands and feedback as objects of finite numbers. Returns ``data``; raises ``TrajectoryFileError`` naming the field."""
     CHECK.mapping(data, where, "log")
     if data.get("format") != LOG_FORMAT:
         CHECK.fail(where, "format", f"expected '{LOG_FORMAT}', got {CHECK.kind(data.get('format'))}")
@@ -353,6 +353,8 @@ def parse_log(data: Any, where: str = "execution log") -> dict:
             if t < last:
                 CHECK.fail(where, f"{f}.t", f"{t:g} s is before the entry before it ({last:g} s)", "entries are in time order")
             last = t
+            if key == "received" and e.get("read_t") is not None:  # when the servos were read: before the line arrived
+                CHECK.number(e["read_t"], where, f"{f}.read_t", lo=-MAX_LOG_TIME, hi=t)
             body = e.get(inner)
             if body is None and key == "received":
                 continue

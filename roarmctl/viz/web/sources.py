@@ -114,7 +114,7 @@ def _log_source(log: dict[str, Any], path: Path, trajectory: str | os.PathLike |
         if tkind != "trajectory":
             raise InputError(f"--trajectory {trajectory}: not a trajectory file", "give the .traj.json that was executed")
     robot = log_robot(log, str(path), traj, str(trajectory))
-    streams = log_streams(log, robot, traj, read_times=True)
+    streams = log_streams(log, robot, traj)
     measured = streams.joint_states["measured"]
     notes = [f"execution log {path.name}: {len(streams.joint_states['commanded'].times)} commands, {len(measured.times)} feedback frames"]
     if traj is not None:
@@ -130,7 +130,7 @@ def _log_source(log: dict[str, Any], path: Path, trajectory: str | os.PathLike |
         notes.append("no scene: give --trajectory with the .traj.json this run executed")
     ghost = _physics_ghost(log, robot, path)
     if ghost is None and len(measured.times):
-        times, positions = measured.times, measured.positions
+        times, positions = measured.times, measured.positions  # when the servos were read, on the run's clock
         paused = [(float(a), float(d)) for a, d in log.get("paused", []) or []]
         if traj is not None and paused:  # the plan waited for a late host: the measured arm on the plan's time
             times = plan_clock(times, paused)
