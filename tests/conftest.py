@@ -4,9 +4,10 @@
 one worker, ``tests/test_view.py``). The tests under ``tests/device/`` that stream to the firmware simulator in
 real time are spread over the workers like any other test: the simulated firmware runs in a process of its own,
 on its own clock and at the lowest real-time priority where the system allows it (as an ESP32 keeps its own
-time), and the streamer's tracking check widens only by lateness it measured (late sends, skipped ticks, late
-answers), so a busy machine, a second stream beside it included, makes a run late, not wrong. Putting them all
-on one worker made their ~4 minutes the floor of the whole suite.
+time), and the streamer compares the arm with the plan on the plan's own clock (it pauses where a busy host made a
+tick so late that the next was due too: every tick is sent, in order, none skipped) and widens its tracking check
+only by lateness it measured (late sends, late answers), so a busy machine, a second stream beside it included,
+makes a run late, not wrong. Putting them all on one worker made their ~4 minutes the floor of the whole suite.
 """
 
 from __future__ import annotations

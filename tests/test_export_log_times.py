@@ -34,7 +34,8 @@ def test_out_of_order_read_times_export_from_the_earliest(tmp_path: Path) -> Non
     assert reads[1] < min(0.0, reads[0])  # the case: the second state is the earliest, and before time 0
     cmd = {"T": 102, "base": 0.0, "shoulder": 0.0, "elbow": 1.57, "wrist": 0.0, "roll": 0.0, "hand": 3.14,
            "spd": 0, "acc": 10}
-    log = {"format": "roarmctl.execlog/1", "robot": "roarm_m3_pro", "speed_scale": 1.0,
+    # an older log: no read_t, and the skipped ticks that logs carried before the plan's clock paused instead
+    log = {"format": "roarmctl.execlog/1", "robot": "roarm_m3_pro", "speed_scale": 1.0, "skipped": {"late": 2, "behind": 0},
            "sent": [{"t": 0.0, "cmd": cmd}], "received": received}
     src = tmp_path / "run.exec.json"
     src.write_text(json.dumps(log))

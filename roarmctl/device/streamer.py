@@ -158,7 +158,7 @@ class Result:
                             "max": float(trk.max()) if len(trk) else None, "samples": int(len(trk))},
             "final_error_mm": None if self.final_error is None else self.final_error * 1e3,
         }
-        for key in ("feedback", "skipped", "waits", "hold", "device", "link_budget"):
+        for key in ("feedback", "waits", "hold", "device", "link_budget"):
             if key in self.log:
                 out[key] = self.log[key]
         return out
@@ -216,7 +216,6 @@ class Streamer:
         self.sent_lateness: list[tuple[int, float]] = []
         self.tracking: list[tuple[float, float]] = []
         self.notes: list[str] = []
-        self.skipped = {"late": 0, "behind": 0}  # ticks not sent: none since the plan waits (kept for the log's readers)
         # (plan time s at which the plan's clock stopped, for how long s): where the host, or a firmware behind, made a
         # tick so late that the next was due too; the stream went on from that tick, everything after it that late
         self.paused: list[tuple[float, float]] = []
@@ -696,7 +695,7 @@ class Streamer:
             "device": None if info is None else info.as_dict(),
             "strategy": self.cfg.strategy, "rate": self.rate, "speed_scale": self.cfg.speed_scale,
             "t0_monotonic": t0, "duration": self.schedule[-1].t,
-            "link_budget": budget.as_dict(), "feedback": self.validator.summary(), "skipped": dict(self.skipped),
+            "link_budget": budget.as_dict(), "feedback": self.validator.summary(),
             "waits": dict(self.waits), "paused": [[round(at, 6), round(d, 6)] for at, d in self.paused],
             "hold": hold, "summary": res.summary(), "notes": self.notes, "final_pose": self.pose_in_frames(),
             "tracking": [{"t": round(t, 6), "error_m": round(e, 6)} for t, e in self.tracking],

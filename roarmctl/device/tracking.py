@@ -51,8 +51,9 @@ def lateness_at(t: np.ndarray, events: np.ndarray) -> np.ndarray:
 
 def host_lateness(sent: list[dict[str, Any]], rate: float) -> np.ndarray:
     """(K, 2) (s after the stream's start, lateness s) of an execution log's ``sent`` motion ticks: each tick's own
-    measured lateness, and each gap in the sending beyond one period (ticks the pacing skipped while a busy machine
-    stalled the host: the tick after the gap is barely late, yet nothing went out meanwhile and the arm held the
+    measured lateness, and each gap in the sending beyond one period where ticks are missing (a log written before the
+    plan's clock paused for a late host: the pacing skipped the ticks a busy machine made late, counted in the
+    log's ``skipped``; the tick after the gap is barely late, yet nothing went out meanwhile and the arm held the
     last command), spread over the gap so that every moment of it is covered."""
     dt = 1.0 / float(rate)
     ticks = [(int(e["tick"]), float(e["t"]), float(e["lateness"])) for e in sent if "tick" in e]

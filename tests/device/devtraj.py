@@ -50,8 +50,8 @@ def pick_place(robot: str = "roarm_m3_pro") -> Trajectory:
 
 def host_lateness(log: dict) -> float:
     """The largest lateness (s) the streaming host measured in a run's execution log: each motion tick's own,
-    and each gap in the sending beyond one period (ticks skipped while a busy machine stalled the process: the
-    tick after them is less than a period late, but nothing went out meanwhile), up to the hold (the last T:102)."""
+    and each gap in the sending beyond one period (a busy machine stalled the process: the plan paused, and the
+    tick after the stall is less than a period late, but nothing went out meanwhile), up to the hold (the last T:102)."""
     dt = 1.0 / float(log["rate"])
     ticks = [s for s in log["sent"] if "tick" in s]
     late = max((s["lateness"] for s in ticks), default=0.0)
