@@ -123,3 +123,30 @@ def test_a_read_t_after_its_line_arrived_is_a_damaged_log(tmp_path: Path, capsys
         src.write_text(json.dumps(log))
         assert run_cli(["export", str(src), "-o", str(tmp_path / "bad.csv")]) == 2
         assert f"received[0].{said}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.37])
+def test_the_planned_stream_is_the_plan_at_the_plans_own_clock(scale: float) -> None:
+    """At any run time x, the exported planned set-point (read between its samples) is the plan at the plan's own
+    time there (``schedule.plan_clock``: standing still through each pause), for pauses on the plan's sample grid,
+    off it, and one the log rounded to 1 us."""
+    from roarmctl.device.schedule import plan_clock, sample
+    from roarmctl.export.streams import planned_states
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.loader import load_robot
+
+    robot = load_robot("roarm_m3_pro")
+    t = np.round(np.arange(101) * 0.01, 9)
+    w = 2 * np.pi * np.outer(t, [0.5, 0.3, 0.4, 0.6, 0.2, 0.1])
+    traj = Trajectory(robot.name, list(robot.joint_names), t, 0.3 * np.sin(w), 0.3 * np.cos(w) * 2 * np.pi * np.array(
+        [0.5, 0.3, 0.4, 0.6, 0.2, 0.1]), np.zeros((101, 6)))
+    grid = t / scale  # the run-speed plan times of the samples
+    paused = [(round(float(grid[20]), 6), 0.13), (float(grid[50]) + 0.0043, 0.25), (float(grid[80]) - 2e-7, 0.05)]
+    st = planned_states(traj, scale, paused)
+    assert np.all(np.diff(st.times) >= 0) and len(st.times) == 101 + 1 + 2 + 1  # the off-grid pause: both ends
+    x = np.linspace(0.0, st.times[-1], 4001)
+    got = np.column_stack([np.interp(x, st.times, st.positions[:, j]) for j in range(6)])
+    want = sample(traj, plan_clock(x, paused) * scale)
+    # rad: linear between 10 ms samples against the cubic Hermite (0.3 rad at up to 0.6 Hz: |q''| 4.3 rad/s^2,
+    # h^2/8 |q''| = 5.3e-5 rad)
+    assert np.abs(got - want).max() < 6e-5

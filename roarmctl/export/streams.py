@@ -168,7 +168,8 @@ def planned_states(traj: Trajectory, scale: float, paused: list[tuple[float, flo
     q = sample(traj, at * scale).reshape(len(at), -1)
     # the set-point where the pause starts: a plan sample already there (a tick on the plan's 10 ms grid) keeps its
     # own velocity, the clock stopping after it; otherwise one is added
-    new = np.min(np.abs(t[:, None] - at[None, :]), axis=0) > 1e-6
+    i = np.clip(np.searchsorted(t, at), 1, len(t) - 1) if len(t) > 1 else np.zeros(len(at), dtype=int)
+    new = np.minimum(np.abs(t[i] - at), np.abs(t[i - 1] - at) if len(t) > 1 else np.inf) > 1e-6
     times = np.concatenate([run_t, start[new], start + d])
     order = np.argsort(times, kind="stable")
     zeros = np.zeros_like(q)
