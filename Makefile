@@ -21,8 +21,10 @@ install: $(STAMP)
 
 # The whole suite on every core (pytest-xdist; the browser-view tests share one worker; the real-time
 # simulated-arm tests spread over the workers like the rest: tests/conftest.py says why that is safe).
-# TEST_JOBS: the number of xdist workers (a number, or auto: one per core).
-TEST_JOBS ?= auto
+# TEST_JOBS: the number of xdist workers (a number, or auto: one per core). Two per core by default: the
+# real-time tests mostly wait (on the simulated arm's clock, on Chromium), and a second worker per core fills
+# those waits (idle, 2 cores: 256 s with one worker per core, 202 s with two; docs/design.md "Tests").
+TEST_JOBS ?= $(shell echo $$(( 2 * $$(nproc 2>/dev/null || echo 1) )))
 test: $(STAMP)
 	$(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadgroup
 
