@@ -68,12 +68,14 @@ class InfeasibleError(RoarmError):
     partial: Any = None
 
 
-UnreachableReason = Literal["out_of_reach", "joint_limit", "orientation", "collision"]
+UnreachableReason = Literal["out_of_reach", "joint_limit", "orientation", "collision", "singularity", "mixed"]
 
 
 class UnreachableError(InfeasibleError):
-    """IK found no (valid) solution. ``reason`` is one of 'out_of_reach', 'joint_limit', 'orientation' or
-    'collision' (solutions exist, but each collides or comes too near a singularity)."""
+    """IK found no (valid) solution. ``reason`` is one of 'out_of_reach', 'joint_limit', 'orientation' or, when
+    solutions exist but each was rejected: 'collision' (each collides; where the planner knows no more, also those
+    too near a singularity), 'singularity' (each within the singularity margin), 'joint_limit' (each outside
+    the limits) or 'mixed' (for different causes; the message counts each)."""
 
     def __init__(self, message: str, reason: UnreachableReason = "out_of_reach", hint: str | None = None) -> None:
         super().__init__(message, hint)

@@ -19,6 +19,8 @@ import roarmctl.errors as errors
 from roarmctl.motion.collision import CollisionChecker
 from roarmctl.motion.scene import Scene as WorldScene
 from roarmctl.motion.scene import SceneItem
+from roarmctl.robot.ik import solve_ik
+from roarmctl.robot.model import Robot
 
 ROBOT = rc.load_robot("roarm_m3_pro")
 HOME = ROBOT.named_poses["home"]
@@ -107,6 +109,58 @@ def test_plan_to_pose_ends_at_the_pose():
     path = planner.plan_to_pose(LEFT, rc.Pose((0.25, 0.15, 0.06), pitch=DOWN))
     np.testing.assert_allclose(ROBOT.kin.fk(path.waypoints[-1])[:3, 3], [0.25, 0.15, 0.06], atol=1e-6)
     assert path_is_free(path.waypoints, [TABLE, WALL])
+
+
+def _states_free(robot: Robot, qs: list[np.ndarray], items: list[SceneItem]) -> list[bool]:
+    """An independent check of single states: a fresh checker without the singularity margin."""
+    checker = CollisionChecker(robot, WorldScene(items), padding=0.005)
+    return [bool(v) for v in checker.validity_batch(np.array([q[robot.arm_indices] for q in qs]))]
+
+
+def test_plan_to_pose_says_the_wall_is_in_the_way():
+    pose = rc.Pose((0.28, 0.0, 0.075), pitch=DOWN)  # in the wall
+    sols = solve_ik(ROBOT, pose.xyz, pitch=pose.pitch, q_ref=HOME, all_solutions=True)
+    assert sols and not any(_states_free(ROBOT, sols, [TABLE, WALL])) and all(_states_free(ROBOT, sols, [TABLE]))
+    with pytest.raises(rc.UnreachableError) as ei:
+        rc.Planner(ROBOT, scene_with_wall()).plan_to_pose(HOME, pose)
+    assert ei.value.reason == "collision"  # was "joint_limit"
+    assert "in collision" in ei.value.message and "'wall'" in ei.value.message and "\n" not in ei.value.message
+
+
+def test_plan_to_pose_says_the_singularity_margin_rejects_every_solution():
+    pose = rc.Pose((0.25, 0.15, 0.06), pitch=DOWN)
+    sols = solve_ik(ROBOT, pose.xyz, pitch=pose.pitch, q_ref=HOME, all_solutions=True)
+    checker = CollisionChecker(ROBOT, WorldScene([]))
+    assert sols and all(checker.margin_measure(q[ROBOT.arm_indices])[0] < 0.9 for q in sols)
+    with pytest.raises(rc.UnreachableError) as ei:
+        rc.Planner(ROBOT, singularity_margin=0.9).plan_to_pose(HOME, pose)
+    assert ei.value.reason == "singularity" and "within the singularity margin" in ei.value.message
+
+
+UR5E = Path(__file__).parent / "data" / "arms" / "ur5e" / "robot.yaml"  # ur6 closed form: eight IK branches
+
+
+def test_plan_to_pose_counts_each_cause_when_they_differ():
+    robot = rc.load_robot(UR5E)
+    pose, margin = rc.Pose((0.4, 0.2, 0.3), rpy=(math.pi, 0, 0)), 0.28
+    crate = SceneItem.box("crate", (0.2, 0.2, 0.2), (0.4, 0.2, 0.3))
+    sols = solve_ik(robot, pose.xyz, rpy=pose.rpy, all_solutions=True)
+    sigma = CollisionChecker(robot, WorldScene([])).margin_measure(np.array([q[robot.arm_indices] for q in sols]))
+    near = int(np.sum(sigma < margin))
+    assert len(sols) == 8 and 0 < near < 8
+    assert not any(_states_free(robot, sols, [crate])) and all(_states_free(robot, sols, []))
+    scene = rc.Scene()
+    scene.add_box("crate", (0.2, 0.2, 0.2), (0.4, 0.2, 0.3))
+    with pytest.raises(rc.UnreachableError) as ei:
+        rc.Planner(robot, scene, singularity_margin=margin).plan_to_pose(np.zeros(6), pose)
+    assert ei.value.reason == "mixed"
+    assert f"{8 - near} in collision (" in ei.value.message and "'crate'" in ei.value.message
+    assert f"{near} within the singularity margin (" in ei.value.message
+    scene_only = rc.Scene()
+    scene_only.add_box("crate", (0.2, 0.2, 0.2), (0.4, 0.2, 0.3))
+    with pytest.raises(rc.UnreachableError) as ei:
+        rc.Planner(robot, scene_only, singularity_margin=0).plan_to_pose(np.zeros(6), pose)
+    assert ei.value.reason == "collision" and "all 8 IK solutions are in collision" in ei.value.message
 
 
 def test_time_gives_a_trajectory_the_validator_accepts(tmp_path):

@@ -21,13 +21,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from roarmctl.api.scene import Scene
-from roarmctl.errors import InputError, PlanningError, UnreachableError
+from roarmctl.errors import InputError, PlanningError, UnreachableError, UnreachableReason
 from roarmctl.motion.planning import motions
 from roarmctl.motion.planning.assembly import assemble
 from roarmctl.motion.planning.context import PlanContext
@@ -78,14 +78,22 @@ class Pose:
         return cls(tuple(t[:3, 3]), rpy=tuple(rpy_from_matrix(t[:3, :3])))
 
 
+RejectionKind = Literal["", "joint_limit", "collision", "singularity"]
+_REJECTED_AS = {"joint_limit": "outside the joint limits", "collision": "in collision",
+                "singularity": "within the singularity margin"}
+_REASON: dict[str, UnreachableReason] = {"joint_limit": "joint_limit", "collision": "collision", "singularity": "singularity"}
+
+
 @dataclass(frozen=True)
 class IKResult:
     """What ``Planner.ik`` found: ``solutions`` (each (dof,), rad/m) that are within the joint limits,
     collision-free in the scene and clear of the singularity margin, nearest to the reference first;
-    ``rejected``: why each other solution of the IK was not valid."""
+    ``rejected``: why each other solution of the IK was not valid, and ``kinds`` the cause of each, in the same
+    order ("joint_limit", "collision" or "singularity", as ``Validity.kind``)."""
 
     solutions: tuple[npt.NDArray[np.float64], ...]
     rejected: tuple[str, ...] = ()
+    kinds: tuple[RejectionKind, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -96,18 +104,42 @@ class IKResult:
     def best(self) -> npt.NDArray[np.float64]:
         """The first valid solution (dof,) rad/m (raises ``UnreachableError`` when there is none)."""
         if not self.solutions:
-            raise UnreachableError("IK: no valid solution" + (f" ({self.rejected[0]})" if self.rejected else ""),
-                                   "collision" if self.rejected else "out_of_reach", "move the target or change the orientation asked for")
+            raise self.unreachable("IK: no valid solution")
         return self.solutions[0]
+
+    def unreachable(self, what: str) -> UnreachableError:
+        """The error for no valid solution, its message starting with ``what``: ``reason`` the cause that rejected
+        every solution ('collision', 'joint_limit', 'singularity'; 'mixed' when they differ), and the message
+        how many each cause rejected, with what it said (the item in the way)."""
+        hint = "move the target or change the orientation asked for"
+        if not self.rejected:
+            return UnreachableError(what, "out_of_reach", hint)
+        kinds = self.kinds or ("collision",) * len(self.rejected)  # an IKResult made without kinds
+        parts = []
+        for kind in dict.fromkeys(kinds):
+            said = list(dict.fromkeys(r for r, k in zip(self.rejected, kinds) if k == kind))
+            shown = 3 if kind == "collision" else 1  # what each collision hits; the others differ only in numbers
+            more = f"; {len(said) - shown} more" if kind == "collision" and len(said) > shown else ""
+            parts.append((kinds.count(kind), _REJECTED_AS.get(kind, kind), f"({'; '.join(said[:shown])}{more})"))
+        n = len(kinds)
+        if len(parts) == 1:
+            reason = _REASON.get(kinds[0], "mixed")
+            why = f"{'its one IK solution is' if n == 1 else f'all {n} IK solutions are'} {parts[0][1]} {parts[0][2]}"
+        else:
+            reason = "mixed"
+            why = f"its {n} IK solutions are rejected: " + ", ".join(f"{c} {words} {said}" for c, words, said in parts)
+        return UnreachableError(f"{what}: {why}", reason, hint)
 
 
 @dataclass(frozen=True)
 class Validity:
     """``Planner.is_valid``'s answer: ``valid``, and ``reason`` when not ("joint 2 outside its limits",
-    "link4 hits obstacle 'wall'", ...). True in an ``if``."""
+    "link4 hits obstacle 'wall'", ...), ``kind`` its cause ("joint_limit", "collision" or "singularity"; ""
+    when valid). True in an ``if``."""
 
     valid: bool
     reason: str = ""
+    kind: RejectionKind = ""
 
     def __bool__(self) -> bool:
         return self.valid
@@ -204,14 +236,17 @@ class Planner:
         if len(bad):
             i = int(bad[0])
             return Validity(False, f"{r.joint_names[i]} = {full[i]:.4g} {r.joint_unit(i)} is outside its limits "
-                                   f"[{r.lower[i]:.4g}, {r.upper[i]:.4g}]")
+                                   f"[{r.lower[i]:.4g}, {r.upper[i]:.4g}]", "joint_limit")
         ctx = self._context()
         if touching is not None:
             self.scene[touching]  # noqa: B018 - names the items when it is not one
         ctx.set_state(full[ctx.gi] if ctx.gi is not None else None, grasp_target=touching)
-        if ctx.checker.is_valid(full[ctx.arm]):
+        c, q_arm = ctx.checker, full[ctx.arm]
+        if c.is_valid(q_arm):
             return Validity(True)
-        return Validity(False, ctx.checker.explain(full[ctx.arm]))
+        # in limits (checked above, the checker's are the same): the margin, tested first as explain() does, or a collision
+        near = c.singularity_margin is not None and float(c.margin_measure(q_arm)[0]) < c.singularity_margin
+        return Validity(False, c.explain(q_arm), "singularity" if near else "collision")
 
     def ik(self, pose: Pose, q_ref: npt.ArrayLike | None = None, *, touching: str | None = None) -> IKResult:
         """Every IK solution for ``pose`` that ``is_valid`` (with ``touching``), nearest to ``q_ref`` (dof or arm
@@ -222,14 +257,14 @@ class Planner:
         ref = None if q_ref is None else self._full(q_ref, "ik: q_ref")
         sols = solve_ik(self.robot, pose.xyz, pitch=pose.pitch, roll=pose.roll, rpy=pose.rpy, q_ref=ref, all_solutions=True)
         good: list[npt.NDArray[np.float64]] = []
-        rejected: list[str] = []
+        rejected: list[Validity] = []
         for q in sols:
             v = self.is_valid(q, touching=touching)
             if v:
                 good.append(np.asarray(q, dtype=float))
             else:
-                rejected.append(v.reason)
-        return IKResult(tuple(good), tuple(rejected))
+                rejected.append(v)
+        return IKResult(tuple(good), tuple(v.reason for v in rejected), tuple(v.kind for v in rejected))
 
     def plan_to_joints(self, q_from: npt.ArrayLike, q_to: npt.ArrayLike, *, touching: str | None = None) -> JointPath:
         """A collision-free joint path from ``q_from`` to ``q_to`` (dof or arm joints, rad/m): the straight joint
@@ -257,9 +292,7 @@ class Planner:
         qf = self._full(q_from, "plan_to_pose: q_from")
         found = self.ik(pose, q_ref=qf, touching=touching)
         if not found.ok:
-            raise UnreachableError(f"plan_to_pose: no valid IK solution for {pose.xyz} m"
-                                   + (f" ({found.rejected[0]})" if found.rejected else ""), "joint_limit",
-                                   "move the target or change the orientation asked for")
+            raise found.unreachable(f"plan_to_pose: no valid IK solution for {pose.xyz} m")
         last: PlanningError | None = None
         for q in found.solutions:
             try:
