@@ -137,6 +137,22 @@ def test_plan_to_pose_says_the_singularity_margin_rejects_every_solution():
     assert ei.value.reason == "singularity" and "within the singularity margin" in ei.value.message
 
 
+def test_a_plan_says_the_singularity_margin_rejects_its_target():
+    """The planner's own IK choice (a plan's move) names the cause too: the margin, not a collision."""
+    start = solve_ik(ROBOT, (0.25, 0.15, 0.06), pitch=DOWN)[0]
+    target = (0.12, 0.0, 0.06)
+    checker = CollisionChecker(ROBOT, WorldScene([]))
+    sols = solve_ik(ROBOT, target, pitch=DOWN, all_solutions=True)
+    assert checker.margin_measure(start[ROBOT.arm_indices])[0] > 0.2  # the start clears the margin, every goal not
+    assert sols and all(checker.margin_measure(q[ROBOT.arm_indices])[0] < 0.2 for q in sols)
+    assert all(_states_free(ROBOT, sols, []))
+    plan = {"robot": "roarm_m3_pro", "start": list(start), "planner": {"singularity_margin": 0.2},
+            "tasks": [{"move": {"xyz": list(target), "pitch": {"deg": 90}}}]}
+    with pytest.raises(rc.UnreachableError) as ei:
+        rc.plan(plan)
+    assert ei.value.reason == "singularity" and "singularity" in ei.value.message  # was "collision"
+
+
 UR5E = Path(__file__).parent / "data" / "arms" / "ur5e" / "robot.yaml"  # ur6 closed form: eight IK branches
 
 

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from roarmctl.errors import InfeasibleError, PlanFileError, UnreachableError
+from roarmctl.errors import InfeasibleError, PlanFileError, UnreachableError, UnreachableReason
 from roarmctl.motion.planning import fixed_jaw as jaws
 from roarmctl.motion.planning.grasp import grasp_closed_q, grasp_width
 from roarmctl.motion.planning.pieces import TaskStep, with_value
@@ -328,6 +328,7 @@ def _choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, f
         raise UnreachableError(f"{at}: target ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m is unreachable: {exc.message}",
                                exc.reason, exc.hint) from None
     reasons: list[str] = []
+    causes: list[UnreachableReason] = []  # of each rejected candidate, for the error's reason
     best, best_cost = None, math.inf
     for cand in candidates:
         chain = [with_value(cand, ctx.gi, g)]
@@ -337,6 +338,7 @@ def _choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, f
                 nxt = solve_ik_near(ctx.robot, p, chain[-1], pitch=pt, roll=rl)
             except UnreachableError as exc:
                 reasons.append(exc.message)
+                causes.append(exc.reason)
                 ok = False
                 break
             chain.append(with_value(nxt, ctx.gi, g))
@@ -345,6 +347,9 @@ def _choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, f
         bad = next((c for c in chain if not ctx.checker.is_valid(c[ctx.arm])), None)
         if bad is not None:
             reasons.append(ctx.checker.explain(bad[ctx.arm]))
+            margin = ctx.checker.singularity_margin  # tested before collisions, as explain() does
+            near = margin is not None and float(ctx.checker.margin_measure(bad[ctx.arm])[0]) < margin
+            causes.append("singularity" if near else "collision")
             continue
         cost = float(np.sum(np.abs(chain[-1][ctx.arm] - q[ctx.arm])))
         if cost < best_cost:
@@ -353,7 +358,8 @@ def _choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, f
         p = first
         why = reasons[0] if reasons else "no IK solution"
         raise UnreachableError(f"{at}: no valid arm configuration reaches ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m: {why}",
-                               "collision" if reasons else "out_of_reach", "move the target or change the approach height or pitch")
+                               (causes[0] if len(set(causes)) == 1 else "mixed") if causes else "out_of_reach",
+                               "move the target or change the approach height or pitch")
     return best
 
 
