@@ -7,6 +7,7 @@ OpenManipulator-X (tests/data/arms) is edited in place; the values asserted are 
 
 from __future__ import annotations
 
+import math
 import shutil
 from pathlib import Path
 
@@ -14,6 +15,7 @@ import numpy as np
 import pytest
 
 from roarmctl.errors import DescriptionError
+from roarmctl.robot import xacro_input
 from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import Robot
 
@@ -22,6 +24,7 @@ TOP_XACRO = "open_manipulator_description/urdf/open_manipulator_x/open_manipulat
 ARM_XACRO = "open_manipulator_description/urdf/open_manipulator_x/open_manipulator_x_arm.urdf.xacro"  # an include
 SRDF = "open_manipulator_moveit_config/config/open_manipulator_x/open_manipulator_x.srdf"
 MESHES = "open_manipulator_description/meshes/open_manipulator_x"
+UR5E = Path(__file__).parent / "data" / "arms" / "ur5e"
 
 
 @pytest.fixture
@@ -105,3 +108,18 @@ def test_a_relative_name_is_read_in_the_current_folder(tmp_path: Path, monkeypat
     assert _upper(load_robot("robot.yaml"), "joint3") == pytest.approx(1.4)
     monkeypatch.chdir(tmp_path / "b")
     assert _upper(load_robot("robot.yaml"), "joint3") == pytest.approx(1.25)
+
+
+@pytest.mark.parametrize("trusted", [False, True])
+def test_a_yaml_file_xacro_loads_edited_is_seen(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, trusted: bool) -> None:
+    """UR's xacro reads its limits with xacro.load_yaml: by roarmctl's reader, or by xacro itself when trusted."""
+    monkeypatch.setattr(xacro_input, "TRUST_ALL", trusted)
+    shutil.copytree(UR5E, tmp_path / "ur5e")
+    spec = str(tmp_path / "ur5e" / "robot.yaml")
+    assert _upper(load_robot(spec), "shoulder_lift_joint") == pytest.approx(2 * math.pi)  # 360 deg, as published
+    limits = tmp_path / "ur5e" / "config" / "ur5e" / "joint_limits.yaml"
+    text = limits.read_text()
+    at = text.index("shoulder_lift_joint:")
+    head, tail = text[:at], text[at:]
+    limits.write_text(head + tail.replace("max_position: !degrees  360.0", "max_position: !degrees  300.0", 1))
+    assert _upper(load_robot(spec), "shoulder_lift_joint") == pytest.approx(math.radians(300))

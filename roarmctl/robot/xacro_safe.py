@@ -45,7 +45,7 @@ from contextlib import contextmanager
 from typing import Any, ClassVar
 
 from roarmctl.errors import DescriptionError
-from roarmctl.fileio import UNKNOWN_PACKAGE, Roots, read_text
+from roarmctl.fileio import UNKNOWN_PACKAGE, Roots, note_read, read_text
 
 #: Work one expansion may do (counts, not seconds: the same verdict on a busy machine).
 MAX_ELEMENTS = 20_000  # elements evaluated (macro bodies count each time they are expanded)
@@ -504,7 +504,8 @@ def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
 
     budget = Budget()
     originals = {name: getattr(xacro, name) for name in ("safe_eval", "eval_extension", "parse", "eval_all", "glob",
-                                                          "replace_node", "QuickLexer", "parse_macro_arg")}
+                                                          "replace_node", "QuickLexer", "parse_macro_arg",
+                                                          "abs_filename_spec")}
     orig_parse, orig_eval_all, orig_replace = originals["parse"], originals["eval_all"], originals["replace_node"]
     orig_find = substitution_args._eval_find
     orig_macro_arg = originals["parse_macro_arg"]
@@ -590,6 +591,16 @@ def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
         tags = {tag: unit(factor) for tag, factor in YAML_UNITS.items()}
         return load(path, DescriptionError, what=f"{where}: xacro load_yaml", roots=roots, empty_ok=True, tags=tags)
 
+    def abs_filename_spec(spec: Any) -> Any:
+        """xacro's own, noting the file (``fileio.note_read``): trusted, xacro's ``load_yaml`` opens it itself, and
+        the robot loaded depends on it."""
+        path = originals["abs_filename_spec"](spec)
+        try:
+            note_read(path, os.stat(path))
+        except (OSError, TypeError, ValueError):
+            pass  # not a file (yet): xacro says so if it reads it
+        return path
+
     def arg(name: Any) -> Any:
         try:
             return xacro.substitution_args_context["arg"][name]
@@ -643,6 +654,8 @@ def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
             substitution_args._eval_find = find
             if not trusted:
                 xacro.safe_eval, xacro.eval_extension = safe_eval, eval_extension
+            else:
+                xacro.abs_filename_spec = abs_filename_spec
             yield budget
         finally:
             for name, value in originals.items():
