@@ -157,3 +157,14 @@ def test_negative_joint_values_are_values_not_options():
     assert np.array(out["jacobian"]).shape == (6, 2)
     out = run_json("kin", "dynamics", "planar_2r", "--q", "-0.5 1", "--qd", "-1,-1")
     assert len(out["tau"]) == 2
+
+
+def test_joint_values_typed_as_a_list_are_the_same_values():
+    """'[0, -0.5, 1, -0.2, 0]' (a list as YAML or Python writes it) and '0,-0.5,...' give the same FK as five
+    separate arguments; a word among them is one line naming it, exit 2."""
+    apart = run_json("kin", "fk", "roarm_m3_pro", "0", "-0.5", "1", "-0.2", "0")
+    for typed in ("[0, -0.5, 1, -0.2, 0]", "[0,-0.5,1,-0.2,0]", "0,-0.5,1,-0.2,0"):
+        out = run_json("kin", "fk", "roarm_m3_pro", typed)
+        assert out["q"] == apart["q"] and out["position"] == apart["position"], typed
+    proc = run("kin", "fk", "roarm_m3_pro", "[0, x, 1, -0.2, 0]")
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "'x' is not a number" in proc.stderr

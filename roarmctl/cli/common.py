@@ -96,13 +96,16 @@ def warn(message: str) -> None:
 
 
 def parse_numbers(values: list[str], what: str, deg: bool = False) -> np.ndarray:
-    """Numbers from the command line; degrees are converted to radians when ``deg``."""
+    """Numbers from the command line, as separate arguments or in one ('0,0.5,1.2', '[0, 0.5, 1.2]', as a
+    Python or YAML list is typed); degrees are converted to radians when ``deg``."""
     out = []
     for v in values:
-        try:
-            out.append(float(v))
-        except ValueError:
-            raise InputError(f"{what}: '{v}' is not a number") from None
+        for token in v.strip().removeprefix("[").removesuffix("]").replace(",", " ").split():
+            try:
+                out.append(float(token))
+            except ValueError:
+                raise InputError(f"{what}: '{token}' is not a number",
+                                 "give numbers, separated by spaces or commas: 0 -1.57 1.57") from None
     import numpy as np
 
     arr = np.array(out)

@@ -234,8 +234,7 @@ def _split_numbers(text: str | None, what: str, deg: bool) -> "np.ndarray | None
     """'0 0.5 1.2' or '0,0.5,1.2' -> array (rad when ``deg``); None stays None."""
     if text is None:
         return None
-    parts = [p for p in text.replace(",", " ").split() if p]
-    return common.parse_numbers(parts, what, deg)
+    return common.parse_numbers([text], what, deg)
 
 
 @kin_app.command("ik")
