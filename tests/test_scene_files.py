@@ -203,6 +203,24 @@ def test_a_plan_file_with_a_mesh_and_a_cloud_plans_and_draws(tmp_path):
     run = roarmctl("visualize-path", str(out), "-o", str(png))
     assert run.returncode == 0, run.stderr
     assert png.stat().st_size > 10_000
+    # what the picture draws of them, against the files they came from: the wall's faces span the STL's box
+    # (40 x 100 x 150 mm, scaled to m, at its xyz), the post's marks are its occupied cells, inside the points' box
+    from roarmctl.api import load_trajectory
+    from roarmctl.viz.data import path_data
+    from roarmctl.viz.path_figure import render_path
+    from roarmctl.viz.shapes import item_faces
+
+    traj = load_trajectory(out)
+    fig = render_path(path_data(traj, load_robot(traj.robot)), size=(8, 6))
+    drawn = {a.get_gid(): a for a in fig.findobj(lambda a: (a.get_gid() or "").startswith("scene:"))}
+    assert {"scene:wall", "scene:post"} <= set(drawn)
+    wall = np.vstack(item_faces(scene["wall"], 0))  # the faces handed to the wall's collection
+    assert np.allclose(wall.min(axis=0), np.subtract(WALL_XYZ, np.divide(WALL_SIZE, 2)), atol=1e-6)
+    assert np.allclose(wall.max(axis=0), np.add(WALL_XYZ, np.divide(WALL_SIZE, 2)), atol=1e-6)
+    marks = item_faces(scene["post"], 1)[0]  # the cell centres scattered
+    assert len(marks) == len(scene["post"]["cells"]) == len(drawn["scene:post"].get_offsets())
+    lo, hi = np.array([0.285, -0.295, 0.0]), np.array([0.315, -0.265, 0.12])
+    assert np.allclose(marks.min(axis=0), lo, atol=0.005) and np.allclose(marks.max(axis=0), hi, atol=0.005)
     run = roarmctl("export", str(out), "-o", str(tmp_path / "p.mcap"))
     assert run.returncode == 0, run.stderr
     from mcap.reader import make_reader
