@@ -55,3 +55,18 @@ def roarmctl(*args: str, env: dict[str, str] | None = None, cwd: str | Path | No
             else:
                 os.environ[k] = v
     return Result(code, out.getvalue(), err.getvalue())
+
+
+def planned_and_run_on_sim(folder: Path, plan_text: str) -> tuple[Path, Path]:
+    """Plan ``plan_text`` (a plan file's YAML; the default seed) into ``folder/short.traj.json`` and run it with
+    ``execute --sim --yes`` (the simulated arm, in real time), its log in ``folder/short.exec.json``: (trajectory,
+    log). Fails the test when the run does not complete."""
+    from roarmctl.motion.pipeline import plan_file
+
+    plan = folder / "short.yaml"
+    plan.write_text(plan_text)
+    traj, log = folder / "short.traj.json", folder / "short.exec.json"
+    plan_file(plan, seed=None).trajectory.save(traj)
+    run = roarmctl("execute", str(traj), "--sim", "--yes", "--log", str(log))
+    assert run.returncode == 0, run.stderr
+    return traj, log

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from clirun import planned_and_run_on_sim
 
 from roarmctl.cli import run as run_cli
 from roarmctl.device.protocol import feedback_read_time
@@ -60,15 +61,10 @@ def test_a_run_exports_measured_states_at_read_t_and_the_logs_tracking_error(tmp
     from rosbags.rosbag2 import Reader
     from rosbags.typesys import Stores, get_typestore
 
-    from roarmctl.motion.pipeline import plan_file
     from roarmctl.robot.loader import load_robot
 
-    plan = tmp_path / "short.yaml"
-    plan.write_text("robot: roarm_m3_pro\nstart: home\ntasks:\n  - move: {xyz: [0.25, 0.10, 0.08]}\n"
-                    "  - move: {xyz: [0.20, -0.10, 0.15]}\n")
-    traj, log_path = tmp_path / "short.traj.json", tmp_path / "short.exec.json"
-    plan_file(plan, seed=None).trajectory.save(traj)
-    assert run_cli(["execute", str(traj), "--sim", "--yes", "--log", str(log_path)]) == 0
+    traj, log_path = planned_and_run_on_sim(tmp_path, "robot: roarm_m3_pro\nstart: home\ntasks:\n"
+                                            "  - move: {xyz: [0.25, 0.10, 0.08]}\n  - move: {xyz: [0.20, -0.10, 0.15]}\n")
     log = json.loads(log_path.read_text())
     frames = [r for r in log["received"] if "feedback" in r and "tcp_world_m" in r]
     judged = [r for r in frames if "read_t" in r]

@@ -22,6 +22,7 @@ from pathlib import Path
 import browser as br
 import numpy as np
 import pytest
+from clirun import planned_and_run_on_sim
 
 from roarmctl.cli import run as run_cli
 
@@ -502,14 +503,8 @@ def test_execution_log_shows_the_measured_arm_as_a_ghost(chromium, planned, tmp_
     the streamer measured during the run (a separate computation), and the ghost is drawn and named."""
     import base64
 
-    from roarmctl.motion.pipeline import plan_file
-
-    plan = tmp_path / "short.yaml"
-    plan.write_text("robot: roarm_m3_pro\nstart: home\nscene:\n  table: {shape: box, size: [0.8, 0.6, 0.02], xyz: [0.15, 0, -0.01]}\n"
-                    "tasks:\n  - move: {xyz: [0.25, 0.10, 0.08]}\n")
-    traj_file, log = tmp_path / "short.traj.json", tmp_path / "short.exec.json"
-    plan_file(plan, seed=None).trajectory.save(traj_file)
-    assert run_cli(["execute", str(traj_file), "--sim", "--yes", "--log", str(log)]) == 0
+    traj_file, log = planned_and_run_on_sim(tmp_path, "robot: roarm_m3_pro\nstart: home\nscene:\n  table: {shape: box, "
+                                            "size: [0.8, 0.6, 0.02], xyz: [0.15, 0, -0.01]}\ntasks:\n  - move: {xyz: [0.25, 0.10, 0.08]}\n")
     from roarmctl.viz.web.sources import load_view_source, source_document
 
     doc = source_document(load_view_source(log, traj_file))
