@@ -12,9 +12,12 @@ import pytest
 from clirun import roarmctl
 
 from roarmctl.errors import InfeasibleError, InputError, UnreachableError
+from roarmctl.motion.collision import CollisionChecker
 from roarmctl.motion.pipeline import plan_file
+from roarmctl.motion.scene import Scene
+from roarmctl.plan.schema import PlannerConfig
 from roarmctl.robot.frames import from_frame, get_frame
-from roarmctl.robot.ik import solve_ik, tool_pitch
+from roarmctl.robot.ik import pitch_candidates, solve_ik, tool_pitch
 from roarmctl.robot.loader import load_robot
 
 R = load_robot("roarm_m3_pro")
@@ -70,6 +73,32 @@ def test_pitch_auto_with_a_preferred_angle_and_for_pick_and_place(tmp_path):
     q = segment_end(traj, "descend to 'cube'")
     assert math.degrees(tool_pitch(R, q)) == pytest.approx(60.0, abs=0.05)  # 60 deg works here: kept
     assert all("(pitch" in s.label for s in traj.segments if s.kind == "cartesian")
+
+
+ON_AXIS = [0.0, 0.0, 0.3]  # above the base axis: the pitches that reach it do so only inside the margin
+
+
+def test_pitch_auto_on_the_base_axis_says_the_singularity_margin_rejects_it(tmp_path):
+    """Every pitch that reaches a point above the base axis has its IK solutions inside the (default 0.02 m/rad)
+    singularity margin, measured here by a fresh checker; plan and ``kin ik`` (the pitch chosen too) say so,
+    not the preferred pitch's joint limit (the old reason) nor "collision"."""
+    checker = CollisionChecker(R, Scene([]))
+    sigmas = []
+    for pitch in pitch_candidates(math.pi / 2):
+        try:
+            sols = solve_ik(R, ON_AXIS, pitch=pitch, all_solutions=True)
+        except UnreachableError:
+            continue
+        sigmas += [float(checker.margin_measure(q[R.arm_indices])[0]) for q in sols]
+    assert sigmas and max(sigmas) < PlannerConfig().singularity_margin
+    with pytest.raises(UnreachableError) as ei:
+        plan_file(write(tmp_path, f"  - move: {{xyz: {ON_AXIS}, pitch: auto}}\n"))
+    assert ei.value.reason == "singularity" and "within the singularity margin" in ei.value.message
+    assert "\n" not in ei.value.message
+    proc = roarmctl("kin", "ik", "roarm_m3_pro", "--xyz", *map(str, ON_AXIS))
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 3 and len(lines) == 1 and "unreachable (singularity)" in lines[0]
+    assert f"{len(sigmas)} within the singularity margin" in lines[0]
 
 
 # ---------------------------------------------------------------- jaw width

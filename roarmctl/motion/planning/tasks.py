@@ -277,19 +277,34 @@ def choose_ik_pitch(ctx: PlanContext, points: list[np.ndarray], pitch: float | N
     to ``pitch`` (1 deg steps, ``ik.pitch_candidates``) at which a chain is valid (limits, collisions, margin)."""
     if not auto or pitch is None:  # no pitch to choose
         return choose_ik(ctx, [(p, pitch, roll) for p in points], q, at, gripper=gripper), pitch
-    first: UnreachableError | None = None
+    first: UnreachableError | None = None  # the preferred pitch's (tried first)
+    rejected: dict[UnreachableReason, int] = {}  # pitches whose IK solutions were all rejected, by cause
     for cand in pitch_candidates(pitch):
         try:
             chain = choose_ik(ctx, [(p, cand, roll) for p in points], q, at, gripper=gripper)
         except UnreachableError as exc:
             first = first or exc
+            if exc.reason in _REJECTIONS:
+                rejected[exc.reason] = rejected.get(exc.reason, 0) + 1
             continue
         ctx.notes.append(f"{at}: pitch auto chose {math.degrees(cand):.1f} deg (asked {math.degrees(pitch):.1f} deg)")
         return chain, cand
     assert first is not None  # every candidate pitch failed
     why = first.message[len(at) + 2:] if first.message.startswith(f"{at}: ") else first.message
-    raise UnreachableError(f"{at}: no tool pitch reaches it validly; at {math.degrees(pitch):.1f} deg: {why}",
-                           first.reason, first.hint)
+    reason: UnreachableReason = first.reason
+    also = ""
+    if rejected:  # some pitches reach it: what rejected them is the cause, not the preferred pitch's failure
+        reason = next(iter(rejected)) if len(rejected) == 1 else "mixed"
+        also = (f"; the {sum(rejected.values())} pitches that reach it are rejected ("
+                + ", ".join(f"{n} {_PITCH_REJECTED_AS[k]}" for k, n in rejected.items()) + ")")
+    raise UnreachableError(f"{at}: no tool pitch reaches it validly{also}; at {math.degrees(pitch):.1f} deg: {why}",
+                           reason, first.hint)
+
+
+#: The reasons ``choose_ik`` gives when a pitch's IK solutions exist but are all rejected, and their words.
+_PITCH_REJECTED_AS = {"collision": "in collision", "singularity": "within the singularity margin",
+                      "mixed": "for mixed causes"}
+_REJECTIONS = tuple(_PITCH_REJECTED_AS)
 
 
 def choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, float | None]], q: np.ndarray, at: str,

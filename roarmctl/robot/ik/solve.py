@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from roarmctl.errors import InputError, UnreachableError
+from roarmctl.errors import InputError, UnreachableError, UnreachableReason
 from roarmctl.robot.frames import Frame, device_point, from_frame
 from roarmctl.robot.ik.common import POS_TOL, default_ref, rot_angle, vec3
 from roarmctl.robot.ik.dls import dls_solve, pitch_aim
@@ -24,6 +24,11 @@ from roarmctl.robot.model import Robot, transform
 
 #: Analytic IK families a description may name with ``ik:`` (or through ``singularity_model``).
 IK_FAMILIES = ("roarm5", "roarm3", "ur6")
+
+#: A rejected solution's cause (``Validity.kind``) -> the error's reason, and the words for it.
+_REASON: dict[str, UnreachableReason] = {"joint_limit": "joint_limit", "collision": "collision", "singularity": "singularity"}
+_REJECTED_AS = {"joint_limit": "outside the joint limits", "collision": "in collision",
+                "singularity": "within the singularity margin"}
 
 
 def solve_ik(
@@ -128,34 +133,49 @@ def solve_ik_near(robot: Robot, position: npt.ArrayLike, q_ref: npt.ArrayLike, *
 
 
 def solve_ik_auto_pitch(robot: Robot, position: npt.ArrayLike, *, preferred: float,
-                        accept: Callable[[np.ndarray], bool], roll: float | None = None,
+                        accept: Callable[[np.ndarray], bool | str], roll: float | None = None,
                         q_ref: npt.ArrayLike | None = None, all_solutions: bool = False,
                         solve: Callable | None = None) -> tuple[list[np.ndarray], float]:
     """RoArm IK with the pitch chosen: the pitch nearest to ``preferred`` (rad, 1 deg steps) at which
     some solution is within the limits and ``accept``-ed (e.g. collision-free and clear of the
-    singularity margin). Returns (the accepted solutions, best first; the pitch). ``solve`` replaces
-    ``solve_ik`` (same keywords), e.g. for targets in another frame.
+    singularity margin). ``accept`` returns True for a solution it takes, else the cause that rejects it
+    ("collision", "singularity" or "joint_limit", as ``Validity.kind``; False: "collision"). Returns (the
+    accepted solutions, best first; the pitch). ``solve`` replaces ``solve_ik`` (same keywords), e.g. for
+    targets in another frame.
 
-    Raises UnreachableError when no pitch works, naming why the preferred one failed.
+    Raises UnreachableError when no pitch works: when some pitch had in-limit solutions, its reason is what
+    rejected them (the one cause, or "mixed") and the message counts each cause; else the reason the
+    preferred pitch failed.
     """
     solve = solve or (lambda p, **kw: solve_ik(robot, p, **kw))
-    first: UnreachableError | None = None
-    rejected = 0
+    first: UnreachableError | None = None  # why the first pitch that had no solution failed
+    causes: dict[str, int] = {}  # the cause of each rejected in-limit solution -> how many
     for pitch in pitch_candidates(preferred):
         try:
             sols = solve(position, pitch=pitch, roll=roll, q_ref=q_ref, all_solutions=True)
         except UnreachableError as exc:
             first = first or exc
             continue
-        ok = [q for q in sols if accept(q)]
-        rejected += len(sols) - len(ok)
+        ok = []
+        for q in sols:
+            verdict = accept(q)
+            if verdict is True:
+                ok.append(q)
+            else:
+                kind = verdict or "collision"
+                causes[kind] = causes.get(kind, 0) + 1
         if ok:
             return (ok if all_solutions else ok[:1]), pitch
-    why = first.message if first is not None else "every solution collides or is too close to a singularity"
-    reason = "collision" if rejected and first is None else (first.reason if first else "out_of_reach")
-    raise UnreachableError(f"no tool pitch reaches the target validly ({rejected} in-limit solutions rejected); "
-                           f"at the preferred pitch {math.degrees(preferred):.1f} deg: {why}", reason,
-                           "move the target")
+    at = f"{math.degrees(preferred):.1f} deg"
+    if not causes:
+        assert first is not None  # every pitch either failed or gave solutions
+        raise UnreachableError(f"no tool pitch reaches the target; at the preferred pitch {at}: {first.message}",
+                               first.reason, "move the target")
+    n = sum(causes.values())
+    reason = _REASON.get(next(iter(causes)), "mixed") if len(causes) == 1 else "mixed"
+    said = ", ".join(f"{c} {_REJECTED_AS.get(k, k)}" for k, c in causes.items())
+    raise UnreachableError(f"no tool pitch reaches the target validly: the {n} in-limit solutions of the pitches "
+                           f"that reach it are rejected ({said})", reason, "move the target")
 
 
 def solve_ik_frame(robot: Robot, frame: Frame, position: npt.ArrayLike, **kw: Any) -> list[np.ndarray]:
