@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import fcl
 import numpy as np
@@ -96,11 +97,35 @@ def test_singularity_margin_uses_the_smallest_singular_value(robot):
     checker = CollisionChecker(robot, Scene([]), singularity_margin=margin)
     np.testing.assert_array_equal(checker.validity_batch(q), sigma >= margin)
     bad = q[np.argmin(sigma)]
-    assert "base-axis singularity" in checker.explain(bad)
+    assert "closer to a singularity than the margin" in checker.explain(bad)
     # TCP on the base axis: the smallest singular value is ~0 (the base joint moves nothing).
     upright = np.array([0.0, -1.4, 2.75, -0.9, 0.0])
     assert np.hypot(*free.tcp_pose(upright)[:2, 3]) < 1e-4
     assert not CollisionChecker(robot, Scene([]), singularity_margin=0.02).is_valid(upright)
+
+
+UR5E = Path(__file__).parent / "data" / "arms" / "ur5e" / "robot.yaml"
+
+
+def test_explain_names_the_singular_pose_only_when_the_description_models_it(robot):
+    """explain() says what the margin measures for any arm; the RoArm's description (singularity_model: roarm5)
+    also names the pose (TCP on the base axis, by FK); the UR5e's has no model, so no base axis nor any class is
+    claimed for it (the old text said "base-axis singularity" for every arm)."""
+    upright = np.array([0.0, -1.4, 2.75, -0.9, 0.0])
+    sigma = np.linalg.svd(robot.kin.jacobian(robot.full_q(upright))[:3], compute_uv=False)[-1]
+    text = CollisionChecker(robot, Scene([]), singularity_margin=0.02).explain(upright)
+    assert robot.singularity_model == "roarm5" and np.hypot(*robot.kin.fk(robot.full_q(upright))[:2, 3]) < 1e-4
+    assert text.startswith("closer to a singularity than the margin") and f"{sigma:.4f} < 0.0200 m/rad" in text
+    assert "roarm5 model: tcp_on_base_axis" in text
+    ur5e = load_robot(str(UR5E))
+    assert ur5e.singularity_model is None
+    stretched = np.array([0.0, -np.pi / 2, 0.0, -np.pi / 2, 0.0, 0.0])  # upper arm and forearm in line: the elbow
+    sigma = np.linalg.svd(ur5e.kin.jacobian(stretched)[:3], compute_uv=False)[-1]
+    margin = float(sigma) + 0.05
+    text = CollisionChecker(ur5e, Scene([]), singularity_margin=margin).explain(stretched)
+    assert text == (f"closer to a singularity than the margin (smallest singular value of the translational "
+                    f"Jacobian {sigma:.4f} < {margin:.4f} m/rad)")
+    assert "base" not in text
 
 
 # ----------------------------------------------------------------------------- self-collision

@@ -52,6 +52,7 @@ from roarmctl.motion.geometry import half_extents as _half_extents
 from roarmctl.motion.scene import Scene, SceneItem, settled
 from roarmctl.robot.meshes import MeshGeometry
 from roarmctl.robot.model import Joint, Kinematics, Robot
+from roarmctl.robot.singularity import margin_text
 
 _EPS = 1e-9  # rad: joint-limit tolerance (the kernel uses the same)
 _NO_GRIP = np.zeros(0).data  # "every state at the set_gripper value"
@@ -742,8 +743,7 @@ class CollisionChecker:
             if self.singularity_margin is not None:
                 sig = float(self.margin_measure(q)[0])
                 if sig < self.singularity_margin:
-                    return (f"closer to the base-axis singularity than the margin (smallest singular value of the "
-                            f"translational Jacobian {sig:.4f} < {self.singularity_margin:.4f} m/rad)")
+                    return margin_text(self.robot, q[0], sig, self.singularity_margin)
             # Exhaustive FCL pass without the pre-filter, so explain() never depends on it.
             rl = rot[:, self._mv_link]
             srot, scen = rl @ self._mv_rot, pos[:, self._mv_link] + np.einsum("nsij,sj->nsi", rl, self._mv_pos)

@@ -1,6 +1,7 @@
 """Named singularity classes for the robots that have a known structure.
 
-``classify_singularity(robot, q)`` returns the class name (e.g. ``"elbow_stretched"``) or None.
+``classify_singularity(robot, q)`` returns the class name (e.g. ``"elbow_stretched"``) or None;
+``margin_text`` says in words why a configuration is inside the singularity margin.
 The robot description chooses the model with ``singularity_model``; robots without one are
 classified as ``"unclassified"`` only when the Jacobian's smallest singular value is tiny.
 """
@@ -70,3 +71,14 @@ def classify_singularity(robot: Robot, q: npt.ArrayLike) -> str | None:
         return model(robot, q)
     sv = np.linalg.svd(robot.kin.jacobian(q), compute_uv=False)
     return "unclassified" if sv[-1] < 1e-6 else None
+
+
+def margin_text(robot: Robot, q: npt.ArrayLike, sigma: float, margin: float) -> str:
+    """Why configuration ``q`` (full or arm-only, rad/m) is inside the singularity margin, in words: the measure
+    the margin bounds (``sigma`` < ``margin``, m/rad: the smallest singular value of the translational
+    Jacobian), and the class of the singular pose when the description's ``singularity_model`` names one here
+    (e.g. "roarm5 model: tcp_on_base_axis"); an arm without one is not told which singularity it nears."""
+    cls = classify_singularity(robot, q) if robot.singularity_model else None
+    named = f"; {robot.singularity_model} model: {cls}" if cls else ""
+    return (f"closer to a singularity than the margin (smallest singular value of the translational Jacobian "
+            f"{sigma:.4f} < {margin:.4f} m/rad{named})")

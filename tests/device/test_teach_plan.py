@@ -58,7 +58,7 @@ def test_saved_plan_reads_back_with_the_scene_flags_and_gripper(tmp_path):
     # the gripper: set at the first waypoint, at each grasp/release and where it moved (0.6 -> 0.5), kept elsewhere
     assert [t.gripper for t in plan.tasks] == [pytest.approx(1.2), pytest.approx(0.6), pytest.approx(0.5), None,
                                                pytest.approx(1.2)]
-    assert text.count("# FLAGGED") == 2 and "closer to the base-axis singularity" in text and "# grasp" in text
+    assert text.count("# FLAGGED") == 2 and "closer to a singularity than the margin" in text and "# grasp" in text
     assert "clearance" in text  # measured against --plan's scene
 
 
