@@ -16,6 +16,7 @@ import pytest
 
 import roarmctl.api as rc
 import roarmctl.errors as errors
+from roarmctl.plan.schema import load_plan
 from roarmctl.motion.collision import CollisionChecker
 from roarmctl.motion.scene import Scene as WorldScene
 from roarmctl.motion.scene import SceneItem
@@ -307,3 +308,31 @@ def test_scene_mesh_from_triangles_and_a_cloud_block_what_a_box_there_blocks():
         add(scene)
         v = planner.is_valid(q)
         assert not v and "'thing'" in v.reason
+
+
+@pytest.mark.parametrize("margin", [1.5, -0.01, True])
+def test_singularity_margin_out_of_range_is_the_same_error_from_planner_and_plan_file(tmp_path, margin):
+    """One bound, one check: api.Planner and a plan file (YAML and dict) refuse the same values with the same
+    words after where they were given (the plan file's field is planner.singularity_margin)."""
+    with pytest.raises(errors.InputError) as by_api:
+        rc.Planner("roarm_m3_pro", singularity_margin=margin)
+    path = tmp_path / "plan.yaml"
+    path.write_text(f"robot: roarm_m3_pro\nplanner: {{singularity_margin: {str(margin).lower()}}}\ntasks:\n  - wait: 0.1\n")
+    with pytest.raises(errors.PlanFileError) as by_file:
+        load_plan(path)
+    with pytest.raises(errors.PlanFileError) as by_dict:
+        load_plan({"robot": "roarm_m3_pro", "planner": {"singularity_margin": margin}, "tasks": [{"wait": 0.1}]})
+    said = by_api.value.message.removeprefix("Planner: ")
+    assert said.startswith("singularity_margin: ") and "\n" not in said
+    assert by_file.value.message.endswith(f": planner.{said}") and by_dict.value.message.endswith(f": planner.{said}")
+
+
+def test_a_margin_a_larger_arm_can_keep_is_taken_by_both():
+    """0.35 m/rad (above the plan file's old cap of 0.3) is a margin the UR10 keeps at some poses (its smallest
+    translational singular value, by numpy SVD, is 0.409 at q below): the plan file takes it as the Planner does."""
+    robot = rc.load_robot("ur10")
+    q = np.array([-2.6, 2.1, 1.8, -1.6, 2.4, -2.8])
+    assert np.linalg.svd(robot.kin.jacobian(q)[:3], compute_uv=False)[-1] > 0.35
+    assert load_plan({"robot": "ur10", "planner": {"singularity_margin": 0.35},
+                      "tasks": [{"wait": 0.1}]}).planner.singularity_margin == 0.35
+    assert rc.Planner(robot, singularity_margin=0.35).is_valid(q)

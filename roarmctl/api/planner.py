@@ -32,10 +32,11 @@ from roarmctl.motion.planning import motions
 from roarmctl.motion.planning.assembly import assemble
 from roarmctl.motion.planning.context import PlanContext
 from roarmctl.motion.planning.pieces import TaskStep, UntimedMotion
-from roarmctl.plan.schema import Limits, Plan, PlannerConfig
+from roarmctl.plan.schema import FIELD_BOUNDS, Limits, Plan, PlannerConfig
 from roarmctl.robot.ik import solve_ik
 from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import Robot, rpy_from_matrix
+from roarmctl.validation import Checker
 
 if TYPE_CHECKING:
     from roarmctl.motion.trajectory import Trajectory
@@ -162,7 +163,7 @@ class JointPath:
 class Planner:
     """Single queries for ``robot`` (a ``Robot``, a bundled name or a description path) among ``scene``'s items.
 
-    ``padding`` (m) inflates the arm against the scene; ``singularity_margin`` (m/rad; 0: none) is the
+    ``padding`` (m) inflates the arm against the scene; ``singularity_margin`` (m/rad, 0 to 1 as in a plan file; 0: none) is the
     smallest singular value of the TCP's translational Jacobian a valid state keeps; ``velocity_scale`` and
     ``acceleration_scale`` scale the robot's joint limits for ``time``; ``max_tcp_speed`` (m/s) caps the TCP;
     ``planner`` names the OMPL planner, ``seed`` makes every answer repeatable (same calls, same results) and
@@ -182,8 +183,9 @@ class Planner:
             self.scene.robot = robot
         elif self.scene.robot is not robot:
             raise InputError("Planner: the scene belongs to another robot's planner", "give each robot its own Scene")
-        for name, value, lo, hi in (("padding", padding, 0.0, 0.1), ("singularity_margin", singularity_margin, 0.0, 1.0),
-                                    ("velocity_scale", velocity_scale, 1e-3, 1.0),
+        lo, hi = FIELD_BOUNDS["singularity_margin"]  # the plan file's bound and check, so its words too
+        singularity_margin = Checker(InputError).number(singularity_margin, "Planner", "singularity_margin", lo=lo, hi=hi)
+        for name, value, lo, hi in (("padding", padding, 0.0, 0.1), ("velocity_scale", velocity_scale, 1e-3, 1.0),
                                     ("acceleration_scale", acceleration_scale, 1e-3, 1.0)):
             if not (isinstance(value, (int, float)) and lo <= float(value) <= hi):
                 raise InputError(f"Planner: {name} = {value!r} is outside [{lo:g}, {hi:g}]")

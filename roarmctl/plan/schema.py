@@ -247,6 +247,10 @@ FIELD_BOUNDS: dict[str, tuple[float, float]] = {
     "max_tcp_speed": (0.001, 5.0),
     "scale": (0.0, 1e6),
     "resolution": (1e-4, 1.0),
+    # m/rad, the smallest singular value of the translational Jacobian a state keeps (api.Planner checks the
+    # same): it scales with the arm's reach (sampled maxima: roarm_m3_pro 0.23, ur5e 0.33, ur10 0.45), so the
+    # cap is for any arm, only a typo's catch; a margin beyond what the arm can keep refuses its start.
+    "singularity_margin": (0.0, 1.0),
 }
 DEFAULT_BOUND = 1e6  # any other number, unless its reader gives a tighter range
 MAX_TASKS = 1000  # tasks in the file, and tasks x cycles
@@ -727,7 +731,7 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
                 ctx.fail(d.line_of("seed"), "planner.seed", f"expected a whole number >= 0, got {_kind(d['seed'])}")
             planner.seed = d["seed"]
         if "singularity_margin" in d:
-            planner.singularity_margin = ctx.number(d["singularity_margin"], d.line_of("singularity_margin"), "planner.singularity_margin", lo=0.0, hi=0.3)
+            planner.singularity_margin = ctx.number(d["singularity_margin"], d.line_of("singularity_margin"), "planner.singularity_margin")
         if "padding" in d:
             planner.padding = ctx.number(d["padding"], d.line_of("padding"), "planner.padding", lo=0.0, hi=0.05)
 
