@@ -307,6 +307,36 @@ def test_pick_and_place_across_the_base_warns_and_keeps_the_margin(tmp_path):
     assert np.hypot(tcp[:, 0], tcp[:, 1]).min() > 0.05  # never over the base axis
 
 
+UR5E_PLAN = Path(__file__).parent / "data" / "arms" / "ur5e" / "plan.yaml"
+
+
+@pytest.mark.parametrize("plan_path", ["roarm_m3_pro", UR5E_PLAN])
+def test_the_collinear_warning_names_a_singular_pose_only_where_the_description_models_it(plan_path):
+    """A pick and a place across the base: the RoArm's description (singularity_model: roarm5) has a singular class
+    for the TCP on the base axis, and the warning names it; the UR5e's names no model, so the warning claims no
+    singularity there (the old text said "base-axis singularity" for every arm)."""
+    from roarmctl.motion.pipeline import Planner as PlanPipeline
+    from roarmctl.motion.pipeline import robot_spec
+    from roarmctl.motion.planning import tasks
+
+    if plan_path == "roarm_m3_pro":
+        plan = load_plan({"robot": "roarm_m3_pro", "tasks": [{"wait": 0.1}]})
+    else:
+        plan = load_plan(plan_path)
+    robot = load_robot(robot_spec(plan))
+    ctx = PlanPipeline(plan, robot).ctx
+    ctx.object_pose["block"] = np.eye(4)
+    ctx.object_pose["block"][:3, 3] = [0.3, 0.1, 0.02]
+    tasks.warn_collinear(ctx, [PickTask("block"), PlaceTask(np.array([-0.3, -0.1, 0.02]))])
+    [said] = [w for w in ctx.warnings if "collinear with the base" in w]
+    assert "base-axis singularity" not in said and "over the base axis" in said
+    if robot.singularity_model == "roarm5":
+        assert "a singular pose (roarm5 model: tcp_on_base_axis)" in said
+    else:
+        assert robot.singularity_model is None
+        assert "may be near a singularity" in said and "model" not in said and "singular pose" not in said
+
+
 def _wait_for_stop_handlers(pid: int, timeout: float = 30.0) -> None:
     """Wait until the process catches SIGTERM (Linux /proc SigCgt): roarmctl's entry point installs
     its SIGINT/SIGTERM/SIGHUP handlers together, before its first heavy import. Python itself never

@@ -1,7 +1,8 @@
 """Named singularity classes for the robots that have a known structure.
 
 ``classify_singularity(robot, q)`` returns the class name (e.g. ``"elbow_stretched"``) or None;
-``margin_text`` says in words why a configuration is inside the singularity margin.
+``margin_text`` says in words why a configuration is inside the singularity margin, ``base_axis_text`` what
+a TCP passing over the base axis means for an arm.
 The robot description chooses the model with ``singularity_model``; robots without one are
 classified as ``"unclassified"`` only when the Jacobian's smallest singular value is tiny.
 """
@@ -82,3 +83,17 @@ def margin_text(robot: Robot, q: npt.ArrayLike, sigma: float, margin: float) -> 
     named = f"; {robot.singularity_model} model: {cls}" if cls else ""
     return (f"closer to a singularity than the margin (smallest singular value of the translational Jacobian "
             f"{sigma:.4f} < {margin:.4f} m/rad{named})")
+
+
+#: Per singularity model, its class for the TCP on the base axis, where it has one (a singular pose there).
+BASE_AXIS_CLASS = {"roarm5": "tcp_on_base_axis"}
+
+
+def base_axis_text(robot: Robot) -> str:
+    """What a TCP passing over the base axis means for ``robot``, in words: the class of the singular pose there
+    when the description's ``singularity_model`` has one ("roarm5 model: tcp_on_base_axis"); else only that it
+    may be near a singularity (which one, only a model knows)."""
+    cls = BASE_AXIS_CLASS.get(robot.singularity_model or "")
+    if cls:
+        return f"over the base axis, a singular pose ({robot.singularity_model} model: {cls})"
+    return "over the base axis, where the arm may be near a singularity"

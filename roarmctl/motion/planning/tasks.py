@@ -18,6 +18,7 @@ from roarmctl.motion.planning.pieces import TaskStep, with_value
 from roarmctl.motion.trajectory import Event
 from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask, WaitTask
 from roarmctl.robot.ik import accepts_pitch, pitch_candidates, solve_ik, solve_ik_near, takes_pitch
+from roarmctl.robot.singularity import base_axis_text
 
 if TYPE_CHECKING:
     from roarmctl.motion.planning.context import PlanContext
@@ -380,7 +381,8 @@ def _choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, f
 
 def warn_collinear(ctx: PlanContext, tasks: list) -> None:
     """Pick and place on opposite sides of the base: the straight way between them passes over the
-    base axis, where the arm is singular (a failure seen in practice on the RoArm)."""
+    base axis, a singular pose where the description's singularity model says so (the RoArm's, a failure
+    seen in practice), else possibly near one (``robot.singularity.base_axis_text``)."""
     picks = [ctx.object_pose[t.object][:3, 3] for t in tasks if isinstance(t, PickTask)]
     places = [np.asarray(t.xyz) for t in tasks if isinstance(t, PlaceTask)]
     for a, b in zip(picks, places):
@@ -390,4 +392,4 @@ def warn_collinear(ctx: PlanContext, tasks: list) -> None:
         if angle > math.radians(170):
             ctx.warnings.append(
                 f"pick ({a[0]:.2f}, {a[1]:.2f}) and place ({b[0]:.2f}, {b[1]:.2f}) are collinear with the base: a straight "
-                "move would cross the base-axis singularity; the planner keeps the singularity margin and turns the base instead")
+                f"move would pass {base_axis_text(ctx.robot)}; the planner keeps the singularity margin")
