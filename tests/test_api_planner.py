@@ -336,3 +336,62 @@ def test_a_margin_a_larger_arm_can_keep_is_taken_by_both():
     assert load_plan({"robot": "ur10", "planner": {"singularity_margin": 0.35},
                       "tasks": [{"wait": 0.1}]}).planner.singularity_margin == 0.35
     assert rc.Planner(robot, singularity_margin=0.35).is_valid(q)
+
+
+@pytest.mark.parametrize("section, name, value", [
+    ("limits", "velocity_scale", 0.005), ("limits", "velocity_scale", 1.5), ("limits", "acceleration_scale", 0.005),
+    ("limits", "acceleration_scale", 0.0), ("planner", "padding", 0.2), ("planner", "padding", -0.001)])
+def test_scales_and_padding_out_of_range_are_the_same_error_from_planner_and_plan_file(tmp_path, section, name, value):
+    """One bound per field (plan.schema.FIELD_BOUNDS), one check: api.Planner and a plan file (YAML and dict) refuse
+    the same values with the same words after where they were given. The Planner took scales from 0.001 and a
+    padding up to 0.1 m with its own words ("velocity_scale = 0.005 is outside ..."); a plan file took scales
+    only above 0.01 and a padding up to 0.05 m."""
+    with pytest.raises(errors.InputError) as by_api:
+        rc.Planner("roarm_m3_pro", **{name: value})
+    path = tmp_path / "plan.yaml"
+    path.write_text(f"robot: roarm_m3_pro\n{section}: {{{name}: {value}}}\ntasks:\n  - wait: 0.1\n")
+    with pytest.raises(errors.PlanFileError) as by_file:
+        load_plan(path)
+    with pytest.raises(errors.PlanFileError) as by_dict:
+        load_plan({"robot": "roarm_m3_pro", section: {name: value}, "tasks": [{"wait": 0.1}]})
+    said = by_api.value.message.removeprefix("Planner: ")
+    assert said.startswith(f"{name}: {value:g} is too ") and "\n" not in said
+    assert by_file.value.message.endswith(f": {section}.{said}") and by_dict.value.message.endswith(f": {section}.{said}")
+
+
+@pytest.mark.parametrize("section, name, value", [("limits", "velocity_scale", 0.01), ("limits", "acceleration_scale", 1.0),
+                                                  ("planner", "padding", 0.08), ("planner", "padding", 0.1)])
+def test_the_bounds_themselves_are_taken_by_both(section, name, value):
+    """The ends of each range are inside it for both (a plan file refused a scale of 0.01, "must be > 0.01", and a
+    padding above 0.05 m)."""
+    plan = load_plan({"robot": "roarm_m3_pro", section: {name: value}, "tasks": [{"wait": 0.1}]})
+    assert getattr(getattr(plan, section), name) == value
+    planner = rc.Planner("roarm_m3_pro", **{name: value})
+    assert getattr(planner._limits if section == "limits" else planner._config, name) == value
+
+
+def test_a_trajectory_file_records_a_margin_within_the_same_bound():
+    """The trajectory validator took a recorded singularity margin up to 10 m/rad, which neither a plan file nor the
+    Planner can give; it now checks FIELD_BOUNDS' 0 to 1 as they do (1 taken, 1.5 refused in one line)."""
+    from viz_fixtures import pick_place_trajectory
+
+    from roarmctl.motion.validate import parse_document
+
+    for margin, ok in ((1.0, True), (1.5, False)):
+        doc = pick_place_trajectory(min_singular_value=margin).to_dict()
+        if ok:
+            assert parse_document(doc).singularity_margin == {"min_singular_value": margin}
+            continue
+        with pytest.raises(errors.TrajectoryFileError) as ei:
+            parse_document(doc)
+        assert ei.value.message.endswith("singularity_margin.min_singular_value: 1.5 is too large (must be <= 1)")
+
+
+def test_a_plan_with_a_larger_padding_gives_a_trajectory_that_reads_back():
+    """The trajectory records its plan's padding and the validator checks it against the same bound: a plan with
+    0.08 m (now taken) gives a trajectory that parses, padding and all (the validator capped it at 0.05)."""
+    from roarmctl.motion.pipeline import plan_file
+    from roarmctl.motion.validate import parse_document
+
+    doc = plan_file({"robot": "roarm_m3_pro", "planner": {"padding": 0.08}, "tasks": [{"wait": 0.1}]}).trajectory.to_dict()
+    assert parse_document(doc).plan["padding"] == 0.08

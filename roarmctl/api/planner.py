@@ -163,9 +163,10 @@ class JointPath:
 class Planner:
     """Single queries for ``robot`` (a ``Robot``, a bundled name or a description path) among ``scene``'s items.
 
-    ``padding`` (m) inflates the arm against the scene; ``singularity_margin`` (m/rad, 0 to 1 as in a plan file; 0: none) is the
+    ``padding`` (m, 0 to 0.1) inflates the arm against the scene; ``singularity_margin`` (m/rad, 0 to 1; 0: none) is the
     smallest singular value of the TCP's translational Jacobian a valid state keeps; ``velocity_scale`` and
-    ``acceleration_scale`` scale the robot's joint limits for ``time``; ``max_tcp_speed`` (m/s) caps the TCP;
+    ``acceleration_scale`` (0.01 to 1) scale the robot's joint limits for ``time`` (the bounds are a plan file's,
+    ``plan.schema.FIELD_BOUNDS``); ``max_tcp_speed`` (m/s) caps the TCP;
     ``planner`` names the OMPL planner, ``seed`` makes every answer repeatable (same calls, same results) and
     ``max_checks`` is the work budget of one path search. The scene may change between queries (add, remove,
     attach, detach): the next query uses it as it is then.
@@ -183,12 +184,12 @@ class Planner:
             self.scene.robot = robot
         elif self.scene.robot is not robot:
             raise InputError("Planner: the scene belongs to another robot's planner", "give each robot its own Scene")
-        lo, hi = FIELD_BOUNDS["singularity_margin"]  # the plan file's bound and check, so its words too
-        singularity_margin = Checker(InputError).number(singularity_margin, "Planner", "singularity_margin", lo=lo, hi=hi)
-        for name, value, lo, hi in (("padding", padding, 0.0, 0.1), ("velocity_scale", velocity_scale, 1e-3, 1.0),
-                                    ("acceleration_scale", acceleration_scale, 1e-3, 1.0)):
-            if not (isinstance(value, (int, float)) and lo <= float(value) <= hi):
-                raise InputError(f"Planner: {name} = {value!r} is outside [{lo:g}, {hi:g}]")
+        # the plan file's bounds and check, so its words too
+        check = Checker(InputError)
+        singularity_margin, padding, velocity_scale, acceleration_scale = (
+            check.number(value, "Planner", name, lo=FIELD_BOUNDS[name][0], hi=FIELD_BOUNDS[name][1])
+            for name, value in (("singularity_margin", singularity_margin), ("padding", padding),
+                                ("velocity_scale", velocity_scale), ("acceleration_scale", acceleration_scale)))
         if max_tcp_speed is not None and not 0 < float(max_tcp_speed) <= 100:
             raise InputError(f"Planner: max_tcp_speed = {max_tcp_speed!r} m/s must be in (0, 100]")
         self._limits = Limits(velocity_scale=float(velocity_scale), acceleration_scale=float(acceleration_scale),

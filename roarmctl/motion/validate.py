@@ -27,7 +27,7 @@ import numpy as np
 
 from roarmctl.errors import InputError, TrajectoryFileError
 from roarmctl.motion.trajectory import FORMAT, Event, Segment, Trajectory
-from roarmctl.plan.schema import PLANNERS
+from roarmctl.plan.schema import FIELD_BOUNDS, PLANNERS
 from roarmctl.robot.bundle import trajectory_robot
 from roarmctl.robot.loader import load_robot
 from roarmctl.validation import Checker, HugeNumber, load_json
@@ -213,7 +213,8 @@ def parse_document(data: Any, where: str = "trajectory") -> Trajectory:
     if margin is not None:
         CHECK.mapping(margin, where, "singularity_margin")
         if margin.get("min_singular_value") is not None:
-            CHECK.number(margin["min_singular_value"], where, "singularity_margin.min_singular_value", lo=0.0, hi=10.0)
+            lo, hi = FIELD_BOUNDS["singularity_margin"]  # the plan's and api.Planner's bound: what they can record
+            CHECK.number(margin["min_singular_value"], where, "singularity_margin.min_singular_value", lo=lo, hi=hi)
 
     scene = data.get("scene") or {"items": []}
     CHECK.mapping(scene, where, "scene")
@@ -253,7 +254,8 @@ def _plan_meta(plan: Any, where: str) -> None:
         if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2 ** 63:
             CHECK.fail(where, "plan.seed", f"expected a whole number from 0 to 2**63 - 1, got {CHECK.kind(seed)}")
     if plan.get("padding") is not None:
-        CHECK.number(plan["padding"], where, "plan.padding", lo=0.0, hi=0.05)
+        lo, hi = FIELD_BOUNDS["padding"]  # what a plan or api.Planner may have used
+        CHECK.number(plan["padding"], where, "plan.padding", lo=lo, hi=hi)
 
 
 def _scene_item(it: Any, where: str, f: str, seen: set) -> None:

@@ -242,6 +242,9 @@ FIELD_BOUNDS: dict[str, tuple[float, float]] = {
     "grasp_offset": (-0.5, 0.5),
     "grasp_width": (0.0, 10.0),
     "gripper": (-4 * math.pi, 4 * math.pi),
+    # fractions of the robot's joint velocity and acceleration limits (api.Planner checks the same): above 1 the
+    # description's limits would be broken; below 1 % nothing is gained (the README's pick and place takes 6.8 s
+    # at 0.6, 105 s at 0.02, so about half an hour at 0.001, near the 3600 s a trajectory may last).
     "velocity_scale": (0.01, 1.0),
     "acceleration_scale": (0.01, 1.0),
     "max_tcp_speed": (0.001, 5.0),
@@ -251,6 +254,11 @@ FIELD_BOUNDS: dict[str, tuple[float, float]] = {
     # same): it scales with the arm's reach (sampled maxima: roarm_m3_pro 0.23, ur5e 0.33, ur10 0.45), so the
     # cap is for any arm, only a typo's catch; a margin beyond what the arm can keep refuses its start.
     "singularity_margin": (0.0, 1.0),
+    # m the arm is inflated against the scene (api.Planner checks the same): a clearance for the model's and the
+    # arm's errors, which grow with its size, so the cap is for any arm (a UR10 reaches 1.3 m: 5 cm is not much
+    # there); beyond 0.1 m it is more likely millimetres written as metres, and a padding the scene cannot
+    # leave room for refuses the start or the targets, in words.
+    "padding": (0.0, 0.1),
 }
 DEFAULT_BOUND = 1e6  # any other number, unless its reader gives a tighter range
 MAX_TASKS = 1000  # tasks in the file, and tasks x cycles
@@ -702,7 +710,7 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
         d = ctx.mapping(top["limits"], top.line_of("limits"), "limits", ("velocity_scale", "acceleration_scale", "max_tcp_speed", "gripper_time", "blend"))
         for key in ("velocity_scale", "acceleration_scale"):
             if key in d:
-                setattr(limits, key, ctx.number(d[key], d.line_of(key), f"limits.{key}", lo=0.0, hi=1.0, strict_lo=True))
+                setattr(limits, key, ctx.number(d[key], d.line_of(key), f"limits.{key}"))
         if d.get("max_tcp_speed") is not None:
             limits.max_tcp_speed = ctx.number(d["max_tcp_speed"], d.line_of("max_tcp_speed"), "limits.max_tcp_speed", lo=0.0, hi=5.0, strict_lo=True)
         if "blend" in d:
@@ -733,7 +741,7 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
         if "singularity_margin" in d:
             planner.singularity_margin = ctx.number(d["singularity_margin"], d.line_of("singularity_margin"), "planner.singularity_margin")
         if "padding" in d:
-            planner.padding = ctx.number(d["padding"], d.line_of("padding"), "planner.padding", lo=0.0, hi=0.05)
+            planner.padding = ctx.number(d["padding"], d.line_of("padding"), "planner.padding")
 
     least = cycles * sum(_least_duration(t, limits) for t in tasks)
     if least > MAX_DURATION:
