@@ -8,7 +8,8 @@ only ``roarmctl.cli`` turns them into output and exit codes.
 from __future__ import annotations
 
 import signal
-from typing import Any, Literal
+from collections.abc import Iterable, Mapping
+from typing import Any, Literal, cast, get_args
 
 
 def describe_value(value: Any, *, json: bool = False) -> str:
@@ -80,6 +81,27 @@ class UnreachableError(InfeasibleError):
     def __init__(self, message: str, reason: UnreachableReason = "out_of_reach", hint: str | None = None) -> None:
         super().__init__(message, hint)
         self.reason = reason
+
+
+#: The cause an IK candidate (a solution, or a tool pitch) was rejected for -> the words a message counts it with.
+REJECTED_AS = {"joint_limit": "outside the joint limits", "collision": "in collision",
+               "singularity": "within the singularity margin", "mixed": "for mixed causes"}
+
+
+def rejection(causes: Iterable[str], said: Mapping[str, str] | None = None) -> tuple[UnreachableReason, str]:
+    """What rejected a set of IK candidates, from the cause of each (``causes``: "collision", "singularity",
+    "joint_limit", ... as ``motion.rejection.rejection_cause`` and ``Validity.kind`` say). Returns (the
+    ``UnreachableError`` reason: the one cause, or "mixed" when they differ or the one is no reason; the one-line
+    count of each cause in the order first seen, "3 in collision, 2 within the singularity margin", each followed
+    by ``said[cause]`` when given). The counting of every "no valid IK" error (api, plans, ``kin ik``)."""
+    counts: dict[str, int] = {}
+    for cause in causes:
+        counts[cause] = counts.get(cause, 0) + 1
+    one = next(iter(counts)) if len(counts) == 1 else "mixed"
+    reason = cast(UnreachableReason, one) if one in get_args(UnreachableReason) else "mixed"
+    text = ", ".join(f"{n} {REJECTED_AS.get(c, c)}" + (f" {said[c]}" if said and c in said else "")
+                     for c, n in counts.items())
+    return reason, text
 
 
 class PlanningError(InfeasibleError):

@@ -27,11 +27,12 @@ import numpy as np
 import numpy.typing as npt
 
 from roarmctl.api.scene import Scene
-from roarmctl.errors import InputError, PlanningError, UnreachableError, UnreachableReason
+from roarmctl.errors import REJECTED_AS, InputError, PlanningError, UnreachableError, rejection
 from roarmctl.motion.planning import motions
 from roarmctl.motion.planning.assembly import assemble
 from roarmctl.motion.planning.context import PlanContext
 from roarmctl.motion.planning.pieces import TaskStep, UntimedMotion
+from roarmctl.motion.rejection import rejection_cause
 from roarmctl.plan.schema import FIELD_BOUNDS, Limits, Plan, PlannerConfig
 from roarmctl.robot.ik import solve_ik
 from roarmctl.robot.loader import load_robot
@@ -80,9 +81,6 @@ class Pose:
 
 
 RejectionKind = Literal["", "joint_limit", "collision", "singularity"]
-_REJECTED_AS = {"joint_limit": "outside the joint limits", "collision": "in collision",
-                "singularity": "within the singularity margin"}
-_REASON: dict[str, UnreachableReason] = {"joint_limit": "joint_limit", "collision": "collision", "singularity": "singularity"}
 
 
 @dataclass(frozen=True)
@@ -116,19 +114,19 @@ class IKResult:
         if not self.rejected:
             return UnreachableError(what, "out_of_reach", hint)
         kinds = self.kinds or ("collision",) * len(self.rejected)  # an IKResult made without kinds
-        parts = []
+        detail = {}
         for kind in dict.fromkeys(kinds):
             said = list(dict.fromkeys(r for r, k in zip(self.rejected, kinds) if k == kind))
             shown = 3 if kind == "collision" else 1  # what each collision hits; the others differ only in numbers
             more = f"; {len(said) - shown} more" if kind == "collision" and len(said) > shown else ""
-            parts.append((kinds.count(kind), _REJECTED_AS.get(kind, kind), f"({'; '.join(said[:shown])}{more})"))
+            detail[kind] = f"({'; '.join(said[:shown])}{more})"
+        reason, counted = rejection(kinds, detail)
         n = len(kinds)
-        if len(parts) == 1:
-            reason = _REASON.get(kinds[0], "mixed")
-            why = f"{'its one IK solution is' if n == 1 else f'all {n} IK solutions are'} {parts[0][1]} {parts[0][2]}"
+        if len(detail) == 1:
+            why = (f"{'its one IK solution is' if n == 1 else f'all {n} IK solutions are'} "
+                   f"{REJECTED_AS.get(kinds[0], kinds[0])} {detail[kinds[0]]}")
         else:
-            reason = "mixed"
-            why = f"its {n} IK solutions are rejected: " + ", ".join(f"{c} {words} {said}" for c, words, said in parts)
+            why = f"its {n} IK solutions are rejected: {counted}"
         return UnreachableError(f"{what}: {why}", reason, hint)
 
 
@@ -247,9 +245,7 @@ class Planner:
         c, q_arm = ctx.checker, full[ctx.arm]
         if c.is_valid(q_arm):
             return Validity(True)
-        # in limits (checked above, the checker's are the same): the margin, tested first as explain() does, or a collision
-        near = c.singularity_margin is not None and float(c.margin_measure(q_arm)[0]) < c.singularity_margin
-        return Validity(False, c.explain(q_arm), "singularity" if near else "collision")
+        return Validity(False, c.explain(q_arm), rejection_cause(c, q_arm))  # in limits: checked above, as the checker's
 
     def ik(self, pose: Pose, q_ref: npt.ArrayLike | None = None, *, touching: str | None = None) -> IKResult:
         """Every IK solution for ``pose`` that ``is_valid`` (with ``touching``), nearest to ``q_ref`` (dof or arm

@@ -15,11 +15,11 @@ if TYPE_CHECKING:  # numpy itself is imported where a command runs (start-up tim
     import numpy as np
     import numpy.typing as npt
 
-    from roarmctl.motion.collision import CollisionChecker
     from roarmctl.robot.model import Robot
 
 from roarmctl.cli import common
 from roarmctl.errors import InputError, RoarmError, UnreachableError
+from roarmctl.motion.rejection import rejection_cause
 
 kin_app = typer.Typer(help="Kinematics and dynamics: fk, ik, jacobian, dynamics.", no_args_is_help=True)
 
@@ -75,15 +75,6 @@ def _outside_limits(r: "Robot", q: "np.ndarray", deg: bool, cols: list[int]) -> 
     lo, hi = r.to_user(r.lower, deg), r.to_user(r.upper, deg)
     common.warn("outside the joint limits (the arm cannot be there): " + "; ".join(
         f"{r.joint_names[c]} = {shown[c]:.4g} {r.joint_unit(c, deg=deg)} (limits [{lo[c]:.4g}, {hi[c]:.4g}])" for c in out))
-
-
-def _verdict(checker: "CollisionChecker", q_arm: "np.ndarray") -> bool | str:
-    """True when ``q_arm`` (arm_dof,) rad is valid, else its cause: "singularity" when inside the margin (tested
-    first, as ``explain`` does), else "collision" (the IK gives in-limit solutions only)."""
-    if checker.is_valid(q_arm):
-        return True
-    m = checker.singularity_margin
-    return "singularity" if m is not None and float(checker.margin_measure(q_arm)[0]) < m else "collision"
 
 
 def _units(r: "Robot", deg: bool, power: int = 0) -> list[str]:
@@ -310,7 +301,7 @@ def ik(
             preferred = tool_pitch(r, q_ref, target) if q_ref is not None else float(np.pi / 2)
             sols, _ = solve_ik_auto_pitch(
                 r, xyz_arr, preferred=preferred, roll=None if roll is None else conv(roll), q_ref=q_ref,
-                all_solutions=all_solutions, accept=lambda qq: _verdict(checker, qq[r.arm_indices]),
+                all_solutions=all_solutions, accept=lambda qq: checker.is_valid(qq[r.arm_indices]) or rejection_cause(checker, qq[r.arm_indices]),
                 solve=lambda p, **kw: solve_ik_frame(r, fr, p, **kw))
         else:
             sols = solve_ik_frame(r, fr, xyz_arr, pitch=None if pitch is None else conv(pitch),

@@ -11,10 +11,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from roarmctl.errors import InfeasibleError, PlanFileError, UnreachableError, UnreachableReason
+from roarmctl.errors import InfeasibleError, PlanFileError, UnreachableError, UnreachableReason, rejection
 from roarmctl.motion.planning import fixed_jaw as jaws
 from roarmctl.motion.planning.grasp import grasp_closed_q, grasp_width
 from roarmctl.motion.planning.pieces import TaskStep, with_value
+from roarmctl.motion.rejection import rejection_cause
 from roarmctl.motion.trajectory import Event
 from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask, WaitTask
 from roarmctl.robot.ik import accepts_pitch, pitch_candidates, solve_ik, solve_ik_near, takes_pitch
@@ -279,14 +280,14 @@ def choose_ik_pitch(ctx: PlanContext, points: list[np.ndarray], pitch: float | N
     if not auto or pitch is None:  # no pitch to choose
         return choose_ik(ctx, [(p, pitch, roll) for p in points], q, at, gripper=gripper), pitch
     first: UnreachableError | None = None  # the preferred pitch's (tried first)
-    rejected: dict[UnreachableReason, int] = {}  # pitches whose IK solutions were all rejected, by cause
+    rejected: list[UnreachableReason] = []  # the cause of each pitch whose IK solutions were all rejected
     for cand in pitch_candidates(pitch):
         try:
             chain = choose_ik(ctx, [(p, cand, roll) for p in points], q, at, gripper=gripper)
         except UnreachableError as exc:
             first = first or exc
             if exc.reason in _REJECTIONS:
-                rejected[exc.reason] = rejected.get(exc.reason, 0) + 1
+                rejected.append(exc.reason)
             continue
         ctx.notes.append(f"{at}: pitch auto chose {math.degrees(cand):.1f} deg (asked {math.degrees(pitch):.1f} deg)")
         return chain, cand
@@ -295,17 +296,14 @@ def choose_ik_pitch(ctx: PlanContext, points: list[np.ndarray], pitch: float | N
     reason: UnreachableReason = first.reason
     also = ""
     if rejected:  # some pitches reach it: what rejected them is the cause, not the preferred pitch's failure
-        reason = next(iter(rejected)) if len(rejected) == 1 else "mixed"
-        also = (f"; the {sum(rejected.values())} pitches that reach it are rejected ("
-                + ", ".join(f"{n} {_PITCH_REJECTED_AS[k]}" for k, n in rejected.items()) + ")")
+        reason, counted = rejection(rejected)
+        also = f"; the {len(rejected)} pitches that reach it are rejected ({counted})"
     raise UnreachableError(f"{at}: no tool pitch reaches it validly{also}; at {math.degrees(pitch):.1f} deg: {why}",
                            reason, first.hint)
 
 
-#: The reasons ``choose_ik`` gives when a pitch's IK solutions exist but are all rejected, and their words.
-_PITCH_REJECTED_AS = {"collision": "in collision", "singularity": "within the singularity margin",
-                      "mixed": "for mixed causes"}
-_REJECTIONS = tuple(_PITCH_REJECTED_AS)
+#: The reasons ``choose_ik`` gives when a pitch's IK solutions exist but are all rejected.
+_REJECTIONS = ("collision", "singularity", "mixed")
 
 
 def choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, float | None]], q: np.ndarray, at: str,
@@ -363,9 +361,7 @@ def _choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, f
         bad = next((c for c in chain if not ctx.checker.is_valid(c[ctx.arm])), None)
         if bad is not None:
             reasons.append(ctx.checker.explain(bad[ctx.arm]))
-            margin = ctx.checker.singularity_margin  # tested before collisions, as explain() does
-            near = margin is not None and float(ctx.checker.margin_measure(bad[ctx.arm])[0]) < margin
-            causes.append("singularity" if near else "collision")
+            causes.append(rejection_cause(ctx.checker, bad[ctx.arm]))
             continue
         cost = float(np.sum(np.abs(chain[-1][ctx.arm] - q[ctx.arm])))
         if cost < best_cost:
@@ -374,7 +370,7 @@ def _choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, f
         p = first
         why = reasons[0] if reasons else "no IK solution"
         raise UnreachableError(f"{at}: no valid arm configuration reaches ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m: {why}",
-                               (causes[0] if len(set(causes)) == 1 else "mixed") if causes else "out_of_reach",
+                               rejection(causes)[0] if causes else "out_of_reach",
                                "move the target or change the approach height or pitch")
     return best
 

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from roarmctl.errors import InputError, UnreachableError, UnreachableReason
+from roarmctl.errors import InputError, UnreachableError, rejection
 from roarmctl.robot.frames import Frame, device_point, from_frame
 from roarmctl.robot.ik.common import POS_TOL, default_ref, rot_angle, vec3
 from roarmctl.robot.ik.dls import dls_solve, pitch_aim
@@ -24,11 +24,6 @@ from roarmctl.robot.model import Robot, transform
 
 #: Analytic IK families a description may name with ``ik:`` (or through ``singularity_model``).
 IK_FAMILIES = ("roarm5", "roarm3", "ur6")
-
-#: A rejected solution's cause (``Validity.kind``) -> the error's reason, and the words for it.
-_REASON: dict[str, UnreachableReason] = {"joint_limit": "joint_limit", "collision": "collision", "singularity": "singularity"}
-_REJECTED_AS = {"joint_limit": "outside the joint limits", "collision": "in collision",
-                "singularity": "within the singularity margin"}
 
 
 def solve_ik(
@@ -149,7 +144,7 @@ def solve_ik_auto_pitch(robot: Robot, position: npt.ArrayLike, *, preferred: flo
     """
     solve = solve or (lambda p, **kw: solve_ik(robot, p, **kw))
     first: UnreachableError | None = None  # why the first pitch that had no solution failed
-    causes: dict[str, int] = {}  # the cause of each rejected in-limit solution -> how many
+    causes: list[str] = []  # the cause of each rejected in-limit solution
     for pitch in pitch_candidates(preferred):
         try:
             sols = solve(position, pitch=pitch, roll=roll, q_ref=q_ref, all_solutions=True)
@@ -162,8 +157,7 @@ def solve_ik_auto_pitch(robot: Robot, position: npt.ArrayLike, *, preferred: flo
             if verdict is True:
                 ok.append(q)
             else:
-                kind = verdict or "collision"
-                causes[kind] = causes.get(kind, 0) + 1
+                causes.append(verdict or "collision")
         if ok:
             return (ok if all_solutions else ok[:1]), pitch
     at = f"{math.degrees(preferred):.1f} deg"
@@ -171,10 +165,8 @@ def solve_ik_auto_pitch(robot: Robot, position: npt.ArrayLike, *, preferred: flo
         assert first is not None  # every pitch either failed or gave solutions
         raise UnreachableError(f"no tool pitch reaches the target; at the preferred pitch {at}: {first.message}",
                                first.reason, "move the target")
-    n = sum(causes.values())
-    reason = _REASON.get(next(iter(causes)), "mixed") if len(causes) == 1 else "mixed"
-    said = ", ".join(f"{c} {_REJECTED_AS.get(k, k)}" for k, c in causes.items())
-    raise UnreachableError(f"no tool pitch reaches the target validly: the {n} in-limit solutions of the pitches "
+    reason, said = rejection(causes)
+    raise UnreachableError(f"no tool pitch reaches the target validly: the {len(causes)} in-limit solutions of the pitches "
                            f"that reach it are rejected ({said})", reason, "move the target")
 
 
