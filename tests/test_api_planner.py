@@ -340,7 +340,8 @@ def test_a_margin_a_larger_arm_can_keep_is_taken_by_both():
 
 @pytest.mark.parametrize("section, name, value", [
     ("limits", "velocity_scale", 0.005), ("limits", "velocity_scale", 1.5), ("limits", "acceleration_scale", 0.005),
-    ("limits", "acceleration_scale", 0.0), ("planner", "padding", 0.2), ("planner", "padding", -0.001)])
+    ("limits", "acceleration_scale", 0.0), ("planner", "padding", 0.2), ("planner", "padding", -0.001),
+    ("limits", "max_tcp_speed", 6.0), ("limits", "max_tcp_speed", 0.0005)])
 def test_scales_and_padding_out_of_range_are_the_same_error_from_planner_and_plan_file(tmp_path, section, name, value):
     """One bound per field (plan.schema.FIELD_BOUNDS), one check: api.Planner and a plan file (YAML and dict) refuse
     the same values with the same words after where they were given. The Planner took scales from 0.001 and a
@@ -360,7 +361,8 @@ def test_scales_and_padding_out_of_range_are_the_same_error_from_planner_and_pla
 
 
 @pytest.mark.parametrize("section, name, value", [("limits", "velocity_scale", 0.01), ("limits", "acceleration_scale", 1.0),
-                                                  ("planner", "padding", 0.08), ("planner", "padding", 0.1)])
+                                                  ("planner", "padding", 0.08), ("planner", "padding", 0.1),
+                                                  ("limits", "max_tcp_speed", 0.001), ("limits", "max_tcp_speed", 5.0)])
 def test_the_bounds_themselves_are_taken_by_both(section, name, value):
     """The ends of each range are inside it for both (a plan file refused a scale of 0.01, "must be > 0.01", and a
     padding above 0.05 m)."""

@@ -164,7 +164,7 @@ class Planner:
     ``padding`` (m, 0 to 0.1) inflates the arm against the scene; ``singularity_margin`` (m/rad, 0 to 1; 0: none) is the
     smallest singular value of the TCP's translational Jacobian a valid state keeps; ``velocity_scale`` and
     ``acceleration_scale`` (0.01 to 1) scale the robot's joint limits for ``time`` (the bounds are a plan file's,
-    ``plan.schema.FIELD_BOUNDS``); ``max_tcp_speed`` (m/s) caps the TCP;
+    ``plan.schema.FIELD_BOUNDS``); ``max_tcp_speed`` (m/s, 0.001 to 5) caps the TCP;
     ``planner`` names the OMPL planner, ``seed`` makes every answer repeatable (same calls, same results) and
     ``max_checks`` is the work budget of one path search. The scene may change between queries (add, remove,
     attach, detach): the next query uses it as it is then.
@@ -188,8 +188,9 @@ class Planner:
             check.number(value, "Planner", name, lo=FIELD_BOUNDS[name][0], hi=FIELD_BOUNDS[name][1])
             for name, value in (("singularity_margin", singularity_margin), ("padding", padding),
                                 ("velocity_scale", velocity_scale), ("acceleration_scale", acceleration_scale)))
-        if max_tcp_speed is not None and not 0 < float(max_tcp_speed) <= 100:
-            raise InputError(f"Planner: max_tcp_speed = {max_tcp_speed!r} m/s must be in (0, 100]")
+        if max_tcp_speed is not None:
+            max_tcp_speed = check.number(max_tcp_speed, "Planner", "max_tcp_speed", lo=FIELD_BOUNDS["max_tcp_speed"][0],
+                                         hi=FIELD_BOUNDS["max_tcp_speed"][1])
         self._limits = Limits(velocity_scale=float(velocity_scale), acceleration_scale=float(acceleration_scale),
                               max_tcp_speed=None if max_tcp_speed is None else float(max_tcp_speed))
         self._config = PlannerConfig(name=planner, seed=int(seed), singularity_margin=float(singularity_margin),

@@ -247,6 +247,8 @@ FIELD_BOUNDS: dict[str, tuple[float, float]] = {
     # at 0.6, 105 s at 0.02, so about half an hour at 0.001, near the 3600 s a trajectory may last).
     "velocity_scale": (0.01, 1.0),
     "acceleration_scale": (0.01, 1.0),
+    # m/s the TCP may move (api.Planner checks the same): 5 m/s is beyond what the arms described here reach (a
+    # UR's tool tops out near 3 m/s), 1 mm/s is slower than anything useful; outside, likely a unit mistake.
     "max_tcp_speed": (0.001, 5.0),
     "scale": (0.0, 1e6),
     "resolution": (1e-4, 1.0),
@@ -712,7 +714,7 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
             if key in d:
                 setattr(limits, key, ctx.number(d[key], d.line_of(key), f"limits.{key}"))
         if d.get("max_tcp_speed") is not None:
-            limits.max_tcp_speed = ctx.number(d["max_tcp_speed"], d.line_of("max_tcp_speed"), "limits.max_tcp_speed", lo=0.0, hi=5.0, strict_lo=True)
+            limits.max_tcp_speed = ctx.number(d["max_tcp_speed"], d.line_of("max_tcp_speed"), "limits.max_tcp_speed")
         if "blend" in d:
             if not isinstance(d["blend"], bool):
                 ctx.fail(d.line_of("blend"), "limits.blend", f"expected true or false, got {_kind(d['blend'])}")
