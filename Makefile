@@ -10,9 +10,9 @@ all: test
 
 # The install compiles the C kernel (FK, dynamics and state checker) into the source tree (editable install):
 # a change to the C source needs a new install too.
-$(STAMP): pyproject.toml setup.py roarmctl/_kernel.c
+$(STAMP): pyproject.toml setup.py src/roarmctl/_kernel.c
 	$(PYTHON) -m venv $(VENV)
-	rm -f roarmctl/*.so roarmctl/motion/*.so  # an older build's module would shadow the new abi3 one
+	rm -f src/roarmctl/*.so src/roarmctl/motion/*.so roarmctl/*.so  # an older build's module would shadow the new abi3 one
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'
 	touch $(STAMP)
@@ -35,7 +35,7 @@ test-fast: $(STAMP)
 
 # Lint and types (rules and why: pyproject.toml, docs/design.md "Lint and types").
 lint: $(STAMP)
-	$(BIN)/ruff check roarmctl
+	$(BIN)/ruff check src
 	$(BIN)/mypy
 
 # Chromium from the system's packages, for the browser-view tests (tests/test_view.py: Playwright drives
@@ -65,4 +65,4 @@ demo: $(STAMP)
 	$(BIN)/roarmctl export out/pick_place.exec.json -o out/pick_place_exec_bag
 
 clean:
-	rm -rf $(VENV) build *.egg-info roarmctl/*.so roarmctl/motion/*.so
+	rm -rf $(VENV) build *.egg-info src/roarmctl/*.so src/roarmctl/motion/*.so

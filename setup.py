@@ -1,6 +1,6 @@
 """The compiled kernel and its build: everything else about the package is in pyproject.toml.
 
-``roarmctl/_kernel.c`` (the library's FK, Jacobian and inverse dynamics and the state checker; docs/design.md
+``src/roarmctl/_kernel.c`` (the library's FK, Jacobian and inverse dynamics and the state checker; docs/design.md
 "One compiled FK, Jacobian and inverse dynamics" and "How the collision check is fast") uses only CPython's
 limited API of 3.11, so ``pip wheel .`` builds one abi3 wheel for 3.11 and later. ``-fno-fast-math
 -ffp-contract=off``: no FMA contraction, the same sums on every machine. Without a C compiler or the Python
@@ -15,7 +15,7 @@ from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
 from setuptools.errors import CCompilerError, CompileError, ExecError, PlatformError
 
-HINT = ("roarmctl's compiled kernel (roarmctl/_kernel.c) needs a C compiler and the Python headers: "
+HINT = ("roarmctl's compiled kernel (src/roarmctl/_kernel.c) needs a C compiler and the Python headers: "
         "on Debian/Ubuntu 'sudo apt-get install gcc python3-dev', on Fedora 'sudo dnf install gcc python3-devel', "
         "on macOS 'xcode-select --install'; or install a prebuilt roarmctl wheel")
 
@@ -37,7 +37,7 @@ class BuildExt(build_ext):
             raise PlatformError(f"building the kernel failed ({exc}). {HINT}") from None
 
 
-KERNEL = Extension("roarmctl._kernel", sources=["roarmctl/_kernel.c"], py_limited_api=True,
+KERNEL = Extension("roarmctl._kernel", sources=["src/roarmctl/_kernel.c"], py_limited_api=True,
                    define_macros=[("Py_LIMITED_API", "0x030B0000")],
                    extra_compile_args=["-O3", "-fno-fast-math", "-ffp-contract=off"])
 

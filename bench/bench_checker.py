@@ -2,7 +2,7 @@
 
 Run: .venv/bin/python bench/bench_checker.py [--repeats 5]
 Pinned to one core (sched_setaffinity, single-threaded BLAS). Prints medians over repeats.
-Every check goes through the compiled kernel (roarmctl/_kernel.c) and FCL for the pairs
+Every check goes through the compiled kernel (src/roarmctl/_kernel.c) and FCL for the pairs
 its conservative filters leave; the baselines below show what the filters and the kernel buy.
 
 Scene (roarmctl.motion.scene.example_scene): table top at z = 0, a 0.04 x 0.10 x 0.15 m wall at

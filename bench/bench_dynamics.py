@@ -1,4 +1,4 @@
-"""roarmctl's inverse dynamics (the compiled Newton-Euler of roarmctl/_kernel.c) against Pinocchio's RNEA.
+"""roarmctl's inverse dynamics (the compiled Newton-Euler of src/roarmctl/_kernel.c) against Pinocchio's RNEA.
 
 Run: .venv/bin/python bench/bench_dynamics.py [--states 2000] [--robots roarm_m3_pro roarm_m2_s ur10 planar_2r]
      [--venv /tmp/roarmctl-bench-pin]

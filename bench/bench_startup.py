@@ -54,7 +54,7 @@ def main() -> None:
     args = parser.parse_args()
     env = dict(os.environ)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
-    subprocess.run([PY, "-m", "compileall", "-q", str(ROOT / "roarmctl")], check=True, env=env, capture_output=True)
+    subprocess.run([PY, "-m", "compileall", "-q", str(ROOT / "src" / "roarmctl")], check=True, env=env, capture_output=True)
     out = Path(tempfile.mkdtemp()) / "pick_place.traj.json"
     cases = {
         "python -c pass": [PY, "-c", "pass"],

@@ -369,7 +369,7 @@ def fresh_processes() -> tuple[dict[str, list[str]], dict[str, str], Path]:
     bytecode written first and PYTHONDONTWRITEBYTECODE unset, as an installed copy runs (bench/bench_startup.py)."""
     env = dict(os.environ)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
-    subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "roarmctl")], check=True, env=env, capture_output=True)
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "src" / "roarmctl")], check=True, env=env, capture_output=True)
     out = Path(tempfile.mkdtemp()) / "pick_place.traj.json"
     cli = [sys.executable, "-m", "roarmctl"]
     cmds = {"python -c pass": [sys.executable, "-c", "pass"], "roarmctl --help": cli + ["--help"],

@@ -1,4 +1,4 @@
-"""The compiled kernel (roarmctl/_kernel.c) against independent answers: its FK (the library's one FK) against
+"""The compiled kernel (src/roarmctl/_kernel.c) against independent answers: its FK (the library's one FK) against
 a naive chain product, its margin measure against the SVD of a finite-difference Jacobian, its
 separating-axis filter and its candidate pairs against FCL."""
 
@@ -42,7 +42,7 @@ def robots(tmp_path_factory) -> list:
 
 
 def _step_kinds(kin) -> set[int]:
-    """Kind codes of the kinematic table's steps (roarmctl/_kernel.c: 0 fixed, 1 z rotation, 2 other axis,
+    """Kind codes of the kinematic table's steps (src/roarmctl/_kernel.c: 0 fixed, 1 z rotation, 2 other axis,
     3 prismatic, plus 4 for a step with a DH post)."""
     n_steps, n_const = int(kin._ki[2]), int(kin._ki[3])
     steps = kin._ki[7 + n_const:7 + n_const + 5 * n_steps].reshape(-1, 5)

@@ -19,7 +19,7 @@ import pytest
 pytestmark = pytest.mark.xdist_group("layers")  # one worker reads the package's imports, once
 
 ROOT = Path(__file__).resolve().parents[1]
-PKG = ROOT / "roarmctl"
+PKG = ROOT / "src" / "roarmctl"
 
 
 def layer_table() -> list[list[str]]:
@@ -46,7 +46,7 @@ def layer_of(module: str) -> int:
 
 def module_name(path: Path) -> str:
     """Dotted name of a file of the package."""
-    rel = path.relative_to(ROOT).with_suffix("")
+    rel = path.relative_to(PKG.parent).with_suffix("")
     parts = list(rel.parts)
     if parts[-1] == "__init__":
         parts = parts[:-1]

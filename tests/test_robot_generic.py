@@ -17,7 +17,7 @@ from roarmctl.robot.ik import solve_ik
 from roarmctl.robot.loader import bundled_dir, load_robot
 from roarmctl.robot.singularity import classify_singularity
 
-PKG = Path(__file__).resolve().parents[1] / "roarmctl"
+PKG = Path(__file__).resolve().parents[1] / "src" / "roarmctl"
 
 # Universal Robots' published standard-DH table of the UR10 (metres, radians).
 UR10_STANDARD = {

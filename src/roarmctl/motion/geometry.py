@@ -2,7 +2,7 @@
 scene item (what the checker hands to its compiled pre-filter and to FCL).
 
 A scene item becomes one or more parts, each an FCL object placed in the world and an oriented box that holds
-it (the pre-filter's test; ``roarmctl/_kernel.c`` clears a pair only where the boxes are apart, so every part
+it (the pre-filter's test; ``src/roarmctl/_kernel.c`` clears a pair only where the boxes are apart, so every part
 must lie inside its box): a primitive is one part (a cylinder also has a second box, ``second_box``); a mesh
 one part per convex piece (FCL's convex polytope) or one for its exact triangles (a BVH); a point cloud one
 FCL octree per occupied block of ``octree.BLOCK_CELLS``^3 cells, boxed tightly by its cells. The parts'

@@ -1,7 +1,7 @@
 """The library's one forward kinematics, plus the geometric Jacobian and manipulability, for any
 tree of joints. IK, the collision checker, timing (TCP speed), dynamics and the pictures all use it.
 
-The FK runs in the compiled kernel (``roarmctl/_kernel.c``, function ``fk``) from tables that
+The FK runs in the compiled kernel (``src/roarmctl/_kernel.c``, function ``fk``) from tables that
 ``Kinematics`` builds once per robot (``_pack``): links reached from the root through fixed joints
 only are constant; every other joint is one step, origin @ motion(q) @ post, with a revolute joint
 about its local z axis (every URDF joint of the RoArm, every DH joint) as cos(q) A + sin(q) B + C
@@ -60,7 +60,7 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-# Kind codes of the kernel's step and joint records (roarmctl/_kernel.c: STEPI, JOINTI).
+# Kind codes of the kernel's step and joint records (src/roarmctl/_kernel.c: STEPI, JOINTI).
 _STEP_KIND = {"fixed": 0, "rz": 1, "revolute": 2, "prismatic": 3}
 _JOINT_KIND = {"fixed": 0, "revolute": 1, "prismatic": 2}
 
@@ -92,7 +92,7 @@ class Kinematics:
 
     # ------------------------------------------------------------------ FK
     def _pack(self) -> None:
-        """The kernel's kinematic tables ``_ki`` (int64) and ``_kf`` (float64), layout as in roarmctl/_kernel.c:
+        """The kernel's kinematic tables ``_ki`` (int64) and ``_kf`` (float64), layout as in src/roarmctl/_kernel.c:
         constant link frames, one step per joint that moves a link (kind, parent, child, q index, post;
         offset and the 4 x 4 A, B, C, post), the TCP chain (parent link, revolute or prismatic; axis and
         origin point in the parent frame) and every joint for the dynamics (kind, parent, child, q index,

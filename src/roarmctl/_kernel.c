@@ -1,7 +1,7 @@
 /* roarmctl's compiled kernel: the library's one forward kinematics, its Jacobian and its inverse dynamics
- * (recursive Newton-Euler), and the state checker of roarmctl/motion/collision.py.
+ * (recursive Newton-Euler), and the state checker of src/roarmctl/motion/collision.py.
  *
- * Kinematics (roarmctl/robot/kinematics.py packs the tables, see Kinematics._pack; robot/dynamics.py adds
+ * Kinematics (src/roarmctl/robot/kinematics.py packs the tables, see Kinematics._pack; robot/dynamics.py adds
  * the link bodies):
  *   fk          every link frame of a batch of configurations (Kinematics.frames4, the library's FK);
  *   jacobian    TCP pose and geometric Jacobian (Kinematics.pose_jacobian), tcp_velocity J_v qd;

@@ -1,5 +1,5 @@
 // roarmctl's browser view: places what the page's data says (roarmctl.view/1, written by
-// roarmctl/viz/web/document.py); every number shown was computed in Python with the library's FK,
+// src/roarmctl/viz/web/document.py); every number shown was computed in Python with the library's FK,
 // Jacobian and FCL. Text from the data is only ever set as textContent, never parsed as HTML.
 (function () {
   'use strict';

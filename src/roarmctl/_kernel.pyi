@@ -1,8 +1,8 @@
-"""Type stub of the compiled kernel (``roarmctl/_kernel.c``).
+"""Type stub of the compiled kernel (``src/roarmctl/_kernel.c``).
 
 Every function takes its arguments positionally: memoryviews of C-contiguous float64 or int64 arrays (the robot's
 step tables, the states, the output buffers it fills in place) and numbers; see the callers in
-``roarmctl/robot/kinematics.py``, ``roarmctl/robot/dynamics.py`` and ``roarmctl/motion/collision.py``.
+``src/roarmctl/robot/kinematics.py``, ``src/roarmctl/robot/dynamics.py`` and ``src/roarmctl/motion/collision.py``.
 """
 
 from typing import Any

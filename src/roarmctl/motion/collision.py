@@ -1,7 +1,7 @@
 """State-validity checking: joint limits, singularity margin, arm vs scene and arm vs itself (FCL).
 
 How a batch of states (N, arm_dof) is checked, in one call of the compiled kernel
-(``roarmctl/_kernel.c``, a small C extension built at install time) per batch:
+(``src/roarmctl/_kernel.c``, a small C extension built at install time) per batch:
 
 1. joint limits, the library's one FK (the kernel's ``fk`` on ``robot.kin``'s tables, which
    ``Kinematics.frames4`` also calls) and, when a margin is set, the smallest singular value of the
@@ -370,7 +370,7 @@ class CollisionChecker:
         self._pack()
 
     def _pack(self) -> None:
-        """The kernel's tables: one int64 and one float64 array (layout: parse_model in roarmctl/_kernel.c), the
+        """The kernel's tables: one int64 and one float64 array (layout: parse_model in src/roarmctl/_kernel.c), the
         robot's kinematic tables (``Kinematics._pack``) inside."""
         kin = self._fk
         for what, count, most in (("joints", len(self._q_template), 64), ("links", kin.n_links, 256),
@@ -457,7 +457,7 @@ class CollisionChecker:
 
     def _template_view(self) -> np.ndarray:
         """The joint template (dof,) inside the kernel's float table ``self._kf`` (after the kinematic tables and the
-        arm's lower and upper limits: parse_model in roarmctl/_kernel.c)."""
+        arm's lower and upper limits: parse_model in src/roarmctl/_kernel.c)."""
         off = len(self._fk._kf) + 2 * len(self._arm)
         return self._kf[off:off + self.robot.dof]
 

@@ -9,7 +9,7 @@ Gravity acts along -z of the root frame (``GRAVITY`` = 9.81 m/s^2). Vectors ``q`
 every actuated joint (``robot.dof``, gripper included); arm-only vectors are accepted and completed
 (gripper closed for ``q``, zero rate and acceleration). Results cover every actuated joint.
 
-The recursion runs in the compiled kernel (``roarmctl/_kernel.c``, function ``rnea``) on the kinematic
+The recursion runs in the compiled kernel (``src/roarmctl/_kernel.c``, function ``rnea``) on the kinematic
 tables of ``robot.kin`` and the library's FK, in root-frame coordinates: the forward pass carries each
 link's angular velocity and acceleration and the linear acceleration of its frame origin (gravity enters
 as an upward acceleration of the root), the backward pass sums each subtree's force and its moment about
@@ -83,7 +83,7 @@ def _batch(robot: Robot, v: npt.ArrayLike, what: str, is_position: bool) -> np.n
         robot.full_q(a) if is_position else _scatter_arm(robot, a))
 
 
-_BODYF = 14  # per link: has a body, mass, com (3), inertia (9): roarmctl/_kernel.c BODYF
+_BODYF = 14  # per link: has a body, mass, com (3), inertia (9): src/roarmctl/_kernel.c BODYF
 
 
 def _bodies(robot: Robot, payload: dict[str, Inertial] | None) -> np.ndarray:
