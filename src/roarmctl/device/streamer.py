@@ -16,11 +16,8 @@ measured), lost feedback, Ctrl-C/SIGTERM/SIGHUP or a lost link end the stream wi
 The hold stops the arm where it is, with torque on: by default at the point of the planned,
 collision-checked path the arm reaches when the hold arrives (never beyond the last set-point sent;
 no reversal), or, when the arm is not following its commands (tracking abort), at its last validated
-measured pose if that is at most 50 ms old. On the 20260701 build the firmware's command queue is
-flushed first with the bytes ``"T":0`` (which on that build only flushes and sets StopFlag; on the
-0.84 build ``T:0`` cuts torque for 10 s and is never sent), then ``"T":999`` clears the flag. The hold goes
-out twice, the second copy once the firmware has read what came before: a full receive buffer loses the newest
-bytes, which can be the hold.
+measured pose if that is at most 50 ms old. How the hold is made to run (the 20260701 build's queue flushed
+first, two copies): ``roarmctl.device.hold``.
 The choice and its figures: ``docs/guide.md``, "Talking to the firmware".
 """
 
@@ -40,6 +37,7 @@ import numpy as np
 
 from roarmctl.device import protocol, st3235
 from roarmctl.device.feedback import FeedbackRefused, FeedbackValidator, Reading, read_valid
+from roarmctl.device.hold import HOLD_SPD, send_hold
 from roarmctl.device.pose import within_limits
 from roarmctl.device.protocol import WireMap, wire_seconds
 from roarmctl.device.schedule import (
@@ -91,7 +89,6 @@ __all__ = [
 #: (1.5 x). The tracking check compares the arm with the plan anywhere in that window (less what the
 #: strategy's lead already makes up), so a lagging arm is not a fault and a stalled one still is.
 SERVO_LAG = 1.5 * st3235.LOOP_LAG
-HOLD_SPD = 600  # the firmware's own ARM_SERVO_INIT_SPEED, steps/s: the least speed of a hold
 HOLD_MODES = ("auto", "path", "setpoint", "measured")
 READ_BEFORE_PRINT = protocol.READ_BEFORE_PRINT  # s between the firmware's servo reads and the start of its T:1051 line
 
@@ -597,38 +594,14 @@ class Streamer:
             if wire is None:
                 self.notes.append("no hold sent: nothing was commanded and no valid pose was read")
                 return
-            flushed = False
-            if getattr(link, "firmware", None) == "m3-2026":
-                # that build's serial task flushes its command queue on the bytes "T":0 (and never
-                # queues the line); T:999 clears the StopFlag it sets. Torque stays on.
-                link.send({"T": 0}, fresh_line=True)
-                link.send({"T": 999})
-                flushed = True
             spd = HOLD_SPD
             if kind != "measured" and self.setpoint is not None:
                 spd = max(HOLD_SPD, int(self.setpoint.cmd.get("spd", 0) or 0))
-            cmd = self.wm.hold(dict(zip(self.wm.field_names, (float(v) for v in wire))), spd, 0)
-            t_hold = link.send(cmd, fresh_line=not flushed)
-            self.hold_info = {"kind": kind, "cause": cause, "flushed_queue": flushed, "t": t_hold,
-                              "wire": [protocol.r4(v) for v in wire], "copies": 1}
+            # the stream's own polls still unanswered are answered first
+            self.hold_info = send_hold(link, self.wm, wire, spd, kind=kind, cause=cause, earlier=len(self._polls),
+                                       on_answer=self._judge_quietly)
+            flushed = self.hold_info["flushed_queue"]
             self.notes.append(f"hold sent ({kind}{', queue flushed first' if flushed else ''})")
-            # answered after the firmware read the hold's line: bounds the hold's latency (the stream's own polls
-            # still unanswered are answered first)
-            r = link.request(0.3, earlier=len(self._polls))
-            if r is not None:
-                self.hold_info["answered_after_s"] = round(r.t - t_hold, 4)
-                self._judge_quietly(r)
-            # The firmware's receive buffer (256 + 128 bytes on the ESP32) loses the newest bytes when it is full:
-            # lines that queued up while its loop was busy (a slow pass, long feedback lines) can cost the hold,
-            # while a later line is read. A second copy, sent when the firmware has read all that came before (or
-            # nothing answered in 0.3 s), finds the buffer empty; the hold is a fixed goal, so running it twice
-            # changes nothing.
-            link.send(cmd, fresh_line=True)
-            self.hold_info["copies"] = 2
-            r2 = link.request(0.3)
-            self.hold_info["confirmed"] = r2 is not None
-            if r2 is not None:
-                self._judge_quietly(r2)
         except DeviceError:
             self.notes.append("hold could not be sent: the link is gone")
 

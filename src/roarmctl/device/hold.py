@@ -1,0 +1,62 @@
+"""The hold: stop the arm at a given goal, with torque on, so that the firmware surely runs it.
+
+One implementation for every loop that moves the arm (``roarmctl.device.streamer`` after a plan's stream,
+``roarmctl.device.follow`` after a live source), which choose the goal; this module only gets it run.
+
+On the 20260701 build the firmware's command queue is flushed first with the bytes ``"T":0`` (which on that
+build only flushes and sets StopFlag; on the 0.84 build ``T:0`` cuts torque for 10 s and is never sent), then
+``"T":999`` clears the flag. The hold goes out twice, the second copy once the firmware has read what came before:
+a full receive buffer (256 + 128 bytes on the ESP32) loses the newest bytes, which can be the hold.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from roarmctl.device import protocol
+from roarmctl.device.protocol import WireMap
+
+if TYPE_CHECKING:
+    from roarmctl.device.link import Link, Received
+
+HOLD_SPD = 600  # the firmware's own ARM_SERVO_INIT_SPEED, steps/s: the least speed of a hold
+
+
+def send_hold(link: Link, wm: WireMap, wire: np.ndarray, spd: int, *, kind: str, cause: str, earlier: int = 0,
+              on_answer: Callable[[Received], None] | None = None) -> dict[str, Any]:
+    """Send the hold to firmware radians ``wire`` (fields order) at ``spd`` steps/s (at least ``HOLD_SPD``);
+    return what the log keeps of it (``kind``, ``cause``, when, the goal, copies, whether it was confirmed).
+
+    ``earlier``: answers still due to ``T:105`` polls sent before (the firmware answers in order);
+    ``on_answer`` hears the feedback that answers after each copy (the caller judges it).
+    Raises DeviceError when the link is gone.
+    """
+    flushed = False
+    if getattr(link, "firmware", None) == "m3-2026":
+        # that build's serial task flushes its command queue on the bytes "T":0 (and never queues the line);
+        # T:999 clears the StopFlag it sets. Torque stays on.
+        link.send({"T": 0}, fresh_line=True)
+        link.send({"T": 999})
+        flushed = True
+    cmd = wm.hold(dict(zip(wm.field_names, (float(v) for v in wire))), max(HOLD_SPD, int(spd)), 0)
+    t_hold = link.send(cmd, fresh_line=not flushed)
+    info: dict[str, Any] = {"kind": kind, "cause": cause, "flushed_queue": flushed, "t": t_hold,
+                            "wire": [protocol.r4(v) for v in wire], "copies": 1}
+    # answered after the firmware read the hold's line: bounds the hold's latency
+    r = link.request(0.3, earlier=earlier)
+    if r is not None:
+        info["answered_after_s"] = round(r.t - t_hold, 4)
+        if on_answer is not None:
+            on_answer(r)
+    # a second copy, sent when the firmware has read all that came before (or nothing answered in 0.3 s), finds
+    # the receive buffer empty; the hold is a fixed goal, so running it twice changes nothing
+    link.send(cmd, fresh_line=True)
+    info["copies"] = 2
+    r2 = link.request(0.3)
+    info["confirmed"] = r2 is not None
+    if r2 is not None and on_answer is not None:
+        on_answer(r2)
+    return info
