@@ -21,6 +21,7 @@ import hashlib
 import importlib
 import json
 import math
+import re
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -114,16 +115,32 @@ def _short_tag(tag: str) -> str:
     return tag.replace("tag:yaml.org,2002:", "!!")[:60]
 
 
-def _construct(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError], budget: _Budget,
-               depth: int = 0) -> Any:
-    budget.nodes += 1
+def _refuse_size(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError], budget: _Budget) -> NoReturn:
     line = node.start_mark.line + 1
     if budget.nodes > MAX_NODES:
         raise error(f"{loader.name}:{line}: the file expands to more than {MAX_NODES} values",
                     "aliases (*name) are expanded each time they are used; write it out plainly")
-    if depth > MAX_DEPTH:
-        raise error(f"{loader.name}:{line}: nested more than {MAX_DEPTH} levels deep (or an alias that contains itself)")
-    if isinstance(node, yaml.MappingNode):
+    raise error(f"{loader.name}:{line}: nested more than {MAX_DEPTH} levels deep (or an alias that contains itself)")
+
+
+def _construct(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError], budget: _Budget,
+               depth: int = 0) -> Any:
+    budget.nodes += 1
+    if budget.nodes > MAX_NODES or depth > MAX_DEPTH:
+        _refuse_size(node, loader, error, budget)
+    kind = type(node)  # the composers make these three classes exactly
+    if kind is yaml.ScalarNode:  # most nodes: first, and without the containers' bookkeeping
+        if node.tag in budget.tags:
+            try:
+                return budget.tags[node.tag](str(node.value))
+            except InputError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - the tag's reader says what was wrong
+                raise error(f"{loader.name}:{node.start_mark.line + 1}: {node.tag} {str(node.value)[:40]!r}: "
+                            f"{exc}") from None
+        return _scalar(node, loader, error)
+    line = node.start_mark.line + 1
+    if kind is yaml.MappingNode:
         if node.tag != MAP_TAG:
             raise error(f"{loader.name}:{line}: the tag {_short_tag(node.tag)} is not allowed", "remove the tag")
         out = LocatedDict()
@@ -153,26 +170,43 @@ def _construct(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError]
                 out[k] = v
                 out.lines[k] = kline
         return out
-    if isinstance(node, yaml.SequenceNode):
-        if node.tag != SEQ_TAG:
-            raise error(f"{loader.name}:{line}: the tag {_short_tag(node.tag)} is not allowed", "remove the tag")
-        lst = LocatedList(_construct(n, loader, error, budget, depth + 1) for n in node.value)
-        lst.line, lst.lines = line, [n.start_mark.line + 1 for n in node.value]
-        return lst
-    if isinstance(node, yaml.ScalarNode) and node.tag in budget.tags:
+    if node.tag != SEQ_TAG:
+        raise error(f"{loader.name}:{line}: the tag {_short_tag(node.tag)} is not allowed", "remove the tag")
+    items = node.value
+    lst = LocatedList([_construct(n, loader, error, budget, depth + 1) for n in items])
+    lst.line, lst.lines = line, [n.start_mark.line + 1 for n in items]
+    return lst
+
+
+def _fast_float(loader: yaml.SafeLoader, node: yaml.ScalarNode) -> Any:
+    """``!!float``: Python's ``float`` for the plain decimal forms (most of a plan's numbers), PyYAML's own
+    constructor for the rest (``_`` separators, ``1:30`` sexagesimal, ``.inf``, ``.nan``): the same values either way,
+    since the resolver only tags as float what YAML 1.1's float pattern matches."""
+    text = node.value
+    if "_" not in text and ":" not in text:
         try:
-            return budget.tags[node.tag](str(node.value))
-        except InputError:
-            raise
-        except Exception as exc:  # noqa: BLE001 - the tag's reader says what was wrong
-            raise error(f"{loader.name}:{line}: {node.tag} {str(node.value)[:40]!r}: {exc}") from None
-    return _scalar(node, loader, error)
+            return float(text)
+        except ValueError:  # .inf, .nan and their signed forms
+            pass
+    return SafeConstructor.construct_yaml_float(loader, node)
+
+
+#: Scalar tags built without PyYAML's generic ``construct_object`` (its bookkeeping of recursive objects is for
+#: mappings and lists, which ``_construct`` builds itself): tag -> function of (loader, node).
+_SCALAR_BUILDERS: dict[str, Callable[[Any, Any], Any]] = {
+    "tag:yaml.org,2002:str": lambda loader, node: node.value,
+    "tag:yaml.org,2002:float": _fast_float,
+    "tag:yaml.org,2002:int": SafeConstructor.construct_yaml_int,
+    "tag:yaml.org,2002:bool": SafeConstructor.construct_yaml_bool,
+    "tag:yaml.org,2002:null": SafeConstructor.construct_yaml_null,
+}
 
 
 def _scalar(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError]) -> Any:
     """One scalar; a tag whose text does not fit (``!!float abc``, ``!!int x``) is refused."""
     try:
-        value = loader.construct_object(node, deep=True)
+        build = _SCALAR_BUILDERS.get(node.tag)
+        value = build(loader, node) if build is not None else loader.construct_object(node, deep=True)
     except yaml.MarkedYAMLError:
         raise
     except (ValueError, TypeError, OverflowError) as exc:
@@ -183,14 +217,21 @@ def _scalar(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError]) -
     return value
 
 
+#: The characters ``_flow_depth_line`` looks at; the text between them is skipped at C speed.
+_FLOW_MARKS = re.compile(r"[\[\]{}\n'\"#]")
+
+
 def _flow_depth_line(text: str) -> int:
     """The line (1-based) where ``[``/``{`` brackets first nest deeper than ``MAX_DEPTH``, 0 if never.
 
     PyYAML's scanner takes time quadratic in the flow nesting (5,000 levels: seconds), so this linear
     scan refuses such a file first. Quoted strings and comments are skipped; a bracket inside a plain
     scalar counts, which can only make the scan stricter than the parser."""
-    depth, line, quote, comment, prev = 0, 1, "", False, " "
-    for c in text:
+    if text.count("[") + text.count("{") <= MAX_DEPTH:  # fewer openers than the limit cannot nest past it
+        return 0
+    depth, line, quote, comment = 0, 1, "", False
+    for mark in _FLOW_MARKS.finditer(text):
+        c = mark.group()
         if c == "\n":  # a quote or comment ends at the line's end here (stricter than YAML, never laxer)
             line, comment, quote = line + 1, False, ""
         elif comment:
@@ -200,15 +241,15 @@ def _flow_depth_line(text: str) -> int:
                 quote = ""
         elif c in "'\"":
             quote = c
-        elif c == "#" and prev in " \t\n":
-            comment = True
+        elif c == "#":
+            at = mark.start()
+            comment = at == 0 or text[at - 1] in " \t\n"
         elif c in "[{":
             depth += 1
             if depth > MAX_DEPTH:
                 return line
-        elif c in "]}":
+        else:
             depth = max(depth - 1, 0)
-        prev = c
     return 0
 
 
@@ -246,9 +287,25 @@ def _private_loader() -> type:
     constructors[None] = SafeConstructor.construct_undefined
     resolvers = {first: [(tag, rx) for tag, rx in pairs if tag in _IMPLICIT_TAGS]
                  for first, pairs in Resolver.yaml_implicit_resolvers.items()}
+    # The tag of every scalar is asked of the resolver; with no path resolvers (our table has none) PyYAML's
+    # ``resolve`` and its per-node ``descend_resolver``/``ascend_resolver`` bookkeeping reduce to this: the first
+    # implicit pattern for the scalar's first character that matches a plain scalar, else the kind's default tag.
+    def resolve(self: Any, kind: type, value: str, implicit: tuple[bool, bool]) -> str:
+        if kind is yaml.ScalarNode:
+            if implicit[0]:
+                for tag, regexp in resolvers.get(value[:1], ()):
+                    if regexp.match(value):
+                        return tag
+            return str(Resolver.DEFAULT_SCALAR_TAG)
+        return str(Resolver.DEFAULT_SEQUENCE_TAG if kind is yaml.SequenceNode else Resolver.DEFAULT_MAPPING_TAG)
+
+    def no_path(self: Any, *args: Any) -> None:
+        return None
+
     return type("RoarmctlYAMLLoader", (*parsers, SafeConstructor, Resolver), {
         "__init__": __init__, "yaml_constructors": constructors, "yaml_multi_constructors": {},
-        "yaml_implicit_resolvers": resolvers, "yaml_path_resolvers": {}})
+        "yaml_implicit_resolvers": resolvers, "yaml_path_resolvers": {}, "resolve": resolve,
+        "descend_resolver": no_path, "ascend_resolver": no_path})
 
 
 #: The loader every YAML input is parsed with (see ``_private_loader``).
