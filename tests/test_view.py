@@ -542,6 +542,68 @@ def test_execution_log_shows_the_measured_arm_as_a_ghost(chromium, planned, tmp_
         page.close()
 
 
+def _decode(a: str) -> np.ndarray:
+    import base64
+
+    return np.frombuffer(base64.b64decode(a), dtype="<f4")
+
+
+def _rms(a: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.asarray(a, dtype=float) ** 2)))
+
+
+@pytest.fixture(scope="module")
+def pick_place_run(planned, tmp_path_factory):
+    """plans/pick_place.yaml run on the simulated arm (``execute --sim``, real time): (trajectory, log)."""
+    d = tmp_path_factory.mktemp("pick_place_run")
+    f, _ = planned["pick_place"]
+    log = d / "pick_place.exec.json"
+    done = subprocess.run([sys.executable, "-m", "roarmctl", "execute", str(f), "--sim", "--yes", "--log", str(log)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return f, log
+
+
+@pytest.mark.slow
+def test_a_run_viewed_without_its_trajectory_agrees_with_the_cli(pick_place_run, tmp_path):
+    """A log viewed alone: its tracking figures are the run's (the CLI's summary, and those of the page made with
+    -t), not the distance to commands drawn when their lines were sent (they aim ~80 ms ahead on the plan: 10x too
+    high); the commanded TCP speed stays at the plan's peak (a tick's T:102 and gripper T:101 are one command, not a
+    jump in 0.1 ms); the note names an option visualize-path has, and with it the page has the scene and the marks."""
+    from roarmctl.viz.web.sources import load_view_source, source_document
+
+    traj_file, log = pick_place_run
+    run = json.loads(log.read_text())
+    alone = source_document(load_view_source(log))
+    whole = source_document(load_view_source(log, traj_file))
+    inside = lambda d: (_decode(d["times"]) > 0.1) & (_decode(d["times"]) < d["duration"] - 0.1)  # noqa: E731
+    err_alone = _decode(alone["ghost"]["error"])[inside(alone)]
+    err_whole = _decode(whole["ghost"]["error"])[inside(whole)]
+    assert abs(_rms(err_alone) * 1000 - run["summary"]["tracking_mm"]["rms"]) < 0.5
+    assert abs(_rms(err_alone) - _rms(err_whole)) < 0.0005
+    assert err_alone.max() * 1000 < run["summary"]["tracking_mm"]["max"] + 0.5
+    # the commanded arm on the plan's clock: its TCP speed peaks where the plan's does
+    plan_peak = float(_decode(whole["speed"]).max())
+    assert _decode(alone["speed"]).max() < 1.05 * plan_peak
+    # commanded and planned TCP on one clock: within the sag offset (a few mm), not the ~16 mm of 80 ms ahead
+    t_a, tcp_a = _decode(alone["times"]), _decode(alone["tcp"]).reshape(-1, 3)
+    t_w, tcp_w = _decode(whole["times"]), _decode(whole["tcp"]).reshape(-1, 3)
+    planned_at = np.column_stack([np.interp(t_a, t_w, tcp_w[:, k]) for k in range(3)])
+    assert _rms(np.linalg.norm(tcp_a - planned_at, axis=1)) < 0.005
+    (note,) = [n for n in alone["notes"] if "give" in n]
+    assert "-t/--trajectory" in note and alone["items"] == []
+    code, out = write_html(tmp_path, log, "-t", str(traj_file), name="run.html")
+    assert code == 0
+    text = out.read_text()
+    assert '"name":"cube"' in text and '"kind":"grasp"' in text
+
+
+def test_visualize_path_trajectory_option_goes_with_a_page_only(planned, tmp_path, capsys):
+    f, _ = planned["pick_place"]
+    assert run_cli(["visualize-path", str(f), "-t", str(f), "-o", str(tmp_path / "x.png")]) == 2
+    assert "-o NAME.html" in capsys.readouterr().err and not (tmp_path / "x.png").exists()
+
+
 @pytest.mark.slow
 def test_physics_run_shows_the_simulated_arm_and_where_the_cube_went(planned, tmp_path):
     """`roarmctl simulate`'s run file: the ghost is the simulated arm, and the simulated cube's outline ends where
@@ -561,3 +623,12 @@ def test_physics_run_shows_the_simulated_arm_and_where_the_cube_went(planned, tm
     track = np.frombuffer(base64.b64decode(cube["track"]), dtype="<f4").reshape(doc["n"], 3, 4)
     assert np.linalg.norm(track[-1, :, 3] - [0.25, 0.15, 0.02]) < 0.010
     assert np.linalg.norm(track[0, :, 3] - [0.25, -0.15, 0.02]) < 0.002  # it started where it stood
+    # the run file alone carries its scene: the cube and where physics put it, the run's own tracking figures
+    alone = source_document(load_view_source(run))
+    assert [it["name"] for it in alone["items"]] == [it["name"] for it in doc["items"]]
+    (cube_alone,) = alone["ghost"]["items"]
+    end = np.frombuffer(base64.b64decode(cube_alone["track"]), dtype="<f4").reshape(alone["n"], 3, 4)[-1, :, 3]
+    assert np.linalg.norm(end - track[-1, :, 3]) < 0.001
+    summary = json.loads(run.read_text())["summary"]["tracking_mm"]
+    err = np.frombuffer(base64.b64decode(alone["ghost"]["error"]), dtype="<f4")
+    assert abs(1000 * np.sqrt(np.mean(err.astype(float) ** 2)) - summary["rms"]) < 0.5

@@ -60,14 +60,18 @@ def visualize_path(
     view: str = typer.Option("iso", "--view", help="3D view: iso, top, front or side."),
     dpi: float = typer.Option(100.0, "--dpi", help="Pixels per inch of the PNG."),
     size: str = typer.Option("16x10", "--size", help="Sheet size WxH in inches (pixels = size x dpi)."),
+    trajectory: Path | None = typer.Option(None, "--trajectory", "-t",
+                                        help="With an execution log and -o NAME.html: the trajectory it ran (its scene, marks and commanded arm)."),
 ) -> None:
     """Draw a planned trajectory (PNG, SVG or PDF): 3D scene and TCP path, joint curves, TCP speed, manipulability.
     With -o NAME.html: the interactive 3D view as one self-contained page (no server, no network), also of an
     execution log (what the arm was told and what it reported)."""
     out = output if output is not None else default_output(source)
     if out.suffix.lower() == ".html":
-        _write_html(source, out)
+        _write_html(source, out, trajectory)
         return
+    if trajectory is not None:
+        raise InputError("--trajectory goes with an execution log drawn as the 3D page", "write it with -o NAME.html")
     if view not in VIEW_NAMES:
         raise InputError(f"--view: '{view}' is not one of {', '.join(VIEW_NAMES)}")
     _check_dpi(dpi)
@@ -108,13 +112,13 @@ def _is_log(source: Path) -> bool:
     return isinstance(data, dict) and data.get("format") == EXECLOG_FORMAT
 
 
-def _write_html(source: Path, out: Path) -> None:
+def _write_html(source: Path, out: Path, trajectory: Path | None = None) -> None:
     """``visualize-path SOURCE -o out.html``: the browser view as one file; a failing plan is drawn up to the
     failure, then reported (exit 3) as for a picture."""
     from roarmctl.viz.web.page import write_page
     from roarmctl.viz.web.sources import load_view_source, source_document
 
-    src = load_view_source(source)
+    src = load_view_source(source, trajectory)
     written = write_page(source_document(src), out)
     if src.error is not None:
         exc = src.error

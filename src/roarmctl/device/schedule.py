@@ -129,6 +129,16 @@ class Tick:
         return [self.cmd, *self.extra]
 
 
+def target_offset(strategy: str | Strategy, rate: float, latency: float | None = None) -> float:
+    """s: how far after its tick's time (the run's clock, ``k / rate``) a command's target lies on the plan run at
+    its speed: the strategy's lookahead in intervals, the link latency (``default_latency``) and its lead. The arm is
+    meant to stand at a command's target at that time, so a command drawn there lies on the plan's clock."""
+    strat = STRATEGIES[strategy] if isinstance(strategy, str) else strategy
+    rate = strategy_rate(strat, rate)
+    lat = default_latency(rate) if latency is None else latency
+    return strat.lookahead / rate + lat + strat.lead
+
+
 def strategy_rate(strategy: str | Strategy, rate: float) -> float:
     """The tick rate (Hz) a stream of ``strategy`` runs at when ``rate`` is asked for."""
     strat = STRATEGIES[strategy] if isinstance(strategy, str) else strategy
@@ -160,11 +170,10 @@ def build_schedule(traj: Trajectory, robot: Robot, *, rate: float = DEFAULT_RATE
     t_end = traj.duration / speed_scale
     n = int(math.ceil(t_end * rate - 1e-9)) + 1
     ts = np.minimum(np.arange(n) * dt, t_end)
-    ahead = strat.lookahead * dt
     # plan times (un-scaled) of where each interval starts and ends, shifted by the link latency
     # and the strategy's lead
     t_from = np.minimum(ts + lat + strat.lead, t_end) * speed_scale
-    t_to = np.minimum(ts + ahead + lat + strat.lead, t_end) * speed_scale
+    t_to = np.minimum(ts + target_offset(strat, rate, lat), t_end) * speed_scale
     q_to, q_from = sample(traj, t_to), sample(traj, t_from)
     c_to, c_from = q_to, q_from  # what is commanded: the plan, offset by the sag when compensated
     if sag:

@@ -25,11 +25,13 @@ if TYPE_CHECKING:
 
 @dataclass
 class JointStates:
-    """Timed joint states: ``times`` (N,) s, ``positions`` (N, dof) rad, ``velocities`` (N, dof) rad/s or None."""
+    """Timed joint states: ``times`` (N,) s, ``positions`` (N, dof) rad, ``velocities`` (N, dof) rad/s or None;
+    ``ticks`` (N,) int or None: for an execution log's commands, the streamer's tick each belongs to (-1: none)."""
 
     times: np.ndarray
     positions: np.ndarray
     velocities: np.ndarray | None = None
+    ticks: np.ndarray | None = None
 
 
 @dataclass
@@ -202,20 +204,23 @@ def _log_streams(log: dict[str, Any], robot: Robot) -> Streams:
     its line was sent, a measured state's when the firmware read the servos (``device.protocol.frame_read_time``:
     the log's ``read_t``), not when its line arrived."""
     wm = WireMap(robot)
-    cmd_t, cmd_q = [], []
+    cmd_t, cmd_q, cmd_tick = [], [], []
     wire: dict[str, float] | None = None
+    tick = -1  # a tick's T:101 for the gripper follows its T:102, which alone carries the tick
     for entry in log.get("sent", []):
         cmd = entry.get("cmd") if isinstance(entry, dict) else None
         if not isinstance(cmd, dict):
             continue
         if cmd.get("T") == 102 and all(isinstance(cmd.get(f), (int, float)) for f in M3_FIELDS):
             wire = {f: float(cmd[f]) for f in M3_FIELDS}
+            tick = int(entry["tick"]) if isinstance(entry.get("tick"), int) else -1
         elif cmd.get("T") == 101 and cmd.get("joint") == 6 and wire is not None and isinstance(cmd.get("rad"), (int, float)):
             wire = dict(wire, hand=float(cmd["rad"]))
         else:
             continue
         cmd_t.append(float(entry["t"]))
         cmd_q.append(wm.from_wire(wire))
+        cmd_tick.append(tick)
     meas_t, meas_q = [], []
     for entry in log.get("received", []):
         fb = parse_feedback(entry["feedback"]) if isinstance(entry, dict) and isinstance(entry.get("feedback"), dict) else None
@@ -227,7 +232,7 @@ def _log_streams(log: dict[str, Any], robot: Robot) -> Streams:
         raise InputError("the execution log holds no joint commands and no feedback", "export a log of a run that moved the arm")
     dof = robot.dof
     states = {
-        "commanded": JointStates(np.array(cmd_t), np.array(cmd_q).reshape(-1, dof)),
+        "commanded": JointStates(np.array(cmd_t), np.array(cmd_q).reshape(-1, dof), ticks=np.array(cmd_tick, dtype=int)),
         "measured": JointStates(np.array(meas_t), np.array(meas_q).reshape(-1, dof)),
     }
     return Streams(robot, list(robot.joint_names), states, "measured" if meas_t else "commanded")

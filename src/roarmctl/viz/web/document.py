@@ -49,6 +49,9 @@ class Ghost:
     #: name -> (times (K,) s, positions (K, 3) m, quaternions (K, 4) w-x-y-z): where the run had the scene's
     #: objects (a physics run tracks them), drawn as outlines of the items of those names.
     objects: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
+    #: (times (M,) s, TCP errors (M,) m) measured against the plan by the run itself, shown instead of the distance
+    #: to the commanded arm (a log viewed without its trajectory: its commands carry the sag offset, not the plan).
+    error: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def _f32(a: np.ndarray) -> str:
@@ -204,7 +207,9 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         gframes = robot.kin.link_frames(gq)
         gtcp = gframes[:, robot.kin.tcp_index, :3, 3]
         ghost_doc = {"label": ghost.label, "poses": _f32(_pose12(gframes[:, link_ids])), "q": _f32(gq), "tcp": _f32(gtcp),
-                     "error": _f32(np.linalg.norm(gtcp - data.tcp[idx], axis=1)),
+                     "error": _f32(np.linalg.norm(gtcp - data.tcp[idx], axis=1) if ghost.error is None
+                                   else np.interp(times, *ghost.error)),
+                     "error_source": "run" if ghost.error is not None else "plan" if traj.events or traj.scene else "commanded",
                      "span": [float(ghost.times[0]), float(ghost.times[-1])],
                      "items": _ghost_items(ghost, items, times)}
         extra.append(gtcp)

@@ -13,13 +13,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roarmctl.device.schedule import plan_clock
+from roarmctl.device.schedule import STRATEGIES, plan_clock, strategy_rate, target_offset
 from roarmctl.errors import InfeasibleError, InputError, TrajectoryFileError
 from roarmctl.export import load_source, log_robot
-from roarmctl.export.streams import log_streams
+from roarmctl.export.streams import JointStates, log_streams
 from roarmctl.motion.pipeline import plan_file
 from roarmctl.motion.trajectory import Trajectory
-from roarmctl.motion.validate import validate_trajectory
+from roarmctl.motion.validate import parse_document, validate_trajectory
 from roarmctl.viz.data import robot_for
 from roarmctl.viz.web.document import Ghost, view_document
 
@@ -77,8 +77,30 @@ def _states_trajectory(robot: Robot, times: np.ndarray, q: np.ndarray) -> Trajec
     finite differences (for the TCP speed shown)."""
     keep = np.append(np.diff(times) > 1e-9, True)  # strictly increasing: the last command of equal times wins
     t, p = times[keep], q[keep]
+    if len(t) and t[0] > 0:  # a trajectory starts at 0 s: the first command's pose stands until its time
+        t, p = np.concatenate([[0.0], t]), np.concatenate([p[:1], p])
     v = np.gradient(p, t, axis=0) if len(t) > 1 else np.zeros_like(p)
     return Trajectory(robot.name, list(robot.joint_names), t, p, v, np.zeros_like(p))
+
+
+def commanded_on_plan_clock(log: dict[str, Any], cmd: JointStates) -> tuple[np.ndarray, np.ndarray]:
+    """The log's commands where the plan (run at the log's speed) has them: each at its target's time, its tick's
+    time ``k / rate`` plus ``schedule.target_offset`` (lookahead, link latency, lead), not when its line was sent (up
+    to ~80 ms earlier with timed-lead: drawn at its send time, the commanded arm runs that far ahead of the plan and
+    of the measured arm). A tick's gripper T:101 belongs to its T:102 (the last of a tick wins); the commands before
+    the stream's first tick (none in a log of ``execute``) keep their send times. (times (K,) s, positions (K, dof))."""
+    rate = float(log.get("rate") or 0.0)
+    strategy = str(log.get("strategy", ""))
+    ticks = cmd.ticks if cmd.ticks is not None else np.full(len(cmd.times), -1)
+    if not (np.isfinite(rate) and rate > 0) or strategy not in STRATEGIES or not np.any(ticks >= 0):
+        return cmd.times, cmd.positions
+    rate = strategy_rate(strategy, rate)
+    last = np.append(ticks[1:] != ticks[:-1], True) | (ticks < 0)
+    times = np.where(ticks >= 0, ticks / rate + target_offset(strategy, rate), cmd.times)[last]
+    duration = float(log.get("duration") or 0.0)
+    if np.isfinite(duration) and duration > 0:
+        times = np.minimum(times, duration)
+    return times, cmd.positions[last]
 
 
 def load_view_source(path: str | os.PathLike, trajectory: str | os.PathLike | None = None) -> ViewSource:
@@ -126,22 +148,53 @@ def _log_source(log: dict[str, Any], path: Path, trajectory: str | os.PathLike |
         cmd = streams.joint_states["commanded"]
         if not len(cmd.times):
             raise TrajectoryFileError(f"{path}: the log holds no joint commands", "view a log of a run that moved the arm")
-        main = _states_trajectory(robot, cmd.times, cmd.positions)
-        notes.append("no scene: give --trajectory with the .traj.json this run executed")
+        main = _states_trajectory(robot, *commanded_on_plan_clock(log, cmd))
+        scene = log["physics"].get("scene") if isinstance(log.get("physics"), dict) else None
+        if isinstance(scene, dict):  # a physics run carries its scene: drawn, checked as a trajectory's is
+            main = parse_document(main.to_dict() | {"scene": scene}, f"{path}: physics")
+            notes.append("no targets: give -t/--trajectory with the .traj.json this run executed")
+        else:
+            notes.append("no scene, targets or objects: give -t/--trajectory with the .traj.json this run executed")
     ghost = _physics_ghost(log, robot, path)
     if ghost is None and len(measured.times):
         times, positions = measured.times, measured.positions  # when the servos were read, on the run's clock
         paused = [(float(a), float(d)) for a, d in log.get("paused", []) or []]
-        if traj is not None and paused:  # the plan waited for a late host: the measured arm on the plan's time
+        if paused:  # the plan waited for a late host: the measured arm on the plan's time, as the commands are
             times = plan_clock(times, paused)
             keep = np.concatenate([[True], np.diff(times) > 0])  # a pause's frames stand at its start
             times, positions = times[keep], positions[keep]
             notes.append(f"the run waited {sum(d for _, d in paused):.2f} s for a busy host ({len(paused)} pauses): "
                          "the measured arm is shown on the plan's time")
         ghost = Ghost("measured", times, positions)
+    if ghost is not None and traj is None:  # no plan to measure against: the run's own errors (what the CLI printed)
+        ghost.error = _run_tracking(log, path)
+        summary = log["summary"].get("tracking_mm") if isinstance(log.get("summary"), dict) else None
+        if isinstance(summary, dict) and all(isinstance(summary.get(k), (int, float)) for k in ("rms", "max")):
+            notes.append(f"TCP tracking error (the run's, {ghost.label} against the plan): RMS {summary['rms']:.1f} mm, "
+                         f"max {summary['max']:.1f} mm")
     if ghost is None:
         notes.append("no feedback in the log: only the commanded arm is shown")
     return ViewSource(main, robot, path.name, ghost=ghost, notes=notes)
+
+
+def _run_tracking(log: dict[str, Any], path: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """The log's ``tracking`` (the streamer's TCP error of each feedback frame against the plan: ``t`` s when the
+    servos were read, on the run's clock, ``error_m`` m) on the plan's clock (``paused``), or None when it has none."""
+    rows = log.get("tracking")
+    if not isinstance(rows, list) or not rows:
+        return None
+    try:
+        t = np.array([float(r["t"]) for r in rows])
+        e = np.array([float(r["error_m"]) for r in rows])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise TrajectoryFileError(f"{path}: tracking: malformed entry ({type(exc).__name__}: {exc})",
+                                  "view a log written by 'roarmctl execute' or 'roarmctl simulate'") from None
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(e)) and np.all(e >= 0)):
+        raise TrajectoryFileError(f"{path}: tracking: times and errors must be finite, errors >= 0")
+    paused = [(float(a), float(d)) for a, d in log.get("paused", []) or []]
+    t = plan_clock(t, paused) if paused else t
+    order = np.argsort(t, kind="stable")
+    return t[order], e[order]
 
 
 def _physics_ghost(log: dict[str, Any], robot: Robot, path: Path) -> Ghost | None:

@@ -121,7 +121,7 @@
     $('ghost-toggle').hidden = false;  // (its TCP dot is added with the commanded one below)
     $('ghost-name').textContent = D.ghost.label;
     $('r-ghost-row').hidden = false;
-    $('r-ghost-name').textContent = D.ghost.label + ' vs commanded TCP';
+    $('r-ghost-name').textContent = D.ghost.label + ({ run: ' vs planned TCP (the run\'s)', plan: ' vs planned TCP' }[D.ghost.error_source] || ' vs commanded TCP');
   }
 
   // ------------------------------------------------------------------ scene items
