@@ -906,7 +906,7 @@ def test_an_old_file_naming_a_description_path_reads_it_only_beside_itself(tmp_p
 def test_execute_and_export_hold_speed_scale_to_one_bound(tmp_path, traj, scale, ok):
     """``execute --speed-scale`` took any S > 0 while ``export`` refused a log slowed below 0.001 (a run at
     1e-300 of its speed would never end): both read ``motion.validate.MIN_SPEED_SCALE`` now."""
-    from roarmctl.motion.validate import MIN_SPEED_SCALE
+    from roarmctl.formats import MIN_SPEED_SCALE
 
     assert MIN_SPEED_SCALE == 0.001
     code, _, err = cli(["execute", str(traj), "--output", str(tmp_path / "cmds.jsonl"), "--speed-scale", str(scale)])

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from test_streamer import ROBOT, FakeClock, FakeLink, traj
 
-from roarmctl.device.streamer import StreamConfig, Streamer, write_log
+from roarmctl.device.execlog import write_log
+from roarmctl.device.streamer import StreamConfig, Streamer
 from roarmctl.export import streams_for
 
 

@@ -27,8 +27,9 @@ import numpy as np
 import numpy.typing as npt
 
 from roarmctl.errors import InputError
-from roarmctl.motion.scene import Role, SceneItem
+from roarmctl.formats import Role
 from roarmctl.motion.scene import Scene as _WorldScene
+from roarmctl.motion.scene import SceneItem
 
 if TYPE_CHECKING:
     from roarmctl.robot.model import Robot

@@ -9,7 +9,7 @@ import typer
 from roarmctl.cli import common
 from roarmctl.cli.execute_cmd import SAG_HELP, STRATEGY_HELP
 from roarmctl.errors import InfeasibleError, InputError
-from roarmctl.fileio import atomic_write_json, check_output_file
+from roarmctl.fileio import check_output_file
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -69,6 +69,7 @@ def simulate(
         from roarmctl.motion.validate import check_against_robot
 
         check_against_robot(traj, robot, str(traj_path))
+    from roarmctl.device.execlog import write_log
     from roarmctl.device.sag import wanted
     from roarmctl.physics.report import measure, run_log
     from roarmctl.physics.run import Options
@@ -87,7 +88,7 @@ def simulate(
     report = measure(traj, robot, setup, rec, options)
     if output is not None:
 
-        atomic_write_json(output, run_log(traj, robot, setup, rec, options, report, source=robot_desc), indent=None)
+        write_log(output, run_log(traj, robot, setup, rec, options, report, source=robot_desc))
     if json_out:
         common.print_json({k: report[k] for k in ("ok", "joints", "tcp", "contacts", "objects", "run", "model")}
                           | ({"run_file": str(output)} if output is not None else {}))

@@ -20,7 +20,7 @@ except ImportError:  # pragma: no cover - Windows
 
 from roarmctl.cli import common, signals
 from roarmctl.errors import DeviceError, InputError, Interrupted, signal_name
-from roarmctl.fileio import atomic_write_json, check_output_file
+from roarmctl.fileio import check_output_file
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -179,6 +179,7 @@ def _safely(action: "Callable[[], object]", view: "_View") -> None:
 def _finish(session: "TeachSession", output: Path, raw: Path | None, robot: "Robot", judge: "Judge",
             source: "Plan | None", outcome: str, message: str, view: "_View") -> None:
     """Save the recording and the raw log (atomically), then say where they went."""
+    from roarmctl.device.execlog import write_log
     from roarmctl.device.teach_plan import save_plan
 
     view.flush(session)
@@ -192,7 +193,7 @@ def _finish(session: "TeachSession", output: Path, raw: Path | None, robot: "Rob
         view.line("nothing recorded: no plan written")
     if raw is not None:
         try:
-            atomic_write_json(raw, session.raw_log(outcome, message), indent=None)
+            write_log(raw, session.raw_log(outcome, message))
             view.line(f"feedback stream: {raw}")
         except (OSError, InputError) as exc:
             common.warn(f"could not write {raw}: {exc}")

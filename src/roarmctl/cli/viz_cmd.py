@@ -10,7 +10,6 @@ import typer
 
 from roarmctl.cli import common
 from roarmctl.errors import InfeasibleError, InputError
-from roarmctl.export import EXECLOG_FORMAT
 from roarmctl.viz.formats import picture_format
 
 VIEW_NAMES = ("iso", "top", "front", "side")
@@ -103,13 +102,14 @@ def visualize_path(
 
 def _is_log(source: Path) -> bool:
     """Whether ``source`` is an execution log (read again only on this error path)."""
-    from roarmctl.motion.validate import read_document
+    from roarmctl.device.execlog import is_log
+    from roarmctl.formats import read_document
 
     try:
         data = read_document(source)
     except InputError:
         return False
-    return isinstance(data, dict) and data.get("format") == EXECLOG_FORMAT
+    return is_log(data)
 
 
 def _write_html(source: Path, out: Path, trajectory: Path | None = None) -> None:

@@ -24,7 +24,7 @@ from roarmctl.device import protocol, st3235
 from roarmctl.device.protocol import WireMap, acc_register, spd_register, wire_seconds
 from roarmctl.device.sag import offsets as sag_offsets
 from roarmctl.errors import InputError
-from roarmctl.motion.validate import MIN_SPEED_SCALE
+from roarmctl.formats import MIN_SPEED_SCALE
 
 if TYPE_CHECKING:
     from roarmctl.motion.trajectory import Trajectory

@@ -62,9 +62,10 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
     default the ideal kinematic ones). Errors propagate after the log is written; the stream
     result of a failed run is the exception's ``result`` attribute when it has one.
     """
+    from roarmctl.device.execlog import write_log
     from roarmctl.device.link import Link
     from roarmctl.device.protocol import WireMap
-    from roarmctl.device.streamer import Streamer, write_log
+    from roarmctl.device.streamer import Streamer
 
     if (port is None) == (not sim):
         raise InputError("execute: give exactly one of a port or the simulator")

@@ -30,12 +30,12 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from roarmctl.device import protocol, st3235
+from roarmctl.device.execlog import ExecLog
 from roarmctl.device.feedback import FeedbackRefused, FeedbackValidator, Reading, read_valid
 from roarmctl.device.hold import HOLD_SPD, send_hold
 from roarmctl.device.pose import within_limits
@@ -58,7 +58,6 @@ from roarmctl.device.schedule import (
     strategy_rate,
 )
 from roarmctl.errors import DeviceError, InfeasibleError, Interrupted, signal_name
-from roarmctl.fileio import atomic_write_json
 from roarmctl.robot.frames import device_point, to_frame
 
 if TYPE_CHECKING:
@@ -81,7 +80,6 @@ __all__ = [
     "build_schedule",
     "default_latency",
     "sample",
-    "write_log",
 ]
 
 #: How far behind its goal a servo may be (s): the ST3235's P-only position loop follows a goal moving
@@ -662,21 +660,14 @@ class Streamer:
         info = getattr(self.link, "info", None)
         budget = self.link_budget()
         hold = None if self.hold_info is None else dict(self.hold_info, t=round(self.hold_info["t"] - t0, 6))
-        return {
-            "format": "roarmctl.execlog/1",
-            "port": self.link.port, "firmware": getattr(self.link, "firmware", None), "robot": self.robot.name,
-            "device": None if info is None else info.as_dict(),
-            "strategy": self.cfg.strategy, "rate": self.rate, "speed_scale": self.cfg.speed_scale,
-            "t0_monotonic": t0, "duration": self.schedule[-1].t,
-            "link_budget": budget.as_dict(), "feedback": self.validator.summary(),
-            "waits": dict(self.waits), "paused": [[round(at, 6), round(d, 6)] for at, d in self.paused],
-            "hold": hold, "summary": res.summary(), "notes": self.notes, "final_pose": self.pose_in_frames(),
-            "tracking": [{"t": round(t, 6), "error_m": round(e, 6)} for t, e in self.tracking],
-            "sent": sent, "received": received,
-        } | ({"robot_description": self.traj.robot_description}  # a robot not bundled, carried (robot.bundle)
-             if getattr(self.traj, "robot_description", None) is not None else {})
-
-
-def write_log(path: str | Path, log: dict[str, Any]) -> Path:
-    """Write the execution log atomically (JSON)."""
-    return atomic_write_json(path, log, indent=None)
+        return ExecLog(
+            robot=self.robot.name, port=self.link.port, firmware=getattr(self.link, "firmware", None),
+            device=None if info is None else info.as_dict(), speed_scale=self.cfg.speed_scale, t0_monotonic=t0,
+            robot_description=getattr(self.traj, "robot_description", None),  # a robot not bundled, carried
+            details={
+                "strategy": self.cfg.strategy, "rate": self.rate, "duration": self.schedule[-1].t,
+                "link_budget": budget.as_dict(), "feedback": self.validator.summary(),
+                "waits": dict(self.waits), "paused": [[round(at, 6), round(d, 6)] for at, d in self.paused],
+                "hold": hold, "summary": res.summary(), "notes": self.notes, "final_pose": self.pose_in_frames(),
+                "tracking": [{"t": round(t, 6), "error_m": round(e, 6)} for t, e in self.tracking]},
+            sent=sent, received=received).to_dict()

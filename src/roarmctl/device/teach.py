@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.device import protocol
+from roarmctl.device.execlog import ExecLog
 from roarmctl.device.feedback import FeedbackValidator, Reading, read_valid
 from roarmctl.device.link import LOST_HINT, Link
 from roarmctl.device.pose import within_limits
@@ -355,18 +356,18 @@ class TeachSession:
                 e["feedback"] = r.feedback.raw
             received.append(e)
         info = self.link.info
-        return {
-            "format": "roarmctl.execlog/1", "kind": "teach", "port": self.link.port, "firmware": self.link.firmware,
-            "robot": self.robot.name, "device": None if info is None else info.as_dict(), "speed_scale": 1.0,
-            "t0_monotonic": t0, "outcome": outcome, "message": message,
-            "singularity_margin": self.judge.margin, "warn_factor": NEAR_FACTOR,
-            "feedback": self.validator.summary(), "dropped_lines": self.raw_dropped,
-            "hold": None if self.hold_sent is None else dict(self.hold_sent, t=round(self.hold_sent["t"] - t0, 6)),
-            "events": [{"t": round(t, 4), "text": s} for t, s in self.events],
-            "waypoints": [{"t": round(w.t, 4), "q": [round(float(v), 6) for v in w.q], "action": w.action,
-                           "sigma": round(w.measures.sigma, 6), "flags": w.flags} for w in self.waypoints],
-            "sent": sent, "received": received,
-        }
+        return ExecLog(
+            robot=self.robot.name, port=self.link.port, firmware=self.link.firmware, kind="teach",
+            device=None if info is None else info.as_dict(), speed_scale=1.0, t0_monotonic=t0,
+            details={
+                "outcome": outcome, "message": message,
+                "singularity_margin": self.judge.margin, "warn_factor": NEAR_FACTOR,
+                "feedback": self.validator.summary(), "dropped_lines": self.raw_dropped,
+                "hold": None if self.hold_sent is None else dict(self.hold_sent, t=round(self.hold_sent["t"] - t0, 6)),
+                "events": [{"t": round(t, 4), "text": s} for t, s in self.events],
+                "waypoints": [{"t": round(w.t, 4), "q": [round(float(v), 6) for v in w.q], "action": w.action,
+                               "sigma": round(w.measures.sigma, 6), "flags": w.flags} for w in self.waypoints]},
+            sent=sent, received=received).to_dict()
 
 
 def gripper_index(robot: Robot) -> int:

@@ -21,7 +21,6 @@ if TYPE_CHECKING:
     from roarmctl.robot.model import Robot
 
 FORMATS = ("mcap", "bag", "csv")
-EXECLOG_FORMAT = "roarmctl.execlog/1"
 
 
 def format_for(path: str | os.PathLike) -> str:
@@ -45,19 +44,22 @@ def format_for(path: str | os.PathLike) -> str:
 def load_source(path: str | os.PathLike | Any) -> tuple[str, Any]:
     """Read a ``*.traj.json`` (-> ('trajectory', Trajectory), checked by the one trajectory validator)
     or an execution log (-> ('log', dict))."""
+    from roarmctl.device.execlog import FORMAT as LOG_FORMAT
+    from roarmctl.device.execlog import parse_log
+    from roarmctl.formats import read_document
     from roarmctl.motion.trajectory import FORMAT, Trajectory
-    from roarmctl.motion.validate import parse_log, read_document, validate_trajectory
+    from roarmctl.motion.validate import validate_trajectory
 
     if isinstance(path, Trajectory):  # in memory (the Python API)
         return "trajectory", validate_trajectory(path)
     p = Path(path)
     data = read_document(p)
     kind = data.get("format") if isinstance(data, dict) else None
-    if kind == EXECLOG_FORMAT:
+    if kind == LOG_FORMAT:
         return "log", parse_log(data, str(p))
     if kind == FORMAT:
         return "trajectory", validate_trajectory(data, where=str(p))
-    raise TrajectoryFileError(f"{p}: format {kind!r} is neither '{FORMAT}' nor '{EXECLOG_FORMAT}'",
+    raise TrajectoryFileError(f"{p}: format {kind!r} is neither '{FORMAT}' nor '{LOG_FORMAT}'",
                               "give a file written by 'roarmctl plan' or 'roarmctl execute'")
 
 

@@ -25,9 +25,10 @@ from roarmctl.errors import InfeasibleError, InputError
 from roarmctl.fileio import read_bytes
 from roarmctl.motion.scene import Scene
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
+from roarmctl.plan.schema import ItemSpec, Limits, MoveTask, Plan, PlannerConfig
+from roarmctl.validation import MAX_BYTES
 
 if TYPE_CHECKING:
-    from roarmctl.plan.schema import Plan
     from roarmctl.robot.model import Robot
 
 MODES = ("gripper", "move_to_start", "from_current")
@@ -35,7 +36,6 @@ MODES = ("gripper", "move_to_start", "from_current")
 
 def _plan_for(traj: Trajectory, robot: Robot, q_from: np.ndarray, q_to: np.ndarray) -> Plan:
     """A ``Plan`` with the trajectory's scene, limits and planner: one move from ``q_from`` to ``q_to``."""
-    from roarmctl.plan.schema import ItemSpec, Limits, MoveTask, Plan, PlannerConfig
 
     items = Scene.from_dict(traj.scene or {"items": []}).items
     specs = [ItemSpec(name=i.name, role=i.role, shape=i.shape, pose=i.pose.copy(), size=(i.size[0], i.size[1], i.size[2]),
@@ -107,8 +107,6 @@ def _plan_again(traj: Trajectory, q: np.ndarray) -> Trajectory | None:
     path = Path(str(meta.get("path", "")))
     if not meta.get("sha256") or not path.is_file():
         return None
-    from roarmctl.validation import MAX_BYTES
-
     try:  # the trajectory names this file: read it like a plan (bounded), and only if its hash matches
         data = read_bytes(path, None, MAX_BYTES)
     except InputError:

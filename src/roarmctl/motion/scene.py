@@ -19,20 +19,15 @@ from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal, cast
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
 
 from roarmctl.errors import InputError
+from roarmctl.formats import ROLES, SHAPES, Role, Shape
 from roarmctl.motion.scenefiles import CloudData, MeshData, cloud_data, mesh_data, read_cloud_item, read_mesh_item
 from roarmctl.robot.model import rpy_from_matrix, transform
-
-Role = Literal["table", "obstacle", "object"]
-Shape = Literal["box", "cylinder", "sphere", "mesh", "cloud"]
-ROLES = ("table", "obstacle", "object")
-PRIMITIVES = ("box", "cylinder", "sphere")
-SHAPES = PRIMITIVES + ("mesh", "cloud")
 
 
 @dataclass

@@ -26,19 +26,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.errors import InputError, TrajectoryFileError
+from roarmctl.formats import MAX_DURATION, MAX_POINTS, ROLES, SHAPES, read_document
 from roarmctl.motion.trajectory import FORMAT, Event, Segment, Trajectory
 from roarmctl.plan.schema import FIELD_BOUNDS, PLANNERS
 from roarmctl.robot.bundle import trajectory_robot
 from roarmctl.robot.loader import load_robot
-from roarmctl.validation import Checker, HugeNumber, load_json
+from roarmctl.validation import Checker
 
 if TYPE_CHECKING:
     from roarmctl.motion.trajectory import Trajectory
     from roarmctl.robot.model import Robot
 
-MAX_FILE_BYTES = 256 * 1024 * 1024  # a one-hour trajectory at 100 Hz is about 80 MB
-MAX_POINTS = 1_000_000
-MAX_DURATION = 3600.0  # s; streaming builds one command per tick, so the duration bounds memory
 SAMPLE_RATE_RANGE = (0.1, 10000.0)  # Hz
 MAX_EVENTS = 100_000
 MAX_SCENE_ITEMS = 10_000
@@ -51,19 +49,11 @@ ACC_TOL = 0.05  # relative, on the robot's acceleration limits
 TIME_TOL = 1e-6  # s
 SEGMENT_KINDS = ("free", "cartesian", "gripper", "wait")
 EVENT_KINDS = ("grasp", "release")  # what the planner writes; replanning and the pictures act on them
-ROLES = ("table", "obstacle", "object")
-SHAPES = ("box", "cylinder", "sphere", "mesh", "cloud")
 MAX_MESH_PIECES, MAX_MESH_VERTICES = 256, 2_000_000  # a scene mesh item: convex pieces, vertices of all pieces
 MAX_CLOUD_CELLS = 2_000_000  # a scene cloud item's occupied cells
 
 
 CHECK = Checker(TrajectoryFileError, json=True, bound=math.inf, max_name=MAX_NAME)
-
-
-# --------------------------------------------------------------------------- reading
-def read_document(path: str | Path) -> Any:
-    """The JSON of a trajectory file or execution log, read within ``MAX_FILE_BYTES`` (``roarmctl.validation``)."""
-    return load_json(path, TrajectoryFileError, limit=MAX_FILE_BYTES, hint="the file is damaged; plan it again")
 
 
 # --------------------------------------------------------------------------- the document
@@ -322,49 +312,6 @@ def _mesh_pieces(v: Any, where: str, f: str) -> None:
         if arr.ndim != 2 or arr.shape[1] != 3 or not np.all(np.abs(arr) <= MAX_COORD):
             CHECK.fail(where, f"{f}[{i}].vertices", f"expected rows [x, y, z] of finite numbers within {MAX_COORD:g} m")
         _int_rows(piece.get("faces"), where, f"{f}[{i}].faces", 4 * MAX_MESH_VERTICES, 0, len(verts) - 1)
-
-
-# --------------------------------------------------------------------------- execution logs
-LOG_FORMAT = "roarmctl.execlog/1"
-MAX_LOG_ENTRIES = 10 * MAX_POINTS  # commands sent and lines received
-MIN_SPEED_SCALE = 1e-3  # a run slowed down further would last more than 40 days
-MAX_LOG_TIME = 2 * MAX_DURATION + 600.0  # s, |t| of any entry: the slowest run of the longest trajectory, and its start
-
-
-def parse_log(data: Any, where: str = "execution log") -> dict:
-    """An execution log (``roarmctl.execlog/1``, written by ``roarmctl execute``) checked in the fields
-    an export reads: ``robot``, ``speed_scale`` in (0, 1], ``sent`` and ``received`` lists of entries
-    whose ``t`` (s) are finite, within +-``MAX_LOG_TIME`` and never decreasing (a received entry's ``read_t``, when
-    there, finite and not after its ``t``), commands and feedback as objects of finite numbers. Returns ``data``; raises ``TrajectoryFileError`` naming the field."""
-    CHECK.mapping(data, where, "log")
-    if data.get("format") != LOG_FORMAT:
-        CHECK.fail(where, "format", f"expected '{LOG_FORMAT}', got {CHECK.kind(data.get('format'))}")
-    CHECK.name(data.get("robot"), where, "robot")
-    if data.get("speed_scale") is not None:
-        CHECK.number(data["speed_scale"], where, "speed_scale", lo=MIN_SPEED_SCALE, hi=1.0)
-    for key in ("sent", "received"):
-        entries = data.get(key)
-        if not isinstance(entries, list) or len(entries) > MAX_LOG_ENTRIES:
-            CHECK.fail(where, key, f"expected a list of at most {MAX_LOG_ENTRIES} entries, got {CHECK.kind(entries)}")
-        last = -math.inf
-        inner = "cmd" if key == "sent" else "feedback"
-        for i, e in enumerate(entries):
-            f = f"{key}[{i}]"
-            CHECK.mapping(e, where, f)
-            t = CHECK.number(e.get("t"), where, f"{f}.t", lo=-MAX_LOG_TIME, hi=MAX_LOG_TIME)
-            if t < last:
-                CHECK.fail(where, f"{f}.t", f"{t:g} s is before the entry before it ({last:g} s)", "entries are in time order")
-            last = t
-            if key == "received" and e.get("read_t") is not None:  # when the servos were read: before the line arrived
-                CHECK.number(e["read_t"], where, f"{f}.read_t", lo=-MAX_LOG_TIME, hi=t)
-            body = e.get(inner)
-            if body is None and key == "received":
-                continue
-            CHECK.mapping(body, where, f"{f}.{inner}")
-            for k, v in body.items():
-                if isinstance(v, (int, float, HugeNumber)) and not isinstance(v, bool):
-                    CHECK.number(v, where, f"{f}.{inner}.{k}", lo=-1e6, hi=1e6)
-    return data
 
 
 # --------------------------------------------------------------------------- against the robot

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from roarmctl.device.execlog import ExecLog
 from roarmctl.device.fwmath import firmware_fk, position_to_rad
 from roarmctl.device.protocol import M3_FEEDBACK_KEYS, M3_FIELDS, WireMap
 from roarmctl.device.sag import offsets as sag_offsets
@@ -274,35 +275,33 @@ def run_log(traj: Trajectory, robot: Robot, setup: Setup, rec: Recording, option
               "q": [[_r(v, 6) for v in row] for row in rec.q[::stride]],
               "objects": {n: {"t": [_r(t, 4) for t in rec.track_t], "xyz": [[_r(v, 5) for v in p] for p in xs],
                               "quat": [[_r(v, 6) for v in q] for q in qs]} for n, (xs, qs) in rec.objects.items()}}
-    log = {
-        "format": "roarmctl.execlog/1",
-        "port": "physics", "firmware": "physics", "robot": robot.name,
-        **_description(traj, source),
-        "strategy": options.strategy, "rate": options.rate, "speed_scale": options.speed_scale,
-        "t0_monotonic": 0.0, "duration": _r(traj.duration / options.speed_scale, 6),
-        "summary": {"outcome": "completed" if report["ok"] else "failed",
-                    "message": "" if report["ok"] else _failure(report),
-                    "commands": sum(1 for _t, c, _k in rec.commands if c.get("T") == 102),
-                    "lateness_ms": {"p50": 0.0, "p99": 0.0, "max": 0.0},
-                    "tracking_mm": {"rms": tr["rms_mm"], "max": tr["max_mm"], "samples": len(tracking)},
-                    "final_error_mm": tr["final_mm"]},
-        "notes": list(setup.notes),
-        "final_pose": {"world_m": [_r(v, 6) for v in robot.kin.fk(rec.q[-1])[:3, 3]]},
-        "tracking": tracking, "sent": sent, "received": received,
-        "physics": report | {"tracks": tracks, "scene": traj.scene},
-    }
+    log = ExecLog(
+        robot=robot.name, port="physics", firmware="physics", speed_scale=options.speed_scale, t0_monotonic=0.0,
+        robot_description=_description(traj, source),
+        details={
+            "strategy": options.strategy, "rate": options.rate, "duration": _r(traj.duration / options.speed_scale, 6),
+            "summary": {"outcome": "completed" if report["ok"] else "failed",
+                        "message": "" if report["ok"] else _failure(report),
+                        "commands": sum(1 for _t, c, _k in rec.commands if c.get("T") == 102),
+                        "lateness_ms": {"p50": 0.0, "p99": 0.0, "max": 0.0},
+                        "tracking_mm": {"rms": tr["rms_mm"], "max": tr["max_mm"], "samples": len(tracking)},
+                        "final_error_mm": tr["final_mm"]},
+            "notes": list(setup.notes),
+            "final_pose": {"world_m": [_r(v, 6) for v in robot.kin.fk(rec.q[-1])[:3, 3]]},
+            "tracking": tracking,
+            "physics": report | {"tracks": tracks, "scene": traj.scene}},
+        sent=sent, received=received).to_dict()
     json.dumps(log, allow_nan=False)  # a NaN in a report is a bug: fail here, not in the reader
     return log
 
 
-def _description(traj: Trajectory, source: str | None) -> dict[str, Any]:
+def _description(traj: Trajectory, source: str | None) -> dict[str, Any] | None:
     """The run file's ``robot_description`` (``roarmctl.robot.bundle``): the trajectory's, or the bundle of the
     description ``source`` that the run used instead (``simulate --robot``), so that ``export`` reads the run
-    by itself; nothing for a bundled robot."""
+    by itself; None for a bundled robot."""
     if source is not None:
-        return {} if source in bundled_robots() else {"robot_description": make_bundle(source)}
-    desc = getattr(traj, "robot_description", None)
-    return {} if desc is None else {"robot_description": desc}
+        return None if source in bundled_robots() else make_bundle(source)
+    return getattr(traj, "robot_description", None)
 
 
 def _failure(report: dict[str, Any]) -> str:

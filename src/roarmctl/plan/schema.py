@@ -18,14 +18,13 @@ from typing import Any, NoReturn
 import numpy as np
 
 from roarmctl.errors import PlanFileError, describe_value
+from roarmctl.formats import MAX_DURATION, PRIMITIVES, SHAPES
 from roarmctl.robot.frames import from_frame
 from roarmctl.robot.model import transform
 from roarmctl.validation import Checker, LocatedDict, LocatedList, closest, load_yaml, locate
 
 DICT_NAME = "<plan dict>"  # stands for the file name in errors about a plan given as a dict
 PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
-SHAPES = ("box", "cylinder", "sphere")  # of objects (grasped): primitives
-SCENE_SHAPES = SHAPES + ("mesh", "cloud")  # of the table and obstacles: also meshes and point clouds from files
 MESH_COLLISION = ("convex", "exact")
 
 
@@ -266,7 +265,6 @@ DEFAULT_BOUND = 1e6  # any other number, unless its reader gives a tighter range
 MAX_TASKS = 1000  # tasks in the file, and tasks x cycles
 MAX_CYCLES = 1000
 MAX_ITEMS = 500  # obstacles, and objects
-MAX_DURATION = 3600.0  # s of motion the plan may need (the trajectory validator's limit too)
 
 
 def _bounds(where: str, lo: float | None, hi: float | None) -> tuple[float, float]:
@@ -459,7 +457,7 @@ def _locate_plan(source: dict) -> Any:
 
 def _item_spec(ctx: _Ctx, raw: Any, line: int, where: str, role: str, frames: dict | None = None) -> ItemSpec:
     d = ctx.mapping(raw, line, where, _ITEM_KEYS, required=("shape", "xyz") + (("name",) if role != "table" else ()))
-    shape = ctx.string(d["shape"], d.line_of("shape"), f"{where}.shape", SHAPES if role == "object" else SCENE_SHAPES)
+    shape = ctx.string(d["shape"], d.line_of("shape"), f"{where}.shape", PRIMITIVES if role == "object" else SHAPES)
     xyz = _position(ctx, d["xyz"], d.line_of("xyz"), f"{where}.xyz", frames)
     rpy = ctx.vector(d["rpy"], d.line_of("rpy"), f"{where}.rpy", 3, angle=True) if "rpy" in d else _NO_ROTATION
     spec = ItemSpec(name=str(d.get("name", "table")), role=role, shape=shape, pose=transform(xyz, rpy), line=d.line)

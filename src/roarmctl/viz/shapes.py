@@ -14,13 +14,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from roarmctl.errors import TrajectoryFileError
+from roarmctl.formats import SHAPES
 from roarmctl.robot.model import transform
 
 if TYPE_CHECKING:
     from roarmctl.robot.model import CollisionShape
 
-SHAPES = ("box", "cylinder", "sphere", "mesh", "cloud")
-ROLES = ("table", "obstacle", "object")
 
 
 def _place(points: np.ndarray, pose: np.ndarray) -> np.ndarray:

@@ -20,8 +20,9 @@ from roarmctl.robot.loader import bundled_robots
 from roarmctl.robot.meshes import PACKAGE_PATHS
 
 if TYPE_CHECKING:
+    from roarmctl.formats import Role, Shape
     from roarmctl.motion.collision import CollisionChecker
-    from roarmctl.motion.scene import Role, Scene, SceneItem, Shape
+    from roarmctl.motion.scene import Scene, SceneItem
     from roarmctl.motion.timing import TimedPath
     from roarmctl.plan.schema import ItemSpec, Plan
     from roarmctl.robot.model import Robot
