@@ -19,6 +19,7 @@ from roarmctl.motion.rejection import rejection_cause
 from roarmctl.motion.trajectory import Event
 from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask, WaitTask
 from roarmctl.robot.ik import accepts_pitch, pitch_candidates, solve_ik, solve_ik_near, takes_pitch
+from roarmctl.robot.ik.common import wrap_angle
 from roarmctl.robot.singularity import base_axis_text
 
 if TYPE_CHECKING:
@@ -168,13 +169,37 @@ def _against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_g
                        q: np.ndarray, at: str,
                        g_open: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float | None]:
     """``against_fixed_jaw`` itself (not kept, no note)."""
+    roll = task.roll
+    up = np.array([0.0, 0.0, task.approach_height])
+    first_roll = roll
+    for cheap in (True, False):
+        roll = first_roll
+        grasp, roll, q_settled = _settle_against_jaw(ctx, task, centre, q_grasp, pitch, roll, q, at, g_open, cheap)
+        grasp = jaws.rounded(grasp)
+        if roll is not None and task.roll is None:  # a roll the plan gives is kept as written
+            roll = float(jaws.rounded(roll))
+        (q_chosen, q_above), _ = choose_ik_pitch(ctx, [grasp, grasp + up], pitch, False, roll, q, at, gripper=g_open)
+        # The cheap rounds followed the first answer's branch; the chosen chain must be on it (its jaw offset gives
+        # the same target), else the target is settled again on the chosen branches, as it always was before.
+        if not cheap or float(np.max(np.abs(wrap_angle(q_chosen[ctx.arm] - q_settled[ctx.arm])))) < 1e-3:
+            return q_chosen, q_above, grasp, grasp + up, roll
+    raise AssertionError("unreachable: the second pass returns")
+
+
+def _settle_against_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_grasp: np.ndarray, pitch: float | None,
+                        roll: float | None, q: np.ndarray, at: str, g_open: float,
+                        cheap: bool) -> tuple[np.ndarray, float | None, np.ndarray]:
+    """Rounds of "move the target by the jaw offset at the grasp configuration, solve the IK again" until the target
+    settles (``jaws.ITERATIONS``, ``jaws.SETTLE``): (grasp point, roll, the configuration it settled at).
+
+    ``cheap``: each round solves the grasp alone on the branch of the round before (``solve_ik_near``: no approach
+    point, no collision check; the caller checks the chain it chooses at the end), about a quarter of a chain's
+    ``choose_ik``; otherwise each round chooses the valid grasp-and-approach chain nearest to ``q``."""
     spec = next(o for o in ctx.plan.objects if o.name == task.object)
     width = grasp_width(spec)
     pose = ctx.object_pose[task.object]
-    roll = task.roll
     lift = np.array([0.0, 0.0, task.grasp_offset])
     up = np.array([0.0, 0.0, task.approach_height])
-    grasp = centre + lift
     roll_index = ctx.arm[-1] if takes_pitch(ctx.robot) else None
     grasp = None
     for _ in range(jaws.ITERATIONS):  # until the target settles (jaws.ITERATIONS), then rounded and solved once more
@@ -190,13 +215,18 @@ def _against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_g
         grasp, roll = new_grasp, new_roll
         if settled:
             break
-        (q_grasp, q_above), _ = choose_ik_pitch(ctx, [grasp, grasp + up], pitch, False, roll, q, at, gripper=g_open)
+        if cheap:
+            t0 = time.perf_counter()
+            try:
+                q_grasp = with_value(solve_ik_near(ctx.robot, grasp, q_grasp, pitch=pitch, roll=roll), ctx.gi, g_open)
+                continue
+            except UnreachableError:
+                pass  # the branch left its reach: choose as below, which names why if nothing reaches it
+            finally:
+                ctx.timer.add("ik", t0)
+        (q_grasp, _), _ = choose_ik_pitch(ctx, [grasp, grasp + up], pitch, False, roll, q, at, gripper=g_open)
     assert grasp is not None  # jaws.ITERATIONS > 0
-    grasp = jaws.rounded(grasp)
-    if roll is not None and task.roll is None:  # a roll the plan gives is kept as written
-        roll = float(jaws.rounded(roll))
-    (q_grasp, q_above), _ = choose_ik_pitch(ctx, [grasp, grasp + up], pitch, False, roll, q, at, gripper=g_open)
-    return q_grasp, q_above, grasp, grasp + up, roll
+    return grasp, roll, q_grasp
 
 
 def expand_place(ctx: PlanContext, task: PlaceTask, q: np.ndarray, at: str) -> list[TaskStep]:
