@@ -105,9 +105,10 @@ MAX_DIGITS = 30
 
 
 class _Budget:
-    def __init__(self, tags: dict[str, Callable[[str], Any]] | None = None) -> None:
+    def __init__(self, tags: dict[str, Callable[[str], Any]] | None = None, last_key_wins: bool = False) -> None:
         self.nodes = 0
         self.tags = tags or {}
+        self.last_key_wins = last_key_wins
 
 
 def _short_tag(tag: str) -> str:
@@ -161,7 +162,7 @@ def _construct(node: yaml.Node, loader: yaml.SafeLoader, error: type[InputError]
                 raise error(f"{loader.name}:{key_node.start_mark.line + 1}: a key must be a plain name, not a "
                             f"{'list' if isinstance(key_node, yaml.SequenceNode) else 'mapping'}")
             key = _scalar(key_node, loader, error)
-            if key in out:
+            if key in out and not budget.last_key_wins:
                 raise error(f"{loader.name}:{key_node.start_mark.line + 1}: '{key}' is given twice")
             out[key] = _construct(value_node, loader, error, budget, depth + 1)
             out.lines[key] = key_node.start_mark.line + 1
@@ -313,11 +314,13 @@ SAFE_LOADER = _private_loader()
 
 
 def parse_yaml(text: str, name: str, error: type[InputError] = PlanFileError,
-               tags: dict[str, Callable[[str], Any]] | None = None) -> Any:
+               tags: dict[str, Callable[[str], Any]] | None = None, last_key_wins: bool = False) -> Any:
     """YAML ``text`` (from file ``name``) -> located values within the limits; None for an empty document.
 
     ``tags``: readers of local tags (``"!degrees"`` -> a function of the scalar's text), for the YAML
-    files xacro loads."""
+    files xacro loads. A key given twice in one mapping is refused, unless ``last_key_wins`` (the later
+    value, as PyYAML reads it: for the YAML files xacro loads, where real xacro's reading is the reference;
+    Franka's published ``inertials.yaml`` repeats a key)."""
     deep = _flow_depth_line(text)
     if deep:
         raise error(f"{name}:{deep}: nested more than {MAX_DEPTH} levels deep")
@@ -328,7 +331,7 @@ def parse_yaml(text: str, name: str, error: type[InputError] = PlanFileError,
         node = loader.get_single_node()
         if node is None:
             return None
-        return _construct(node, loader, error, _Budget(tags))
+        return _construct(node, loader, error, _Budget(tags, last_key_wins))
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = f":{mark.line + 1}" if mark else ""
@@ -347,12 +350,13 @@ def parse_yaml(text: str, name: str, error: type[InputError] = PlanFileError,
 
 def load_yaml(path: str | Path, error: type[InputError] = PlanFileError, *, what: str | None = None,
               limit: int = MAX_BYTES, roots: Roots | None = None, empty_ok: bool = False,
-              tags: dict[str, Callable[[str], Any]] | None = None, digest: bool = False) -> Any:
+              tags: dict[str, Callable[[str], Any]] | None = None, digest: bool = False,
+              last_key_wins: bool = False) -> Any:
     """A YAML file -> located values (see ``parse_yaml``), read by ``fileio.read_bytes``.
 
     ``what``: the field that names the file (None for a file named on the command line); ``roots``:
     where the file may lie. An empty file is refused unless ``empty_ok`` (then None). With ``digest``:
-    (values, sha256 hex of the bytes parsed), the file read once.
+    (values, sha256 hex of the bytes parsed), the file read once. ``last_key_wins``: see ``parse_yaml``.
     """
     path = Path(path)
     data = read_bytes(path, what, limit, roots=roots, error=error)
@@ -361,7 +365,7 @@ def load_yaml(path: str | Path, error: type[InputError] = PlanFileError, *, what
     except UnicodeDecodeError as exc:
         line = data[: exc.start].count(b"\n") + 1
         raise error(f"{path}:{line}: not UTF-8 text (byte {exc.start})", "save the file as UTF-8") from None
-    value = parse_yaml(text, str(path), error, tags)
+    value = parse_yaml(text, str(path), error, tags, last_key_wins)
     if value is None and not empty_ok:
         raise error(f"{path}: the file is empty")
     if digest:

@@ -9,7 +9,7 @@ expansion, the functions of the ``xacro`` module where it evaluates and reads:
   tree, the part xacro documents for properties and math: numbers, strings, ``True``/``False``,
   arithmetic (``+ - * / // % **``), comparisons, ``and``/``or``/``not``, ``a if c else b``, property
   names, lists/tuples/dicts written out, indexing, the math functions and constants xacro exposes
-  (``sin``, ``radians``, ``pi``, also as ``math.sin``), ``abs min max round int float str bool len``,
+  (``sin``, ``radians``, ``pi``, also as ``math.sin``), ``abs min max round int float str bool len``, ``dict`` (with keyword arguments too),
   ``xacro.arg(name)`` and ``xacro.load_yaml(file)`` / ``load_yaml(file)`` (a YAML file inside the
   roots, read by ``roarmctl.validation``). Anything else (attribute access, lambda, comprehension,
   f-string, a name starting with ``_``, a call of anything not listed) is refused by name.
@@ -127,8 +127,10 @@ def _float(value: Any = 0.0) -> float:
 
 FUNCTIONS: dict[str, Callable[..., Any]] = {
     "abs": abs, "min": min, "max": max, "round": round, "int": _int, "float": _float, "str": str, "bool": bool,
-    "len": len, **{name: getattr(math, name) for name in MATH_FUNCTIONS},
+    "len": len, "dict": dict, **{name: getattr(math, name) for name in MATH_FUNCTIONS},
 }
+#: The functions that take keyword arguments (``dict(joint_1=0.0, joint_2=0.0)``: Kinova's published gen3.xacro).
+KEYWORD_FUNCTIONS = ("dict",)
 
 
 def _pow(a: Any, b: Any) -> Any:
@@ -361,12 +363,15 @@ class Evaluator:
                       "an include's namespace)")
 
     def _Call(self, node: ast.Call) -> Any:
-        if node.keywords or any(isinstance(a, ast.Starred) for a in node.args):
-            raise Refused("keyword or * arguments are not allowed")
+        if any(isinstance(a, ast.Starred) for a in node.args) or any(k.arg is None for k in node.keywords):
+            raise Refused("* or ** arguments are not allowed")
         func = self._function(node.func)
+        if node.keywords and not any(func is FUNCTIONS[name] for name in KEYWORD_FUNCTIONS):
+            raise Refused(f"keyword arguments are allowed only in {', '.join(f'{n}(...)' for n in KEYWORD_FUNCTIONS)}")
         args = [self._operand(self.eval(a)) for a in node.args]
+        kwargs = {str(k.arg): self._operand(self.eval(k.value)) for k in node.keywords}
         try:
-            return func(*args)
+            return func(*args, **kwargs)
         except Refused:
             raise
         except (ValueError, TypeError, OverflowError, ZeroDivisionError) as exc:
@@ -589,7 +594,8 @@ def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
             return lambda text: float(Evaluator(_no_properties, budget)(text)) * factor
 
         tags = {tag: unit(factor) for tag, factor in YAML_UNITS.items()}
-        return load(path, DescriptionError, what=f"{where}: xacro load_yaml", roots=roots, empty_ok=True, tags=tags)
+        return load(path, DescriptionError, what=f"{where}: xacro load_yaml", roots=roots, empty_ok=True, tags=tags,
+                    last_key_wins=True)
 
     def abs_filename_spec(spec: Any) -> Any:
         """xacro's own, noting the file (``fileio.note_read``): trusted, xacro's ``load_yaml`` opens it itself, and
