@@ -85,6 +85,8 @@ def register(app: typer.Typer) -> None:
 
         A plan with 'start: current' starts where the arm is: give --port (or --sim) to read it.
         """
+        from roarmctl.motion.planning.targets import summary as target_summary
+
         measured: list[str] = []
         result = run_planner(plan, seed, quiet=json_out, current=arm_reader(port, sim, measured))
         result.notes[:0] = measured
@@ -103,6 +105,8 @@ def register(app: typer.Typer) -> None:
             "timings": result.timings,
             "points": len(traj.times),
             "events": [{"time_from_start": e.time, "kind": e.kind, "label": e.label} for e in traj.events],
+            "targets": traj.targets,
+            "targets_summary": target_summary(traj.targets),
             "warnings": result.warnings,
             "notes": result.notes,
         }
@@ -126,6 +130,7 @@ def register(app: typer.Typer) -> None:
         split = ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in result.timings.items())
         table.add_row("planning time", f"{result.planning_time * 1000:.0f} ms ({split})")
         table.add_row("cycle time", f"{traj.duration:.2f} s, {len(traj.blends)} blended joins")
+        table.add_row("targets", target_summary(traj.targets))
         common.console().print(table)
         if result.peaks:
             common.console().print(_peaks_table(result.peaks))

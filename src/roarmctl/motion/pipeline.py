@@ -20,7 +20,7 @@ import numpy as np
 
 from roarmctl.errors import DescriptionError, InfeasibleError, InputError, PlanFileError, PlanningError
 from roarmctl.motion import timing
-from roarmctl.motion.planning import blending, motions, tasks
+from roarmctl.motion.planning import blending, motions, targets, tasks
 from roarmctl.motion.planning.assembly import PartialPlan, assemble, partial
 from roarmctl.motion.planning.context import PlanContext, robot_spec, scene_item
 from roarmctl.motion.planning.grasp import gripper_action, gripper_event
@@ -171,6 +171,8 @@ class Planner:
                     self.progress(step.label, i, len(all_tasks))
                     if step.kind in ("free", "cartesian"):
                         motion = motions.geometry(ctx, step, q)
+                        if chain:
+                            _check_zone(ctx, chain[-1], motion)
                         chain.append(motion)
                         q = motion.wps[-1].copy()
                         if step.open_to is not None:
@@ -199,6 +201,14 @@ class Planner:
             raise
         self.progress("done", len(all_tasks), len(all_tasks))
         traj = assemble(ctx, pieces)
+        traj.targets = targets.target_table(ctx.robot, traj, ctx.targets)
+        if not all(row["reached"] for row in traj.targets):
+            first = next(row for row in traj.targets if not row["reached"])
+            missed = InfeasibleError(f"{ctx.plan.path}: {targets.missed_text(traj.targets)}",
+                                     "a target must be reached (or passed within its zone): report this plan as a bug, "
+                                     "or give the target a zone")
+            missed.partial = PartialPlan(traj, first["position"], first["name"])
+            raise missed
 
         return PlanResult(traj, dict(ctx.timer.t), ctx.warnings, len(traj.segments), int(getattr(ctx.checker, "check_count", 0)),
                           motion_peaks(traj, ctx.robot), ctx.notes)
@@ -222,6 +232,20 @@ class Planner:
             raise PlanningError(f"{ctx.plan.path}: start: the start configuration is invalid: {ctx.checker.explain(q[ctx.arm])}",
                                 "choose another start pose or move the obstacle")
         return q
+
+
+def _check_zone(ctx: PlanContext, prev: UntimedMotion, nxt: UntimedMotion) -> None:
+    """A move target's zone must not reach the next target (the end of the motion after it): else the corner could
+    skip it. Raises ``PlanFileError`` (exit 2) naming the task and its line."""
+    zone = prev.step.zone
+    if zone is None or zone <= 0.0:
+        return
+    gap = float(np.linalg.norm(ctx.robot.kin.fk(nxt.wps[-1])[:3, 3] - ctx.robot.kin.fk(prev.wps[-1])[:3, 3]))
+    if zone > gap:
+        tgt = next((t for t in ctx.targets if t.step == prev.step.label), None)
+        name, field = (tgt.name, tgt.zone_field) if tgt is not None else (prev.step.label, "zone")
+        raise PlanFileError(f"{ctx.plan.path}: {name}: {field} {zone:g} m is larger than the {gap:.4f} m to the next "
+                            f"target ({nxt.step.label})", f"give it a zone of at most {gap:.4f} m, or 0 to reach it")
 
 
 def _at_rest(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> TimedPath:

@@ -13,6 +13,9 @@ The layout follows ROS 2 ``trajectory_msgs/JointTrajectory`` so it exports 1:1:
       "segments": [{"start": s, "end": s, "kind": "free"|"cartesian"|"gripper"|"wait",
                     "label": str}],
       "blends": [s, ...],                      # times where one segment flows into the next without stopping
+      "targets": [{"name": str, "kind": "move"|"grasp"|"release", "position": [m], "distance": m,
+                   "time": s, "zone": m, "reached": bool, "orientation_error": rad (optional),
+                   "joint_error": rad (optional)}],   # how close the TCP comes to each target the plan names
       "payloads": [{"start": s, "end": s, "link": str, "mass": kg, "com": [m] (link frame),
                     "inertia": [[kg m^2]] (about the COM, link axes), "label": str}],  # held objects
       "limits": {"velocity": [rad/s], "acceleration": [rad/s^2], "velocity_scale": f,
@@ -80,6 +83,7 @@ class Trajectory:
     segments: list[Segment] = field(default_factory=list)
     blends: list[float] = field(default_factory=list)  # s: blended joins (velocity continuous, no stop)
     payloads: list[dict[str, Any]] = field(default_factory=list)  # held objects, grasp to release (see the module doc)
+    targets: list[dict[str, Any]] = field(default_factory=list)  # per named target: closest TCP distance, time, zone
     limits: dict[str, Any] = field(default_factory=dict)
     singularity_margin: dict[str, Any] | None = None
     scene: dict[str, Any] = field(default_factory=lambda: {"items": []})
@@ -113,6 +117,8 @@ class Trajectory:
             "segments": [{"start": t9(s.start), "end": t9(s.end), "kind": s.kind, "label": s.label} for s in self.segments],
             "blends": [t9(b) for b in self.blends],
             "payloads": _unsigned_zeros(self.payloads),
+            "targets": [_unsigned_zeros({k: (round(v, 9) if isinstance(v, float) else [round(x, 9) for x in v] if isinstance(v, list) else v)
+                                         for k, v in t.items()}) for t in self.targets],
             "limits": _unsigned_zeros(self.limits),
             "singularity_margin": _unsigned_zeros(self.singularity_margin),
             "scene": _unsigned_zeros(self.scene),

@@ -169,6 +169,8 @@ def parse_document(data: Any, where: str = "trajectory") -> Trajectory:
         CHECK.fail(where, "blends", f"expected a list of at most {MAX_EVENTS} times, got {CHECK.kind(raw_blends)}")
     blends = [CHECK.number(b, where, f"blends[{i}]", lo=-TIME_TOL, hi=duration + TIME_TOL) for i, b in enumerate(raw_blends)]
 
+    targets = _targets(data.get("targets") or [], where, duration)
+
     payloads = data.get("payloads") or []
     if not isinstance(payloads, list) or len(payloads) > MAX_EVENTS:
         CHECK.fail(where, "payloads", f"expected a list of at most {MAX_EVENTS}, got {CHECK.kind(payloads)}")
@@ -223,9 +225,39 @@ def parse_document(data: Any, where: str = "trajectory") -> Trajectory:
     description = data.get("robot_description")  # checked file by file when loaded (robot.bundle)
     if description is not None:
         CHECK.mapping(description, where, "robot_description")
-    return Trajectory(robot=robot, joint_names=names, times=times, events=events, segments=segments, blends=blends, payloads=[dict(p) for p in payloads],
+    return Trajectory(robot=robot, joint_names=names, times=times, events=events, segments=segments, blends=blends, targets=targets, payloads=[dict(p) for p in payloads],
                       limits=dict(limits), singularity_margin=margin, scene={**scene, "items": items}, plan=plan,
                       sample_rate=rate, robot_description=description, **arrays)
+
+
+TARGET_KINDS = ("move", "grasp", "release")
+
+
+def _targets(raw: Any, where: str, duration: float) -> list[dict]:
+    """The per-target table (``Trajectory.targets``): each row's fields checked (distances and zones in m)."""
+    if not isinstance(raw, list) or len(raw) > MAX_EVENTS:
+        CHECK.fail(where, "targets", f"expected a list of at most {MAX_EVENTS}, got {CHECK.kind(raw)}")
+    out = []
+    for i, t in enumerate(raw):
+        f = f"targets[{i}]"
+        CHECK.mapping(t, where, f)
+        for key in ("name", "kind", "position", "distance", "time", "zone", "reached"):
+            if key not in t:
+                CHECK.fail(where, f, f"'{key}' is missing")
+        row = {"name": CHECK.name(t["name"], where, f"{f}.name", empty=True),
+               "kind": CHECK.name(t["kind"], where, f"{f}.kind", choices=TARGET_KINDS),
+               "position": CHECK.numbers(t["position"], 3, where, f"{f}.position", lo=-MAX_COORD, hi=MAX_COORD),
+               "distance": CHECK.number(t["distance"], where, f"{f}.distance", lo=0.0, hi=MAX_COORD),
+               "time": CHECK.number(t["time"], where, f"{f}.time", lo=-TIME_TOL, hi=duration + TIME_TOL),
+               "zone": CHECK.number(t["zone"], where, f"{f}.zone", lo=0.0, hi=MAX_COORD)}
+        for key in ("orientation_error", "joint_error"):
+            if t.get(key) is not None:
+                row[key] = CHECK.number(t[key], where, f"{f}.{key}", lo=0.0, hi=1e6)
+        if not isinstance(t["reached"], bool):
+            CHECK.fail(where, f"{f}.reached", f"expected true or false, got {CHECK.kind(t['reached'])}")
+        row["reached"] = t["reached"]
+        out.append(row)
+    return out
 
 
 def _plan_meta(plan: Any, where: str) -> None:

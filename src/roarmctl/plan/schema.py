@@ -101,6 +101,7 @@ class MoveTask:
     pitch: float | None = None
     pitch_auto: bool = False
     gripper: float | str | None = None  # rad, or "open" / "closed" (the robot's values); None: keep
+    zone: float | None = None  # m the path may pass the target at and flow on (0: reached); None: limits.zone
     line: int = 0
     kind: str = "move"
 
@@ -123,6 +124,7 @@ class Limits:
     max_tcp_speed: float | None = None
     gripper_time: float = 0.6
     blend: bool = True  # flow through pre-grasp points and open the gripper in transit; False: stop at every join
+    zone: float = 0.0  # m: a move target's zone unless it gives its own (0: reached, the TCP within ZONE_REACHED)
 
 
 @dataclass
@@ -260,6 +262,9 @@ FIELD_BOUNDS: dict[str, tuple[float, float]] = {
     # there); beyond 0.1 m it is more likely millimetres written as metres, and a padding the scene cannot
     # leave room for refuses the start or the targets, in words.
     "padding": (0.0, 0.1),
+    # m a move's path may pass its target at and flow on (0: reached): 1 m is beyond any corner of the arms described
+    # here; a zone larger than the way to the next target is refused when planning.
+    "zone": (0.0, 1.0),
 }
 DEFAULT_BOUND = 1e6  # any other number, unless its reader gives a tighter range
 MAX_TASKS = 1000  # tasks in the file, and tasks x cycles
@@ -544,6 +549,11 @@ def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpe
         else:
             secs = body
         return WaitTask(ctx.number(secs, bline, w, lo=0.0), line=bline)
+    if kind in ("pick", "place") and isinstance(body, dict) and "zone" in body:
+        what = "grasp" if kind == "pick" else "release"
+        ctx.fail(body.line_of("zone") if isinstance(body, LocatedDict) else bline, f"{w}.zone",
+                 f"a {kind}'s {what} is always reached (the jaws act there), so it takes no zone",
+                 "leave zone out; the straight approach and retreat are joined by the planner within 1 mm of their line")
     if kind == "pick":
         d = ctx.mapping(body, bline, w, ("object", "approach_height", "pitch", "roll", "gripper_open", "gripper_closed", "grasp_offset",
                                          "squeeze"), ("object",))
@@ -570,7 +580,7 @@ def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpe
         _common_grasp(ctx, d, w, place)
         return place
     if kind == "move":
-        d = ctx.mapping(body, bline, w, ("pose", "joints", "xyz", "pitch", "gripper"))
+        d = ctx.mapping(body, bline, w, ("pose", "joints", "xyz", "pitch", "gripper", "zone"))
         given = [k for k in ("pose", "joints", "xyz") if k in d]
         if len(given) != 1:
             ctx.fail(bline, w, "give exactly one of 'pose' (a named pose), 'joints' (list) or 'xyz' (+ 'pitch')")
@@ -581,6 +591,8 @@ def _task(ctx: _Ctx, raw: Any, line: int, where: str, objects: dict[str, ItemSpe
                 move.gripper = ctx.string(g, d.line_of("gripper"), f"{w}.gripper", ("open", "closed"))
             else:
                 move.gripper = ctx.number(g, d.line_of("gripper"), f"{w}.gripper", angle=True)
+        if "zone" in d:
+            move.zone = ctx.number(d["zone"], d.line_of("zone"), f"{w}.zone")
         if "pose" in d:
             move.pose = ctx.string(d["pose"], d.line_of("pose"), f"{w}.pose", tuple(poses) if poses is not None else None)
         elif "joints" in d:
@@ -707,7 +719,7 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
 
     limits = Limits()
     if "limits" in top:
-        d = ctx.mapping(top["limits"], top.line_of("limits"), "limits", ("velocity_scale", "acceleration_scale", "max_tcp_speed", "gripper_time", "blend"))
+        d = ctx.mapping(top["limits"], top.line_of("limits"), "limits", ("velocity_scale", "acceleration_scale", "max_tcp_speed", "gripper_time", "blend", "zone"))
         for key in ("velocity_scale", "acceleration_scale"):
             if key in d:
                 setattr(limits, key, ctx.number(d[key], d.line_of(key), f"limits.{key}"))
@@ -717,6 +729,8 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
             if not isinstance(d["blend"], bool):
                 ctx.fail(d.line_of("blend"), "limits.blend", f"expected true or false, got {_kind(d['blend'])}")
             limits.blend = d["blend"]
+        if "zone" in d:
+            limits.zone = ctx.number(d["zone"], d.line_of("zone"), "limits.zone")
         if "gripper_time" in d:
             limits.gripper_time = ctx.number(d["gripper_time"], d.line_of("gripper_time"), "limits.gripper_time", lo=0.05, hi=10.0)
 

@@ -86,7 +86,7 @@ def chain_key(ctx: PlanContext, motions: list[UntimedMotion]) -> tuple | None:
         if s.waypoints is not None or s.q_from is not None or s.event is not None or s.kind not in ("free", "cartesian"):
             return None
         line = None if s.line is None else (np.asarray(s.line[0], dtype=float).tobytes(), np.asarray(s.line[1], dtype=float).tobytes())
-        parts.append((s.kind, s.grasp_target, s.open_to, line, m.wps.shape, np.ascontiguousarray(m.wps, dtype=float).tobytes()))
+        parts.append((s.kind, s.grasp_target, s.open_to, s.zone, line, m.wps.shape, np.ascontiguousarray(m.wps, dtype=float).tobytes()))
     return (tuple(parts), payload_key(ctx), ctx.held, ctx.checker._state_key())
 
 
@@ -166,12 +166,18 @@ def blend_join(ctx: PlanContext, a: TimedPiece, bounds: Bounds, a_motions: list[
         limit = min(limit, ia - int(np.ceil(lines[0] / dt - 1e-9)))
     if lines[1] is not None:
         limit = min(limit, int(lines[1] / dt))
+    zone = prev.step.zone  # a target the plan names ends prev: the corner is rounded inside its zone only
+    span = None if zone is None or zone <= 0.0 else zone_limits(ctx, ta, tb, ia, int(np.ceil(bounds[-1][0] / dt - 1e-9)), zone)
+    if span is not None:
+        limit = min(limit, ia + 1 - span[0], span[1] + 1)
     t0 = time.perf_counter()
     try:
-        cornered = corner_move(ctx, ta, tb, ia, bounds, prev, motion, prev_tp, (ia + 1) * dt + tb.duration, lines)
+        cornered = None
+        if zone is None or zone > 0.0:
+            cornered = corner_move(ctx, ta, tb, ia, bounds, prev, motion, prev_tp, (ia + 1) * dt + tb.duration, lines, span)
         if cornered is not None and cornered[0].duration <= (ia + 1 - max(limit, 0)) * dt + tb.duration + 1e-9:
             return corner_piece(a, b, bounds, prev, motion, *cornered)  # no overlap could do better
-        for m in range(limit, 0, -BLEND_STEP):
+        for m in (range(limit, 0, -BLEND_STEP) if zone is None or zone > 0.0 else ()):
             cand = superpose(ta, tb, ia, m)
             if join_samples_ok(ctx, cand, ia + 1 - m, ia, prev, motion):
                 break
@@ -197,7 +203,8 @@ def blend_join(ctx: PlanContext, a: TimedPiece, bounds: Bounds, a_motions: list[
 
 def corner_move(ctx: PlanContext, ta: TimedPath, tb: TimedPath, ia: int, bounds: Bounds, prev: UntimedMotion,
                 motion: UntimedMotion, prev_tp: TimedPath, beat: float,
-                lines: tuple[float | None, float | None]) -> tuple[TimedPath, int, int] | None:
+                lines: tuple[float | None, float | None],
+                span: tuple[int, int] | None = None) -> tuple[TimedPath, int, int] | None:
     """The corner between ``ta`` (ending with the motion ``prev``, its last on-grid sample ``ia``) and ``tb`` (the
     motion ``motion``, timed from rest) cut out and replaced by a time-optimal, jerk-limited move from sample i of
     ``ta`` to sample k of ``tb`` (Ruckig, state to state: position, velocity and acceleration at both ends, all
@@ -213,7 +220,8 @@ def corner_move(ctx: PlanContext, ta: TimedPath, tb: TimedPath, ia: int, bounds:
     ``join_samples_ok`` (every limit, collisions under both motions' states) and that beats ``beat`` (s, the
     superposed result) is returned: (path, i, index of the corner move's last sample). None if none. ``lines``:
     the times (s, in ``ta`` and ``tb``) when ``prev`` and ``motion`` are 1 - LINE_KEEP along their straight lines
-    (None: not a line), as ``blend_join`` found them."""
+    (None: not a line), as ``blend_join`` found them. ``span``: ``zone_limits`` of a target with a zone at the
+    corner (the corner move starts and ends inside the zone), or None (a join the planner made)."""
     from ruckig import DurationDiscretization, InputParameter, Result, Ruckig, RuckigError, Trajectory
 
     dt = SAMPLE_DT
@@ -245,6 +253,8 @@ def corner_move(ctx: PlanContext, ta: TimedPath, tb: TimedPath, ia: int, bounds:
         else:
             bad = first_invalid_under(ctx, motion, ta.q[i_lo:ia + 1][::-1])
             i_lo = i_lo if bad is None else ia + 1 - bad
+    if span is not None:
+        i_lo, k_hi = max(i_lo, span[0]), min(k_hi, span[1])
     if ia <= i_lo or k_hi <= 0:
         return None
     otg, traj, inp = Ruckig(len(arm), dt), Trajectory(len(arm)), InputParameter(len(arm))
@@ -304,6 +314,22 @@ def corner_move(ctx: PlanContext, ta: TimedPath, tb: TimedPath, ia: int, bounds:
         if join_samples_ok(ctx, cand, i, i + steps, prev, motion):
             return cand, i, i + steps
     return None
+
+
+def zone_limits(ctx: PlanContext, ta: TimedPath, tb: TimedPath, ia: int, lo: int, zone: float) -> tuple[int, int]:
+    """Where a blend may round the corner at a target with a ``zone`` (m) that ``ta`` ends at: the first sample of
+    ``ta`` (from ``lo`` to ``ia``) from which its TCP stays within the zone of the target, and the last of ``tb``
+    (started where ``ta`` ends) up to which its TCP stays within it. A blend that leaves ``ta`` and joins ``tb``
+    inside them passes the target within the zone: its first sample is one of ``ta``'s (``ia + 1`` when no
+    sample is inside, -1 likewise for ``tb``)."""
+    point = ctx.robot.kin.fk(ta.q[-1])[:3, 3]
+    near_a = np.linalg.norm(ctx.robot.kin.fk(ta.q[lo:ia + 1])[:, :3, 3] - point, axis=1) <= zone
+    out_a = np.flatnonzero(~near_a)
+    first = lo + (int(out_a[-1]) + 1 if len(out_a) else 0)
+    near_b = np.linalg.norm(ctx.robot.kin.fk(tb.q + (ta.q[-1] - tb.q[0]))[:, :3, 3] - point, axis=1) <= zone
+    out_b = np.flatnonzero(~near_b)
+    last = (int(out_b[0]) if len(out_b) else len(near_b)) - 1
+    return first, last
 
 
 def splice_corner(ta: TimedPath, tb: TimedPath, i: int, k: int, steps: int, traj: ruckig.Trajectory,

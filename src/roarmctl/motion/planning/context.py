@@ -22,6 +22,7 @@ from roarmctl.robot.meshes import PACKAGE_PATHS
 if TYPE_CHECKING:
     from roarmctl.formats import Role, Shape
     from roarmctl.motion.collision import CollisionChecker
+    from roarmctl.motion.planning.targets import Target
     from roarmctl.motion.scene import Scene, SceneItem
     from roarmctl.motion.timing import TimedPath
     from roarmctl.plan.schema import ItemSpec, Plan
@@ -77,6 +78,7 @@ class PlanContext:
         self.chains: Kept[tuple] = Kept(64)  # what blending.time_chain timed, by its motions and world (chain_key)
         self.iks: Kept[list[np.ndarray]] = Kept(256)  # what tasks.choose_ik found, by its targets, q and world
         self.lines: Kept[np.ndarray] = Kept(256)  # what motions.geometry solved along straight lines, by q and the end
+        self.targets: list[Target] = []  # every target the plan names, in order (``planning.targets``)
         self.jaw_targets: Kept[tuple] = Kept(256)  # what tasks.against_fixed_jaw found, by its task, poses and world
 
     def set_state(self, gripper: float | None, grasp_target: str | None = None) -> None:

@@ -40,6 +40,7 @@ class TaskStep:
     grasp_target: str | None = None  # the object the jaws may touch during this step
     open_to: float | None = None  # free motion: the gripper opens to this during it (blended) or right after
     open_label: str = ""
+    zone: float | None = None  # m: a move target the plan names ends this step (0: reached); None: a join the planner made
 
 
 @dataclass

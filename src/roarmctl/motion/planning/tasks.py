@@ -15,6 +15,7 @@ from roarmctl.errors import InfeasibleError, PlanFileError, UnreachableError, Un
 from roarmctl.motion.planning import fixed_jaw as jaws
 from roarmctl.motion.planning.grasp import grasp_closed_q, grasp_width
 from roarmctl.motion.planning.pieces import TaskStep, with_value
+from roarmctl.motion.planning.targets import Target
 from roarmctl.motion.rejection import rejection_cause
 from roarmctl.motion.trajectory import Event
 from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask, WaitTask
@@ -44,8 +45,9 @@ def expand(ctx: PlanContext, task: PickTask | PlaceTask | MoveTask | WaitTask, q
     if isinstance(task, WaitTask):
         return [TaskStep("wait", f"{at}: wait {task.seconds:g} s", duration=task.seconds)]
     if isinstance(task, MoveTask):
-        goal, label = move_goal(ctx, task, q, at)
-        steps = [TaskStep("free", f"{at}: move{label}", q_to=goal)]
+        goal, label, pitch = move_goal(ctx, task, q, at)
+        zone = task.zone if task.zone is not None else ctx.plan.limits.zone
+        steps = [TaskStep("free", f"{at}: move{label}", q_to=goal, zone=zone)]
         g = move_gripper_q(ctx, task.gripper)
         if g is not None and abs(g - q[ctx.gi]) > 1e-9:
             word = {"open": "open", "closed": "close"}.get(task.gripper, "set") if isinstance(task.gripper, str) else "set"
@@ -53,6 +55,7 @@ def expand(ctx: PlanContext, task: PickTask | PlaceTask | MoveTask | WaitTask, q
                 steps = [TaskStep("gripper", f"{at}: {word} gripper", gripper_to=g)]
             else:  # during the move where the jaws are clear (blending), else right after it
                 steps[0].open_to, steps[0].open_label = g, f"{at}: {word} gripper"
+        ctx.targets.append(move_target(ctx, task, goal, pitch, at, steps[0].label, zone))
         return steps
     if isinstance(task, PickTask):
         return expand_pick(ctx, task, q, at)
@@ -76,9 +79,21 @@ def move_gripper_q(ctx: PlanContext, value: float | str | None) -> float | None:
     return float(value)
 
 
-def move_goal(ctx: PlanContext, task: MoveTask, q: np.ndarray, at: str) -> tuple[np.ndarray, str]:
-    """A move's goal configuration (dof,) rad, the gripper as at ``q``, and a label suffix (the pitch chosen)."""
-    label = ""
+def move_target(ctx: PlanContext, task: MoveTask, goal: np.ndarray, pitch: float | None, at: str, step: str,
+                zone: float) -> Target:
+    """The target a move names: its position (m) and the pitch held there, or a joint target's joints and pose."""
+    field = "zone" if task.zone is not None else "limits.zone"
+    if task.xyz is not None:
+        return Target("move", at, step, np.asarray(task.xyz, dtype=float).copy(), zone, pitch=pitch, zone_field=field)
+    t = ctx.robot.kin.fk(goal)
+    return Target("move", at, step, t[:3, 3].copy(), zone, joints=goal[ctx.arm].copy(), rotation=t[:3, :3].copy(),
+                  zone_field=field)
+
+
+def move_goal(ctx: PlanContext, task: MoveTask, q: np.ndarray, at: str) -> tuple[np.ndarray, str, float | None]:
+    """A move's goal configuration (dof,) rad, the gripper as at ``q``, a label suffix (the pitch chosen) and the
+    pitch (rad) its IK held (None: a joint target, or position only)."""
+    label, pitch = "", None
     if task.pose is not None:
         goal = ctx.robot.full_q(ctx.robot.named_poses[task.pose]).copy()
     elif task.joints is not None:
@@ -95,7 +110,7 @@ def move_goal(ctx: PlanContext, task: MoveTask, q: np.ndarray, at: str) -> tuple
         goal[ctx.gi] = q[ctx.gi]
     if not ctx.robot.within_limits(goal):
         raise InfeasibleError(f"{at}: the goal configuration is outside the joint limits")
-    return goal, label
+    return goal, label, pitch
 
 
 def expand_pick(ctx: PlanContext, task: PickTask, q: np.ndarray, at: str) -> list[TaskStep]:
@@ -127,6 +142,7 @@ def expand_pick(ctx: PlanContext, task: PickTask, q: np.ndarray, at: str) -> lis
         TaskStep("cartesian", f"{at}: lift '{task.object}'{lab}", q_to=q_above, line=(grasp, above),
                  pitch=pitch, roll=roll, grasp_target=task.object),
     ]
+    ctx.targets.append(Target("grasp", at, steps[1].label, np.asarray(grasp, dtype=float).copy(), pitch=pitch))
     ctx.pending_pick = (task.object, grasp - centre)
     if jaw_fixed(ctx, task.object):  # the object's centre in the TCP frame, carried to the place
         ctx.held_local = ctx.robot.kin.fk(q_grasp)[:3, :3].T @ (centre - grasp)
@@ -267,6 +283,7 @@ def expand_place(ctx: PlanContext, task: PlaceTask, q: np.ndarray, at: str) -> l
         (q_place, q_above), _ = choose_ik_pitch(ctx, [target, target + up], pitch, False, task.roll, q, at)
         above = target + up
     lab = pitch_label(pitch, task.pitch_auto and pitch is not None)
+    ctx.targets.append(Target("release", at, f"{at}: lower '{name}'{lab}", np.asarray(target, dtype=float).copy(), pitch=pitch))
     return [
         TaskStep("free", f"{at}: transit above the place for '{name}'{lab}", q_to=q_above),
         TaskStep("cartesian", f"{at}: lower '{name}'{lab}", q_to=q_place, line=(above, target), pitch=pitch, roll=task.roll),
