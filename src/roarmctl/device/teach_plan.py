@@ -6,8 +6,8 @@ in order, one ``move: {joints: [...]}`` task each. A grasp or release is a move 
 sets the gripper to the value measured there (``gripper: rad``, as the gripper was when ``g`` was
 pressed), so the replay closes and opens the gripper where the hand did (a grasp at one of ``--plan``'s
 objects is a ``pick`` of it and its release a ``place``: see ``_picks``); the first waypoint, and any
-whose gripper moved by more than ``GRIPPER_MOVED``, set it too (a move sets the gripper after the arm arrives). ``limits.blend`` is false:
-the replay stops at every waypoint instead of rounding it. Waypoints the planner would refuse (inside
+whose gripper moved by more than ``GRIPPER_MOVED``, set it too (a move sets the gripper after the arm arrives). ``limits.blend`` is false and ``limits.zone`` 0 (written
+out): the replay reaches every waypoint and stops there instead of rounding it. Waypoints the planner would refuse (inside
 the singularity margin, in collision, beyond a limit) or that lie within the warning band are flagged
 in a comment above their task.
 """
@@ -71,10 +71,13 @@ def plan_text(robot: Robot, waypoints: list[Waypoint], margin: float, source: An
         tasks.append(TaskText(move_task(np.asarray(w.q)[arm], gripper), comments, w.action))
     limits = dict(plain(doc.get("limits") or {}))
     limits["blend"] = False
+    limits["zone"] = 0.0
     planner = dict(plain(doc.get("planner") or {}))
     planner.setdefault("singularity_margin", float(margin))
     return write_plan_text(robot.name, tasks, header=header, carried=doc, limits=limits, planner=planner,
-                           limits_note="blend: false - stop at every taught waypoint rather than round it")
+                           limits_note="zone: 0, blend: false - every taught waypoint is reached (the arm stops at "
+                                       "each; a taught grasp closes after it arrives); give a move a zone and set "
+                                       "blend: true to let the replay flow past it")
 
 
 def _picks(robot: Robot, waypoints: list[Waypoint], source: Any) -> dict[int, tuple[str, str]]:
