@@ -598,6 +598,39 @@ def test_a_run_viewed_without_its_trajectory_agrees_with_the_cli(pick_place_run,
     assert '"name":"cube"' in text and '"kind":"grasp"' in text
 
 
+def test_page_reads_each_joints_torque_as_a_share_of_its_own_limit(chromium, planned, tmp_path):
+    """plans/payload.yaml holding its 0.2 kg weight: the panel's torque column reads each joint's RNEA torque over
+    that joint's own limit (the M3's differ: 2.94 N m shoulder, 1.47 elbow), the figure the PNG's panel draws."""
+    from roarmctl.robot.dynamics import inverse_dynamics
+    from roarmctl.robot.model import Inertial
+    from roarmctl.viz.data import robot_for
+
+    f, traj = planned["payload"]
+    robot = robot_for(traj)
+    code, out = write_html(tmp_path, f)
+    assert code == 0
+    page, watch = br.open_page(chromium, out.as_uri())
+    try:
+        times = page.evaluate("Array.from(new Float32Array(Uint8Array.from(atob(window.roarmView.data.times), "
+                              "c => c.charCodeAt(0)).buffer))")
+        grasp = next(e for e in traj.events if e.kind == "grasp").time
+        i = int(np.searchsorted(times, grasp + 0.3))
+        page.evaluate(f"window.roarmView.setIndex({i})")
+        rows = page.locator("#joints tbody tr").all()
+        k = sample_at(traj, float(times[i]))
+        (p,) = traj.payloads
+        body = {p["link"]: Inertial(p["mass"], np.array(p["com"]), np.array(p["inertia"]))}
+        tau = inverse_dynamics(robot, traj.positions[k], traj.velocities[k], traj.accelerations[k], payload=body)
+        for j, row in enumerate(rows):
+            cell = row.locator("td").nth(3)
+            text = cell.inner_text()
+            assert text.endswith(" %") and abs(float(text[:-2]) - 100 * tau[j] / robot.effort_limits[j]) <= 0.51
+            assert float(cell.get_attribute("title").split()[0]) == pytest.approx(tau[j], abs=2e-3)
+        assert watch.errors == []
+    finally:
+        page.close()
+
+
 def test_visualize_path_trajectory_option_goes_with_a_page_only(planned, tmp_path, capsys):
     f, _ = planned["pick_place"]
     assert run_cli(["visualize-path", str(f), "-t", str(f), "-o", str(tmp_path / "x.png")]) == 2

@@ -322,8 +322,9 @@ def test_single_sample_trajectory_renders(tmp_path):
 
 
 def test_torque_panel_with_limits_and_blended_joins_marked():
-    """The planned payload example: torque curves are RNEA with the held weight, limits dashed at +-effort,
-    and every blended join is a dotted line in each time plot and a marker on the 3D path."""
+    """The planned payload example: torque curves are RNEA with the held weight, each as a share of its own joint's
+    limit (the M3's limits differ: 2.94 N m on the shoulder, 0.88 on the gripper) with one dashed limit at
+    +-100 %, and every blended join is a dotted line in each time plot and a marker on the 3D path."""
     from roarmctl.motion.pipeline import plan_file
     from roarmctl.robot.dynamics import inverse_dynamics
     from roarmctl.robot.model import Inertial
@@ -341,8 +342,16 @@ def test_torque_panel_with_limits_and_blended_joins_marked():
     body = {p["link"]: Inertial(p["mass"], np.array(p["com"]), np.array(p["inertia"]))}
     assert p["mass"] == pytest.approx(0.2)
     expect = inverse_dynamics(robot, traj.positions[k], traj.velocities[k], traj.accelerations[k], payload=body)
-    assert line.get_ydata()[k] == pytest.approx(expect[robot.joint_index(shoulder)], abs=1e-9)
-    assert sorted(abs(a.get_ydata()[0]) for a in artists(fig, f"taulim:{shoulder}")) == pytest.approx([2.94, 2.94])
+    assert line.get_ydata()[k] == pytest.approx(100 * expect[robot.joint_index(shoulder)] / 2.94, abs=1e-7)
+    assert sorted(a.get_ydata()[0] for a in artists(fig, "taulim")) == pytest.approx([-100.0, 100.0])
+    # every joint's curve peaks at its own peak torque over its own limit, whatever the others' limits
+    from roarmctl.motion.report import joint_torques
+
+    tau = joint_torques(traj, robot)
+    for j, name in enumerate(traj.joint_names):
+        (curve,) = artists(fig, f"tau:{name}")
+        peak = np.max(np.abs(tau[:, j])) / robot.effort_limits[j] * 100
+        assert np.max(np.abs(curve.get_ydata())) == pytest.approx(peak, rel=1e-9)
     assert traj.blends
     for name in ("q", "v", "a", "torque", "speed", "manip"):
         xs = sorted(a.get_xdata()[0] for a in artists(fig, f"blend:{name}"))

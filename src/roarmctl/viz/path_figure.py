@@ -279,39 +279,53 @@ def _axis_for(ax: Axes, data: PathData, j: int, twins: dict, label: str) -> Axes
     return twins[ax]
 
 
-def _draw_torque(ax: Axes, data: PathData) -> None:
-    """Joint torques by RNEA (held objects included) with each joint's limit dashed; the forces of prismatic
-    joints (N) on their own axis."""
-    colors = colormaps["tab10"]
-    ax.set_ylabel("torque\n(N m)")
+def torque_shares(data: PathData) -> np.ndarray | None:
+    """(N, dof) each joint's torque (force for a prismatic joint) as a share of its own limit, in %; NaN for a joint
+    without a finite limit; None without inertial data. One scale for joints whose limits differ (an xArm6's 50 and
+    20 N m): a joint at 18 of 50 N m reads 36 %, never 90 % beside another joint's line."""
     if data.torque is None:
+        return None
+    lim = np.full(data.torque.shape[1], np.inf) if data.torque_limit is None else np.asarray(data.torque_limit, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = 100.0 * data.torque / np.where(np.isfinite(lim) & (lim > 0), lim, np.nan)
+    return share
+
+
+def _draw_torque(ax: Axes, data: PathData) -> None:
+    """Joint torques by RNEA (held objects included), each as a share of its own limit (%, the limit dashed at
+    +-100 %); a joint without a limit in N m (N when prismatic) on a twin axis, dash-dotted."""
+    colors = colormaps["tab10"]
+    share = torque_shares(data)
+    if data.torque is None or share is None:
+        ax.set_ylabel("torque\n(N m)")
         ax.text(0.5, 0.5, "no inertial data in the robot description", transform=ax.transAxes, ha="center", va="center",
                 fontsize=8, color="0.4")
         return
-    top = 0.0
-    twins: dict = {}
+    limited = [j for j in range(len(data.joint_names)) if np.all(np.isfinite(share[:, j]))]
+    if limited:
+        ax.set_ylabel("torque\n(% of limit)")
+        top = max(float(np.max(np.abs(share[:, limited]))), 100.0)
+        for sign in (1, -1):
+            ax.axhline(sign * 100.0, color="0.3", lw=0.9, ls="--", alpha=0.75, gid="taulim")
+        ax.set_ylim(-top * 1.08, top * 1.08)
+    else:
+        ax.set_ylabel("torque\n(N m)")
+    twin = None
     for j, name in enumerate(data.joint_names):
         c = colors(j % 10)
-        if data.prismatic is not None and data.prismatic[j]:
-            tw = _axis_for(ax, data, j, twins, "force (N),\nprismatic")
-            tw.plot(data.times, data.torque[:, j], color=c, lw=1.1, ls="-.", gid=f"tau:{name}")
-            lim = None if data.torque_limit is None else data.torque_limit[j]
-            if lim is not None and np.isfinite(lim):
-                for sign in (1, -1):
-                    tw.axhline(sign * lim, color=c, lw=0.9, ls="--", alpha=0.75, gid=f"taulim:{name}")
+        if j in limited:
+            ax.plot(data.times, share[:, j], color=c, lw=1.1, gid=f"tau:{name}")
             continue
-        ax.plot(data.times, data.torque[:, j], color=c, lw=1.1, gid=f"tau:{name}")
-        top = max(top, float(np.max(np.abs(data.torque[:, j]))))
-        lim = None if data.torque_limit is None else data.torque_limit[j]
-        if lim is not None and np.isfinite(lim):
-            for sign in (1, -1):
-                ax.axhline(sign * lim, color=c, lw=0.9, ls="--", alpha=0.75, gid=f"taulim:{name}")
-    finite = [] if data.torque_limit is None else [v for j, v in enumerate(data.torque_limit) if np.isfinite(v)
-                                                   and (data.prismatic is None or not data.prismatic[j])]
-    if finite:  # show the largest torque and the limits near it, not every far-away limit
-        span = max(top * 1.25, min(v for v in finite if v >= top) if any(v >= top for v in finite) else top * 1.25)
-        ax.set_ylim(-span * 1.05, span * 1.05)
-    ax.set_title("dashed: joint torque limit; dotted orange: blended joins", fontsize=8, loc="right", pad=2)
+        target = ax
+        if limited or (data.prismatic is not None and data.prismatic[j]):
+            if twin is None:
+                twin = ax.twinx()
+                twin.set_ylabel("no limit:\nN m (N prismatic)", fontsize=8)
+                twin.tick_params(labelsize=7)
+            target = twin
+        target.plot(data.times, data.torque[:, j], color=c, lw=1.1, ls="-." if target is twin else "-", gid=f"tau:{name}")
+    title = "each joint's torque as a share of its own limit (dashed)" if limited else "joint torque (no limits given)"
+    ax.set_title(title + "; dotted orange: blended joins", fontsize=8, loc="right", pad=2)
 
 
 def draw_time_plots(axes: Sequence[Axes], data: PathData) -> None:

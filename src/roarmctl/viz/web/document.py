@@ -146,7 +146,7 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
     ``notes``: lines shown under the title (e.g. what a run's log says).
     """
     from roarmctl.motion.clearance import clearance
-    from roarmctl.viz.path_figure import EVENT_COLOR, ROLE_STYLE, describe
+    from roarmctl.viz.path_figure import EVENT_COLOR, ROLE_STYLE, describe, torque_shares
 
     robot = robot if robot is not None else robot_for(traj)
     data = path_data(traj, robot)
@@ -219,6 +219,7 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
     if failure is not None:
         title += f" — PLANNING FAILED at {failure.label}"
     nearest = np.where(np.isfinite(clear.distance), clear.distance, -1.0)
+    shares = torque_shares(data)
     return {
         "format": FORMAT,
         "title": title,
@@ -238,6 +239,9 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         "colors": base64.b64encode(colors.tobytes()).decode("ascii"),
         "color_stops": stops,
         "sigma_min": _f32(data.sigma_min[idx]),
+        # (n, dof) N m (N prismatic) by RNEA and as % of each joint's own limit (NaN: no limit), as the PNG draws them
+        "torque": None if data.torque is None else _f32(data.torque[idx]),
+        "torque_share": None if shares is None else _f32(shares[idx]),
         "clearance": _f32(nearest),
         "nearest_item": [int(v) for v in clear.item],
         "nearest_part": [int(v) for v in clear.part],

@@ -19,6 +19,7 @@
   const T = f32(D.times), Q = f32(D.q), TCP = f32(D.tcp), SPEED = f32(D.speed), SIGMA = f32(D.sigma_min);
   const CLEAR = f32(D.clearance), POSES = f32(D.poses), COLORS = bytes(D.colors);
   const L = D.links.length, DOF = D.joint_names.length;
+  const TORQUE = D.torque ? f32(D.torque) : null, SHARE = D.torque_share ? f32(D.torque_share) : null;
   const GHOST = D.ghost ? { poses: f32(D.ghost.poses), q: f32(D.ghost.q), error: f32(D.ghost.error), tcp: f32(D.ghost.tcp) } : null;
 
   // ------------------------------------------------------------------ renderer, camera, lights
@@ -265,7 +266,7 @@
   }
   const jointCells = D.joint_names.map((name, j) => {
     const tr = document.createElement('tr');
-    const cells = [0, 1, 2].map(() => document.createElement('td'));
+    const cells = [0, 1, 2, 3].map(() => document.createElement('td'));
     cells[0].textContent = name;
     for (const c of cells) tr.appendChild(c);
     $('joints').tBodies[0].appendChild(tr);
@@ -304,6 +305,12 @@
       const v = Q[i * DOF + j], cells = jointCells[j];
       if (D.joint_units[j] === 'm') { cells[1].textContent = (v * 1000).toFixed(1) + ' mm'; cells[2].textContent = ''; }
       else { cells[1].textContent = v.toFixed(4) + ' rad'; cells[2].textContent = (v * 180 / Math.PI).toFixed(1) + '°'; }
+      // the torque as a share of this joint's own limit (as the PNG's panel); N m where the joint has no limit
+      const tau = TORQUE ? TORQUE[i * DOF + j] : NaN, share = SHARE ? SHARE[i * DOF + j] : NaN;
+      const unit = D.joint_units[j] === 'm' ? ' N' : ' N m';
+      cells[3].textContent = Number.isFinite(share) ? share.toFixed(0) + ' %' : (Number.isFinite(tau) ? tau.toFixed(2) + unit : '—');
+      cells[3].title = Number.isFinite(tau) ? tau.toFixed(3) + unit : '';
+      cells[3].className = Number.isFinite(share) && Math.abs(share) >= 100 ? 'warn' : '';
     }
   }
 
