@@ -27,16 +27,16 @@ def layer_table() -> list[list[str]]:
     text = (ROOT / "docs" / "design.md").read_text()
     section = text.split("## Layers and their order", 1)[1].split("\n## ", 1)[0]
     rows = [line for line in section.splitlines() if re.match(r"\|\s*\d+\s*\|", line)]
-    return [re.findall(r"`(roarmctl(?:\.\w+)?)`", row.split("|")[2]) for row in rows]
+    return [re.findall(r"`(roarmctl(?:\.\w+)*)`", row.split("|")[2]) for row in rows]
 
 
 LAYERS = layer_table()
 
 
 def layer_of(module: str) -> int:
-    """The index of the layer a module belongs to (its own entry, or its top-level package's)."""
+    """The index of the layer a module belongs to (its own entry, or its closest package's)."""
     parts = module.split(".")
-    for depth in (2, 1):
+    for depth in range(len(parts), 0, -1):
         name = ".".join(parts[:depth])
         for i, names in enumerate(LAYERS):
             if name in names:

@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from roarmctl.motion.validate import load_trajectory
-from roarmctl.plan.schema import PickTask, PlaceTask, load_plan
+from roarmctl.plan.schema import load_plan
+from roarmctl.plan.types import PickTask, PlaceTask
 from roarmctl.robot.loader import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]

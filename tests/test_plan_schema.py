@@ -8,7 +8,8 @@ import pytest
 from clirun import roarmctl
 
 from roarmctl.errors import PlanFileError
-from roarmctl.plan.schema import PickTask, PlaceTask, load_plan
+from roarmctl.plan.schema import load_plan
+from roarmctl.plan.types import PickTask, PlaceTask
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "plans" / "pick_place.yaml"

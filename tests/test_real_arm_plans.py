@@ -15,7 +15,7 @@ from roarmctl.errors import InfeasibleError, InputError, UnreachableError
 from roarmctl.motion.collision import CollisionChecker
 from roarmctl.motion.pipeline import plan_file
 from roarmctl.motion.scene import Scene
-from roarmctl.plan.schema import PlannerConfig
+from roarmctl.motion.options import PlannerConfig
 from roarmctl.robot.frames import from_frame, get_frame
 from roarmctl.robot.ik import pitch_candidates, solve_ik, tool_pitch
 from roarmctl.robot.loader import load_robot
@@ -146,7 +146,8 @@ def test_move_with_gripper_ends_where_it_started(tmp_path):
 
 def test_bundled_plans_end_where_they_start():
     root = Path(__file__).resolve().parents[1] / "plans"
-    from roarmctl.plan.schema import MoveTask, load_plan
+    from roarmctl.plan.schema import load_plan
+    from roarmctl.plan.types import MoveTask
 
     for p in sorted(root.glob("*.yaml")):
         plan = load_plan(p)

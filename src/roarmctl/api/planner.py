@@ -28,12 +28,14 @@ import numpy.typing as npt
 
 from roarmctl.api.scene import Scene
 from roarmctl.errors import REJECTED_AS, InputError, PlanningError, UnreachableError, rejection
+from roarmctl.motion.options import Limits, PlannerConfig
 from roarmctl.motion.planning import motions
 from roarmctl.motion.planning.assembly import assemble
 from roarmctl.motion.planning.context import PlanContext
 from roarmctl.motion.planning.pieces import TaskStep, UntimedMotion
 from roarmctl.motion.rejection import rejection_cause
-from roarmctl.plan.schema import FIELD_BOUNDS, Limits, Plan, PlannerConfig
+from roarmctl.plan.schema import FIELD_BOUNDS
+from roarmctl.plan.types import Plan
 from roarmctl.robot.ik import solve_ik
 from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import Robot, rpy_from_matrix

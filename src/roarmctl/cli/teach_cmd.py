@@ -21,6 +21,7 @@ except ImportError:  # pragma: no cover - Windows
 from roarmctl.cli import common, signals
 from roarmctl.errors import DeviceError, InputError, Interrupted, signal_name
 from roarmctl.fileio import check_output_file
+from roarmctl.motion.options import PlannerConfig
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -29,7 +30,7 @@ if TYPE_CHECKING:
     from rich.panel import Panel
 
     from roarmctl.device.teach import Frame, Judge, TeachSession
-    from roarmctl.plan.schema import Plan
+    from roarmctl.plan.types import Plan
     from roarmctl.robot.model import Robot
 
 KEYS_HELP = "Enter record a waypoint · g grasp/release here · u undo · s save · q quit"
@@ -65,7 +66,7 @@ def teach(
     from roarmctl.device.teach import SURPRISES, Judge, TeachSession
     from roarmctl.motion.pipeline import robot_spec
     from roarmctl.motion.planning.context import scene_item
-    from roarmctl.plan.schema import PlannerConfig, load_plan
+    from roarmctl.plan.schema import load_plan
     from roarmctl.robot.loader import load_robot
 
     if (port is None) == (not sim):

@@ -23,9 +23,10 @@ import numpy as np
 
 from roarmctl.errors import InfeasibleError, InputError
 from roarmctl.fileio import read_bytes
+from roarmctl.motion.options import Limits, PlannerConfig
 from roarmctl.motion.scene import Scene
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
-from roarmctl.plan.schema import ItemSpec, Limits, MoveTask, Plan, PlannerConfig
+from roarmctl.plan.types import ItemSpec, MoveTask, Plan
 from roarmctl.validation import MAX_BYTES
 
 if TYPE_CHECKING:

@@ -14,13 +14,14 @@ from roarmctl.motion.planning.pieces import SAMPLE_DT, TimedPiece
 from roarmctl.motion.planning.tasks import where
 from roarmctl.motion.timing import TimedPath
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
-from roarmctl.plan.schema import DICT_NAME, MoveTask, PickTask, PlaceTask
+from roarmctl.plan.schema import DICT_NAME
+from roarmctl.plan.types import MoveTask, PickTask, PlaceTask
 from roarmctl.robot.bundle import make_bundle
 from roarmctl.robot.loader import bundled_robots
 
 if TYPE_CHECKING:
     from roarmctl.motion.planning.context import PlanContext
-    from roarmctl.plan.schema import WaitTask
+    from roarmctl.plan.types import WaitTask
 
 
 @dataclass

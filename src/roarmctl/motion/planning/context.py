@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from roarmctl.motion.planning.targets import Target
     from roarmctl.motion.scene import Scene, SceneItem
     from roarmctl.motion.timing import TimedPath
-    from roarmctl.plan.schema import ItemSpec, Plan
+    from roarmctl.plan.types import ItemSpec, Plan
     from roarmctl.robot.model import Robot
 
 

@@ -31,7 +31,7 @@ from roarmctl.robot.dynamics import inverse_dynamics
 
 if TYPE_CHECKING:
     from roarmctl.motion.planning.context import PlanContext
-    from roarmctl.plan.schema import ItemSpec, PickTask
+    from roarmctl.plan.types import ItemSpec, PickTask
 
 # m: the TCP this near the grasp (release) pose counts as there: the moving jaw may already be inside the padding
 # of the object while the arm settles (arrives) or starts to leave (a tenth of a millimetre, far below what the

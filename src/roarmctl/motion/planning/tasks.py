@@ -18,7 +18,7 @@ from roarmctl.motion.planning.pieces import TaskStep, with_value
 from roarmctl.motion.planning.targets import Target
 from roarmctl.motion.rejection import rejection_cause
 from roarmctl.motion.trajectory import Event
-from roarmctl.plan.schema import MoveTask, PickTask, PlaceTask, WaitTask
+from roarmctl.plan.types import MoveTask, PickTask, PlaceTask, WaitTask
 from roarmctl.robot.ik import accepts_pitch, pitch_candidates, solve_ik, solve_ik_near, takes_pitch
 from roarmctl.robot.ik.common import wrap_angle
 from roarmctl.robot.singularity import base_axis_text
