@@ -114,7 +114,7 @@ def test_bad_zones_exit_2_with_one_line_naming_task_and_line(tmp_path, task, mes
 
 
 def test_a_default_zone_too_large_names_limits_zone(tmp_path):
-    r, out = plan(tmp_path, six_moves("{zone: 0.1}"))
+    r, _ = plan(tmp_path, six_moves("{zone: 0.1}"))
     assert r.returncode == 2
     assert "task 1 (move, line 7): limits.zone 0.1 m is larger than the 0.0800 m to the next target" in r.stdout + r.stderr
 
@@ -152,8 +152,30 @@ def test_joint_targets_are_reached_within_a_milliradian(tmp_path, roarm):
 
 def test_the_table_in_the_trajectory_file_is_checked_when_read(tmp_path):
     r, out = plan(tmp_path, six_moves())
+    assert r.returncode == 0, r.stderr
     doc = json.loads(out.read_text())
     doc["targets"][2]["distance"] = -1.0
     out.write_text(json.dumps(doc))
     bad = roarmctl("export", str(out), "-o", str(tmp_path / "x.csv"))
     assert bad.returncode == 2 and "targets[2].distance" in bad.stderr, bad.stderr
+
+
+def test_the_png_marks_each_target_with_its_miss(tmp_path, roarm):
+    """visualize-path's figure: one cross per target at its position and a line from it to the TCP at its closest
+    sample, as long as the table's distance, labelled with it (zone 30 mm: some corners are rounded)."""
+    pytest.importorskip("matplotlib")
+    from roarmctl.viz.data import path_data
+    from roarmctl.viz.path_figure import render_path
+
+    r, out = plan(tmp_path, six_moves("{zone: 0.03}", {1: 0.0, 4: 0.0}))
+    assert r.returncode == 0, r.stderr
+    traj = load_trajectory(out)
+    fig = render_path(path_data(traj, roarm), view="iso", size=(12, 8))
+    texts = [t.get_text() for t in fig.findobj(lambda a: (a.get_gid() or "").startswith("label:"))]
+    for k, row in enumerate(traj.targets):
+        (line,) = [a for a in fig.findobj(lambda a, k=k: a.get_gid() == f"missline:{k}")]
+        xs, ys, zs = line.get_data_3d()
+        assert np.linalg.norm([xs[1] - xs[0], ys[1] - ys[0], zs[1] - zs[0]]) == pytest.approx(row["distance"], abs=1e-6)
+        assert [xs[0], ys[0], zs[0]] == pytest.approx(SIX[k], abs=1e-9)
+        assert f"{row['distance'] * 1e3:.1f} mm" + (" (zone 30)" if row["zone"] else "") in texts
+    assert len([a for a in fig.findobj(lambda a: (a.get_gid() or "").startswith("miss:"))]) == 6

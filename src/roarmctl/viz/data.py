@@ -79,6 +79,7 @@ class PathData:
     torque: np.ndarray | None = None  # (N, dof) N m by RNEA, held objects included; None without inertial data
     torque_limit: np.ndarray | None = None  # (dof,) N m, inf where none
     blends: list[float] = field(default_factory=list)  # s: blended joins
+    targets: list[dict] = field(default_factory=list)  # the trajectory's per-target table (Trajectory.targets)
     events: list[EventMark] = field(default_factory=list)
     key_poses: list[KeyPose] = field(default_factory=list)
     arm_segments: list[tuple[int, int]] = field(default_factory=list)
@@ -246,6 +247,7 @@ def path_data(traj: Trajectory, robot: Robot) -> PathData:
         torque=torque,
         torque_limit=None if robot.effort_limits is None else np.asarray(robot.effort_limits, dtype=float),
         blends=[float(b) for b in traj.blends],
+        targets=[dict(t) for t in traj.targets],
         events=events,
         key_poses=key_poses,
         arm_segments=arm_segments(robot),

@@ -134,6 +134,19 @@ def _bounds(data: PathData) -> np.ndarray:
     return np.stack([lo - pad, hi + pad])
 
 
+def _draw_targets(ax: Axes3D, data: PathData, labels: list[Label]) -> None:
+    """Each target the plan names (the trajectory's table): a cross at it, a line from it to the TCP at its closest
+    sample, and its miss in mm (red when outside its zone; ``zone`` shown when it has one)."""
+    for k, row in enumerate(data.targets):
+        p = np.asarray(row["position"], dtype=float)
+        i = int(np.clip(np.searchsorted(data.times, row["time"] - 1e-9), 0, len(data.tcp) - 1))
+        color = "#2ca02c" if row["reached"] else "#d62728"
+        ax.scatter(*p, s=46, marker="+", color=color, linewidth=1.4, depthshade=False, zorder=9, gid=f"miss:{k}")
+        ax.plot(*np.transpose([p, data.tcp[i]]), color=color, lw=1.0, zorder=9, gid=f"missline:{k}")
+        text = f"{row['distance'] * 1e3:.1f} mm" + (f" (zone {row['zone'] * 1e3:.0f})" if row["zone"] > 0 else "")
+        labels.append(Label(p, text, color, 7.0, "normal", priority=2))
+
+
 def _segments(points: np.ndarray) -> np.ndarray:
     return np.stack([points[:-1], points[1:]], axis=1)
 
@@ -193,6 +206,8 @@ def draw_scene_3d(ax: Axes3D, data: PathData, view: str) -> tuple[Normalize, Col
         m.set_gid(f"target:{e.kind}")
         labels.append(Label(e.target, e.label or e.kind, c, 8.5, "bold", priority=0))
 
+    _draw_targets(ax, data, labels)
+
     lo, hi = _bounds(data)
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
@@ -230,6 +245,8 @@ def draw_scene_3d(ax: Axes3D, data: PathData, view: str) -> tuple[Normalize, Col
     ]
     if data.blends:
         handles.append(Line2D([], [], ls="", marker="D", color="#ff7f0e", mec="k", ms=5, label="blended join (no stop)"))
+    if data.targets:
+        handles.append(Line2D([], [], ls="", marker="+", color="#2ca02c", mew=1.4, label="target: miss (mm)"))
     for kind in dict.fromkeys(e.kind for e in data.events):
         handles.append(Line2D([], [], ls="", marker=EVENT_MARKER.get(kind, "x"), color=EVENT_COLOR.get(kind, "k"),
                               mec="k", ms=8, label=f"{kind} target"))
