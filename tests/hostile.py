@@ -7,6 +7,7 @@ The code-execution payload is real: under ``--trust-xacro`` (xacro's own evaluat
 
 from __future__ import annotations
 
+import builtins
 import json
 import math
 import os
@@ -162,3 +163,81 @@ def execlog_doc(robot: str = "roarm_m3_pro", n: int = 20) -> dict:
     return {"format": "roarmctl.execlog/1", "port": "sim", "firmware": "sim", "robot": robot, "strategy": "stream",
             "rate": 50.0, "speed_scale": 1.0, "t0_monotonic": 0.0, "duration": 0.02 * n, "summary": {},
             "notes": [], "tracking": [], "sent": sent, "received": received}
+
+
+# --------------------------------------------------------------------------- every allowed xacro function
+#: Property values the table below calls functions with (built once: making them is not what is tested).
+def table_properties() -> dict:
+    from roarmctl.robot.xacro_safe import MAX_INT_BITS, MAX_ITEMS, MAX_STR
+
+    return {"big_i": 2 ** MAX_INT_BITS - 1, "big_s": "a" * MAX_STR, "spaces": "a " * (MAX_STR // 2),
+            "big_l": [0.5] * (MAX_ITEMS // 10), "pairs": [[0, 1]] * 1000}
+
+
+#: Arguments as an attacker writes them: extreme integers (digits, exponents, shifts), floats at the ends of
+#: their range, the largest strings and lists a value may be, empty and odd types.
+HOSTILE_ARGS = ("0", "-1", "10**9", "-10**9", "2**62", "-2**62", "big_i", "-big_i", "1e308", "-1e308", "5e-324",
+                "inf", "-inf", "nan", "''", "'1'*80", "'9'*81", "big_s", "spaces", "[]", "big_l", "pairs",
+                "{'a': 1}", "True", "None")
+#: The ones that cost time to pass around (sized at each use): put beside one benign argument only.
+BIG = ("big_s", "spaces", "big_l", "pairs")
+#: Ordinary arguments the hostile one is put beside.
+BENIGN_ARGS = ("1", "2.5", "'a b'", "[1.0, 2.0]")
+#: The numeric ones, tried in every pair (``round(1, -10**9)``, ``ldexp(1e308, 10**9)``).
+NUMERIC_ARGS = ("0", "-1", "10**9", "-10**9", "2**62", "-2**62", "big_i", "-big_i", "1e308", "-1e308", "5e-324", "inf",
+                "-inf", "nan")
+
+
+def hostile_calls() -> list[str]:
+    """Expressions calling every allowed function and string method with hostile arguments: one to three
+    arguments, a hostile one at each place beside benign ones, and every pair of numeric extremes."""
+    from roarmctl.robot.xacro_safe import FUNCTIONS, STR_METHODS
+
+    arg_lists: list[tuple[str, ...]] = [()]
+    arg_lists += [(h,) for h in HOSTILE_ARGS + BENIGN_ARGS]
+    arg_lists += [(h, b) for h in HOSTILE_ARGS for b in BENIGN_ARGS if h not in BIG or b == "1"]
+    arg_lists += [(b, h) for h in HOSTILE_ARGS for b in BENIGN_ARGS if h not in BIG or b == "1"]
+    arg_lists += [(a, b) for a in NUMERIC_ARGS for b in NUMERIC_ARGS]
+    arg_lists += [("' '", h, "1") for h in HOSTILE_ARGS] + [("'a'", "'b'", h) for h in HOSTILE_ARGS]
+    calls = [f"{name}({', '.join(args)})" for name in FUNCTIONS for args in arg_lists]
+    owners = ("'a b a'", "big_s", "spaces", "''")
+    calls += [f"{owner}.{name}({', '.join(args)})" for name in STR_METHODS for owner in owners for args in arg_lists
+              if len(args) < 2 or owner == "'a b a'"]
+    return calls
+
+
+def evaluate_calls(calls: list[str]) -> dict:
+    """Each call evaluated with a fresh budget: {"refused": n, "answered": n, "other": [call: exception]}, and
+    every answer compared with Python's own (``differs``) where Python answers in bounded work too."""
+    from roarmctl.robot.xacro_safe import Budget, Evaluator, Refused
+
+    props = table_properties()
+    tally: dict = {"refused": 0, "answered": 0, "other": [], "differs": []}
+    for expr in calls:
+        try:
+            value = Evaluator(lambda n: props[n], Budget())(expr)
+        except Refused:
+            tally["refused"] += 1
+            continue
+        except Exception as exc:  # noqa: BLE001 - reported by the test
+            tally["other"].append(f"{expr}: {type(exc).__name__}: {exc}")
+            continue
+        tally["answered"] += 1
+        try:
+            expected = eval(expr, {"__builtins__": {}}, {**props, **_python_names()})  # noqa: S307 - our own table
+        except Exception:  # noqa: BLE001 - ours answered where Python refuses: a difference
+            expected = "<python refused>"
+        if repr(value) != repr(expected):
+            tally["differs"].append(f"{expr}: {str(value)[:60]} != {str(expected)[:60]}")
+    return tally
+
+
+def _python_names() -> dict:
+    import math as m
+
+    from roarmctl.robot.xacro_safe import MATH_FUNCTIONS
+
+    from roarmctl.robot.xacro_safe import FUNCTIONS
+
+    return {**{n: getattr(builtins, n) for n in FUNCTIONS if n not in MATH_FUNCTIONS}, "inf": m.inf, "nan": m.nan,
+            **{n: getattr(m, n) for n in MATH_FUNCTIONS}}

@@ -34,7 +34,8 @@ expressions and ``$(...)`` to xacro itself: only for files whose author you trus
 from __future__ import annotations
 
 import ast
-import glob as _glob
+import fnmatch
+import itertools
 import math
 import operator
 import os
@@ -57,6 +58,7 @@ MAX_INCLUDES = 1000  # files included
 MAX_INCLUDE_DEPTH = 40  # includes within includes (a file including itself stops here)
 MAX_MOVES = 5_000_000  # list operations of replacing a macro call by its body (minidom's are linear in the siblings)
 MAX_FILE_BYTES = 8 * 1024 * 1024  # one xacro file or included file
+MAX_GLOB_ENTRIES = 10_000  # files and folders one include pattern may look at (``/proc/*/root/*/...`` never ends)
 #: Values an expression may produce.
 MAX_INT_BITS = 256
 MAX_STR = 1024 * 1024
@@ -125,12 +127,37 @@ def _float(value: Any = 0.0) -> float:
     return float(value)
 
 
+#: Digits ``round`` may keep or drop (``round(x, n)``, ``|n|``): a float has no digit past 330 (1e308 and 17
+#: digits; ``round(1.5, -400)`` is 0.0) and an integer of ``MAX_INT_BITS`` bits 78. ``round(1, -10**9)`` would
+#: compute ``10**(10**9)`` before it answers (minutes of work inside one allowed call).
+MAX_ROUND_DIGITS = 400
+
+
+def _round(number: Any, ndigits: Any = None) -> Any:
+    if isinstance(ndigits, int) and not -MAX_ROUND_DIGITS <= ndigits <= MAX_ROUND_DIGITS:
+        raise Refused(f"round() to more than {MAX_ROUND_DIGITS} digits")
+    return round(number, ndigits)
+
+
 FUNCTIONS: dict[str, Callable[..., Any]] = {
-    "abs": abs, "min": min, "max": max, "round": round, "int": _int, "float": _float, "str": str, "bool": bool,
+    "abs": abs, "min": min, "max": max, "round": _round, "int": _int, "float": _float, "str": str, "bool": bool,
     "len": len, "dict": dict, **{name: getattr(math, name) for name in MATH_FUNCTIONS},
 }
 #: The functions that take keyword arguments (``dict(joint_1=0.0, joint_2=0.0)``: Kinova's published gen3.xacro).
 KEYWORD_FUNCTIONS = ("dict",)
+
+
+def check_argument(value: Any) -> Any:
+    """An argument of an allowed function, refused past the bounds of a value before the function runs: an
+    integer of at most ``MAX_INT_BITS`` bits, a string of at most ``MAX_STR`` characters, a list, tuple or
+    mapping of at most ``MAX_ITEMS`` items (a value from ``load_yaml`` was not made by an operation)."""
+    if isinstance(value, int) and value.bit_length() > MAX_INT_BITS:
+        raise Refused(f"an integer of more than {MAX_INT_BITS} bits")
+    if isinstance(value, str) and len(value) > MAX_STR:
+        raise Refused(f"a string of more than {MAX_STR:,} characters")
+    if isinstance(value, (list, tuple, dict)) and len(value) > MAX_ITEMS:
+        raise Refused(f"a list of more than {MAX_ITEMS:,} items")
+    return value
 
 
 def _pow(a: Any, b: Any) -> Any:
@@ -343,7 +370,17 @@ class Evaluator:
             if isinstance(value, dict):
                 raise Refused("slicing a mapping")
             return value[slice(*parts)]
-        return value[self.eval(node.slice)]
+        key = self.eval(node.slice)
+        if isinstance(value, dict) and type(value) is not dict and self.namespace is not None:
+            # an include's namespace (xacro's Table): its own properties and its parents', never what its
+            # indexing reaches beyond them (xacro's global symbols: Python's builtins, the math module)
+            try:
+                if not isinstance(key, str):
+                    raise KeyError(key)
+                return self.namespace(value, key)
+            except KeyError:
+                raise Refused(f"no property {_describe(node.slice)} in the namespace {_describe(node.value)}") from None
+        return value[key]
 
     def _Attribute(self, node: ast.Attribute) -> Any:
         if node.attr.startswith("_"):
@@ -368,13 +405,13 @@ class Evaluator:
         func = self._function(node.func)
         if node.keywords and not any(func is FUNCTIONS[name] for name in KEYWORD_FUNCTIONS):
             raise Refused(f"keyword arguments are allowed only in {', '.join(f'{n}(...)' for n in KEYWORD_FUNCTIONS)}")
-        args = [self._operand(self.eval(a)) for a in node.args]
-        kwargs = {str(k.arg): self._operand(self.eval(k.value)) for k in node.keywords}
+        args = [check_argument(self._operand(self.eval(a))) for a in node.args]
+        kwargs = {str(k.arg): check_argument(self._operand(self.eval(k.value))) for k in node.keywords}
         try:
             return func(*args, **kwargs)
         except Refused:
             raise
-        except (ValueError, TypeError, OverflowError, ZeroDivisionError) as exc:
+        except (ValueError, TypeError, OverflowError, ZeroDivisionError, MemoryError) as exc:
             raise Refused(f"{ast.unparse(node.func)}(): {exc}") from None
 
     def _is_property(self, name: str) -> bool:
@@ -415,6 +452,18 @@ def _no_properties(name: str) -> Any:
 def _str_method(text: str, name: str) -> Callable[..., Any]:
     """``text.name`` with its result's size checked BEFORE it is built (``replace`` and ``join`` can grow)."""
     method = getattr(text, name)
+    if name in ("split", "rsplit"):
+        def split(sep: Any = None, maxsplit: Any = -1) -> list[str]:
+            if isinstance(sep, str) and sep and isinstance(maxsplit, int):  # the pieces, counted before they are made
+                pieces = text.count(sep) + 1 if maxsplit < 0 else min(text.count(sep), maxsplit) + 1
+            elif sep is None and isinstance(maxsplit, int):
+                pieces = sum(1 for _ in itertools.islice(re.finditer(r"\S+", text), MAX_ITEMS + 1))
+            else:
+                pieces = 0  # the method refuses the arguments
+            if pieces > MAX_ITEMS:
+                raise Refused(f"a list of more than {MAX_ITEMS:,} items")
+            return method(sep, maxsplit)
+        return split
     if name == "replace":
         def replace(old: Any, new: Any, count: int = -1) -> str:
             if not isinstance(old, str) or not isinstance(new, str):
@@ -447,6 +496,56 @@ def _describe(node: ast.AST) -> str:
             "NamedExpr": "':='", "Starred": "'*'", "Set": "a set", "Await": "await", "Yield": "yield"}.get(type(node).__name__)
     short = text if len(text) <= 40 else text[:37] + "..."
     return f"{kind} ('{short}')" if kind else f"'{short}'"
+
+
+# --------------------------------------------------------------------------- include patterns
+_MAGIC = re.compile(r"[*?[]")  # what makes xacro treat an include's file name as a pattern (``get_include_files``)
+
+
+def include_glob(pattern: str, roots: Roots, what: str) -> list[str]:
+    """The files an include pattern (``$(dirname)/parts/*.xacro``) names, as ``glob.glob`` would find them, walked
+    inside ``roots`` only: the part before the first wildcard must lie inside; ``..`` after a wildcard is
+    refused (it could climb out of whatever the wildcard matched); a folder is listed only once it resolves
+    inside (a symlink to ``/`` or ``/proc/*/root`` is refused, naming the link, never what lies beyond it); each
+    file found must resolve inside; at most ``MAX_GLOB_ENTRIES`` entries are looked at and ``MAX_INCLUDES``
+    files returned. Hidden names match only a part that starts with '.', as in ``glob``."""
+    parts = pattern.split(os.sep)
+    first = next((k for k, part in enumerate(parts) if _MAGIC.search(part)), len(parts))
+    if ".." in parts[first:]:
+        raise Refused(f"the include pattern '{pattern}' has '..' after a wildcard (it could lead out of the folders "
+                      "this description may read): name the folder before the wildcard")
+    head = os.sep.join(parts[:first]) or (os.sep if pattern.startswith(os.sep) else os.curdir)
+    roots.check(head, what, DescriptionError)
+    found, looked_at = [head], 0
+    for k, part in enumerate(parts[first:], first):
+        last = k == len(parts) - 1
+        matches = []
+        for folder in found:
+            if not _MAGIC.search(part):
+                path = os.path.join(folder, part)
+                if os.path.lexists(path) and (last or os.path.isdir(path)):
+                    matches.append(path)
+                continue
+            roots.check(folder, what, DescriptionError)  # never list a folder outside, whatever led to it
+            try:
+                with os.scandir(folder) as entries:
+                    for entry in entries:
+                        looked_at += 1
+                        if looked_at > MAX_GLOB_ENTRIES:
+                            raise Refused(f"the include pattern '{pattern}' looks at more than {MAX_GLOB_ENTRIES:,} "
+                                          "files and folders")
+                        if entry.name.startswith(".") and not part.startswith("."):
+                            continue
+                        if fnmatch.fnmatchcase(entry.name, part) and (last or entry.is_dir()):
+                            matches.append(os.path.join(folder, entry.name))
+            except (NotADirectoryError, FileNotFoundError, PermissionError):
+                continue
+        found = matches
+    if len(found) > MAX_INCLUDES:
+        raise Refused(f"the include pattern '{pattern}' matches more than {MAX_INCLUDES} files")
+    for path in found:
+        roots.check(path, what, DescriptionError)
+    return sorted(found)
 
 
 # --------------------------------------------------------------------------- the hooks into xacro
@@ -574,14 +673,7 @@ def hooks(roots: Roots, where: str, trusted: bool = False) -> Iterator[Budget]:
     class _Glob:
         @staticmethod
         def glob(pattern: str, *args: Any, **kwargs: Any) -> list[str]:
-            head = pattern
-            while any(c in head for c in "*?["):
-                head = os.path.dirname(head)
-            roots.check(head or ".", f"{where}: xacro include '{pattern}'", DescriptionError)
-            found = sorted(_glob.glob(pattern))
-            if len(found) > MAX_INCLUDES:
-                raise Refused(f"the include pattern '{pattern}' matches more than {MAX_INCLUDES} files")
-            return found
+            return include_glob(pattern, roots, f"{where}: xacro include '{pattern}'")
 
     def load_yaml(filename: Any) -> Any:
         from roarmctl.validation import load_yaml as load
