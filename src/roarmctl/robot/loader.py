@@ -563,7 +563,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
             f"{n} at {rest[n]:g} {'m' if next(j for j in ordered if j.name == n).kind == 'prismatic' else 'rad'}"
             for n in held) + " (list them in the sidecar's joints: to drive them)")
         ordered = held_fixed(ordered, held)
-    urdf_vel, urdf_eff, vel_default = [], [], set()
+    urdf_vel, urdf_eff, vel_default, negative = [], [], set(), []
     for n in names:
         lim = next(j for j in joints_xml if j.get("name") == n).find("limit")
         v = _fattr(lim, "velocity", 0.0, f"{urdf}: joint '{n}' limit")
@@ -572,6 +572,10 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
         urdf_vel.append(jl.get(n, {}).get("velocity", v if v > 0 else DEFAULT_VELOCITY))
         e = _fattr(lim, "effort", 0.0, f"{urdf}: joint '{n}' limit")
         urdf_eff.append(e if e > 0 else np.inf)  # URDF effort 0 means unset
+        negative += [f"{n} {key} {value:g}" for key, value in (("velocity", v), ("effort", e)) if value < 0]
+    if negative:  # urdfdom reads any number here; a vendor's -1 means "not given" (Annin's AR4 writes effort="-1")
+        notes.append(f"URDF limit(s) below 0 taken as not given: {', '.join(negative)} (no effort bound; "
+                     "roarmctl's default velocity unless joint_limits.yaml gives one)")
     by_name = {j.name: j for j in ordered}
 
     meshes = {"urdf": urdf, "packages": package_map(side.get("packages"), sidecar, str(sidecar)),

@@ -300,10 +300,8 @@ def check_urdf(root: ET.Element, where: str) -> None:
             if lower is not None and upper is not None and j.get("type") in ("revolute", "prismatic"):
                 if not float(lower) < float(upper):
                     CHECK.fail(where, f"joint '{name}' limit", f"lower {lower} must be below upper {upper}")
-            for key in ("velocity", "effort"):
-                value_text = lim.get(key)
-                if value_text is not None and float(value_text) < 0:
-                    CHECK.fail(where, f"joint '{name}' limit {key}", f"{value_text} must not be negative")
+            # a negative velocity or effort is read as urdfdom reads it (any number, urdf_parser/src/joint.cpp):
+            # vendors write -1 for "not given"; the loader takes it so, with a note
     for start in parent_of:  # walking up from every link must reach the root: no cycles
         seen, up = {start}, start
         while up in parent_of:

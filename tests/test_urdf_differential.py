@@ -1,0 +1,141 @@
+"""roarmctl's URDF reading against urdfdom's, through Pinocchio (issue 33, item 1).
+
+Pinocchio (``pin`` from PyPI) parses a URDF with urdfdom itself (cmeel-urdfdom), so it is the reference for
+what urdfdom accepts, and an independent forward kinematics. On the published descriptions of the xacro
+corpus (tests/data/xacro/, expanded as real xacro does: tests/test_xacro_differential.py) with their mesh
+geometry left out (the corpus keeps no meshes; urdfdom opens none): urdfdom accepts each, so roarmctl must,
+and every link's pose at random joint values within the limits agrees with Pinocchio's to 1e-9 (mimic joints
+follow their leader, joints roarmctl holds still sit at their held value). Values urdfdom takes that mean
+"not given" (a negative or zero effort or velocity) load with a note, not a refusal.
+"""
+
+from __future__ import annotations
+
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from roarmctl.errors import DescriptionError
+from roarmctl.robot.loader import bundled_dir, load_robot
+from roarmctl.robot.xacro_input import expand
+
+pin = pytest.importorskip("pinocchio")
+
+from test_xacro_differential import CASES, INNER, job  # noqa: E402 - after the skip
+
+URDF_CASES = sorted(n for n in CASES if not n.endswith("_srdf"))
+RNG_SEED = 33
+#: Published files that load only with a sidecar line: case -> (roarmctl's refusal, the sidecar fields). The
+#: IRB 5400's wrist has a mimic joint (joint5b follows joint5) between joint5 and the flange: roarmctl's TCP
+#: Jacobian takes one column per joint of the chain and refuses a TCP that a mimic joint moves.
+NEEDS_SIDECAR: dict[str, tuple[str, dict]] = {
+    "abb_irb5400": ("is moved by the mimic joint 'joint5b'", {"tcp_link": "link_5"}),
+}
+
+
+def for_pinocchio(urdf: str) -> str:
+    """``urdf`` with negative efforts and velocities written as 0: urdfdom reads them, but Pinocchio's own model
+    check (effort and velocity limits are symmetric bounds) refuses them. The kinematics are unchanged."""
+    return re.sub(r'\b(effort|velocity)="\s*-[^"]*"', r'\1="0"', urdf)
+
+
+def without_meshes(urdf: str) -> str:
+    """``urdf`` with every ``<visual>`` and ``<collision>`` that names a mesh left out (kinematics unchanged)."""
+    root = ET.fromstring(urdf)
+    for link in root.iter("link"):
+        for el in [e for e in link if e.tag in ("visual", "collision") and e.find("geometry/mesh") is not None]:
+            link.remove(el)
+    return ET.tostring(root, encoding="unicode")
+
+
+def pin_frames(model, data, robot, q_full: np.ndarray) -> dict[str, np.ndarray]:
+    """Pinocchio's pose of every link (4x4, root frame) for roarmctl's full configuration ``q_full``."""
+    names, values, _ = robot.joint_states(q_full)
+    value = dict(zip(names, values[0]))
+    q = pin.neutral(model)
+    for jid in range(1, model.njoints):
+        name, jm = model.names[jid], model.joints[jid]
+        v = value.get(name, 0.0)
+        if jm.nq == 2:  # a continuous joint: (cos, sin)
+            q[jm.idx_q:jm.idx_q + 2] = np.cos(v), np.sin(v)
+        else:
+            q[jm.idx_q] = v
+    pin.forwardKinematics(model, data, q)
+    pin.updateFramePlacements(model, data)
+    out = {}
+    for fid, frame in enumerate(model.frames):
+        if frame.type == pin.FrameType.BODY:
+            out[frame.name] = data.oMf[fid].homogeneous
+    return out
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[] if n in INNER else [pytest.mark.slow]) for n in URDF_CASES])
+def test_urdfdom_accepts_so_roarmctl_does_and_fk_agrees(tmp_path, name):
+    j = job(name)
+    urdf = without_meshes(expand(Path(j["file"]), j["args"], name, {p: Path(f) for p, f in j["packages"].items()}))
+    model = pin.buildModelFromXML(for_pinocchio(urdf))  # urdfdom accepts it (it raises otherwise)
+    path = tmp_path / f"{name}.urdf"
+    path.write_text(urdf)
+    if name in NEEDS_SIDECAR:
+        refusal, fields = NEEDS_SIDECAR[name]
+        with pytest.raises(DescriptionError, match=re.escape(refusal)):
+            load_robot(str(path))
+        (tmp_path / "arm.yaml").write_text(yaml.safe_dump({"format": "roarmctl.robot/1", "urdf": path.name, **fields}))
+        path = tmp_path / "arm.yaml"
+    robot = load_robot(str(path))
+    data = model.createData()
+    rng = np.random.default_rng(RNG_SEED)
+    lo = np.where(np.isfinite(robot.lower), robot.lower, -np.pi)
+    hi = np.where(np.isfinite(robot.upper), robot.upper, np.pi)
+    checked = 0
+    for q in rng.uniform(lo, hi, size=(5, robot.dof)):
+        ours = robot.kin.link_frames(q)
+        theirs = pin_frames(model, data, robot, q)
+        for k, link in enumerate(robot.link_names):
+            assert np.allclose(ours[k], theirs[link], atol=1e-9, rtol=0), (link, q)
+            checked += 1
+    assert checked >= 5 * len(robot.link_names) and robot.dof >= 5
+
+
+NEGATIVE = """<robot name="r">
+  <link name="base"/><link name="l1"/><link name="l2"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.1"/>
+    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="{effort}" velocity="{velocity}"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.2"/>
+    <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="3" velocity="2"/></joint>
+</robot>"""
+
+
+@pytest.mark.parametrize("effort, velocity", [(-1, 2), (0, 2), (3, -1), (-5, -0.5), (3, 0)])
+def test_a_negative_or_zero_effort_or_velocity_is_not_given_with_a_note(tmp_path, effort, velocity):
+    """urdfdom reads any number for effort and velocity (vendors write -1 or 0 for "not given"): roarmctl loads
+    the file, takes the value as not given (no effort bound; the default velocity) and says so."""
+    yourdfpy = pytest.importorskip("yourdfpy")
+    text = NEGATIVE.format(effort=effort, velocity=velocity)
+    (tmp_path / "arm.urdf").write_text(text)
+    limit = yourdfpy.URDF.load(str(tmp_path / "arm.urdf"), load_meshes=False).robot.joints[0].limit
+    assert (limit.effort, limit.velocity) == (effort, velocity)  # read as given, as urdfdom reads it
+    robot = load_robot(str(tmp_path / "arm.urdf"))
+    assert robot.effort_limits[0] == (np.inf if effort <= 0 else effort)
+    assert robot.effort_limits[1] == 3 and robot.velocity_limits[1] == 2
+    if velocity <= 0:
+        assert robot.velocity_limits[0] > 0 and "j1" in robot.defaults.get("velocity", [])
+    else:
+        assert robot.velocity_limits[0] == velocity
+    if effort < 0 or velocity < 0:
+        assert any("not given" in n and "j1" in n for n in robot.notes), robot.notes
+
+
+def test_the_bundled_urdf_agrees_with_pinocchio():
+    robot = load_robot("roarm_m3_pro")
+    model = pin.buildModelFromUrdf(str(bundled_dir() / "roarm_m3_pro.urdf"))
+    data = model.createData()
+    for q in np.random.default_rng(RNG_SEED).uniform(robot.lower, robot.upper, size=(20, robot.dof)):
+        theirs = pin_frames(model, data, robot, q)
+        ours = robot.kin.link_frames(q)
+        for k, link in enumerate(robot.link_names):
+            assert np.allclose(ours[k], theirs[link], atol=1e-9, rtol=0), link
