@@ -631,6 +631,60 @@ def test_page_reads_each_joints_torque_as_a_share_of_its_own_limit(chromium, pla
         page.close()
 
 
+def _pixel(image: np.ndarray, xy) -> np.ndarray:
+    """Median RGB of the 5 x 5 pixels around page pixel ``xy``."""
+    x, y = int(round(xy[0])), int(round(xy[1]))
+    return np.median(image[y - 2:y + 3, x - 2:x + 3].reshape(-1, 3).astype(float), axis=0)
+
+
+def _look(page, position, target) -> np.ndarray:
+    """Put the page's camera at ``position`` looking at ``target`` (world m); the pixel colour where ``target`` lands."""
+    page.evaluate(f"window.roarmView.lookAt({list(map(float, position))}, {list(map(float, target))})")
+    return _pixel(br.screenshot(page), br.project(page.evaluate("window.roarmView.state()"), target))
+
+
+def _around(centre, azimuth_deg: float, elevation_deg: float, distance: float) -> np.ndarray:
+    a, e = np.radians(azimuth_deg), np.radians(elevation_deg)
+    return np.asarray(centre) + distance * np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+
+
+@pytest.mark.slow
+def test_scene_items_are_opaque_and_keep_their_colour_as_the_view_turns(chromium, planned, tmp_path):
+    """Pixels in Chromium, plans/pick_place.yaml's cube on its table: the cube's top is opaque (its colour does not
+    change when the table behind it is hidden or made see-through: drawn see-through without depth, a solid showed
+    its far faces and whatever lay behind) and, lit by lights that depend on the surface's normal only, the same from
+    two azimuths. Seen from under the table, an opaque table hides the cube; a see-through one shows it, in one
+    colour from both sides (not greyed by a draw order that flips as the view turns)."""
+    f, _ = planned["pick_place"]
+    code, out = write_html(tmp_path, f)
+    assert code == 0
+    page, watch = br.open_page(chromium, out.as_uri(), {"width": 720, "height": 480})  # software GL: fewer pixels
+    try:
+        page.uncheck("#show-path")  # the path comes down onto the cube's top; the labels float over it
+        page.uncheck("#show-labels")
+        top, bottom = np.array([0.25, -0.15, 0.04]), np.array([0.25, -0.15, 0.0])
+        seen = _look(page, _around(top, -38, 40, 0.45), top)
+        assert page.evaluate("window.roarmView.showItem('table', false)")
+        assert np.abs(_look(page, _around(top, -38, 40, 0.45), top) - seen).max() <= 2
+        page.evaluate("window.roarmView.showItem('table', true)")
+        page.check("#see-through-table")
+        assert np.abs(_look(page, _around(top, -38, 40, 0.45), top) - seen).max() <= 2
+        assert np.abs(_look(page, _around(top, 70, 40, 0.45), top) - seen).max() <= 3
+        # from under the table, looking up at the cube's bottom face
+        through = [_look(page, _around(bottom, a, -35, 0.45), bottom) for a in (-38, 70)]
+        assert np.abs(through[0] - through[1]).max() <= 3
+        page.evaluate("window.roarmView.showItem('cube', false)")
+        bare = _look(page, _around(bottom, -38, -35, 0.45), bottom)
+        assert np.abs(through[0] - bare).max() > 10  # the cube shows through
+        page.uncheck("#see-through-table")
+        hidden = _look(page, _around(bottom, -38, -35, 0.45), bottom)
+        page.evaluate("window.roarmView.showItem('cube', true)")
+        assert np.abs(_look(page, _around(bottom, -38, -35, 0.45), bottom) - hidden).max() <= 2  # opaque: hidden
+        assert watch.errors == []
+    finally:
+        page.close()
+
+
 def test_visualize_path_trajectory_option_goes_with_a_page_only(planned, tmp_path, capsys):
     f, _ = planned["pick_place"]
     assert run_cli(["visualize-path", str(f), "-t", str(f), "-o", str(tmp_path / "x.png")]) == 2

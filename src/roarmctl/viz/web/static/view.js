@@ -63,9 +63,23 @@
   }
 
   // One kind of surface material for everything: each shader program costs a compile (slow in software GL).
+  // Opaque surfaces write depth, so a solid's far faces never show over its near ones (drawn see-through without
+  // depth, a closed shape looks inside out); they sit a little behind their own plane, so the grid and edges on
+  // them never flicker. See-through ones (the checker's shapes over visual meshes, the table on request) draw after
+  // every opaque thing, their back faces first.
   function surface(color, opacity) {
     const o = opacity === undefined ? 1 : opacity;
-    return new THREE.MeshLambertMaterial({ color: color, side: THREE.DoubleSide, transparent: o < 1, opacity: o, depthWrite: o >= 1 });
+    return new THREE.MeshLambertMaterial({ color: color, side: THREE.DoubleSide, transparent: o < 1, opacity: o, depthWrite: o >= 1,
+      polygonOffset: o >= 1, polygonOffsetFactor: 1, polygonOffsetUnits: 1 });
+  }
+  function seeThrough(material, on, opacity) {
+    material.transparent = on;
+    material.opacity = on ? opacity : 1;
+    material.depthWrite = !on;
+    // not pushed back: over a face in its own plane (an object standing on the table) it always wins the depth
+    // test, instead of winning or losing by the view's slope (a colour that changes as the view turns)
+    material.polygonOffset = !on;
+    material.needsUpdate = true;
   }
 
   function solid(triangles, color, opacity, edges) {
@@ -126,7 +140,9 @@
   }
 
   // ------------------------------------------------------------------ scene items
-  const ROLE_OPACITY = { table: 0.45, obstacle: 0.55, object: 0.9 };
+  // Every item is opaque: its colour is its own whatever lies behind it and wherever the camera turns. The table can
+  // be made see-through (the toggle) to look at what is under it.
+  const TABLE_SEE_THROUGH = 0.35;
   const items = D.items.map((item) => {
     let g;
     if (item.points) {  // a point cloud's occupied cells, each a square a cell wide
@@ -134,11 +150,22 @@
       geom.setAttribute('position', new THREE.BufferAttribute(f32(item.points), 3));
       g = placed(new THREE.Points(geom, new THREE.PointsMaterial({ color: item.color, size: item.point_size })));
     } else {
-      g = placed(solid(f32(item.triangles), item.color, ROLE_OPACITY[item.role] || 0.55, 0x444444));
+      g = placed(solid(f32(item.triangles), item.color, 1.0, 0x444444));
     }
     g.matrix.copy(matrixOf(item.pose));
-    return { group: g, track: item.track ? f32(item.track) : null };
+    return { name: item.name, role: item.role, group: g, track: item.track ? f32(item.track) : null };
   });
+  const tables = items.filter((it) => it.role === 'table' && it.group.children.length);
+  if (tables.length) $('table-toggle').hidden = false;
+  function setTableSeeThrough(on) {
+    for (const t of tables) {
+      const mesh = t.group.children[0];
+      seeThrough(mesh.material, on, TABLE_SEE_THROUGH);
+      mesh.renderOrder = on ? 5 : 0;  // after the arm's see-through shapes
+    }
+    $('see-through-table').checked = on;
+    render();
+  }
 
   // where the run had the objects (a physics run): orange outlines following their tracks
   const ghostItems = GHOST ? (D.ghost.items || []).map((g) => {
@@ -308,7 +335,7 @@
       // the torque as a share of this joint's own limit (as the PNG's panel); N m where the joint has no limit
       const tau = TORQUE ? TORQUE[i * DOF + j] : NaN, share = SHARE ? SHARE[i * DOF + j] : NaN;
       const unit = D.joint_units[j] === 'm' ? ' N' : ' N m';
-      cells[3].textContent = Number.isFinite(share) ? share.toFixed(0) + ' %' : (Number.isFinite(tau) ? tau.toFixed(2) + unit : '—');
+      cells[3].textContent = Number.isFinite(share) ? (Math.round(share) || 0) + ' %' : (Number.isFinite(tau) ? tau.toFixed(2) + unit : '—');
       cells[3].title = Number.isFinite(tau) ? tau.toFixed(3) + unit : '';
       cells[3].className = Number.isFinite(share) && Math.abs(share) >= 100 ? 'warn' : '';
     }
@@ -405,6 +432,7 @@
   });
   $('show-visual').addEventListener('change', (ev) => { for (const v of visualGroups) v.visible = ev.target.checked; render(); });
   $('show-path').addEventListener('change', (ev) => { path.visible = ev.target.checked; render(); });
+  $('see-through-table').addEventListener('change', (ev) => setTableSeeThrough(ev.target.checked));
   $('show-labels').addEventListener('change', render);
   $('show-ghost').addEventListener('change', (ev) => {
     for (const g of ghostGroups) g.visible = ev.target.checked;
@@ -432,6 +460,22 @@
     data: D,
     setIndex: setIndex,
     setPlaying: setPlaying,
+    setTableSeeThrough: setTableSeeThrough,
+    // show or hide the scene item of this name; false when there is none
+    showItem: function (name, visible) {
+      const it = items.find((x) => x.name === name);
+      if (!it) return false;
+      it.group.visible = visible;
+      render();
+      return true;
+    },
+    // put the camera at ``position`` looking at ``target`` (world m)
+    lookAt: function (position, target) {
+      camera.position.fromArray(position);
+      controls.target.fromArray(target);
+      controls.update();
+      render();
+    },
     state: function () {
       const rect = canvas.getBoundingClientRect();
       camera.updateMatrixWorld();
