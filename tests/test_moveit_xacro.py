@@ -66,10 +66,8 @@ def test_xacro_input_expands_arguments(tmp_path):
 
 
 @pytest.mark.parametrize("srdf_extra, limits, side_extra, needle", [
-    ('<passive_joint name="x"/>', None, None, r"arm.srdf: passive_joint: 'x' is not a joint of the URDF"),
     ('<virtual_joint name="v" type="floating" parent_frame="world" child_link="base_link"/>', None, None,
      r"arm.srdf: virtual_joint 'v': type 'floating' is not supported"),
-    ('<disable_collisions link1="link1" link2="nolink"/>', None, None, r"arm.srdf: disable_collisions link2: 'nolink'"),
     ('<group_state name="bad" group="arm"><joint name="base_link_to_link1" value="x"/></group_state>', None, None,
      r"group_state 'bad' joint 'base_link_to_link1' value: not a number"),
     ('<group_state name="part" group="arm"><joint name="base_link_to_link1" value="0"/></group_state>', None, None,

@@ -14,8 +14,11 @@ SRDF (``srdf: file.srdf`` in the sidecar; a ``.xacro`` SRDF is expanded like the
   ``close``/``closed`` (any case) -> ``gripper.open`` / ``gripper.closed``. A sidecar ``gripper:``
   wins over all of it (the SRDF's group is then only used to sort its states);
 - ``virtual_joint`` of type fixed is accepted (the URDF root is fixed to the world).
-Other groups' states and unknown elements are left out with a note (``notes``); elements whose meaning
-would change the robot (floating virtual joints, ``disable_default_collisions``) are errors.
+Other groups' states and unknown elements are left out with a note (``notes``), and so is what srdfdom
+skips (its ``model.cpp`` logs and goes on): an element inside a ``<group>`` other than joint, link, chain and
+group (``<passive_joint>`` written there), a joint or link the URDF does not have (in a group, a chain, a
+``passive_joint``, a ``disable_collisions`` pair, a ``group_state``). Elements whose meaning would change the
+robot (floating virtual joints, ``disable_default_collisions``) are errors.
 
 joint_limits.yaml (``joint_limits: file.yaml``): per joint ``has_velocity_limits`` /
 ``max_velocity``, ``has_acceleration_limits`` / ``max_acceleration``, ``has_position_limits`` /
@@ -60,10 +63,16 @@ def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, s
     notes: list[str] = []
     passive: list[str] = []
 
-    def check_joint(name: str | None, what: str) -> str:
-        if name is None or name not in joints:
-            raise DescriptionError(f"{src}: {what}: '{name}' is not a joint of the URDF")
-        return name
+    def note(text: str) -> None:
+        if text not in notes:
+            notes.append(text)
+
+    def known(name: str | None, names: Mapping[str, Any] | set[str], kind: str, what: str) -> bool:
+        """Whether ``name`` is a URDF joint/link; if not, a note: srdfdom skips such an element (and logs it)."""
+        if name is not None and name in names:
+            return True
+        note(f"{src}: {what}: '{name}' is not a {kind} of the URDF: skipped (as srdfdom does)")
+        return False
 
     for el in root:
         if not isinstance(el.tag, str):
@@ -78,23 +87,26 @@ def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, s
                                    f"(only a fixed mounting)")
         if el.tag == "disable_default_collisions":
             raise DescriptionError(f"{src}: disable_default_collisions is not supported; list the pairs instead")
-        if el.tag == "passive_joint":
-            passive.append(check_joint(el.get("name"), "passive_joint"))
+        if el.tag == "passive_joint" and known(el.get("name"), joints, "joint", "passive_joint"):
+            passive.append(str(el.get("name")))
 
     def check_link(name: str | None, what: str) -> str:
         if name is None or name not in links:
             raise DescriptionError(f"{src}: {what}: '{name}' is not a link of the URDF")
         return name
 
-    for gname, g in groups.items():  # every group's chain names links of the URDF, used or not
+    def chain_ok(chain: ET.Element, gname: str) -> bool:
+        return all([known(chain.get(end), links, "link", f"group '{gname}' chain {end}") for end in ("base_link", "tip_link")])
+
+    for gname, g in groups.items():  # every group's chain is checked, used or not; srdfdom skips a bad one
         for chain in g.findall("chain"):
-            check_link(chain.get("base_link"), f"group '{gname}' chain base_link")
-            check_link(chain.get("tip_link"), f"group '{gname}' chain tip_link")
+            if not chain_ok(chain, gname):
+                g.remove(chain)
     out: dict[str, Any] = {"passive_joints": passive, "notes": notes}
     pairs = []
     for el in root.iter("disable_collisions"):
-        pairs.append([check_link(el.get("link1"), "disable_collisions link1"),
-                      check_link(el.get("link2"), "disable_collisions link2")])
+        if all([known(el.get(k), links, "link", f"disable_collisions {k}") for k in ("link1", "link2")]):
+            pairs.append([str(el.get("link1")), str(el.get("link2"))])
     out["allowed_collisions"] = pairs
 
     def group_joints(name: str, seen: tuple[str, ...] = ()) -> list[str]:
@@ -104,10 +116,11 @@ def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, s
         js: list[str] = []
         for el in g:
             if el.tag == "joint":
-                js.append(check_joint(el.get("name"), f"group '{name}' joint"))
+                if known(el.get("name"), joints, "joint", f"group '{name}' joint"):
+                    js.append(str(el.get("name")))
             elif el.tag == "link":
-                ln = check_link(el.get("name"), f"group '{name}' link")
-                js.extend(j for j, (_, child, _m, _p) in joints.items() if child == ln)
+                if known(el.get("name"), links, "link", f"group '{name}' link"):
+                    js.extend(j for j, (_, child, _m, _p) in joints.items() if child == el.get("name"))
             elif el.tag == "chain":  # the joints from the base link down to the tip
                 base = check_link(el.get("base_link"), f"group '{name}' chain base_link")
                 link = check_link(el.get("tip_link"), f"group '{name}' chain tip_link")
@@ -122,8 +135,9 @@ def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, s
                 if inner in seen:
                     raise DescriptionError(f"{src}: group '{name}' includes itself")
                 js.extend(group_joints(inner, seen + (name,)))
-            elif isinstance(el.tag, str):
-                raise DescriptionError(f"{src}: group '{name}': <{el.tag}> is not supported (joint, link, chain, group)")
+            elif isinstance(el.tag, str):  # srdfdom reads only these four inside a group and skips the rest
+                note(f"{src}: group '{name}': <{el.tag}> not read inside a group (srdfdom reads joint, link, chain and "
+                     "group there; it skips the rest)")
         return js
 
     def driven(name: str) -> list[str]:
@@ -181,7 +195,9 @@ def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, s
         name, group = gs.get("name", ""), gs.get("group")
         values: dict[str, float] = {}
         for j in gs.findall("joint"):
-            jname = check_joint(j.get("name"), f"group_state '{name}' joint")
+            if not known(j.get("name"), joints, "joint", f"group_state '{name}' joint"):
+                continue
+            jname = str(j.get("name"))
             try:
                 values[jname] = float(j.get("value", ""))
             except (TypeError, ValueError):
