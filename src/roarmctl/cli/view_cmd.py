@@ -1,9 +1,12 @@
 """``roarmctl view``: the interactive 3D view of a plan, a trajectory or a run, served on 127.0.0.1.
 
 The page is the one ``visualize-path -o NAME.html`` writes (``roarmctl.viz.web``); the server holds it in
-memory and answers only on the loopback interface. Ctrl-C stops it (exit 130, as every command).
+memory and answers only on the loopback interface. Ctrl-C is its normal end: exit 0, with how to open it again
+(SIGTERM and SIGHUP stop it as every command: 143, 129).
 """
 
+import shlex
+import signal
 import sys
 from pathlib import Path
 
@@ -44,6 +47,14 @@ def view(
         sys.stdout.flush()
         if open_browser:
             webbrowser.open(server.url)
-        server.serve_forever()
+        try:
+            server.serve_forever()
+        except KeyboardInterrupt as exc:
+            if (getattr(exc, "signum", None) or signal.SIGINT) != signal.SIGINT:
+                raise  # SIGTERM, SIGHUP: stopped from outside, reported as every command is
+            # Ctrl-C is how a view ends: not an error (exit 0); the page is gone with the server, so say how to get it back
+            again = " ".join(shlex.quote(str(a)) for a in (["roarmctl", "view", source] + (["-t", trajectory] if trajectory else [])))
+            out.print(f"stopped the view of {source.name}; open it again with: {again} (or write it to a file that needs no "
+                      f"server: roarmctl visualize-path {shlex.quote(str(source))} -o NAME.html)", soft_wrap=True, markup=False)
     finally:
         server.close()
