@@ -55,6 +55,7 @@ class Options:
     track_rate: float = 50.0
     feedback_rate: float = 25.0
     sag: bool = True  # the schedule's sag compensation (roarmctl.device.sag), on as execute sends it by default
+    frame_rate: float = 0.0  # Hz: the whole state (MuJoCo qpos) at frame k / frame_rate, for rendering (0: none)
 
 
 @dataclass
@@ -76,6 +77,8 @@ class Recording:
     episodes: list[Episode]
     wall: float = 0.0
     cpu: float = 0.0
+    frame_t: np.ndarray | None = None  # (F,) s: the physics step nearest each frame time k / frame_rate
+    frame_qpos: np.ndarray | None = None  # (F, nq): MuJoCo's qpos at those steps (arm, gripper, free objects)
 
 
 def simulate(traj: Trajectory, robot: Robot, options: Options | None = None, *, setup: Setup | None = None,
@@ -120,6 +123,9 @@ class _Recorder:
         self.tracks: dict[str, tuple[list, list]] = {n: ([], []) for n in world.objects}
         self.commands: list[tuple[float, dict[str, Any], int]] = []
         self._n = 0
+        self.frame_period = 1.0 / options.frame_rate if options.frame_rate > 0 else 0.0
+        self.frame_t: list[float] = []
+        self.frame_qpos: list[np.ndarray] = []
 
     def __call__(self, _servos: object = None) -> None:
         w = self.world
@@ -136,6 +142,10 @@ class _Recorder:
                 p, r = w.object_pose(name)
                 xs.append(p)
                 qs.append(r)
+        half = 0.5 * float(w.model.opt.timestep)
+        if self.frame_period and t + half >= len(self.frame_t) * self.frame_period:  # the step nearest the frame time
+            self.frame_t.append(t)
+            self.frame_qpos.append(w.data.qpos.copy())
         self._n += 1
 
     def result(self) -> Recording:
@@ -144,7 +154,9 @@ class _Recorder:
             float(self.world.model.opt.timestep), np.array(self.t), np.array(self.q).reshape(-1, dof),
             np.array(self.qd).reshape(-1, dof), np.array(self.duty).reshape(len(self.t), -1), np.array(self.track_t),
             {n: (np.array(xs).reshape(-1, 3), np.array(qs).reshape(-1, 4)) for n, (xs, qs) in self.tracks.items()},
-            self.commands, self.episodes.result())
+            self.commands, self.episodes.result(),
+            frame_t=np.array(self.frame_t) if self.frame_period else None,
+            frame_qpos=np.array(self.frame_qpos).reshape(len(self.frame_t), -1) if self.frame_period else None)
 
 
 def _progress_every(total: float, progress: Callable[[float, float], None] | None, done: float,
