@@ -1,0 +1,64 @@
+"""``meta/stats.json`` and the ``stats/...`` columns of the episodes' metadata, as lerobot computes them
+(huggingface/lerobot ``src/lerobot/datasets/compute_stats.py``).
+
+Per episode and feature: ``min``, ``max``, ``mean``, ``std`` (population), ``count`` (frames, shape (1,)) and
+the quantiles ``q01``, ``q10``, ``q50``, ``q90``, ``q99`` (lerobot's ``DEFAULT_QUANTILES``; lerobot estimates
+them from a 5,000-bin histogram, here they are exact: ``numpy.quantile``, linear). Vectors per
+dimension; images per channel over the pixels of sampled frames, scaled to 0-1, shape (3, 1, 1). The
+dataset's stats aggregate the episodes' as lerobot's ``aggregate_feature_stats`` does: min of the mins,
+max of the maxes, the count-weighted mean, the pooled variance, and for each quantile the min (q <= 50)
+or the max (q > 50) over the episodes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)
+Q_KEYS = tuple(f"q{int(q * 100):02d}" for q in QUANTILES)
+KEYS = ("min", "max", "mean", "std", "count") + Q_KEYS
+MAX_IMAGE_SAMPLES = 100  # frames of an episode whose pixels an image's stats use, evenly spaced
+
+
+def vector_stats(x: np.ndarray) -> dict[str, np.ndarray]:
+    """Stats of (N, D) values (or (N,)) per dimension, float64 arrays of shape (D,) (``count`` (1,))."""
+    a = np.asarray(x, dtype=np.float64)
+    a = a.reshape(len(a), -1)
+    out = {"min": a.min(axis=0), "max": a.max(axis=0), "mean": a.mean(axis=0), "std": a.std(axis=0),
+           "count": np.array([len(a)])}
+    for key, q in zip(Q_KEYS, np.quantile(a, QUANTILES, axis=0)):
+        out[key] = q
+    return out
+
+
+def image_stats(frames: np.ndarray) -> dict[str, np.ndarray]:
+    """Stats of (F, H, W, 3) uint8 frames per channel, 0-1, each of shape (3, 1, 1); ``count``: the frames sampled."""
+    n = len(frames)
+    idx = np.unique(np.linspace(0, n - 1, min(n, MAX_IMAGE_SAMPLES)).round().astype(int))
+    px = frames[idx].reshape(-1, frames.shape[-1]).astype(np.float64) / 255.0
+    s = vector_stats(px)
+    return {k: (np.array([len(idx)]) if k == "count" else v.reshape(-1, 1, 1)) for k, v in s.items()}
+
+
+def aggregate(stats: Sequence[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """One feature's stats over several episodes (lerobot's rule, see the module doc)."""
+    means = np.stack([s["mean"] for s in stats])
+    var = np.stack([s["std"] ** 2 for s in stats])
+    counts = np.stack([np.asarray(s["count"], dtype=np.float64) for s in stats])
+    total = counts.sum(axis=0)
+    w = counts.reshape(counts.shape + (1,) * (means.ndim - counts.ndim))
+    mean = (means * w).sum(axis=0) / total.reshape(total.shape + (1,) * (means.ndim - 1 - total.ndim))
+    variance = ((var + (means - mean) ** 2) * w).sum(axis=0) / total.reshape(total.shape + (1,) * (means.ndim - 1 - total.ndim))
+    out = {"min": np.stack([s["min"] for s in stats]).min(axis=0), "max": np.stack([s["max"] for s in stats]).max(axis=0),
+           "mean": mean, "std": np.sqrt(variance), "count": total.astype(np.int64)}
+    for key in Q_KEYS:
+        q = np.stack([s[key] for s in stats])
+        out[key] = q.min(axis=0) if int(key[1:]) <= 50 else q.max(axis=0)
+    return out
+
+
+def to_json(stats: dict[str, dict[str, np.ndarray]]) -> dict[str, dict[str, list]]:
+    """Feature -> stat -> nested lists (``meta/stats.json``)."""
+    return {f: {k: np.asarray(v).tolist() for k, v in s.items()} for f, s in stats.items()}

@@ -1,0 +1,132 @@
+"""The videos of a LeRobot dataset, with PyAV: encode frames, join episodes, cut one out, probe, decode.
+
+Encoding follows lerobot's default ``VideoEncoderConfig`` (huggingface/lerobot ``src/lerobot/configs/video.py``):
+AV1 by SVT-AV1 (``libsvtav1``), ``yuv420p``, a key frame every 2 frames (``g``), ``crf`` 30, preset 12, with
+one encoder thread (``lp=1``) so that the same frames give the same bytes on any machine load. An
+episode's video is encoded once (by the worker that rendered it); a dataset's file joins the episodes'
+packets without decoding them again (a remux), each episode shifted to start where the previous one ends,
+as lerobot's ``concatenate_video_files`` does, so that ``from_timestamp``/``to_timestamp`` in the
+episodes' metadata are the frame counts before and after it divided by the fps.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from collections.abc import Sequence
+from fractions import Fraction
+from typing import Any
+
+import numpy as np
+
+CODEC = "libsvtav1"
+PIX_FMT = "yuv420p"
+ENCODER = {"g": 2, "crf": 30, "preset": 12, "fast_decode": 0}  # lerobot's defaults (video.* in info.json)
+
+
+def encode(frames: np.ndarray, fps: int) -> bytes:
+    """MP4 bytes of ``frames`` (F, height, width, 3) uint8 RGB at ``fps``; frame k at k / fps s."""
+    import av
+
+    os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1's own log (its banner on stderr for every video): errors only
+    frames = np.ascontiguousarray(frames, dtype=np.uint8)
+    n, h, w, _ = frames.shape
+    buf = io.BytesIO()
+    with av.open(buf, "w", format="mp4") as out:
+        opts = {"g": str(ENCODER["g"]), "crf": str(ENCODER["crf"]), "preset": str(ENCODER["preset"]),
+                "svtav1-params": f"fast-decode={ENCODER['fast_decode']}:lp=1"}
+        stream: Any = out.add_stream(CODEC, rate=fps, options=opts)
+        stream.width, stream.height, stream.pix_fmt = w, h, PIX_FMT
+        stream.time_base = Fraction(1, fps)
+        for k in range(n):
+            frame = av.VideoFrame.from_ndarray(frames[k], format="rgb24")
+            frame.pts = k
+            frame.time_base = Fraction(1, fps)
+            for packet in stream.encode(frame):
+                out.mux(packet)
+        for packet in stream.encode():
+            out.mux(packet)
+    return buf.getvalue()
+
+
+def join(parts: Sequence[bytes], frames: Sequence[int], fps: int, out: Any) -> None:
+    """Write one MP4 to the binary file ``out`` holding the episodes ``parts`` (MP4 bytes, as ``encode``
+    makes them, ``frames[i]`` frames each) one after the other, packets copied, not decoded."""
+    import av
+
+    with av.open(out, "w", format="mp4") as dst:
+        stream = None
+        offset = 0  # frames before this part
+        for data, n in zip(parts, frames):
+            with av.open(io.BytesIO(data), "r") as src:
+                s = src.streams.video[0]
+                if stream is None:
+                    stream = dst.add_stream_from_template(s, opaque=True)
+                    stream.time_base = Fraction(1, fps)
+                shift = offset  # in 1/fps
+                for packet in src.demux(s):
+                    if packet.dts is None:
+                        continue
+                    scale = Fraction(packet.time_base) * fps
+                    packet.pts = int(round(packet.pts * scale)) + shift if packet.pts is not None else None
+                    packet.dts = int(round(packet.dts * scale)) + shift
+                    packet.duration = int(round(packet.duration * scale)) if packet.duration else 1
+                    packet.time_base = Fraction(1, fps)
+                    packet.stream = stream
+                    dst.mux(packet)
+            offset += int(n)
+
+
+def cut(path: Any, start: int, count: int, fps: int) -> bytes:
+    """The MP4 bytes of frames ``start`` .. ``start + count - 1`` of a dataset's video file (an episode),
+    packets copied and shifted to start at 0 (every episode starts on a key frame: ``join``)."""
+    import av
+
+    buf = io.BytesIO()
+    with av.open(path, "r") as src, av.open(buf, "w", format="mp4") as dst:
+        s = src.streams.video[0]
+        stream = dst.add_stream_from_template(s, opaque=True)
+        stream.time_base = Fraction(1, fps)
+        for packet in src.demux(s):
+            if packet.dts is None or packet.pts is None:
+                continue
+            scale = Fraction(packet.time_base) * fps
+            k = int(round(packet.pts * scale))
+            if not start <= k < start + count:
+                continue
+            packet.pts = k - start
+            packet.dts = int(round(packet.dts * scale)) - start
+            packet.duration = int(round(packet.duration * scale)) if packet.duration else 1
+            packet.time_base = Fraction(1, fps)
+            packet.stream = stream
+            dst.mux(packet)
+    return buf.getvalue()
+
+
+def probe(path: Any) -> dict[str, Any]:
+    """The ``info`` of a video feature in ``meta/info.json`` as lerobot's ``get_video_info`` writes it."""
+    import av
+
+    with av.open(path, "r") as f:
+        s = f.streams.video[0]
+        info: dict[str, Any] = {"video.height": s.height, "video.width": s.width, "video.codec": s.codec_context.codec.canonical_name
+                                if hasattr(s.codec_context.codec, "canonical_name") else s.codec_context.name,
+                                "video.pix_fmt": s.pix_fmt, "video.is_depth_map": False,
+                                "video.fps": int(s.base_rate) if s.base_rate else None, "video.channels": 3,
+                                "has_audio": bool(f.streams.audio)}
+    info.update({f"video.{k}": v for k, v in ENCODER.items()})
+    info |= {"video.video_backend": "pyav", "video.extra_options": {}, "is_depth_map": False}
+    info.pop("video.is_depth_map")
+    return info
+
+
+def decode(path: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Every frame of a video (F, height, width, 3) uint8 RGB and its time (F,) s."""
+    import av
+
+    frames, times = [], []
+    with av.open(path, "r") as f:
+        for frame in f.decode(video=0):
+            frames.append(frame.to_ndarray(format="rgb24"))
+            times.append(float(frame.time) if frame.time is not None else float("nan"))
+    return np.array(frames, dtype=np.uint8).reshape(len(frames), *(frames[0].shape if frames else (0, 0, 3))), np.array(times)
