@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: all demo test test-fast fuzz lint bench clean install browser
+.PHONY: all demo test test-fast fuzz lint bench clean install browser render
 
 all: test
 
@@ -25,12 +25,12 @@ install: $(STAMP)
 # real-time tests mostly wait (on the simulated arm's clock, on Chromium), and a second worker per core fills
 # those waits (idle, 2 cores: 256 s with one worker per core, 202 s with two; docs/design.md "Tests").
 TEST_JOBS ?= $(shell echo $$(( 2 * $$(nproc 2>/dev/null || echo 1) )))
-test: $(STAMP)
+test: $(STAMP) render
 	$(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadgroup
 
 # The inner loop: everything but the tests marked slow (real-time runs on the simulated arm, fresh
 # interpreters, CPU-heavy sweeps); under a minute.
-test-fast: $(STAMP)
+test-fast: $(STAMP) render
 	$(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadgroup -m "not slow"
 
 # Lint and types (rules and why: pyproject.toml, docs/design.md "Lint and types").
@@ -45,6 +45,15 @@ browser:
 	@if command -v chromium >/dev/null 2>&1; then echo "chromium: $$(command -v chromium)"; \
 	else apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; fi
 
+# Offscreen rendering for datagen's cameras (src/roarmctl/physics/render.py): MuJoCo through EGL on Mesa's
+# llvmpipe (CPU), from the system's packages. Installs with apt-get when missing (needs root, as CI has); on your
+# own machine: sudo apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri (Debian/Ubuntu).
+RENDER_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri
+render:
+	@if [ "$$(dpkg-query -W -f='$${Status}\n' $(RENDER_PACKAGES) 2>/dev/null | grep -c 'ok installed')" = "3" ]; \
+	then echo "EGL: $(RENDER_PACKAGES) installed"; \
+	else apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(RENDER_PACKAGES); fi
+
 # The fuzz suite's CI profile: 1,000 plan files, 500 trajectories, 300 robot descriptions (about a
 # minute; `make test` runs a tenth of it).
 fuzz: $(STAMP)
@@ -55,7 +64,7 @@ bench: $(STAMP)
 
 # Plan the bundled pick-and-place, draw it, and run it on the simulated arm (firmware simulator
 # on a pseudo-terminal), then export the plan and the run for Foxglove / ROS 2. Outputs go to out/.
-demo: $(STAMP)
+demo: $(STAMP) render
 	$(BIN)/roarmctl plan plans/pick_place.yaml -o out/pick_place.traj.json
 	$(BIN)/roarmctl visualize-path out/pick_place.traj.json -o out/pick_place.png
 	$(BIN)/roarmctl execute out/pick_place.traj.json --sim --yes
@@ -63,6 +72,7 @@ demo: $(STAMP)
 	$(BIN)/roarmctl export out/pick_place.exec.json -o out/pick_place.exec.mcap
 	$(BIN)/roarmctl export out/pick_place.traj.json -o out/pick_place_bag
 	$(BIN)/roarmctl export out/pick_place.exec.json -o out/pick_place_exec_bag
+	rm -rf out/pick_place_lerobot && $(BIN)/roarmctl datagen plans/datagen_pick_place.yaml -n 4 -o out/pick_place_lerobot --size 320x240 --workers 2
 
 clean:
 	rm -rf $(VENV) build *.egg-info src/roarmctl/*.so src/roarmctl/motion/*.so

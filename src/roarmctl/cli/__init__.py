@@ -17,6 +17,7 @@ import typer
 from roarmctl import __version__
 from roarmctl.cli import (
     common,
+    datagen_cmd,
     execute_cmd,
     export_cmd,
     kin,
@@ -112,6 +113,7 @@ view_cmd.register(app)
 export_cmd.register(app)
 simulate_cmd.register(app)
 teach_cmd.register(app)
+datagen_cmd.register(app)
 
 
 def run(argv: list[str] | None = None) -> int:

@@ -1,0 +1,351 @@
+"""``datagen``: many episodes of a template as one LeRobot dataset, in shards on a process pool or on Ray.
+
+Tries are numbered 0, 1, 2, ...; try ``t`` is ``roarmctl.physics.episode.run_episode(template, robot, t, seed)``,
+a pure function of its arguments. Shards of ``SHARD`` consecutive tries run on the workers (in this process
+for one worker, a process pool, or Ray tasks), each writing its tries into the staging folder
+``DATASET/.datagen/`` (a kept try: its state, action, videos (encoded by the worker) and image stats, in a
+folder renamed into place when whole; then, for every try, a small outcome file, the try's commit). The
+dataset is the first ``n`` kept tries in try order: the same whatever the number of workers or the engine,
+and shards still running past the ``n``-th kept try are waited for and left unused. When the kept tries
+are known, ``roarmctl.export.lerobot.dataset.write_dataset`` writes the dataset into ``DATASET/`` and the
+staging folder is removed.
+
+A killed run leaves only whole staged tries (a half-written try is a ``.tmp-`` folder, removed on resume);
+``resume=True`` takes them and runs only the missing tries. Nothing is written outside ``DATASET/``
+(Ray keeps its own session files in its temporary folder).
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import shutil
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from roarmctl.errors import InfeasibleError, InputError
+from roarmctl.export.lerobot import stats, video
+from roarmctl.export.lerobot.dataset import DatasetSpec, Episode, write_dataset
+from roarmctl.fileio import atomic_write_json
+from roarmctl.physics.episode import CAUSES, EpisodeOptions, run_episode
+from roarmctl.plan.template import check_reach, load_template
+from roarmctl.robot.loader import load_robot
+from roarmctl.validation import load_json
+
+STAGING = ".datagen"
+STATE_FILE = "run.json"
+SHARD = 2  # tries per shard: small, so that few tries run past the last episode needed
+FORMAT = "roarmctl.datagen/1"
+STAGES = ("sample", "plan", "physics", "render", "encode", "stage")
+
+
+@dataclass
+class DatagenOptions:
+    """``episodes`` to keep, the ``seed``, ``workers`` (processes or Ray tasks at once), image ``width`` x
+    ``height``, ``max_tries`` (0: 20 per episode, at least 50) before giving up (exit 3), ``ray``: None
+    (process pool), "" (a local Ray started here) or a cluster address, ``resume`` a killed run."""
+
+    episodes: int
+    seed: int = 0
+    workers: int = 1
+    width: int = 640
+    height: int = 480
+    max_tries: int = 0
+    ray: str | None = None
+    resume: bool = False
+
+    def __post_init__(self) -> None:
+        for name, lo, hi in (("episodes", 1, 1_000_000), ("workers", 1, 1024), ("width", 16, 4096), ("height", 16, 4096),
+                             ("max_tries", 0, 100_000_000), ("seed", 0, 2**63 - 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+                raise InputError(f"{name}: {v!r} is out of range", f"a whole number from {lo} to {hi}")
+
+    @property
+    def limit(self) -> int:
+        """Tries before giving up."""
+        return self.max_tries or max(50, 20 * self.episodes)
+
+
+@dataclass
+class Summary:
+    """What a run did: ``kept`` episodes of ``tried`` tries, rejections by cause, seconds per stage summed over
+    the tries (``stages``), the dataset's ``frames``, its size on disk (bytes) and the wall time (s)."""
+
+    kept: int = 0
+    tried: int = 0
+    causes: dict[str, int] = field(default_factory=dict)
+    stages: dict[str, float] = field(default_factory=dict)
+    frames: int = 0
+    bytes: int = 0
+    wall: float = 0.0
+    resumed: int = 0  # tries taken from a killed run
+
+
+# ------------------------------------------------------------------------------------------- the workers
+_CACHE: dict[str, Any] = {}
+
+
+def _loaded(template_path: str) -> tuple[Any, Any]:
+    """The template and robot of this process (loaded once per worker)."""
+    if template_path not in _CACHE:
+        template = load_template(template_path)
+        _CACHE[template_path] = (template, load_robot(template.plan.robot))
+    return _CACHE[template_path]
+
+
+def run_shard(template_path: str, staging: str, tries: list[int], seed: int, width: int, height: int) -> list[dict[str, Any]]:
+    """Run ``tries`` and stage each (see the module doc); returns their outcomes."""
+    template, robot = _loaded(template_path)
+    options = EpisodeOptions(width=width, height=height, fps=template.fps)
+    out = []
+    for t in tries:
+        r = run_episode(template, robot, t, seed, options)
+        outcome: dict[str, Any] = {"try": t, "kept": r.kept, "cause": r.cause, "detail": r.detail, "timings": dict(r.timings)}
+        if r.kept:
+            assert r.state is not None and r.action is not None  # kept
+            t0 = time.perf_counter()
+            videos = {cam: video.encode(frames, template.fps) for cam, frames in r.images.items()}
+            image_stats = {cam: stats.to_json({"s": stats.image_stats(frames)})["s"] for cam, frames in r.images.items()}
+            outcome["timings"]["encode"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            _stage(Path(staging), t, r.state, r.action, videos, image_stats)
+            outcome["timings"]["stage"] = time.perf_counter() - t0
+            outcome["frames"] = len(r.state)
+        _write_json(Path(staging) / f"{t:08d}.json", outcome)
+        out.append(outcome)
+    return out
+
+
+def _write_json(path: Path, obj: Any) -> None:
+    atomic_write_json(path, obj, indent=None)
+
+
+def _stage(staging: Path, t: int, state: np.ndarray, action: np.ndarray, videos: dict[str, bytes],
+           image_stats: dict[str, Any]) -> None:
+    """A kept try's files, in a temporary folder renamed to ``NNNNNNNN/`` once whole."""
+    final = staging / f"{t:08d}"
+    tmp = staging / f".tmp-{t:08d}-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    np.save(tmp / "state.npy", state)
+    np.save(tmp / "action.npy", action)
+    for cam, data in videos.items():
+        (tmp / f"{cam}.mp4").write_bytes(data)
+    (tmp / "image_stats.json").write_text(json.dumps(image_stats))
+    shutil.rmtree(final, ignore_errors=True)  # a try staged before its outcome file was written: done again
+    os.replace(tmp, final)
+
+
+# ------------------------------------------------------------------------------------------- the engines
+def _shards(start: int, done: set[int]) -> Iterator[list[int]]:
+    t = start
+    while True:
+        shard = [k for k in range(t, t + SHARD) if k not in done]
+        t += SHARD
+        if shard:
+            yield shard
+
+
+class _Pool:
+    """Shards on a process pool (spawned processes: no GL or OMPL state is forked), or in this process."""
+
+    def __init__(self, workers: int) -> None:
+        self.executor: Any = None
+        if workers > 1:
+            self.executor = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+        self.slots = workers
+
+    def submit(self, *args: Any) -> Any:
+        if self.executor is None:
+            f: Future = Future()
+            f.set_result(run_shard(*args))
+            return f
+        return self.executor.submit(run_shard, *args)
+
+    def wait(self, pending: list[Any]) -> list[Any]:
+        done, _ = wait(pending, return_when=FIRST_COMPLETED)
+        return [f for f in pending if f in done]
+
+    @staticmethod
+    def result(f: Any) -> list[dict[str, Any]]:
+        return f.result()
+
+    def close(self) -> None:
+        if self.executor is not None:
+            self.executor.shutdown(wait=True, cancel_futures=True)
+
+
+class _Ray:
+    """The same shards as Ray tasks: a local Ray started here (``address`` "") or an existing cluster."""
+
+    def __init__(self, address: str, workers: int) -> None:
+        try:
+            import ray
+        except ImportError:
+            raise InputError("--ray: Ray is not installed", "pip install 'ray[data]' (make install does)") from None
+        self.ray = ray
+        self.started = not ray.is_initialized()
+        if self.started:
+            kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
+            if address:
+                kwargs["address"] = address
+            else:
+                kwargs["num_cpus"] = workers
+            try:
+                ray.init(**kwargs)
+            except (ConnectionError, RuntimeError, ValueError) as exc:
+                raise InputError(f"--ray {address or '(local)'}: cannot start or reach Ray: {str(exc).splitlines()[0]}",
+                                 "check the address (ray status), or leave out --ray for the process pool") from None
+        self.task = ray.remote(num_cpus=1)(run_shard)
+        self.slots = workers
+
+    def submit(self, *args: Any) -> Any:
+        return self.task.remote(*args)
+
+    def wait(self, pending: list[Any]) -> list[Any]:
+        done, _ = self.ray.wait(pending, num_returns=1)
+        return [f for f in pending if f in done]
+
+    def result(self, f: Any) -> list[dict[str, Any]]:
+        return self.ray.get(f)
+
+    def close(self) -> None:
+        if self.started:
+            self.ray.shutdown()
+
+
+# ------------------------------------------------------------------------------------------- the run
+def _check_out(out: Path, options: DatagenOptions, state: dict[str, Any]) -> dict[int, dict[str, Any]]:
+    """The staged outcomes to resume from (none for a new run); refuses a folder that is not this run's."""
+    staging = out / STAGING
+    if out.exists() and not out.is_dir():
+        raise InputError(f"-o {out}: exists and is not a folder", "give the name of a new folder")
+    if not options.resume:
+        if out.exists() and any(out.iterdir()):
+            raise InputError(f"-o {out}: the folder is not empty", "give a new folder, or --resume a killed run into it")
+        return {}
+    if not (staging / STATE_FILE).is_file():
+        if (out / "meta" / "info.json").is_file():
+            raise InputError(f"-o {out}: the dataset there is complete: nothing to resume", "give a new folder for a new run")
+        if out.exists() and any(out.iterdir()):
+            raise InputError(f"-o {out}: no run of roarmctl datagen to resume there (no {STAGING}/{STATE_FILE})")
+        return {}
+    had = load_json(staging / STATE_FILE, InputError, limit=1 << 16)
+    if had != state:
+        diff = [k for k in state if not isinstance(had, dict) or had.get(k) != state[k]]
+        raise InputError(f"-o {out}: the run there had other settings ({', '.join(diff)})",
+                         "resume with the same template, seed and image size, or give a new folder")
+    outcomes = {}
+    for p in sorted(staging.iterdir()):
+        if p.name.startswith(".tmp-"):
+            shutil.rmtree(p, ignore_errors=True)  # a try killed while it was staged
+        elif p.suffix == ".json" and p.name != STATE_FILE and p.stem.isdigit():
+            try:
+                o = json.loads(p.read_text())
+            except (OSError, ValueError):
+                continue  # written atomically: a broken one is not ours; the try runs again
+            if o.get("kept") and not (staging / p.stem).is_dir():
+                continue
+            outcomes[int(p.stem)] = o
+    return outcomes
+
+
+def _first_kept(outcomes: dict[int, dict[str, Any]], n: int) -> list[int] | None:
+    """The first ``n`` kept tries, if the tries before the ``n``-th kept one are all known."""
+    kept = []
+    t = 0
+    while t in outcomes:
+        if outcomes[t]["kept"]:
+            kept.append(t)
+            if len(kept) == n:
+                return kept
+        t += 1
+    return None
+
+
+def generate(template_path: str | Path, out: str | Path, options: DatagenOptions,
+             progress: Callable[[Summary], None] | None = None) -> Summary:
+    """Run the tries and write the dataset (see the module doc); ``progress(summary)`` after every shard.
+    ``InfeasibleError`` (exit 3) when ``options.limit`` tries keep fewer than ``options.episodes``."""
+    t_start = time.perf_counter()
+    template_path = Path(template_path)
+    out = Path(out)
+    template, robot = _loaded(str(template_path))
+    check_reach(template, robot)
+    state = {"format": FORMAT, "template_sha256": template.sha256, "seed": options.seed, "width": options.width,
+             "height": options.height, "fps": template.fps, "robot": robot.name}
+    outcomes = _check_out(out, options, state)
+    staging = out / STAGING
+    staging.mkdir(parents=True, exist_ok=True)
+    _write_json(staging / STATE_FILE, state)
+    summary = Summary(resumed=len(outcomes), causes=dict.fromkeys(CAUSES, 0), stages=dict.fromkeys(STAGES, 0.0))
+
+    def count(o: dict[str, Any]) -> None:
+        summary.tried += 1
+        if o["kept"]:
+            summary.kept += 1
+        else:
+            summary.causes[o["cause"]] = summary.causes.get(o["cause"], 0) + 1
+        for k, v in o.get("timings", {}).items():
+            summary.stages[k] = summary.stages.get(k, 0.0) + float(v)
+
+    for o in outcomes.values():
+        count(o)
+    chosen = _first_kept(outcomes, options.episodes)
+    if chosen is None:
+        engine: _Pool | _Ray = _Ray(options.ray, options.workers) if options.ray is not None else _Pool(options.workers)
+        try:
+            shards = _shards(0, set(outcomes))
+            pending: list[Any] = []
+            while chosen is None:
+                while len(pending) < engine.slots and summary.tried + SHARD * len(pending) < options.limit:
+                    pending.append(engine.submit(str(template_path), str(staging), next(shards), options.seed,
+                                                 options.width, options.height))
+                if not pending:
+                    break
+                for f in engine.wait(pending):
+                    pending.remove(f)
+                    for o in engine.result(f):
+                        outcomes[int(o["try"])] = o
+                        count(o)
+                if progress is not None:
+                    progress(summary)
+                chosen = _first_kept(outcomes, options.episodes)
+            for f in pending:  # past the last episode needed: finished, not used
+                for o in engine.result(f):
+                    outcomes[int(o["try"])] = o
+        finally:
+            engine.close()
+    if chosen is None:
+        worst = max(summary.causes, key=lambda c: summary.causes[c])
+        raise InfeasibleError(f"datagen: {summary.kept} of {options.episodes} episodes kept in {summary.tried} tries "
+                              f"(most rejected: {worst}, {summary.causes[worst]})",
+                              f"widen or move the template's regions, or raise --max-tries; {out} keeps the tries for --resume")
+    cams = {c: (options.height, options.width) for c in ("front", "wrist")}
+    spec = DatasetSpec(template.fps, robot.name, list(robot.joint_names), cams)
+    episodes = []
+    for t in chosen:
+        d = staging / f"{t:08d}"
+        img = json.loads((d / "image_stats.json").read_text())
+        episodes.append(Episode(template.task, np.load(d / "state.npy"), np.load(d / "action.npy"),
+                                videos={c: (d / f"{c}.mp4").read_bytes() for c in cams},
+                                image_stats={c: {k: np.asarray(v) for k, v in img[c].items()} for c in cams}))
+    t0 = time.perf_counter()
+    write_dataset(out, spec, episodes)
+    summary.stages["write"] = time.perf_counter() - t0
+    shutil.rmtree(staging)
+    summary.kept = len(chosen)
+    summary.frames = sum(e.length for e in episodes)
+    summary.bytes = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
+    summary.wall = time.perf_counter() - t_start
+    if progress is not None:
+        progress(summary)
+    return summary

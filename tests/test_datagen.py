@@ -1,0 +1,377 @@
+"""roarmctl datagen: templates, episodes, the LeRobot v3.0 writer, shards, determinism and resume.
+
+The datasets are read back with plain pyarrow and numpy (and pandas for the tasks, as lerobot reads them), not
+with the writer's own reader; lerobot itself and Ray Data's ``read_lerobot`` (which needs lerobot) only where
+they are installed."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as hs
+
+from tests.clirun import roarmctl
+
+ROOT = Path(__file__).resolve().parents[1]
+TEMPLATE = ROOT / "plans" / "datagen_pick_place.yaml"
+SIZE = 96
+
+
+def _template(tmp_path: Path, datagen: str) -> Path:
+    """The bundled template with its datagen block replaced."""
+    text = TEMPLATE.read_text()
+    plan = text[: text.index("datagen:")]
+    p = tmp_path / "t.yaml"
+    p.write_text(plan + datagen)
+    return p
+
+
+# ------------------------------------------------------------------------------------------- bad templates
+@pytest.mark.parametrize(("block", "words"), [
+    ("datagen:\n  task: t\n  objects:\n    cube: {x: [0.30, 0.20]}\n", "is empty"),
+    ("datagen:\n  task: t\n  objects:\n    cube: {x: [0.20, .nan]}\n", "finite"),
+    ("datagen:\n  task: t\n  objects:\n    cube: {mass: [0.02, .inf]}\n", "finite"),
+    ("datagen:\n  task: t\n  places:\n    - {x: [0.45, 0.55], y: [0.10, 0.15]}\n", "cannot reach"),
+    ("datagen:\n  task: t\n  objects:\n    mug: {x: [0.2, 0.25]}\n", "unknown key"),
+    ("datagen:\n  task: t\n  places: [{x: [0.2, 0.25], y: [0.1, 0.12]}, {x: [0.2, 0.25], y: [0.1, 0.12]}]\n", "one region per place"),
+    ("datagen:\n  task: t\n  distractors: {count: [0, 99], x: [0.1, 0.2], y: [0, 0.1], size: 0.02}\n", "out of range"),
+    ("datagen:\n  task: ''\n", "task"),
+    ("", "not a datagen template"),
+])
+def test_a_bad_template_exits_2_with_one_line_and_writes_nothing(tmp_path, block, words):
+    p = _template(tmp_path, block)
+    out = tmp_path / "ds"
+    r = roarmctl("datagen", str(p), "-n", "1", "-o", str(out), "--size", "32x32")
+    assert r.returncode == 2, r.stderr
+    lines = [x for x in r.stderr.splitlines() if x.strip()]
+    assert len(lines) == 1 and words in lines[0] and "Traceback" not in r.stderr, r.stderr
+    assert not out.exists()
+
+
+def test_bad_options_exit_2(tmp_path):
+    for args in (["-n", "0"], ["-n", "1", "--size", "9x"], ["-n", "1", "--workers", "0"]):
+        r = roarmctl("datagen", str(TEMPLATE), *args, "-o", str(tmp_path / "ds"))
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_a_sampled_scene_stays_within_the_regions_and_is_the_same_for_the_same_try():
+    from roarmctl.physics.episode import sample_plan
+    from roarmctl.plan.template import load_template
+    from roarmctl.robot.loader import load_robot
+
+    t = load_template(TEMPLATE)
+    robot = load_robot(t.plan.robot)
+    cube = t.objects["cube"]
+    for k in range(30):
+        a = sample_plan(t, robot, np.random.default_rng([5, k]))
+        b = sample_plan(t, robot, np.random.default_rng([5, k]))
+        assert a == b and a is not None
+        doc, colors = a
+        obj = next(o for o in doc["objects"] if o["name"] == "cube")
+        assert cube.x.lo <= obj["xyz"][0] <= cube.x.hi and cube.y.lo <= obj["xyz"][1] <= cube.y.hi
+        # the bottom stays on the table whatever the scale
+        assert obj["xyz"][2] - obj["size"][2] / 2 == pytest.approx(0.0, abs=1e-12)
+        assert 0.02 <= obj["mass"] <= 0.04 and tuple(colors["cube"]) in cube.colors
+        place = next(task["place"] for task in doc["tasks"] if "place" in task)
+        assert t.places[0].x.lo <= place["xyz"][0] <= t.places[0].x.hi
+        assert place["xyz"][2] == pytest.approx(obj["xyz"][2])  # the place height follows the object's size
+        start = np.array(doc["start"])
+        assert np.all(np.abs(start - robot.named_poses["home"]) <= t.start_jitter + 1e-12)
+
+
+# ------------------------------------------------------------------------------------------- stats
+@settings(max_examples=40, deadline=None)
+@given(hs.lists(hs.integers(1, 40), min_size=1, max_size=6), hs.integers(0, 2**31))
+def test_aggregated_stats_equal_the_stats_of_all_frames(lengths, seed):
+    from roarmctl.export.lerobot import stats
+
+    rng = np.random.default_rng(seed)
+    parts = [rng.normal(rng.normal(), rng.uniform(0.1, 3), size=(n, 3)) for n in lengths]
+    agg = stats.aggregate([stats.vector_stats(p) for p in parts])
+    every = np.concatenate(parts)
+    np.testing.assert_allclose(agg["mean"], every.mean(axis=0), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(agg["std"], every.std(axis=0), rtol=1e-7, atol=1e-9)
+    np.testing.assert_array_equal(agg["min"], every.min(axis=0))
+    np.testing.assert_array_equal(agg["max"], every.max(axis=0))
+    assert agg["count"].tolist() == [len(every)]
+    # lerobot's rule for the quantiles: the lowest of the episodes' (q <= 50), the highest (q > 50)
+    np.testing.assert_array_equal(agg["q01"], np.min([np.quantile(p, 0.01, axis=0) for p in parts], axis=0))
+    np.testing.assert_array_equal(agg["q99"], np.max([np.quantile(p, 0.99, axis=0) for p in parts], axis=0))
+
+
+# ------------------------------------------------------------------------------------------- the writer
+def _synthetic(n_frames: list[int], seed: int = 0, size: int = 64) -> list:
+    from roarmctl.export.lerobot import video
+    from roarmctl.export.lerobot.dataset import Episode
+
+    rng = np.random.default_rng(seed)
+    out = []
+    for k, n in enumerate(n_frames):
+        frames = np.zeros((n, size, size, 3), dtype=np.uint8)
+        for f in range(n):  # a square that moves: each frame differs
+            frames[f, (f * 3) % (size - 8):(f * 3) % (size - 8) + 8, 10:18] = (200, 40 + 10 * k, 30)
+        out.append(Episode(f"task {k % 2}", rng.normal(size=(n, 6)).astype(np.float32), rng.normal(size=(n, 6)).astype(np.float32),
+                           videos={"front": video.encode(frames, 10)}))
+    return out
+
+
+def _spec(size: int = 64):
+    from roarmctl.export.lerobot.dataset import DatasetSpec
+
+    return DatasetSpec(10, "roarm_m3_pro", ["base", "shoulder", "elbow", "wrist", "roll", "hand"], {"front": (size, size)})
+
+
+def _check_dataset(root: Path, lengths: list[int], fps: int, cams: list[str]) -> None:
+    """The layout and contents, read with pyarrow, numpy, pandas and PyAV (not the writer's reader)."""
+    import av
+    import pandas as pd
+    import pyarrow.parquet as pq
+
+    info = json.loads((root / "meta/info.json").read_text())
+    assert info["codebase_version"] == "v3.0" and info["fps"] == fps
+    assert info["total_episodes"] == len(lengths) and info["total_frames"] == sum(lengths)
+    assert info["data_path"] == "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
+    assert info["video_path"] == "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"
+    feats = info["features"]
+    assert feats["observation.state"]["names"] == feats["action"]["names"] and feats["action"]["shape"] == [6]
+    data = pq.read_table(root / "data/chunk-000/file-000.parquet")
+    assert data.num_rows == sum(lengths)
+    ep = data["episode_index"].to_numpy()
+    fi = data["frame_index"].to_numpy()
+    assert data["index"].to_numpy().tolist() == list(range(sum(lengths)))
+    assert np.array_equal(data["timestamp"].to_numpy(), (fi / fps).astype(np.float32))
+    episodes = pq.read_table(root / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
+    tasks = pd.read_parquet(root / "meta/tasks.parquet")
+    state = np.stack(data["observation.state"].to_numpy(zero_copy_only=False))
+    before = 0
+    for k, (row, n) in enumerate(zip(episodes, lengths)):
+        assert row["episode_index"] == k and row["length"] == n
+        a, b = row["dataset_from_index"], row["dataset_to_index"]
+        assert (a, b) == (before, before + n)
+        assert np.all(ep[a:b] == k) and fi[a:b].tolist() == list(range(n))
+        assert tasks.loc[row["tasks"][0], "task_index"] == data["task_index"].to_numpy()[a]
+        s = state[a:b]
+        np.testing.assert_allclose(row["stats/observation.state/mean"], s.mean(axis=0), rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(row["stats/observation.state/q50"], np.quantile(s.astype(np.float64), 0.5, axis=0), rtol=1e-6, atol=1e-7)
+        for cam in cams:
+            key = f"observation.images.{cam}"
+            assert row[f"videos/{key}/from_timestamp"] == pytest.approx(before / fps)
+            assert row[f"videos/{key}/to_timestamp"] == pytest.approx((before + n) / fps)
+        before += n
+    total = json.loads((root / "meta/stats.json").read_text())
+    np.testing.assert_allclose(total["observation.state"]["mean"], state.mean(axis=0), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(total["observation.state"]["std"], state.std(axis=0), rtol=1e-4, atol=1e-6)
+    assert set(total["action"]) == {"min", "max", "mean", "std", "count", "q01", "q10", "q50", "q90", "q99"}
+    for cam in cams:
+        key = f"observation.images.{cam}"
+        assert np.asarray(total[key]["mean"]).shape == (3, 1, 1)
+        with av.open(str(root / f"videos/{key}/chunk-000/file-000.mp4")) as f:
+            times = [fr.time for fr in f.decode(video=0)]
+        assert len(times) == sum(lengths)
+        np.testing.assert_allclose(times, np.arange(sum(lengths)) / fps, atol=1e-6)
+        assert feats[key]["info"]["video.codec"] == "av1" and feats[key]["info"]["video.fps"] == fps
+
+
+def test_a_written_dataset_reads_back_with_pyarrow(tmp_path):
+    from roarmctl.export.lerobot.dataset import read_actions, write_dataset
+
+    eps = _synthetic([7, 12, 5])
+    write_dataset(tmp_path / "ds", _spec(), eps)
+    _check_dataset(tmp_path / "ds", [7, 12, 5], 10, ["front"])
+    t, a = read_actions(tmp_path / "ds", 1)
+    np.testing.assert_array_equal(a, eps[1].action)
+    np.testing.assert_allclose(t, np.arange(12) / 10, atol=1e-6)
+
+
+def test_appending_gives_the_same_bytes_as_writing_all_at_once(tmp_path):
+    from roarmctl.export.lerobot.dataset import append_episodes, write_dataset
+
+    eps = _synthetic([6, 9, 4], seed=3)
+    write_dataset(tmp_path / "all", _spec(), eps)
+    append_episodes(tmp_path / "grown", _spec(), eps[:2])
+    append_episodes(tmp_path / "grown", _spec(), eps[2:])
+    for rel in ("data/chunk-000/file-000.parquet", "meta/episodes/chunk-000/file-000.parquet", "meta/tasks.parquet",
+                "meta/stats.json", "meta/info.json", "videos/observation.images.front/chunk-000/file-000.mp4"):
+        assert (tmp_path / "all" / rel).read_bytes() == (tmp_path / "grown" / rel).read_bytes(), rel
+
+
+def test_appending_other_joints_or_cameras_is_refused(tmp_path):
+    from roarmctl.errors import InputError
+    from roarmctl.export.lerobot.dataset import DatasetSpec, append_episodes, write_dataset
+
+    write_dataset(tmp_path / "ds", _spec(), _synthetic([4]))
+    other = DatasetSpec(10, "roarm_m3_pro", ["base", "shoulder", "elbow", "wrist", "roll", "hand"], {})
+    with pytest.raises(InputError, match="cameras"):
+        append_episodes(tmp_path / "ds", other, [])
+
+
+# ------------------------------------------------------------------------------------------- whole runs
+def _generate(out: Path, workers: int = 1, **kw):
+    from roarmctl.export.lerobot.datagen import DatagenOptions, generate
+
+    return generate(TEMPLATE, out, DatagenOptions(episodes=4, seed=0, workers=workers, width=SIZE, height=SIZE, **kw))
+
+
+@pytest.fixture(scope="module")
+def dataset4(tmp_path_factory):
+    out = tmp_path_factory.mktemp("datagen") / "ds"
+    summary = _generate(out)
+    return out, summary
+
+
+FILES = ("data/chunk-000/file-000.parquet", "meta/episodes/chunk-000/file-000.parquet", "meta/tasks.parquet",
+         "meta/stats.json", "meta/info.json")
+VIDEOS = ("videos/observation.images.front/chunk-000/file-000.mp4", "videos/observation.images.wrist/chunk-000/file-000.mp4")
+
+
+@pytest.mark.slow  # four episodes planned, run in physics and rendered (about 20 s on an idle core)
+def test_four_episodes_at_96_pixels(dataset4):
+    import pyarrow.parquet as pq
+
+    out, summary = dataset4
+    assert summary.kept == 4 and summary.tried >= 4 and summary.tried == 4 + sum(summary.causes.values())
+    assert not (out / ".datagen").exists()
+    lengths = [r["length"] for r in pq.read_table(out / "meta/episodes/chunk-000/file-000.parquet").to_pylist()]
+    _check_dataset(out, lengths, 30, ["front", "wrist"])
+    assert sorted(p.name for p in out.iterdir()) == ["data", "meta", "videos"]
+
+
+@pytest.mark.slow
+def test_actions_are_what_execute_sends_and_states_follow_the_plan(dataset4):
+    """Each episode's trajectory is planned again from its try (the same draw), and the commands of the
+    streamer's schedule (``build_schedule``, as execute sends them) decoded at each frame time must be its
+    action column; the state is measured, so it follows the plan closely but is not the command."""
+    import pyarrow.parquet as pq
+
+    from roarmctl.device.protocol import M3_FIELDS, WireMap
+    from roarmctl.device.schedule import build_schedule, sample
+    from roarmctl.motion.pipeline import plan_file
+    from roarmctl.physics.episode import sample_plan
+    from roarmctl.plan.template import load_template
+    from roarmctl.robot.loader import load_robot
+
+    out, _ = dataset4
+    t = load_template(TEMPLATE)
+    robot = load_robot(t.plan.robot)
+    data = pq.read_table(out / "data/chunk-000/file-000.parquet")
+    action = np.stack(data["action"].to_numpy(zero_copy_only=False)).astype(np.float64)
+    state = np.stack(data["observation.state"].to_numpy(zero_copy_only=False)).astype(np.float64)
+    ep = data["episode_index"].to_numpy()
+    ts = data["frame_index"].to_numpy() / 30.0  # the instants exactly (the timestamp column is float32)
+    wm = WireMap(robot)
+    matched = 0
+    for k in range(12):  # the kept tries are among the first ones (the fixture kept 4)
+        rng = np.random.default_rng([0, k])
+        drawn = sample_plan(t, robot, rng)
+        if drawn is None:
+            continue
+        try:
+            traj = plan_file(drawn[0], seed=int(rng.integers(2**31 - 1)), base_dir=TEMPLATE.parent).trajectory
+        except Exception:  # noqa: BLE001  (a rejected try)
+            continue
+        ticks = build_schedule(traj, robot, sag=True)  # as execute sends it by default
+        wire = dict(zip(wm.field_names, wm.to_wire_array(traj.positions[:1])[0]))
+        rows = np.flatnonzero(ep == matched)
+        want = []
+        i = 0
+        for time_s in ts[rows]:
+            while i < len(ticks) and ticks[i].t <= time_s + 1e-9:
+                for cmd in ticks[i].commands:
+                    if cmd.get("T") == 102:
+                        wire.update({f: float(cmd[f]) for f in wm.field_names if f in cmd})
+                    elif cmd.get("T") == 101:
+                        wire[M3_FIELDS[int(cmd["joint"]) - 1]] = float(cmd["rad"])
+                i += 1
+            want.append(wm.from_wire(wire))
+        if len(rows) and np.allclose(np.array(want), action[rows], atol=2e-6):
+            arm = robot.arm_indices
+            plan = sample(traj, np.clip(ts[rows], 0, traj.duration))
+            assert np.max(np.abs(state[rows][:, arm] - plan[:, arm])) < 0.25  # the servos track the plan
+            assert not np.allclose(state[rows], action[rows], atol=1e-4)  # measured, not commanded
+            matched += 1
+            if matched == 4:
+                break
+    assert matched == 4
+
+
+@pytest.mark.slow  # a second run of the four episodes on two worker processes
+def test_two_workers_write_the_same_dataset_as_one(dataset4, tmp_path):
+    from roarmctl.export.lerobot import video
+
+    out, _ = dataset4
+    _generate(tmp_path / "two", workers=2)
+    for rel in FILES:
+        assert (out / rel).read_bytes() == (tmp_path / "two" / rel).read_bytes(), rel
+    for rel in VIDEOS:
+        a, _ = video.decode(out / rel)
+        b, _ = video.decode(tmp_path / "two" / rel)
+        assert np.array_equal(a, b), rel
+
+
+@pytest.mark.slow  # a run killed with SIGKILL after its first staged try, then resumed
+def test_a_killed_run_resumes_to_the_same_dataset(dataset4, tmp_path):
+    out, _ = dataset4
+    target = tmp_path / "ds"
+    env = {**os.environ, "COLUMNS": "80"}
+    proc = subprocess.Popen([sys.executable, "-m", "roarmctl", "datagen", str(TEMPLATE), "-n", "4", "-o", str(target),
+                             "--size", f"{SIZE}x{SIZE}", "--json"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    try:
+        deadline = time.monotonic() + 300  # a ceiling only: the test waits for a staged try, not for a time
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (target / ".datagen" / "00000001.json").exists():
+                break
+            time.sleep(0.05)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    staged = target / ".datagen"
+    assert staged.is_dir() and not (target / "meta").exists()  # killed before the dataset was written
+    r = roarmctl("datagen", str(TEMPLATE), "-n", "4", "-o", str(target), "--size", f"{SIZE}x{SIZE}")
+    assert r.returncode == 2 and "--resume" in r.stderr  # a non-empty folder needs --resume
+    summary = _generate(target, resume=True)
+    assert summary.resumed >= 2
+    for rel in FILES + VIDEOS:
+        assert (out / rel).read_bytes() == (target / rel).read_bytes(), rel
+    assert sorted(p.name for p in target.iterdir()) == ["data", "meta", "videos"]
+
+
+@pytest.mark.slow
+def test_ray_data_and_lerobot_read_the_dataset(dataset4):
+    """Optional: lerobot and Ray Data's read_lerobot (which decodes through lerobot) where they are installed."""
+    pytest.importorskip("lerobot")
+    ray = pytest.importorskip("ray")
+    out, _ = dataset4
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    ds = LeRobotDataset("local/roarmctl", root=out)
+    assert ds.num_episodes == 4
+    ray.init(num_cpus=1, include_dashboard=False)
+    try:
+        rows = ray.data.read_lerobot(str(out)).count()
+        assert rows == ds.num_frames
+    finally:
+        ray.shutdown()
+
+
+def test_video_join_and_cut_keep_every_frame():
+    from roarmctl.export.lerobot import video
+
+    eps = _synthetic([5, 8], seed=1)
+    buf = io.BytesIO()
+    video.join([e.videos["front"] for e in eps], [5, 8], 10, buf)
+    frames, times = video.decode(io.BytesIO(buf.getvalue()))
+    assert len(frames) == 13
+    second, _ = video.decode(io.BytesIO(eps[1].videos["front"]))
+    assert np.array_equal(frames[5:], second)
+    cut, _ = video.decode(io.BytesIO(video.cut(io.BytesIO(buf.getvalue()), 5, 8, 10)))
+    assert np.array_equal(cut, second)
