@@ -26,8 +26,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.device.protocol import M3_FIELDS, WireMap
+from roarmctl.device.schedule import sample
 from roarmctl.errors import InfeasibleError, InputError, PlanFileError, UnreachableError
 from roarmctl.physics.render import Cameras, offscreen
+from roarmctl.physics.setup import build
 from roarmctl.plan.template import Range, Template
 
 if TYPE_CHECKING:
@@ -204,8 +206,6 @@ def goals_at(traj: Trajectory, robot: Robot, rec: Recording, times: np.ndarray) 
     """The joint goals (len(times), dof) that had been sent at each time (s from the start of the motion):
     the last firmware command of each joint decoded to joint values; the planned position for a robot
     that is not streamed (no commands)."""
-    from roarmctl.device.schedule import sample
-
     if not rec.commands:
         return np.asarray(sample(traj, np.clip(times, 0.0, traj.duration)), dtype=float)
     wm = WireMap(robot)
@@ -229,7 +229,6 @@ def run_episode(template: Template, robot: Robot, try_index: int, seed: int, opt
     from roarmctl.motion.pipeline import plan_file
     from roarmctl.physics.report import measure
     from roarmctl.physics.run import Options, simulate
-    from roarmctl.physics.setup import build
 
     if options.cameras:
         offscreen()
