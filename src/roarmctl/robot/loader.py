@@ -32,7 +32,15 @@ from roarmctl.robot.implied import (
     mimic_bounds,
     rest_value,
 )
-from roarmctl.robot.meshes import PACKAGE_PATHS, description_roots, load_mesh, mesh_modes, package_map, resolve
+from roarmctl.robot.meshes import (
+    PACKAGE_PATHS,
+    description_roots,
+    load_mesh,
+    mesh_modes,
+    package_map,
+    resolve,
+    unit_notes,
+)
 from roarmctl.robot.model import (
     CollisionShape,
     FixedJaw,
@@ -602,6 +610,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
             shapes.extend(_urdf_shape(lname, c, f"{urdf}: link '{lname}' collision[{k}]", k, meshes))
     if massless:
         notes.append(f"link(s) with collision geometry but no <inertial>, taken as massless: {', '.join(massless)}")
+    notes += unit_notes(shapes, {j.child: float(np.linalg.norm(j.origin[:3, 3])) for j in ordered})
     tcp = side.get("tcp_link", next((j.child for j in reversed(ordered) if j.mimic is None), ordered[-1].child))
     if tcp not in links:
         raise DescriptionError(f"{sidecar}: tcp_link: '{tcp}' is not a link of {urdf.name}")

@@ -5,8 +5,12 @@ File names: relative to the URDF's folder, absolute, ``file://...``, or ``packag
 resolved through the sidecar's ``packages: {NAME: folder}`` map (folders relative to the sidecar)
 or the command line's ``--package-path NAME=FOLDER`` (``PACKAGE_PATHS``; the sidecar wins).
 Formats: whatever trimesh reads as one triangle mesh, STL, OBJ, DAE (COLLADA, through pycollada)
-among them; a scene with several meshes is concatenated in its own frame. ``scale`` multiplies the
-vertices before anything else, as in URDF.
+among them; a scene with several meshes is concatenated in its own frame. A COLLADA file's
+``<unit meter="0.001"/>`` is honoured (its vertices are in that unit, as assimp, so RViz and Gazebo, read
+them; trimesh records it and leaves the numbers as written); STL, OBJ and the rest are in metres.
+``scale`` multiplies the vertices after that, as in URDF. ``unit_notes``: a link whose mesh is more than
+``UNIT_RATIO`` times larger or smaller than the link's distance from its parent joint, the usual sign of a
+mesh in the wrong unit.
 
 Load time: an STL of a few thousand triangles loads and gets its hull in about 2 ms, so nothing is
 cached on disk; a mesh used by several links is read once per process (keyed by path, file
@@ -16,7 +20,9 @@ modification time and scale).
 from __future__ import annotations
 
 import io
+import math
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,6 +42,10 @@ MESH_TYPES = ("stl", "obj", "dae", "ply", "off", "glb")  # read from bytes alone
 MESH_BYTES = 64 * 1024 * 1024  # a mesh file may have (published arms' collision meshes: < 5 MiB)
 SCENE_MESH_BYTES = 256 * 1024 * 1024  # a scene item's mesh file (a CAD export of a workcell)
 MAX_TRIANGLES = 2_000_000  # triangles of one mesh file
+#: A mesh this many times larger or smaller than its link's offset from the parent joint gets a note.
+UNIT_RATIO = 10.0
+#: Offsets below this (m) are no measure of a link's size (a frame at its parent's origin): no note.
+UNIT_MIN_OFFSET = 0.01
 
 
 @dataclass(frozen=True)
@@ -244,6 +254,7 @@ def read_triangles(path: Path, scale: npt.ArrayLike, what: str, *, roots: Roots 
         data = read_bytes(given, what, limit, roots=roots, error=error, hint=hint)
         try:
             loaded = trimesh.load_mesh(io.BytesIO(data), file_type=kind, process=False)
+            unit = _declared_unit(loaded) if kind == "dae" else 1.0
             if isinstance(loaded, trimesh.Scene):  # several meshes (COLLADA, OBJ groups): in the file's frame
                 loaded = loaded.to_mesh() if len(loaded.geometry) else None
             elif isinstance(loaded, list):
@@ -256,11 +267,43 @@ def read_triangles(path: Path, scale: npt.ArrayLike, what: str, *, roots: Roots 
         if len(loaded.faces) > MAX_TRIANGLES:
             raise error(f"{what}: '{path}' has {len(loaded.faces)} triangles, more than {MAX_TRIANGLES}",
                         "simplify the mesh (a collision model needs far fewer)")
-        vertices = np.asarray(loaded.vertices, dtype=float) * np.array(scale3)
+        if not (math.isfinite(unit) and 1e-6 <= unit <= 1e6):
+            raise error(f"{what}: '{path}' declares <unit meter=\"{unit:g}\"/>, not a length unit",
+                        "fix the file's <unit> (0.001 for millimetres)")
+        vertices = np.asarray(loaded.vertices, dtype=float) * unit * np.array(scale3)
         if not np.all(np.isfinite(vertices)):
             raise error(f"{what}: '{path}' has non-finite vertex coordinates")
         _LOADED.keep(key, (vertices, np.asarray(loaded.faces, dtype=np.int64)))
     return _LOADED[key]
+
+
+def _declared_unit(loaded: Any) -> float:
+    """Metres per unit of a COLLADA file as trimesh records its ``<unit meter=...>`` ('0.001 * meters'); 1 if none."""
+    units = getattr(loaded, "metadata", {}).get("units")
+    m = re.fullmatch(r"\s*([-+0-9.eE]+)\s*\*\s*meters\s*", units) if isinstance(units, str) else None
+    try:
+        return float(m.group(1)) if m else 1.0
+    except ValueError:
+        return math.nan
+
+
+def unit_notes(shapes: list[Any], offsets: dict[str, float], kind: str = "collision") -> list[str]:
+    """Notes for links whose mesh size is more than ``UNIT_RATIO`` x larger or smaller than ``offsets[link]``
+    (m, the link's distance from its parent joint; links under ``UNIT_MIN_OFFSET`` are not judged).
+    ``shapes``: objects with ``link`` and ``mesh`` (a ``MeshGeometry`` or None)."""
+    sizes: dict[str, float] = {}
+    for shape in shapes:
+        if shape.mesh is not None and len(shape.mesh.vertices):
+            v = shape.mesh.vertices
+            sizes[shape.link] = max(sizes.get(shape.link, 0.0), float(np.max(v.max(axis=0) - v.min(axis=0))))
+    off = [f"{link} ({size:.3g} m across, {offsets[link]:.3g} m from its parent joint)"
+           for link, size in sizes.items() if offsets.get(link, 0.0) >= UNIT_MIN_OFFSET
+           and not offsets[link] / UNIT_RATIO <= size <= offsets[link] * UNIT_RATIO]
+    if not off:
+        return []
+    return [f"{kind} mesh of {', '.join(off)}: more than {UNIT_RATIO:g}x off the link's size; a mesh in "
+            "millimetres read as metres? (STL and OBJ are read as metres: give the URDF's scale=\"0.001 0.001 "
+            "0.001\"; a COLLADA file's <unit> is honoured)"]
 
 
 def convex_hull(vertices: np.ndarray, where: str,
