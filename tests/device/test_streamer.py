@@ -267,3 +267,95 @@ def test_a_host_stall_in_a_detour_makes_the_run_late_never_cut_across_the_obstac
         moving = q[ts >= start]
         assert np.abs(moving[-1][arm] - whole.positions[0][arm]).max() < 0.01  # it got there
         assert strict.first_invalid(moving[:, arm]) is None, f"stall after tick {j}"
+
+
+# ----------------------------------------------------------------------------- a slow 20260701 loop
+def queued_link(clock: FakeClock, loop_pass: float) -> FakeLink:
+    """The 20260701 build (one queued line per loop pass) with passes of ``loop_pass`` s, its round trip and time per
+    line measured as connect() measures them (T:105 alone; six filler lines ahead of one)."""
+    from roarmctl.device.link import DeviceInfo
+    from roarmctl.device.protocol import quiet_command
+
+    link = FakeLink(clock)
+    link.firmware = "m3-2026"
+    base = 6 * 0.0005 * 1.3 + 0.002  # the model's own pass on that build: six servo reads and its other work
+    link.fw = Firmware(SimConfig(firmware="m3-2026", info_print=0, loop_period=loop_pass - base), t0=clock())
+    rtts = []
+    for _ in range(3):
+        t0 = clock()
+        rtts.append(link.request(0.5).t - t0)
+    t0 = clock()
+    for _ in range(6):
+        link.send(quiet_command())
+    r = link.request(1.0)
+    line_time = (r.t - t0 - min(rtts)) / 6
+    link.info = DeviceInfo("m3-2026", float(np.median(rtts)), line_time, True, False, False, r.feedback)
+    link.sent.clear()
+    link.received.clear()
+    return link
+
+
+def pick_like(dur=2.0):
+    """An arm move with the gripper closing on the way (its own T:101 lines beside the T:102)."""
+    return min_jerk([HOME, [0.8, 0.3, 1.9, -0.5, 0.3, 1.2], [-0.4, 0.2, 1.6, 0.2, -0.3, 0.2]], [dur / 2, dur / 2])
+
+
+@pytest.mark.parametrize("loop_pass", [0.014, 0.022, 0.030])
+def test_a_slow_queued_loop_is_paced_by_its_measured_time_the_rate_lowered_and_its_lag_logged(loop_pass):
+    """The 20260701 build with a slow loop: every line waits in its queue at most the time in flight the stream gives
+    it (plus the line ahead of it), the motion ends when planned (the rate was lowered so the firmware keeps up), and
+    the log has the firmware's lag. Before: 12 lines in flight by count and an allowance that grew with the lag
+    measured: at 22 ms a pass lines waited 230-270 ms and the motion ran 7.6 s long on the bundled pick and place."""
+    clock = FakeClock()
+    link = queued_link(clock, loop_pass)
+    t = pick_like()
+    st = Streamer(link, ROBOT, t, StreamConfig(rate=50, settle=0.0), clock=clock, sleep=clock.sleep)
+    res = st.run()
+    assert res.outcome == "completed"
+    ticks = {id(tk.cmd) for tk in st.schedule}
+    waits = np.array([c - t_line for t_line, c, cmd in link.fw.executed if cmd.get("T") in (101, 102)])
+    sent = {id(c): tt for tt, c in link.sent}
+    assert waits.max() <= 0.05 + 2 * loop_pass + 0.02  # queue wait bounded by time, not a count
+    last = max(c for _, c, cmd in link.fw.executed if cmd.get("T") == 102)
+    assert last - res.t0 - t.duration <= 0.1  # the motion keeps its planned time
+    assert st.rate < 50 and st.rate_changes and res.log["rate_changes"] == st.rate_changes
+    assert all(id(tk.cmd) in sent for tk in st.schedule) and len(ticks) == len(st.schedule)  # every tick went out
+    lag = res.log["firmware_lag_ms"]
+    assert lag["polls"] > 5 and lag["max"] is not None and res.log["firmware_lag"]
+    assert "rate lowered" in " ".join(res.log["notes"])
+
+
+def test_the_queued_hold_goes_to_the_last_confirmed_line_never_ahead_and_its_answer_is_paired():
+    """Ctrl-C on the 20260701 build with a 22 ms loop, at ticks all through the move: the queue is flushed and the
+    hold is the goal of the last tick a poll answer confirmed, which the firmware ran (never ahead of the last line
+    it ran, on the planned path); its confirmation does not wait for the answers to polls the flush discarded.
+    Before: the hold aimed at the host's schedule, up to 0.47 s ahead of the firmware, and 7 of 10 holds had no
+    ``answered_after_s``."""
+    t = pick_like()
+    wm = WireMap(ROBOT)
+    for stop in (0.2, 0.35, 0.5, 0.65, 0.8):
+        clock = FakeClock()
+        link = queued_link(clock, 0.022)
+        st = Streamer(link, ROBOT, t, StreamConfig(rate=50), clock=clock, sleep=clock.sleep)
+
+        def hook(k, st=st, stop=stop):
+            if st.schedule[k].t >= stop * st.schedule[-1].t:
+                raise KeyboardInterrupt
+
+        st.hook = hook
+        with pytest.raises(Interrupted) as info:
+            st.run()
+        log = info.value.result.log
+        hold = log["hold"]
+        assert hold["flushed_queue"] and hold["kind"] == "confirmed" and "answered_after_s" in hold
+        k = st.pacer.confirmed_tick
+        assert k is not None and np.allclose(hold["wire"], np.round(st.schedule[k].wire, 4))
+        flush = next(tt for tt, c in link.sent if c.get("T") == 0)
+        ran = [cmd for _, c, cmd in link.fw.executed if c <= flush and cmd.get("T") == 102]
+        by_cmd = {id(tk.cmd): i for i, tk in enumerate(st.schedule)}
+        ran_ticks = [i for _, c in link.sent if (i := by_cmd.get(id(c))) is not None and c in ran]
+        assert ran_ticks and k <= max(ran_ticks)  # never ahead of what the firmware ran
+        held = wm.from_wire(dict(zip(wm.field_names, hold["wire"])))
+        from roarmctl.device.streamer import sample
+        path = sample(t, np.linspace(0.0, t.duration, 4001))
+        assert np.min(np.max(np.abs(path - held), axis=1)) < 2e-3  # on the planned path

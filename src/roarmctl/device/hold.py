@@ -26,12 +26,14 @@ HOLD_SPD = 600  # the firmware's own ARM_SERVO_INIT_SPEED, steps/s: the least sp
 
 
 def send_hold(link: Link, wm: WireMap, wire: np.ndarray, spd: int, *, kind: str, cause: str, earlier: int = 0,
-              on_answer: Callable[[Received], None] | None = None) -> dict[str, Any]:
+              on_answer: Callable[[Received], None] | None = None, clock: Callable[[], float] | None = None,
+              sleep: Callable[[float], None] | None = None) -> dict[str, Any]:
     """Send the hold to firmware radians ``wire`` (fields order) at ``spd`` steps/s (at least ``HOLD_SPD``);
     return what the log keeps of it (``kind``, ``cause``, when, the goal, copies, whether it was confirmed).
 
     ``earlier``: answers still due to ``T:105`` polls sent before (the firmware answers in order);
-    ``on_answer`` hears the feedback that answers after each copy (the caller judges it).
+    ``on_answer`` hears the feedback that answers after each copy (the caller judges it). ``clock``/``sleep``: the
+    caller's (default the link's), for the wait after a flush.
     Raises DeviceError when the link is gone.
     """
     flushed = False
@@ -46,7 +48,10 @@ def send_hold(link: Link, wm: WireMap, wire: np.ndarray, spd: int, *, kind: str,
     info: dict[str, Any] = {"kind": kind, "cause": cause, "flushed_queue": flushed, "t": t_hold,
                             "wire": [protocol.r4(v) for v in wire], "copies": 1}
     # answered after the firmware read the hold's line: bounds the hold's latency
-    r = link.request(0.3, earlier=earlier)
+    if flushed:
+        r = answer_after_flush(link, earlier, clock or link.clock, sleep or link.sleep)
+    else:
+        r = link.request(0.3, earlier=earlier)
     if r is not None:
         info["answered_after_s"] = round(r.t - t_hold, 4)
         if on_answer is not None:
@@ -60,3 +65,23 @@ def send_hold(link: Link, wm: WireMap, wire: np.ndarray, spd: int, *, kind: str,
     if r2 is not None and on_answer is not None:
         on_answer(r2)
     return info
+
+
+def answer_after_flush(link: Link, outstanding: int, clock: Callable[[], float], sleep: Callable[[float], None],
+                       timeout: float = 0.3) -> Received | None:
+    """Send a T:105 after a flushed queue and return its answer (None if none came within ``timeout`` s).
+
+    The ``outstanding`` polls sent before were either run before the flush (their answers come first) or flushed with
+    the queue (no answer ever comes): waiting for all of them, as without a flush, waited out the timeout and
+    confirmed nothing (7 of 10 holds on the 20260701 build had no ``answered_after_s``). The firmware answers in order
+    and prints nothing unasked (InfoPrint 0), so the last answer read within ``timeout`` is this one's; once
+    ``outstanding + 1`` are read there is nothing left to wait for.
+    """
+    link.send(protocol.feedback_request())
+    end = clock() + timeout
+    frames: list[Received] = []
+    while len(frames) <= outstanding and clock() < end:
+        frames += [r for r in link.poll() if r.feedback is not None]
+        if len(frames) <= outstanding:
+            sleep(0.005)
+    return frames[-1] if frames else None

@@ -147,14 +147,15 @@ def strategy_rate(strategy: str | Strategy, rate: float) -> float:
 
 def build_schedule(traj: Trajectory, robot: Robot, *, rate: float = DEFAULT_RATE, speed_scale: float = 1.0,
                    strategy: str | Strategy = DEFAULT_STRATEGY, latency: float | None = None,
-                   sag: bool = False) -> list[Tick]:
+                   sag: bool = False, start: float = 0.0) -> list[Tick]:
     """Every command the streamer will send for ``traj``, with its time (s from the start).
 
     ``speed_scale`` < 1 slows the whole motion down (times divided by it, speeds multiplied).
     A strategy with its own ``rate`` (per-joint) uses that instead of ``rate``. ``sag``: each goal is
     offset by the servos' sag under gravity and the held payload at its planned pose
     (``roarmctl.device.sag``), so that a P-only servo loop stands where the plan is; a tick's
-    ``target`` stays the plan's.
+    ``target`` stays the plan's. ``start`` (s, execution time): the ticks start there instead of at 0 (the rest of
+    a stream going on at another rate).
     """
     strat = STRATEGIES[strategy] if isinstance(strategy, str) else strategy
     if not 0 < rate <= MAX_LINK_RATE:
@@ -168,8 +169,8 @@ def build_schedule(traj: Trajectory, robot: Robot, *, rate: float = DEFAULT_RATE
     dt = 1.0 / rate
     lat = default_latency(rate) if latency is None else latency
     t_end = traj.duration / speed_scale
-    n = int(math.ceil(t_end * rate - 1e-9)) + 1
-    ts = np.minimum(np.arange(n) * dt, t_end)
+    n = int(math.ceil(max(0.0, t_end - start) * rate - 1e-9)) + 1
+    ts = np.minimum(start + np.arange(n) * dt, t_end)
     # plan times (un-scaled) of where each interval starts and ends, shifted by the link latency
     # and the strategy's lead
     t_from = np.minimum(ts + lat + strat.lead, t_end) * speed_scale

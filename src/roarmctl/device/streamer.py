@@ -38,6 +38,7 @@ from roarmctl.device import protocol, st3235
 from roarmctl.device.execlog import ExecLog
 from roarmctl.device.feedback import FeedbackRefused, FeedbackValidator, Reading, read_valid
 from roarmctl.device.hold import HOLD_SPD, send_hold
+from roarmctl.device.pacing import Pacer
 from roarmctl.device.pose import within_limits
 from roarmctl.device.protocol import WireMap, wire_seconds
 from roarmctl.device.schedule import (
@@ -88,6 +89,8 @@ __all__ = [
 #: strategy's lead already makes up), so a lagging arm is not a fault and a stalled one still is.
 SERVO_LAG = 1.5 * st3235.LOOP_LAG
 HOLD_MODES = ("auto", "path", "setpoint", "measured")
+CONFIRM_EVERY = 0.1  # s: the longest a stream goes without a poll (a rate lowered for a slow firmware keeps it)
+READ_EVERY = 0.005  # s: the stream reads the link at least this often while it waits
 READ_BEFORE_PRINT = protocol.READ_BEFORE_PRINT  # s between the firmware's servo reads and the start of its T:1051 line
 
 
@@ -109,7 +112,7 @@ class StreamConfig:
     hold: str = "auto"  # "auto", "path", "setpoint" or "measured" (see the module docstring)
     hold_max_age: float = 0.05  # a measured pose older than this is never held
     feedback_rate: float | None = None  # T:105 polls/s; None: FEEDBACK_RATE, half that on a build that queues
-    max_unconfirmed: int = 12  # command lines sent but not yet confirmed by a poll answer
+    in_flight: float = 0.05  # s of the firmware's time (measured per line) the unconfirmed lines may represent
     behind_after: float = 0.04  # a poll answered this much later than the round trip: the firmware is behind
     sag: bool = False  # goals offset by the servos' sag (roarmctl.device.sag); execute and the API default on: sag.wanted
 
@@ -153,7 +156,7 @@ class Result:
                             "max": float(trk.max()) if len(trk) else None, "samples": int(len(trk))},
             "final_error_mm": None if self.final_error is None else self.final_error * 1e3,
         }
-        for key in ("feedback", "waits", "hold", "device", "link_budget"):
+        for key in ("feedback", "waits", "firmware_lag_ms", "rate_changes", "hold", "device", "link_budget"):
             if key in self.log:
                 out[key] = self.log[key]
         return out
@@ -217,7 +220,9 @@ class Streamer:
         self.shift = 0.0  # s: the pauses so far (tick k is due at t0 + shift + t_k)
         self.waits = {"late": 0, "behind": 0}  # ticks waited for: the host came after the next was due; the firmware was behind
         self.hold_info: dict[str, Any] | None = None
-        self._polls: deque[tuple[float, int]] = deque()  # the stream's T:105 polls not answered yet
+        self.pacer = Pacer(0.03, 0.0, self.cfg.in_flight)  # lines and polls in flight (replaced when streaming starts)
+        self.poll_every = 1  # a T:105 with every this many ticks
+        self.rate_changes: list[dict[str, Any]] = []  # where the stream went on at a lower rate, and why
         self.refused_lines: dict[int, str] = {}  # id(Received) -> reason, for the log
         self._tick_of: dict[int, int] = {}  # id(first command sent for a tick) -> tick
         self._read_at: dict[int, float] = {}  # id(Received) -> when its servos were read (s, clock): the log's read_t
@@ -427,22 +432,22 @@ class Streamer:
         return float(np.min(np.linalg.norm(plans - p, axis=1)))
 
     def _stream(self) -> None:
-        link, sched, cfg = self.link, self.schedule, self.cfg
-        dt = 1.0 / self.rate
-        poll_every = max(1, int(round(self.rate / self.poll_rate())))
+        link, cfg = self.link, self.cfg
+        self.poll_every = self._poll_every(self.rate)
+        self._polled_tick = 0
         info = getattr(link, "info", None)
         rtt = info.rtt if info is not None else 0.03
+        pacer = self.pacer = Pacer(rtt, info.line_time if info is not None else 0.0, cfg.in_flight)
         link.poll()
         self.t0 = self.clock() + cfg.lead
-        n = len(sched)
-        err = None
-        lines, confirmed = 0, 0
-        polls: deque[tuple[float, int]] = deque()  # (on the wire from, lines sent up to and including it)
-        self._polls = polls  # the hold waits for the answers still due to these
+        self._fit_rate(0)  # a firmware measured at connect as too slow for the asked rate: start lower
+        err: float | None = None
         wire_free = 0.0  # when the bytes sent so far will have left the host (115200 baud)
-        polled = self.clock()
-        k, hooked, waited, host_late = 0, -1, -1, False
-        while k < n:
+        self._polled = self.clock()
+        k, hooked, waited, host_late, samples = 0, -1, -1, False, 0
+        while k < len(self.schedule):
+            sched = self.schedule
+            n = len(sched)
             tick = sched[k]
             first = hooked != k
             if first:
@@ -451,16 +456,27 @@ class Streamer:
                     self.hook(k)
             due = self.t0 + self.shift + tick.t
             wait = due - self.clock()
-            if wait > 0:
-                self.sleep(wait)
+            while wait > 0:
+                # the link is read while waiting, not only once a tick: an answer's time says when the firmware had
+                # run the lines it confirms, and the queue model (pacing) is only as good as that time
+                self.sleep(min(wait, READ_EVERY))
+                wait = due - self.clock()
+                if wait > 0:
+                    err = self._read_answers(tick, err)
             now = self.clock()
             if first:
                 host_late = k + 1 < n and now >= due + sched[k + 1].t - tick.t  # the host came after the next was due
-            send = not (k + 1 < n and (lines - confirmed > cfg.max_unconfirmed
-                                       or (polls and now - polls[0][0] > rtt + cfg.behind_after + self._device_late())))
+            # the firmware has not caught up when the lines it has not run yet would make a new one wait longer than
+            # in_flight, or a poll is overdue by more than behind_after (fixed: it does not grow with the lag measured)
+            send = k + 1 >= n or (pacer.may_send(now, len(tick.commands)) and not pacer.overdue(now, cfg.behind_after))
             if not send and waited != k and not host_late:
                 waited = k
-                self.waits["behind"] += 1  # the firmware has not caught up: add nothing to its backlog, wait
+                self.waits["behind"] += 1  # add nothing to its backlog, wait
+            if not send and not pacer.polls:
+                # nothing asks the firmware how far it got: ask (else nothing would ever confirm the lines in flight)
+                t_poll = link.send(protocol.feedback_request())
+                on_wire, wire_free = max(t_poll, wire_free), max(wire_free, t_poll) + wire_seconds(T105_BYTES)
+                pacer.poll_sent(on_wire, wire_free, now)
             if send:
                 if k + 1 < n and now >= due + sched[k + 1].t - tick.t:
                     # so late that the next tick is due too: the plan waits here (its clock pauses) and this tick goes
@@ -476,49 +492,98 @@ class Streamer:
                 self._tick_of[id(cmds[0])] = k
                 for extra in cmds[1:]:
                     wire_free = max(wire_free, link.send(extra)) + wire_seconds(len(protocol.encode(extra)))
-                lines += len(cmds)
+                pacer.sent(len(cmds), wire_free, k)
                 self.sent_lateness.append((k, t_sent - due))
                 self.setpoint = tick
-                if (k % poll_every == 0 or not polls) and len(polls) < 2:
+                # a poll every poll_every ticks (each costs the firmware a line and its answer's time on the wire); at a
+                # rate lowered for a slow firmware, still one at least every CONFIRM_EVERY s: the hold of a queuing build
+                # goes back to the last line an answer confirmed
+                if (k - self._polled_tick >= self.poll_every or not self.sent_lateness[:-1]) and len(pacer.polls) < 2:
+                    self._polled_tick = k
                     # the T:105 leaves the host's UART after the command bytes still in flight ahead of it:
                     # its round trip starts then (the one measured at connect had nothing ahead of it)
                     t_poll = link.send(protocol.feedback_request())
-                    polls.append((max(t_poll, wire_free), lines + 1))
-                    wire_free = max(wire_free, t_poll) + wire_seconds(T105_BYTES)
-                    lines += 1
-            polled_before, polled = polled, self.clock()
-            new = link.poll()
-            asked: dict[int, float] = {}
-            for r in new:
-                if r.feedback is not None and polls:
-                    t_poll, confirmed = polls.popleft()
-                    asked[id(r)] = t_poll
-                    # the answer was not there yet at the previous read: it is late by at least this much
-                    late = polled_before - t_poll - rtt
-                    if late > 0.002:
-                        self.device_late.append((polled, late))
-            readings = self._judge(new, asked)
-            # feedback is overdue when a question had gone unanswered too long when the link was last read, not
-            # when the host itself did not ask or did not look: a busy machine that stopped this process for
-            # 0.33 s between two polls, or for 0.36 s between reading the link and this check, ended runs here as
-            # "link lost" while the arm had answered every question in time
-            if polls and polled - polls[0][0] > cfg.stale_after + self._lateness_window(self.plan_time(polled - self.t0)):
-                raise DeviceError(f"link lost: no feedback for {polled - polls[0][0]:.2f} s during motion",
-                                  "check the USB cable and the arm's power; the arm may have rebooted")
-            for reading in readings:
-                tracked = self._track(reading)
-                if tracked is None:
-                    continue
-                err, err_window = tracked
-                if err_window > cfg.max_error:
-                    raise _Abort(f"tracking error {err * 1e3:.1f} mm exceeds {cfg.max_error * 1e3:.0f} mm "
-                                 f"at t = {tick.t:.2f} s; aborted")
+                    on_wire, wire_free = max(t_poll, wire_free), max(wire_free, t_poll) + wire_seconds(T105_BYTES)
+                    pacer.poll_sent(on_wire, wire_free, t_poll)
+            err = self._read_answers(tick, err)
             if self.on_status is not None:
                 self.on_status(Status(k, n, tick.t, sched[-1].t, now - due, tick.target, self.measured, err))
             if send:
                 k += 1
             else:
-                self.sleep(min(0.25 * dt, 0.005))
+                self.sleep(min(0.25 / self.rate, READ_EVERY))
+            if pacer.samples != samples:
+                samples = pacer.samples
+                self._fit_rate(k)
+
+    def _read_answers(self, tick: Tick, err: float | None) -> float | None:
+        """Read the link: poll answers confirm lines (pacing), feedback is judged and tracked; raises on a stale link
+        or a tracking error beyond the bound. Returns the newest tracking error (m), or ``err`` when none came."""
+        rtt = self.pacer.rtt
+        polled_before, polled = self._polled, self.clock()
+        self._polled = polled
+        new = self.link.poll()
+        asked: dict[int, float] = {}
+        for r in new:
+            if r.feedback is not None and self.pacer.polls:
+                t_poll = self.pacer.answered(polled, polled_before, wire_seconds(len(r.line) + 2))
+                asked[id(r)] = t_poll
+                # the answer was not there yet at the previous read: it is late by at least this much
+                late = polled_before - t_poll - rtt
+                if late > 0.002:
+                    self.device_late.append((polled, late))
+        readings = self._judge(new, asked)
+        # feedback is overdue when a question had gone unanswered too long when the link was last read, not
+        # when the host itself did not ask or did not look: a busy machine that stopped this process for
+        # 0.33 s between two polls, or for 0.36 s between reading the link and this check, ended runs here as
+        # "link lost" while the arm had answered every question in time
+        polls, cfg = self.pacer.polls, self.cfg
+        if polls and polled - polls[0][0] > cfg.stale_after + self._lateness_window(self.plan_time(polled - self.t0)):
+            raise DeviceError(f"link lost: no feedback for {polled - polls[0][0]:.2f} s during motion",
+                              "check the USB cable and the arm's power; the arm may have rebooted")
+        for reading in readings:
+            tracked = self._track(reading)
+            if tracked is None:
+                continue
+            err, err_window = tracked
+            if err_window > self.cfg.max_error:
+                raise _Abort(f"tracking error {err * 1e3:.1f} mm exceeds {self.cfg.max_error * 1e3:.0f} mm "
+                             f"at t = {tick.t:.2f} s; aborted")
+        return err
+
+    def _poll_every(self, rate: float) -> int:
+        """Ticks from one T:105 to the next at ``rate``: ``poll_rate()`` polls/s, and one at least every
+        ``CONFIRM_EVERY`` s."""
+        return max(1, min(int(round(rate / self.poll_rate())), int(rate * CONFIRM_EVERY)))
+
+    def _fit_rate(self, k: int) -> None:
+        """Go on from tick ``k`` at a lower rate when the firmware's time per line (measured at connect, then from
+        the poll answers) says the stream needs more than its share of it (``roarmctl.device.pacing``). Ticks before
+        ``k`` keep their times; the new ones start one new interval after the last tick sent."""
+        strat = STRATEGIES[self.cfg.strategy] if isinstance(self.cfg.strategy, str) else self.cfg.strategy
+        sched = self.schedule
+        if strat.rate is not None or k >= len(sched) - 1:
+            return  # a strategy with its own rate (per-joint) keeps it
+        # the busiest half second ahead sets the demand: a gripper moving beside the arm doubles the lines of its ticks
+        # (its own T:101), and a rate that fits only on average makes the plan wait there
+        lines = np.array([len(tk.commands) for tk in sched[k:]], dtype=float)
+        w = max(1, min(len(lines), int(round(0.5 * self.rate))))
+        peak = float(np.convolve(lines, np.ones(w) / w, mode="valid").max())
+        fit = self.pacer.fitting_rate(self.rate, peak + 1.0 / self.poll_every)
+        if fit is None:
+            return
+        for _ in range(3):  # fewer ticks a second: a poll with more of them (CONFIRM_EVERY)
+            fit = self.pacer.fitting_rate(self.rate, peak + 1.0 / self._poll_every(fit), lower_by=1.0) or fit
+        self.poll_every = self._poll_every(fit)
+        start = sched[k - 1].t + 1.0 / fit if k > 0 else 0.0
+        tail = build_schedule(self.traj, self.robot, rate=fit, speed_scale=self.cfg.speed_scale, sag=self.cfg.sag,
+                              strategy=self.cfg.strategy, start=min(start, sched[-1].t))
+        self.schedule = sched[:k] + tail
+        self.rate_changes.append({"tick": k, "t": round(self.schedule[k].t, 6), "from_hz": round(self.rate, 3),
+                                  "to_hz": round(fit, 3), "line_time_s": round(self.pacer.line_time, 5)})
+        self.notes.append(f"rate lowered from {self.rate:.0f} to {fit:.0f} Hz at t = {self.schedule[k].t:.2f} s: the "
+                          f"firmware takes {self.pacer.line_time * 1e3:.1f} ms a line")
+        self.rate = fit
 
     def _settle(self) -> None:
         end = self.clock() + self.cfg.settle
@@ -563,11 +628,26 @@ class Streamer:
             return ("measured", np.array([fresh.wire[f] for f in self.wm.field_names])) if fresh is not None else ("none", None)
         if mode == "setpoint" or math.isnan(self.t0):
             return "setpoint", sp.wire
+        if self._flushes():
+            # the queue is flushed before the hold: the lines not run yet never run, and the arm got as far as the last
+            # line the firmware ran. The last one a poll answer confirmed bounds that from below, on the path: hold its
+            # goal (never ahead of it; before any confirmation, a fresh measured pose or the start)
+            k = self.pacer.confirmed_tick
+            if k is None:
+                if fresh is not None:
+                    return "measured", np.array([fresh.wire[f] for f in self.wm.field_names])
+                return "confirmed", self.wm.to_wire_array(self.traj.positions[0])[0]
+            tick = self.schedule[k]
+            return "confirmed", tick.wire if tick.wire is not None else self.wm.to_wire_array(tick.target)[0]
         # the goals ran ``lead`` ahead on the plan: the hold stops them where they would be when it arrives
         arrive = self.plan_time(now - self.t0) + default_latency(self.rate) + self.lead
         latest = min(arrive, sp.t + 1.0 / self.rate + default_latency(self.rate) + self.lead)
         q = sample(self.traj, max(0.0, latest) * self.cfg.speed_scale)
         return "path", self.wm.to_wire_array(q)[0]
+
+    def _flushes(self) -> bool:
+        """Whether this build queues lines and the hold flushes its queue first (the 20260701 build)."""
+        return getattr(self.link, "firmware", None) == "m3-2026"
 
     def _gripper_field(self) -> int | None:
         if self.robot.gripper is None:
@@ -596,8 +676,9 @@ class Streamer:
             if kind != "measured" and self.setpoint is not None:
                 spd = max(HOLD_SPD, int(self.setpoint.cmd.get("spd", 0) or 0))
             # the stream's own polls still unanswered are answered first
-            self.hold_info = send_hold(link, self.wm, wire, spd, kind=kind, cause=cause, earlier=len(self._polls),
-                                       on_answer=self._judge_quietly)
+            self.hold_info = send_hold(link, self.wm, wire, spd, kind=kind, cause=cause, earlier=len(self.pacer.polls),
+                                       on_answer=self._judge_quietly, clock=self.clock, sleep=self.sleep)
+            self.pacer.polls.clear()
             flushed = self.hold_info["flushed_queue"]
             self.notes.append(f"hold sent ({kind}{', queue flushed first' if flushed else ''})")
         except DeviceError:
@@ -668,6 +749,11 @@ class Streamer:
                 "strategy": self.cfg.strategy, "rate": self.rate, "duration": self.schedule[-1].t,
                 "link_budget": budget.as_dict(), "feedback": self.validator.summary(),
                 "waits": dict(self.waits), "paused": [[round(at, 6), round(d, 6)] for at, d in self.paused],
+                # how much later than the round trip each poll was answered (s; the time it waited behind other lines
+                # at the firmware), the firmware's time per line as measured, where the stream went on at a lower rate
+                "firmware_lag_ms": self.pacer.lag_summary(),
+                "firmware_lag": [[round(t - t0, 6), round(x, 6)] for t, x in self.pacer.lag],
+                "firmware_line_time_s": round(self.pacer.line_time, 6), "rate_changes": self.rate_changes,
                 "hold": hold, "summary": res.summary(), "notes": self.notes, "final_pose": self.pose_in_frames(),
                 "tracking": [{"t": round(t, 6), "error_m": round(e, 6)} for t, e in self.tracking]},
             sent=sent, received=received).to_dict()
