@@ -85,7 +85,7 @@ def test_sim_tracks_the_planned_blended_jerk_limited_pick_and_place(tmp_path, ca
     assert json.loads(out.read_text())["blends"]
     rc = run_cli(["execute", str(out), "--sim", "--yes", "--json"])
     res = json.loads(capsys.readouterr().out)
-    assert rc == 0 and res["outcome"] == "completed"
+    assert rc == 0 and res["outcome"] == "completed", res
     print(f"\nplanned pick-and-place on the simulator: TCP RMS {res['simulator']['rms_mm']:.2f} mm, "
           f"max {res['simulator']['max_mm']:.2f} mm")
     assert res["simulator"]["rms_aligned_mm"] < 5.0
