@@ -55,6 +55,9 @@ from roarmctl.robot.model import (
 from roarmctl.robot.padding import sidecar_padding
 from roarmctl.robot.singularity import MODELS
 from roarmctl.robot.srdf import parse_srdf, read_joint_limits, read_srdf
+from roarmctl.robot.urdf_values import fattr as _fattr
+from roarmctl.robot.urdf_values import floats as _floats
+from roarmctl.robot.urdf_values import origin as _origin
 from roarmctl.robot.xacro_input import expand
 from roarmctl.validation import check_markup
 
@@ -404,34 +407,6 @@ def _tool_joint(data: dict, where: str, parent: str, taken: set[str], lscale: fl
 
 
 # --------------------------------------------------------------------------- URDF
-def _floats(text: str | None, n: int, where: str) -> np.ndarray:
-    if text is None:
-        return np.zeros(n)
-    try:
-        vals = [float(v) for v in text.split()]
-    except ValueError:
-        raise DescriptionError(f"{where}: not a list of numbers: '{text}'") from None
-    if len(vals) != n:
-        raise DescriptionError(f"{where}: expected {n} numbers, got '{text}'")
-    return np.array(vals)
-
-
-def _fattr(elem: ET.Element | None, key: str, default: float, where: str) -> float:
-    """A numeric XML attribute (``default`` when the element or attribute is absent)."""
-    if elem is None or elem.get(key) is None:
-        return default
-    try:
-        return float(elem.get(key, ""))
-    except ValueError:
-        raise DescriptionError(f"{where} {key}: not a number: '{elem.get(key)}'") from None
-
-
-def _origin(elem: ET.Element | None, where: str) -> np.ndarray:
-    if elem is None:
-        return np.eye(4)
-    return transform(_floats(elem.get("xyz"), 3, f"{where} origin xyz"), _floats(elem.get("rpy"), 3, f"{where} origin rpy"))
-
-
 def _read_urdf(urdf: Path, side: dict, sidecar: Path) -> ET.Element:
     """The URDF's XML root; a ``.xacro`` file is expanded first (``xacro_args`` in the sidecar)."""
     roots = side.get("_roots") or description_roots(side, sidecar)
