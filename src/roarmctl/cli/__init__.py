@@ -20,6 +20,7 @@ from roarmctl.cli import (
     datagen_cmd,
     execute_cmd,
     export_cmd,
+    follow_cmd,
     kin,
     plan_cmd,
     signals,
@@ -114,6 +115,7 @@ export_cmd.register(app)
 simulate_cmd.register(app)
 teach_cmd.register(app)
 datagen_cmd.register(app)
+follow_cmd.register(app)
 
 
 def run(argv: list[str] | None = None) -> int:

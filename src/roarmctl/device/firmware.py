@@ -124,6 +124,7 @@ class SimConfig:
     leader_pose: tuple[float, ...] = (0.6, 0.2, 1.3, 0.3, 0.0, 3.0)  # firmware radians the leader sends
     bogus: tuple[Bogus, ...] = ()
     mute_after: int | None = None  # stop printing anything after this many motion commands
+    faults_from: float = 0.0  # s after the start before fail_reads, unpowered, bogus and mute apply (a leader sends no motions)
     stuck: tuple[str, ...] = ()  # joints whose servo cannot move (blocked): their goal writes have no effect
     boot_mission: tuple[str, ...] = ()  # JSON lines of the flash mission "boot"
     seed: int = 0
@@ -149,6 +150,7 @@ class Firmware:
             raise ValueError(f"unknown firmware build {cfg.firmware!r}; one of {BUILDS}")
         self.queued_build = cfg.firmware == "m3-2026"
         self.now = t0
+        self.t_start = t0
         start = [float(command_to_goal(j, INIT_RAD[j])) for j in range(6)]
         self.servos: ServoModel = servos if servos is not None else KinematicServos(
             start, t0, max_speed=cfg.max_speed, max_accel=cfg.max_accel)
@@ -215,7 +217,11 @@ class Firmware:
 
     def muted(self) -> bool:
         """Whether the mute fault has silenced the output (after ``mute_after`` motion commands)."""
-        return self.cfg.mute_after is not None and self.motion_count >= self.cfg.mute_after
+        return self.cfg.mute_after is not None and self.motion_count >= self.cfg.mute_after and self.faulty()
+
+    def faulty(self) -> bool:
+        """Whether the faults apply yet (``faults_from`` s after the start)."""
+        return self.now - self.t_start >= self.cfg.faults_from
 
     def println(self, text: str, t: float) -> float:
         """``Serial.println`` at ``t``: queue ``text\\r\\n`` for the wire; return when the call returns
@@ -342,7 +348,8 @@ class Firmware:
         library's timeout and keeps the old position ([fw26]: torque flag and current read 0)."""
         per = self.cfg.read_time * (1.3 if self.queued_build else 1.0)
         cfg = self.cfg
-        fails = [cfg.unpowered or (cfg.fail_reads.get(name, 0.0) > 0 and self.rng.random() < cfg.fail_reads[name])
+        faulty = self.faulty()
+        fails = [faulty and (cfg.unpowered or (cfg.fail_reads.get(name, 0.0) > 0 and self.rng.random() < cfg.fail_reads[name]))
                  for name in JOINTS]
         if not any(fails):  # six reads in a row: sampled together at the middle of the block
             self._step_to(c + 3 * per)
@@ -365,7 +372,7 @@ class Firmware:
         return c
 
     def _voltage_cv(self) -> int:
-        return 0 if self.cfg.unpowered else int(self.cfg.voltage * 100)
+        return 0 if self.cfg.unpowered and self.faulty() else int(self.cfg.voltage * 100)
 
     def _esp_now(self, t: float) -> None:
         """A leader nearby broadcasts its joints every 50 ms; a follower (mode 3) obeys at spd 0, acc 0."""
@@ -397,7 +404,7 @@ class Firmware:
                 items += [(f"torswitch{k}", int(self.read_torque[j])) for j, k in enumerate("BSETRG")]
                 items += [("v", self._voltage_cv())]
         text = {k: (str(v) if isinstance(v, int) else _num_text(v)) for k, v in items}
-        if apply_bogus:
+        if apply_bogus and self.faulty():
             for i, bog in enumerate(self.cfg.bogus):
                 if self.motion_count >= bog.after and self._bogus_left[i] != 0 and bog.key in text:
                     text[bog.key] = bog.value

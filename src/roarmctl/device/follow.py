@@ -33,7 +33,7 @@ from roarmctl.device.feedback import FeedbackRefused, FeedbackValidator, read_va
 from roarmctl.device.follow_guard import Guard, GuardLimits, SourceLost, Target, Verdict
 from roarmctl.device.follow_motion import Motion, Smoother
 from roarmctl.device.hold import HOLD_SPD, send_hold
-from roarmctl.device.protocol import WireMap, acc_register, spd_register
+from roarmctl.device.protocol import WireMap, spd_register
 from roarmctl.errors import DeviceError, InputError, Interrupted, signal_name
 
 if TYPE_CHECKING:
@@ -41,7 +41,11 @@ if TYPE_CHECKING:
     from roarmctl.motion.collision import CollisionChecker
     from roarmctl.robot.model import Robot
 
-SPD_MARGIN = 1.2  # a set-point's spd: its fastest joint's speed x this (the servo arrives within the interval)
+#: A set-point's spd: its fastest joint's speed x this (the servo arrives within the interval); its acc is 0 (no ramp
+#: of the servo's own: the set-points are jerk-limited already). On the simulated arm following a leader, acc from the
+#: motion's acceleration (x 1.5, at least 5, as the streamer's timed strategy) lagged the set-points by 0.135 s, acc 0
+#: by 0.06 s (tests/device/followsim.py's swing).
+SPD_MARGIN = 1.2
 
 
 class SourceEnded(Exception):  # noqa: N818 - a clean end, not an error
@@ -78,6 +82,7 @@ class FollowConfig:
     stale_after: float = 0.3
     max_unconfirmed: int = 12
     behind_after: float = 0.04
+    duration: float | None = None  # s: stop taking targets after this long (None: until the source ends)
     guard: GuardLimits = field(default_factory=GuardLimits)
 
     def __post_init__(self) -> None:
@@ -89,6 +94,10 @@ class FollowConfig:
         if isinstance(self.max_unconfirmed, bool) or not isinstance(self.max_unconfirmed, int) \
                 or not 1 <= self.max_unconfirmed <= 100:
             raise InputError(f"max_unconfirmed must be a whole number in [1, 100], got {self.max_unconfirmed!r}")
+        d = self.duration
+        if d is not None and (isinstance(d, bool) or not isinstance(d, (int, float)) or not math.isfinite(d)
+                              or not 0 < d <= 86400):
+            raise InputError(f"duration must be a number in (0, 86400] s, got {d!r}")
 
 
 @dataclass
@@ -201,6 +210,9 @@ class Follower:
             if wait > 0:
                 self.sleep(wait)
             now = self.clock()
+            if not ended and cfg.duration is not None and now - self.t0 >= cfg.duration:
+                ended = True
+                self.event(f"{cfg.duration:g} s followed: finishing the motion to the last accepted target")
             if not ended:
                 try:
                     self._take(self.source.poll(now))
@@ -290,8 +302,7 @@ class Follower:
         wire = self.wm.to_wire_array(q)[0]
         prev = self.wm.to_wire_array(before)[0]
         speed = float(np.max(np.abs(wire - prev))) / self.dt
-        accel = float(np.max(np.abs(self.smoother.acceleration[self.wm.index])))
-        cmd = self.wm.command(q, spd_register(speed * SPD_MARGIN, minimum=50), acc_register(accel * 1.5, minimum=5))
+        cmd = self.wm.command(q, spd_register(speed * SPD_MARGIN, minimum=50), 0)
         t = self.link.send(cmd)
         self.commanded.append((t, q.copy()))
         self._last_cmd, self._wire = cmd, wire

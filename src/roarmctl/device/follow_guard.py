@@ -13,11 +13,13 @@ A target (:class:`Target`: the source's own time stamp and a joint vector) is ac
    delivered later than ``max_lag`` beyond the quickest delivery seen (the source's clock against this host's),
    and its values are not bit-for-bit those of the frames of the last ``frozen_after`` s (a frozen source:
    a failed read repeats the previous value);
-2. every value is a finite number, within the joint's limits;
+2. every value is a finite number, within the joint's limits (a value at most ``limit_tolerance`` beyond a limit is
+   taken as the limit: a leader's reading of a joint at its limit can round past it by a servo step);
 3. the step from the last accepted target is within the budget: per joint, at most ``max_velocity x dt`` and
    at most ``max_acceleration x dt^2`` away from where the last velocity would have taken it (``dt``: the
-   smaller of the source's and this host's time between the two, so a stamp cannot buy a larger step; after a
-   refusal the time stops at the first refused frame, so a value that jumped and stayed is still refused);
+   source's time between the two, at most this host's plus ``max_lag``, so a stamp cannot buy a larger step while
+   frames that queued up in a pipe still pass; a value that jumped by pi and stayed needs pi / 2 rad/s = 1.6 s of
+   refusals before it fits a RoArm joint's budget, far more than ``max_refusals`` frames of any source);
 4. the target, and the straight joint-space segment to it from the last accepted one (every ``resolution``
    rad), is clear of the scene and of the arm itself and outside the singularity margin (the planner's own
    ``CollisionChecker``);
@@ -69,7 +71,8 @@ class GuardLimits:
     ``start_tolerance``: how far the first target may be from the measured pose, per joint; ``timeout``: silence
     that loses the source; ``max_lag``: delivery later than the quickest seen that makes a frame stale;
     ``frozen_after``: identical frames for this long make the source frozen (0: never); ``max_refusals``: refused
-    targets in a row that end the following; ``resolution``: rad between the states checked along a segment.
+    targets in a row that end the following; ``resolution``: rad between the states checked along a segment;
+    ``limit_tolerance``: rad beyond a joint limit that is taken as the limit.
     """
 
     velocity_scale: float = 1.0
@@ -81,6 +84,7 @@ class GuardLimits:
     frozen_after: float = 2.0
     max_refusals: int = 5
     resolution: float = 0.01
+    limit_tolerance: float = 0.005
 
     def __post_init__(self) -> None:
         _bounded("velocity_scale", self.velocity_scale, 0.0, 1.0, "")
@@ -91,6 +95,7 @@ class GuardLimits:
         _bounded("max_lag", self.max_lag, 0.0, 60.0, "s")
         _bounded("frozen_after", self.frozen_after, 0.0, 3600.0, "s", zero=True)
         _bounded("resolution", self.resolution, 0.0, 0.1, "rad")
+        _bounded("limit_tolerance", self.limit_tolerance, 0.0, 0.1, "rad", zero=True)
         if isinstance(self.max_refusals, bool) or not isinstance(self.max_refusals, int) or not 1 <= self.max_refusals <= 1000:
             raise InputError(f"max_refusals must be a whole number in [1, 1000], got {self.max_refusals!r}")
 
@@ -144,7 +149,6 @@ class Guard:
         self.quickest: float | None = None  # least (received - t) seen: the source's clock against ours
         self.same_q: np.ndarray | None = None
         self.same_since: float | None = None  # source time since which every frame had the values same_q
-        self.refused_since: tuple[float, float] | None = None  # (source, host) time of the first refusal of a run
         self.run = 0
         self.accepted = 0
         self.refused = 0
@@ -158,6 +162,8 @@ class Guard:
         verdict = self._fresh(target)
         if verdict is None:
             verdict = self._values(target.q)
+        if verdict is None:
+            target = Target(target.t, np.clip(target.q, self.lower, self.upper), target.received)
         if verdict is None:
             verdict = self._step(target)
         if verdict is None:
@@ -197,7 +203,8 @@ class Guard:
         bad = np.flatnonzero(~np.isfinite(q))
         if bad.size:
             return Verdict("not_finite", f"{names[bad[0]]} is {q[bad[0]]!r}, not a finite number")
-        out = np.flatnonzero((q < self.lower - 1e-9) | (q > self.upper + 1e-9))
+        tol = self.lim.limit_tolerance + 1e-9
+        out = np.flatnonzero((q < self.lower - tol) | (q > self.upper + tol))
         if out.size:
             j = int(out[0])
             return Verdict("joint_limit", f"joint limit: {names[j]} = {q[j]:.4f} rad is outside "
@@ -214,10 +221,7 @@ class Guard:
                 return Verdict("step", f"the first target is {abs(d[j]):.3f} rad from the arm on {names[j]} (more than "
                                        f"{self.lim.start_tolerance:g}): start the source where the arm stands")
             return None
-        t_src, t_host = tg.t, tg.received
-        if self.refused_since is not None:  # the time to move stops at the first refusal of the run
-            t_src, t_host = min(t_src, self.refused_since[0]), min(t_host, self.refused_since[1])
-        dt = max(min(t_src - self.last_t, t_host - self.last_at), 1e-3)
+        dt = self._dt(tg.t, tg.received)
         over_v = np.abs(d) - (self.vmax * dt + tol)
         over_a = np.abs(d - self.velocity * dt) - (self.amax * dt * dt + tol)
         for over, what, bound in ((over_v, "velocity", self.vmax), (over_a, "acceleration", self.amax)):
@@ -246,24 +250,26 @@ class Guard:
         where = "at the target" if bad == len(path) - 1 else f"{bad / (len(path) - 1):.0%} of the way to it"
         return Verdict(kind, f"{why} ({where})")
 
+    def _dt(self, t_src: float, t_host: float) -> float:
+        """s from the last accepted target to one at source time ``t_src`` that arrived at ``t_host``."""
+        assert self.last_t is not None and self.last_at is not None
+        return max(min(t_src - self.last_t, t_host - self.last_at + self.lim.max_lag), 1e-3)
+
     # ------------------------------------------------------------------ counting
     def _accept(self, tg: Target) -> Verdict:
         q = np.asarray(tg.q, dtype=float)
         if self.last_t is not None and self.last_at is not None:
-            dt = max(min(tg.t - self.last_t, tg.received - self.last_at), 1e-3)
+            dt = self._dt(tg.t, tg.received)
             self.velocity = (q - self.last_q) / dt
         self.last_q, self.last_t, self.last_at = q.copy(), tg.t, tg.received
         self.accepted += 1
         self.run = 0
-        self.refused_since = None
         return Verdict("ok")
 
     def _refuse(self, tg: Target, verdict: Verdict) -> Verdict:
         self.refused += 1
         self.run += 1
         self.by_kind[verdict.kind] = self.by_kind.get(verdict.kind, 0) + 1
-        if self.refused_since is None:
-            self.refused_since = (tg.t if math.isfinite(tg.t) else math.inf, tg.received)
         self.refusals.append({"t": tg.received, "kind": verdict.kind, "reason": verdict.reason})
         if self.run >= self.lim.max_refusals:
             raise SourceLost(f"{self.run} targets refused in a row: {verdict.reason}",

@@ -70,16 +70,21 @@ class Smoother:
         self.computed = 0  # motions computed (the bench's count)
 
     def plan(self, target: np.ndarray) -> Motion | str:
-        """The motion from the current state to ``target`` (dof,) at rest, or why there is none."""
+        """The motion from the current state to ``target`` (dof,) rad, arriving at rest, or why there is none.
+
+        (Passing a moving source's targets at its estimated speed was tried: with a leader's frames arriving 25-45 ms
+        apart the speed estimate is noisy, and the lag to the leader grew from 0.11 to 0.17 s, tests/device/followsim.)
+        """
         from ruckig import Result, RuckigError
 
         inp = self._inp
+        n = len(self.position)
         inp.current_position = list(self.position)
         inp.current_velocity = list(self.velocity)
         inp.current_acceleration = list(self.acceleration)
         inp.target_position = list(np.asarray(target, dtype=float))
-        inp.target_velocity = [0.0] * len(self.position)
-        inp.target_acceleration = [0.0] * len(self.position)
+        inp.target_velocity = [0.0] * n
+        inp.target_acceleration = [0.0] * n
         self.computed += 1
         try:
             result = self._otg.calculate(inp, self._traj)
