@@ -17,9 +17,11 @@ from typing import TYPE_CHECKING, Any
 
 from roarmctl.device.follow import FollowConfig, Follower, FollowResult, Source
 from roarmctl.device.follow_sources import LeaderSource
+from roarmctl.device.guide import guided_servos
 from roarmctl.device.link import Link
 from roarmctl.device.protocol import WireMap
 from roarmctl.device.simulator import PtySimulator, SimConfig
+from roarmctl.device.teach import Judge, TeachSession
 from roarmctl.errors import InputError, RoarmError
 from roarmctl.fileio import atomic_write_json
 
@@ -120,15 +122,11 @@ def follow_live(robot: Robot, checker: CollisionChecker, *, port: str | None = N
 
 def _leader_source(spec: LeaderSpec, robot: Robot, sims: list[PtySimulator]) -> Source:
     """Open, connect and start the leader (torque off) as a source."""
-    from roarmctl.device.teach import Judge, TeachSession
-
     lead_robot = spec.robot or robot
     port = spec.port
     if port is None:
         if spec.guide is None:
             raise InputError("a simulated leader needs a guide (the hand's script)")
-        from roarmctl.device.guide import guided_servos
-
         sims.append(PtySimulator(SimConfig(**(spec.faults or {})), servos=guided_servos(spec.guide), process=True).start())
         port = sims[-1].path
     link = Link(port)
