@@ -463,13 +463,13 @@ def test_view_serves_the_page_on_loopback_until_ctrl_c(chromium, planned, tmp_pa
                             stderr=subprocess.PIPE, text=True)
     try:
         line = proc.stdout.readline()
-        m = re.search(r"http://127\.0\.0\.1:(\d+)/", line)
+        m = re.search(r"http://127\.0\.0\.1:(\d+)/\?token=[\w-]{32,}", line)  # the token: tests/test_view_server.py
         assert m, line
         url = m.group(0)
         with urllib.request.urlopen(url, timeout=30) as r:
             assert r.status == 200 and r.read() == out.read_bytes()
         with pytest.raises(urllib.error.HTTPError) as e:
-            urllib.request.urlopen(url + "etc/passwd", timeout=30)
+            urllib.request.urlopen(url.replace("/?", "/etc/passwd?"), timeout=30)
         assert e.value.code == 404
         page, watch = br.open_page(chromium, url)
         try:
