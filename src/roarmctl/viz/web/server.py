@@ -17,6 +17,7 @@ import errno
 import hmac
 import secrets
 import socket
+import sys
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
@@ -53,12 +54,10 @@ class ViewServer:
         self.requests = self.refused = self.dropped = 0
         self.errors: list[str] = []
         self.slots = threading.BoundedSemaphore(max_connections)  # one per connection being served
-        server = self
+        server, idle = self, timeout
 
         class Handler(BaseHTTPRequestHandler):
-            def setup(self) -> None:
-                self.timeout = timeout  # StreamRequestHandler sets it on the socket: a silent client is let go
-                super().setup()
+            timeout = idle  # StreamRequestHandler sets it on the socket: a silent client is let go
 
             def _send(self, code: int, body: bytes, head_only: bool = False) -> None:
                 self.send_response(code)
@@ -116,8 +115,6 @@ class ViewServer:
                     server.slots.release()
 
             def handle_error(self, request: Any, client_address: Any) -> None:
-                import sys
-
                 exc = sys.exc_info()[1]
                 if not isinstance(exc, HANGUPS):
                     server.errors.append(f"{type(exc).__name__}: {exc}"[:200])
