@@ -49,6 +49,17 @@ class InputError(RoarmError):
     exit_code = 2
 
 
+class OptionError(InputError):
+    """An option out of its bounds, in the library's words: ``field`` names it as the options object does
+    (``speed_scale``), ``problem`` says what is wrong; the message is ``"{field}: {problem}"``. The CLI names
+    its flag instead when it prints (``roarmctl.cli.common``)."""
+
+    def __init__(self, field: str, problem: str, hint: str | None = None) -> None:
+        super().__init__(f"{field}: {problem}", hint)
+        self.field = field
+        self.problem = problem
+
+
 class DescriptionError(InputError):
     """A robot description (URDF, sidecar or DH table) is wrong or incomplete (exit 2)."""
 

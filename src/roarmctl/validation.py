@@ -23,6 +23,7 @@ import json
 import math
 import re
 from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -34,7 +35,7 @@ from yaml.reader import Reader
 from yaml.resolver import Resolver
 from yaml.scanner import Scanner
 
-from roarmctl.errors import InputError, PlanFileError, describe_value
+from roarmctl.errors import InputError, OptionError, PlanFileError, describe_value
 from roarmctl.fileio import Roots, read_bytes
 
 
@@ -546,3 +547,58 @@ class Checker:
         for key in keys:
             if key not in value:
                 self.fail(where, field, f"'{key}' is missing")
+
+
+# --------------------------------------------------------------------------- options objects
+MAX_WHOLE = 2 ** 63 - 1  # the largest whole-number option (a seed): what a C long holds
+
+
+@dataclass(frozen=True)
+class Bound:
+    """The values one option takes: a finite number in [``lo``, ``hi``] (above ``lo`` when ``strict_lo``), a whole
+    number in that range (``whole``), true or false (``flag``) or one of ``choices``; ``optional``: None too."""
+
+    lo: float = -1e6
+    hi: float = 1e6
+    strict_lo: bool = False
+    whole: bool = False
+    flag: bool = False
+    choices: tuple[str, ...] | None = None
+    optional: bool = False
+
+    def check(self, value: Any, checker: Checker, where: str, field: str) -> Any:
+        """``value`` if it is within the bound; else ``checker``'s error naming ``where`` and ``field``."""
+        if value is None and self.optional:
+            return None
+        if self.flag:
+            if not isinstance(value, bool):
+                checker.fail(where, field, f"expected true or false, got {checker.kind(value)}")
+            return value
+        if self.choices is not None:
+            return checker.name(value, where, field, choices=self.choices)
+        if self.whole:
+            if isinstance(value, bool) or not isinstance(value, int) or not self.lo <= value <= self.hi:
+                span = f">= {self.lo:.0f}" if self.hi >= MAX_WHOLE else f"from {self.lo:.0f} to {self.hi:.0f}"
+                checker.fail(where, field, f"expected a whole number {span}, got {checker.kind(value)}")
+            return value
+        return checker.number(value, where, field, lo=self.lo, hi=self.hi, strict_lo=self.strict_lo)
+
+
+class _OptionChecker(Checker):
+    """Field checks that raise ``OptionError`` in the options object's own words (no file, no flag)."""
+
+    def fail(self, where: str, field: str, message: str, hint: str | None = None) -> NoReturn:
+        raise OptionError(field, message, hint)
+
+
+OPTION_CHECK = _OptionChecker(OptionError)
+
+
+def check_options(options: Any, bounds: dict[str, Bound]) -> None:
+    """Check every field of the dataclass ``options`` that ``bounds`` names; raises ``OptionError`` naming the
+    first field out of its bound (NaN, inf, a wrong type, out of range). Options objects call it from
+    ``__post_init__``, so none exists with a value outside its bounds."""
+    for f in fields(options):
+        bound = bounds.get(f.name)
+        if bound is not None:
+            bound.check(getattr(options, f.name), OPTION_CHECK, "", f.name)

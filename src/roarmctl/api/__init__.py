@@ -49,6 +49,7 @@ from roarmctl.errors import (
     InfeasibleError,
     InputError,
     Interrupted,
+    OptionError,
     PlanFileError,
     PlanningError,
     RoarmError,
@@ -58,6 +59,7 @@ from roarmctl.errors import (
 )
 from roarmctl.export import export as _export
 from roarmctl.export import format_for
+from roarmctl.motion.options import Limits, PlannerConfig
 from roarmctl.motion.pipeline import plan_file
 from roarmctl.motion.scene import SceneItem
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
@@ -74,10 +76,38 @@ PathLike = str | os.PathLike[str]
 TrajectoryLike = Trajectory | PathLike
 
 __all__ = [
-    "DescriptionError", "DeviceError", "Event", "IKResult", "InfeasibleError", "InputError", "Interrupted",
-    "JointPath", "PlanFileError", "Planner", "PlanningError", "Pose", "RoarmError", "Scene", "SceneItem",
-    "Segment", "StopRequested", "Trajectory", "TrajectoryFileError", "UnreachableError", "Validity", "draw",
-    "execute", "export", "load_robot", "load_trajectory", "plan", "sample", "save_trajectory",
+    "DescriptionError",
+    "DeviceError",
+    "Event",
+    "IKResult",
+    "InfeasibleError",
+    "InputError",
+    "Interrupted",
+    "JointPath",
+    "Limits",
+    "OptionError",
+    "PlanFileError",
+    "Planner",
+    "PlannerConfig",
+    "PlanningError",
+    "Pose",
+    "RoarmError",
+    "Scene",
+    "SceneItem",
+    "Segment",
+    "StopRequested",
+    "Trajectory",
+    "TrajectoryFileError",
+    "UnreachableError",
+    "Validity",
+    "draw",
+    "execute",
+    "export",
+    "load_robot",
+    "load_trajectory",
+    "plan",
+    "sample",
+    "save_trajectory",
     "to_joint_trajectory",
 ]
 

@@ -20,8 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -34,12 +33,11 @@ from roarmctl.motion.planning.assembly import assemble
 from roarmctl.motion.planning.context import PlanContext
 from roarmctl.motion.planning.pieces import TaskStep, UntimedMotion
 from roarmctl.motion.rejection import rejection_cause
-from roarmctl.plan.schema import FIELD_BOUNDS
-from roarmctl.plan.types import Plan
 from roarmctl.robot.ik import solve_ik
 from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import Robot, rpy_from_matrix
-from roarmctl.validation import Checker
+
+_O = TypeVar("_O", Limits, PlannerConfig)
 
 if TYPE_CHECKING:
     from roarmctl.motion.trajectory import Trajectory
@@ -160,22 +158,43 @@ class JointPath:
         object.__setattr__(self, "length", float(np.sum(np.linalg.norm(np.diff(self.waypoints, axis=0), axis=1))))
 
 
+def _options(cls: type[_O], given: _O | None, what: str, **values: object) -> _O:
+    """``given`` when the caller passed the options object whole, else one made of the keyword values given
+    (the rest its defaults); both at once is ambiguous."""
+    values = {k: v for k, v in values.items() if v is not None}
+    if given is None:
+        return cls(**values)  # type: ignore[arg-type]  # each field checks its own type and bounds
+    if values:
+        raise InputError(f"Planner: {', '.join(values)} given beside {what}=",
+                         f"set them in the {cls.__name__} you pass, or leave {what}= out")
+    if not isinstance(given, cls):
+        raise InputError(f"Planner: {what}: expected a {cls.__name__}, got {type(given).__name__}")
+    return given
+
+
 class Planner:
     """Single queries for ``robot`` (a ``Robot``, a bundled name or a description path) among ``scene``'s items.
 
     ``padding`` (m, 0 to 0.1) inflates the arm against the scene; ``singularity_margin`` (m/rad, 0 to 1; 0: none) is the
     smallest singular value of the TCP's translational Jacobian a valid state keeps; ``velocity_scale`` and
-    ``acceleration_scale`` (0.01 to 1) scale the robot's joint limits for ``time`` (the bounds are a plan file's,
-    ``plan.schema.FIELD_BOUNDS``); ``max_tcp_speed`` (m/s, 0.001 to 5) caps the TCP;
-    ``planner`` names the OMPL planner, ``seed`` makes every answer repeatable (same calls, same results) and
-    ``max_checks`` is the work budget of one path search. The scene may change between queries (add, remove,
-    attach, detach): the next query uses it as it is then.
+    ``acceleration_scale`` (0.01 to 1) scale the robot's joint limits for ``time``; ``max_tcp_speed`` (m/s, 0.001 to 5)
+    caps the TCP; ``planner`` names the OMPL planner, ``seed`` makes every answer repeatable (same calls, same results)
+    and ``max_checks`` is the work budget of one path search. These build the two options objects a plan file's
+    ``limits`` and ``planner`` become (``roarmctl.motion.options``: ``Limits``, ``PlannerConfig``, with the bounds);
+    pass ``limits=`` / ``config=`` to give them whole instead (then not their keyword arguments). A value out of its
+    bounds raises ``OptionError`` naming the field. The scene may change between queries (add, remove, attach,
+    detach): the next query uses it as it is then.
     """
 
-    def __init__(self, robot: Robot | str, scene: Scene | None = None, *, padding: float = 0.005,
-                 singularity_margin: float = 0.02, velocity_scale: float = 0.5, acceleration_scale: float = 0.5,
-                 max_tcp_speed: float | None = None, planner: str = "RRTConnect", seed: int = 0,
-                 max_checks: int = 2_000_000) -> None:
+    def __init__(self, robot: Robot | str, scene: Scene | None = None, *, padding: float | None = None,
+                 singularity_margin: float | None = None, velocity_scale: float | None = None,
+                 acceleration_scale: float | None = None, max_tcp_speed: float | None = None, planner: str | None = None,
+                 seed: int | None = None, max_checks: int | None = None, limits: Limits | None = None,
+                 config: PlannerConfig | None = None) -> None:
+        self._limits = _options(Limits, limits, "limits", velocity_scale=velocity_scale,
+                                acceleration_scale=acceleration_scale, max_tcp_speed=max_tcp_speed)
+        self._config = _options(PlannerConfig, config, "config", padding=padding, singularity_margin=singularity_margin,
+                                name=planner, seed=seed, max_checks=max_checks)
         if not isinstance(robot, Robot):
             robot = load_robot(str(robot))
         self.robot = robot
@@ -184,19 +203,6 @@ class Planner:
             self.scene.robot = robot
         elif self.scene.robot is not robot:
             raise InputError("Planner: the scene belongs to another robot's planner", "give each robot its own Scene")
-        # the plan file's bounds and check, so its words too
-        check = Checker(InputError)
-        singularity_margin, padding, velocity_scale, acceleration_scale = (
-            check.number(value, "Planner", name, lo=FIELD_BOUNDS[name][0], hi=FIELD_BOUNDS[name][1])
-            for name, value in (("singularity_margin", singularity_margin), ("padding", padding),
-                                ("velocity_scale", velocity_scale), ("acceleration_scale", acceleration_scale)))
-        if max_tcp_speed is not None:
-            max_tcp_speed = check.number(max_tcp_speed, "Planner", "max_tcp_speed", lo=FIELD_BOUNDS["max_tcp_speed"][0],
-                                         hi=FIELD_BOUNDS["max_tcp_speed"][1])
-        self._limits = Limits(velocity_scale=float(velocity_scale), acceleration_scale=float(acceleration_scale),
-                              max_tcp_speed=None if max_tcp_speed is None else float(max_tcp_speed))
-        self._config = PlannerConfig(name=planner, seed=int(seed), singularity_margin=float(singularity_margin),
-                                     padding=float(padding), max_checks=int(max_checks))
         self._ctx: PlanContext | None = None
         self._version = -1
 
@@ -214,11 +220,8 @@ class Planner:
                                    singularity_margin=self._config.singularity_margin or None)
         for name in self.scene.carried:
             checker.attach(name, rest[r.arm_indices])
-        spec = getattr(r, "spec", "") or r.name
-        plan = Plan(path=Path("<api>"), sha256="", robot=spec, start=rest, scene=[], objects=[], tasks=[],
-                    limits=self._limits, planner=self._config)
         free_count = self._ctx.free_count if self._ctx is not None else 0
-        self._ctx = PlanContext(plan, r, checker)
+        self._ctx = PlanContext(r, checker, self._limits, self._config)
         self._ctx.free_count = free_count  # the OMPL seeds go on where they were: same calls, same answers
         self._version = self.scene.version
         return self._ctx

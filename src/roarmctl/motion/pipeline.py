@@ -13,7 +13,7 @@ from __future__ import annotations
 import signal
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -88,9 +88,9 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
     plan = load_plan(path, named_poses=list(robot.named_poses), base_dir=base_dir, frames=robot.frames, parsed=plan)
     if start_here or (isinstance(plan.start, str) and plan.start == "current"):
         assert current is not None  # checked above for start: current; start_here comes with it
-        plan.start = np.asarray(current(robot), dtype=float)
+        plan = replace(plan, start=np.asarray(current(robot), dtype=float))
     if seed is not None:
-        plan.planner.seed = seed
+        plan = replace(plan, planner=replace(plan.planner, seed=seed))  # the options check the seed
     return Planner(plan, robot, progress).run()
 
 
@@ -151,7 +151,9 @@ class Planner:
         scene = Scene([scene_item(s) for s in plan.scene + plan.objects])
         checker = CollisionChecker(robot, scene, padding=plan.planner.padding,
                                    singularity_margin=plan.planner.singularity_margin or None)
-        self.ctx = PlanContext(plan, robot, checker, initial_scene=scene)  # the checker copied it: nothing else moves it
+        self.plan = plan
+        self.ctx = PlanContext(robot, checker, plan.limits, plan.planner, plan=plan,
+                               initial_scene=scene)  # the checker copied it: nothing else moves it
         self.ctx.notes.extend(robot.notes)  # what the description lacks or leaves out, said once with the plan
         thin = thin_parts(robot, plan.planner.padding)
         if thin is not None:
@@ -161,7 +163,7 @@ class Planner:
         """Plan every task (``cycles`` times over) and return the checked trajectory with its report."""
         ctx = self.ctx
         q = self._start_configuration()
-        all_tasks = [t for _ in range(ctx.plan.cycles) for t in ctx.plan.tasks]
+        all_tasks = [t for _ in range(self.plan.cycles) for t in self.plan.tasks]
         tasks.warn_collinear(ctx, all_tasks)
         pieces: list[TimedPiece] = []
         chain: list[UntimedMotion] = []  # free and straight motions not yet timed: timed as one when blending
@@ -205,7 +207,7 @@ class Planner:
         traj.targets = targets.target_table(ctx.robot, traj, ctx.targets)
         if not all(row["reached"] for row in traj.targets):
             first = next(row for row in traj.targets if not row["reached"])
-            missed = InfeasibleError(f"{ctx.plan.path}: {targets.missed_text(traj.targets)}",
+            missed = InfeasibleError(f"{ctx.where}: {targets.missed_text(traj.targets)}",
                                      "a target must be reached (or passed within its zone): report this plan as a bug, "
                                      "or give the target a zone")
             missed.partial = PartialPlan(traj, first["position"], first["name"])
@@ -216,21 +218,21 @@ class Planner:
 
     def _start_configuration(self) -> np.ndarray:
         ctx = self.ctx
-        s = ctx.plan.start
+        s = self.plan.start
         if isinstance(s, str):
             if s not in ctx.robot.named_poses:
-                raise InfeasibleError(f"{ctx.plan.path}: start: '{s}' is not a named pose of {ctx.robot.name}")
+                raise InfeasibleError(f"{ctx.where}: start: '{s}' is not a named pose of {ctx.robot.name}")
             q = ctx.robot.full_q(ctx.robot.named_poses[s]).copy()
         else:
             try:
                 q = ctx.robot.full_q(s).copy()
             except InputError as exc:
-                raise PlanFileError(f"{ctx.plan.path}:{ctx.plan.lines.get('start', 1)}: start: {exc.message}") from None
+                raise PlanFileError(f"{ctx.where}:{self.plan.lines.get('start', 1)}: start: {exc.message}") from None
         if not ctx.robot.within_limits(q):
-            raise InfeasibleError(f"{ctx.plan.path}: start: the configuration is outside the joint limits")
+            raise InfeasibleError(f"{ctx.where}: start: the configuration is outside the joint limits")
         ctx.set_state(q[ctx.gi] if ctx.gi is not None else None)
         if not ctx.checker.is_valid(q[ctx.arm]):
-            raise PlanningError(f"{ctx.plan.path}: start: the start configuration is invalid: {ctx.checker.explain(q[ctx.arm])}",
+            raise PlanningError(f"{ctx.where}: start: the start configuration is invalid: {ctx.checker.explain(q[ctx.arm])}",
                                 "choose another start pose or move the obstacle")
         return q
 
@@ -245,7 +247,7 @@ def _check_zone(ctx: PlanContext, prev: UntimedMotion, nxt: UntimedMotion) -> No
     if zone > gap:
         tgt = next((t for t in ctx.targets if t.step == prev.step.label), None)
         name, field = (tgt.name, tgt.zone_field) if tgt is not None else (prev.step.label, "zone")
-        raise PlanFileError(f"{ctx.plan.path}: {name}: {field} {zone:g} m is larger than the {gap:.4f} m to the next "
+        raise PlanFileError(f"{ctx.where}: {name}: {field} {zone:g} m is larger than the {gap:.4f} m to the next "
                             f"target ({nxt.step.label})", f"give it a zone of at most {gap:.4f} m, or 0 to reach it")
 
 

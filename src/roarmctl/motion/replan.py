@@ -23,7 +23,7 @@ import numpy as np
 
 from roarmctl.errors import InfeasibleError, InputError
 from roarmctl.fileio import read_bytes
-from roarmctl.motion.options import Limits, PlannerConfig
+from roarmctl.motion.options import LIMITS_BOUNDS, Limits, PlannerConfig
 from roarmctl.motion.scene import Scene
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
 from roarmctl.plan.types import ItemSpec, MoveTask, Plan
@@ -42,16 +42,16 @@ def _plan_for(traj: Trajectory, robot: Robot, q_from: np.ndarray, q_to: np.ndarr
     specs = [ItemSpec(name=i.name, role=i.role, shape=i.shape, pose=i.pose.copy(), size=(i.size[0], i.size[1], i.size[2]),
                       radius=i.radius, length=i.length, data=i.mesh or i.cloud) for i in items]
     lim = traj.limits or {}
+    tcp = lim.get("max_tcp_speed")
+    hi = LIMITS_BOUNDS["max_tcp_speed"].hi  # older Planner versions recorded up to 100 m/s: no cap on these arms either
     limits = Limits(velocity_scale=float(lim.get("velocity_scale", 0.5)),
                     acceleration_scale=float(lim.get("acceleration_scale", 0.5)),
-                    max_tcp_speed=lim.get("max_tcp_speed"))
+                    max_tcp_speed=None if tcp is None else min(float(tcp), hi))
     meta = traj.plan or {}
-    cfg = PlannerConfig()
-    cfg.name = str(meta.get("planner", cfg.name))
-    cfg.seed = int(meta.get("seed", cfg.seed) or 0)
-    cfg.padding = float(meta.get("padding", cfg.padding))
     margin = (traj.singularity_margin or {}).get("min_singular_value")
-    cfg.singularity_margin = float(margin) if margin else 0.0
+    cfg = PlannerConfig(name=str(meta.get("planner", PlannerConfig.name)), seed=int(meta.get("seed", 0) or 0),
+                        padding=float(meta.get("padding", PlannerConfig.padding)),
+                        singularity_margin=float(margin) if margin else 0.0)
     gi = robot.joint_index(robot.gripper.joint) if robot.gripper else None
     task = MoveTask(joints=np.asarray(q_to, dtype=float).copy(), gripper=None if gi is None else float(q_to[gi]), line=0)
     path = Path(str(meta.get("path", "trajectory")))

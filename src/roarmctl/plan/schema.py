@@ -12,20 +12,21 @@ import itertools
 import json
 import math
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, NoReturn, TypeVar
 
 import numpy as np
 
 from roarmctl.errors import PlanFileError, describe_value
 from roarmctl.formats import MAX_DURATION, PRIMITIVES, SHAPES
-from roarmctl.motion.options import PLANNERS, Limits, PlannerConfig
+from roarmctl.motion.options import LIMITS_BOUNDS, PLANNER_BOUNDS, Limits, PlannerConfig
 from roarmctl.plan.types import ItemSpec, MoveTask, PickTask, PlaceTask, Plan, WaitTask
 from roarmctl.robot.frames import from_frame
 from roarmctl.robot.model import transform
-from roarmctl.validation import Checker, LocatedDict, LocatedList, closest, load_yaml, locate
+from roarmctl.validation import Bound, Checker, LocatedDict, LocatedList, closest, load_yaml, locate
 
 DICT_NAME = "<plan dict>"  # stands for the file name in errors about a plan given as a dict
 MESH_COLLISION = ("convex", "exact")
+_O = TypeVar("_O", Limits, PlannerConfig)
 
 
 class _Ctx:
@@ -112,29 +113,12 @@ FIELD_BOUNDS: dict[str, tuple[float, float]] = {
     "grasp_offset": (-0.5, 0.5),
     "grasp_width": (0.0, 10.0),
     "gripper": (-4 * math.pi, 4 * math.pi),
-    # fractions of the robot's joint velocity and acceleration limits (api.Planner checks the same): above 1 the
-    # description's limits would be broken; below 1 % nothing is gained (the README's pick and place takes 6.8 s
-    # at 0.6, 105 s at 0.02, so about half an hour at 0.001, near the 3600 s a trajectory may last).
-    "velocity_scale": (0.01, 1.0),
-    "acceleration_scale": (0.01, 1.0),
-    # m/s the TCP may move (api.Planner checks the same): 5 m/s is beyond what the arms described here reach (a
-    # UR's tool tops out near 3 m/s), 1 mm/s is slower than anything useful; outside, likely a unit mistake.
-    "max_tcp_speed": (0.001, 5.0),
     "scale": (0.0, 1e6),
     "resolution": (1e-4, 1.0),
-    # m/rad, the smallest singular value of the translational Jacobian a state keeps (api.Planner checks the
-    # same): it scales with the arm's reach (sampled maxima: roarm_m3_pro 0.23, ur5e 0.33, ur10 0.45), so the
-    # cap is for any arm, only a typo's catch; a margin beyond what the arm can keep refuses its start.
-    "singularity_margin": (0.0, 1.0),
-    # m the arm is inflated against the scene (api.Planner checks the same): a clearance for the model's and the
-    # arm's errors, which grow with its size, so the cap is for any arm (a UR10 reaches 1.3 m: 5 cm is not much
-    # there); beyond 0.1 m it is more likely millimetres written as metres, and a padding the scene cannot
-    # leave room for refuses the start or the targets, in words.
-    "padding": (0.0, 0.1),
-    # m a move's path may pass its target at and flow on (0: reached): 1 m is beyond any corner of the arms described
-    # here; a zone larger than the way to the next target is refused when planning.
-    "zone": (0.0, 1.0),
 }
+# the options' numbers, where they are written (limits.*, planner.*) and wherever a field of the same name is (a move's zone)
+FIELD_BOUNDS |= {name: (b.lo, b.hi) for name, b in (LIMITS_BOUNDS | PLANNER_BOUNDS).items()
+                 if not (b.flag or b.whole or b.choices)}
 DEFAULT_BOUND = 1e6  # any other number, unless its reader gives a tighter range
 MAX_TASKS = 1000  # tasks in the file, and tasks x cycles
 MAX_CYCLES = 1000
@@ -586,45 +570,8 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
                      f"at most {min(MAX_CYCLES, MAX_TASKS // len(tasks))} cycles of this plan")
         cycles = c
 
-    limits = Limits()
-    if "limits" in top:
-        d = ctx.mapping(top["limits"], top.line_of("limits"), "limits", ("velocity_scale", "acceleration_scale", "max_tcp_speed", "gripper_time", "blend", "zone"))
-        for key in ("velocity_scale", "acceleration_scale"):
-            if key in d:
-                setattr(limits, key, ctx.number(d[key], d.line_of(key), f"limits.{key}"))
-        if d.get("max_tcp_speed") is not None:
-            limits.max_tcp_speed = ctx.number(d["max_tcp_speed"], d.line_of("max_tcp_speed"), "limits.max_tcp_speed")
-        if "blend" in d:
-            if not isinstance(d["blend"], bool):
-                ctx.fail(d.line_of("blend"), "limits.blend", f"expected true or false, got {_kind(d['blend'])}")
-            limits.blend = d["blend"]
-        if "zone" in d:
-            limits.zone = ctx.number(d["zone"], d.line_of("zone"), "limits.zone")
-        if "gripper_time" in d:
-            limits.gripper_time = ctx.number(d["gripper_time"], d.line_of("gripper_time"), "limits.gripper_time", lo=0.05, hi=10.0)
-
-    planner = PlannerConfig()
-    if "planner" in top:
-        d = ctx.mapping(top["planner"], top.line_of("planner"), "planner", ("name", "time_budget", "simplify_budget", "max_checks", "seed", "singularity_margin", "padding"))
-        if "name" in d:
-            planner.name = ctx.string(d["name"], d.line_of("name"), "planner.name", PLANNERS)
-        if "time_budget" in d:
-            planner.time_budget = ctx.number(d["time_budget"], d.line_of("time_budget"), "planner.time_budget", lo=0.0, hi=600.0, strict_lo=True)
-        if "simplify_budget" in d:
-            planner.simplify_budget = ctx.number(d["simplify_budget"], d.line_of("simplify_budget"), "planner.simplify_budget", lo=0.0, hi=60.0)
-        if "max_checks" in d:
-            v = d["max_checks"]
-            if isinstance(v, bool) or not isinstance(v, int) or not 1_000 <= v <= 1_000_000_000:
-                ctx.fail(d.line_of("max_checks"), "planner.max_checks", f"expected a whole number from 1000 to 1e9, got {_kind(v)}")
-            planner.max_checks = v
-        if "seed" in d:
-            if isinstance(d["seed"], bool) or not isinstance(d["seed"], int) or d["seed"] < 0:
-                ctx.fail(d.line_of("seed"), "planner.seed", f"expected a whole number >= 0, got {_kind(d['seed'])}")
-            planner.seed = d["seed"]
-        if "singularity_margin" in d:
-            planner.singularity_margin = ctx.number(d["singularity_margin"], d.line_of("singularity_margin"), "planner.singularity_margin")
-        if "padding" in d:
-            planner.padding = ctx.number(d["padding"], d.line_of("padding"), "planner.padding")
+    limits = _options(ctx, top, "limits", Limits, LIMITS_BOUNDS)
+    planner = _options(ctx, top, "planner", PlannerConfig, PLANNER_BOUNDS)
 
     least = cycles * sum(_least_duration(t, limits) for t in tasks)
     if least > MAX_DURATION:
@@ -634,6 +581,17 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
 
     return Plan(path=path, sha256=digest, robot=robot, start=start, scene=scene, objects=objects, tasks=tasks,
                 cycles=cycles, limits=limits, planner=planner, lines=dict(top.lines), document=raw, item_specs=ctx.specs)
+
+
+def _options(ctx: _Ctx, top: LocatedDict, section: str, cls: type[_O], bounds: dict[str, Bound]) -> _O:
+    """The options object of a top-level section (``limits``, ``planner``): each field written checked against the
+    object's own bound (``bounds``), the error naming file, line and ``section.field``; the rest its defaults."""
+    if section not in top:
+        return cls()
+    d = ctx.mapping(top[section], top.line_of(section), section, tuple(bounds))
+    given = {key: bounds[key].check(d[key], ctx.check, ctx.where(d.line_of(key)), f"{section}.{key}")
+             for key in bounds if key in d and not (bounds[key].optional and d[key] is None)}
+    return cls(**given)
 
 
 def _json_value(value: Any) -> Any:

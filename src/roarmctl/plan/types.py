@@ -100,9 +100,10 @@ class WaitTask:
     kind: str = "wait"
 
 
-@dataclass
+@dataclass(frozen=True)
 class Plan:
-    """A checked plan file: its path and sha256, robot, start, scene, objects, tasks, limits and planner."""
+    """A checked plan file: its path and sha256, robot, start, scene, objects, tasks, limits and planner. Not
+    changed after it is read (a caller that plans from elsewhere makes a copy: ``dataclasses.replace``)."""
 
     path: Path
     sha256: str

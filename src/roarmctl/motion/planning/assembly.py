@@ -63,9 +63,13 @@ def assemble(ctx: PlanContext, pieces: list[TimedPiece]) -> Trajectory:
     t = np.concatenate(times)
     keep = np.concatenate([[True], np.diff(t) > 1e-9])
     p = ctx.plan
+    if p is not None:
+        spec, confine, sha256 = robot_spec(p), p.path.name != DICT_NAME, p.sha256
+    else:  # the api's Planner: the robot its caller loaded
+        spec, confine, sha256 = getattr(ctx.robot, "spec", "") or ctx.robot.name, False, ""
     traj = Trajectory(
         robot=ctx.robot.name,
-        robot_description=make_bundle(robot_spec(p), confine=p.path.name != DICT_NAME) if p.robot not in bundled_robots() else None,
+        robot_description=None if (p.robot if p is not None else spec) in bundled_robots() else make_bundle(spec, confine=confine),
         joint_names=list(ctx.robot.joint_names),
         times=t[keep],
         positions=np.concatenate(qs)[keep],
@@ -78,19 +82,19 @@ def assemble(ctx: PlanContext, pieces: list[TimedPiece]) -> Trajectory:
         limits={
             "velocity": [float(v) for v in ctx.robot.velocity_limits],
             "acceleration": [float(v) for v in ctx.robot.acceleration_limits],
-            "velocity_scale": p.limits.velocity_scale,
-            "acceleration_scale": p.limits.acceleration_scale,
-            "max_tcp_speed": p.limits.max_tcp_speed,
+            "velocity_scale": ctx.limits.velocity_scale,
+            "acceleration_scale": ctx.limits.acceleration_scale,
+            "max_tcp_speed": ctx.limits.max_tcp_speed,
             "jerk": None if ctx.jmax is None else [float(v) for v in ctx.jmax],
             "effort": None if ctx.effort is None else [float(v) if np.isfinite(v) else None for v in ctx.effort],
-            "blend": p.limits.blend,
+            "blend": ctx.limits.blend,
             # limit kind -> joints whose limit above is roarmctl's default (the description gives none)
             **({"defaults": {k: list(v) for k, v in ctx.robot.defaults.items()}} if ctx.robot.defaults else {}),
         },
-        singularity_margin={"min_singular_value": p.planner.singularity_margin} if p.planner.singularity_margin else None,
+        singularity_margin={"min_singular_value": ctx.config.singularity_margin} if ctx.config.singularity_margin else None,
         scene=initial_scene_dict(ctx),
-        plan={"path": str(p.path), "sha256": p.sha256, "planner": p.planner.name, "seed": p.planner.seed,
-              "padding": p.planner.padding, **({"link_padding": dict(ctx.robot.padding)} if ctx.robot.padding else {})},
+        plan={"path": ctx.where, "sha256": sha256, "planner": ctx.config.name, "seed": ctx.config.seed,
+              "padding": ctx.config.padding, **({"link_padding": dict(ctx.robot.padding)} if ctx.robot.padding else {})},
         sample_rate=1.0 / SAMPLE_DT,
     )
     return traj

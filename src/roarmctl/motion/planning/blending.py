@@ -93,7 +93,7 @@ def chain_key(ctx: PlanContext, motions: list[UntimedMotion]) -> tuple | None:
 def _time_chain(ctx: PlanContext, motions: list[UntimedMotion]) -> list[TimedPiece]:
     """``time_chain`` itself (not kept)."""
     singles = [time_motion(ctx, m) for m in motions]
-    if not ctx.plan.limits.blend:
+    if not ctx.limits.blend:
         return at_rest(ctx, motions, singles)
     piece, bounds = blend_chain(ctx, motions, singles)
     try:
@@ -109,7 +109,7 @@ def append_pieces(ctx: PlanContext, pieces: list[TimedPiece], new: list[TimedPie
     the straight motion after a release starts while the jaws still open (``grasp.overlap_jaw_action``)."""
     if not new:
         return pieces
-    if not pieces or not ctx.plan.limits.blend or ctx.gi is None:
+    if not pieces or not ctx.limits.blend or ctx.gi is None:
         return pieces + new
     a, b = pieces[-1], new[0]
     if b.event is not None and b.event.kind == "grasp" and b.jaw_target and a.segments[-1].kind == "cartesian":
@@ -413,8 +413,8 @@ def join_samples_ok(ctx: PlanContext, tp: TimedPath, lo: int, hi: int, prev: Unt
         jerk = np.diff(tp.qdd[max(a - 1, 0):min(b + 1, len(tp.times))], axis=0) / np.diff(tp.times[max(a - 1, 0):min(b + 1, len(tp.times))])[:, None]
         if np.any(np.abs(jerk) > ctx.jmax * (1 + 1e-9)):
             return False
-    if ctx.plan.limits.max_tcp_speed is not None:
-        if np.max(np.linalg.norm(ctx.robot.kin.tcp_velocity(q, qd[:, ctx.arm]), axis=1)) > ctx.plan.limits.max_tcp_speed:
+    if ctx.limits.max_tcp_speed is not None:
+        if np.max(np.linalg.norm(ctx.robot.kin.tcp_velocity(q, qd[:, ctx.arm]), axis=1)) > ctx.limits.max_tcp_speed:
             return False
     model = torque_model(ctx, q[0], list(range(ctx.robot.dof)))
     if model is not None and np.any(np.abs(model.inverse_dynamics(q, qd, qdd)) > model.limits):

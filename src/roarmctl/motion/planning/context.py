@@ -22,6 +22,7 @@ from roarmctl.robot.meshes import PACKAGE_PATHS
 if TYPE_CHECKING:
     from roarmctl.formats import Role, Shape
     from roarmctl.motion.collision import CollisionChecker
+    from roarmctl.motion.options import Limits, PlannerConfig
     from roarmctl.motion.planning.targets import Target
     from roarmctl.motion.scene import Scene, SceneItem
     from roarmctl.motion.timing import TimedPath
@@ -40,8 +41,12 @@ class StageTimer:
         self.t[key] = self.t.get(key, 0.0) + time.perf_counter() - since
 
 
+API_SOURCE = "<api>"  # what a trajectory of ``roarmctl.api.Planner`` records as its plan's path
+
+
 class PlanContext:
-    """One plan being planned for one robot: the plan, the robot, its collision checker, the scaled limits,
+    """One plan being planned for one robot: the plan, the robot, its collision checker, the limits and planner
+    options (``roarmctl.motion.options``: the plan's, or the api Planner's) and the joint limits they scale,
     the world as it is at this point of the plan (object poses, the held object, its payload), and what the
     user is told (``warnings``, ``notes``) with the stage ``timer``.
 
@@ -50,8 +55,12 @@ class PlanContext:
     gripper joint (None without a gripper).
     """
 
-    def __init__(self, plan: Plan, robot: Robot, checker: CollisionChecker, initial_scene: Scene | None = None) -> None:
-        self.plan, self.robot, self.checker = plan, robot, checker
+    def __init__(self, robot: Robot, checker: CollisionChecker, limits: Limits, config: PlannerConfig, *,
+                 plan: Plan | None = None, initial_scene: Scene | None = None) -> None:
+        self.robot, self.checker, self.limits, self.config = robot, checker, limits, config
+        self.plan = plan  # the plan file being planned; None for the single queries of ``roarmctl.api.Planner``
+        self.objects: list[ItemSpec] = list(plan.objects) if plan is not None else []
+        self.where = str(plan.path) if plan is not None else API_SOURCE  # names the source in messages
         # the plan's scene before anything moved (the trajectory records it): ``initial_scene`` when the caller hands
         # over one that nothing else moves (the scene the checker was made from: it keeps its own copy)
         self.initial_scene = checker.scene.copy() if initial_scene is None else initial_scene
@@ -62,13 +71,13 @@ class PlanContext:
         self.noted_position_only = False  # "no pitch given" note (generic arms): once per plan
         self.arm = robot.arm_indices
         self.gi = robot.joint_index(robot.gripper.joint) if robot.gripper else None
-        self.object_pose = {o.name: o.pose.copy() for o in plan.objects}
+        self.object_pose = {o.name: o.pose.copy() for o in self.objects}
         self.held: str | None = None
         self.held_offset = np.zeros(3)  # TCP position minus object centre at grasp (world frame)
         self.pending_pick: tuple[str, np.ndarray] | None = None  # set by a pick, taken by its grasp
         self.held_local: np.ndarray | None = None  # object centre in the TCP frame while held against a fixed jaw
-        self.vmax = robot.velocity_limits * plan.limits.velocity_scale
-        self.amax = robot.acceleration_limits * plan.limits.acceleration_scale
+        self.vmax = robot.velocity_limits * limits.velocity_scale
+        self.amax = robot.acceleration_limits * limits.acceleration_scale
         self.jmax = robot.jerk_limits  # not scaled: the scales slow the motion, the jerk bound keeps it smooth
         self.effort = robot.effort_limits
         self.payload: dict | None = None  # link -> Inertial of the held object, from grasp to release

@@ -65,7 +65,7 @@ def grasp_closed_q(ctx: PlanContext, task: PickTask, g_open: float, where: str) 
     assert gr is not None  # a plan with picks needs a gripper (checked by the Planner)
     if not gr.has_widths:
         return task.gripper_closed if task.gripper_closed is not None else gr.closed
-    spec = next(o for o in ctx.plan.objects if o.name == task.object)
+    spec = next(o for o in ctx.objects if o.name == task.object)
     width = grasp_width(spec)
     opening = gr.width(g_open)
     if opening < width + gr.clearance:
@@ -127,8 +127,8 @@ def gripper_action(ctx: PlanContext, step: TaskStep, q: np.ndarray, update: bool
     assert step.gripper_to is not None
     a, b = float(q[ctx.gi]), float(step.gripper_to)
     tp = gripper_motion(ctx, q, b, step.label)
-    if tp.duration < ctx.plan.limits.gripper_time:  # the jaws get at least gripper_time to settle
-        tp = concat(tp, dwell(tp.q[-1], ctx.plan.limits.gripper_time - tp.duration))
+    if tp.duration < ctx.limits.gripper_time:  # the jaws get at least gripper_time to settle
+        tp = concat(tp, dwell(tp.q[-1], ctx.limits.gripper_time - tp.duration))
     t0 = time.perf_counter()
     values = np.linspace(a, b, 5)  # the jaw sweeps: check it along the way (one batch, a gripper value per row)
     ctx.set_state(b, grasp_target=step.grasp_target)

@@ -56,7 +56,7 @@ def free_path(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> np.ndarray:
     goal = step.q_to.copy()
     if ctx.gi is not None:
         goal[ctx.gi] = q[ctx.gi]
-    cfg = ctx.plan.planner
+    cfg = ctx.config
     seed = cfg.seed + 1000 * ctx.free_count
     ctx.free_count += 1
     best = None
@@ -111,7 +111,7 @@ def time_path(ctx: PlanContext, wps: np.ndarray, label: str) -> TimedPath:
         return _copied(known)
     arm = ctx.arm
     tcpv = None
-    if ctx.plan.limits.max_tcp_speed is not None:
+    if ctx.limits.max_tcp_speed is not None:
         base = wps[0].copy()
 
         def tcpv(qa: np.ndarray, dqa: np.ndarray) -> np.ndarray:
@@ -120,7 +120,7 @@ def time_path(ctx: PlanContext, wps: np.ndarray, label: str) -> TimedPath:
             return ctx.robot.kin.tcp_velocity(full, dqa)
 
     tp_arm = time_parameterise(wps[:, arm], ctx.vmax[arm], ctx.amax[arm], None if ctx.jmax is None else ctx.jmax[arm],
-                               tcp_velocity_per_ds=tcpv, max_tcp_speed=ctx.plan.limits.max_tcp_speed,
+                               tcp_velocity_per_ds=tcpv, max_tcp_speed=ctx.limits.max_tcp_speed,
                                torque=torque_model(ctx, wps[0], arm), sample_dt=SAMPLE_DT, label=label)
     n = len(tp_arm.times)
     q = np.repeat(wps[0][None, :], n, axis=0)
@@ -173,9 +173,9 @@ def check_motion(ctx: PlanContext, tp: TimedPath, motion: UntimedMotion, label: 
         raise PlanningError(f"{label}: the timed motion exceeds a joint velocity limit")
     if np.any(np.abs(tp.qdd) > ctx.amax * (1 + 1e-6) + LIMIT_TOL):
         raise PlanningError(f"{label}: the timed motion exceeds a joint acceleration limit")
-    if ctx.plan.limits.max_tcp_speed is not None:
+    if ctx.limits.max_tcp_speed is not None:
         speed = np.linalg.norm(r.kin.tcp_velocity(tp.q, tp.qd[:, ctx.arm]), axis=1)
-        if np.max(speed) > ctx.plan.limits.max_tcp_speed * (1 + 1e-6):
+        if np.max(speed) > ctx.limits.max_tcp_speed * (1 + 1e-6):
             raise PlanningError(f"{label}: the TCP speed {np.max(speed):.3f} m/s exceeds max_tcp_speed")
     assert tp.s is not None  # a timed path, not a dwell
     s_bounds = np.array([0.0, float(tp.s[-1])])

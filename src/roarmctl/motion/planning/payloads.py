@@ -36,7 +36,7 @@ def torque_model(ctx: PlanContext, base: np.ndarray, idx: list[int]) -> TorqueMo
 def attach_payload(ctx: PlanContext, name: str, q: np.ndarray, label: str) -> None:
     """The held object ``name``'s mass, COM and inertia become part of the TCP link (from grasp to release);
     a load the arm cannot hold at ``q`` even at rest raises InfeasibleError."""
-    spec = next(o for o in ctx.plan.objects if o.name == name)
+    spec = next(o for o in ctx.objects if o.name == name)
     if not spec.mass:
         return
     tcp = ctx.robot.kin.fk(q)

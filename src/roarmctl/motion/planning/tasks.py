@@ -46,7 +46,7 @@ def expand(ctx: PlanContext, task: PickTask | PlaceTask | MoveTask | WaitTask, q
         return [TaskStep("wait", f"{at}: wait {task.seconds:g} s", duration=task.seconds)]
     if isinstance(task, MoveTask):
         goal, label, pitch = move_goal(ctx, task, q, at)
-        zone = task.zone if task.zone is not None else ctx.plan.limits.zone
+        zone = task.zone if task.zone is not None else ctx.limits.zone
         steps = [TaskStep("free", f"{at}: move{label}", q_to=goal, zone=zone)]
         g = move_gripper_q(ctx, task.gripper)
         if g is not None and abs(g - q[ctx.gi]) > 1e-9:
@@ -68,14 +68,14 @@ def move_gripper_q(ctx: PlanContext, value: float | str | None) -> float | None:
     if value is None:
         return None
     if ctx.gi is None:
-        raise InfeasibleError(f"{ctx.plan.path}: {ctx.robot.name} has no gripper to open or close")
+        raise InfeasibleError(f"{ctx.where}: {ctx.robot.name} has no gripper to open or close")
     if isinstance(value, str):
         gr = ctx.robot.gripper
         assert gr is not None  # gi is set
         return float(gr.open if value == "open" else gr.closed)
     lo, hi = ctx.robot.lower[ctx.gi], ctx.robot.upper[ctx.gi]
     if not lo - 1e-9 <= value <= hi + 1e-9:
-        raise InfeasibleError(f"{ctx.plan.path}: gripper {value:.3f} rad is outside [{lo:.3f}, {hi:.3f}]")
+        raise InfeasibleError(f"{ctx.where}: gripper {value:.3f} rad is outside [{lo:.3f}, {hi:.3f}]")
     return float(value)
 
 
@@ -152,7 +152,7 @@ def expand_pick(ctx: PlanContext, task: PickTask, q: np.ndarray, at: str) -> lis
 def jaw_fixed(ctx: PlanContext, name: str) -> bool:
     """Picks of this robot put the object against a fixed jaw (the description gives its face)."""
     gr = ctx.robot.gripper
-    return gr is not None and gr.fixed_jaw is not None and any(o.name == name for o in ctx.plan.objects)
+    return gr is not None and gr.fixed_jaw is not None and any(o.name == name for o in ctx.objects)
 
 
 def against_fixed_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_grasp: np.ndarray, pitch: float | None,
@@ -211,7 +211,7 @@ def _settle_against_jaw(ctx: PlanContext, task: PickTask, centre: np.ndarray, q_
     ``cheap``: each round solves the grasp alone on the branch of the round before (``solve_ik_near``: no approach
     point, no collision check; the caller checks the chain it chooses at the end), about a quarter of a chain's
     ``choose_ik``; otherwise each round chooses the valid grasp-and-approach chain nearest to ``q``."""
-    spec = next(o for o in ctx.plan.objects if o.name == task.object)
+    spec = next(o for o in ctx.objects if o.name == task.object)
     width = grasp_width(spec)
     pose = ctx.object_pose[task.object]
     lift = np.array([0.0, 0.0, task.grasp_offset])

@@ -1,0 +1,84 @@
+"""Every options object checks its own fields (``roarmctl.validation.check_options``): NaN, infinities, negative,
+huge and wrong-typed values are refused with an ``OptionError`` naming the field, in the library's words (no file,
+no flag); the defaults and the ends of each range are taken. Every field of every options object is walked, so a
+field added without a bound fails here."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import roarmctl.api as rc
+from roarmctl.errors import OptionError
+from roarmctl.motion.options import LIMITS_BOUNDS, PLANNER_BOUNDS, Limits, PlannerConfig
+
+#: every options object of the library and the bounds it checks against
+OPTIONS: list[tuple[type, dict]] = [(Limits, LIMITS_BOUNDS), (PlannerConfig, PLANNER_BOUNDS)]
+FIELDS = [(cls, f.name, bounds[f.name] if f.name in bounds else None) for cls, bounds in OPTIONS
+          for f in dataclasses.fields(cls)]
+BAD_NUMBERS = [math.nan, math.inf, -math.inf, -1.0, 1e300, -1e300, "1", True, [1.0]]
+
+
+@pytest.mark.parametrize(("cls", "name", "bound"), FIELDS, ids=[f"{c.__name__}.{n}" for c, n, _ in FIELDS])
+def test_every_field_has_a_bound(cls, name, bound):
+    assert bound is not None, f"{cls.__name__}.{name} has no bound: add it to the object's bounds"
+
+
+@pytest.mark.parametrize(("cls", "name", "bound"), FIELDS, ids=[f"{c.__name__}.{n}" for c, n, _ in FIELDS])
+def test_bad_values_are_refused_naming_the_field(cls, name, bound):
+    bad = [v for v in BAD_NUMBERS if not (bound.optional and v is None)]
+    if bound.choices:
+        bad = ["", "nope", 3, None]
+    elif bound.flag:
+        bad = [1, "yes", None, math.nan]
+    for value in bad:
+        if not bound.flag and not bound.choices and isinstance(value, float) and bound.lo <= value <= bound.hi:
+            continue  # inside the range (a field whose range takes -1)
+        with pytest.raises(OptionError) as err:
+            cls(**{name: value})
+        assert err.value.field == name and err.value.message.startswith(f"{name}: ") and "\n" not in err.value.message
+
+
+@pytest.mark.parametrize(("cls", "name", "bound"), [f for f in FIELDS if not (f[2].flag or f[2].choices)],
+                         ids=[f"{c.__name__}.{n}" for c, n, b in FIELDS if not (b.flag or b.choices)])
+def test_the_ends_of_each_range_are_taken(cls, name, bound):
+    for end in (bound.lo, bound.hi):
+        if end == bound.lo and bound.strict_lo:
+            continue
+        value = int(end) if bound.whole else end
+        assert getattr(cls(**{name: value}), name) == value
+
+
+@settings(max_examples=200, deadline=None)
+@given(data=st.data())
+def test_any_number_is_taken_exactly_when_inside_its_bound(data):
+    cls, name, bound = data.draw(st.sampled_from([f for f in FIELDS if not (f[2].flag or f[2].choices or f[2].whole)]))
+    value = data.draw(st.floats(allow_nan=True, allow_infinity=True) | st.floats(min_value=bound.lo, max_value=bound.hi))
+    inside = math.isfinite(value) and bound.lo <= value <= bound.hi and not (bound.strict_lo and value == bound.lo)
+    if inside:
+        assert getattr(cls(**{name: value}), name) == value
+    else:
+        with pytest.raises(OptionError):
+            cls(**{name: value})
+
+
+def test_options_objects_do_not_change_and_a_copy_is_checked_again():
+    limits = Limits()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        limits.velocity_scale = 2.0  # type: ignore[misc]
+    with pytest.raises(OptionError, match="velocity_scale"):
+        dataclasses.replace(limits, velocity_scale=math.nan)
+
+
+def test_the_api_planner_takes_the_options_objects_and_refuses_nan():
+    limits, config = Limits(velocity_scale=0.3), PlannerConfig(padding=0.01, seed=7)
+    planner = rc.Planner("roarm_m3_pro", limits=limits, config=config)
+    assert planner._limits is limits and planner._config is config
+    with pytest.raises(rc.OptionError, match=r"^singularity_margin: expected a finite number, got nan"):
+        rc.Planner("roarm_m3_pro", singularity_margin=math.nan)
+    with pytest.raises(rc.InputError, match="velocity_scale given beside limits="):
+        rc.Planner("roarm_m3_pro", limits=limits, velocity_scale=0.2)
