@@ -22,7 +22,7 @@ reached, so that a region the arm cannot reach is an input error, not a thousand
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -235,7 +235,7 @@ def load_template(path: str | Path) -> Template:
         plan = load_plan(document, base_dir=path.parent)
     except PlanFileError as exc:  # the same checks as a plan file; the message names the template
         raise PlanFileError(f"{path}: {exc.message.replace('<plan dict>: ', '')}", exc.hint) from None
-    plan.path = path
+    plan = replace(plan, path=path)  # the template names itself in later messages
     task = g.get("task", "")
     if not isinstance(task, str) or not task.strip() or len(task) > MAX_TASK or "\n" in task:
         c.fail(at("task"), "task", f"expected one line of text (1 to {MAX_TASK} characters)",
