@@ -109,6 +109,34 @@ def test_clearance_of_a_sphere_is_the_closed_form_distance_to_the_nearest_box():
             assert c.item[i] == 0
 
 
+def test_every_items_distance_and_the_closest_points_are_the_closed_form():
+    """Two balls beside the arm at three poses: the page's distance of *each* item (not only the nearest) is the
+    closed-form point-to-box distance minus the radius over every collision box, and the closest-point pair drawn
+    in 3D spans the nearest distance and ends on the nearest ball's surface."""
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.loader import load_robot
+    from roarmctl.viz.web.document import view_document
+
+    robot = load_robot("roarm_m3_pro")
+    qs = np.array([robot.full_q(robot.named_poses[n]) for n in ("home", "observe", "ready")])
+    balls = [("near", np.array([0.30, 0.05, 0.20]), 0.02), ("far", np.array([0.05, -0.25, 0.12]), 0.03)]
+    scene = {"items": [{"name": n, "role": "obstacle", "shape": "sphere", "radius": r, "xyz": c.tolist(), "rpy": [0, 0, 0]}
+                       for n, c, r in balls]}
+    traj = Trajectory(robot.name, list(robot.joint_names), np.array([0.0, 1.0, 2.0]), qs, 0 * qs, 0 * qs, scene=scene)
+    doc = view_document(traj, robot)
+    n = doc["n"]
+    each = _decode(doc["item_clearance"]).reshape(n, 2)
+    pts = _decode(doc["closest_points"]).reshape(n, 2, 3)
+    frames = robot.kin.link_frames(qs)
+    for i in range(n):
+        expect = [max(min(_point_box_distance(c, frames[i, robot.kin.link_index[s.link]] @ s.origin, s.size)
+                          for s in robot.collision) - r, 0.0) for _, c, r in balls]
+        assert each[i] == pytest.approx(expect, abs=2e-6)
+        k = int(np.argmin(expect))
+        assert np.linalg.norm(pts[i, 0] - pts[i, 1]) == pytest.approx(expect[k], abs=2e-6)
+        assert np.linalg.norm(pts[i, 1] - balls[k][1]) == pytest.approx(balls[k][2], abs=2e-6)
+
+
 def test_clearance_to_a_mesh_and_a_cloud_agrees_with_the_same_box():
     """The same 6 x 4 x 10 cm block as a box, as a (rotated, offset) mesh, and as a point cloud of 5 mm cells:
     the arm's clearance to the mesh is the box's; to the cloud within a cell's half-diagonal of it."""
@@ -681,6 +709,49 @@ def test_scene_items_are_opaque_and_keep_their_colour_as_the_view_turns(chromium
         hidden = _look(page, _around(bottom, -38, -35, 0.45), bottom)
         page.evaluate("window.roarmView.showItem('cube', true)")
         assert np.abs(_look(page, _around(bottom, -38, -35, 0.45), bottom) - hidden).max() <= 2  # opaque: hidden
+        assert watch.errors == []
+    finally:
+        page.close()
+
+
+@pytest.mark.slow
+def test_clearance_strip_goes_to_the_tightest_moment_and_tells_intended_contact(chromium, planned, tmp_path):
+    """plans/pick_place.yaml: "min" goes to the smallest clearance that is not intended contact (found here from the
+    page's per-item arrays and the plan's segments: the jaws on the cube and the cube on the table from its
+    descent to its lift, and from its lowering to the retreat, are meant); the panel reads every item's distance
+    there, the 3D label the nearest's; at the grasp the cube's contact reads as intended, not as a violation."""
+    f, traj = planned["pick_place"]
+    code, out = write_html(tmp_path, f)
+    assert code == 0
+    page, watch = br.open_page(chromium, out.as_uri())
+    try:
+        doc = page.evaluate("window.roarmView.data")
+        n, names = doc["n"], [it["name"] for it in doc["items"]]
+        times, each = _decode(doc["times"]), _decode(doc["item_clearance"]).reshape(n, len(names))
+        meant = np.zeros_like(each, dtype=bool)
+        for e in traj.events:  # the non-free run of segments around each grasp and release
+            runs = [(s.start, s.end) for s in traj.segments if s.kind != "free"]
+            lo = hi = e.time
+            for _ in runs:
+                for a, b in runs:
+                    if a <= hi + 1e-6 and b >= lo - 1e-6:
+                        lo, hi = min(lo, a), max(hi, b)
+            meant[(times >= lo - 1e-6) & (times <= hi + 1e-6)] = True  # both items touch only there in this plan
+        free = np.where(meant | (each < 0), np.inf, each)
+        i, k = np.unravel_index(np.argmin(free), free.shape)
+        assert free[i, k] > 0.005  # the plan keeps its padding outside intended contact
+        assert page.is_visible("#strip") and page.inner_text("#go-min") == f"min {1000 * free[i, k]:.1f} mm"
+        page.click("#go-min")
+        assert page.evaluate("window.roarmView.state().index") == i
+        rows = page.locator("#item-clearance tbody tr").all()
+        for kk, row in enumerate(rows):
+            assert row.locator("td").nth(1).inner_text() == f"{1000 * each[i, kk]:.1f} mm"
+        assert f"{1000 * each[i].min():.1f} mm" in page.locator(".label.gap").inner_text()
+        grasp = next(e for e in doc["events"] if e["kind"] == "grasp")["index"]
+        page.evaluate(f"window.roarmView.setIndex({grasp - 1})")
+        cube = rows[names.index("cube")]
+        assert "intended" in cube.locator("td").nth(2).inner_text()
+        assert cube.locator("td").nth(1).get_attribute("class") == "intended"
         assert watch.errors == []
     finally:
         page.close()

@@ -40,6 +40,12 @@ class Clearance:
     item: np.ndarray
     part: np.ndarray
     parts: list[str]
+    #: with ``per_item``: (N, M) m each item's own smallest distance (``inf``: not measured at that sample), the
+    #: moving part nearest each item (N, M) (-1: none), and the nearest pair's closest points (N, 2, 3) m in the
+    #: world, on the moving part first (NaN where nothing is measured)
+    item_distance: np.ndarray | None = None
+    item_part: np.ndarray | None = None
+    points: np.ndarray | None = None
 
 
 @dataclass
@@ -78,11 +84,13 @@ def _shape_radius(shape: CollisionShape) -> float:
 
 
 def clearance(robot: Robot, items: list[SceneItem], q: np.ndarray, item_poses: np.ndarray | None = None,
-              carried: np.ndarray | None = None) -> Clearance:
+              carried: np.ndarray | None = None, per_item: bool = False) -> Clearance:
     """The arm's clearance from ``items`` along the configurations ``q`` (N, dof), see ``Clearance``.
 
     ``item_poses`` (N, M, 4, 4): each item's world pose at each sample (default: ``item.pose`` throughout);
     ``carried`` (N, M) bool: the item moves with the hand at that sample (default: none is carried).
+    ``per_item``: also every item's own distance and the nearest pair's closest points (more FCL calls: the
+    search stops per item, not at the first item).
     """
     q = np.atleast_2d(np.asarray(q, dtype=float))
     n, m = len(q), len(items)
@@ -110,8 +118,11 @@ def clearance(robot: Robot, items: list[SceneItem], q: np.ndarray, item_poses: n
     dist = np.full(n, np.inf)
     best_item = np.full(n, -1, dtype=int)
     best_part = np.full(n, -1, dtype=int)
+    each = np.full((n, m), np.inf) if per_item else None
+    each_part = np.full((n, m), -1, dtype=int) if per_item else None
+    points = np.full((n, 2, 3), np.nan) if per_item else None
     if not moving or not fixed:
-        return Clearance(dist, best_item, best_part, parts)
+        return Clearance(dist, best_item, best_part, parts, each, each_part, points)
     base = set(robot.base_links)
     owner_m = np.array([s.owner for s in moving])
     owner_f = np.array([s.owner for s in fixed])
@@ -131,7 +142,7 @@ def clearance(robot: Robot, items: list[SceneItem], q: np.ndarray, item_poses: n
     gap = (np.linalg.norm(mcentre[:, :, None] - fcentre[:, None], axis=-1)
            - np.array([s.radius for s in moving])[None, :, None] - np.array([s.radius for s in fixed])[None, None, :])
     nf = len(fixed)
-    request = fcl.DistanceRequest()
+    request = fcl.DistanceRequest(enable_nearest_points=per_item)
     for i in range(n):
         active = ~skip & ~carried[i][owner_f][None, :]
         for a in range(len(moving)):  # a carried item's parts are moving parts only while it is carried
@@ -141,6 +152,14 @@ def clearance(robot: Robot, items: list[SceneItem], q: np.ndarray, item_poses: n
         if not len(cand):
             continue
         order = cand[np.argsort(gap[i].ravel()[cand], kind="stable")]
+        if per_item:
+            assert each is not None and each_part is not None and points is not None
+            _per_item_sample(i, order, nf, gap, moving, fixed, mpose, fpose, owner_m, owner_f, request, each[i],
+                             each_part[i], points)
+            k = int(np.argmin(each[i]))
+            if np.isfinite(each[i, k]):
+                dist[i], best_part[i], best_item[i] = each[i, k], each_part[i, k], k
+            continue
         best, ba, bk = np.inf, -1, -1
         for flat in order:
             a, b = divmod(int(flat), nf)
@@ -154,4 +173,27 @@ def clearance(robot: Robot, items: list[SceneItem], q: np.ndarray, item_poses: n
             if best == 0.0:
                 break
         dist[i], best_part[i], best_item[i] = best, ba, bk
-    return Clearance(dist, best_item, best_part, parts)
+    return Clearance(dist, best_item, best_part, parts, each, each_part, points)
+
+
+def _per_item_sample(i: int, order: np.ndarray, nf: int, gap: np.ndarray, moving: list[_Solid], fixed: list[_Solid],
+                     mpose: np.ndarray, fpose: np.ndarray, owner_m: np.ndarray, owner_f: np.ndarray,
+                     request: fcl.DistanceRequest, each: np.ndarray, each_part: np.ndarray, points: np.ndarray) -> None:
+    """Sample ``i``'s smallest distance per item into ``each`` (M,) and ``each_part`` (M,), and the nearest pair's
+    closest points into ``points[i]``: the pairs in ``order`` (by their lower bound), a pair skipped once its bound
+    reaches its item's best."""
+    best_all = np.inf
+    for flat in order:
+        a, b = divmod(int(flat), nf)
+        k = int(owner_f[b])
+        if gap[i, a, b] >= each[k]:
+            continue
+        moving[a].obj.setTransform(fcl.Transform(mpose[i, a, :3, :3], mpose[i, a, :3, 3]))
+        fixed[b].obj.setTransform(fcl.Transform(fpose[i, b, :3, :3], fpose[i, b, :3, 3]))
+        result = fcl.DistanceResult()
+        d = max(float(fcl.distance(moving[a].obj, fixed[b].obj, request, result)), 0.0)
+        if d < each[k]:
+            each[k], each_part[k] = d, int(owner_m[a])
+        if d < best_all:
+            best_all = d
+            points[i] = np.asarray(result.nearest_points, dtype=float)

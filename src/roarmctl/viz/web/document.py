@@ -167,7 +167,9 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
     bones = [[bone_links.index(a), bone_links.index(b)] for a, b in data.arm_segments]
     items, item_poses, carried = _item_tracks(traj, robot, times)
     scene_items = [SceneItem.from_dict(it) for it in items]
-    clear = clearance(robot, scene_items, q, item_poses, carried)
+    clear = clearance(robot, scene_items, q, item_poses, carried, per_item=True)
+    assert clear.item_distance is not None and clear.item_part is not None and clear.points is not None
+    intended = intended_contact(traj, times, carried, clear.item_part, len(robot.collision))
 
     speed = data.tcp_speed[idx]
     vmax = max(float(data.tcp_speed.max()) if len(data.tcp_speed) else 0.0, data.max_tcp_speed or 0.0, 1e-6)
@@ -243,6 +245,13 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         "torque": None if data.torque is None else _f32(data.torque[idx]),
         "torque_share": None if shares is None else _f32(shares[idx]),
         "clearance": _f32(nearest),
+        # (n, M) each item's own distance (m, -1: not measured), its nearest moving part, whether it is intended
+        # contact (uint8), the nearest pair's closest points (n, 6) m; the plan's padding (m)
+        "item_clearance": _f32(np.where(np.isfinite(clear.item_distance), clear.item_distance, -1.0)),
+        "item_part": _f32(clear.item_part),
+        "intended": base64.b64encode(intended.astype(np.uint8).tobytes()).decode("ascii"),
+        "closest_points": _f32(np.nan_to_num(clear.points.reshape(n, 6), nan=0.0)),
+        "padding": _padding(traj),
         "nearest_item": [int(v) for v in clear.item],
         "nearest_part": [int(v) for v in clear.part],
         "parts": clear.parts,
@@ -285,6 +294,43 @@ def _ghost_items(ghost: Ghost, items: list[dict], times: np.ndarray) -> list[dic
         j = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 1)
         pose[:, :, :3] = _quat_matrix(quat)[j]
         out.append({"item": names.index(name), "track": _f32(pose.reshape(len(times), 12))})
+    return out
+
+
+def _padding(traj: Trajectory) -> float | None:
+    """The padding (m) the plan kept from the scene, when the trajectory records it."""
+    pad = (traj.plan or {}).get("padding")
+    return float(pad) if isinstance(pad, (int, float)) and np.isfinite(pad) and pad >= 0 else None
+
+
+def intended_contact(traj: Trajectory, times: np.ndarray, carried: np.ndarray, item_part: np.ndarray,
+                     n_shapes: int) -> np.ndarray:
+    """(N, M) bool: where an item's distance is contact the plan means, not a near miss. Around each grasp and
+    release (the run of non-free segments that holds it: descent, gripper, lift), the object it takes or leaves
+    (the item carried just after a grasp or just before a release) against the arm, and whatever the carried
+    object rests on (an item whose nearest moving part is that object). ``times`` (N,) s of the samples,
+    ``carried`` (N, M), ``item_part`` (N, M) from ``motion.clearance`` (parts from ``n_shapes`` on are carried items)."""
+    n, m = carried.shape
+    out = np.zeros((n, m), dtype=bool)
+    spans = sorted((float(sg.start), float(sg.end), sg.kind) for sg in traj.segments)
+    for e in traj.events:
+        if e.kind not in ("grasp", "release"):
+            continue
+        lo = hi = float(e.time)
+        grown = True
+        while grown:  # widen over the non-free segments that touch the window, until none does
+            grown = False
+            for start, end, kind in spans:
+                if kind != "free" and start <= hi + 1e-6 and end >= lo - 1e-6 and (start < lo or end > hi):
+                    lo, hi, grown = min(lo, start), max(hi, end), True
+        inside = (times >= lo - 1e-9) & (times <= hi + 1e-9)
+        k_at = int(np.clip(np.searchsorted(times, e.time + (1e-6 if e.kind == "grasp" else -1e-6)), 0, n - 1))
+        held = np.flatnonzero(carried[min(k_at + 1, n - 1)] if e.kind == "grasp" else carried[max(k_at, 0)])
+        for k in held:
+            out[inside, k] = True
+            # the carried object's own parts follow the robot's shapes: what it rests on is intended too
+            on_it = item_part[inside] >= n_shapes
+            out[np.flatnonzero(inside)[:, None].repeat(m, 1)[on_it], np.nonzero(on_it)[1]] = True
     return out
 
 

@@ -20,6 +20,28 @@
   const CLEAR = f32(D.clearance), POSES = f32(D.poses), COLORS = bytes(D.colors);
   const L = D.links.length, DOF = D.joint_names.length;
   const TORQUE = D.torque ? f32(D.torque) : null, SHARE = D.torque_share ? f32(D.torque_share) : null;
+  // per scene item (M): its own distance at each sample (m, -1: not measured), its nearest moving part, whether
+  // it is contact the plan means (the object in the jaws, the object on its support at grasp and release)
+  const M = D.items.length;
+  const ICLEAR = D.item_clearance ? f32(D.item_clearance) : new Float32Array(N * M).fill(-1);
+  const IPART = D.item_part ? f32(D.item_part) : new Float32Array(N * M).fill(-1);
+  const INTENDED = D.intended ? bytes(D.intended) : new Uint8Array(N * M);
+  const CPTS = D.closest_points ? f32(D.closest_points) : null;
+  const PAD = D.padding;
+  const ITEM_PALETTE = ['#1f77b4', '#ff7f0e', '#9467bd', '#8c564b', '#e377c2', '#7f7f7f', '#bcbd22', '#17becf'];
+  const INTENDED_COLOR = '#1a9850', TIGHT_COLOR = '#d62728';
+  const itemColor = (k) => ITEM_PALETTE[k % ITEM_PALETTE.length];
+  // the smallest clearance that is not intended contact: where "min" goes
+  const MINIMUM = (() => {
+    let best = { index: -1, item: -1, distance: Infinity };
+    for (let i = 0; i < N; i++) {
+      for (let k = 0; k < M; k++) {
+        const d = ICLEAR[i * M + k];
+        if (d >= 0 && !INTENDED[i * M + k] && d < best.distance) best = { index: i, item: k, distance: d };
+      }
+    }
+    return best;
+  })();
   const GHOST = D.ghost ? { poses: f32(D.ghost.poses), q: f32(D.ghost.q), error: f32(D.ghost.error), tcp: f32(D.ghost.tcp) } : null;
 
   // ------------------------------------------------------------------ renderer, camera, lights
@@ -273,6 +295,19 @@
     scene.add(ghostDot);
   }
 
+  // The nearest pair's closest points at the cursor: a line in 3D with its distance (drawn over everything).
+  const gapGeom = new THREE.BufferGeometry();
+  gapGeom.setAttribute('position', new THREE.BufferAttribute(new Float32Array(6), 3));
+  const gapLine = new THREE.Line(gapGeom, new THREE.LineBasicMaterial({ color: TIGHT_COLOR, depthTest: false, transparent: true }));
+  gapLine.renderOrder = 11;
+  gapLine.frustumCulled = false;
+  scene.add(gapLine);
+  const gapLabel = document.createElement('div');
+  gapLabel.className = 'label gap';
+  $('labels').appendChild(gapLabel);
+  const gapAnchor = { div: gapLabel, anchor: new THREE.Vector3(), dynamic: true };
+  labels.push(gapAnchor);
+
   // ------------------------------------------------------------------ panel
   $('title').textContent = D.title;
   $('subtitle').textContent = D.subtitle;
@@ -299,6 +334,24 @@
     $('joints').tBodies[0].appendChild(tr);
     return cells;
   });
+
+  const itemRows = D.items.map((item, k) => {
+    const tr = document.createElement('tr');
+    const cells = [0, 1, 2].map(() => document.createElement('td'));
+    const sw = document.createElement('span');
+    sw.className = 'swatch';
+    sw.style.setProperty('--c', itemColor(k));
+    cells[0].appendChild(sw);
+    cells[0].appendChild(document.createTextNode(item.name));
+    for (const c of cells) tr.appendChild(c);
+    $('item-clearance').tBodies[0].appendChild(tr);
+    return cells;
+  });
+  if (M) { $('item-clearance').hidden = false; $('strip-box').hidden = false; }
+  if (MINIMUM.index >= 0) {
+    $('go-min').hidden = false;
+    $('go-min').textContent = 'min ' + (MINIMUM.distance * 1000).toFixed(1) + ' mm';
+  }
 
   // ------------------------------------------------------------------ time
   const scrub = $('scrub');
@@ -328,6 +381,26 @@
       (c * 1000).toFixed(1) + ' mm: ' + D.parts[part] + ' to ' + D.items[item].name;
     $('r-clearance').className = c >= 0 && c < 0.005 ? 'warn' : '';
     if (GHOST) $('r-ghost').textContent = (GHOST.error[i] * 1000).toFixed(1) + ' mm';
+    if (c >= 0 && INTENDED[i * M + item]) { $('r-clearance').textContent += ' (intended contact)'; $('r-clearance').className = 'intended'; }
+    for (let k = 0; k < M; k++) {
+      const d = ICLEAR[i * M + k], part = IPART[i * M + k], cells = itemRows[k], meant = INTENDED[i * M + k];
+      cells[1].textContent = d < 0 ? '—' : (d * 1000).toFixed(1) + ' mm';
+      cells[2].textContent = d < 0 ? (D.items[k].track ? 'carried' : '') : (D.parts[part] || '') + (meant ? ' (intended)' : '');
+      cells[1].className = d < 0 ? '' : meant ? 'intended' : (PAD !== null && d < PAD) || d < 0.005 ? 'warn' : '';
+    }
+    const pos = gapGeom.attributes.position;
+    const shown = CPTS && c >= 0;
+    if (shown) {
+      for (let e = 0; e < 6; e++) pos.array[e] = CPTS[6 * i + e];
+      pos.needsUpdate = true;
+      gapLine.material.color.set(INTENDED[i * M + item] ? INTENDED_COLOR : TIGHT_COLOR);
+      gapAnchor.anchor.set((CPTS[6 * i] + CPTS[6 * i + 3]) / 2, (CPTS[6 * i + 1] + CPTS[6 * i + 4]) / 2, (CPTS[6 * i + 2] + CPTS[6 * i + 5]) / 2);
+      gapLabel.textContent = (c * 1000).toFixed(1) + ' mm';
+      gapLabel.style.color = INTENDED[i * M + item] ? INTENDED_COLOR : TIGHT_COLOR;
+    }
+    gapLine.visible = !!shown;
+    gapAnchor.hidden = !shown;
+    $('strip-cursor').style.left = (N > 1 ? 100 * i / (N - 1) : 0) + '%';
     for (let j = 0; j < DOF; j++) {
       const v = Q[i * DOF + j], cells = jointCells[j];
       if (D.joint_units[j] === 'm') { cells[1].textContent = (v * 1000).toFixed(1) + ' mm'; cells[2].textContent = ''; }
@@ -373,13 +446,54 @@
     const w = canvas.clientWidth, h = canvas.clientHeight, v = new THREE.Vector3();
     for (const l of labels) {
       v.copy(l.anchor).project(camera);
-      const visible = $('show-labels').checked && v.z > -1 && v.z < 1;
+      const visible = !l.hidden && (l.dynamic || $('show-labels').checked) && v.z > -1 && v.z < 1;
       l.div.style.display = visible ? '' : 'none';
       if (visible) { l.div.style.left = ((v.x + 1) / 2 * w) + 'px'; l.div.style.top = ((1 - v.y) / 2 * h) + 'px'; }
     }
   }
 
+  // The clearance strip under the timeline: every item's distance over time (its colour; intended contact green),
+  // the padding dashed, the smallest clearance that is not intended contact marked. Drawn once per size, not per frame.
+  function drawStrip() {
+    if (!M) return;
+    const strip = $('strip'), ratio = window.devicePixelRatio || 1;
+    const w = strip.clientWidth, h = strip.clientHeight;
+    strip.width = Math.max(1, Math.round(w * ratio));
+    strip.height = Math.max(1, Math.round(h * ratio));
+    const g = strip.getContext('2d');
+    g.setTransform(ratio, 0, 0, ratio, 0, 0);
+    g.fillStyle = '#fafbfc';
+    g.fillRect(0, 0, w, h);
+    const top = Math.min(0.1, Math.max(0.02, PAD ? 4 * PAD : 0, MINIMUM.index >= 0 ? 2 * MINIMUM.distance : 0));
+    const x = (i) => (N > 1 ? i / (N - 1) : 0) * w, y = (d) => h - 2 - Math.min(d / top, 1) * (h - 12);
+    for (let k = 0; k < M; k++) {
+      for (let i = 0; i + 1 < N; i++) {
+        const a = ICLEAR[i * M + k], b = ICLEAR[(i + 1) * M + k];
+        if (a < 0 || b < 0) continue;
+        g.strokeStyle = INTENDED[i * M + k] && INTENDED[(i + 1) * M + k] ? INTENDED_COLOR : itemColor(k);
+        g.lineWidth = INTENDED[i * M + k] ? 2.5 : 1.3;
+        g.beginPath(); g.moveTo(x(i), y(a)); g.lineTo(x(i + 1), y(b)); g.stroke();
+      }
+    }
+    g.font = '10px system-ui, sans-serif';
+    if (PAD) {
+      g.strokeStyle = TIGHT_COLOR; g.lineWidth = 1; g.setLineDash([4, 3]);
+      g.beginPath(); g.moveTo(0, y(PAD)); g.lineTo(w, y(PAD)); g.stroke(); g.setLineDash([]);
+      g.fillStyle = TIGHT_COLOR; g.fillText('padding ' + (PAD * 1000).toFixed(1) + ' mm', 3, y(PAD) - 2);
+    }
+    g.fillStyle = '#555';
+    g.fillText((top * 1000).toFixed(0) + ' mm', w - 40, 10);
+    if (MINIMUM.index >= 0) {
+      const mx = x(MINIMUM.index), my = y(MINIMUM.distance);
+      g.fillStyle = TIGHT_COLOR;
+      g.beginPath(); g.arc(mx, my, 4, 0, 2 * Math.PI); g.fill();
+      const text = 'min ' + (MINIMUM.distance * 1000).toFixed(1) + ' mm: ' + D.items[MINIMUM.item].name;
+      g.fillText(text, Math.min(mx + 6, w - g.measureText(text).width - 2), Math.max(my - 4, 20));
+    }
+  }
+
   function resize() {
+    drawStrip();
     const w = canvas.parentElement.clientWidth, h = canvas.parentElement.clientHeight;
     renderer.setSize(w, h, false);
     camera.aspect = w / Math.max(h, 1);
@@ -424,6 +538,13 @@
   }
 
   scrub.addEventListener('input', () => { setPlaying(false); setIndex(Number(scrub.value)); });
+  function goToMinimum() { if (MINIMUM.index >= 0) { setPlaying(false); setIndex(MINIMUM.index); } }
+  $('go-min').addEventListener('click', goToMinimum);
+  $('strip').addEventListener('click', (ev) => {
+    const r = $('strip').getBoundingClientRect();
+    setPlaying(false);
+    setIndex((ev.clientX - r.left) / Math.max(r.width, 1) * (N - 1));
+  });
   $('play').addEventListener('click', () => setPlaying(!playing));
   $('reset-camera').addEventListener('click', () => { homeCamera(); render(); });
   $('show-collision').addEventListener('change', (ev) => {
@@ -447,6 +568,7 @@
     if (ev.key === ' ') { ev.preventDefault(); setPlaying(!playing); }
     else if (ev.key === 'ArrowRight') setIndex(index + 1);
     else if (ev.key === 'ArrowLeft') setIndex(index - 1);
+    else if (ev.key === 'm') goToMinimum();
   });
 
   homeCamera();
@@ -461,6 +583,7 @@
     setIndex: setIndex,
     setPlaying: setPlaying,
     setTableSeeThrough: setTableSeeThrough,
+    minimum: MINIMUM,
     // show or hide the scene item of this name; false when there is none
     showItem: function (name, visible) {
       const it = items.find((x) => x.name === name);
