@@ -8,7 +8,7 @@ Two stages:
 
 * ``parse_document(data, where)``: the ``roarmctl.trajectory/1`` form (types, finite numbers, sizes,
   times from 0 strictly increasing, events/segments/scene/limits well-formed) -> ``Trajectory``.
-* ``check_against_robot(traj, robot, where)``: joint names, joint limits, velocity and acceleration
+* ``check_against_robot(traj, robot, where)``: joint names, the links payloads ride on, joint limits, velocity and acceleration
   limits (``VEL_TOL``/``ACC_TOL``), sample spacing at the declared rate, and position steps that
   agree with the velocities given the acceleration limit.
 
@@ -353,6 +353,11 @@ def check_against_robot(traj: Trajectory, robot: Robot, where: str = "trajectory
     if list(traj.joint_names) != list(robot.joint_names):
         CHECK.fail(where, "joint_names", f"{', '.join(traj.joint_names)} do not match robot '{robot.name}'",
                    f"expected {', '.join(robot.joint_names)}")
+    links = set(robot.link_names)
+    for i, p in enumerate(traj.payloads):  # a held object's mass rides on a link: simulate, sag and torques need it
+        if str(p["link"]) not in links:
+            CHECK.fail(where, f"payloads[{i}].link", f"'{p['link']}' is not a link of robot '{robot.name}'",
+                       f"the trajectory was planned for another arm: plan it again for {robot.name}")
     names = robot.joint_names
     q, v, a, t = traj.positions, traj.velocities, traj.accelerations, traj.times
     lo, hi = np.asarray(robot.lower, dtype=float), np.asarray(robot.upper, dtype=float)

@@ -1,0 +1,58 @@
+"""Trust no file, part 3 (issue 40), beyond xacro: a payload on a link the robot lacks, scene meshes of many
+pieces, stale temporaries of a killed write, a tiny --speed-scale in physics, huge coordinates, terminal
+sequences in names. The xacro cases are tests/test_trust_xacro.py, the view server's tests/test_view_server.py."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import hostile
+import pytest
+from test_trust import refused
+
+#: Every command that reads a trajectory, with its output (``{d}``: the test's folder).
+TRAJECTORY_COMMANDS = {
+    "simulate": ["simulate", "{f}"],
+    "execute --sim": ["execute", "{f}", "--sim"],
+    "execute --output": ["execute", "{f}", "--output", "{d}/out.jsonl"],
+    "export mcap": ["export", "{f}", "-o", "{d}/out.mcap"],
+    "export csv": ["export", "{f}", "-o", "{d}/out.csv"],
+    "export bag": ["export", "{f}", "-o", "{d}/out_bag"],
+    "visualize-path": ["visualize-path", "{f}", "-o", "{d}/out.png"],
+    "visualize-path html": ["visualize-path", "{f}", "-o", "{d}/out.html"],
+}
+
+
+def foreign_payload(link: str) -> dict:
+    """The hostile trajectory with a held object's payload on ``link``."""
+    doc = hostile.trajectory_doc()
+    doc["payloads"] = [{"start": 0.1, "end": 0.5, "link": link, "mass": 0.05, "com": [0, 0, 0],
+                        "inertia": [[1e-5, 0, 0], [0, 1e-5, 0], [0, 0, 1e-5]]}]
+    return doc
+
+
+@pytest.mark.parametrize("command", list(TRAJECTORY_COMMANDS))
+@pytest.mark.parametrize("link", ["no_such_link", "wrist_link_of_another_arm", "", "base_link\x1b]0;pwned\x07"])
+def test_a_payload_on_a_link_the_robot_lacks_is_refused_by_every_command(tmp_path, command, link):
+    """One validator (motion/validate.py) refuses it for every command: exit 2, one line naming the field
+    (before: simulate exit 1 on a KeyError, execute --sim 130 with the simulator's traceback, export and
+    execute --output wrote it)."""
+    f = tmp_path / "t.traj.json"
+    f.write_text(json.dumps(foreign_payload(link)))
+    args = [a.format(f=f, d=tmp_path) for a in TRAJECTORY_COMMANDS[command]]
+    err = refused(args, "payloads[0].link")
+    assert "\x1b" not in err and "\x07" not in err
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith("out")], "an output was written"
+
+
+def test_a_payload_on_one_of_the_robot_s_links_is_taken(tmp_path):
+    """The control: the same trajectory with the payload on the M3's gripper link exports."""
+    from roarmctl.robot.loader import load_robot
+
+    f = tmp_path / "t.traj.json"
+    f.write_text(json.dumps(foreign_payload(load_robot("roarm_m3_pro").tcp_link)))
+    from test_trust import cli
+
+    code, _, err = cli(["export", str(f), "-o", str(tmp_path / "out.csv")])
+    assert code == 0 and (tmp_path / "out.csv").exists(), err
