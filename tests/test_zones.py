@@ -89,6 +89,7 @@ def test_zones_let_the_path_flow_within_them_and_cost_less_time(tmp_path, roarm)
     assert max(misses) > 5e-3  # some corner is rounded: the zone was used
     rows = json.loads(zoned.stdout)["targets"]
     assert [row["zone"] for row in rows] == [0.03, 0.0, 0.03, 0.03, 0.0, 0.03]
+    assert t1.limits["zone"] == 0.03 and t0.limits["zone"] == 0.0  # the default the plan gave, recorded
     assert "passed within their zones" in json.loads(zoned.stdout)["targets_summary"]
 
 

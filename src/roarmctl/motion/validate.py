@@ -199,6 +199,9 @@ def parse_document(data: Any, where: str = "trajectory") -> Trajectory:
     for key in ("velocity_scale", "acceleration_scale"):
         if limits.get(key) is not None:
             CHECK.number(limits[key], where, f"limits.{key}", lo=0.0, hi=1.0, strict_lo=True)
+    if limits.get("zone") is not None:
+        lo, hi = FIELD_BOUNDS["zone"]  # the plan's bound: what a planner can record
+        CHECK.number(limits["zone"], where, "limits.zone", lo=lo, hi=hi)
     if limits.get("max_tcp_speed") is not None:
         CHECK.number(limits["max_tcp_speed"], where, "limits.max_tcp_speed", lo=0.0, hi=100.0, strict_lo=True)
 

@@ -88,6 +88,7 @@ def assemble(ctx: PlanContext, pieces: list[TimedPiece]) -> Trajectory:
             "jerk": None if ctx.jmax is None else [float(v) for v in ctx.jmax],
             "effort": None if ctx.effort is None else [float(v) if np.isfinite(v) else None for v in ctx.effort],
             "blend": ctx.limits.blend,
+            "zone": ctx.limits.zone,  # m, the default zone of a move target (each target's own is in ``targets``)
             # limit kind -> joints whose limit above is roarmctl's default (the description gives none)
             **({"defaults": {k: list(v) for k, v in ctx.robot.defaults.items()}} if ctx.robot.defaults else {}),
         },
