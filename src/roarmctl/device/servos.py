@@ -30,8 +30,22 @@ import numpy as np
 JOINTS = ("base", "shoulder", "elbow", "wrist", "roll", "hand")
 N_JOINTS = len(JOINTS)
 ACC_UNIT = 100.0  # steps/s^2 per ACC register count
+#: One turn of an STS servo, in steps: the servo holds its goal register to its angle limits (EEPROM registers 9 and 11,
+#: 0 and 4095 by default) and its magnetic encoder reads one turn, 0-4095 (Feetech's SMS/STS memory table: SMS_STS.h
+#: in github.com/ftservo/FTServo_stm32HAL, and the STS3215/ST3235 register lists)
+POSITION_RANGE = (0.0, 4095.0)
 #: ST3235 no-load speed: 0.222 s per 60 deg at 12 V (Waveshare's ST3235 page) = 4.72 rad/s = 3072 steps/s.
 ST3235_MAX_SPEED = 3072.0
+
+
+def servo_goal(goal: float) -> float:
+    """A goal register write as the servo takes it: held to its angle limits (``POSITION_RANGE``)."""
+    return min(max(float(goal), POSITION_RANGE[0]), POSITION_RANGE[1])
+
+
+def servo_reading(position: float) -> float:
+    """A present position as the servo's encoder reports it: one turn, 0-4095 steps (a shaft beyond it wraps)."""
+    return float(position) % (POSITION_RANGE[1] + 1.0)
 
 
 @runtime_checkable
@@ -99,7 +113,7 @@ class KinematicServos:
     def command(self, joints: Sequence[int], goal: Sequence[float], spd: Sequence[float], acc: Sequence[float]) -> None:
         """See ``ServoModel.command``."""
         for j, g, s, a in zip(joints, goal, spd, acc):
-            self._goal[j] = float(g)
+            self._goal[j] = servo_goal(g)
             self._spd[j] = float(s)
             self._acc[j] = float(a)
             self._on[j] = True

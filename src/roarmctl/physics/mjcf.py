@@ -186,6 +186,9 @@ def build_document(robot: Robot, scene: Scene, masses: dict[str, float] | None =
         if j.kind in ("revolute", "prismatic"):
             jel = ET.SubElement(jb, "joint", name=joint_name(j.name), type="hinge" if j.kind == "revolute" else "slide",
                                 axis=_f(np.asarray(j.axis, dtype=float)))
+            if math.isfinite(j.lower) and math.isfinite(j.upper) and j.lower < j.upper:
+                # the description's limits are the joint's ends: a real arm stops there, whatever its servo is told
+                jel.set("range", _f((j.lower, j.upper)))
             dyn = dynamics.get(j.name)
             if dyn is not None:
                 for key in ("armature", "damping", "frictionloss"):

@@ -22,6 +22,7 @@ import numpy.typing as npt
 
 from roarmctl.device.fwmath import INIT_RAD
 from roarmctl.device.protocol import M3_FIELDS, WireMap
+from roarmctl.device.servos import servo_goal, servo_reading
 from roarmctl.motion.scene import Scene
 from roarmctl.physics.actuation import Actuation, for_robot
 from roarmctl.physics.servo import ACC_UNIT, ST3235, ServoBank, profile_step, quantise_speed
@@ -74,6 +75,7 @@ class PhysicsServos:
         ch, g, s, a = [], [], [], []
         for j, gg, ss, aa in zip(joints, goal, spd, acc):
             c = self.channel[j]
+            gg = servo_goal(gg)  # the servo's own angle limits: one turn
             if c >= 0:
                 ch.append(int(c))
                 g.append(gg)
@@ -113,7 +115,7 @@ class PhysicsServos:
         out = self.phantom_pos.copy()
         steps = self.bank.steps(self.world.q())
         for c, k in enumerate(self.act.firmware_index):
-            out[k] = steps[c]
+            out[k] = servo_reading(steps[c])  # the encoder reads one turn
         return out
 
     def torque(self) -> np.ndarray:
@@ -163,10 +165,17 @@ def physics_step(world: World, bank: ServoBank, dt: float, profile: bool = True)
     world.step()
 
 
+def desk() -> Scene:
+    """The scene of an arm without a trajectory (``sim-device``): a 1 x 1 m table whose top is the base's plane, so
+    that the arm meets it (and itself) as a real arm on a desk does, instead of swinging through where it stands."""
+    return Scene.from_dict({"items": [{"name": "table", "role": "table", "shape": "box", "size": [1.0, 1.0, 0.02],
+                                       "xyz": [0.0, 0.0, -0.01], "rpy": [0.0, 0.0, 0.0]}]})
+
+
 def for_firmware(robot: Robot, traj: Trajectory | None = None) -> Callable[[], PhysicsServos]:
     """A zero-argument factory of physics servos for the firmware simulator (``roarmctl.device``'s
     ``PtySimulator(servos=...)``; called in its process): ``robot`` in ``traj``'s scene with its payload
-    masses (an empty world without ``traj``), standing at the firmware's boot pose (``INIT_RAD``: elbow
+    masses (on the ``desk()`` without ``traj``), standing at the firmware's boot pose (``INIT_RAD``: elbow
     pi/2, gripper closed), its clock starting at the firmware's first call."""
 
     def make() -> PhysicsServos:
@@ -177,7 +186,7 @@ def for_firmware(robot: Robot, traj: Trajectory | None = None) -> Callable[[], P
             world, act = setup.world, setup.actuation
         else:
             act = for_robot(robot)
-            world = World(robot, Scene([]), None, act.dynamics(robot))
+            world = World(robot, desk(), None, act.dynamics(robot))
         wm = WireMap(robot)
         q0 = wm.from_wire({f: INIT_RAD[M3_FIELDS.index(f)] for f in wm.field_names})
         return PhysicsServos(world, act, q0, t0=None)
