@@ -13,7 +13,7 @@ import numpy as np
 
 from roarmctl.device.follow import FollowConfig
 from roarmctl.device.follow_guard import GuardLimits
-from roarmctl.device.follow_session import Followed, LeaderSpec, follow_live
+from roarmctl.device.follow_session import Followed, LeaderSpec, follow_live, leader_tracking
 from roarmctl.device.follow_sources import StreamSource
 from roarmctl.device.guide import Guide
 from roarmctl.device.protocol import WireMap
@@ -124,21 +124,6 @@ def swing(duration: float = 6.0, hz: float = 0.25) -> Guide:
     return guide(list(ts), qs)
 
 
-def tracking(done: Followed, lags: np.ndarray | None = None) -> dict[str, float]:
-    """The follower's true joints against the leader's, both as their simulators recorded them: the lag (s) that
-    fits best, and the RMS and max of the arm joints' largest error (rad) at that lag, over the follower's motion."""
-    tf, qf, _ = done.recording
-    tl, ql, _ = done.leader_recording
-    lags = np.arange(0.0, 0.5, 0.005) if lags is None else lags
-    moving = np.flatnonzero(np.linalg.norm(np.diff(qf[:, :5], axis=0), axis=1) > 1e-6)
-    sel = slice(int(moving[0]), int(moving[-1]) + 1)
-    t, q = tf[sel], qf[sel, :5]
-    best = None
-    for lag in lags:
-        ref = np.column_stack([np.interp(t - lag, tl, ql[:, j]) for j in range(5)])
-        err = np.max(np.abs(q - ref), axis=1)
-        rms = float(np.sqrt(np.mean(err ** 2)))
-        if best is None or rms < best[1]:
-            best = (float(lag), rms, float(err.max()))
-    assert best is not None
-    return {"latency_s": best[0], "rms_rad": best[1], "max_rad": best[2]}
+def tracking(done: Followed) -> dict[str, float]:
+    """The follower's true joints against the leader's (``follow_session.leader_tracking``)."""
+    return leader_tracking(done.recording, done.leader_recording)

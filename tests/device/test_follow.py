@@ -141,3 +141,19 @@ def test_a_nan_target_is_refused_and_following_goes_on():
     res = fol.run()
     assert res.outcome == "completed" and res.log["summary"]["targets"]["by_kind"] == {"not_finite": 1}
     assert np.allclose(ran_setpoints(link)[-1], HOME + [0.3, 0, 0, 0, 0, 0], atol=2e-4)
+
+
+def test_leader_tracking_finds_a_known_lag_and_error():
+    """Two recordings made by hand: the follower is the leader 0.12 s later plus 0.01 rad on the wrist."""
+    from roarmctl.device.follow_session import leader_tracking
+
+    t = np.arange(0.0, 4.0, 0.005)
+    ql = np.zeros((len(t), 6))
+    ql[:, 0] = 0.4 * np.sin(t)
+    qf = np.zeros_like(ql)
+    qf[:, 0] = 0.4 * np.sin(t - 0.12)
+    qf[:, 3] = 0.01
+    late = t >= 0.5  # the follower's record starts after the leader's (no reference before the leader's start)
+    trk = leader_tracking((t[late], qf[late], None), (t, ql, None))
+    assert trk["latency_s"] == pytest.approx(0.12, abs=1e-9)
+    assert trk["rms_rad"] == pytest.approx(0.01, abs=1e-4) and trk["max_rad"] == pytest.approx(0.01, abs=1e-4)

@@ -118,15 +118,18 @@ class Follower:
     """Follow ``source`` with the arm on ``link`` (open, connected) for ``robot``, every target judged against
     ``checker`` (the scene, padding and singularity margin). ``clock``/``sleep``/``timer`` are injectable (tests
     run on a virtual clock; ``timer`` measures the computation per target, s). ``on_event(text)`` hears every
-    refusal and end (the screen)."""
+    refusal and end (the screen). ``extra_lateness() -> s``: how late the device itself is (the simulator
+    measures its own), added to the time a poll may stay unanswered."""
 
     def __init__(self, link: Link, robot: Robot, checker: CollisionChecker, source: Source,
                  config: FollowConfig | None = None, *, clock: Callable[[], float] = time.monotonic,
                  sleep: Callable[[float], None] = time.sleep, timer: Callable[[], float] = time.perf_counter,
-                 on_event: Callable[[str], None] | None = None) -> None:
+                 on_event: Callable[[str], None] | None = None,
+                 extra_lateness: Callable[[], float] | None = None) -> None:
         self.link, self.robot, self.checker, self.source = link, robot, checker, source
         self.cfg = config or FollowConfig()
         self.clock, self.sleep, self.timer, self.on_event = clock, sleep, timer, on_event
+        self.extra_lateness = extra_lateness
         self.wm = WireMap(robot)
         self.dt = 1.0 / self.cfg.rate
         self.validator = FeedbackValidator(robot, firmware=getattr(link, "firmware", None))
@@ -237,12 +240,16 @@ class Follower:
                 t_poll = link.send(protocol.feedback_request())
                 lines += 1
                 polls.append((t_poll, lines))
+            polled = self.clock()
             for r in link.poll():
                 if r.feedback is not None and polls:
                     confirmed = polls.popleft()[1]
                 self._judge(r)
-            if polls and self.clock() - polls[0][0] > cfg.stale_after + rtt:
-                raise DeviceError(f"link lost: the arm did not answer for {self.clock() - polls[0][0]:.2f} s",
+            # overdue when unanswered at the last read (a host stopped before the read does not blame the arm), beyond
+            # what the device itself says it is late (the simulator measures its own)
+            late = self.extra_lateness() if self.extra_lateness is not None else 0.0
+            if polls and polled - polls[0][0] > cfg.stale_after + rtt + late:
+                raise DeviceError(f"link lost: the arm did not answer for {polled - polls[0][0]:.2f} s",
                                   "check the USB cable and the arm's power; the arm may have rebooted")
             if ended and not self.smoother.moving:
                 return

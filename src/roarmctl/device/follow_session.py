@@ -9,11 +9,14 @@ is returned for tests and benches (:class:`Followed`).
 from __future__ import annotations
 
 import contextlib
+import math
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from roarmctl.device.follow import FollowConfig, Follower, FollowResult, Source
 from roarmctl.device.follow_sources import LeaderSource
@@ -88,7 +91,8 @@ def follow_live(robot: Robot, checker: CollisionChecker, *, port: str | None = N
         if leader is not None:  # its torque goes off (a hand moves it) once the follower is ready
             source = _leader_source(leader, robot, sims)
         assert source is not None
-        follower = Follower(link, robot, checker, source, config, on_event=on_event)
+        follower = Follower(link, robot, checker, source, config, on_event=on_event,
+                            extra_lateness=sims[0].recent_lateness if sim else None)
         result = follower.run()
         followed = Followed(result, str(port))
     except RoarmError as exc:
@@ -141,3 +145,28 @@ def _leader_source(spec: LeaderSpec, robot: Robot, sims: list[PtySimulator]) -> 
         link.close()
         raise
     return LeaderSource(session, robot)
+
+
+def leader_tracking(follower: Any, leader: Any, lags: np.ndarray | None = None) -> dict[str, float]:
+    """How closely the follower followed the leader, from the two simulators' recordings ((times s, joints (N, 6)
+    rad, torque), one monotonic clock): the lag (s, of ``lags``, default 0-1 s by 5 ms) that fits best (least squares
+    over the arm joints), and at that lag the RMS and max over the follower's motion of the largest arm-joint error
+    (rad)."""
+    tf, qf, _ = follower
+    tl, ql, _ = leader
+    lags = np.arange(0.0, 1.0, 0.005) if lags is None else lags
+    arm = qf.shape[1] - 1  # the RoArm's recordings: the arm joints, then the gripper
+    moving = np.flatnonzero(np.linalg.norm(np.diff(qf[:, :arm], axis=0), axis=1) > 1e-6)
+    if not len(moving):
+        return {"latency_s": math.nan, "rms_rad": math.nan, "max_rad": math.nan}
+    sel = slice(int(moving[0]), int(moving[-1]) + 1)
+    t, q = tf[sel], qf[sel, :arm]
+    best, fit = None, math.inf
+    for lag in lags:  # the lag: least squares over every arm joint (a joint's constant offset does not hide it)
+        ref = np.column_stack([np.interp(t - lag, tl, ql[:, j]) for j in range(arm)])
+        sq = float(np.mean((q - ref) ** 2))
+        if sq < fit:
+            fit, best = sq, (float(lag), np.max(np.abs(q - ref), axis=1))
+    assert best is not None
+    lag, err = best
+    return {"latency_s": lag, "rms_rad": float(np.sqrt(np.mean(err ** 2))), "max_rad": float(err.max())}
