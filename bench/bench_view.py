@@ -11,6 +11,13 @@ navigation start to the end of the page's own script (data decoded, scene built,
 finished with the page, its first frame rendered by the GPU process, here SwiftShader's software GL).
 The machine's load average is printed: on a shared 2-core machine the figures move with it.
 
+Where the time goes (medians, ms, from the page's ``roarmView.timing``): "parse" = navigation start to the data's
+JSON parsed (the HTML and three.js read), "context" = the WebGL context made, "build" = the scene and the panel made
+(data decoded, geometry built), "frame" = the first frame handed to GL (shader compiles). "fps" = frames per second
+while playing in a 1400 x 900 window (the issue's size): each animation frame moves to the next sample and draws,
+counted over 3 s; "calls" = draw calls of one frame (three.js counts them); "GL" says whether the page found
+software GL (then it draws without multisampling).
+
 ``--screenshot PATH`` also writes the README's picture: pick_place at its grasp, 1200 x 760 px.
 """
 
@@ -30,6 +37,27 @@ sys.path.insert(0, str(ROOT / "tests"))  # the Chromium driver shared with the b
 import browser as br  # noqa: E402
 
 
+PLAY = """() => new Promise((done) => {
+  let n = 0; const t0 = performance.now();
+  function frame() {
+    window.roarmView.setIndex(n % window.roarmView.data.n); n++;
+    if (performance.now() - t0 < 3000) requestAnimationFrame(frame); else done([n, performance.now() - t0]);
+  }
+  requestAnimationFrame(frame);
+})"""
+
+
+def frames_per_second(chromium, url: str) -> tuple[float, int, bool]:
+    """Frames per second while stepping through the samples in a 1400 x 900 window, the draw calls of a frame, and
+    whether the page drew with software GL."""
+    page, _ = br.open_page(chromium, url, {"width": 1400, "height": 900})
+    try:
+        frames, ms = page.evaluate(PLAY)
+        return frames / ms * 1000.0, int(page.evaluate("window.roarmView.stats().calls")), bool(page.evaluate("window.roarmView.softwareGL"))
+    finally:
+        page.close()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--loads", type=int, default=5)
@@ -40,19 +68,25 @@ def main() -> None:
 
     import matplotlib  # noqa: F401  (paid once, not per page)
 
+    from roarmctl.errors import InputError
     from roarmctl.motion.pipeline import plan_file
     from roarmctl.viz.web.document import view_document
     from roarmctl.viz.web.page import render_page, write_page
 
     plans = sorted((ROOT / "plans").glob("*.yaml"))
     print(f"load average {os.getloadavg()[0]:.2f} (2 cores); {args.loads} loads per page, medians")
-    print(f"{'plan':<16} {'samples':>7} {'page MB':>8} {'build s':>8} {'ready ms':>9} {'load event ms':>14}")
+    print(f"{'plan':<16} {'samples':>7} {'page MB':>8} {'build s':>8} {'ready ms':>9} {'load event ms':>14} "
+          f"{'parse':>6} {'context':>8} {'build':>6} {'frame':>6} {'fps':>5} {'calls':>6} GL")
     from playwright.sync_api import sync_playwright
 
     with tempfile.TemporaryDirectory() as tmp, sync_playwright() as pw:
         chromium = br.launch(pw)
         for p in plans:
-            traj = plan_file(p, seed=None).trajectory
+            try:
+                traj = plan_file(p, seed=None).trajectory
+            except InputError as exc:  # a plans/ file that is not a plan by itself (e.g. a datagen template)
+                print(f"{p.stem:<16} skipped: {exc.message}")
+                continue
             builds = []
             for _ in range(3):
                 t0 = time.perf_counter()
@@ -60,11 +94,13 @@ def main() -> None:
                 render_page(doc)
                 builds.append(time.perf_counter() - t0)
             out = write_page(doc, Path(tmp) / f"{p.stem}.html")
-            ready, loaded = [], []
+            ready, loaded, phases = [], [], []
             for _ in range(args.loads):
                 page, watch = br.open_page(chromium, out.as_uri())
                 page.wait_for_function("() => document.readyState === 'complete'")
                 ready.append(page.evaluate("window.roarmView.timing.ready"))
+                t = page.evaluate("window.roarmView.timing")
+                phases.append([t["parsed"], t["context"] - t["parsed"], t["built"] - t["context"], t["drawn"] - t["built"]])
                 loaded.append(page.evaluate("performance.timing.loadEventEnd - performance.timing.navigationStart"))
                 if watch.errors:
                     sys.exit(f"bench_view: {p.name}: errors on the page: {watch.errors}")
@@ -73,8 +109,11 @@ def main() -> None:
                     args.screenshot.parent.mkdir(parents=True, exist_ok=True)
                     page.screenshot(path=str(args.screenshot))
                 page.close()
+            fps, calls, soft = frames_per_second(chromium, out.as_uri())
+            ph = [statistics.median(col) for col in zip(*phases)]
             print(f"{p.stem:<16} {doc['n']:>7} {out.stat().st_size / 1e6:>8.2f} {statistics.median(builds):>8.2f} "
-                  f"{statistics.median(ready):>9.0f} {statistics.median(loaded):>14.0f}")
+                  f"{statistics.median(ready):>9.0f} {statistics.median(loaded):>14.0f} "
+                  f"{ph[0]:>6.0f} {ph[1]:>8.0f} {ph[2]:>6.0f} {ph[3]:>6.0f} {fps:>5.1f} {calls:>6} {'software' if soft else 'GPU'}")
         chromium.close()
     if args.screenshot is not None:
         print(f"wrote {args.screenshot}")

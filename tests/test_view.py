@@ -27,7 +27,8 @@ from clirun import planned_and_run_on_sim
 from roarmctl.cli import run as run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
-PLANS = sorted((ROOT / "plans").glob("*.yaml"))
+# the bundled plans; a datagen template (a plan file plus a top-level datagen: block) is not a plan by itself
+PLANS = sorted(p for p in (ROOT / "plans").glob("*.yaml") if not re.search(r"^datagen:", p.read_text(), re.M))
 # one xdist worker runs this module: one browser and one planning of the bundled plans for all its tests
 pytestmark = pytest.mark.xdist_group("browser-view")
 
@@ -752,6 +753,26 @@ def test_clearance_strip_goes_to_the_tightest_moment_and_tells_intended_contact(
         cube = rows[names.index("cube")]
         assert "intended" in cube.locator("td").nth(2).inner_text()
         assert cube.locator("td").nth(1).get_attribute("class") == "intended"
+        assert watch.errors == []
+    finally:
+        page.close()
+
+
+def test_software_gl_draws_without_multisampling_in_few_draw_calls(chromium, planned, tmp_path):
+    """Headless Chromium draws with SwiftShader: the page finds it and leaves multisampling off (most of a software
+    frame's cost: bench/bench_view.py), and one frame of pick_place is a few dozen draw calls, counted by three.js."""
+    f, _ = planned["pick_place"]
+    code, out = write_html(tmp_path, f)
+    assert code == 0
+    page, watch = br.open_page(chromium, out.as_uri(), {"width": 640, "height": 400})
+    try:
+        assert page.evaluate("window.roarmView.softwareGL") is True
+        attrs = page.evaluate("document.getElementById('canvas3d').getContext('webgl2').getContextAttributes()")
+        assert attrs["antialias"] is False
+        stats = page.evaluate("window.roarmView.stats()")
+        assert 0 < stats["calls"] <= 45 and stats["programs"] <= 8
+        t = page.evaluate("window.roarmView.timing")
+        assert t["scriptStart"] <= t["parsed"] <= t["context"] <= t["built"] <= t["drawn"] <= t["ready"]
         assert watch.errors == []
     finally:
         page.close()

@@ -5,6 +5,7 @@
   'use strict';
   const started = performance.now();
   const D = JSON.parse(document.getElementById('roarm-view-data').textContent);
+  const parsed = performance.now();
   const $ = (id) => document.getElementById(id);
 
   function bytes(b64) {
@@ -46,8 +47,22 @@
 
   // ------------------------------------------------------------------ renderer, camera, lights
   const canvas = $('canvas3d');
-  const renderer = new THREE.WebGLRenderer({ canvas: canvas, antialias: true });
+  // Software GL (SwiftShader in a headless or GPU-less Chromium, Mesa's llvmpipe): multisampling costs most of a
+  // frame (1400 x 900: 2.4 frames/s with it, 7.6 without, on a loaded 2-core machine; bench/bench_view.py), so it
+  // is left off there; a GPU does it for free.
+  const SOFTWARE_GL = (() => {
+    try {
+      const gl = document.createElement('canvas').getContext('webgl');
+      const ext = gl && gl.getExtension('WEBGL_debug_renderer_info');
+      const name = ext ? String(gl.getParameter(ext.UNMASKED_RENDERER_WEBGL)) : '';
+      const lose = gl && gl.getExtension('WEBGL_lose_context');
+      if (lose) lose.loseContext();
+      return /swiftshader|llvmpipe|softpipe|software/i.test(name);
+    } catch (e) { return false; }
+  })();
+  const renderer = new THREE.WebGLRenderer({ canvas: canvas, antialias: !SOFTWARE_GL });
   renderer.setPixelRatio(window.devicePixelRatio || 1);
+  const timing = { scriptStart: started, parsed: parsed, context: performance.now() };  // ms since navigation start
   const scene = new THREE.Scene();
   scene.background = new THREE.Color(0xf7f8fa);
   const camera = new THREE.PerspectiveCamera(35, 1, 0.002, 100);
@@ -78,9 +93,9 @@
   scene.add(grid);
   scene.add(new THREE.AxesHelper(0.05));
 
-  function matrixOf(arr, offset) {  // 12 floats (3x4, row-major) -> Matrix4
+  function matrixOf(arr, offset, into) {  // 12 floats (3x4, row-major) -> Matrix4 (``into``, else a new one)
     const a = arr, o = offset || 0;
-    return new THREE.Matrix4().set(a[o], a[o + 1], a[o + 2], a[o + 3], a[o + 4], a[o + 5], a[o + 6], a[o + 7],
+    return (into || new THREE.Matrix4()).set(a[o], a[o + 1], a[o + 2], a[o + 3], a[o + 4], a[o + 5], a[o + 6], a[o + 7],
       a[o + 8], a[o + 9], a[o + 10], a[o + 11], 0, 0, 0, 1);
   }
 
@@ -416,10 +431,10 @@
 
   function setIndex(i) {
     index = Math.max(0, Math.min(N - 1, Math.round(i)));
-    for (let k = 0; k < L; k++) linkGroups[k].matrix.copy(matrixOf(POSES, (index * L + k) * 12));
-    for (let k = 0; k < ghostGroups.length; k++) ghostGroups[k].matrix.copy(matrixOf(GHOST.poses, (index * L + k) * 12));
-    for (const it of items) if (it.track) it.group.matrix.copy(matrixOf(it.track, index * 12));
-    for (const it of ghostItems) it.group.matrix.copy(matrixOf(it.track, index * 12));
+    for (let k = 0; k < L; k++) matrixOf(POSES, (index * L + k) * 12, linkGroups[k].matrix);
+    for (let k = 0; k < ghostGroups.length; k++) matrixOf(GHOST.poses, (index * L + k) * 12, ghostGroups[k].matrix);
+    for (const it of items) if (it.track) matrixOf(it.track, index * 12, it.group.matrix);
+    for (const it of ghostItems) matrixOf(it.track, index * 12, it.group.matrix);
     const bp = boneGeom.attributes.position;
     D.bones.forEach((pair, k) => {
       for (let e = 0; e < 2; e++) {
@@ -517,7 +532,8 @@
     if (!playing) return;
     playTime += (now - lastFrame) / 1000 * Number($('rate').value);
     lastFrame = now;
-    setIndex(sampleAt(playTime));
+    const next = sampleAt(playTime);
+    if (next !== index) setIndex(next);  // slowed down, several frames fall on one sample: draw it once
     if (index >= N - 1) { setPlaying(false); return; }
     requestAnimationFrame(step);
   }
@@ -571,14 +587,21 @@
     else if (ev.key === 'm') goToMinimum();
   });
 
+  timing.built = performance.now();  // the scene and the panel made
   homeCamera();
   resize();
   setIndex(0);
+  timing.drawn = performance.now();  // the first frame handed to GL (shaders compiled)
 
   // For scripts and tests: the state of the view, and the camera that drew it (column-major, as three.js keeps it).
   window.roarmView = {
     ready: true,
-    timing: { scriptStart: started, ready: performance.now() },  // ms since navigation start
+    timing: Object.assign(timing, { ready: performance.now() }),  // ms since navigation start, per phase
+    softwareGL: SOFTWARE_GL,
+    // draw calls and triangles of the last frame (three.js counts them), shader programs compiled
+    stats: function () {
+      return { calls: renderer.info.render.calls, triangles: renderer.info.render.triangles, programs: renderer.info.programs.length };
+    },
     data: D,
     setIndex: setIndex,
     setPlaying: setPlaying,
