@@ -778,6 +778,48 @@ def test_software_gl_draws_without_multisampling_in_few_draw_calls(chromium, pla
         page.close()
 
 
+@pytest.mark.slow
+def test_views_orthographic_zoom_toward_the_cursor_and_the_grid_scale(chromium, planned, tmp_path):
+    """Top / front / side look along -z / -x / +y (two points apart only along that axis land on one pixel with the
+    orthographic camera, not with the perspective one); the wheel zooms toward the cursor (the point under it stays
+    there, the camera comes closer), in both cameras; the grid's spacing is said and is a round number."""
+    f, traj = planned["pick_place"]
+    code, out = write_html(tmp_path, f)
+    assert code == 0
+    page, watch = br.open_page(chromium, out.as_uri(), {"width": 900, "height": 600})
+    state = lambda: page.evaluate("window.roarmView.state()")  # noqa: E731
+    try:
+        p = np.array([0.25, -0.15, 0.04])
+        for view, axis in (("top", 2), ("front", 0), ("side", 1)):
+            page.click(f"#views button[data-view={view}]")
+            q = p.copy()
+            q[axis] += 0.2
+            persp = np.linalg.norm(br.project(state(), p) - br.project(state(), q))
+            page.check("#orthographic")
+            ortho = np.linalg.norm(br.project(state(), p) - br.project(state(), q))
+            page.uncheck("#orthographic")
+            assert ortho < 0.5 and persp > 2.0, (view, ortho, persp)
+        page.click("#views button[data-view=iso]")
+        for ortho in (False, True):
+            page.set_checked("#orthographic", ortho)
+            before = state()
+            at = br.project(before, p)
+            page.mouse.move(*at)
+            page.mouse.wheel(0, -240)
+            page.wait_for_function(f"window.roarmView.state().view.join() !== {json.dumps(','.join(map(str, before['view'])))}")
+            after = state()
+            assert np.linalg.norm(br.project(after, p) - at) < 1.5
+            scale = lambda s: np.linalg.norm(br.project(s, p) - br.project(s, p + [0, 0, 0.05]))  # noqa: E731
+            assert scale(after) > 1.3 * scale(before)  # closer: 5 cm looks longer
+        grid = page.evaluate("window.roarmView.grid")
+        mantissa = grid["spacing"] / 10 ** np.floor(np.log10(grid["spacing"]))
+        assert min(abs(mantissa - m) for m in (1, 2, 5)) < 1e-9 and 8 <= grid["cells"] <= 30
+        assert page.inner_text("#grid-scale") == f"grid {grid['spacing'] * 1000:g} mm"
+        assert watch.errors == []
+    finally:
+        page.close()
+
+
 def test_visualize_path_trajectory_option_goes_with_a_page_only(planned, tmp_path, capsys):
     f, _ = planned["pick_place"]
     assert run_cli(["visualize-path", str(f), "-t", str(f), "-o", str(tmp_path / "x.png")]) == 2

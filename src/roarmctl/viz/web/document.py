@@ -146,7 +146,7 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
     ``notes``: lines shown under the title (e.g. what a run's log says).
     """
     from roarmctl.motion.clearance import clearance
-    from roarmctl.viz.path_figure import EVENT_COLOR, ROLE_STYLE, describe, torque_shares
+    from roarmctl.viz.path_figure import EVENT_COLOR, ROLE_STYLE, VIEWS, describe, torque_shares
 
     robot = robot if robot is not None else robot_for(traj)
     data = path_data(traj, robot)
@@ -269,6 +269,7 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         "limits": {"max_tcp_speed": data.max_tcp_speed, "min_singular_value": data.min_singular_value},
         "ghost": ghost_doc,
         "bounds": [lo.tolist(), hi.tolist()],
+        "views": {k: list(v) for k, v in VIEWS.items()},  # the PNG's views: elevation, azimuth (deg)
     }
 
 

@@ -65,9 +65,14 @@
   const timing = { scriptStart: started, parsed: parsed, context: performance.now() };  // ms since navigation start
   const scene = new THREE.Scene();
   scene.background = new THREE.Color(0xf7f8fa);
-  const camera = new THREE.PerspectiveCamera(35, 1, 0.002, 100);
-  camera.up.set(0, 0, 1);
+  // Two cameras, one in use (the "orthographic" toggle): perspective, and orthographic for measuring by eye.
+  const perspective = new THREE.PerspectiveCamera(35, 1, 0.002, 100);
+  const orthographic = new THREE.OrthographicCamera(-1, 1, 1, -1, -100, 100);
+  perspective.up.set(0, 0, 1);
+  orthographic.up.set(0, 0, 1);
+  let camera = perspective;
   const controls = new THREE.OrbitControls(camera, canvas);
+  controls.enableZoom = false;  // the wheel zooms toward the cursor (below), not toward the orbit's centre
   scene.add(new THREE.HemisphereLight(0xffffff, 0x8d8d8d, 0.75));
   const sun = new THREE.DirectionalLight(0xffffff, 0.65);
   sun.position.set(1.0, -0.6, 2.0);
@@ -77,21 +82,90 @@
   const centre = lo.clone().add(hi).multiplyScalar(0.5);
   const span = Math.max(hi.clone().sub(lo).length(), 0.05);
 
-  function homeCamera() {
-    // the PNG's iso view: elevation 26 deg, azimuth -38 deg
-    const e = 26 * Math.PI / 180, a = -38 * Math.PI / 180;
+  // The PNG's views (elevation, azimuth in degrees; path_figure.VIEWS): the camera looks at the scene's centre from
+  // there. Straight down is nudged off the pole, where the orbit's "up" would be undefined.
+  const VIEWS = D.views || { iso: [26, -38] };
+  let viewName = 'iso';
+  function setView(name) {
+    const [elev, azim] = VIEWS[name] || VIEWS.iso;
+    viewName = VIEWS[name] ? name : 'iso';
+    const e = Math.min(elev, 89.9) * Math.PI / 180, a = azim * Math.PI / 180;
     const dir = new THREE.Vector3(Math.cos(e) * Math.cos(a), Math.cos(e) * Math.sin(a), Math.sin(e));
-    const dist = 0.5 * span / Math.tan(0.5 * camera.fov * Math.PI / 180) * 0.9;
+    const dist = 0.5 * span / Math.tan(0.5 * perspective.fov * Math.PI / 180) * 0.9;
     camera.position.copy(centre).addScaledVector(dir, dist);
     controls.target.copy(centre);
+    if (camera === orthographic) { orthographic.zoom = 1; fitOrthographic(dist); }
     controls.update();
+    for (const b of document.querySelectorAll('#views button[data-view]')) b.classList.toggle('on', b.dataset.view === viewName);
+    render();
+  }
+  function homeCamera() { setView('iso'); }
+
+  // orthographic: a frustum as tall as the perspective camera sees at the orbit's centre
+  function fitOrthographic(dist) {
+    const h = dist * Math.tan(0.5 * perspective.fov * Math.PI / 180), w = h * perspective.aspect;
+    Object.assign(orthographic, { left: -w, right: w, top: h, bottom: -h });
+    orthographic.updateProjectionMatrix();
+  }
+  function setOrthographic(on) {
+    const next = on ? orthographic : perspective;
+    if (next === camera) return;
+    const dist = camera.position.distanceTo(controls.target) / (camera === orthographic ? orthographic.zoom : 1);
+    next.position.copy(camera.position);
+    next.quaternion.copy(camera.quaternion);
+    camera = next;
+    controls.object = camera;
+    if (on) { orthographic.zoom = 1; fitOrthographic(dist); }
+    controls.update();
+    $('orthographic').checked = on;
+    render();
   }
 
-  const grid = new THREE.GridHelper(Math.ceil(span * 20) / 10, Math.ceil(span * 20), 0xc8ccd2, 0xe2e5e9);
+  // The wheel zooms toward the point under the cursor: that point stays under it (a scaling about it in
+  // perspective; in orthographic the zoom, then a shift that brings it back).
+  const ray = new THREE.Raycaster(), plane = new THREE.Plane();
+  function pointUnder(clientX, clientY) {
+    const r = canvas.getBoundingClientRect();
+    ray.setFromCamera(new THREE.Vector2((clientX - r.left) / r.width * 2 - 1, 1 - (clientY - r.top) / r.height * 2), camera);
+    plane.setFromNormalAndCoplanarPoint(camera.getWorldDirection(new THREE.Vector3()), controls.target);
+    return ray.ray.intersectPlane(plane, new THREE.Vector3());
+  }
+  function zoomAt(clientX, clientY, factor) {  // factor < 1: closer
+    const p = pointUnder(clientX, clientY);
+    if (!p) return;
+    if (camera === perspective) {
+      const d = camera.position.distanceTo(controls.target) * factor;
+      if (d < 0.01 || d > 50 * span) return;
+      camera.position.sub(p).multiplyScalar(factor).add(p);
+      controls.target.sub(p).multiplyScalar(factor).add(p);
+    } else {
+      orthographic.zoom = Math.min(Math.max(orthographic.zoom / factor, 0.02), 500);
+      orthographic.updateProjectionMatrix();
+      const q = pointUnder(clientX, clientY);
+      if (q) { const shift = p.sub(q); camera.position.add(shift); controls.target.add(shift); }
+    }
+    controls.update();
+    render();
+  }
+  canvas.addEventListener('wheel', (ev) => {
+    ev.preventDefault();
+    zoomAt(ev.clientX, ev.clientY, Math.exp(Math.max(-1, Math.min(1, ev.deltaY * 0.002))));
+  }, { passive: false });
+
+  // The floor grid at a round spacing (1, 2 or 5 times a power of ten, about 8 to 20 cells over the scene), said
+  // in the corner: a scale to read distances by.
+  const GRID = (() => {
+    const raw = span / 12, p = Math.pow(10, Math.floor(Math.log10(raw)));
+    const step = [1, 2, 5, 10].map((m) => m * p).find((v) => v >= raw);
+    const cells = 2 * Math.ceil(0.75 * span / step);
+    return { spacing: step, size: cells * step, cells: cells };
+  })();
+  const grid = new THREE.GridHelper(GRID.size, GRID.cells, 0xc8ccd2, 0xe2e5e9);
   grid.rotation.x = Math.PI / 2;  // three.js grids lie in x-z; the world's floor is x-y
-  grid.position.set(centre.x, centre.y, 0);
+  grid.position.set(Math.round(centre.x / GRID.spacing) * GRID.spacing, Math.round(centre.y / GRID.spacing) * GRID.spacing, 0);
   scene.add(grid);
   scene.add(new THREE.AxesHelper(0.05));
+  $('grid-scale').textContent = 'grid ' + (GRID.spacing >= 1 ? GRID.spacing + ' m' : +(GRID.spacing * 1000).toPrecision(3) + ' mm');
 
   function matrixOf(arr, offset, into) {  // 12 floats (3x4, row-major) -> Matrix4 (``into``, else a new one)
     const a = arr, o = offset || 0;
@@ -456,7 +530,9 @@
     render();
   }
 
+  let live = false;  // no frame before the first sample is placed (each costs in software GL)
   function render() {
+    if (!live) return;
     renderer.render(scene, camera);
     const w = canvas.clientWidth, h = canvas.clientHeight, v = new THREE.Vector3();
     for (const l of labels) {
@@ -511,8 +587,9 @@
     drawStrip();
     const w = canvas.parentElement.clientWidth, h = canvas.parentElement.clientHeight;
     renderer.setSize(w, h, false);
-    camera.aspect = w / Math.max(h, 1);
-    camera.updateProjectionMatrix();
+    perspective.aspect = w / Math.max(h, 1);
+    perspective.updateProjectionMatrix();
+    if (camera === orthographic) fitOrthographic(orthographic.top / Math.tan(0.5 * perspective.fov * Math.PI / 180));
     for (const m of lineMaterials) m.resolution.set(w, h);
     render();
   }
@@ -563,6 +640,8 @@
   });
   $('play').addEventListener('click', () => setPlaying(!playing));
   $('reset-camera').addEventListener('click', () => { homeCamera(); render(); });
+  for (const b of document.querySelectorAll('#views button[data-view]')) b.addEventListener('click', () => setView(b.dataset.view));
+  $('orthographic').addEventListener('change', (ev) => setOrthographic(ev.target.checked));
   $('show-collision').addEventListener('change', (ev) => {
     for (const c of collisionGroups) c.visible = ev.target.checked;
     render();
@@ -590,6 +669,7 @@
   timing.built = performance.now();  // the scene and the panel made
   homeCamera();
   resize();
+  live = true;
   setIndex(0);
   timing.drawn = performance.now();  // the first frame handed to GL (shaders compiled)
 
@@ -607,6 +687,10 @@
     setPlaying: setPlaying,
     setTableSeeThrough: setTableSeeThrough,
     minimum: MINIMUM,
+    setView: setView,
+    setOrthographic: setOrthographic,
+    zoomAt: zoomAt,
+    grid: GRID,
     // show or hide the scene item of this name; false when there is none
     showItem: function (name, visible) {
       const it = items.find((x) => x.name === name);
