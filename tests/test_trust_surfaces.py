@@ -56,3 +56,63 @@ def test_a_payload_on_one_of_the_robot_s_links_is_taken(tmp_path):
 
     code, _, err = cli(["export", str(f), "-o", str(tmp_path / "out.csv")])
     assert code == 0 and (tmp_path / "out.csv").exists(), err
+
+
+# --------------------------------------------------------------------------- scene meshes of many pieces
+def _separate_triangles(n: int, seed: int = 0):
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    tri = rng.uniform(-0.5, 0.5, (n, 1, 3)) + np.array([[0, 0, 0], [0.001, 0, 0], [0, 0.001, 0]])
+    return tri.reshape(-1, 3), np.arange(3 * n).reshape(-1, 3)
+
+
+def test_a_mesh_of_many_separate_triangles_is_refused_before_trimesh_splits_it(monkeypatch):
+    """The part count comes first, by a linear method: trimesh's merge and split (a mesh made per part: minutes
+    for a million) never run on a mesh that has too many parts. bench/bench_mesh_parts.py has the times."""
+    import trimesh
+
+    from roarmctl.errors import InputError
+    from roarmctl.motion.scenefiles import MAX_PIECES, mesh_data
+
+    def never(*a, **k):
+        raise AssertionError("trimesh split the mesh before its parts were counted")
+
+    monkeypatch.setattr(trimesh.Trimesh, "split", never)
+    monkeypatch.setattr(trimesh.Trimesh, "merge_vertices", never)
+    v, f = _separate_triangles(5000)
+    with pytest.raises(InputError, match=f"5000 separate parts or more, more than {MAX_PIECES}"):
+        mesh_data(v, f, False, "m.stl", "scene.items[0]")
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_part_count_is_never_more_than_trimesh_s(seed):
+    """Differential, over generated meshes: boxes (as an STL stores them: each triangle's vertices apart), single
+    triangles, pairs touching at one vertex (one part here, two for trimesh, which joins by edges) and copies of
+    one box on top of each other (one part): the count is at most trimesh's split, and equal where no two parts
+    share a vertex."""
+    import numpy as np
+    import trimesh
+
+    from roarmctl.motion.scenefiles import fewest_parts
+
+    rng = np.random.default_rng(seed)
+    meshes, touching = [], 0
+    for k in range(int(rng.integers(1, 40))):
+        at = np.array([k * 0.1, rng.uniform(-1, 1), 0.0])
+        kind = int(rng.integers(0, 3))
+        if kind == 0:
+            box = trimesh.creation.box(rng.uniform(0.01, 0.05, 3))
+            meshes.append(box.vertices[box.faces].reshape(-1, 3) + at)
+        elif kind == 1:
+            meshes.append(_separate_triangles(1, k)[0] * 0.01 + at)
+        else:  # two triangles that share only their first vertex
+            a = np.array([[0, 0, 0], [0.01, 0, 0], [0, 0.01, 0]])
+            meshes.append(np.vstack([a, a * [-1, -1, 1]]) + at)
+            touching += 1
+    v = np.vstack(meshes)
+    f = np.arange(len(v)).reshape(-1, 3)
+    whole = trimesh.Trimesh(v, f, process=False)
+    whole.merge_vertices()
+    split = len(whole.split(only_watertight=False))
+    assert fewest_parts(v, f) == split - touching
