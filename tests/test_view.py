@@ -820,6 +820,33 @@ def test_views_orthographic_zoom_toward_the_cursor_and_the_grid_scale(chromium, 
         page.close()
 
 
+@pytest.mark.slow
+def test_each_target_is_marked_with_its_miss(chromium, planned, tmp_path):
+    """The trajectory's per-target table (issue 32) in the page: every named target marked with its miss in mm, the
+    line to the TCP where it came closest ending at FK of the trajectory at that time."""
+    from roarmctl.viz.data import robot_for
+
+    f, traj = planned["pick_place"]
+    assert traj.targets
+    robot = robot_for(traj)
+    code, out = write_html(tmp_path, f)
+    assert code == 0
+    page, watch = br.open_page(chromium, out.as_uri())
+    try:
+        doc = page.evaluate("window.roarmView.data")
+        assert [t["name"] for t in doc["targets"]] == [t["name"] for t in traj.targets]
+        for row, t in zip(traj.targets, doc["targets"]):
+            k = int(np.clip(np.searchsorted(traj.times, row["time"] - 1e-9), 0, len(traj.times) - 1))
+            assert np.allclose(t["closest"], robot.kin.fk(traj.positions[k])[:3, 3], atol=1e-9)
+            assert np.linalg.norm(np.subtract(t["closest"], row["position"])) == pytest.approx(row["distance"], abs=1e-6)
+        texts = page.locator(".label.miss").all_inner_texts()
+        assert texts == [f"{1000 * row['distance']:.1f} mm" + (f" (zone {1000 * row['zone']:.0f})" if row["zone"] > 0 else "")
+                         for row in traj.targets]
+        assert watch.errors == []
+    finally:
+        page.close()
+
+
 def test_visualize_path_trajectory_option_goes_with_a_page_only(planned, tmp_path, capsys):
     f, _ = planned["pick_place"]
     assert run_cli(["visualize-path", str(f), "-t", str(f), "-o", str(tmp_path / "x.png")]) == 2

@@ -270,6 +270,12 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         "ghost": ghost_doc,
         "bounds": [lo.tolist(), hi.tolist()],
         "views": {k: list(v) for k, v in VIEWS.items()},  # the PNG's views: elevation, azimuth (deg)
+        # each target the plan names (the trajectory's table) with its miss: where the TCP came closest, when
+        "targets": [{"name": str(t.get("name", "")), "kind": str(t.get("kind", "")),
+                     "position": [float(v) for v in t["position"]], "distance": float(t["distance"]),
+                     "zone": float(t.get("zone", 0.0)), "reached": bool(t.get("reached", True)),
+                     "time": float(t["time"]), "index": sample_of(float(t["time"])),
+                     "closest": [float(v) for v in data.tcp[index_at(float(t["time"]))]]} for t in data.targets],
     }
 
 

@@ -324,6 +324,7 @@
     div.style.color = color;
     $('labels').appendChild(div);
     labels.push({ div: div, anchor: new THREE.Vector3().fromArray(anchor) });
+    return { div: div };
   }
   function ball(at, color, radius) {
     const m = new THREE.Mesh(new THREE.SphereGeometry(radius, 16, 12), surface(color));
@@ -345,6 +346,24 @@
     const m = new THREE.Mesh(new THREE.OctahedronGeometry(0.45 * mark), surface(0xff7f0e));
     m.position.fromArray(tcpAt(b.index));
     path.add(m);
+  }
+  // Each target the plan names with its miss (the trajectory's table, as the PNG draws it): a cross at the target, a
+  // line to the TCP where it came closest, the distance in mm (and the zone it was allowed). Green within its zone,
+  // red outside. One line object per colour.
+  for (const reached of [true, false]) {
+    const pos = [];
+    for (const t of D.targets || []) {
+      if (t.reached !== reached) continue;
+      const [x, y, z] = t.position, c = 0.6 * mark;
+      pos.push(x - c, y, z, x + c, y, z, x, y - c, z, x, y + c, z, x, y, z - c, x, y, z + c);
+      pos.push(x, y, z, t.closest[0], t.closest[1], t.closest[2]);
+      const text = (t.distance * 1000).toFixed(1) + ' mm' + (t.zone > 0 ? ' (zone ' + (t.zone * 1000).toFixed(0) + ')' : '');
+      label(text, reached ? '#2ca02c' : '#d62728', [x, y, z - 1.5 * mark]).div.classList.add('miss');
+    }
+    if (!pos.length) continue;
+    const g = new THREE.BufferGeometry();
+    g.setAttribute('position', new THREE.Float32BufferAttribute(pos, 3));
+    path.add(new THREE.LineSegments(g, new THREE.LineBasicMaterial({ color: reached ? 0x2ca02c : 0xd62728 })));
   }
   if (D.failure && D.failure.target) {
     const x = new THREE.Group();
@@ -406,6 +425,7 @@
   $('speed-max').textContent = D.speed_max.toFixed(3);
   const marks = [['start', '#2ca02c'], ['end', '#d62728'], ['TCP now', '#ff00ff']];
   if (D.blends.length) marks.push(['blended join (no stop)', '#ff7f0e']);
+  if ((D.targets || []).length) marks.push(['target: + and its miss (mm), red outside its zone', '#2ca02c']);
   for (const e of D.events) if (!marks.some((m) => m[0] === e.kind + ' target')) marks.push([e.kind + ' target', e.color]);
   if (GHOST) marks.push([D.ghost.label + ' arm' + (D.ghost.items.length ? ' and objects' : '') + ' (outline)', '#e67e22']);
   if (D.failure) marks.push(['failed target: ' + D.failure.label, D.failure.color]);
