@@ -157,3 +157,32 @@ def test_leader_tracking_finds_a_known_lag_and_error():
     trk = leader_tracking((t[late], qf[late], None), (t, ql, None))
     assert trk["latency_s"] == pytest.approx(0.12, abs=1e-9)
     assert trk["rms_rad"] == pytest.approx(0.01, abs=1e-4) and trk["max_rad"] == pytest.approx(0.01, abs=1e-4)
+
+
+def test_a_follow_log_becomes_an_episode_of_held_actions_and_interpolated_states():
+    """Hand-made log: targets at 0.0, 0.25 (refused) and 0.3 s; measured every 0.1 s, rising 0.1 rad per 0.1 s."""
+    from roarmctl.errors import InputError
+    from roarmctl.export.lerobot.follow_record import follow_episode
+
+    a, b = HOME + 0.01, HOME + 0.02
+    log = {"targets": [{"t": 0.0, "q": list(a)}, {"t": 0.25, "q": list(HOME + 1.0), "refused": "x"},
+                       {"t": 0.3, "q": list(b)}],
+           "measured": [[0.1 * k, *(HOME + 0.1 * k)] for k in range(6)]}
+    ep = follow_episode(log, ROBOT, 20, "task")
+    assert ep.length == 11 and ep.task == "task"  # 0 .. 0.5 s at 20 fps
+    assert np.allclose(ep.action[:6], a) and np.allclose(ep.action[6:], b)  # held; the refused one never appears
+    assert np.allclose(ep.state[:, 0], HOME[0] + np.arange(11) * 0.05, atol=1e-6)
+    with pytest.raises(InputError, match="nothing to record"):
+        follow_episode({"targets": [], "measured": []}, ROBOT, 20, "task")
+
+
+def test_a_replay_releases_each_frame_at_its_time_and_then_ends():
+    from roarmctl.device.follow_sources import ReplaySource
+
+    times = np.array([5.0, 5.1, 5.3])
+    src = ReplaySource(times, np.vstack([HOME, HOME + 0.01, HOME + 0.02]), "r")
+    assert [tg.t for tg in src.poll(100.0)] == [5.0]
+    assert src.poll(100.05) == []
+    assert [tg.t for tg in src.poll(100.35)] == [5.1, 5.3]
+    with pytest.raises(SourceEnded):
+        src.poll(100.4)

@@ -16,6 +16,7 @@ if TYPE_CHECKING:
     from rich.console import Console
 
     from roarmctl.device.follow import FollowResult, Source
+    from roarmctl.robot.model import Robot
 
 
 def register(app: typer.Typer) -> None:
@@ -32,6 +33,13 @@ def follow(
                                              "by this hand script (as 'teach --sim --guide' reads it)."),
     socket_path: Path | None = typer.Option(None, "--socket", metavar="PATH", help="Read JSON lines from the process "
                                             "that connects to this new Unix socket (default: stdin)."),
+    dataset: Path | None = typer.Option(None, "--dataset", metavar="DIR", help="Replay an episode's action column of "
+                                        "this LeRobot v3.0 dataset (with --episode)."),
+    episode: int = typer.Option(0, "--episode", help="The episode of --dataset to replay."),
+    record: Path | None = typer.Option(None, "--record", metavar="DIR", help="Append the followed episode (the source's "
+                                       "targets as action, the arm's measured joints as state) to this LeRobot dataset."),
+    record_fps: int = typer.Option(30, "--record-fps", help="Frames per second of the recorded episode."),
+    task: str = typer.Option("follow", "--task", help="The recorded episode's task (its instruction text)."),
     scene: Path | None = typer.Option(None, "--scene", metavar="PLAN", help="A plan whose scene, padding, singularity "
                                       "margin and robot the targets are checked against."),
     rate: float = typer.Option(50.0, "--rate", help="Set-points per second sent to the arm."),
@@ -75,8 +83,8 @@ def follow(
     if leader is not None and leader_guide is not None:
         raise InputError("give one leader: --leader PORT or --leader-guide FILE (a simulated one)")
     is_leader = leader is not None or leader_guide is not None
-    if is_leader and socket_path is not None:
-        raise InputError("give one source: a leader arm or --socket")
+    if sum((is_leader, socket_path is not None, dataset is not None)) > 1:
+        raise InputError("give one source: a leader arm, --socket or --dataset")
     source_plan = load_plan(scene) if scene is not None else None
     robot = common.load_robot(robot_spec(source_plan)) if source_plan is not None else load_robot("roarm_m3_pro")
     if source_plan is not None and scene is not None:
@@ -91,8 +99,10 @@ def follow(
                                          timeout=timeout, frozen_after=frozen_after, max_refusals=max_refusals))
     if log is not None:
         check_output_file(log)
+    if record is not None:
+        _check_record(record, robot, record_fps)
     if port is not None and not yes:
-        if not is_leader and socket_path is None:
+        if not is_leader and socket_path is None and dataset is None:
             raise InputError("refusing to ask for confirmation: the targets come on stdin", "pass --yes to follow without asking")
         if not sys.stdin.isatty():
             raise InputError("refusing to ask for confirmation: stdin is not a terminal", "pass --yes to follow without asking")
@@ -108,6 +118,8 @@ def follow(
         spec = LeaderSpec(guide=load_guide(leader_guide))
     elif leader is not None:
         spec = LeaderSpec(port=leader)
+    elif dataset is not None:
+        source = _replay(dataset, episode, robot)
     elif socket_path is not None:
         source = SocketSource(robot, socket_path)
         err.print(f"waiting for a process to connect to {socket_path}", highlight=False)
@@ -125,8 +137,51 @@ def follow(
         res = getattr(exc, "result", None)
         if res is not None:
             _summary(err, res, log)
+            if record is not None:
+                _record(err, record, robot, res, record_fps, task)
         raise
     _summary(err, done.result, log)
+    if record is not None:
+        _record(err, record, robot, done.result, record_fps, task)
+
+
+def _replay(dataset: Path, episode: int, robot: "Robot") -> "Source":
+    """The ``action`` column of one episode of a LeRobot dataset, for this robot."""
+    from roarmctl.device.follow_sources import ReplaySource
+    from roarmctl.export.lerobot.dataset import read_actions, spec_of
+
+    have = spec_of(dataset)
+    if list(have.joint_names) != list(robot.joint_names):
+        raise InputError(f"--dataset {dataset}: its joints are {', '.join(have.joint_names)}, the robot's "
+                         f"{', '.join(robot.joint_names)}", "replay a dataset of this robot (or give its plan with --scene)")
+    t, action = read_actions(dataset, episode)
+    return ReplaySource(t, action, f"{dataset} episode {episode}")
+
+
+def _check_record(root: Path, robot: "Robot", fps: int) -> None:
+    """Refuse a --record folder that is not a dataset of this robot and rate before anything moves."""
+    from roarmctl.export.lerobot.dataset import INFO_PATH, spec_of
+
+    if not 1 <= fps <= 1000:
+        raise InputError(f"--record-fps must be a whole number in [1, 1000], got {fps}")
+    if root.exists() and not (root / INFO_PATH).exists() and (not root.is_dir() or any(root.iterdir())):
+        raise InputError(f"--record {root}: exists and is not a LeRobot dataset", "give a new folder or a dataset")
+    if (root / INFO_PATH).exists():
+        have = spec_of(root)
+        if (have.fps, list(have.joint_names), have.cameras) != (fps, list(robot.joint_names), {}):
+            raise InputError(f"--record {root}: the dataset has fps {have.fps}, joints {', '.join(have.joint_names)} and "
+                             f"cameras {', '.join(have.cameras) or 'none'}; a followed episode has fps {fps}, the robot's "
+                             "joints and no camera", "record into a new folder or match --record-fps")
+
+
+def _record(err: "Console", root: Path, robot: "Robot", res: "FollowResult", fps: int, task: str) -> None:
+    from roarmctl.export.lerobot.follow_record import record_follow
+
+    try:
+        path = record_follow(root, robot, res.log, fps, task)
+        err.print(f"recorded the episode into {path}", highlight=False, markup=False)
+    except InputError as exc:
+        common.warn(f"not recorded: {exc.message}")
 
 
 def _summary(err: "Console", res: "FollowResult", log: Path | None) -> None:

@@ -223,7 +223,9 @@ class Follower:
                     ended = True
                     self.event("the source ended: finishing the motion to its last accepted target")
                 self._refused_by_source()
-                if self.guard.heard is None:
+                if ended:  # a clean end is not silence (frames that queued up may have come long before it)
+                    pass
+                elif self.guard.heard is None:
                     if now - self.t0 > cfg.first_frame:
                         raise SourceLost(f"source lost: no frame in the first {cfg.first_frame:g} s",
                                          "start the source (the policy process, the leader) and follow again")
@@ -365,7 +367,7 @@ class Follower:
         return {
             "format": "roarmctl.followlog/1", "robot": self.robot.name, "source": self.source.name,
             "port": getattr(self.link, "port", None), "firmware": getattr(self.link, "firmware", None),
-            "rate": self.cfg.rate, "joint_names": list(self.robot.joint_names),
+            "rate": self.cfg.rate, "joint_names": list(self.robot.joint_names), "t0_monotonic": t0,
             "summary": {"outcome": outcome, "message": message, "setpoints": len(self.commanded),
                         "targets": self.guard.summary() if self.guard is not None else None,
                         "cost_ms": {"p50": pct(50), "p99": pct(99), "max": round(float(cost.max()), 4) if len(cost) else None,

@@ -19,13 +19,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.device.follow import FollowConfig, Follower, FollowResult, Source
+from roarmctl.device.follow_guard import SourceLost
 from roarmctl.device.follow_sources import LeaderSource
 from roarmctl.device.guide import guided_servos
 from roarmctl.device.link import Link
 from roarmctl.device.protocol import WireMap
 from roarmctl.device.simulator import PtySimulator, SimConfig
 from roarmctl.device.teach import Judge, TeachSession
-from roarmctl.errors import InputError, RoarmError
+from roarmctl.errors import DeviceError, InputError, RoarmError
 from roarmctl.fileio import atomic_write_json
 
 if TYPE_CHECKING:
@@ -89,7 +90,10 @@ def follow_live(robot: Robot, checker: CollisionChecker, *, port: str | None = N
         link.open()
         link.connect()
         if leader is not None:  # its torque goes off (a hand moves it) once the follower is ready
-            source = _leader_source(leader, robot, sims)
+            try:
+                source = _leader_source(leader, robot, sims)
+            except DeviceError as exc:  # a leader that cannot start is a lost source; the follower has not moved
+                raise SourceLost(f"leader: {exc.message}", exc.hint) from None
         assert source is not None
         follower = Follower(link, robot, checker, source, config, on_event=on_event,
                             extra_lateness=sims[0].recent_lateness if sim else None)

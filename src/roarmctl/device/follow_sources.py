@@ -1,6 +1,9 @@
 """Where a follower's targets come from: JSON lines (a policy process writing to stdin or to a local socket) or a
 leader arm (its feedback frames, read as ``teach`` reads them, with its torque off).
 
+A recorded episode (:class:`ReplaySource`: a LeRobot dataset's ``action`` column, read by the CLI) is played back
+on this host's clock.
+
 A JSON line is one object ``{"t": s, "joints": [rad x arm joints], "gripper": rad}``: ``t`` on the source's own
 clock (increasing), the arm joints and the gripper in the robot description's convention (URDF radians, as plans
 and ``kin`` use them); ``gripper`` may be left out (the last one stays). A line that is not such an object is a
@@ -196,6 +199,42 @@ class SocketSource:
             st = self.path.lstat()
             if stat.S_ISSOCK(st.st_mode) and st.st_ino == self._inode:
                 self.path.unlink()
+
+
+class ReplaySource:
+    """Recorded targets played back on this host's clock: ``times`` (F,) s increasing, ``targets`` (F, dof) rad in
+    the robot's joint order (a dataset episode's ``action`` column); frame k is due ``times[k] - times[0]`` s after
+    the first poll. The end of the frames ends the source."""
+
+    def __init__(self, times: np.ndarray, targets: np.ndarray, name: str) -> None:
+        self.times = np.asarray(times, dtype=float)
+        self.targets = np.asarray(targets, dtype=float)
+        if self.times.ndim != 1 or self.targets.shape[:1] != self.times.shape or len(self.times) == 0:
+            raise InputError(f"{name}: expected (F,) times and (F, dof) targets, got {self.times.shape} and "
+                             f"{self.targets.shape}")
+        self.name = name
+        self.k = 0
+        self.t0: float | None = None
+
+    def poll(self, now: float) -> list[Target]:
+        """See ``Source.poll``."""
+        if self.t0 is None:
+            self.t0 = now
+        if self.k >= len(self.times):
+            raise SourceEnded
+        due = self.times[0] + (now - self.t0)
+        out = []
+        while self.k < len(self.times) and self.times[self.k] <= due:
+            out.append(Target(float(self.times[self.k]), self.targets[self.k].copy(), now))
+            self.k += 1
+        return out
+
+    def refusals(self) -> list[tuple[float, str]]:
+        """See ``Source.refusals`` (none: the frames are numbers already)."""
+        return []
+
+    def close(self) -> None:
+        """Nothing to give back."""
 
 
 class LeaderSource:
