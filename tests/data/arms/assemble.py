@@ -10,7 +10,7 @@ extend the corpus and check where every file came from.
 description files that the URDF and SRDF expansion reads (found by expanding them with xacro and
 recording every file opened) and the collision meshes the expanded URDF names are copied, at the
 commit below, to ``tests/data/arms/NAME/<path in the repository>``, byte for byte. Collision meshes
-larger than ``HULL_ABOVE`` bytes are stored as their convex hull (a binary STL): roarmctl checks a
+larger than ``HULL_ABOVE`` bytes are stored as their convex hull (a binary STL, or COLLADA in metres): roarmctl checks a
 mesh's convex hull unless the sidecar asks for ``mesh_collision: exact``, so the collision answers are
 the same, and the repository stays small. Visual meshes are left out (roarmctl reads none). Each arm's
 ``SOURCE`` lists the repository, commit, licence and every file with the git blob id of the published
@@ -100,6 +100,33 @@ ARMS: dict[str, dict] = {
         urdf="abb_irb2400_support/urdf/irb2400.urdf",
         srdf="abb_irb2400_moveit_config/config/abb_irb2400.srdf",
         joint_limits="abb_irb2400_moveit_config/config/joint_limits.yaml"),
+    "gen3": dict(
+        repo="Kinovarobotics/ros2_kortex", commit="1fdbef345954b326627dc3792981e18e2221450b",
+        licence="BSD-3-Clause", licence_file="LICENSE",
+        packages={"kortex_description": "kortex_description"},
+        urdf="kortex_description/robots/gen3.xacro", xacro_args={"dof": 7}),
+    "fr3": dict(
+        repo="frankaemika/franka_description", commit="b299b39d9692bfae795184df32a98ce7778d56af",
+        licence="Apache-2.0", licence_file="LICENSE", extra=["NOTICE"],
+        packages={"franka_description": "."},
+        urdf="robots/fr3/fr3.urdf.xacro", xacro_args={"hand": "true"}),
+    "ar4": dict(
+        repo="ycheng517/ar4_ros_driver", commit="ff1c63f4e49519d58db3a773341fb8a101f05804",
+        licence="MIT", licence_file="LICENSE",
+        packages={"annin_ar4_description": "annin_ar4_description", "annin_ar4_moveit_config": "annin_ar4_moveit_config"},
+        urdf="annin_ar4_description/urdf/ar.urdf.xacro", srdf="annin_ar4_moveit_config/srdf/ar.srdf.xacro",
+        xacro_args={"ar_model": "mk3", "name": "ar"}),  # its joint_limits.yaml is a launch file's ($(var tf_prefix) keys)
+    "gp7": dict(
+        repo="ros-industrial/motoman", commit="433be15f6a27cb9a5715cc3887b1cd15ff33a8cb",
+        licence="BSD-3-Clause (motoman_gp7_support/package.xml)", licence_file=None,
+        extra=["motoman_gp7_support/package.xml"],
+        packages={"motoman_gp7_support": "motoman_gp7_support", "motoman_resources": "motoman_resources"},
+        urdf="motoman_gp7_support/urdf/gp7.xacro"),
+    "rx160": dict(
+        repo="ros-industrial/staubli", commit="367d92ec7432867d9ba87c3399d49a940c4afc67",
+        licence="Apache-2.0", licence_file="LICENSE",
+        packages={"staubli_rx160_support": "staubli_rx160_support", "staubli_resources": "staubli_resources"},
+        urdf="staubli_rx160_support/urdf/rx160.xacro"),
 }
 
 TEXT = re.compile(r"\.(xacro|urdf|srdf|yaml|yml|xml|json)$", re.I)
@@ -146,13 +173,20 @@ def _expand_tracking(path: Path, args: dict, packages: dict[str, Path]) -> tuple
     return doc.toxml(), opened
 
 
-def _hull_stl(data: bytes) -> bytes:
-    """The convex hull of an STL's vertices as a binary STL (scipy's qhull through trimesh)."""
+def _hull_stl(data: bytes, kind: str = "stl") -> bytes:
+    """The convex hull of a mesh file's vertices (scipy's qhull through trimesh), in the same format: a binary
+    STL, or a COLLADA file in metres (a declared ``<unit>``, read by pycollada, is applied to the vertices)."""
     import trimesh
 
-    mesh = trimesh.load_mesh(io.BytesIO(data), file_type="stl", process=False)
-    hull = mesh.convex_hull
-    return hull.export(file_type="stl")
+    mesh = trimesh.load_mesh(io.BytesIO(data), file_type=kind, process=False)
+    if isinstance(mesh, trimesh.Scene):
+        mesh = mesh.to_mesh()
+    if kind == "dae":
+        import collada
+
+        unit = collada.Collada(io.BytesIO(data)).assetInfo.unitmeter or 1.0
+        mesh = trimesh.Trimesh(mesh.vertices * unit, mesh.faces, process=False)
+    return mesh.convex_hull.export(file_type=kind)
 
 
 def assemble(name: str, git_root: Path) -> None:
@@ -206,8 +240,8 @@ def assemble(name: str, git_root: Path) -> None:
     for f in sorted(meshes):
         data = repo.read(f)
         (dest / f).parent.mkdir(parents=True, exist_ok=True)
-        if len(data) > HULL_ABOVE:
-            (dest / f).write_bytes(_hull_stl(data))
+        if len(data) > HULL_ABOVE:  # (a small file, an empty one among them, is kept as published)
+            (dest / f).write_bytes(_hull_stl(data, Path(f).suffix.lower().lstrip(".")))
             lines.append(f"  {f}: hull of {repo.blob(f)}")
         else:
             (dest / f).write_bytes(data)
