@@ -1,4 +1,5 @@
-"""Inspect a trajectory: duration, events, joint positions at chosen times, the TCP path and speed.
+"""Inspect a trajectory: duration, events, how close it comes to each target, joint positions at chosen times, the
+TCP path and speed.
 
     python examples/02_inspect_trajectory.py [TRAJ]     (default: plans the bundled pick_place.yaml)
 """
@@ -19,6 +20,9 @@ robot = rc.load_robot(traj.robot)
 print(f"{traj.robot}: {len(traj.joint_names)} joints, {traj.duration:.2f} s, {len(traj.times)} samples")
 for e in traj.events:
     print(f"  {e.kind:8s} at {e.time:5.2f} s  {e.label}")
+for row in traj.targets:  # every target the plan names: reached (zone 0) or passed within its zone
+    print(f"  {row['kind']:8s} target of {row['name']}: {row['distance'] * 1e3:.1f} mm at {row['time']:.2f} s "
+          f"(zone {row['zone'] * 1e3:.0f} mm, {'reached' if row['reached'] else 'OUTSIDE'})")
 
 t = np.linspace(0.0, traj.duration, 5)
 q = rc.sample(traj, t)  # (5, dof) rad
