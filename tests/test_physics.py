@@ -165,6 +165,24 @@ def test_pick_place_places_the_cube_and_writes_a_run_file_export_reads(trajs, tm
     assert cli(["export", str(run), "-o", str(tmp_path / "run.csv")]) == 0  # the run file is an execution log
 
 
+def test_a_pick_whose_object_is_not_in_the_scene_is_exit_3_and_the_notes_say_where_the_stiffness_comes_from(
+        trajs, tmp_path, capsys):
+    """The pick and place with its cube taken out of the trajectory's scene: the jaws close on nothing, and the run
+    says so (exit 3, one line naming the payload) instead of ``ok: true`` with no objects and a note. Its
+    ``model.notes`` say the servos' stiffness comes from a sister servo (STS3215) at an assumed P gain."""
+    doc = json.loads(trajs["pick_place"].read_text())
+    doc["scene"]["items"] = [i for i in doc["scene"]["items"] if i["name"] != "cube"]
+    no_cube = tmp_path / "no_cube.traj.json"
+    no_cube.write_text(json.dumps(doc))
+    code, rep = _simulate(capsys, str(no_cube), "--settle", "0.2")
+    assert code == 3 and not rep["ok"] and rep["objects"] == []
+    assert rep["unmatched_payloads"] and rep["unmatched_payloads"][0]["payload"] == 1
+    assert any("STS3215" in n and "P = 16" in n and "assumed" in n for n in rep["model"]["notes"])
+    assert cli(["simulate", str(no_cube), "--settle", "0.2"]) == 3
+    err = capsys.readouterr().err
+    assert "payload 1 (grasp at" in err and "picks no object of the trajectory's scene" in err and "Traceback" not in err
+
+
 @pytest.mark.slow  # CPU: the payload plan simulated twice (with and without --sag); make test-fast keeps the pick_place placement
 def test_the_0_2_kg_weight_holds_its_sag_is_reported_and_sag_compensation_cancels_it(trajs, capsys):
     """The weight held still (the plan's 'wait') pulls the P-only servos down about 2.5 cm: with --no-sag the

@@ -46,7 +46,9 @@ def simulate(
     The servos get the commands execute would send (same schedule); the report gives per-joint
     tracking and peak torque against stall, the TCP error and sag at rest, every contact the plan did
     not intend, and whether each picked object was lifted and placed. Exit 3 when an object is not
-    placed within --tolerance or an unintended contact happens.
+    placed within --tolerance, an unintended contact happens, or a pick's object is not in the
+    trajectory's scene. The servos' stiffness is the ST3235's position loop at the firmware's P gain
+    (16), calibrated on a sister servo (STS3215) and assumed proportional to P (docs/physics.md).
     """
     from roarmctl.device.schedule import STRATEGIES
     from roarmctl.motion.validate import robot_of, validate_trajectory
@@ -90,7 +92,7 @@ def simulate(
 
         write_log(output, run_log(traj, robot, setup, rec, options, report, source=robot_desc))
     if json_out:
-        common.print_json({k: report[k] for k in ("ok", "joints", "tcp", "contacts", "objects", "run", "model")}
+        common.print_json({k: report[k] for k in ("ok", "joints", "tcp", "contacts", "objects", "unmatched_payloads", "run", "model")}
                           | ({"run_file": str(output)} if output is not None else {}))
     else:
         _render(report, output)
@@ -102,7 +104,12 @@ def simulate(
             c = report["contacts"][0]
             who = c.get("link") or c.get("item")
             parts.append(f"{len(report['contacts'])} unintended contact(s), first {who} with {c['with']} at {c['start_s']:.2f} s")
+        for u in report["unmatched_payloads"]:
+            parts.append(f"payload {u['payload']} (grasp at {u['grasp_s']:.2f} s) picks no object of the trajectory's "
+                         "scene: nothing there to lift")
         hint = f"tolerance {tolerance:g} mm; see the report" + (f" and {output}" if output else "")
+        if report["unmatched_payloads"] and not bad and not report["contacts"]:
+            hint = "plan it again with the object in the plan's scene (an item of role object where the pick is)"
         sag_mm = report["tcp"]["sag_mm"]
         if not sag and any(o["lifted"] for o in bad) and sag_mm is not None and sag_mm > tolerance / 2:
             hint = f"the servos sag up to {sag_mm:.0f} mm at rest: drop --no-sag (execute compensates by default); " + hint

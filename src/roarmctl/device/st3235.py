@@ -40,6 +40,12 @@ SERVOS_PER_FIELD = {"shoulder": 2}
 TORQUE_LIMIT = {"hand": 0.3}
 
 
+#: What the model's servo stiffness rests on, in one sentence (the run's ``model.notes``, ``simulate --help``)
+STIFFNESS_NOTE = ("servo stiffness: the ST3235's position loop at the firmware's P = 16, its duty per step of error "
+                  "calibrated on a sister servo (an STS3215 holding 1.04 N m 20-30 steps off its goal at P = 32) and "
+                  "assumed proportional to P: 13.6 N m/rad per servo; bench/bench_physics.py --stiffness shows 0.5x and 2x")
+
+
 def stiffness(field: str) -> float:
     """Steady torque (N m) that holds the joint of firmware field ``field`` one radian off its goal:
     ``n * stall * kp * steps per rad`` (13.6 N m/rad for one servo, 27.1 for the shoulder's two)."""

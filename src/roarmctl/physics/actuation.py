@@ -88,7 +88,7 @@ def for_robot(robot: Robot, traj: Trajectory | None = None) -> Actuation:
             fields.append(w.field)
             fw.append(k)
         bank = ServoBank(joint, spec, count, sign, zero, limit)
-        return Actuation(bank, fields, fw, streamed=True)
+        return Actuation(bank, fields, fw, streamed=True, notes=[st3235.STIFFNESS_NOTE])
     return _generic(robot, traj)
 
 

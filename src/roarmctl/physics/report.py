@@ -80,7 +80,11 @@ def measure(traj: Trajectory, robot: Robot, setup: Setup, rec: Recording, option
     out["tcp"] = _tcp(traj, robot, rec, plan, moving, scale, options.sag)
     out["contacts"] = [e.to_dict() for e in rec.episodes]
     out["objects"] = _objects(traj, robot, setup, rec, options)
-    out["ok"] = bool(all(o["placed"] for o in out["objects"]) and not out["contacts"])
+    # a payload that names no object of the trajectory's scene: the run cannot say the pick worked (nothing was
+    # there to lift), so it is not ok
+    out["unmatched_payloads"] = [{"payload": k + 1, "grasp_s": _r(float(p["start"]), 4)}
+                                 for k, (p, n) in enumerate(zip(traj.payloads, setup.objects_of_payloads)) if n is None]
+    out["ok"] = bool(all(o["placed"] for o in out["objects"]) and not out["contacts"] and not out["unmatched_payloads"])
     sim = float(rec.t[-1]) if len(rec.t) else 0.0
     out["run"] = {"simulated_s": _r(sim), "wall_s": _r(rec.wall), "real_time_factor": _r(sim / rec.wall, 1) if rec.wall > 0 else None,
                   "cpu_s": _r(rec.cpu), "cpu_real_time_factor": _r(sim / rec.cpu, 1) if rec.cpu > 0 else None,
@@ -311,6 +315,8 @@ def _failure(report: dict[str, Any]) -> str:
         parts.append("not placed within tolerance: " + ", ".join(bad))
     if report["contacts"]:
         parts.append(f"{len(report['contacts'])} unintended contact(s)")
+    for u in report.get("unmatched_payloads", []):
+        parts.append(f"payload {u['payload']} (grasp at {u['grasp_s']:.2f} s) picks no object of the trajectory's scene")
     return "; ".join(parts)
 
 
