@@ -9,7 +9,7 @@ from pathlib import Path
 
 import hostile
 import pytest
-from test_trust import refused
+from test_trust import cli, refused
 
 #: Every command that reads a trajectory, with its output (``{d}``: the test's folder).
 TRAJECTORY_COMMANDS = {
@@ -52,7 +52,6 @@ def test_a_payload_on_one_of_the_robot_s_links_is_taken(tmp_path):
 
     f = tmp_path / "t.traj.json"
     f.write_text(json.dumps(foreign_payload(load_robot("roarm_m3_pro").tcp_link)))
-    from test_trust import cli
 
     code, _, err = cli(["export", str(f), "-o", str(tmp_path / "out.csv")])
     assert code == 0 and (tmp_path / "out.csv").exists(), err
@@ -116,3 +115,79 @@ def test_the_part_count_is_never_more_than_trimesh_s(seed):
     whole.merge_vertices()
     split = len(whole.split(only_watertight=False))
     assert fewest_parts(v, f) == split - touching
+
+
+# --------------------------------------------------------------------------- leftovers of a killed write
+_KILLED_WRITE = """
+import os, signal, sys
+from pathlib import Path
+from roarmctl import fileio
+folder = Path(sys.argv[1])
+def writer(f):
+    f.write(b"half of a trajectory")
+    f.flush()
+    os.kill(os.getpid(), signal.SIGKILL)
+if sys.argv[2] == "file":
+    fileio.atomic_write_with(folder / "out.traj.json", writer)
+else:
+    tmp = fileio.new_folder_beside(folder / "out_bag")
+    (tmp / "out_bag_0.mcap").write_bytes(b"half of a bag")
+    os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def _killed_write(folder: Path, kind: str) -> int:
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-c", _KILLED_WRITE, str(folder), kind], capture_output=True)
+    assert proc.returncode == -9, proc.stderr
+    return proc.returncode
+
+
+def test_a_later_run_removes_the_temporaries_of_a_killed_write_and_nothing_else(tmp_path):
+    """SIGKILL during an atomic write and during a bag's folder: the hidden temporaries stay (nothing can run
+    on SIGKILL); the next roarmctl that writes into the folder removes them - by their name, which only roarmctl
+    makes, and only when their process is gone - and leaves every other file, however alike."""
+    import os
+    import subprocess
+    import sys
+
+    out = tmp_path / "outputs"
+    out.mkdir()
+    _killed_write(out, "file")
+    left = [p.name for p in out.iterdir()]
+    assert len(left) == 1 and left[0].startswith(".out.traj.json.roarmctl-") and left[0].endswith(".tmp"), left
+    _killed_write(out, "folder")  # a later write: the killed file's temporary is removed, its own folder stays
+    left = [p.name for p in out.iterdir()]
+    assert len(left) == 1 and left[0].startswith(".out_bag.roarmctl-") and (out / left[0]).is_dir(), left
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(dead.stdout)
+    user = {".notes.txt.abcd1234.tmp": "file", ".out.traj.json.x1y2z3w4.tmp": "file",  # tempfile's old names: not ours
+            f".mine.roarmctl-{os.getpid()}-abcdefgh.tmp": "file",  # a process that runs (this one)
+            f".dir.roarmctl-{dead_pid}-abcdefgh.tmp": "folder",  # a folder where we write files
+            f".file.roarmctl-{dead_pid}-abcdefgh": "file",  # a file where we make folders
+            f".link.roarmctl-{dead_pid}-abcdefgh": "link",  # a symlink: never followed
+            "out.traj.json.tmp": "file", "keep": "folder"}
+    target = tmp_path / "users_folder"
+    target.mkdir()
+    (target / "precious.txt").write_text("the user's")
+    for name, kind in user.items():
+        if kind == "file":
+            (out / name).write_text("the user's")
+        elif kind == "folder":
+            (out / name).mkdir()
+            (out / name / "inside.txt").write_text("the user's")
+        else:
+            (out / name).symlink_to(target)
+    code, _, err = cli(["export", str(_traj(tmp_path)), "-o", str(out / "new.csv")])
+    assert code == 0, err
+    assert sorted(p.name for p in out.iterdir()) == sorted([*user, "new.csv"])
+    assert (target / "precious.txt").read_text() == "the user's"
+    assert all((out / n / "inside.txt").exists() for n, k in user.items() if k == "folder")
+
+
+def _traj(folder: Path) -> Path:
+    f = folder / "t.traj.json"
+    f.write_text(json.dumps(hostile.trajectory_doc()))
+    return f

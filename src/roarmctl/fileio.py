@@ -11,6 +11,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 import shutil
 import stat
 from collections.abc import Callable
@@ -42,7 +43,8 @@ def atomic_write_with(path: str | os.PathLike, writer: Callable[[Any], Any]) -> 
     target = check_output_file(path)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+        remove_stale_temporaries(target.parent)
+        fd, tmp = tempfile.mkstemp(prefix=temporary_prefix(target), suffix=".tmp", dir=target.parent)
     except OSError as exc:
         raise InputError(f"cannot write {target}: {exc.strerror or exc}", "choose a directory you can write to") from None
     try:
@@ -61,6 +63,60 @@ def atomic_write_with(path: str | os.PathLike, writer: Callable[[Any], Any]) -> 
             raise InputError(f"cannot write {target}: {exc.strerror or exc}", "check the disk space and permissions") from None
         raise
     return target
+
+
+#: The temporaries roarmctl writes beside an output, named ``.NAME.roarmctl-PID-XXXXXXXX.tmp`` (a file) or
+#: ``.NAME.roarmctl-PID-XXXXXXXX`` (a folder being filled: a bag), PID the writing process and XXXXXXXX
+#: ``tempfile``'s random part: a name only roarmctl makes, so that a later run can remove what a killed one
+#: (SIGKILL, a power cut) left, and nothing else.
+_TEMPORARY = re.compile(r"\.(?:.+)\.roarmctl-([0-9]{1,10})-[a-z0-9_]{8}(\.tmp)?")
+_SWEPT: set[str] = set()  # folders this process has swept (once each: a folder of many outputs is listed once)
+
+
+def temporary_prefix(target: Path) -> str:
+    """The start of the name of a temporary written beside ``target`` by this process (see ``_TEMPORARY``)."""
+    return f".{target.name}.roarmctl-{os.getpid()}-"
+
+
+def remove_stale_temporaries(folder: str | os.PathLike) -> list[str]:
+    """Remove from ``folder`` the temporaries of roarmctl processes that no longer run (a write killed before
+    its rename): only names that match ``_TEMPORARY`` whose process is gone, a file for a ``.tmp`` name and a
+    folder otherwise, symlinks never followed. Once per folder and process; returns the names removed."""
+    try:
+        key = os.path.realpath(folder)
+    except (OSError, ValueError):
+        return []
+    if key in _SWEPT:
+        return []
+    _SWEPT.add(key)
+    removed = []
+    try:
+        with os.scandir(folder) as entries:
+            stale = [(e, m) for e in entries if (m := _TEMPORARY.fullmatch(e.name)) and not _running(int(m[1]))]
+        for entry, m in stale:
+            if m[2] and entry.is_file(follow_symlinks=False):
+                os.unlink(entry.path)
+            elif not m[2] and entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path)
+            else:
+                continue
+            removed.append(entry.name)
+    except OSError:
+        pass  # a folder we cannot list or clean: the write itself says so if it fails
+    return removed
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` exists (another user's counts)."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, OSError):
+        return True
+    return True
 
 
 def check_output_file(path: str | os.PathLike) -> Path:
@@ -359,7 +415,8 @@ def new_folder_beside(target: str | os.PathLike) -> Path:
     target = Path(target)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+        remove_stale_temporaries(target.parent)
+        tmp = Path(tempfile.mkdtemp(prefix=temporary_prefix(target), dir=target.parent))
     except OSError as exc:
         raise InputError(f"cannot write {_short(target)}: {_reason(exc)}", "choose a folder you can write to") from None
     return tmp
