@@ -78,7 +78,7 @@ def temporary_prefix(target: Path) -> str:
     return f".{target.name}.roarmctl-{os.getpid()}-"
 
 
-def remove_stale_temporaries(folder: str | os.PathLike) -> list[str]:
+def remove_stale_temporaries(folder: str | os.PathLike[str]) -> list[str]:
     """Remove from ``folder`` the temporaries of roarmctl processes that no longer run (a write killed before
     its rename): only names that match ``_TEMPORARY`` whose process is gone, a file for a ``.tmp`` name and a
     folder otherwise, symlinks never followed. Once per folder and process; returns the names removed."""
@@ -91,7 +91,7 @@ def remove_stale_temporaries(folder: str | os.PathLike) -> list[str]:
     _SWEPT.add(key)
     removed = []
     try:
-        with os.scandir(folder) as entries:
+        with os.scandir(os.fspath(folder)) as entries:
             stale = [(e, m) for e in entries if (m := _TEMPORARY.fullmatch(e.name)) and not _running(int(m[1]))]
         for entry, m in stale:
             if m[2] and entry.is_file(follow_symlinks=False):
