@@ -337,7 +337,7 @@ def test_page_with_visual_meshes_shows_them(chromium, tmp_path):
         assert watch.errors == [] and page.is_visible("#visual-toggle")
         assert orange() > 200
         page.uncheck("#show-visual")
-        assert orange() < 5
+        assert orange() < 30  # the world axes' x axis (three.js draws it red to orange) is a line a pixel wide
     finally:
         page.close()
 

@@ -22,6 +22,7 @@ from roarmctl.fileio import atomic_write_bytes
 
 THREE_PACKAGE = "jupyter_threejs_sage"
 THREE_RELEASE = "r130"
+APP_SCRIPTS = ("camera.js", "strip.js", "view.js")  # the page's own script, in this order (view.js uses the others)
 
 
 def _static(name: str) -> str:
@@ -48,7 +49,8 @@ def render_page(doc: dict[str, Any]) -> str:
     """The whole page as text (UTF-8 when written)."""
     return Template(_static("page.html")).substitute(
         version=html.escape(__version__), title=html.escape(str(doc.get("title", "roarmctl view"))),
-        css=_static("view.css"), data=data_json(doc), three=three_js(), app=_static("view.js"))
+        css=_static("view.css"), data=data_json(doc), three=three_js(),
+        app="\n".join(_static(name) for name in APP_SCRIPTS))
 
 
 def write_page(doc: dict[str, Any], path: str | Path) -> Path:

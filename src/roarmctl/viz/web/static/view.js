@@ -65,14 +65,6 @@
   const timing = { scriptStart: started, parsed: parsed, context: performance.now() };  // ms since navigation start
   const scene = new THREE.Scene();
   scene.background = new THREE.Color(0xf7f8fa);
-  // Two cameras, one in use (the "orthographic" toggle): perspective, and orthographic for measuring by eye.
-  const perspective = new THREE.PerspectiveCamera(35, 1, 0.002, 100);
-  const orthographic = new THREE.OrthographicCamera(-1, 1, 1, -1, -100, 100);
-  perspective.up.set(0, 0, 1);
-  orthographic.up.set(0, 0, 1);
-  let camera = perspective;
-  const controls = new THREE.OrbitControls(camera, canvas);
-  controls.enableZoom = false;  // the wheel zooms toward the cursor (below), not toward the orbit's centre
   scene.add(new THREE.HemisphereLight(0xffffff, 0x8d8d8d, 0.75));
   const sun = new THREE.DirectionalLight(0xffffff, 0.65);
   sun.position.set(1.0, -0.6, 2.0);
@@ -81,76 +73,15 @@
   const lo = new THREE.Vector3().fromArray(D.bounds[0]), hi = new THREE.Vector3().fromArray(D.bounds[1]);
   const centre = lo.clone().add(hi).multiplyScalar(0.5);
   const span = Math.max(hi.clone().sub(lo).length(), 0.05);
-
-  // The PNG's views (elevation, azimuth in degrees; path_figure.VIEWS): the camera looks at the scene's centre from
-  // there. Straight down is nudged off the pole, where the orbit's "up" would be undefined.
-  const VIEWS = D.views || { iso: [26, -38] };
-  let viewName = 'iso';
-  function setView(name) {
-    const [elev, azim] = VIEWS[name] || VIEWS.iso;
-    viewName = VIEWS[name] ? name : 'iso';
-    const e = Math.min(elev, 89.9) * Math.PI / 180, a = azim * Math.PI / 180;
-    const dir = new THREE.Vector3(Math.cos(e) * Math.cos(a), Math.cos(e) * Math.sin(a), Math.sin(e));
-    const dist = 0.5 * span / Math.tan(0.5 * perspective.fov * Math.PI / 180) * 0.9;
-    camera.position.copy(centre).addScaledVector(dir, dist);
-    controls.target.copy(centre);
-    if (camera === orthographic) { orthographic.zoom = 1; fitOrthographic(dist); }
-    controls.update();
-    for (const b of document.querySelectorAll('#views button[data-view]')) b.classList.toggle('on', b.dataset.view === viewName);
+  // the camera (static/camera.js): the PNG's views, perspective or orthographic, the wheel's zoom toward the cursor
+  const cam = window.roarmCamera(THREE, canvas, D.views || { iso: [26, -38] }, centre, span, (view) => {
+    for (const b of document.querySelectorAll('#views button[data-view]')) b.classList.toggle('on', b.dataset.view === view);
+    $('orthographic').checked = cam.isOrthographic();
     render();
-  }
-  function homeCamera() { setView('iso'); }
+  });
+  const controls = cam.controls;
+  function homeCamera() { cam.setView('iso'); }
 
-  // orthographic: a frustum as tall as the perspective camera sees at the orbit's centre
-  function fitOrthographic(dist) {
-    const h = dist * Math.tan(0.5 * perspective.fov * Math.PI / 180), w = h * perspective.aspect;
-    Object.assign(orthographic, { left: -w, right: w, top: h, bottom: -h });
-    orthographic.updateProjectionMatrix();
-  }
-  function setOrthographic(on) {
-    const next = on ? orthographic : perspective;
-    if (next === camera) return;
-    const dist = camera.position.distanceTo(controls.target) / (camera === orthographic ? orthographic.zoom : 1);
-    next.position.copy(camera.position);
-    next.quaternion.copy(camera.quaternion);
-    camera = next;
-    controls.object = camera;
-    if (on) { orthographic.zoom = 1; fitOrthographic(dist); }
-    controls.update();
-    $('orthographic').checked = on;
-    render();
-  }
-
-  // The wheel zooms toward the point under the cursor: that point stays under it (a scaling about it in
-  // perspective; in orthographic the zoom, then a shift that brings it back).
-  const ray = new THREE.Raycaster(), plane = new THREE.Plane();
-  function pointUnder(clientX, clientY) {
-    const r = canvas.getBoundingClientRect();
-    ray.setFromCamera(new THREE.Vector2((clientX - r.left) / r.width * 2 - 1, 1 - (clientY - r.top) / r.height * 2), camera);
-    plane.setFromNormalAndCoplanarPoint(camera.getWorldDirection(new THREE.Vector3()), controls.target);
-    return ray.ray.intersectPlane(plane, new THREE.Vector3());
-  }
-  function zoomAt(clientX, clientY, factor) {  // factor < 1: closer
-    const p = pointUnder(clientX, clientY);
-    if (!p) return;
-    if (camera === perspective) {
-      const d = camera.position.distanceTo(controls.target) * factor;
-      if (d < 0.01 || d > 50 * span) return;
-      camera.position.sub(p).multiplyScalar(factor).add(p);
-      controls.target.sub(p).multiplyScalar(factor).add(p);
-    } else {
-      orthographic.zoom = Math.min(Math.max(orthographic.zoom / factor, 0.02), 500);
-      orthographic.updateProjectionMatrix();
-      const q = pointUnder(clientX, clientY);
-      if (q) { const shift = p.sub(q); camera.position.add(shift); controls.target.add(shift); }
-    }
-    controls.update();
-    render();
-  }
-  canvas.addEventListener('wheel', (ev) => {
-    ev.preventDefault();
-    zoomAt(ev.clientX, ev.clientY, Math.exp(Math.max(-1, Math.min(1, ev.deltaY * 0.002))));
-  }, { passive: false });
 
   // The floor grid at a round spacing (1, 2 or 5 times a power of ten, about 8 to 20 cells over the scene), said
   // in the corner: a scale to read distances by.
@@ -553,63 +484,28 @@
   let live = false;  // no frame before the first sample is placed (each costs in software GL)
   function render() {
     if (!live) return;
-    renderer.render(scene, camera);
+    renderer.render(scene, cam.camera);
     const w = canvas.clientWidth, h = canvas.clientHeight, v = new THREE.Vector3();
     for (const l of labels) {
-      v.copy(l.anchor).project(camera);
+      v.copy(l.anchor).project(cam.camera);
       const visible = !l.hidden && (l.dynamic || $('show-labels').checked) && v.z > -1 && v.z < 1;
       l.div.style.display = visible ? '' : 'none';
       if (visible) { l.div.style.left = ((v.x + 1) / 2 * w) + 'px'; l.div.style.top = ((1 - v.y) / 2 * h) + 'px'; }
     }
   }
 
-  // The clearance strip under the timeline: every item's distance over time (its colour; intended contact green),
-  // the padding dashed, the smallest clearance that is not intended contact marked. Drawn once per size, not per frame.
+  // The clearance strip under the timeline (static/strip.js), drawn once per size, not per frame.
   function drawStrip() {
     if (!M) return;
-    const strip = $('strip'), ratio = window.devicePixelRatio || 1;
-    const w = strip.clientWidth, h = strip.clientHeight;
-    strip.width = Math.max(1, Math.round(w * ratio));
-    strip.height = Math.max(1, Math.round(h * ratio));
-    const g = strip.getContext('2d');
-    g.setTransform(ratio, 0, 0, ratio, 0, 0);
-    g.fillStyle = '#fafbfc';
-    g.fillRect(0, 0, w, h);
-    const top = Math.min(0.1, Math.max(0.02, PAD ? 4 * PAD : 0, MINIMUM.index >= 0 ? 2 * MINIMUM.distance : 0));
-    const x = (i) => (N > 1 ? i / (N - 1) : 0) * w, y = (d) => h - 2 - Math.min(d / top, 1) * (h - 12);
-    for (let k = 0; k < M; k++) {
-      for (let i = 0; i + 1 < N; i++) {
-        const a = ICLEAR[i * M + k], b = ICLEAR[(i + 1) * M + k];
-        if (a < 0 || b < 0) continue;
-        g.strokeStyle = INTENDED[i * M + k] && INTENDED[(i + 1) * M + k] ? INTENDED_COLOR : itemColor(k);
-        g.lineWidth = INTENDED[i * M + k] ? 2.5 : 1.3;
-        g.beginPath(); g.moveTo(x(i), y(a)); g.lineTo(x(i + 1), y(b)); g.stroke();
-      }
-    }
-    g.font = '10px system-ui, sans-serif';
-    if (PAD) {
-      g.strokeStyle = TIGHT_COLOR; g.lineWidth = 1; g.setLineDash([4, 3]);
-      g.beginPath(); g.moveTo(0, y(PAD)); g.lineTo(w, y(PAD)); g.stroke(); g.setLineDash([]);
-      g.fillStyle = TIGHT_COLOR; g.fillText('padding ' + (PAD * 1000).toFixed(1) + ' mm', 3, y(PAD) - 2);
-    }
-    g.fillStyle = '#555';
-    g.fillText((top * 1000).toFixed(0) + ' mm', w - 40, 10);
-    if (MINIMUM.index >= 0) {
-      const mx = x(MINIMUM.index), my = y(MINIMUM.distance);
-      g.fillStyle = TIGHT_COLOR;
-      g.beginPath(); g.arc(mx, my, 4, 0, 2 * Math.PI); g.fill();
-      const text = 'min ' + (MINIMUM.distance * 1000).toFixed(1) + ' mm: ' + D.items[MINIMUM.item].name;
-      g.fillText(text, Math.min(mx + 6, w - g.measureText(text).width - 2), Math.max(my - 4, 20));
-    }
+    window.roarmStrip($('strip'), { n: N, m: M, clearance: ICLEAR, intended: INTENDED, padding: PAD, minimum: MINIMUM,
+      names: D.items.map((it) => it.name), color: itemColor, intendedColor: INTENDED_COLOR, tightColor: TIGHT_COLOR });
   }
 
   function resize() {
     drawStrip();
     const w = canvas.parentElement.clientWidth, h = canvas.parentElement.clientHeight;
     renderer.setSize(w, h, false);
-    perspective.aspect = w / Math.max(h, 1);
-    perspective.updateProjectionMatrix();
-    if (camera === orthographic) fitOrthographic(orthographic.top / Math.tan(0.5 * perspective.fov * Math.PI / 180));
+    cam.setAspect(w / Math.max(h, 1));
     for (const m of lineMaterials) m.resolution.set(w, h);
     render();
   }
@@ -660,8 +556,8 @@
   });
   $('play').addEventListener('click', () => setPlaying(!playing));
   $('reset-camera').addEventListener('click', () => { homeCamera(); render(); });
-  for (const b of document.querySelectorAll('#views button[data-view]')) b.addEventListener('click', () => setView(b.dataset.view));
-  $('orthographic').addEventListener('change', (ev) => setOrthographic(ev.target.checked));
+  for (const b of document.querySelectorAll('#views button[data-view]')) b.addEventListener('click', () => cam.setView(b.dataset.view));
+  $('orthographic').addEventListener('change', (ev) => cam.setOrthographic(ev.target.checked));
   $('show-collision').addEventListener('change', (ev) => {
     for (const c of collisionGroups) c.visible = ev.target.checked;
     render();
@@ -707,9 +603,9 @@
     setPlaying: setPlaying,
     setTableSeeThrough: setTableSeeThrough,
     minimum: MINIMUM,
-    setView: setView,
-    setOrthographic: setOrthographic,
-    zoomAt: zoomAt,
+    setView: cam.setView,
+    setOrthographic: cam.setOrthographic,
+    zoomAt: cam.zoomAt,
     grid: GRID,
     // show or hide the scene item of this name; false when there is none
     showItem: function (name, visible) {
@@ -721,13 +617,14 @@
     },
     // put the camera at ``position`` looking at ``target`` (world m)
     lookAt: function (position, target) {
-      camera.position.fromArray(position);
+      cam.camera.position.fromArray(position);
       controls.target.fromArray(target);
       controls.update();
       render();
     },
     state: function () {
       const rect = canvas.getBoundingClientRect();
+      const camera = cam.camera;
       camera.updateMatrixWorld();
       return {
         index: index, time: T[index], playing: playing,
