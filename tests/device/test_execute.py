@@ -322,3 +322,33 @@ def test_permission_denied_names_the_dialout_fix():
 
     err = Link("/dev/ttyUSB0")._open_error(__import__("serial").SerialException(13, "could not open port /dev/ttyUSB0: [Errno 13] Permission denied: '/dev/ttyUSB0'"))
     assert err.exit_code == 4 and "permission denied" in err.message and "usermod -aG dialout" in err.hint
+
+
+def test_execute_sim_rehearses_a_slow_20260701_loop(tmp_path, capsys):
+    """``execute --sim`` takes sim-device's build and the loop pass: on the 20260701 build at 22 ms a pass the stream
+    measures the slow firmware and goes on at a lower rate, and the motion keeps its time. (Before: --sim ran only the
+    0.84 build with boot off.)"""
+    p = tmp_path / "short.traj.json"
+    min_jerk([HOME, [0.8, 0.3, 1.9, -0.5, 0.3, 0.5]], [1.5]).save(p)
+    rc = run_cli(["execute", str(p), "--sim", "--servos", "ideal", "--yes", "--json", "--firmware", "m3-2026",
+                  "--loop-pass", "22", "--log", str(tmp_path / "slow.json")])
+    capsys.readouterr()
+    log = json.loads((tmp_path / "slow.json").read_text())
+    assert rc == 0 and log["firmware"] == "m3-2026" and log["device"]["queued"]
+    assert log["device"]["line_time_s"] > 0.015  # the 22 ms pass, as connect() measured it
+    assert log["rate_changes"] and log["rate"] < 50 and log["firmware_lag_ms"]["polls"] > 3
+
+
+@pytest.mark.parametrize("args, why", [(["--loop-pass", "22"], "--loop-pass: only with --sim"),
+                                       (["--firmware", "m3-2026"], "--firmware: only with --sim"),
+                                       (["--sim", "--loop-pass", "nan"], "--loop-pass: nan ms is outside"),
+                                       (["--sim", "--loop-pass", "1"], "--loop-pass: 1 ms is outside"),
+                                       (["--sim", "--firmware", "m2"], "--firmware m2: the trajectory is for a RoArm-M3"),
+                                       (["--sim", "--firmware", "x"], "--firmware: unknown 'x'")])
+def test_execute_sim_options_are_checked(tmp_path, capsys, args, why):
+    p = tmp_path / "short.traj.json"
+    min_jerk([HOME, [0.8, 0.3, 1.9, -0.5, 0.3, 0.5]], [1.0]).save(p)
+    extra = [] if "--sim" in args else ["--port", "/dev/null"]
+    rc = run_cli(["execute", str(p), "--yes", *extra, *args])
+    err = capsys.readouterr().err
+    assert rc == 2 and why in err and "Traceback" not in err

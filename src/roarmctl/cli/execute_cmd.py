@@ -19,7 +19,7 @@ if TYPE_CHECKING:
 
     from rich.console import Console
 
-    from roarmctl.device.firmware import Bogus
+    from roarmctl.device.firmware import Bogus, SimConfig
     from roarmctl.device.schedule import Tick
     from roarmctl.device.servos import ServoModel
     from roarmctl.device.streamer import Status, StreamConfig
@@ -65,6 +65,12 @@ def execute(
     servos: str | None = typer.Option(None, "--servos", help="With --sim: the simulated servos, physics (the default: MuJoCo, "
                                       "the ST3235 model with its 46 ms lag, gravity, the trajectory's scene and payload; "
                                       "docs/physics.md) or ideal (each runs its trapezoid exactly, no lag, no gravity)."),
+    firmware: str | None = typer.Option(None, "--firmware", help="With --sim: which firmware to imitate, as sim-device: "
+                                        "m3-0.84 (default for an M3), m3-2026 (one queued line per loop pass), m2."),
+    boot: bool = typer.Option(False, "--boot/--no-boot", help="With --sim: start like a powered-on arm (boot text, silence, "
+                              "boot moves), as sim-device does by default."),
+    loop_pass: float | None = typer.Option(None, "--loop-pass", metavar="MS", help="With --sim: the firmware's loop pass (ms; "
+                                           "default the model's own, about 3 ms on 0.84 and 6 ms on 20260701): rehearse a slow loop."),
     log: Path | None = typer.Option(None, "--log", help="Execution log (JSON); default: next to TRAJ as NAME.exec.json."),
     json_out: bool = typer.Option(False, "--json", help="Print one JSON summary object on stdout, nothing else."),
 ) -> None:
@@ -88,6 +94,9 @@ def execute(
         raise InputError("--max-error: must be positive (mm)")
     if servos is not None and not sim:
         raise InputError("--servos: only with --sim (a real arm has its own servos)")
+    given = [n for n, v in (("--firmware", firmware), ("--boot", boot or None), ("--loop-pass", loop_pass)) if v is not None]
+    if given and not sim:
+        raise InputError(f"{given[0]}: only with --sim (a real arm has its own firmware)")
     servos = servos or "physics"
     if servos not in ("physics", "ideal"):
         raise InputError(f"--servos: '{servos}' is not physics or ideal")
@@ -117,12 +126,21 @@ def execute(
     build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy, sag=sag)  # validate before opening
     if port is not None and not yes and not sys.stdin.isatty():
         raise InputError("refusing to ask for confirmation: stdin is not a terminal", "pass --yes to execute without asking")
+    sim_config = None
+    if sim:
+        from roarmctl.device.protocol import WireMap
+
+        model = WireMap(robot).model
+        sim_config = sim_build(firmware or ("m2" if model == "m2" else "m3-0.84"), loop_pass, boot=boot)
+        if (sim_config.firmware == "m2") != (model == "m2"):
+            raise InputError(f"--firmware {sim_config.firmware}: the trajectory is for a RoArm-{(model or 'm3').upper()}",
+                             "give the firmware of the arm it is for")
     factory = None
     if sim and servos == "physics":
         from roarmctl.physics.servo_backend import for_firmware
 
         factory = for_firmware(robot, traj)
-    _run(traj, traj_path, robot, cfg, port, sim, yes, log or default_log_path(traj_path), json_out, factory)
+    _run(traj, traj_path, robot, cfg, port, sim, yes, log or default_log_path(traj_path), json_out, factory, sim_config)
 
 
 def _write_output(path: Path, schedule: "list[Tick]") -> None:
@@ -133,8 +151,26 @@ def _write_output(path: Path, schedule: "list[Tick]") -> None:
     atomic_write_bytes(path, b"".join(lines))
 
 
+def sim_build(firmware: str, loop_pass: float | None, **fields: Any) -> "SimConfig":
+    """The simulator's ``SimConfig`` for ``--firmware`` and ``--loop-pass`` (ms: the whole pass, the model's own
+    work included), checked; ``fields``: the other ``SimConfig`` fields."""
+    from roarmctl.device.firmware import SimConfig, own_pass
+
+    if firmware not in ("m3-0.84", "m3-2026", "m2"):
+        raise InputError(f"--firmware: unknown '{firmware}'", "choose m3-0.84, m3-2026 or m2")
+    period = 0.0
+    if loop_pass is not None:
+        least = own_pass(firmware) * 1e3
+        if not least <= loop_pass <= 1000.0:  # NaN fails both
+            raise InputError(f"--loop-pass: {loop_pass:g} ms is outside {least:.1f}..1000 ms",
+                             f"the model's own pass on {firmware} is {least:.1f} ms; e.g. 22 for a slow 20260701 loop")
+        period = loop_pass / 1e3 - own_pass(firmware)
+    return SimConfig(firmware=firmware, loop_period=period, **fields)
+
+
 def _run(traj: "Trajectory", traj_path: Path, robot: "Robot", cfg: "StreamConfig", port: "str | None", sim: bool,
-         yes: bool, log_path: Path, json_out: bool, sim_servos: "Callable[[], ServoModel] | None" = None) -> None:
+         yes: bool, log_path: Path, json_out: bool, sim_servos: "Callable[[], ServoModel] | None" = None,
+         sim_config: "SimConfig | None" = None) -> None:
     err = common.console(stderr=True)
     live = _Display(err, len(robot.joint_names), robot) if (err.is_terminal and not json_out) else None
 
@@ -163,7 +199,7 @@ def _run(traj: "Trajectory", traj_path: Path, robot: "Robot", cfg: "StreamConfig
     run = run_execution(traj, robot, cfg, port=port, sim=sim, log_path=log_path, confirm=confirm,
                         on_status=live.update if live else None, on_start=live.start if live else None,
                         on_note=note, on_end=live.stop if live else None, shield=signals.shielded,
-                        on_log_error=log_error, on_info=info, sim_servos=sim_servos)
+                        on_log_error=log_error, on_info=info, sim_servos=sim_servos, sim_config=sim_config)
     result, port = run.result, run.port
     summary = result.summary() | {"log": str(log_path), "notes": result.log.get("notes", []),
                                   "final_pose": result.log.get("final_pose")}
@@ -247,6 +283,8 @@ def sim_device(
                                         "(e.g. roarm_m2_s -> m2, roarm_m3_pro -> m3-0.84)."),
     info_print: int = typer.Option(2, "--info-print", help="InfoPrint level at start (factory 2 = continuous feedback)."),
     boot: bool = typer.Option(True, "--boot/--no-boot", help="Start like a powered-on arm: boot text, silence, boot moves."),
+    loop_pass: float | None = typer.Option(None, "--loop-pass", metavar="MS", help="The firmware's loop pass (ms; default the "
+                                           "model's own, about 3 ms on 0.84 and 6 ms on 20260701): rehearse a slow loop."),
     link: Path | None = typer.Option(None, "--link", help="Also make this symlink to the pseudo-terminal (e.g. /tmp/ttyROARM)."),
     json_out: bool = typer.Option(False, "--json", help="Print {\"port\": PATH, \"pty\": PTY, \"firmware\": NAME} as JSON (port: the --link if given)."),
     fail_reads: list[str] = typer.Option([], "--fail-reads", metavar="JOINT=P", help="Fault: each read of JOINT's servo fails "
@@ -275,7 +313,7 @@ def sim_device(
     roarm_sdk, or a terminal (115200 baud, JSON lines). The fault options rehearse what a real arm
     can do to its host.
     """
-    from roarmctl.device.simulator import PtySimulator, SimConfig
+    from roarmctl.device.simulator import PtySimulator
 
     if model is not None:
         from roarmctl.device.protocol import WireMap
@@ -291,7 +329,7 @@ def sim_device(
         raise InputError(f"--firmware: unknown '{firmware}'", "choose m3-0.84, m3-2026 or m2")
     if info_print not in (0, 1, 2):
         raise InputError("--info-print: must be 0, 1 or 2")
-    config = SimConfig(firmware=firmware, info_print=info_print, boot=boot, unpowered=unpowered, voltage=voltage,
+    config = sim_build(firmware, loop_pass, info_print=info_print, boot=boot, unpowered=unpowered, voltage=voltage,
                        torque_off=torque_off, esp_now_leader=esp_now_leader, mute_after=mute_after, deaf=deaf,
                        silent=silent, fail_reads=_joint_values("--fail-reads", fail_reads),
                        bogus=tuple(_bogus(b) for b in bogus), stuck=tuple(_joint("--stuck", j) for j in stuck),

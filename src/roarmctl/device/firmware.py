@@ -131,6 +131,13 @@ class SimConfig:
     record_limit: int = 2_000_000
 
 
+def own_pass(firmware: str, read_time: float = SimConfig.read_time) -> float:
+    """The model's own loop pass (s) of ``firmware`` without feedback printing: six servo reads and the other work
+    (``pass_overhead``); ``loop_period`` adds to it. A pass of ``T`` s is ``loop_period = T - own_pass(...)``."""
+    queued = firmware == "m3-2026"
+    return 6 * read_time * (1.3 if queued else 1.0) + (0.002 if queued else 0.0003)
+
+
 def _num_text(v: float) -> str:
     """A double as ArduinoJson prints it in T:1051: up to 9 decimals, about 10 significant digits
     (a real line: ``"x":402.6030162,"b":3.138524692,"e":0.003067962``)."""

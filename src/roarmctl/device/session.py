@@ -46,7 +46,7 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
                   shield: Callable[[], AbstractContextManager] = contextlib.nullcontext,
                   on_log_error: Callable[[Path, Exception], None] | None = None,
                   on_info: Callable[[str], None] | None = None,
-                  sim_servos: Callable[[], Any] | None = None) -> Execution:
+                  sim_servos: Callable[[], Any] | None = None, sim_config: Any = None) -> Execution:
     """Stream ``traj`` (a validated ``Trajectory`` for ``robot``) with ``cfg`` (``StreamConfig``).
 
     Exactly one of ``port`` (a serial port name or pyserial URL) and ``sim=True`` (the firmware
@@ -59,7 +59,8 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
     instead of hiding the run's own outcome. ``on_info(line)`` hears what connecting learned (the
     firmware build, round trip, pacing) and the link budget. ``sim_servos``: a zero-argument factory of
     the simulator's servo model (``roarmctl.physics.servo_backend.for_firmware``: the physics servos;
-    default the ideal kinematic ones). Errors propagate after the log is written; the stream
+    default the ideal kinematic ones); ``sim_config``: its ``SimConfig`` (build, boot, loop pass; default the
+    build of the trajectory's robot, already running, the model's own pass). Errors propagate after the log is written; the stream
     result of a failed run is the exception's ``result`` attribute when it has one.
     """
     from roarmctl.device.execlog import write_log
@@ -76,8 +77,8 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
 
         # the simulated arm is the kind the trajectory is for (an M2 trajectory gets the M2 protocol);
         # its firmware runs in a process of its own, with its own time, as the ESP32 does
-        simulator = PtySimulator(SimConfig(firmware="m2" if model == "m2" else "m3-0.84"), servos=sim_servos,
-                                 process=True).start()
+        config = sim_config or SimConfig(firmware="m2" if model == "m2" else "m3-0.84")
+        simulator = PtySimulator(config, servos=sim_servos, process=True).start()
         port = simulator.path
 
     def replan(q: np.ndarray, mode: str) -> tuple[Trajectory, str]:
