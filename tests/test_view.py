@@ -161,6 +161,11 @@ def test_clearance_to_a_mesh_and_a_cloud_agrees_with_the_same_box():
     assert np.allclose(clearance(robot, [mesh], qs).distance, d_box, atol=1e-6)
     d_cloud = clearance(robot, [cloud], qs).distance
     assert np.all(np.abs(d_cloud - d_box) <= r * np.sqrt(3) / 2 + 1e-6), (d_cloud, d_box)
+    # all three at once, each item's own distance (the cloud's many blocks searched per item): the same numbers
+    moved = [SceneItem.box("b", size, centre + [0, 0.3, 0]), cloud, SceneItem.from_mesh("m", tm.vertices, tm.faces, xyz=centre - [0, 0.3, 0])]
+    each = clearance(robot, moved, qs, per_item=True).item_distance
+    for k, it in enumerate(moved):
+        assert np.allclose(each[:, k], clearance(robot, [it], qs).distance, atol=1e-9)
 
 
 def test_clearance_rules_base_on_the_table_and_a_carried_object():
