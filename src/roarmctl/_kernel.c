@@ -1277,4 +1277,18 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef moddef = {PyModuleDef_HEAD_INIT, "_kernel", "roarmctl's compiled kinematics, dynamics and state-check kernel.", -1, methods};
 
-PyMODINIT_FUNC PyInit__kernel(void) { return PyModule_Create(&moddef); }
+/* The table layouts and work-array sizes above, as module constants: the Python side packs the tables with these
+ * (collision_tables.py, dynamics.py) so that both languages read them from this one source. */
+PyMODINIT_FUNC PyInit__kernel(void) {
+    PyObject *m = PyModule_Create(&moddef);
+    if (m == NULL)
+        return NULL;
+    if (PyModule_AddIntConstant(m, "MAXDOF", MAXDOF) < 0 || PyModule_AddIntConstant(m, "MAXLINKS", MAXLINKS) < 0
+        || PyModule_AddIntConstant(m, "MAXSHAPES", MAXSHAPES) < 0 || PyModule_AddIntConstant(m, "SHAPEF", SHAPEF) < 0
+        || PyModule_AddIntConstant(m, "ITEMF", ITEMF) < 0 || PyModule_AddIntConstant(m, "POSEF", POSEF) < 0
+        || PyModule_AddIntConstant(m, "BODYF", BODYF) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}

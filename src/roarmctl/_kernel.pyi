@@ -7,6 +7,16 @@ step tables, the states, the output buffers it fills in place) and numbers; see 
 
 from typing import Any
 
+# table layouts (floats per record) and work-array sizes, from the #defines of _kernel.c
+MAXDOF: int
+MAXLINKS: int
+MAXSHAPES: int
+SHAPEF: int  # a moving shape: rot (9), pos (3), half (3), half_self (3), radius (1)
+ITEMF: int  # a scene part: aabb centre (3), aabb half (3), rot (9), centre (3), local half (3), pad (3), has a second
+# box (1), the second box's rot (9) and half (3)
+POSEF: int  # per state and shape: world rot (9), centre (3)
+BODYF: int  # per link: has a body, mass, com (3), inertia (9)
+
 def check(*args: Any) -> Any: ...
 def check_line(*args: Any) -> Any: ...
 def segment(*args: Any) -> Any: ...

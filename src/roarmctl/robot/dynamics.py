@@ -83,7 +83,6 @@ def _batch(robot: Robot, v: npt.ArrayLike, what: str, is_position: bool) -> np.n
         robot.full_q(a) if is_position else _scatter_arm(robot, a))
 
 
-_BODYF = 14  # per link: has a body, mass, com (3), inertia (9): src/roarmctl/_kernel.c BODYF
 
 
 def _bodies(robot: Robot, payload: dict[str, Inertial] | None) -> np.ndarray:
@@ -104,7 +103,7 @@ def _bodies(robot: Robot, payload: dict[str, Inertial] | None) -> np.ndarray:
     bodies = dict(robot.inertials)
     for name, extra in (payload or {}).items():
         bodies[name] = combine_inertials(bodies[name], extra) if name in bodies else extra
-    table = np.zeros((kin.n_links, _BODYF))
+    table = np.zeros((kin.n_links, _kernel.BODYF))  # per link: has a body, mass, com (3), inertia (9)
     for name, inertial in bodies.items():
         k = kin.link_index.get(name)
         if k is None:
