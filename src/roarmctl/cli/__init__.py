@@ -23,6 +23,7 @@ from roarmctl.cli import (
     follow_cmd,
     kin,
     plan_cmd,
+    robots_cmd,
     signals,
     simulate_cmd,
     teach_cmd,
@@ -84,28 +85,7 @@ def _root(
             PACKAGE_PATHS[name] = Path(folder).expanduser().resolve()
 
 
-@app.command("robots")
-def robots(json_out: bool = typer.Option(False, "--json", help="Print one JSON object.")) -> None:
-    """List the bundled robots (name, joints, source)."""
-    from roarmctl.robot.loader import bundled_robots, load_robot
-
-    rows: list[dict[str, Any]] = []
-    for name in bundled_robots():
-        r = load_robot(name)
-        rows.append({"name": name, "joints": r.joint_names, "dof": r.dof, "source": r.source, "description": r.description})
-    if json_out:
-        common.print_json({"robots": rows})
-        return
-    from rich.table import Table
-
-    table = Table(title="Bundled robots")
-    for col in ("name", "dof", "joints", "source"):
-        table.add_column(col)
-    for row in rows:
-        table.add_row(row["name"], str(row["dof"]), ", ".join(row["joints"]), row["source"])
-    common.console().print(table)
-
-
+robots_cmd.register(app)
 kin.register(app)
 plan_cmd.register(app)
 execute_cmd.register(app)
@@ -116,6 +96,18 @@ simulate_cmd.register(app)
 teach_cmd.register(app)
 datagen_cmd.register(app)
 follow_cmd.register(app)
+
+
+def _click_exceptions() -> tuple[type, ...]:
+    """The ClickException classes a usage error may be: typer >= 0.2x vendors click as ``typer._click`` (its
+    errors are those), and a ``click`` that another package installs beside it is a different class."""
+    found: list[type] = []
+    for module in ("typer._click.exceptions", "click"):
+        try:
+            found.append(__import__(module, fromlist=["ClickException"]).ClickException)
+        except (ImportError, AttributeError):
+            pass
+    return tuple(found)
 
 
 def run(argv: list[str] | None = None) -> int:
@@ -238,16 +230,12 @@ def _run_command(argv: list[str] | None, guard: "signals.Guard") -> int:
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
     except Exception as exc:  # noqa: BLE001 - the last line of defence: a bug
         guard.live = False
-        try:
-            from click import ClickException
-        except ImportError:  # typer >= 0.2x vendors click as typer._click and no longer installs it
-            from typer._click.exceptions import ClickException
-
         if isinstance(exc, typer.Exit):
             code = exc.exit_code
-        elif isinstance(exc, ClickException):
-            exc.show()
-            common.STATE.last_error = (exc.format_message(), "see 'roarmctl COMMAND --help'")
+        elif isinstance(exc, _click_exceptions()):
+            usage: Any = exc
+            usage.show()
+            common.STATE.last_error = (usage.format_message(), "see 'roarmctl COMMAND --help'")
             code = 2
         elif isinstance(exc, typer.Abort):
             common.error("aborted")
