@@ -191,3 +191,42 @@ def _traj(folder: Path) -> Path:
     f = folder / "t.traj.json"
     f.write_text(json.dumps(hostile.trajectory_doc()))
     return f
+
+
+# --------------------------------------------------------------------------- huge coordinates
+def _plan_with(folder: Path, item: dict) -> Path:
+    import yaml
+
+    plan = yaml.safe_load((Path(__file__).parents[1] / "plans" / "obstacle.yaml").read_text())
+    plan["scene"]["obstacles"] = [item]
+    path = folder / "p.yaml"
+    path.write_text(yaml.safe_dump(plan))
+    return path
+
+
+@pytest.mark.parametrize("case", ["cloud 1e30", "cloud 1e308", "stl 1e38", "stl 1e30 scaled", "obj 1e300"])
+def test_huge_coordinates_are_one_error_line_without_numpy_warnings(tmp_path, case):
+    """A cloud or a mesh with coordinates near float32's or float64's end: exit 2 and the one error line, no
+    RuntimeWarning of numpy before it (a fresh process: warnings print as a user sees them)."""
+    import subprocess
+    import sys
+
+    import numpy as np
+    import trimesh
+
+    if case.startswith("cloud"):
+        big = float(case.split()[1])
+        np.save(tmp_path / "c.npy", np.array([[big, 0.0, 0.0], [0.0, -big, 0.0], [0.1, 0.1, 0.1]]))
+        item = {"name": "w", "shape": "cloud", "file": "c.npy", "resolution": 0.0001, "xyz": [0, 0, 0]}
+    else:
+        kind, big = case.split()[0], float(case.split()[1])
+        box = trimesh.creation.box((1.0, 1.0, 1.0))
+        box.vertices *= big
+        (tmp_path / f"m.{kind}").write_bytes(box.export(file_type=kind) if kind == "stl" else box.export(file_type=kind).encode())
+        item = {"name": "w", "shape": "mesh", "file": f"m.{kind}", "xyz": [0, 0, 0],
+                **({"scale": 1e5} if "scaled" in case else {})}
+    run = subprocess.run([sys.executable, "-m", "roarmctl", "plan", str(_plan_with(tmp_path, item)), "-o",
+                          str(tmp_path / "o.traj.json")], capture_output=True, text=True, timeout=300)
+    lines = [x for x in run.stderr.splitlines() if x.strip()]
+    assert run.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), run.stderr
+    assert "Warning" not in run.stderr, run.stderr

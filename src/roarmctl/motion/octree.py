@@ -35,7 +35,9 @@ BLOCK_CELLS = 16  # edge of a block in cells: a cloud becomes one octree per occ
 
 def cells_of(points: np.ndarray, resolution: float) -> np.ndarray:
     """Occupied cell indices (K, 3) int64, sorted and unique, of ``points`` (N, 3) m in the cloud's frame."""
-    idx = np.floor(np.asarray(points, dtype=float) / float(resolution)).astype(np.int64)
+    with np.errstate(over="ignore", invalid="ignore"):  # 1e308 / 1e-4: inf, clipped below and refused by in_range
+        cells = np.clip(np.floor(np.asarray(points, dtype=float) / float(resolution)), -2.0 ** 62, 2.0 ** 62)
+    idx = cells.astype(np.int64)
     return np.unique(idx, axis=0) if len(idx) else idx.reshape(0, 3)
 
 

@@ -24,7 +24,7 @@ import numpy.typing as npt
 from roarmctl.errors import InputError
 from roarmctl.fileio import read_bytes
 from roarmctl.motion.octree import cells_of, in_range
-from roarmctl.robot.meshes import SCENE_MESH_BYTES, convex_hull, read_triangles
+from roarmctl.robot.meshes import SCENE_MESH_BYTES, check_extent, convex_hull, read_triangles
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,6 +107,7 @@ def mesh_data(vertices: npt.ArrayLike, faces: npt.ArrayLike, exact: bool, source
         raise error(f"{where}: a mesh needs vertices (V, 3) and faces (F, 3), got {v.shape} and {f.shape}")
     if not np.all(np.isfinite(v)) or f.min() < 0 or f.max() >= len(v):
         raise error(f"{where}: the mesh has non-finite vertices or faces that name missing vertices")
+    check_extent(v, where, error)
     v.setflags(write=False)
     f.setflags(write=False)
     if exact:

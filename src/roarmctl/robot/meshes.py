@@ -270,11 +270,26 @@ def read_triangles(path: Path, scale: npt.ArrayLike, what: str, *, roots: Roots 
         if not (math.isfinite(unit) and 1e-6 <= unit <= 1e6):
             raise error(f"{what}: '{path}' declares <unit meter=\"{unit:g}\"/>, not a length unit",
                         "fix the file's <unit> (0.001 for millimetres)")
-        vertices = np.asarray(loaded.vertices, dtype=float) * unit * np.array(scale3)
+        with np.errstate(over="ignore", invalid="ignore"):  # float32 1e38 times a scale: inf, refused below
+            vertices = np.asarray(loaded.vertices, dtype=float) * unit * np.array(scale3)
         if not np.all(np.isfinite(vertices)):
             raise error(f"{what}: '{path}' has non-finite vertex coordinates")
+        check_extent(vertices, f"{what}: '{path}'", error)
         _LOADED.keep(key, (vertices, np.asarray(loaded.faces, dtype=np.int64)))
     return _LOADED[key]
+
+
+#: How far (m) a mesh's vertex may lie from its origin, after its scale: a robot or a scene fits in far less; a
+#: file in the wrong units (micrometres) or with 1e30 coordinates is refused here, before any arithmetic on it.
+MAX_MESH_EXTENT = 1e5
+
+
+def check_extent(vertices: np.ndarray, what: str, error: type[InputError]) -> None:
+    """Refuse (``error`` naming ``what``) vertices (V, 3) m farther than ``MAX_MESH_EXTENT`` from the origin."""
+    far = float(np.abs(vertices).max()) if len(vertices) else 0.0
+    if far > MAX_MESH_EXTENT:
+        raise error(f"{what}: a vertex lies {far:.3g} m from the mesh's origin, more than {MAX_MESH_EXTENT:g} m",
+                    "check the file's units and the scale")
 
 
 def _declared_unit(loaded: Any) -> float:
