@@ -54,7 +54,7 @@ def assert_held_and_lost(done, exc, *words: str) -> None:
     ("frozen", {"fail_reads": dict.fromkeys(("base", "shoulder", "elbow", "wrist", "roll", "hand"), 1.0),
                 "read_timeout": 0.001}, ("frozen",)),
     ("jump by pi", {"bogus": (Bogus("b", "3.1416", frames=0),)}, ("servo step 0", "faster than", "budget")),
-    ("NaN", {"bogus": (Bogus("s", "nan", frames=0),)}, ("leader frame", "no valid feedback")),
+    ("NaN", {"bogus": (Bogus("s", "nan", frames=0),)}, ("not a valid feedback frame",)),
     ("stop", {"mute_after": 0}, ("no frame", "no valid feedback")),
 ])
 def test_a_faulty_leader_is_refused_the_arm_holds_and_following_ends(fault, faults, words):

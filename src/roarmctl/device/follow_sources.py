@@ -246,6 +246,7 @@ class LeaderSource:
         self.robot = robot
         self.name = f"leader {session.link.port}"
         self._refused_seen = session.validator.refused
+        self._line_seen: Any = session.link.received[-1] if session.link.received else None
         self._last = session.last
         self._refused: list[tuple[float, str]] = []
         lead = session.robot
@@ -279,6 +280,18 @@ class LeaderSource:
             raise SourceLost(f"leader: {exc.message}", "the follower holds; check the leader's power and cable") from None
         except DeviceError as exc:
             raise SourceLost(f"leader: {exc.message}", exc.hint) from None
+        # a line that starts as a feedback frame but does not parse (a NaN, a cut line) never reaches the validator
+        rec = s.link.received
+        lines = []
+        for r in reversed(rec):  # back to the last line seen (the session trims the front of the list)
+            if r is self._line_seen:
+                break
+            lines.append(r)
+        for r in reversed(lines):
+            if r.feedback is None and r.line.startswith('{"T":1051'):
+                self._refused.append((r.t, f"leader frame: not a valid feedback frame: {r.line[:60]!r}"))
+        if rec:
+            self._line_seen = rec[-1]
         v = s.validator
         if v.refused > self._refused_seen:
             new = list(v.refusals)[-(v.refused - self._refused_seen):]
@@ -287,7 +300,13 @@ class LeaderSource:
         if s.last is None or s.last is self._last:
             return []
         self._last = s.last
-        return [Target(s.last.t, self.map(s.last.q), s.last.t)]
+        # dated by when the leader's servos were read: at most a round trip after the question it answers (a host
+        # that reads the answer late, on a loaded machine, would otherwise crowd two frames' motion into a short time)
+        t = s.last.t
+        info = s.link.info
+        if s.asked_at is not None and info is not None:
+            t = min(t, s.asked_at + info.rtt)
+        return [Target(t, self.map(s.last.q), t)]
 
     def refusals(self) -> list[tuple[float, str]]:
         """See ``Source.refusals``."""

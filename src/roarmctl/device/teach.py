@@ -170,6 +170,7 @@ class TeachSession:
         self.events: list[tuple[float, str]] = []  # (t, what happened): warnings, records, undo, save
         self.hold_sent: dict[str, Any] | None = None
         self._asked: float | None = None
+        self.asked_at: float | None = None  # when the T:105 the newest accepted frame answers was sent (s, clock)
         self._since = clock()
         self._accepted: deque[float] = deque()
         self._gi = gripper_index(robot)
@@ -210,10 +211,11 @@ class TeachSession:
         for r in self.link.poll():
             if r.feedback is None:
                 continue
-            self._asked = None
+            asked, self._asked = self._asked, None
             reading = self.validator.check(r.feedback, r.t, r.line)
             if reading is not None:
                 got = self._accept(reading)
+                self.asked_at = asked
         self._trim()
         now = self.clock()
         limit = self.grace if (self.last is None or (self.t0 is not None and self.last.t < self.t0)) else self.lost_after
