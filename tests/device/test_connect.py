@@ -48,6 +48,27 @@ def test_a_starting_arm_gets_no_line_before_its_setup_ends_and_its_boot_mission_
     assert first is not None
 
 
+def test_a_quiet_starting_arm_is_left_alone_until_its_set_up_ends_and_the_wait_is_said_in_one_line():
+    """Opened at power-on, an arm whose loop prints nothing unasked (InfoPrint 0): the boot moves are 3.7 s of silence
+    after the servo check's line, and the MAC address line ends set-up about 6 s in. Nothing goes out before it, the
+    boot mission runs, and the connection says what it waited for. Before: a probe 4 s after the last text, about
+    5.7 s in, during set-up: the boot mission was aborted."""
+    mission = ('{"T":114,"led":64}',)
+    cfg = SimConfig(boot=True, info_print=0, boot_mission=mission)
+    with PtySimulator(cfg, process=True) as sim:
+        link = Link(sim.path).open()
+        t_open = time.monotonic()
+        info = link.connect()
+        st = sim.state()
+        ours = [t for t, _, c in sim.executed() if c.get("T") in (605, 105, 301)]
+        link.close()
+    assert info.booted and not info.streamed
+    assert st["boot_mission_aborted"] is False
+    assert ours and min(ours) - t_open > 6.0, min(ours) - t_open
+    assert "MAC address line" in info.waited and info.waited in info.describe()
+    assert info.as_dict()["waited_for"] == info.waited
+
+
 def test_input_during_setup_would_abort_the_boot_mission():
     """What the waiting protects: a line sent during setup() aborts the boot mission (A:8-15)."""
     import serial

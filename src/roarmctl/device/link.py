@@ -12,6 +12,7 @@ RoArm-M3_example-250108/RoArm-M3_example/``; line numbers below are of that copy
 from __future__ import annotations
 
 import errno
+import re
 import statistics
 import sys
 import time
@@ -34,6 +35,9 @@ BUILD_NAMES = {"m3-0.84": "RoArm-M3 0.84 build (RoArm-M3_example-250108)",
 #: line per loop pass, about 3-5 ms each); a longer one is measured again
 QUEUED_LINE_TIME = 0.002
 LINE_TIME_TRIES = 4  # measurements of the line time at most (the least is kept; a busy host only adds)
+#: The last line setup() prints: the ESP-NOW set-up's MAC address (esp_now_ctrl.h lines 36-47 of the 0.84 copy); the
+#: flash mission "boot" runs right after it and is aborted by any input waiting then (RoArm-M3_advance.h 8-15)
+SETUP_END = re.compile(r"^\s*[0-9A-Fa-f]{2}(:[0-9A-Fa-f]{2}){5}\s*$")
 
 
 @dataclass
@@ -43,9 +47,9 @@ class LinkTimings:
     read_timeout: float = 0.01
     write_timeout: float = 1.0
     listen: float = 0.3  # first look after opening: feedback frames, boot text or silence
-    silent_window: float = 1.5  # setup() starts with delay(1200) + 500 ms of silence (I:53, I:81): wait it out
-    boot_timeout: float = 20.0  # the longest a start-up (boot moves, Wi-Fi, boot mission) may take
-    boot_quiet: float = 4.0  # boot text and then this long with no feedback frame: probe
+    silent_window: float = 2.0  # setup() starts with delay(1200) + 500 ms of silence (I:53, I:81): wait it out, and a little more
+    boot_timeout: float = 15.0  # the longest a set-up may take (0.84 in Wi-Fi station mode: up to 15 s) before a probe
+    after_setup: float = 0.5  # after the set-up's last line (the MAC address): its boot mission starts; then probe
     quiet_confirm: float = 0.15  # T:605 took effect when no unsolicited frame came for this long
     silent_after: float = 2.0  # no answer to T:105 probes within this -> device silent
 
@@ -73,6 +77,7 @@ class DeviceInfo:
     voltage: float | None = None  # V, builds that report it
     torque: dict[str, int] | None = None  # torque-enable flag per joint, builds that report it
     sent: list[str] = field(default_factory=list)  # what connect() sent, in order
+    waited: str | None = None  # what connect() waited for before its first line, in one sentence
 
     @property
     def build(self) -> str:
@@ -85,13 +90,15 @@ class DeviceInfo:
                 else "all waiting commands each loop pass")
         extra = f"; supply {self.voltage:.2f} V, torque on" if self.voltage is not None else \
             "; this build reports neither torque nor supply voltage"
-        return f"{self.build}: round trip {self.rtt * 1e3:.0f} ms, {pace}{extra}"
+        waited = f"; {self.waited}" if self.waited else ""
+        return f"{self.build}: round trip {self.rtt * 1e3:.0f} ms, {pace}{extra}{waited}"
 
     def as_dict(self) -> dict[str, Any]:
         """The facts as a JSON-ready dict (the execution log's ``device``)."""
         return {"firmware": self.firmware, "build": self.build, "rtt_s": round(self.rtt, 5),
                 "line_time_s": round(self.line_time, 5), "queued": self.queued, "streamed_unasked": self.streamed,
-                "was_booting": self.booted, "voltage_v": self.voltage, "torque": self.torque, "sent": self.sent}
+                "was_booting": self.booted, "voltage_v": self.voltage, "torque": self.torque, "sent": self.sent,
+                "waited_for": self.waited}
 
 
 class Link:
@@ -117,6 +124,7 @@ class Link:
         self.sent: list[tuple[float, dict[str, Any]]] = []
         self.closed = False
         self._restore_info_print: int | None = None
+        self.waited: str | None = None  # what connect() waited for before its first line
 
     # ------------------------------------------------------------------ open
     def open(self) -> Link:
@@ -346,30 +354,36 @@ class Link:
             v = protocol.number(fb.raw.get("v"))
             voltage = None if v is None else v / 100.0
             torque = {k: int(protocol.number(fb.raw.get(k)) or 0) for k in fb.raw if k.startswith("torswitch")}
-        info = DeviceInfo(fb.firmware, rtt, line_time, queued, streamed, booted, fb, voltage, torque, sent)
+        info = DeviceInfo(fb.firmware, rtt, line_time, queued, streamed, booted, fb, voltage, torque, sent, self.waited)
         self.info = info
         self.firmware = fb.firmware
         self._check_power(info)
         return info
 
     def _wait_for_boot(self, start: float) -> list[Received]:
-        """Start-up text seen: wait for the loop's first unasked frame (InfoPrint 2), sending nothing."""
+        """Start-up text seen: wait, sending nothing, for the end of set-up: the loop's first unasked frame
+        (InfoPrint 2), or its last set-up line (the MAC address, ``SETUP_END``) and ``after_setup`` more for its boot
+        mission to start; at most ``boot_timeout`` s from opening (then a probe tells a running arm from a dead one).
+        ``self.waited`` says which, in one sentence."""
         t = self.timings
-        quiet_since = self.clock()
+        setup_end: float | None = None
         while self.clock() - start < t.boot_timeout:
             more = self.read_for(0.1)
             frames = [r for r in more if r.feedback is not None]
             if frames:
+                self.waited = f"waited {self.clock() - start:.1f} s for the arm's set-up to end (its first feedback frame)"
                 return frames
             text = [r.line for r in more if r.line.strip()]
-            if text:
-                self.boot_text += text
-                quiet_since = self.clock()
-            elif self.clock() - quiet_since > t.boot_quiet:
-                return []  # started without streaming (InfoPrint changed by its boot mission): probe
-        last = f"; last text: {self.boot_text[-1][:60]!r}" if self.boot_text else ""
-        raise DeviceError(f"{self.port}: the arm was starting up and sent no feedback within {t.boot_timeout:.0f} s{last}",
-                          "check the arm's 12 V supply and the servo cables, then retry")
+            self.boot_text += text
+            if any(SETUP_END.match(line) for line in text):
+                setup_end = self.clock()
+            if setup_end is not None and self.clock() - setup_end >= t.after_setup:
+                self.waited = (f"waited {self.clock() - start:.1f} s for the arm's set-up to end (its MAC address line, "
+                               f"then {t.after_setup:.1f} s for its boot mission)")
+                return []
+        last = f" (last text: {self.boot_text[-1][:40]!r})" if self.boot_text else ""
+        self.waited = f"waited {t.boot_timeout:.0f} s for the arm's set-up to end, without its last line{last}; probing"
+        return []
 
     def _quiet(self, sent: list[str]) -> None:
         """T:605 cmd 0, confirmed by a window without unasked frames (up to three tries)."""
@@ -388,13 +402,23 @@ class Link:
                           "another program may be switching it back on (close the web page or other clients), then retry")
 
     def _probe(self) -> Received:
-        """A T:1051 answer to T:105, or DeviceError (device silent)."""
+        """A T:1051 answer to T:105, or DeviceError (device silent). Probes that went unanswered within their wait may
+        still be answered (a slow loop): the firmware answers in order, so the answer kept is the last probe's, once
+        every probe sent has had its answer or 0.3 s passed without one; what came before is passed over (before,
+        three late answers shifted the pairing and the round trip was measured as 28 ms instead of 55)."""
         t = self.timings
         deadline = self.clock() + t.silent_after
         last_other: str | None = None
+        asked = 0
         while self.clock() < deadline:
+            asked += 1
             r = self.request(min(0.5, max(0.05, deadline - self.clock())))
             if r is not None:
+                answers, quiet_from = 1, self.clock()
+                while answers < asked and self.clock() - quiet_from < 0.3:
+                    late = [x for x in self.read_for(0.02) if x.feedback is not None]
+                    if late:
+                        r, answers, quiet_from = late[-1], answers + len(late), self.clock()
                 return r
             others = [x.line.strip() for x in self.received[-5:] if x.feedback is None and x.line.strip()]
             last_other = others[-1] if others else last_other
