@@ -42,7 +42,7 @@ class Clearance:
     parts: list[str]
     #: with ``per_item``: (N, M) m each item's own smallest distance (``inf``: not measured at that sample), the
     #: moving part nearest each item (N, M) (-1: none), and the nearest pair's closest points (N, 2, 3) m in the
-    #: world, on the moving part first (NaN where nothing is measured)
+    #: world, on the moving part first (NaN where nothing is measured or the nearest pair touches)
     item_distance: np.ndarray | None = None
     item_part: np.ndarray | None = None
     points: np.ndarray | None = None
@@ -197,8 +197,8 @@ def _per_item_sample(i: int, order: np.ndarray, nf: int, gap: np.ndarray, moving
             d = max(float(fcl.distance(moving[a].obj, fixed[b].obj, request, result)), 0.0)
             if d < each[k]:
                 each[k], each_part[k] = d, int(owner_m[a])
-            if d < best_all:
+            if d < best_all:  # touching or overlapping: FCL's points are not a pair of closest points then
                 best_all = d
-                points[i] = np.asarray(result.nearest_points, dtype=float)
+                points[i] = np.asarray(result.nearest_points, dtype=float) if d > 0 else np.nan
             if d == 0.0:
                 break

@@ -250,7 +250,7 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         "item_clearance": _f32(np.where(np.isfinite(clear.item_distance), clear.item_distance, -1.0)),
         "item_part": _f32(clear.item_part),
         "intended": base64.b64encode(intended.astype(np.uint8).tobytes()).decode("ascii"),
-        "closest_points": _f32(np.nan_to_num(clear.points.reshape(n, 6), nan=0.0)),
+        "closest_points": _f32(clear.points.reshape(n, 6)),  # NaN: none, or touching
         "padding": _padding(traj),
         "nearest_item": [int(v) for v in clear.item],
         "nearest_part": [int(v) for v in clear.part],

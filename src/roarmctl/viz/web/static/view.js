@@ -429,7 +429,7 @@
       cells[1].className = d < 0 ? '' : meant ? 'intended' : (PAD !== null && d < PAD) || d < 0.005 ? 'warn' : '';
     }
     const pos = gapGeom.attributes.position;
-    const shown = CPTS && c >= 0;
+    const shown = CPTS && c > 0 && Number.isFinite(CPTS[6 * i]);  // touching: no pair of closest points to draw
     if (shown) {
       for (let e = 0; e < 6; e++) pos.array[e] = CPTS[6 * i + e];
       pos.needsUpdate = true;
