@@ -61,8 +61,8 @@ def open_page(browser, url: str, viewport: dict | None = None):
     """A new page at ``url``, waited on until the view says it is ready; returns (page, Watch)."""
     page = browser.new_page(viewport=viewport or VIEWPORT)
     watch = Watch(page)
-    page.goto(url)
-    page.wait_for_function(READY, timeout=60_000)
+    page.goto(url, timeout=180_000)  # a shared 2-core machine under load takes its time; a timeout is not a check
+    page.wait_for_function(READY, timeout=180_000)
     return page, watch
 
 
