@@ -13,11 +13,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import roarmctl.api as rc
+from roarmctl.device.options import STREAM_BOUNDS, StreamConfig
 from roarmctl.errors import OptionError
 from roarmctl.motion.options import LIMITS_BOUNDS, PLANNER_BOUNDS, Limits, PlannerConfig
 
 #: every options object of the library and the bounds it checks against
-OPTIONS: list[tuple[type, dict]] = [(Limits, LIMITS_BOUNDS), (PlannerConfig, PLANNER_BOUNDS)]
+OPTIONS: list[tuple[type, dict]] = [(Limits, LIMITS_BOUNDS), (PlannerConfig, PLANNER_BOUNDS), (StreamConfig, STREAM_BOUNDS)]
 FIELDS = [(cls, f.name, bounds[f.name] if f.name in bounds else None) for cls, bounds in OPTIONS
           for f in dataclasses.fields(cls)]
 BAD_NUMBERS = [math.nan, math.inf, -math.inf, -1.0, 1e300, -1e300, "1", True, [1.0]]
@@ -82,3 +83,25 @@ def test_the_api_planner_takes_the_options_objects_and_refuses_nan():
         rc.Planner("roarm_m3_pro", singularity_margin=math.nan)
     with pytest.raises(rc.InputError, match="velocity_scale given beside limits="):
         rc.Planner("roarm_m3_pro", limits=limits, velocity_scale=0.2)
+
+
+def test_execute_refuses_a_nan_tracking_bound_before_it_opens_anything():
+    """The safety gap of issue 37: ``rc.execute(traj, sim=True, max_error=nan)`` ran to the end with the tracking stop
+    off (no comparison with NaN is true); the options object refuses it before the simulator starts."""
+    from viz_fixtures import pick_place_trajectory
+
+    traj = pick_place_trajectory()
+    for value in (math.nan, math.inf, -0.01, 0.0):
+        with pytest.raises(rc.OptionError, match=r"^max_error: "):
+            rc.execute(traj, sim=True, max_error=value)
+    with pytest.raises(rc.OptionError, match=r"^speed_scale: "):
+        rc.execute(traj, sim=True, speed_scale=2)
+
+
+def test_the_cli_names_the_flag_of_a_field(tmp_path):
+    from clirun import roarmctl
+    from viz_fixtures import pick_place_trajectory
+
+    path = pick_place_trajectory().save(tmp_path / "t.traj.json")
+    res = roarmctl("execute", str(path), "--output", str(tmp_path / "c.jsonl"), "--rate", "nan")
+    assert res.returncode == 2 and "--rate: expected a finite number, got nan" in res.stderr, res.stderr

@@ -8,7 +8,7 @@ import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from roarmctl.errors import InputError
+from roarmctl.errors import InputError, OptionError, RoarmError
 
 if TYPE_CHECKING:
     import numpy as np
@@ -57,6 +57,14 @@ def print_json(obj: Any) -> None:
         obj = {"ok": True, **obj}
     sys.stdout.write(json.dumps(_plain(obj)) + "\n")
     STATE.json_printed = True
+
+
+def cli_words(exc: RoarmError) -> str:
+    """The message of a library error as the CLI prints it: an options object's field (``speed_scale``, the library's
+    neutral words) named by its flag (``--speed-scale``); any other error as it is."""
+    if isinstance(exc, OptionError):
+        return f"--{exc.field.replace('_', '-')}: {exc.problem}"
+    return exc.message
 
 
 def error(message: str, hint: str | None = None) -> None:

@@ -90,8 +90,8 @@ def execute(
                          "e.g. roarmctl execute pick_place.traj.json --port /dev/ttyUSB0")
     if strategy not in STRATEGIES:
         raise InputError(f"--strategy: unknown '{strategy}'", f"choose one of {', '.join(STRATEGIES)}")
-    if not max_error > 0:
-        raise InputError("--max-error: must be positive (mm)")
+    if not 0 < max_error <= 1000:  # StreamConfig's bound is in m; a NaN is refused here too
+        raise InputError(f"--max-error: {max_error:g} mm is outside (0, 1000]", "the TCP tracking bound, e.g. 30")
     if servos is not None and not sim:
         raise InputError("--servos: only with --sim (a real arm has its own servos)")
     given = [n for n, v in (("--firmware", firmware), ("--boot", boot or None), ("--loop-pass", loop_pass)) if v is not None]

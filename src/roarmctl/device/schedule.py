@@ -23,7 +23,7 @@ import numpy.typing as npt
 from roarmctl.device import protocol, st3235
 from roarmctl.device.protocol import WireMap, acc_register, spd_register, wire_seconds
 from roarmctl.device.sag import offsets as sag_offsets
-from roarmctl.errors import InputError
+from roarmctl.errors import InputError, OptionError
 from roarmctl.formats import MIN_SPEED_SCALE
 
 if TYPE_CHECKING:
@@ -159,10 +159,10 @@ def build_schedule(traj: Trajectory, robot: Robot, *, rate: float = DEFAULT_RATE
     """
     strat = STRATEGIES[strategy] if isinstance(strategy, str) else strategy
     if not 0 < rate <= MAX_LINK_RATE:
-        raise InputError(f"--rate: {rate:g} Hz is outside (0, {MAX_LINK_RATE:g}]",
+        raise OptionError("rate", f"{rate:g} Hz is outside (0, {MAX_LINK_RATE:g}]",
                          f"115200 baud carries at most about {MAX_LINK_RATE:g} T:102 lines/s; 20-50 Hz is sensible")
     if not MIN_SPEED_SCALE <= speed_scale <= 1.0:  # the bound an execution log's reader holds it to (export)
-        raise InputError(f"--speed-scale: {speed_scale:g} is outside [{MIN_SPEED_SCALE:g}, 1]", "use 0.5 for half speed")
+        raise OptionError("speed_scale", f"{speed_scale:g} is outside [{MIN_SPEED_SCALE:g}, 1]", "use 0.5 for half speed")
     rate = strategy_rate(strat, rate)
     wm = WireMap(robot)
     _check_wire_range(traj, wm)

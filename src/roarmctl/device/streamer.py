@@ -38,12 +38,12 @@ from roarmctl.device import protocol, st3235
 from roarmctl.device.execlog import ExecLog
 from roarmctl.device.feedback import FeedbackRefused, FeedbackValidator, Reading, read_valid
 from roarmctl.device.hold import HOLD_SPD, send_hold
+from roarmctl.device.options import HOLD_MODES, StreamConfig
 from roarmctl.device.pacing import Pacer
 from roarmctl.device.pose import within_limits
 from roarmctl.device.protocol import WireMap, wire_seconds
 from roarmctl.device.schedule import (
     DEFAULT_RATE,
-    DEFAULT_STRATEGY,
     FEEDBACK_RATE,
     MAX_LINK_RATE,
     STRATEGIES,
@@ -88,33 +88,9 @@ __all__ = [
 #: (1.5 x). The tracking check compares the arm with the plan anywhere in that window (less what the
 #: strategy's lead already makes up), so a lagging arm is not a fault and a stalled one still is.
 SERVO_LAG = 1.5 * st3235.LOOP_LAG
-HOLD_MODES = ("auto", "path", "setpoint", "measured")
 CONFIRM_EVERY = 0.1  # s: the longest a stream goes without a poll (a rate lowered for a slow firmware keeps it)
 READ_EVERY = 0.005  # s: the stream reads the link at least this often while it waits
 READ_BEFORE_PRINT = protocol.READ_BEFORE_PRINT  # s between the firmware's servo reads and the start of its T:1051 line
-
-
-@dataclass
-class StreamConfig:
-    """Streaming options. Times in s, distances in m, angles in rad."""
-
-    rate: float = DEFAULT_RATE
-    speed_scale: float = 1.0
-    strategy: str = DEFAULT_STRATEGY
-    max_error: float = 0.03  # TCP position error before aborting
-    start_tolerance: float = 0.05  # per arm joint between the measured pose and the first point
-    gripper_tolerance: float = 0.35  # the gripper's own
-    move_to_start: bool = False  # arm elsewhere: a planned motion to the start first (needs ``replan``)
-    from_current: bool = False  # arm elsewhere: the first free motion planned again from here (needs ``replan``)
-    stale_after: float = 0.3  # a T:105 unanswered this long during motion (plus measured lateness) -> stop
-    settle: float = 0.6  # to wait for the arm to arrive after the last command
-    lead: float = 0.05  # between the start decision and the first command
-    hold: str = "auto"  # "auto", "path", "setpoint" or "measured" (see the module docstring)
-    hold_max_age: float = 0.05  # a measured pose older than this is never held
-    feedback_rate: float | None = None  # T:105 polls/s; None: FEEDBACK_RATE, half that on a build that queues
-    in_flight: float = 0.05  # s of the firmware's time (measured per line) the unconfirmed lines may represent
-    behind_after: float = 0.04  # a poll answered this much later than the round trip: the firmware is behind
-    sag: bool = False  # goals offset by the servos' sag (roarmctl.device.sag); execute and the API default on: sag.wanted
 
 
 @dataclass
