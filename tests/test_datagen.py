@@ -375,3 +375,70 @@ def test_video_join_and_cut_keep_every_frame():
     assert np.array_equal(frames[5:], second)
     cut, _ = video.decode(io.BytesIO(video.cut(io.BytesIO(buf.getvalue()), 5, 8, 10)))
     assert np.array_equal(cut, second)
+
+
+# ------------------------------------------------------------------------------------------- real runs
+@pytest.fixture(scope="module")
+def run_file(tmp_path_factory):
+    """A run of the bundled pick-and-place as simulate writes it (an execution log, roarmctl.execlog/1)."""
+    d = tmp_path_factory.mktemp("run")
+    assert roarmctl("plan", str(ROOT / "plans" / "pick_place.yaml"), "-o", str(d / "pp.traj.json"), "--json").returncode == 0
+    r = roarmctl("simulate", str(d / "pp.traj.json"), "-o", str(d / "pp.run.json"), "--json")
+    assert r.returncode == 0, r.stderr
+    return d / "pp.run.json"
+
+
+def test_an_executed_run_appends_as_an_episode_of_measured_state_and_sent_goals(run_file, tmp_path):
+    """The episode against the log itself: at each frame the last T:1051 reading (firmware radians, by the time the
+    servos were read: the log's one measured-frame time, ``frame_read_time``) and the last T:102 goals sent, both mapped to joints by the robot's wire map."""
+    import pyarrow.parquet as pq
+
+    from roarmctl.device.protocol import M3_FEEDBACK_KEYS, M3_FIELDS, WireMap, frame_read_time
+    from roarmctl.robot.loader import load_robot
+
+    ds = tmp_path / "real"
+    for task in ("move the cube left", None):
+        r = roarmctl("export", str(run_file), "--lerobot", str(ds), *(["--task", task] if task else []))
+        assert r.returncode == 0, r.stderr
+    data = pq.read_table(ds / "data/chunk-000/file-000.parquet")
+    ep = data["episode_index"].to_numpy()
+    assert set(ep.tolist()) == {0, 1}
+    info = json.loads((ds / "meta/info.json").read_text())
+    assert info["video_path"] is None and info["robot_type"] == "roarm_m3_pro" and info["total_tasks"] == 1
+    log = json.loads(run_file.read_text())
+    wm = WireMap(load_robot("roarm_m3_pro"))
+    keys = dict(zip(M3_FEEDBACK_KEYS, M3_FIELDS))
+    reads = [(frame_read_time(e), wm.from_wire({keys[k]: v for k, v in e["feedback"].items() if k in keys}))
+             for e in log["received"]]
+    sent = [(e["t"], wm.from_wire({f: e["cmd"][f] for f in M3_FIELDS})) for e in log["sent"] if e["cmd"].get("T") == 102]
+    rows = np.flatnonzero(ep == 1)
+    state = np.stack(data["observation.state"].to_numpy(zero_copy_only=False))[rows]
+    action = np.stack(data["action"].to_numpy(zero_copy_only=False))[rows]
+    for k in range(0, len(rows), 7):
+        t = k / 30
+        want_state = [q for when, q in reads if when <= t + 1e-9][-1:] or [reads[0][1]]
+        want_action = [q for when, q in sent if when <= t + 1e-9][-1:] or [sent[0][1]]
+        np.testing.assert_allclose(state[k], want_state[0], atol=1e-6)
+        np.testing.assert_allclose(action[k][:5], want_action[0][:5], atol=1e-6)  # the gripper's own T:101 may follow
+
+
+def test_a_run_does_not_join_a_dataset_with_cameras_or_a_trajectory(run_file, tmp_path):
+    from roarmctl.export.lerobot.dataset import write_dataset
+
+    write_dataset(tmp_path / "cams", _spec(), _synthetic([3]))
+    r = roarmctl("export", str(run_file), "--lerobot", str(tmp_path / "cams"))
+    assert r.returncode == 2 and "cameras" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    traj = run_file.with_name("pp.traj.json")
+    r = roarmctl("export", str(traj), "--lerobot", str(tmp_path / "new"))
+    assert r.returncode == 2 and "execution log" in r.stderr and not (tmp_path / "new").exists()
+    r = roarmctl("export", str(run_file))
+    assert r.returncode == 2 and "--lerobot" in r.stderr
+
+
+@pytest.mark.slow  # Ray started on this machine (tens of seconds on a busy one) and the four episodes again
+def test_ray_tasks_write_the_same_dataset_as_the_process_pool(dataset4, tmp_path):
+    pytest.importorskip("ray")
+    out, _ = dataset4
+    _generate(tmp_path / "ray", workers=2, ray="")
+    for rel in FILES + VIDEOS:
+        assert (out / rel).read_bytes() == (tmp_path / "ray" / rel).read_bytes(), rel

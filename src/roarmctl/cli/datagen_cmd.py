@@ -33,6 +33,7 @@ def datagen(
     size: str = typer.Option("640x480", "--size", help="Camera image size, WIDTHxHEIGHT pixels."),
     ray: str | None = typer.Option(None, "--ray", help="Run the shards as Ray tasks: 'local' (a Ray started here) or a cluster ADDRESS."),
     resume: bool = typer.Option(False, "--resume", help="Go on with a killed run in -o (its finished tries are kept)."),
+    cameras: str = typer.Option("front,wrist", "--cameras", help="Cameras to render, comma-separated (front, wrist), or 'none': state and action only."),
     max_tries: int = typer.Option(0, "--max-tries", help="Give up (exit 3) after this many tries (default: 20 per episode, at least 50)."),
     json_out: bool = typer.Option(False, "--json", help="Print one JSON object."),
 ) -> None:
@@ -46,7 +47,8 @@ def datagen(
 
     width, height = _size(size)
     options = DatagenOptions(episodes=episodes, seed=seed, workers=workers, width=width, height=height, max_tries=max_tries,
-                             ray=None if ray is None else ("" if ray == "local" else ray), resume=resume)
+                             ray=None if ray is None else ("" if ray == "local" else ray), resume=resume,
+                             cameras=() if cameras.strip() == "none" else tuple(c.strip() for c in cameras.split(",")))
     err = common.console(stderr=True)
     if json_out or not err.is_terminal:
         summary = generate(template, output, options)
@@ -76,11 +78,14 @@ def datagen(
 def _render(s: "Summary", output: Path, json_out: bool) -> None:
     result = {"ok": True, "output": str(output), "episodes": s.kept, "tried": s.tried, "rejected": s.causes, "frames": s.frames,
               "bytes": s.bytes, "stages_s": {k: round(v, 3) for k, v in s.stages.items()}, "wall_s": round(s.wall, 3),
-              "resumed_tries": s.resumed}
+              "resumed_tries": s.resumed, "complete": s.complete}
     if json_out:
         common.print_json(result)
         return
     out = common.console()
+    if s.complete:
+        out.print(f"{output} is complete ({s.kept} episodes, {s.frames} frames): nothing to resume")
+        return
     rejected = ", ".join(f"{k} {v}" for k, v in s.causes.items() if v) or "none"
     out.print(f"wrote {output}: {s.kept} episodes, {s.frames} frames, {s.bytes / 1e6:.1f} MB "
               f"({s.tried} tries; rejected: {rejected})" + (f"; {s.resumed} tries resumed" if s.resumed else ""))

@@ -5,6 +5,7 @@ from pathlib import Path
 import typer
 
 from roarmctl.cli import common
+from roarmctl.errors import InputError
 from roarmctl.export import export
 
 
@@ -13,15 +14,37 @@ def register(app: typer.Typer) -> None:
     @app.command("export")
     def export_cmd(
         source: Path = typer.Argument(..., help="Trajectory (.traj.json) or execution log (.exec.json)."),
-        output: Path = typer.Option(..., "-o", "--output",
-                                    help="NAME.mcap (Foxglove), NAME.csv (spreadsheet), or a folder name without extension (ROS 2 bag)."),
+        output: Path | None = typer.Option(None, "-o", "--output",
+                                           help="NAME.mcap (Foxglove), NAME.csv (spreadsheet), or a folder name without extension (ROS 2 bag)."),
+        lerobot: Path | None = typer.Option(None, "--lerobot", help="Append an execution log to this LeRobot v3.0 dataset "
+                                            "folder (made if missing) as one episode: measured joints as state, sent goals as action."),
+        task: str | None = typer.Option(None, "--task", help="With --lerobot: the episode's instruction (default: the dataset's first task)."),
+        fps: int | None = typer.Option(None, "--fps", help="With --lerobot: frames per second of a new dataset (default 30)."),
         trajectory: Path | None = typer.Option(None, "--trajectory", "-t",
                                                   help="With an execution log: the trajectory it ran, added as planned joint states and scene."),
         force: bool = typer.Option(False, "--force", help="Replace an existing bag folder that roarmctl did not write "
                                    "(deleting everything in it)."),
         json_out: bool = typer.Option(False, "--json", help="Print one JSON object."),
     ) -> None:
-        """Export SOURCE for Foxglove, RViz (ros2 bag play) or a spreadsheet; the format follows the -o name."""
+        """Export SOURCE for Foxglove, RViz (ros2 bag play) or a spreadsheet (the format follows the -o name),
+        or append an execution log to a LeRobot dataset (--lerobot)."""
+        if (output is None) == (lerobot is None):
+            raise InputError("give one of -o OUTPUT and --lerobot DATASET", "e.g. -o run.mcap, or --lerobot my_dataset/")
+        if lerobot is not None:
+            if trajectory is not None:
+                raise InputError("--trajectory does not go with --lerobot", "the episode holds the run's joints only")
+            from roarmctl.export.lerobot.run import export_run
+
+            done = export_run(source, lerobot, task=task, fps=fps)
+            if json_out:
+                common.print_json({"ok": True, **done})
+            else:
+                common.console().print(f"appended episode {done['episode_index']} ({done['frames']} frames at {done['fps']} fps) "
+                                       f"to {done['output']}")
+            return
+        if task is not None or fps is not None:
+            raise InputError("--task and --fps go with --lerobot")
+        assert output is not None  # one of the two (checked above)
         summary = export(source, output, trajectory=trajectory, force=force)
         if json_out:
             common.print_json({"ok": True, **summary})

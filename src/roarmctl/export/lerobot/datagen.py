@@ -32,9 +32,10 @@ import numpy as np
 
 from roarmctl.errors import InfeasibleError, InputError
 from roarmctl.export.lerobot import stats, video
-from roarmctl.export.lerobot.dataset import DatasetSpec, Episode, write_dataset
+from roarmctl.export.lerobot.dataset import DatasetSpec, Episode, read_info, write_dataset
 from roarmctl.fileio import atomic_write_json
 from roarmctl.physics.episode import CAUSES, EpisodeOptions, run_episode
+from roarmctl.physics.render import CAMERAS
 from roarmctl.plan.template import check_reach, load_template
 from roarmctl.robot.loader import load_robot
 from roarmctl.validation import load_json
@@ -60,8 +61,14 @@ class DatagenOptions:
     max_tries: int = 0
     ray: str | None = None
     resume: bool = False
+    cameras: tuple[str, ...] = CAMERAS  # none: state and action only (real runs can join: export --lerobot)
 
     def __post_init__(self) -> None:
+        for c in self.cameras:
+            if c not in CAMERAS:
+                raise InputError(f"cameras: unknown '{c}'", f"choose from {', '.join(CAMERAS)}, or none")
+        if len(set(self.cameras)) != len(self.cameras):
+            raise InputError("cameras: a camera is named twice")
         for name, lo, hi in (("episodes", 1, 1_000_000), ("workers", 1, 1024), ("width", 16, 4096), ("height", 16, 4096),
                              ("max_tries", 0, 100_000_000), ("seed", 0, 2**63 - 1)):
             v = getattr(self, name)
@@ -76,8 +83,9 @@ class DatagenOptions:
 
 @dataclass
 class Summary:
-    """What a run did: ``kept`` episodes of ``tried`` tries, rejections by cause, seconds per stage summed over
-    the tries (``stages``), the dataset's ``frames``, its size on disk (bytes) and the wall time (s)."""
+    """What a run did: ``kept`` episodes of ``tried`` tries (those up to the last episode kept), rejections by
+    cause among them, CPU seconds per stage summed over every try run (``stages``: spare tries past the last
+    episode included; the workers' CPU, so a busy machine does not inflate them), the dataset's ``frames``, its size on disk (bytes) and the wall time (s)."""
 
     kept: int = 0
     tried: int = 0
@@ -87,6 +95,11 @@ class Summary:
     bytes: int = 0
     wall: float = 0.0
     resumed: int = 0  # tries taken from a killed run
+    complete: bool = False  # --resume found the dataset already finished: nothing was run
+
+
+class Complete(Exception):  # noqa: N818  (not an error: the run has nothing left to do)
+    """``--resume`` on a finished dataset: nothing to do."""
 
 
 # ------------------------------------------------------------------------------------------- the workers
@@ -101,23 +114,24 @@ def _loaded(template_path: str) -> tuple[Any, Any]:
     return _CACHE[template_path]
 
 
-def run_shard(template_path: str, staging: str, tries: list[int], seed: int, width: int, height: int) -> list[dict[str, Any]]:
+def run_shard(template_path: str, staging: str, tries: list[int], seed: int, width: int, height: int,
+              cameras: tuple[str, ...] = CAMERAS) -> list[dict[str, Any]]:
     """Run ``tries`` and stage each (see the module doc); returns their outcomes."""
     template, robot = _loaded(template_path)
-    options = EpisodeOptions(width=width, height=height, fps=template.fps)
+    options = EpisodeOptions(width=width, height=height, fps=template.fps, cameras=tuple(cameras))
     out = []
     for t in tries:
         r = run_episode(template, robot, t, seed, options)
         outcome: dict[str, Any] = {"try": t, "kept": r.kept, "cause": r.cause, "detail": r.detail, "timings": dict(r.timings)}
         if r.kept:
             assert r.state is not None and r.action is not None  # kept
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             videos = {cam: video.encode(frames, template.fps) for cam, frames in r.images.items()}
             image_stats = {cam: stats.to_json({"s": stats.image_stats(frames)})["s"] for cam, frames in r.images.items()}
-            outcome["timings"]["encode"] = time.perf_counter() - t0
-            t0 = time.perf_counter()
+            outcome["timings"]["encode"] = time.process_time() - t0
+            t0 = time.process_time()
             _stage(Path(staging), t, r.state, r.action, videos, image_stats)
-            outcome["timings"]["stage"] = time.perf_counter() - t0
+            outcome["timings"]["stage"] = time.process_time() - t0
             outcome["frames"] = len(r.state)
         _write_json(Path(staging) / f"{t:08d}.json", outcome)
         out.append(outcome)
@@ -234,7 +248,7 @@ def _check_out(out: Path, options: DatagenOptions, state: dict[str, Any]) -> dic
         return {}
     if not (staging / STATE_FILE).is_file():
         if (out / "meta" / "info.json").is_file():
-            raise InputError(f"-o {out}: the dataset there is complete: nothing to resume", "give a new folder for a new run")
+            raise Complete(out)
         if out.exists() and any(out.iterdir()):
             raise InputError(f"-o {out}: no run of roarmctl datagen to resume there (no {STAGING}/{STATE_FILE})")
         return {}
@@ -281,8 +295,13 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
     template, robot = _loaded(str(template_path))
     check_reach(template, robot)
     state = {"format": FORMAT, "template_sha256": template.sha256, "seed": options.seed, "width": options.width,
-             "height": options.height, "fps": template.fps, "robot": robot.name}
-    outcomes = _check_out(out, options, state)
+             "height": options.height, "fps": template.fps, "robot": robot.name, "cameras": list(options.cameras)}
+    try:
+        outcomes = _check_out(out, options, state)
+    except Complete:
+        info = read_info(out)
+        return Summary(kept=int(info["total_episodes"]), frames=int(info["total_frames"]), complete=True,
+                       bytes=sum(p.stat().st_size for p in out.rglob("*") if p.is_file()), wall=time.perf_counter() - t_start)
     staging = out / STAGING
     staging.mkdir(parents=True, exist_ok=True)
     _write_json(staging / STATE_FILE, state)
@@ -308,7 +327,7 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
             while chosen is None:
                 while len(pending) < engine.slots and summary.tried + SHARD * len(pending) < options.limit:
                     pending.append(engine.submit(str(template_path), str(staging), next(shards), options.seed,
-                                                 options.width, options.height))
+                                                 options.width, options.height, options.cameras))
                 if not pending:
                     break
                 for f in engine.wait(pending):
@@ -329,7 +348,10 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
         raise InfeasibleError(f"datagen: {summary.kept} of {options.episodes} episodes kept in {summary.tried} tries "
                               f"(most rejected: {worst}, {summary.causes[worst]})",
                               f"widen or move the template's regions, or raise --max-tries; {out} keeps the tries for --resume")
-    cams = {c: (options.height, options.width) for c in ("front", "wrist")}
+    used = [outcomes[t] for t in range(chosen[-1] + 1)]  # the tries the dataset depends on (later ones: spare work)
+    summary.tried = len(used)
+    summary.causes = dict.fromkeys(CAUSES, 0) | {c: sum(1 for o in used if o["cause"] == c) for c in CAUSES}
+    cams = {c: (options.height, options.width) for c in options.cameras}
     spec = DatasetSpec(template.fps, robot.name, list(robot.joint_names), cams)
     episodes = []
     for t in chosen:
@@ -338,9 +360,9 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
         episodes.append(Episode(template.task, np.load(d / "state.npy"), np.load(d / "action.npy"),
                                 videos={c: (d / f"{c}.mp4").read_bytes() for c in cams},
                                 image_stats={c: {k: np.asarray(v) for k, v in img[c].items()} for c in cams}))
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     write_dataset(out, spec, episodes)
-    summary.stages["write"] = time.perf_counter() - t0
+    summary.stages["write"] = time.process_time() - t0
     shutil.rmtree(staging)
     summary.kept = len(chosen)
     summary.frames = sum(e.length for e in episodes)
