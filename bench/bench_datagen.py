@@ -3,9 +3,11 @@
     .venv/bin/python bench/bench_datagen.py [--episodes 4] [--sizes 320x240,640x480] [--workers 1,2] [--ray]
 
 Runs ``roarmctl datagen --json`` (a fresh process per run: no library or plan cached from a previous run) on
-the bundled template (plans/datagen_pick_place.yaml, seed 0) for each image size and worker count, and with
+the bundled template (plans/datagen_pick_place.yaml, seed 0) for each image size and worker count (h264), once
+more at the first size on one worker with AV1 (lerobot's default codec), and with
 ``--ray`` the largest worker count again as Ray tasks on a local Ray started by the run (its start-up
-included: the overhead a user sees). Per run: kept/tried (success rate); wall time and episodes per hour per
+included: the overhead a user sees); ``--success N``: N episodes without cameras on 2 workers, for the success
+rate and the causes of the rejections. Per run: kept/tried (success rate); wall time and episodes per hour per
 core by the wall clock (kept x 3600 / (wall x workers), the load average beside it: on a shared machine the
 wall includes waiting for a core); episodes per hour per core by CPU time (kept x 3600 / the CPU seconds of
 all stages of all workers: what a free core gives); the CPU seconds of each stage (sample, plan, physics,
@@ -33,18 +35,21 @@ def main() -> int:
     ap.add_argument("--sizes", default="320x240,640x480")
     ap.add_argument("--workers", default="1,2")
     ap.add_argument("--ray", action="store_true", help="also the largest worker count as Ray tasks (local Ray)")
+    ap.add_argument("--success", type=int, default=0, help="also N episodes without cameras: the success rate and its causes")
     args = ap.parse_args()
     template = ROOT / "plans" / "datagen_pick_place.yaml"
-    runs: list[tuple[str, int, bool]] = [(s, int(w), False) for s in args.sizes.split(",") for w in args.workers.split(",")]
+    first = args.sizes.split(",")[0]
+    runs: list[tuple[str, int, bool, str]] = [(s, int(w), False, "h264") for s in args.sizes.split(",") for w in args.workers.split(",")]
+    runs.append((first, 1, False, "av1"))  # lerobot's default codec, for its cost
     if args.ray:
-        runs.append((args.sizes.split(",")[0], max(int(w) for w in args.workers.split(",")), True))
+        runs.append((first, max(int(w) for w in args.workers.split(",")), True, "h264"))
     print(f"{os.cpu_count()} CPUs; {args.episodes} episodes per run; template {template.name}, seed 0; CPU s per stage")
-    print(f"{'size':>8} {'engine':>6} {'workers':>7} {'kept/tried':>10} {'wall s':>7} {'load':>5} {'ep/h/core wall':>14} "
+    print(f"{'size':>8} {'codec':>5} {'engine':>6} {'workers':>7} {'kept/tried':>10} {'wall s':>7} {'load':>5} {'ep/h/core wall':>14} "
           f"{'ep/h/core CPU':>13} {'(render+encode)/plan':>20} {'MB/ep':>6}  stages")
-    for size, workers, ray in runs:
+    for size, workers, ray, codec in runs:
         tmp = Path(tempfile.mkdtemp(prefix="bench_datagen_"))
         cmd = [sys.executable, "-m", "roarmctl", "datagen", str(template), "-n", str(args.episodes), "-o", str(tmp / "ds"),
-               "--size", size, "--workers", str(workers), "--seed", "0", "--json"] + (["--ray", "local"] if ray else [])
+               "--size", size, "--workers", str(workers), "--seed", "0", "--codec", codec, "--json"] + (["--ray", "local"] if ray else [])
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True, timeout=3600)
         finally:
@@ -58,9 +63,21 @@ def main() -> int:
         ratio = (st.get("render", 0) + st.get("encode", 0)) / max(st.get("plan", 0), 1e-9)
         kept = f"{s['episodes']}/{s['tried']}"
         stages = ", ".join(f"{k} {v:.1f} ({100 * v / cpu:.0f} %)" for k, v in st.items() if v >= 0.05)
-        print(f"{size:>8} {'ray' if ray else 'pool':>6} {workers:>7} {kept:>10} {s['wall_s']:7.1f} "
+        print(f"{size:>8} {codec:>5} {'ray' if ray else 'pool':>6} {workers:>7} {kept:>10} {s['wall_s']:7.1f} "
               f"{os.getloadavg()[0]:5.1f} {s['episodes'] * 3600 / (s['wall_s'] * workers):14.0f} {s['episodes'] * 3600 / cpu:13.0f} "
               f"{ratio:20.2f} {s['bytes'] / 1e6 / s['episodes']:6.2f}  {stages}")
+    if args.success:
+        tmp = Path(tempfile.mkdtemp(prefix="bench_datagen_"))
+        try:
+            proc = subprocess.run([sys.executable, "-m", "roarmctl", "datagen", str(template), "-n", str(args.success), "-o",
+                                   str(tmp / "ds"), "--cameras", "none", "--workers", "2", "--seed", "0", "--json"],
+                                  capture_output=True, text=True, timeout=7200)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        s = json.loads(proc.stdout)
+        causes = ", ".join(f"{k} {v}" for k, v in s["rejected"].items() if v) or "none"
+        print(f"success rate: {s['episodes']} kept of {s['tried']} tries ({100 * s['episodes'] / s['tried']:.0f} %); "
+              f"rejected: {causes}")
     return 0
 
 

@@ -59,7 +59,8 @@ def test_a_bad_template_exits_2_with_one_line_and_writes_nothing(tmp_path, block
 
 
 def test_bad_options_exit_2(tmp_path):
-    for args in (["-n", "0"], ["-n", "1", "--size", "9x"], ["-n", "1", "--workers", "0"]):
+    for args in (["-n", "0"], ["-n", "1", "--size", "9x"], ["-n", "1", "--workers", "0"], ["-n", "1", "--size", "95x96"],
+                 ["-n", "1", "--codec", "vp9"], ["-n", "1", "--cameras", "top"]):
         r = roarmctl("datagen", str(TEMPLATE), *args, "-o", str(tmp_path / "ds"))
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
 
@@ -109,8 +110,23 @@ def test_aggregated_stats_equal_the_stats_of_all_frames(lengths, seed):
     np.testing.assert_array_equal(agg["q99"], np.max([np.quantile(p, 0.99, axis=0) for p in parts], axis=0))
 
 
+@settings(max_examples=30, deadline=None)
+@given(hs.integers(1, 6), hs.integers(1, 9), hs.integers(0, 2**31), hs.sampled_from([2, 40, 256]))
+def test_image_stats_from_histograms_equal_numpy_over_the_pixels(frames, side, seed, levels):
+    from roarmctl.export.lerobot import stats
+
+    rng = np.random.default_rng(seed)
+    img = rng.integers(0, levels, size=(frames, side, side + 1, 3)).astype(np.uint8)
+    got = stats.image_stats(img)
+    px = img.reshape(-1, 3).astype(np.float64) / 255.0
+    want = stats.vector_stats(px)
+    for k in ("min", "max", "mean", "std") + stats.Q_KEYS:
+        np.testing.assert_allclose(got[k].ravel(), want[k], rtol=1e-9, atol=1e-12, err_msg=k)
+    assert got["count"].tolist() == [frames] and got["mean"].shape == (3, 1, 1)
+
+
 # ------------------------------------------------------------------------------------------- the writer
-def _synthetic(n_frames: list[int], seed: int = 0, size: int = 64) -> list:
+def _synthetic(n_frames: list[int], seed: int = 0, size: int = 64, codec: str = "h264") -> list:
     from roarmctl.export.lerobot import video
     from roarmctl.export.lerobot.dataset import Episode
 
@@ -121,7 +137,7 @@ def _synthetic(n_frames: list[int], seed: int = 0, size: int = 64) -> list:
         for f in range(n):  # a square that moves: each frame differs
             frames[f, (f * 3) % (size - 8):(f * 3) % (size - 8) + 8, 10:18] = (200, 40 + 10 * k, 30)
         out.append(Episode(f"task {k % 2}", rng.normal(size=(n, 6)).astype(np.float32), rng.normal(size=(n, 6)).astype(np.float32),
-                           videos={"front": video.encode(frames, 10)}))
+                           videos={"front": video.encode(frames, 10, codec)}))
     return out
 
 
@@ -179,13 +195,15 @@ def _check_dataset(root: Path, lengths: list[int], fps: int, cams: list[str]) ->
             times = [fr.time for fr in f.decode(video=0)]
         assert len(times) == sum(lengths)
         np.testing.assert_allclose(times, np.arange(sum(lengths)) / fps, atol=1e-6)
-        assert feats[key]["info"]["video.codec"] == "av1" and feats[key]["info"]["video.fps"] == fps
+        assert feats[key]["info"]["video.codec"] in ("h264", "av1") and feats[key]["info"]["video.fps"] == fps
+        assert feats[key]["info"]["video.pix_fmt"] == "yuv420p" and feats[key]["info"]["video.g"] == 2
 
 
-def test_a_written_dataset_reads_back_with_pyarrow(tmp_path):
+@pytest.mark.parametrize("codec", ["h264", "av1"])
+def test_a_written_dataset_reads_back_with_pyarrow(tmp_path, codec):
     from roarmctl.export.lerobot.dataset import read_actions, write_dataset
 
-    eps = _synthetic([7, 12, 5])
+    eps = _synthetic([7, 12, 5], codec=codec)
     write_dataset(tmp_path / "ds", _spec(), eps)
     _check_dataset(tmp_path / "ds", [7, 12, 5], 10, ["front"])
     t, a = read_actions(tmp_path / "ds", 1)
@@ -371,6 +389,7 @@ def test_video_join_and_cut_keep_every_frame():
     video.join([e.videos["front"] for e in eps], [5, 8], 10, buf)
     frames, times = video.decode(io.BytesIO(buf.getvalue()))
     assert len(frames) == 13
+    np.testing.assert_allclose(times, np.arange(13) / 10, atol=1e-6)
     second, _ = video.decode(io.BytesIO(eps[1].videos["front"]))
     assert np.array_equal(frames[5:], second)
     cut, _ = video.decode(io.BytesIO(video.cut(io.BytesIO(buf.getvalue()), 5, 8, 10)))
@@ -437,8 +456,13 @@ def test_a_run_does_not_join_a_dataset_with_cameras_or_a_trajectory(run_file, tm
 
 @pytest.mark.slow  # Ray started on this machine (tens of seconds on a busy one) and the four episodes again
 def test_ray_tasks_write_the_same_dataset_as_the_process_pool(dataset4, tmp_path):
+    from roarmctl.errors import DeviceError
+
     pytest.importorskip("ray")
     out, _ = dataset4
-    _generate(tmp_path / "ray", workers=2, ray="")
+    try:
+        _generate(tmp_path / "ray", workers=2, ray="")
+    except DeviceError as exc:  # Ray gives its raylet 30 s to start, which a loaded 2-core machine can exceed
+        pytest.skip(exc.message)
     for rel in FILES + VIDEOS:
         assert (out / rel).read_bytes() == (tmp_path / "ray" / rel).read_bytes(), rel

@@ -34,6 +34,7 @@ def datagen(
     ray: str | None = typer.Option(None, "--ray", help="Run the shards as Ray tasks: 'local' (a Ray started here) or a cluster ADDRESS."),
     resume: bool = typer.Option(False, "--resume", help="Go on with a killed run in -o (its finished tries are kept)."),
     cameras: str = typer.Option("front,wrist", "--cameras", help="Cameras to render, comma-separated (front, wrist), or 'none': state and action only."),
+    codec: str = typer.Option("h264", "--codec", help="Video codec: h264 (x264, fast to encode) or av1 (lerobot's default: smaller, 6x the encoding CPU)."),
     max_tries: int = typer.Option(0, "--max-tries", help="Give up (exit 3) after this many tries (default: 20 per episode, at least 50)."),
     json_out: bool = typer.Option(False, "--json", help="Print one JSON object."),
 ) -> None:
@@ -48,7 +49,7 @@ def datagen(
     width, height = _size(size)
     options = DatagenOptions(episodes=episodes, seed=seed, workers=workers, width=width, height=height, max_tries=max_tries,
                              ray=None if ray is None else ("" if ray == "local" else ray), resume=resume,
-                             cameras=() if cameras.strip() == "none" else tuple(c.strip() for c in cameras.split(",")))
+                             codec=codec, cameras=() if cameras.strip() == "none" else tuple(c.strip() for c in cameras.split(",")))
     err = common.console(stderr=True)
     if json_out or not err.is_terminal:
         summary = generate(template, output, options)

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from roarmctl.errors import InfeasibleError, InputError
+from roarmctl.errors import DeviceError, InfeasibleError, InputError
 from roarmctl.export.lerobot import stats, video
 from roarmctl.export.lerobot.dataset import DatasetSpec, Episode, read_info, write_dataset
 from roarmctl.fileio import atomic_write_json
@@ -62,11 +62,16 @@ class DatagenOptions:
     ray: str | None = None
     resume: bool = False
     cameras: tuple[str, ...] = CAMERAS  # none: state and action only (real runs can join: export --lerobot)
+    codec: str = "h264"  # roarmctl.export.lerobot.video.CODECS
 
     def __post_init__(self) -> None:
         for c in self.cameras:
             if c not in CAMERAS:
                 raise InputError(f"cameras: unknown '{c}'", f"choose from {', '.join(CAMERAS)}, or none")
+        if self.width % 2 or self.height % 2:
+            raise InputError(f"size: {self.width}x{self.height} has an odd side", "the videos (yuv420p) need even widths and heights")
+        if self.codec not in video.CODECS:
+            raise InputError(f"codec: unknown '{self.codec}'", f"choose {' or '.join(video.CODECS)}")
         if len(set(self.cameras)) != len(self.cameras):
             raise InputError("cameras: a camera is named twice")
         for name, lo, hi in (("episodes", 1, 1_000_000), ("workers", 1, 1024), ("width", 16, 4096), ("height", 16, 4096),
@@ -115,7 +120,7 @@ def _loaded(template_path: str) -> tuple[Any, Any]:
 
 
 def run_shard(template_path: str, staging: str, tries: list[int], seed: int, width: int, height: int,
-              cameras: tuple[str, ...] = CAMERAS) -> list[dict[str, Any]]:
+              cameras: tuple[str, ...] = CAMERAS, codec: str = "h264") -> list[dict[str, Any]]:
     """Run ``tries`` and stage each (see the module doc); returns their outcomes."""
     template, robot = _loaded(template_path)
     options = EpisodeOptions(width=width, height=height, fps=template.fps, cameras=tuple(cameras))
@@ -126,7 +131,7 @@ def run_shard(template_path: str, staging: str, tries: list[int], seed: int, wid
         if r.kept:
             assert r.state is not None and r.action is not None  # kept
             t0 = time.process_time()
-            videos = {cam: video.encode(frames, template.fps) for cam, frames in r.images.items()}
+            videos = {cam: video.encode(frames, template.fps, codec) for cam, frames in r.images.items()}
             image_stats = {cam: stats.to_json({"s": stats.image_stats(frames)})["s"] for cam, frames in r.images.items()}
             outcome["timings"]["encode"] = time.process_time() - t0
             t0 = time.process_time()
@@ -215,9 +220,10 @@ class _Ray:
                 kwargs["num_cpus"] = workers
             try:
                 ray.init(**kwargs)
-            except (ConnectionError, RuntimeError, ValueError) as exc:
-                raise InputError(f"--ray {address or '(local)'}: cannot start or reach Ray: {str(exc).splitlines()[0]}",
-                                 "check the address (ray status), or leave out --ray for the process pool") from None
+            except Exception as exc:  # noqa: BLE001  (Ray raises a bare Exception when its raylet is not up in 30 s)
+                raise DeviceError(f"--ray {address or 'local'}: Ray did not start or answer: {str(exc).splitlines()[0]}",
+                                  "on a busy machine try again, check the address (ray status), or leave out --ray "
+                                  "for the process pool") from None
         self.task = ray.remote(num_cpus=1)(run_shard)
         self.slots = workers
 
@@ -295,7 +301,8 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
     template, robot = _loaded(str(template_path))
     check_reach(template, robot)
     state = {"format": FORMAT, "template_sha256": template.sha256, "seed": options.seed, "width": options.width,
-             "height": options.height, "fps": template.fps, "robot": robot.name, "cameras": list(options.cameras)}
+             "height": options.height, "fps": template.fps, "robot": robot.name, "cameras": list(options.cameras),
+             "codec": options.codec}
     try:
         outcomes = _check_out(out, options, state)
     except Complete:
@@ -327,7 +334,7 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
             while chosen is None:
                 while len(pending) < engine.slots and summary.tried + SHARD * len(pending) < options.limit:
                     pending.append(engine.submit(str(template_path), str(staging), next(shards), options.seed,
-                                                 options.width, options.height, options.cameras))
+                                                 options.width, options.height, options.cameras, options.codec))
                 if not pending:
                     break
                 for f in engine.wait(pending):

@@ -1,8 +1,13 @@
 """The videos of a LeRobot dataset, with PyAV: encode frames, join episodes, cut one out, probe, decode.
 
-Encoding follows lerobot's default ``VideoEncoderConfig`` (huggingface/lerobot ``src/lerobot/configs/video.py``):
-AV1 by SVT-AV1 (``libsvtav1``), ``yuv420p``, a key frame every 2 frames (``g``), ``crf`` 30, preset 12, with
-one encoder thread (``lp=1``) so that the same frames give the same bytes on any machine load. An
+Two encoders, both among lerobot's ``VideoEncoderConfig`` codecs (huggingface/lerobot
+``src/lerobot/configs/video.py``), ``yuv420p`` with a key frame every 2 frames (``g``, lerobot's default, so any
+frame decodes quickly) and one encoder thread, so that the same frames give the same bytes on any machine load:
+
+* ``h264`` (the default here): x264, preset ``ultrafast``, ``crf`` 23: 0.6-0.7 ms of CPU a 320x240 frame;
+* ``av1`` (lerobot's default): SVT-AV1, preset 12, ``crf`` 30 (lerobot's settings), ``lp=1``: 4-6 ms a frame
+  (bench/bench_datagen.py), files about 0.6 times the size.
+ An
 episode's video is encoded once (by the worker that rendered it); a dataset's file joins the episodes'
 packets without decoding them again (a remux), each episode shifted to start where the previous one ends,
 as lerobot's ``concatenate_video_files`` does, so that ``from_timestamp``/``to_timestamp`` in the
@@ -19,13 +24,16 @@ from typing import Any
 
 import numpy as np
 
-CODEC = "libsvtav1"
 PIX_FMT = "yuv420p"
-ENCODER = {"g": 2, "crf": 30, "preset": 12, "fast_decode": 0}  # lerobot's defaults (video.* in info.json)
+#: codec -> (FFmpeg encoder, the settings written as video.* in info.json, as lerobot records its encoder's)
+CODECS: dict[str, tuple[str, dict[str, Any]]] = {
+    "h264": ("libx264", {"g": 2, "crf": 23, "preset": "ultrafast"}),
+    "av1": ("libsvtav1", {"g": 2, "crf": 30, "preset": 12, "fast_decode": 0}),
+}
 
 
-def encode(frames: np.ndarray, fps: int) -> bytes:
-    """MP4 bytes of ``frames`` (F, height, width, 3) uint8 RGB at ``fps``; frame k at k / fps s."""
+def encode(frames: np.ndarray, fps: int, codec: str = "h264") -> bytes:
+    """MP4 bytes of ``frames`` (F, height, width, 3) uint8 RGB at ``fps`` in ``codec`` (``CODECS``); frame k at k / fps s."""
     import av
 
     os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1's own log (its banner on stderr for every video): errors only
@@ -33,9 +41,13 @@ def encode(frames: np.ndarray, fps: int) -> bytes:
     n, h, w, _ = frames.shape
     buf = io.BytesIO()
     with av.open(buf, "w", format="mp4") as out:
-        opts = {"g": str(ENCODER["g"]), "crf": str(ENCODER["crf"]), "preset": str(ENCODER["preset"]),
-                "svtav1-params": f"fast-decode={ENCODER['fast_decode']}:lp=1"}
-        stream: Any = out.add_stream(CODEC, rate=fps, options=opts)
+        name, settings = CODECS[codec]
+        opts = {k: str(settings[k]) for k in ("g", "crf", "preset")}
+        if name == "libsvtav1":
+            opts["svtav1-params"] = f"fast-decode={settings['fast_decode']}:lp=1"
+        stream: Any = out.add_stream(name, rate=fps, options=opts)
+        if name == "libx264":
+            stream.codec_context.thread_count = 1
         stream.width, stream.height, stream.pix_fmt = w, h, PIX_FMT
         stream.time_base = Fraction(1, fps)
         for k in range(n):
@@ -114,7 +126,7 @@ def probe(path: Any) -> dict[str, Any]:
                                 "video.pix_fmt": s.pix_fmt, "video.is_depth_map": False,
                                 "video.fps": int(s.base_rate) if s.base_rate else None, "video.channels": 3,
                                 "has_audio": bool(f.streams.audio)}
-    info.update({f"video.{k}": v for k, v in ENCODER.items()})
+    info.update({f"video.{k}": v for k, v in CODECS.get(info["video.codec"], ("", {}))[1].items()})
     info |= {"video.video_backend": "pyav", "video.extra_options": {}, "is_depth_map": False}
     info.pop("video.is_depth_map")
     return info
