@@ -4,8 +4,8 @@
 Per episode and feature: ``min``, ``max``, ``mean``, ``std`` (population), ``count`` (frames, shape (1,)) and
 the quantiles ``q01``, ``q10``, ``q50``, ``q90``, ``q99`` (lerobot's ``DEFAULT_QUANTILES``; lerobot estimates
 them from a 5,000-bin histogram, here they are exact: ``numpy.quantile``, linear). Vectors per
-dimension; images per channel over every pixel (lerobot samples up to 100 frames, shrunk to about 150 pixels),
-scaled to 0-1, shape (3, 1, 1). The
+dimension; images per channel over every frame shrunk as lerobot shrinks them (about 150 pixels a side; lerobot
+also samples up to 100 frames), scaled to 0-1, shape (3, 1, 1). The
 dataset's stats aggregate the episodes' as lerobot's ``aggregate_feature_stats`` does: min of the mins,
 max of the maxes, the count-weighted mean, the pooled variance, and for each quantile the min (q <= 50)
 or the max (q > 50) over the episodes.
@@ -34,10 +34,13 @@ def vector_stats(x: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def image_stats(frames: np.ndarray) -> dict[str, np.ndarray]:
-    """Stats of (F, H, W, C) uint8 frames per channel over every pixel of every frame, scaled to 0-1, each of
+    """Stats of (F, H, W, C) uint8 frames per channel over the pixels of every frame (every ``step``-th row and
+    column, as lerobot shrinks a frame of 300 pixels or more to about 150 a side), scaled to 0-1, each of
     shape (C, 1, 1); ``count``: the frames. From each channel's 256-value histogram, so exact (the quantiles as
     ``numpy.quantile``'s linear method gives them) at a fraction of sorting the pixels."""
-    px = np.ascontiguousarray(frames, dtype=np.uint8).reshape(-1, frames.shape[-1])
+    side = max(frames.shape[1], frames.shape[2])
+    step = side // 150 if side >= 300 else 1  # lerobot's auto_downsample_height_width: about 150 pixels a side
+    px = np.ascontiguousarray(frames[:, ::step, ::step], dtype=np.uint8).reshape(-1, frames.shape[-1])
     values = np.arange(256, dtype=np.float64)
     rows: dict[str, list[float]] = {k: [] for k in KEYS if k != "count"}
     for c in range(px.shape[1]):
