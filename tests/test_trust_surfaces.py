@@ -230,3 +230,23 @@ def test_huge_coordinates_are_one_error_line_without_numpy_warnings(tmp_path, ca
     lines = [x for x in run.stderr.splitlines() if x.strip()]
     assert run.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), run.stderr
     assert "Warning" not in run.stderr, run.stderr
+
+
+# --------------------------------------------------------------------------- terminal sequences in names
+def test_view_prints_a_file_name_s_terminal_sequences_as_text(tmp_path, monkeypatch):
+    """A trajectory named with a title sequence (ESC ] 0 ; ... BEL), a colour change and rich markup: `view`
+    prints its lines with the sequences escaped (common.shown / one_line, as error lines do) and the markup as
+    written."""
+    from roarmctl.viz.web import server
+
+    def stop(self):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(server.ViewServer, "serve_forever", stop)
+    name = "t\x1b]0;pwned\x07\x1b[31m[bold]x[red].traj.json"
+    f = tmp_path / name
+    f.write_text(json.dumps(hostile.trajectory_doc()))
+    code, out, err = cli(["view", str(f)])
+    assert code == 0, err
+    assert "\x1b" not in out + err and "\x07" not in out + err, repr(out + err)
+    assert "view of t\\x1b]0;pwned\\x07\\x1b[31m[bold]x[red].traj.json at" in out.replace("\n", ""), out

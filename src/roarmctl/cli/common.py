@@ -82,6 +82,15 @@ def one_line(text: str) -> str:
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
+def shown(name: object) -> str:
+    """A name from a file or the command line (a file name, a robot's or a plan's name) as rich prints it: control
+    characters escaped (``one_line``: a terminal title sequence in a file name stays text) and rich's markup
+    escaped (``[bold]`` in a name stays text). Every name the CLI prints through rich goes through here."""
+    from rich.markup import escape
+
+    return escape(one_line(str(name)))
+
+
 _NOTED: set[int] = set()
 
 

@@ -174,7 +174,7 @@ def fk(
         ("rotation (3x3, unitless)", _fmt(t[:3, :3])),
         (f"rpy ({unit})", _fmt(out["rpy"], 4)),
     ]
-    _table(f"FK of {r.name} at {out['link']}", rows)
+    _table(f"FK of {common.shown(r.name)} at {common.shown(out['link'])}", rows)
 
 
 @kin_app.command("jacobian", context_settings=NUMBERS)
@@ -207,13 +207,13 @@ def jacobian(
         return
     arm = [f"q{i + 1}" for i in r.arm_indices]
     k = len(m.ellipsoid_radii)
-    _columns_table(f"Jacobian of {r.name} at the TCP (base frame)", arm, [
+    _columns_table(f"Jacobian of {common.shown(r.name)} at the TCP (base frame)", arm, [
         ("vx (m/rad)", m.jacobian[0]), ("vy (m/rad)", m.jacobian[1]), ("vz (m/rad)", m.jacobian[2]),
         ("wx (rad/rad)", m.jacobian[3]), ("wy (rad/rad)", m.jacobian[4]), ("wz (rad/rad)", m.jacobian[5]),
     ], caption=_joint_caption(r) + " (m/rad: per rad of a revolute joint, m/m for a prismatic one)")
     sing = out["singularity"]
     sv = [f"{v:.4g}" for v in m.singular_values]
-    _table(f"Manipulability of {r.name}", [
+    _table(f"Manipulability of {common.shown(r.name)}", [
         (f"translational, 3x{len(arm)} Jv ((m/rad)^{k})", f"{m.translational:.6g}"),
         (f"full, 6x{len(arm)} J (mixed units)", f"{m.manipulability:.6g}"),
         ("singular values of J (mixed)", "\n".join(" ".join(sv[i:i + 3]) for i in range(0, len(sv), 3))),
@@ -336,7 +336,7 @@ def ik(
     unit = "deg" if deg else "rad"
     where = (f"({xyz[0]:.4f}, {xyz[1]:.4f}, {xyz[2]:.4f}) m" if frame == "world" else
              f"({xyz[0]:.2f}, {xyz[1]:.2f}, {xyz[2]:.2f}) {fr.unit} in the {frame} frame")
-    t = Table(title=f"IK of {r.name}: TCP at {where}, {len(sols)} solution(s), joints in {unit}",
+    t = Table(title=f"IK of {common.shown(r.name)}: TCP at {where}, {len(sols)} solution(s), joints in {unit}",
               caption=_unit_caption(r, deg) + "; error: FK of the solution to the target")
     t.add_column("#")
     for i in range(r.dof):
@@ -400,13 +400,13 @@ def dynamics(
         return
     cols = [f"q{i + 1}" for i in range(r.dof)]
     mm = out["mass_matrix"]
-    _columns_table(f"Inverse dynamics of {r.name}", cols, [
+    _columns_table(f"Inverse dynamics of {common.shown(r.name)}", cols, [
         (f"q ({'deg' if deg else 'rad'})", out["q"]),
         ("tau (N m)", tau),
         ("gravity G (N m)", out["gravity"]),
         ("C(q,qd) qd (N m)", out["coriolis"]),
     ], caption=_unit_caption(r, deg) + "; N m for a revolute joint, N for a prismatic one")
-    _columns_table(f"Mass matrix M(q) of {r.name} (kg m^2: N m per rad/s^2)", cols,
+    _columns_table(f"Mass matrix M(q) of {common.shown(r.name)} (kg m^2: N m per rad/s^2)", cols,
                    [(f"row q{i + 1}", mm[i]) for i in range(r.dof)], digits=5)
 
 

@@ -37,7 +37,7 @@ def run_planner(plan: Path, seed: int | None, quiet: bool,
 
     with Progress(SpinnerColumn(), TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} tasks"),
                   TimeElapsedColumn(), console=common.console(stderr=True), transient=True) as bar:
-        job = bar.add_task(f"planning {plan.name}", total=None)
+        job = bar.add_task(f"planning {common.shown(plan.name)}", total=None)
 
         def progress(stage: str, done: int, total: int) -> None:
             bar.update(job, description=stage, completed=done, total=total)
@@ -120,7 +120,7 @@ def register(app: typer.Typer) -> None:
             return
         from rich.table import Table
 
-        table = Table(title=f"Planned {plan.name}", show_header=False)
+        table = Table(title=f"Planned {common.shown(plan.name)}", show_header=False)
         table.add_column("what", style="bold")
         table.add_column("value")
         table.add_row("output", str(out))

@@ -43,7 +43,7 @@ def view(
         if src.error is not None:
             common.warn(f"{src.error.message}; the view shows the path up to the failure")
         out = common.console()
-        out.print(f"view of {source.name} at [bold]{server.url}[/] ({len(page) / 1e6:.1f} MB page; Ctrl-C to stop)", soft_wrap=True)
+        out.print(f"view of {common.shown(source.name)} at [bold]{server.url}[/] ({len(page) / 1e6:.1f} MB page; Ctrl-C to stop)", soft_wrap=True)
         sys.stdout.flush()
         if open_browser:
             webbrowser.open(server.url)
@@ -54,7 +54,8 @@ def view(
                 raise  # SIGTERM, SIGHUP: stopped from outside, reported as every command is
             # Ctrl-C is how a view ends: not an error (exit 0); the page is gone with the server, so say how to get it back
             again = " ".join(shlex.quote(str(a)) for a in (["roarmctl", "view", source] + (["-t", trajectory] if trajectory else [])))
-            out.print(f"stopped the view of {source.name}; open it again with: {again} (or write it to a file that needs no "
-                      f"server: roarmctl visualize-path {shlex.quote(str(source))} -o NAME.html)", soft_wrap=True, markup=False)
+            out.print(common.one_line(f"stopped the view of {source.name}; open it again with: {again} (or write it to a file "
+                                      f"that needs no server: roarmctl visualize-path {shlex.quote(str(source))} -o NAME.html)"),
+                      soft_wrap=True, markup=False)
     finally:
         server.close()
