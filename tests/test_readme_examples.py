@@ -148,3 +148,28 @@ def test_readme_command(cmd, workdir):
     if "-o " in cmd:
         out = workdir / cmd.split("-o ")[1].split()[0]
         assert out.exists()
+
+
+@pytest.mark.slow  # a fresh interpreter that plans (about 5 s idle)
+def test_the_readme_python_snippet_runs_from_the_folder_that_holds_the_clone(tmp_path):
+    """A new user's script beside the clone: the folder that holds it also holds a directory named ``roarmctl`` (the
+    clone). With the package at the repository's top that folder was imported as a namespace package ("unknown robot
+    'roarm_m3_pro' (bundled robots: ;...)"); under src/ the installed package wins. The README's block runs as
+    written, its paths taken from inside the clone, the real-time execute left out."""
+    block = re.search(r"```python\n(.*?)```", README, re.S)
+    assert block is not None
+    code = "\n".join(line for line in block.group(1).splitlines() if "rc.execute(" not in line)
+    assert "plans/pick_place.yaml" in code
+    code = code.replace('"plans/', '"roarmctl/plans/')
+    clone = tmp_path / "roarmctl"  # the clone's folder, as git names it
+    clone.mkdir()
+    shutil.copytree(ROOT / "plans", clone / "plans")
+    (clone / "README.md").write_text(README)
+    check = (f"\nimport roarmctl\nassert roarmctl.__file__ is not None and "
+             f"roarmctl.__file__.startswith({str(ROOT / 'src')!r}), roarmctl.__path__\n"
+             "assert traj.duration > 0\nprint('ok', traj.robot)\n")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    proc = subprocess.run([sys.executable, "-c", code + check], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=600, env=env)
+    assert proc.returncode == 0 and proc.stdout.strip() == "ok roarm_m3_pro", proc.stderr[-2000:]
+    assert (tmp_path / "pick_place.traj.json").is_file()
