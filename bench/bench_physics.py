@@ -31,7 +31,13 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--stiffness", default="", help="comma-separated stiffness factors for the payload study")
+    ap.add_argument("--friction", default="", help="comma-separated sliding friction coefficients for the grip study "
+                                                   "(alone: only that study)")
     args = ap.parse_args()
+    if args.friction:
+        friction_study([float(v) for v in args.friction.split(",")])
+        if not args.stiffness:
+            return 0
     from roarmctl.motion.pipeline import plan_file
     from roarmctl.physics.report import measure
     from roarmctl.physics.run import Options, simulate
@@ -103,6 +109,31 @@ def stiffness_study(factors: list[float]) -> None:
             held = next(r for r in rep["tcp"]["rests"] if r["label"].endswith("wait 0.5 s"))
             print(f"{f:9.2f} {'on' if sag else '--no-sag':9} {'yes' if o['placed'] else 'NO':>6} {o['error_mm']:9.1f} "
                   f"{held['error_mm']:12.1f} {held['below_mm']:9.1f}")
+
+
+def friction_study(coefficients: list[float]) -> None:
+    """The pick-and-place and the payload plan with every contact's sliding friction set to each coefficient (the
+    model assumes 0.6): where the grip starts to fail, i.e. the margin the assumed friction has."""
+    from roarmctl.motion.pipeline import plan_file
+    from roarmctl.physics.report import measure
+    from roarmctl.physics.run import Options, simulate
+    from roarmctl.physics.setup import build
+    from roarmctl.robot.loader import load_robot
+
+    print("\nthe grip against friction (every contact's sliding coefficient; the model assumes 0.6)")
+    print(f"{'plan':12} {'friction':>8} {'lifted':>6} {'placed':>6} {'error mm':>9}")
+    for name in ("pick_place", "payload"):
+        traj = plan_file(ROOT / "plans" / f"{name}.yaml", seed=None).trajectory
+        robot = load_robot(traj.robot)
+        for mu in coefficients:
+            setup = build(traj, robot)
+            setup.world.model.geom_friction[:, 0] = mu
+            opts = Options()
+            setup, rec = simulate(traj, robot, opts, setup=setup)
+            rep = measure(traj, robot, setup, rec, opts)
+            (o,) = rep["objects"]
+            print(f"{name:12} {mu:8.2f} {'yes' if o['lifted'] else 'NO':>6} {'yes' if o['placed'] else 'NO':>6} "
+                  f"{o['error_mm']:9.1f}", flush=True)
 
 
 if __name__ == "__main__":
