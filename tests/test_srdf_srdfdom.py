@@ -43,6 +43,8 @@ SKIPPED = [
     ("top", '<disable_collisions link1="link1" link2="nolink" reason="Never"/>', "disable_collisions link2: 'nolink'"),
     ("top", '<link_sphere_approximation link="link1"/>', "<link_sphere_approximation> not used"),
     ("top", '<some_future_element/>', "<some_future_element> not used"),
+    ("top", '<group name="other"><chain base_link="nowhere" tip_link="hand_tcp"/></group>',
+     "group 'other' chain base_link: 'nowhere' is not a link"),
 ]
 
 

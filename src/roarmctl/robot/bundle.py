@@ -4,7 +4,8 @@ a file it names.
 A trajectory planned for a bundled robot names it (``"robot": "roarm_m3_pro"``). For any other
 description the planner writes its ``robot_description``: the files the loader read, as data -
 ``robot.yaml`` (the sidecar, its file references pointing into the bundle), ``robot.urdf`` (the URDF
-after xacro, checked; visual elements dropped, every collision mesh renamed ``meshes/mK.ext``),
+after xacro, checked; every collision mesh renamed ``meshes/mK.ext``, and the visual meshes too within
+``VISUAL_BYTES``, their shapes read when the bundle is loaded, for pictures),
 ``robot.srdf`` and ``joint_limits.yaml`` when the sidecar has them, and the mesh files' bytes (base64).
 No xacro is left to evaluate and no path leads outside the bundle.
 
@@ -31,14 +32,25 @@ from typing import Any
 from roarmctl.errors import DescriptionError, InputError, TrajectoryFileError
 from roarmctl.fileio import Roots, read_bytes, read_text, resolved
 from roarmctl.kept import Kept
-from roarmctl.robot.meshes import CONFINED_HINT, MESH_BYTES, PACKAGE_PATHS, description_roots, package_map, resolve
+from roarmctl.robot.meshes import (
+    CONFINED_HINT,
+    MESH_BYTES,
+    MESH_TYPES,
+    PACKAGE_PATHS,
+    description_roots,
+    package_map,
+    resolve,
+)
 from roarmctl.robot.model import Robot
+from roarmctl.robot.visuals import keep_visuals
 from roarmctl.robot.xacro_input import expand
 
 FORMAT = "roarmctl.robot-bundle/1"
 MAX_BUNDLE_BYTES = 64 * 1024 * 1024  # all files of a bundle together, decoded
 #: Files of a bundle (each is written to a temporary folder to be loaded: 100,000 empty meshes took 19 s).
 MAX_BUNDLE_FILES = 1000
+#: Bytes of visual mesh files a bundle carries (pictures only; a CAD export over it is left out, drawn as collision).
+VISUAL_BYTES = 16 * 1024 * 1024
 FILE_NAME = re.compile(r"^(robot\.yaml|robot\.urdf|robot\.srdf|joint_limits\.yaml|meshes/m\d{1,5}\.(stl|obj|dae|ply|off|glb))$")
 _LOADED: Kept[Robot] = Kept(64)  # robots of bundles, by their files' digests
 
@@ -80,9 +92,8 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
     root = loader._read_urdf(urdf, side, path)
     packages = package_map(side.get("packages"), path, str(path))
     renamed: dict[Path, str] = {}
+    visual_bytes = 0
     for link in root.findall("link"):
-        for visual in link.findall("visual"):  # not used by roarmctl: not carried
-            link.remove(visual)
         for k, col in enumerate(link.findall("collision")):
             mesh = col.find("geometry/mesh")
             if mesh is None or not mesh.get("filename"):
@@ -93,6 +104,26 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
                 data = read_bytes(src, f"{where} mesh filename", MESH_BYTES, roots=roots, error=DescriptionError)
                 renamed[src] = f"meshes/m{len(renamed)}{src.suffix.lower()}"
                 files[renamed[src]] = {"base64": base64.b64encode(data).decode("ascii")}
+            mesh.set("filename", renamed[src])
+    for link in root.findall("link"):  # the visuals, for pictures, within VISUAL_BYTES; one that does not fit is left out
+        for k, visual in enumerate(link.findall("visual")):
+            mesh = visual.find("geometry/mesh")
+            if mesh is None or not mesh.get("filename"):
+                continue
+            where = f"{urdf}: link '{link.get('name')}' visual[{k}]"
+            try:
+                src = resolve(str(mesh.get("filename")), urdf, packages, where, roots)
+                if src not in renamed:
+                    size = src.stat().st_size
+                    if visual_bytes + size > VISUAL_BYTES or src.suffix.lower().lstrip(".") not in MESH_TYPES:
+                        raise DescriptionError(f"{where}: over the visual budget")
+                    data = read_bytes(src, f"{where} mesh filename", MESH_BYTES, roots=roots, error=DescriptionError)
+                    visual_bytes += len(data)
+                    renamed[src] = f"meshes/m{len(renamed)}{src.suffix.lower()}"
+                    files[renamed[src]] = {"base64": base64.b64encode(data).decode("ascii")}
+            except (DescriptionError, OSError):  # not shipped, too large: drawn without it (said when drawn)
+                link.remove(visual)
+                continue
             mesh.set("filename", renamed[src])
     files["robot.urdf"] = ET.tostring(root, encoding="unicode")
     out = _plain(side)
@@ -168,6 +199,7 @@ def load_bundle(doc: Any, where: str) -> Robot:
             (folder / name).write_bytes(data)
         try:
             robot = load_robot(str(folder / "robot.yaml"), confine=True)
+            keep_visuals(robot)  # read now: the folder goes at the end of this block
         except InputError as exc:
             message = exc.message.replace(str(folder), f"{where}: robot_description")
             raise type(exc)(message, exc.hint) from None

@@ -77,8 +77,16 @@ def source_of(elements: Iterable[tuple[str, int, ET.Element]], meshes: dict[str,
     return VisualSource(kept, dict(meshes), parse, named_materials(root)) if kept else None
 
 
+def keep_visuals(robot: Robot) -> None:
+    """Read the robot's visual shapes now and keep them (a robot loaded from files about to be removed)."""
+    robot.derived["visuals"] = visual_shapes(robot)
+
+
 def visual_shapes(robot: Robot) -> tuple[list[Visual], list[str]]:
     """The robot's visual shapes (empty without a ``visual_source``) and notes on those left out."""
+    kept = robot.derived.get("visuals")
+    if kept is not None:
+        return kept
     src: VisualSource | None = getattr(robot, "visual_source", None)
     if src is None:
         return [], []
