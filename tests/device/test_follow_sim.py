@@ -152,4 +152,6 @@ def test_a_dataset_episode_replays_within_tolerance_of_its_states_and_the_run_is
     ts, act = read_actions(tmp_path / "rec", 0)
     assert np.allclose(act[0], q[0], atol=1e-6) and np.allclose(act[-1], q[-1], atol=1e-3)
     assert np.min(np.abs(act[:, None, :] - q[None].astype(np.float32)).max(axis=2), axis=1).max() < 1e-6  # each row one of q's
-    assert np.max(np.abs(eps[0].state - q[-1]), axis=1)[-1] < 0.01  # at the end the arm stands at the last target
+    # at the end the arm is at the last target, within the servos' lag: following ends with the last set-point and does
+    # not wait for the arm to settle (idle: under 0.01 rad; loaded 10 processes per core: 0.02)
+    assert np.max(np.abs(eps[0].state - q[-1]), axis=1)[-1] < 0.05
