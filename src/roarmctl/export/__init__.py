@@ -13,7 +13,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
-from roarmctl.errors import InputError, TrajectoryFileError
+from roarmctl.errors import InputError, OptionError, TrajectoryFileError
 from roarmctl.fileio import atomic_write_text, check_output_folder, note_output_folder
 
 if TYPE_CHECKING:
@@ -102,7 +102,7 @@ def export(source: str | os.PathLike | Any, path: str | os.PathLike, fmt: str | 
     folder that roarmctl did not write is replaced only with ``force``."""
     fmt = fmt or format_for(path)
     if fmt not in FORMATS:
-        raise InputError(f"--format: '{fmt}' is not one of {', '.join(FORMATS)}")
+        raise OptionError("format", f"'{fmt}' is not one of {', '.join(FORMATS)}")
     if fmt == "bag":  # refuse before the work
         from roarmctl.export.ros import is_bag_we_wrote
 

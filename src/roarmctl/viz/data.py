@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roarmctl.errors import InputError, TrajectoryFileError
+from roarmctl.errors import OptionError, TrajectoryFileError
 from roarmctl.motion.report import joint_torques
 from roarmctl.motion.trajectory import GRASP_RADIUS, carried_item  # noqa: F401  (GRASP_RADIUS re-exported)
 
@@ -281,7 +281,7 @@ def workspace_data(robot: Robot, samples: int = 80000, seed: int = 0) -> Workspa
     The gripper (if any) stays closed; it does not move the TCP.
     """
     if samples < 1:
-        raise InputError(f"--samples: must be at least 1, got {samples}")
+        raise OptionError("samples", f"must be at least 1, got {samples}")
     rng = np.random.default_rng(seed)
     lo = np.asarray(robot.lower, dtype=float)[robot.arm_indices]
     hi = np.asarray(robot.upper, dtype=float)[robot.arm_indices]

@@ -23,7 +23,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from roarmctl.errors import InputError
+from roarmctl.errors import InputError, OptionError
 
 HOST = "127.0.0.1"
 PATHS = ("/", "/index.html")
@@ -48,7 +48,7 @@ class ViewServer:
     def __init__(self, page: bytes, port: int = 0, *, timeout: float = TIMEOUT,
                  max_connections: int = MAX_CONNECTIONS) -> None:
         if not 0 <= port <= 65535:
-            raise InputError(f"--port: {port} is not a TCP port", "use 1 to 65535, or 0 for a free one")
+            raise OptionError("port", f"{port} is not a TCP port", "use 1 to 65535, or 0 for a free one")
         self.page = page
         self.token = secrets.token_urlsafe(32)  # 256 bits, as Jupyter's
         self.requests = self.refused = self.dropped = 0
