@@ -250,3 +250,21 @@ def test_view_prints_a_file_name_s_terminal_sequences_as_text(tmp_path, monkeypa
     assert code == 0, err
     assert "\x1b" not in out + err and "\x07" not in out + err, repr(out + err)
     assert "view of t\\x1b]0;pwned\\x07\\x1b[31m[bold]x[red].traj.json at" in out.replace("\n", ""), out
+
+
+# --------------------------------------------------------------------------- a tiny --speed-scale in physics
+@pytest.mark.parametrize("scale, warned", [(0.001, True), (0.005, True), (0.5, False), (1.0, False)])
+def test_simulate_warns_before_a_slowed_run_of_minutes_of_physics(tmp_path, monkeypatch, scale, warned):
+    """--speed-scale 0.001 makes the 0.6 s trajectory 600 s of physics (pick_place: 27 min): a warning line
+    says so before the run, with the way out; the run itself is stopped here at once (Ctrl-C)."""
+    from roarmctl.physics import run
+
+    def stop(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(run, "simulate", stop)
+    f = tmp_path / "t.traj.json"
+    f.write_text(json.dumps(hostile.trajectory_doc()))
+    code, _, err = cli(["simulate", str(f), "--speed-scale", str(scale)])
+    assert code == 130, err
+    assert ("warning: --speed-scale" in err and "s of motion to simulate" in err) == warned, err

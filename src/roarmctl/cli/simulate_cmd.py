@@ -15,6 +15,8 @@ if TYPE_CHECKING:
     from collections.abc import Callable
 
 _W = TypeVar("_W")  # what the simulation work returns
+#: Seconds of simulated motion past which a slowed-down run (``--speed-scale`` < 1) is announced with a warning.
+LONG_RUN_S = 120.0
 
 
 def register(app: typer.Typer) -> None:
@@ -84,6 +86,11 @@ def simulate(
         from roarmctl.device.schedule import build_schedule
 
         build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy, sag=sag)  # its input errors first
+    motion = traj.duration / speed_scale + settle
+    if speed_scale < 1.0 and motion > LONG_RUN_S:  # physics costs per simulated second: 1,000x slower, 1,000x longer
+        common.warn(f"--speed-scale {speed_scale:g} makes {motion:,.0f} s of motion to simulate ({1 / speed_scale:,.0f}x "
+                    f"the trajectory's {traj.duration:.1f} s; the physics takes about as long or longer): give a larger "
+                    "--speed-scale, or Ctrl-C to stop")
     setup = build(traj, robot)
     setup, rec = _with_progress(lambda progress: run(traj, robot, options, setup=setup, progress=progress),
                                 traj.duration / speed_scale + settle, json_out)
