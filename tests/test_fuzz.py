@@ -354,6 +354,16 @@ EXTENSIONS = st.sampled_from(["$(env HOME)", "$(optenv HOME dflt)", "$(cwd)", "$
                               "$(eval 9**9**9)", "$(find pkg)/parts.xacro"])
 
 
+#: Every allowed function with hostile arguments (issue 40: ``round(1, -10**9)``), those without the table's
+#: large properties (tests/test_trust_xacro.py runs them all).
+HOSTILE_CALLS = sorted(c for c in hostile.hostile_calls() if not any(b in c for b in ("big_", "spaces", "pairs")))
+#: Include patterns that climb out after a wildcard, walk /proc, or stay inside (issue 40).
+GLOB_PATTERNS = st.sampled_from(["$(dirname)/*/../../*", "$(dirname)/p*/../../../etc/*", "$(dirname)/../*",
+                                 "/proc/*/root/*", "$(dirname)/../../../../../../proc/*/root/*/*", "$(dirname)/pkg/*.xacro",
+                                 "$(dirname)/[p]kg/p?rts.xacro", "$(dirname)/**/*.xacro", "$(dirname)/*/*/*/*",
+                                 "/etc/*", "$(dirname)/.*", "$(dirname)/pkg/*/.."])
+
+
 def _xacro_case(work: Path, data) -> Path:
     """A xacro robot: generated expressions and substitutions, or one of the corpus's hostile builders."""
     from xml.sax.saxutils import escape
@@ -386,6 +396,9 @@ def _xacro_case(work: Path, data) -> Path:
         "include glob": lambda: hostile.m3_xacro(work, "'a'", '<xacro:include filename="/etc/*.conf"/>'),
         "lexer": lambda: hostile.m3_xacro(work, "'a'", hostile.lexer_bomb(data.draw(st.sampled_from([1000, 1_000_000])))),
         "macro params": lambda: hostile.m3_xacro(work, "'a'", hostile.macro_params_redos(data.draw(st.sampled_from([5, 40])))),
+        "hostile call": lambda: hostile.m3_xacro(work, escape(f"str({data.draw(st.sampled_from(HOSTILE_CALLS))})",
+                                                               {'"': "&quot;"})),
+        "include pattern": lambda: hostile.m3_xacro(work, "'a'", f'<xacro:include filename="{data.draw(GLOB_PATTERNS)}"/>'),
         **{f"size: {name}": (lambda e, n: lambda: hostile.m3_xacro(
             work, e, hostile.repeated_work() if n == "repeated work on a property" else ""))(expr, name)
            for name, (expr, _) in hostile.SIZE_BOMBS.items()},
