@@ -585,7 +585,7 @@ def _from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
             shapes.extend(_urdf_shape(lname, c, f"{urdf}: link '{lname}' collision[{k}]", k, meshes))
     if massless:
         notes.append(f"link(s) with collision geometry but no <inertial>, taken as massless: {', '.join(massless)}")
-    notes += unit_notes(shapes, {j.child: float(np.linalg.norm(j.origin[:3, 3])) for j in ordered})
+    notes += unit_notes(shapes, ordered)
     tcp = side.get("tcp_link", next((j.child for j in reversed(ordered) if j.mimic is None), ordered[-1].child))
     if tcp not in links:
         raise DescriptionError(f"{sidecar}: tcp_link: '{tcp}' is not a link of {urdf.name}")

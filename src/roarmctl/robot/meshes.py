@@ -9,8 +9,8 @@ among them; a scene with several meshes is concatenated in its own frame. A COLL
 ``<unit meter="0.001"/>`` is honoured (its vertices are in that unit, as assimp, so RViz and Gazebo, read
 them; trimesh records it and leaves the numbers as written); STL, OBJ and the rest are in metres.
 ``scale`` multiplies the vertices after that, as in URDF. ``unit_notes``: a link whose mesh is more than
-``UNIT_RATIO`` times larger or smaller than the link's distance from its parent joint, the usual sign of a
-mesh in the wrong unit.
+``UNIT_RATIO`` times larger or smaller than the longest joint offset at its ends, the usual sign of a mesh
+in the wrong unit.
 
 Load time: an STL of a few thousand triangles loads and gets its hull in about 2 ms, so nothing is
 cached on disk; a mesh used by several links is read once per process (keyed by path, file
@@ -302,16 +302,22 @@ def _declared_unit(loaded: Any) -> float:
         return math.nan
 
 
-def unit_notes(shapes: list[Any], offsets: dict[str, float], kind: str = "collision") -> list[str]:
-    """Notes for links whose mesh size is more than ``UNIT_RATIO`` x larger or smaller than ``offsets[link]``
-    (m, the link's distance from its parent joint; links under ``UNIT_MIN_OFFSET`` are not judged).
-    ``shapes``: objects with ``link`` and ``mesh`` (a ``MeshGeometry`` or None)."""
+def unit_notes(shapes: list[Any], joints: list[Any], kind: str = "collision") -> list[str]:
+    """Notes for links whose mesh size is more than ``UNIT_RATIO`` x larger or smaller than the link's reach:
+    the longest offset of a joint at either of its ends (m; a link whose reach is under ``UNIT_MIN_OFFSET`` is
+    not judged). ``shapes``: objects with ``link`` and ``mesh`` (a ``MeshGeometry`` or None); ``joints``: with
+    ``parent``, ``child`` and ``origin`` (4x4)."""
+    offsets: dict[str, float] = {}
+    for j in joints:
+        d = float(np.linalg.norm(j.origin[:3, 3]))
+        for link in (j.parent, j.child):
+            offsets[link] = max(offsets.get(link, 0.0), d)
     sizes: dict[str, float] = {}
     for shape in shapes:
         if shape.mesh is not None and len(shape.mesh.vertices):
             v = shape.mesh.vertices
             sizes[shape.link] = max(sizes.get(shape.link, 0.0), float(np.max(v.max(axis=0) - v.min(axis=0))))
-    off = [f"{link} ({size:.3g} m across, {offsets[link]:.3g} m from its parent joint)"
+    off = [f"{link} ({size:.3g} m across, its joints {offsets[link]:.3g} m apart at most)"
            for link, size in sizes.items() if offsets.get(link, 0.0) >= UNIT_MIN_OFFSET
            and not offsets[link] / UNIT_RATIO <= size <= offsets[link] * UNIT_RATIO]
     if not off:
