@@ -144,3 +144,28 @@ def test_a_silent_connection_is_let_go_after_its_timeout(serve):
 def test_timeouts_and_bounds_are_whatever_the_caller_gives(serve, value):
     srv = serve(timeout=value, max_connections=1)
     assert srv.slots._value == 1  # noqa: SLF001
+
+
+def test_generated_host_headers_get_the_page_only_when_they_name_this_server(serve):
+    """Hypothesis-made Host headers (the fuzz suite's generator for the view server): the page only for the two
+    spellings of this server, 403 without the page otherwise; the server keeps answering throughout."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    srv = serve()
+    good = srv.url.split(f":{srv.port}", 1)[1]
+    allowed = {f"127.0.0.1:{srv.port}", f"localhost:{srv.port}"}
+    pieces = st.sampled_from(["127.0.0.1", "localhost", "LOCALHOST", "evil.example", ":", str(srv.port),
+                              str(srv.port + 1), ".", "@", " ", "[::1]", "0", "\t"])
+    hosts = st.lists(pieces, min_size=0, max_size=5).map("".join) | st.text(
+        st.characters(min_codepoint=33, max_codepoint=126), max_size=30)
+
+    @settings(max_examples=150, derandomize=True, database=None, deadline=None,
+              suppress_health_check=list(HealthCheck))
+    @given(host=hosts)
+    def one(host):
+        status, body = _get(srv, good, host)
+        ok = host.strip().lower() in allowed
+        assert (status, body == PAGE) == ((200, True) if ok else (403, False)), (host, status)
+
+    one()
