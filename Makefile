@@ -72,7 +72,7 @@ demo: $(STAMP) render
 	$(BIN)/roarmctl export out/pick_place.exec.json -o out/pick_place.exec.mcap
 	$(BIN)/roarmctl export out/pick_place.traj.json -o out/pick_place_bag
 	$(BIN)/roarmctl export out/pick_place.exec.json -o out/pick_place_exec_bag
-	rm -rf out/pick_place_lerobot && $(BIN)/roarmctl datagen plans/datagen_pick_place.yaml -n 4 -o out/pick_place_lerobot --size 320x240 --workers 2
+	rm -rf out/pick_place_lerobot && $(BIN)/roarmctl datagen plans/datagen/pick_place.yaml -n 4 -o out/pick_place_lerobot --size 320x240 --workers 2
 
 clean:
 	rm -rf $(VENV) build *.egg-info src/roarmctl/*.so src/roarmctl/motion/*.so

@@ -3,7 +3,7 @@
     .venv/bin/python bench/bench_datagen.py [--episodes 4] [--sizes 320x240,640x480] [--workers 1,2] [--ray]
 
 Runs ``roarmctl datagen --json`` (a fresh process per run: no library or plan cached from a previous run) on
-the bundled template (plans/datagen_pick_place.yaml, seed 0) for each image size and worker count (h264), once
+the bundled template (plans/datagen/pick_place.yaml, seed 0) for each image size and worker count (h264), once
 more at the first size on one worker with AV1 (lerobot's default codec), and with
 ``--ray`` the largest worker count again as Ray tasks on a local Ray started by the run (its start-up
 included: the overhead a user sees); ``--success N``: N episodes without cameras on 2 workers, for the success
@@ -37,7 +37,7 @@ def main() -> int:
     ap.add_argument("--ray", action="store_true", help="also the largest worker count as Ray tasks (local Ray)")
     ap.add_argument("--success", type=int, default=0, help="also N episodes without cameras: the success rate and its causes")
     args = ap.parse_args()
-    template = ROOT / "plans" / "datagen_pick_place.yaml"
+    template = ROOT / "plans" / "datagen" / "pick_place.yaml"
     first = args.sizes.split(",")[0]
     runs: list[tuple[str, int, bool, str]] = [(s, int(w), False, "h264") for s in args.sizes.split(",") for w in args.workers.split(",")]
     runs.append((first, 1, False, "av1"))  # lerobot's default codec, for its cost

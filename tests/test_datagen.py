@@ -23,7 +23,7 @@ from hypothesis import strategies as hs
 from tests.clirun import roarmctl
 
 ROOT = Path(__file__).resolve().parents[1]
-TEMPLATE = ROOT / "plans" / "datagen_pick_place.yaml"
+TEMPLATE = ROOT / "plans" / "datagen" / "pick_place.yaml"
 SIZE = 96
 
 

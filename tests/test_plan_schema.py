@@ -250,3 +250,18 @@ def test_angles_in_degrees_are_bounded_as_angles():
         load_plan(plan({"deg": [0, 0, 800]}))
     with pytest.raises(PlanFileError, match=r"scene\.obstacles\[0\]\.rpy: expected a list of 3 numbers of degrees"):
         load_plan(plan({"deg": [0, 0]}))
+
+
+def test_a_datagen_template_given_to_plan_names_the_command_that_reads_it():
+    """plans/datagen/pick_place.yaml is a plan file plus a datagen: block: plan refuses it (exit 2) naming its line and
+    `roarmctl datagen`, not as a typo among the plan's keys."""
+    from roarmctl.errors import PlanFileError
+    from roarmctl.plan.schema import load_plan
+
+    template = Path(__file__).resolve().parents[1] / "plans" / "datagen" / "pick_place.yaml"
+    line = next(i for i, text in enumerate(template.read_text().splitlines(), 1) if text.startswith("datagen:"))
+    with pytest.raises(PlanFileError) as exc:
+        load_plan(template)
+    assert f"pick_place.yaml:{line}: datagen: this is a datagen template" in str(exc.value)
+    assert "roarmctl datagen" in (exc.value.hint or "")
+    assert exc.value.exit_code == 2

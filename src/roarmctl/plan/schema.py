@@ -520,6 +520,9 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
     ctx.known = parsed.item_specs if parsed is not None and parsed.document is raw else {}
     # top-level keys starting with 'x-' are ignored: a place to define YAML anchors for '<<: *name'
     extensions = tuple(k for k in raw if isinstance(k, str) and k.startswith("x-")) if isinstance(raw, dict) else ()
+    if isinstance(raw, dict) and "datagen" in raw:  # a template names the plan it varies: say which command reads it
+        ctx.fail(raw.line_of("datagen") if isinstance(raw, LocatedDict) else 1, "datagen",
+                 "this is a datagen template, not a plan", f"make a dataset from it: roarmctl datagen {path} -n N -o DIR")
     top = ctx.mapping(raw, getattr(raw, "line", 1), "", TOP_KEYS + extensions, required=("robot", "tasks"))
     robot = ctx.string(top["robot"], top.line_of("robot"), "robot")
 
