@@ -12,7 +12,14 @@ makes a run late, not wrong. Putting them all on one worker made their ~4 minute
 
 from __future__ import annotations
 
+import os
+
 import pytest
+
+# MuJoCo takes its GL back end from MUJOCO_GL when it is first imported, and a worker runs physics tests (which import
+# it) before datagen's cameras as often as after: EGL for the whole session, as `make render` installs it, so the
+# order of tests on a worker does not decide the back end (GLFW, the default, aborts the worker without a display).
+os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 @pytest.hookimpl(tryfirst=True)  # before -m "not slow" deselects

@@ -466,3 +466,17 @@ def test_ray_tasks_write_the_same_dataset_as_the_process_pool(dataset4, tmp_path
         pytest.skip(exc.message)
     for rel in FILES + VIDEOS:
         assert (out / rel).read_bytes() == (tmp_path / "ray" / rel).read_bytes(), rel
+
+
+def test_cameras_after_mujoco_was_imported_without_a_gl_back_end_are_refused_not_an_abort():
+    """MuJoCo imported first with no MUJOCO_GL renders through GLFW, which aborts a process without a display (a
+    pytest worker died of it): ``offscreen`` refuses with a RenderError (exit 4) naming MUJOCO_GL instead; imported
+    first with MUJOCO_GL=egl it goes on."""
+    code = ("import mujoco\nfrom roarmctl.physics.render import offscreen, RenderError\n"
+            "try:\n    offscreen()\n    print('went on')\nexcept RenderError as e:\n    print('refused', e.exit_code, e.hint)\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "DISPLAY", "WAYLAND_DISPLAY")}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.startswith("refused 4") and "MUJOCO_GL=egl" in out.stdout, out
+    out = subprocess.run([sys.executable, "-c", code], env={**env, "MUJOCO_GL": "egl"}, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "went on", out

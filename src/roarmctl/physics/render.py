@@ -42,9 +42,16 @@ class RenderError(RoarmError):
 
 
 def offscreen() -> None:
-    """Choose EGL for MuJoCo's renderer unless ``MUJOCO_GL`` says otherwise; call before ``mujoco`` is imported."""
+    """Choose EGL for MuJoCo's renderer unless ``MUJOCO_GL`` says otherwise; call before ``mujoco`` is imported.
+
+    When ``mujoco`` was imported earlier in the process with no ``MUJOCO_GL``, it renders through GLFW, whose context
+    aborts the whole process (not an exception) where there is no display: refused here with a ``RenderError``."""
     if "mujoco" not in sys.modules:
         os.environ.setdefault("MUJOCO_GL", "egl")
+    elif os.environ.get("MUJOCO_GL", "glfw").strip().lower() == "glfw" and not (
+            os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise RenderError("MuJoCo was imported in this process before roarmctl could choose an offscreen GL back end, "
+                          "and GLFW needs a display", "set MUJOCO_GL=egl (or osmesa) before Python starts")
 
 
 def _xyaxes(eye: Sequence[float], target: Sequence[float]) -> str:
