@@ -8,6 +8,8 @@ coordinates, finite differences of FK for the TCP speed, and the scaled limits.
 
 from __future__ import annotations
 
+import contextlib
+
 import json
 import subprocess
 import sys
@@ -234,24 +236,33 @@ def test_same_seed_same_bytes_with_every_core_busy(planned, tmp_path):
 
     core = {min(os.sched_getaffinity(0))} if hasattr(os, "sched_setaffinity") else None
 
-    def pinned(niceness: int):
-        def setup() -> None:
-            os.nice(niceness)
+    def pinned(proc: subprocess.Popen, niceness: int) -> subprocess.Popen:
+        # set from this process after the start, not in a preexec_fn: Python code between fork and exec in a worker
+        # that runs threads (pyarrow's, MuJoCo's) can deadlock on a lock held at the fork, and Popen then waits for
+        # the exec for ever (a clean-clone CI run hung there)
+        with contextlib.suppress(ProcessLookupError):
+            os.setpriority(os.PRIO_PROCESS, proc.pid, niceness)
             if core is not None:
-                os.sched_setaffinity(0, core)
-        return setup
+                os.sched_setaffinity(proc.pid, core)
+        return proc
 
     n_hogs = 1 if core is not None else (os.cpu_count() or 2)
-    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"], preexec_fn=pinned(0)) for _ in range(n_hogs)]
+    hogs = [pinned(subprocess.Popen([sys.executable, "-c", "while True: pass"]), 0) for _ in range(n_hogs)]
     try:
         out = tmp_path / "busy.traj.json"
-        proc = subprocess.run([sys.executable, "-m", "roarmctl", "plan", str(ROOT / "plans" / "obstacle.yaml"), "-o", str(out),
-                               "--json"], capture_output=True, text=True, timeout=300, preexec_fn=pinned(5))
+        planner = pinned(subprocess.Popen([sys.executable, "-m", "roarmctl", "plan", str(ROOT / "plans" / "obstacle.yaml"),
+                                           "-o", str(out), "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                          text=True), 5)
+        try:
+            _, stderr = planner.communicate(timeout=300)
+        finally:
+            planner.kill()
+            planner.wait()
     finally:
         for h in hogs:
             h.kill()
             h.wait()
-    assert proc.returncode == 0, proc.stderr
+    assert planner.returncode == 0, stderr
     idle_file, _ = planned["obstacle"]
     assert out.read_bytes() == idle_file.read_bytes()
 
