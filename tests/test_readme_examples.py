@@ -33,7 +33,7 @@ def readme_commands(text: str) -> list[str]:
     cmds = [m.group(1).split("  #")[0].strip() for m in re.finditer(r"^ {4}(roarmctl .*)$", text, re.M)]
     for span in re.findall(r"`(roarmctl [^`]*)`", text):
         placeholder = re.search(r"\b[A-Z][A-Z_]+\b|\.\.\.|\||\[", span)
-        if not placeholder and span not in cmds:
+        if not placeholder and span not in cmds and len(span.split()) > 2:  # `roarmctl follow` names a command
             cmds.append(span)
     return [c for c in dict.fromkeys(cmds) if "--install-completion" not in c]  # never touch the shell rc files
 
@@ -103,6 +103,9 @@ def test_the_readme_shows_the_main_commands():
 @pytest.mark.slow  # execute --sim runs in real time; three commands start an interpreter of their own
 @pytest.mark.parametrize("cmd", COMMANDS)
 def test_readme_command(cmd, workdir):
+    if cmd.startswith("roarmctl follow"):
+        pytest.skip("follow needs a live source (a leader arm, a policy process, a recorded dataset) and the user's scene: "
+                    "tests/device/test_follow_cli.py and test_follow_sim.py run it end to end")
     if "--port /dev/ttyUSB0" in cmd:  # no arm here: a clean one-line device error (exit 4) after the checks
         r = run(cmd, workdir, tty=True)
         assert r.returncode == 4 and r.stderr.startswith("error: ") and r.stderr.count("\n") == 1, r.stderr
@@ -123,7 +126,7 @@ def test_readme_command(cmd, workdir):
         proc = subprocess.Popen([sys.executable, "-m", "roarmctl", *cmd.split()[1:]], cwd=workdir, text=True,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         try:
-            url = re.search(r"http://127\.0\.0\.1:\d+/", proc.stdout.readline())
+            url = re.search(r"http://127\.0\.0\.1:\d+/\S*", proc.stdout.readline())  # with its token
             assert url, "no URL printed"
             import urllib.request
 
@@ -132,7 +135,7 @@ def test_readme_command(cmd, workdir):
         finally:
             proc.send_signal(signal.SIGINT)
             proc.communicate(timeout=30)
-        assert proc.returncode == 130
+        assert proc.returncode == 0  # Ctrl-C is view's normal end (it prints how to reopen the page)
         return
     if "pick_place.exec.json" in cmd and not (workdir / "pick_place.exec.json").exists():
         assert roarmctl("execute", "pick_place.traj.json", "--sim", "--yes", cwd=workdir).returncode == 0
