@@ -24,6 +24,7 @@ import math
 import os
 import socket
 import stat
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -114,6 +115,20 @@ def _number(v: Any) -> float | None:
     return float(v)
 
 
+def _fed(parser: JsonLines, read: Callable[[], bytes], now: float, what: str) -> list[Target]:
+    """The targets of what ``read()`` has for a JSON-lines source now (none while nothing waits); its end raises
+    ``SourceEnded``, a read error ``SourceLost`` naming ``what``."""
+    try:
+        data = read()
+    except (BlockingIOError, InterruptedError):
+        return []
+    except OSError as exc:
+        raise SourceLost(f"source lost: {what} ({exc})") from None
+    if not data:
+        raise SourceEnded
+    return parser.feed(data, now)
+
+
 class StreamSource:
     """JSON lines from an open file descriptor (stdin, a pipe): read without waiting; end of file ends the source."""
 
@@ -126,15 +141,7 @@ class StreamSource:
 
     def poll(self, now: float) -> list[Target]:
         """See ``Source.poll``."""
-        try:
-            data = os.read(self.fd, MAX_READ)
-        except BlockingIOError:
-            return []
-        except OSError as exc:
-            raise SourceLost(f"source lost: cannot read {self.name} ({exc})") from None
-        if not data:
-            raise SourceEnded
-        return self.parser.feed(data, now)
+        return _fed(self.parser, lambda: os.read(self.fd, MAX_READ), now, f"cannot read {self.name}")
 
     def refusals(self) -> list[tuple[float, str]]:
         """See ``Source.refusals``."""
@@ -175,15 +182,8 @@ class SocketSource:
             except (BlockingIOError, InterruptedError):
                 return []
             self.conn.setblocking(False)
-        try:
-            data = self.conn.recv(MAX_READ)
-        except (BlockingIOError, InterruptedError):
-            return []
-        except OSError as exc:
-            raise SourceLost(f"source lost: {self.name} ({exc})") from None
-        if not data:
-            raise SourceEnded
-        return self.parser.feed(data, now)
+        conn = self.conn
+        return _fed(self.parser, lambda: conn.recv(MAX_READ), now, self.name)
 
     def refusals(self) -> list[tuple[float, str]]:
         """See ``Source.refusals``."""
