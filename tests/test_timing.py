@@ -116,22 +116,23 @@ def test_slowing_a_profile_in_time_follows_the_chain_rule():
     """``_slowed`` by a factor f: the same path positions at f times the time, joint velocities / f and joint
     accelerations / f**2 (q(s(t / f)) by the chain rule), compared on the spline at matching times, unfiltered and
     with the jerk filter's width scaled to f w (the whole filtered motion slowed)."""
-    from roarmctl.motion.timing import _Profile, _sample, _slowed, import_toppra, toppra_grid
+    from roarmctl.motion.jerk_filter import Profile, _slowed, sample
+    from roarmctl.motion.toppra_constraints import import_toppra, toppra_grid
 
     ta = import_toppra()
     wp = np.cumsum(np.random.default_rng(8).uniform(-0.4, 0.4, size=(6, 4)), axis=0)
     ss = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(wp, axis=0), axis=1))])
     path = ta.SplineInterpolator(ss, wp, bc_type="not-a-knot")
     grid = toppra_grid(ss)
-    prof = _Profile(grid, 0.9 * np.sqrt(np.sin(np.pi * grid / grid[-1]).clip(0.0)))  # a rest-to-rest path speed
+    prof = Profile(grid, 0.9 * np.sqrt(np.sin(np.pi * grid / grid[-1]).clip(0.0)))  # a rest-to-rest path speed
     f = 1.037
     slow, width = _slowed(path, prof, 0.0, f, None)
     assert width == 0.0 and slow.T == pytest.approx(f * prof.T, rel=1e-12)
     t = np.linspace(0.0, prof.T, 301)[1:-1]
     t = t[np.min(np.abs(t[:, None] - prof.t[None, :]), axis=1) > 1e-9]  # the path acceleration jumps at knots
     for w in (0.0, 0.12):
-        q, qd, qdd, s = _sample(path, prof, t, w)
-        q2, qd2, qdd2, s2 = _sample(path, slow, f * t, f * w)
+        q, qd, qdd, s = sample(path, prof, t, w)
+        q2, qd2, qdd2, s2 = sample(path, slow, f * t, f * w)
         assert np.allclose(s2, s, atol=1e-10) and np.allclose(q2, q, atol=1e-10)
         assert np.allclose(qd2 * f, qd, atol=1e-9) and np.allclose(qdd2 * f**2, qdd, atol=1e-8)
         assert np.max(np.abs(qd)) > 0.1 and np.max(np.abs(qdd)) > 0.1  # the comparison is not of zeros
@@ -145,7 +146,7 @@ def test_a_result_over_a_limit_is_slowed_in_time_not_timed_again(monkeypatch):
     the samples too, and here the motion is even shorter than the one timed again."""
     import toppra.algorithm
 
-    import roarmctl.motion.timing as timing
+    import roarmctl.motion.jerk_filter as jerk_filter
 
     runs = []
     real = toppra.algorithm.TOPPRA.compute_parameterization
@@ -167,7 +168,7 @@ def test_a_result_over_a_limit_is_slowed_in_time_not_timed_again(monkeypatch):
     assert np.all(np.abs(jerk) <= jmax * (1 + 1e-9))
     assert np.max(np.abs(tp.qdd) / amax) > 0.97  # slowed just enough: the limit is still used
     runs.clear()
-    monkeypatch.setattr(timing, "SLOWDOWN_TRIES", 0)
+    monkeypatch.setattr(jerk_filter, "SLOWDOWN_TRIES", 0)
     again = time_parameterise(wp, vmax, amax, jmax, sample_dt=dt)
     assert len(runs) == 2  # the first margin's samples were over a limit
     assert tp.duration <= again.duration
@@ -179,6 +180,7 @@ def test_a_result_slowed_down_a_lot_is_compared_with_the_next_margin(monkeypatch
     time with that filter it lasted 11.71 s, while TOPP-RA at the next margins finds a 0.48 s filter and 9.47 s. A result
     slowed by more than SLOWDOWN_KEEP is kept aside while the next margin is timed: the shorter one is returned, the
     same motion as re-timing alone (SLOWDOWN_TRIES = 0, the independent method) gives, and it keeps the TCP limit."""
+    import roarmctl.motion.jerk_filter as jerk_filter
     import roarmctl.motion.timing as timing
 
     robot = load_robot("roarm_m3_pro")
@@ -201,7 +203,7 @@ def test_a_result_slowed_down_a_lot_is_compared_with_the_next_margin(monkeypatch
     assert np.max(np.linalg.norm(tcpv(tp.q, tp.qd), axis=1)) <= limit
     monkeypatch.setattr(timing, "SLOWDOWN_KEEP", np.inf)  # every slowed result taken as it is
     locked_in = timed()
-    monkeypatch.setattr(timing, "SLOWDOWN_TRIES", 0)
+    monkeypatch.setattr(jerk_filter, "SLOWDOWN_TRIES", 0)
     retimed = timed()
     assert locked_in.duration > 1.15 * retimed.duration  # the case shows the wide filter kept
     assert tp.duration <= retimed.duration and tp.jerk_filter < 0.6 * locked_in.jerk_filter
@@ -264,11 +266,12 @@ def test_short_segment_between_long_ones_keeps_the_first_margin(monkeypatch):
     exited 3). With grid points inside every segment it must time at the 2 % margin alone (the
     first try, at 0.5 %, may be too tight on such a path; the next one is 2 %); the limits are
     checked on 20 kHz samples, not on toppra's grid."""
+    import roarmctl.motion.jerk_filter as jerk_filter
     import roarmctl.motion.timing as timing
 
     assert 0.98 in timing.SAFETY_STEPS[:2]
     monkeypatch.setattr(timing, "SAFETY_STEPS", (0.98,))
-    monkeypatch.setattr(timing, "SLOWDOWN_TRIES", 0)  # no slowing down in time: the margin alone must do
+    monkeypatch.setattr(jerk_filter, "SLOWDOWN_TRIES", 0)  # no slowing down in time: the margin alone must do
     wp = np.array([[0.0, 0.0, 0.0, 0.0, 0.0], [-0.0423, 0.2052, 0.0336, -0.1717, 0.1159],
                    [0.1765, 0.3642, -0.0845, -0.384, 0.0113], [0.181, 0.109, -0.1085, -0.5207, -0.069],
                    [0.0473, 0.0313, -0.0073, -0.2645, -0.1006], [0.4008, -0.1408, 0.0836, -0.0307, -0.0763],
@@ -283,7 +286,8 @@ def test_a_clipped_cruise_is_taken_without_toppra_only_where_toppra_under_the_ca
     """_plateau_profile takes the profile clipped at the cruise speed when its grid accelerations keep the limits to
     TOPP-RA's own tolerance (TOPP-RA's result itself can be ~1e-8 over); wherever it does, TOPP-RA run under the cap
     (the independent method) gives the same duration to 1e-7, and where it does not, the result is TOPP-RA's."""
-    from roarmctl.motion.timing import _Profile, _plateau_cap, _plateau_profile, _sdot_bound_constraint, import_toppra, toppra_grid
+    from roarmctl.motion.jerk_filter import Profile, _plateau_cap, _plateau_profile
+    from roarmctl.motion.toppra_constraints import import_toppra, sdot_bound_constraint, toppra_grid
 
     ta = import_toppra()
     rng = np.random.default_rng(5)
@@ -300,12 +304,12 @@ def test_a_clipped_cruise_is_taken_without_toppra_only_where_toppra_under_the_ca
         def toppra(constraints):
             inst = ta.algorithm.TOPPRA(constraints, path, gridpoints=grid, parametrizer="ParametrizeConstAccel")
             inst.compute_parameterization(0.0, 0.0)
-            return _Profile(grid, np.asarray(inst.problem_data.sd_vec, dtype=float))
+            return Profile(grid, np.asarray(inst.problem_data.sd_vec, dtype=float))
 
         prof = toppra(cons)
         got = _plateau_profile(ta.algorithm, cons, path, grid, prof, 0.07, alim)
         c = _plateau_cap(prof, 0.07)
-        ref = toppra(cons + [_sdot_bound_constraint(np.full(len(grid), c * c))])
+        ref = toppra(cons + [sdot_bound_constraint(np.full(len(grid), c * c))])
         if np.array_equal(got.sd, np.minimum(prof.sd, c)):
             taken += 1
             assert got.T == pytest.approx(ref.T, rel=1e-7)

@@ -25,6 +25,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
+import roarmctl.motion.jerk_filter as jerk_filter
 import roarmctl.motion.timing as timing
 from roarmctl.errors import InfeasibleError, PlanningError
 from roarmctl.motion.timing import TorqueModel, dedupe, time_parameterise
@@ -79,15 +80,15 @@ def _promises(tp, wp, vmax, amax, jmax, dt, tcp=None, torque=None) -> dict[str, 
 
 @pytest.fixture
 def slowdowns(monkeypatch) -> list[float]:
-    """The factors of every slowing down in time (``timing._slowed``) during the test."""
+    """The factors of every slowing down in time (``jerk_filter._slowed``) during the test."""
     factors: list[float] = []
-    real = timing._slowed
+    real = jerk_filter._slowed
 
     def counted(path, prof, w, factor, jm, **kwargs):
         factors.append(factor)
         return real(path, prof, w, factor, jm, **kwargs)
 
-    monkeypatch.setattr(timing, "_slowed", counted)
+    monkeypatch.setattr(jerk_filter, "_slowed", counted)
     return factors
 
 
