@@ -4,7 +4,7 @@ what the safe xacro evaluator costs on a valid description.
 Run: .venv/bin/python bench/bench_trust.py [--repeats 3]
 Each case runs ``roarmctl kin fk`` in a fresh process (start-up included, as a user sees it) on a file
 from tests/hostile.py; the table prints the exit code and the median wall time. The refusals are
-decided by counts of work (src/roarmctl/robot/xacro_safe.py), so the verdict is the same on any machine;
+decided by counts of work (src/roarmctl/robot/xacro_eval.py, xacro_safe.py), so the verdict is the same on any machine;
 only the time varies with the machine's load. The last rows compare the expansion of the bundled
 M3 URDF as a xacro by the safe evaluator and by xacro's own ``eval`` (``--trust-xacro``), in-process.
 """

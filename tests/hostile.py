@@ -168,7 +168,7 @@ def execlog_doc(robot: str = "roarm_m3_pro", n: int = 20) -> dict:
 # --------------------------------------------------------------------------- every allowed xacro function
 #: Property values the table below calls functions with (built once: making them is not what is tested).
 def table_properties() -> dict:
-    from roarmctl.robot.xacro_safe import MAX_INT_BITS, MAX_ITEMS, MAX_STR
+    from roarmctl.robot.xacro_eval import MAX_INT_BITS, MAX_ITEMS, MAX_STR
 
     return {"big_i": 2 ** MAX_INT_BITS - 1, "big_s": "a" * MAX_STR, "spaces": "a " * (MAX_STR // 2),
             "big_l": [0.5] * (MAX_ITEMS // 10), "pairs": [[0, 1]] * 1000}
@@ -191,7 +191,7 @@ NUMERIC_ARGS = ("0", "-1", "10**9", "-10**9", "2**62", "-2**62", "big_i", "-big_
 def hostile_calls() -> list[str]:
     """Expressions calling every allowed function and string method with hostile arguments: one to three
     arguments, a hostile one at each place beside benign ones, and every pair of numeric extremes."""
-    from roarmctl.robot.xacro_safe import FUNCTIONS, STR_METHODS
+    from roarmctl.robot.xacro_eval import FUNCTIONS, STR_METHODS
 
     arg_lists: list[tuple[str, ...]] = [()]
     arg_lists += [(h,) for h in HOSTILE_ARGS + BENIGN_ARGS]
@@ -209,7 +209,7 @@ def hostile_calls() -> list[str]:
 def evaluate_calls(calls: list[str]) -> dict:
     """Each call evaluated with a fresh budget: {"refused": n, "answered": n, "other": [call: exception]}, and
     every answer compared with Python's own (``differs``) where Python answers in bounded work too."""
-    from roarmctl.robot.xacro_safe import Budget, Evaluator, Refused
+    from roarmctl.robot.xacro_eval import Budget, Evaluator, Refused
 
     props = table_properties()
     tally: dict = {"refused": 0, "answered": 0, "other": [], "differs": []}
@@ -235,9 +235,9 @@ def evaluate_calls(calls: list[str]) -> dict:
 def _python_names() -> dict:
     import math as m
 
-    from roarmctl.robot.xacro_safe import MATH_FUNCTIONS
+    from roarmctl.robot.xacro_eval import MATH_FUNCTIONS
 
-    from roarmctl.robot.xacro_safe import FUNCTIONS
+    from roarmctl.robot.xacro_eval import FUNCTIONS
 
     return {**{n: getattr(builtins, n) for n in FUNCTIONS if n not in MATH_FUNCTIONS}, "inf": m.inf, "nan": m.nan,
             **{n: getattr(m, n) for n in MATH_FUNCTIONS}}

@@ -301,7 +301,7 @@ def test_expressions_that_build_something_huge_are_refused_by_a_bound(tmp_path, 
                          ids=["lexer: a million $a", "macro params: unclosed quote"])
 def test_xacro_s_own_text_parsing_is_linear(tmp_path, extra, needle):
     """xacro's lexer (quadratic: hours for a 2 MB attribute) and its macro-parameter pattern (exponential: 2 s
-    at 24 letters, doubling with each) are replaced while a description expands (xacro_safe._Lexer, MACRO_ARG)."""
+    at 24 letters, doubling with each) are replaced while a description expands (xacro_safe._Lexer, xacro_safe.MACRO_ARG)."""
     refused(["kin", "fk", str(hostile.m3_xacro(tmp_path, "'a'", extra)), *hostile.M3_Q], "arm.xacro", needle)
 
 

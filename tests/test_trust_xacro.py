@@ -14,7 +14,7 @@ import hostile
 import pytest
 from test_trust import cli, refused
 
-from roarmctl.robot.xacro_safe import FUNCTIONS, STR_METHODS, Budget, Evaluator, Refused
+from roarmctl.robot.xacro_eval import FUNCTIONS, STR_METHODS, Budget, Evaluator, Refused
 
 TESTS = Path(__file__).parent
 
@@ -141,7 +141,7 @@ def test_include_glob_finds_what_python_s_glob_finds_inside_the_roots(tmp_path):
     import glob
 
     from roarmctl.fileio import Roots
-    from roarmctl.robot.xacro_safe import include_glob
+    from roarmctl.robot.xacro_glob import include_glob
 
     d = _desc(tmp_path)
     for name in ("a.xacro", "b.urdf", ".h.xacro", "sub2/c.xacro", "sub2/d/e.xacro", "x[1].xacro"):

@@ -73,6 +73,8 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
     import yaml
 
     from roarmctl.robot import loader
+    from roarmctl.robot.sidecar import read_sidecar
+    from roarmctl.robot.urdf_loader import URDF_BYTES, read_urdf
 
     if spec in loader.bundled_robots():
         return None
@@ -82,14 +84,14 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
         side: dict[str, Any] = {}
         urdf = path
     else:
-        side = dict(loader._read_yaml(path))
+        side = dict(read_sidecar(path))
         if "dh" in side:
             files["robot.yaml"] = yaml.safe_dump(_plain(side), sort_keys=False)
             return {"format": FORMAT, "files": files}
         urdf = resolved(path.parent / str(side["urdf"]), f"{path}: urdf", DescriptionError)
     roots = description_roots(side, path, confined=confine)
     side["_roots"] = roots
-    root = loader._read_urdf(urdf, side, path)
+    root = read_urdf(urdf, side, path)
     packages = package_map(side.get("packages"), path, str(path))
     renamed: dict[Path, str] = {}
     visual_bytes = 0
@@ -135,11 +137,11 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
         if srdf.suffix.lower() == ".xacro":
             files["robot.srdf"] = expand(srdf, side.get("xacro_args"), str(path), roots=roots)
         else:
-            files["robot.srdf"] = read_text(srdf, f"{path}: srdf", loader.URDF_BYTES, roots=roots, error=DescriptionError)
+            files["robot.srdf"] = read_text(srdf, f"{path}: srdf", URDF_BYTES, roots=roots, error=DescriptionError)
         out["srdf"] = "robot.srdf"
     if side.get("joint_limits") is not None:
         files["joint_limits.yaml"] = read_text(path.parent / str(side["joint_limits"]), f"{path}: joint_limits",
-                                               loader.URDF_BYTES, roots=roots, error=DescriptionError)
+                                               URDF_BYTES, roots=roots, error=DescriptionError)
         out["joint_limits"] = "joint_limits.yaml"
     files["robot.yaml"] = yaml.safe_dump(out, sort_keys=False)
     return {"format": FORMAT, "files": files}

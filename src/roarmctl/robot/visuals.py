@@ -1,7 +1,7 @@
 """A description's visual geometry (URDF ``<visual>``), for pictures only: read when asked, never when planning.
 
 The loader keeps each link's ``<visual>`` elements and what it needs to read their files (``VisualSource``);
-``visual_shapes`` turns them into shapes with the collision parser the loader hands over (``loader._urdf_shape``:
+``visual_shapes`` turns them into shapes with the collision parser the loader hands over (``urdf_loader.urdf_shape``:
 the same geometry rules, file resolution inside the description's roots and bounded mesh reading), each mesh
 as its triangles (not a hull), with the element's colour (``<material><color rgba>``, or a named material of
 the robot). A visual that cannot be read (a mesh file the package does not ship, say) is left out and said,
