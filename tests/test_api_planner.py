@@ -343,7 +343,7 @@ def test_a_margin_a_larger_arm_can_keep_is_taken_by_both():
     ("limits", "acceleration_scale", 0.0), ("planner", "padding", 0.2), ("planner", "padding", -0.001),
     ("limits", "max_tcp_speed", 6.0), ("limits", "max_tcp_speed", 0.0005)])
 def test_scales_and_padding_out_of_range_are_the_same_error_from_planner_and_plan_file(tmp_path, section, name, value):
-    """One bound per field (plan.schema.FIELD_BOUNDS), one check: api.Planner and a plan file (YAML and dict) refuse
+    """One bound per field (plan.fields.FIELD_BOUNDS), one check: api.Planner and a plan file (YAML and dict) refuse
     the same values with the same words after where they were given. The Planner took scales from 0.001 and a
     padding up to 0.1 m with its own words ("velocity_scale = 0.005 is outside ..."); a plan file took scales
     only above 0.01 and a padding up to 0.05 m."""

@@ -144,10 +144,11 @@ def test_plain_primitives_read_at_once_give_the_spec_the_full_reader_gives():
     import dataclasses
     import itertools
 
-    from roarmctl.plan import schema
+    from roarmctl.plan import items as plan_items
+    from roarmctl.plan.fields import ReadContext
     from roarmctl.validation import locate
 
-    ctx = schema._Ctx(Path("plans") / "x.yaml")
+    ctx = ReadContext(Path("plans") / "x.yaml")
     items = []
     for xyz, rpy in itertools.product(([0.1, -0.2, 0.3], [1, 0, 2], [0, 0, 10.5], [0.1, 0.2], [0.1, True, 0.2],
                                        {"world": [0.1, 0.2, 0.3]}, [float("nan"), 0, 0]),
@@ -164,9 +165,9 @@ def test_plain_primitives_read_at_once_give_the_spec_the_full_reader_gives():
     quick = 0
     for raw, role in itertools.product(items, ("obstacle", "table", "object")):
         located = locate(raw)
-        fast = schema._plain_primitive(ctx, located, "scene.obstacles[0]", role)
+        fast = plan_items._plain_primitive(ctx, located, "scene.obstacles[0]", role)
         try:
-            slow = schema._item_spec(ctx, located, 0, "scene.obstacles[0]", role)
+            slow = plan_items._item_spec(ctx, located, 0, "scene.obstacles[0]", role)
         except PlanFileError:
             assert fast is None, raw
             continue
@@ -182,8 +183,8 @@ def test_plain_primitives_read_at_once_give_the_spec_the_full_reader_gives():
     for role in ("obstacle", "table"):
         located = [locate(raw) for raw in items]
         wheres = [f"scene.obstacles[{i}]" for i in range(len(items))]
-        together = schema._plain_primitives(ctx, located, role, wheres)
-        alone = [schema._plain_primitive(ctx, raw, where, role) for raw, where in zip(located, wheres)]
+        together = plan_items._plain_primitives(ctx, located, role, wheres)
+        alone = [plan_items._plain_primitive(ctx, raw, where, role) for raw, where in zip(located, wheres)]
         assert [a is None for a in together] == [a is None for a in alone]
         for a, b in zip(together, alone):
             if a is not None:
@@ -199,7 +200,8 @@ def test_a_plan_dicts_obstacles_read_as_they_are_give_the_files_specs(tmp_path):
 
     import yaml
 
-    from roarmctl.plan import schema
+    from roarmctl.plan import items
+    from roarmctl.plan.fields import ReadContext
 
     (tmp_path / "tri.stl").write_text("solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 0.01 0 0\n"
                                       "vertex 0 0.01 0\nendloop\nendfacet\nendsolid t\n")
@@ -231,7 +233,7 @@ def test_a_plan_dicts_obstacles_read_as_they_are_give_the_files_specs(tmp_path):
     bad = dict(as_code, scene={"obstacles": [*obstacles[:20], dict(obstacles[20], size=[0.02, -1, 0.04]), *obstacles[21:]]})
     with pytest.raises(PlanFileError, match=r"^<plan dict>: scene\.obstacles\[20\]\.size\[1\]: "):
         load_plan(bad, base_dir=tmp_path)
-    assert schema._plain_primitives(schema._Ctx(tmp_path / "p.yaml"), obstacles[:3], "obstacle", ["a", "b", "c"])[2].size == (0.02, 0.02, 0.04)
+    assert items._plain_primitives(ReadContext(tmp_path / "p.yaml"), obstacles[:3], "obstacle", ["a", "b", "c"])[2].size == (0.02, 0.02, 0.04)
 
 
 def test_angles_in_degrees_are_bounded_as_angles():

@@ -72,10 +72,11 @@ def follow(
     from roarmctl.device.follow_sources import SocketSource, StreamSource
     from roarmctl.device.protocol import WireMap
     from roarmctl.motion.collision import CollisionChecker
+    from roarmctl.motion.options import PlannerConfig
     from roarmctl.motion.pipeline import robot_spec
     from roarmctl.motion.planning.context import scene_item
     from roarmctl.motion.scene import Scene
-    from roarmctl.plan.schema import PlannerConfig, load_plan
+    from roarmctl.plan.schema import load_plan
     from roarmctl.robot.loader import load_robot
 
     if (port is None) == (not sim):

@@ -29,7 +29,8 @@ from roarmctl.motion.report import motion_peaks
 from roarmctl.motion.scene import Scene
 from roarmctl.motion.timing import TimedPath
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
-from roarmctl.plan.schema import DICT_NAME, load_plan
+from roarmctl.plan.fields import DICT_NAME
+from roarmctl.plan.schema import load_plan
 from roarmctl.plan.types import PickTask, PlaceTask, Plan
 from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import Robot

@@ -29,7 +29,7 @@ from roarmctl.errors import InputError, TrajectoryFileError
 from roarmctl.formats import MAX_DURATION, MAX_POINTS, ROLES, SHAPES, read_document
 from roarmctl.motion.options import PLANNERS
 from roarmctl.motion.trajectory import FORMAT, Event, Segment, Trajectory
-from roarmctl.plan.schema import FIELD_BOUNDS
+from roarmctl.plan.fields import FIELD_BOUNDS
 from roarmctl.robot.bundle import trajectory_robot
 from roarmctl.robot.loader import load_robot
 from roarmctl.validation import Checker

@@ -27,7 +27,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from roarmctl.errors import PlanFileError, RoarmError
-from roarmctl.plan.schema import FIELD_BOUNDS, load_plan
+from roarmctl.plan.fields import FIELD_BOUNDS
+from roarmctl.plan.schema import load_plan
 from roarmctl.plan.types import PickTask, PlaceTask, Plan
 from roarmctl.robot.ik import solve_ik
 from roarmctl.validation import LocatedDict, load_yaml

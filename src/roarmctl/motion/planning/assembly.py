@@ -14,7 +14,7 @@ from roarmctl.motion.planning.pieces import SAMPLE_DT, TimedPiece
 from roarmctl.motion.planning.tasks import where
 from roarmctl.motion.timing import TimedPath
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
-from roarmctl.plan.schema import DICT_NAME
+from roarmctl.plan.fields import DICT_NAME
 from roarmctl.plan.types import MoveTask, PickTask, PlaceTask
 from roarmctl.robot.bundle import make_bundle
 from roarmctl.robot.loader import bundled_robots

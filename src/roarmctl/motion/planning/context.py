@@ -14,7 +14,7 @@ from roarmctl.kept import Kept
 from roarmctl.motion.planning.pieces import UntimedMotion
 from roarmctl.motion.scene import SceneItem
 from roarmctl.motion.scenefiles import read_cloud_item, read_mesh_item
-from roarmctl.plan.schema import DICT_NAME
+from roarmctl.plan.fields import DICT_NAME
 from roarmctl.robot.ik import takes_pitch
 from roarmctl.robot.loader import bundled_robots
 from roarmctl.robot.meshes import PACKAGE_PATHS
