@@ -13,11 +13,10 @@ Every feedback frame goes through the one validator (``roarmctl.device.feedback`
 frames, a tracking error beyond the bound (measured against the plan with the lateness the loop
 measured), lost feedback, Ctrl-C/SIGTERM/SIGHUP or a lost link end the stream with a hold.
 
-The hold stops the arm where it is, with torque on: by default at the point of the planned,
-collision-checked path the arm reaches when the hold arrives (never beyond the last set-point sent;
-no reversal), or, when the arm is not following its commands (tracking abort), at its last validated
-measured pose if that is at most 50 ms old. How the hold is made to run (the 20260701 build's queue flushed
-first, two copies): ``roarmctl.device.hold``.
+The hold stops the arm where it is, with torque on: where it goes is chosen in ``roarmctl.device.stream_hold``
+(by default the point of the planned path the arm reaches when the hold arrives; on the 20260701 build the goal of
+the last line the firmware confirmed), how it is made to run in ``roarmctl.device.hold``. What a run reports
+(``Status``, ``Result``, the execution log): ``roarmctl.device.stream_result``.
 The choice and its figures: ``docs/guide.md``, "Talking to the firmware".
 """
 
@@ -29,15 +28,13 @@ import signal
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roarmctl.device import protocol, st3235
-from roarmctl.device.execlog import ExecLog
+from roarmctl.device import protocol, st3235, stream_hold
 from roarmctl.device.feedback import FeedbackRefused, FeedbackValidator, Reading, read_valid
-from roarmctl.device.hold import HOLD_SPD, send_hold
+from roarmctl.device.hold import HOLD_SPD
 from roarmctl.device.options import HOLD_MODES, StreamConfig
 from roarmctl.device.pacing import Pacer
 from roarmctl.device.pose import within_limits
@@ -58,8 +55,8 @@ from roarmctl.device.schedule import (
     sample,
     strategy_rate,
 )
+from roarmctl.device.stream_result import Result, Status, run_log, tcp
 from roarmctl.errors import DeviceError, InfeasibleError, Interrupted, signal_name
-from roarmctl.robot.frames import device_point, to_frame
 
 if TYPE_CHECKING:
     from roarmctl.device.link import Link, Received
@@ -92,50 +89,6 @@ CONFIRM_EVERY = 0.1  # s: the longest a stream goes without a poll (a rate lower
 READ_EVERY = 0.005  # s: the stream reads the link at least this often while it waits
 READ_BEFORE_PRINT = protocol.READ_BEFORE_PRINT  # s between the firmware's servo reads and the start of its T:1051 line
 
-
-@dataclass
-class Status:
-    """What the display shows after each tick."""
-
-    k: int
-    n: int
-    t: float
-    duration: float
-    lateness: float
-    commanded: np.ndarray
-    measured: np.ndarray | None
-    error: float | None  # m, TCP tracking error of the newest feedback
-
-
-@dataclass
-class Result:
-    """How a run ended (``outcome``, ``message``), what was sent, its lateness and tracking, and its log."""
-
-    outcome: str  # "completed" | "interrupted" | "terminated" | "aborted" | "link_lost" | "failed"
-    message: str
-    n_sent: int
-    lateness: np.ndarray  # (n,) s
-    tracking: np.ndarray  # (m,) m, TCP error of each feedback during motion
-    final_error: float | None
-    t0: float
-    log: dict[str, Any] = field(default_factory=dict)
-
-    def summary(self) -> dict[str, Any]:
-        """The log's ``summary``: outcome, counts, lateness p50/p99 (ms), tracking RMS/max (mm) and what connecting and pacing learned."""
-        lat = self.lateness * 1e3
-        trk = self.tracking * 1e3
-        pct = lambda a, p: float(np.percentile(a, p)) if len(a) else None  # noqa: E731
-        out = {
-            "outcome": self.outcome, "message": self.message, "commands": self.n_sent,
-            "lateness_ms": {"p50": pct(lat, 50), "p99": pct(lat, 99), "max": float(lat.max()) if len(lat) else None},
-            "tracking_mm": {"rms": float(np.sqrt(np.mean(trk ** 2))) if len(trk) else None,
-                            "max": float(trk.max()) if len(trk) else None, "samples": int(len(trk))},
-            "final_error_mm": None if self.final_error is None else self.final_error * 1e3,
-        }
-        for key in ("feedback", "waits", "firmware_lag_ms", "rate_changes", "hold", "device", "link_budget"):
-            if key in self.log:
-                out[key] = self.log[key]
-        return out
 
 
 class _Abort(Exception):
@@ -200,8 +153,8 @@ class Streamer:
         self.poll_every = 1  # a T:105 with every this many ticks
         self.rate_changes: list[dict[str, Any]] = []  # where the stream went on at a lower rate, and why
         self.refused_lines: dict[int, str] = {}  # id(Received) -> reason, for the log
-        self._tick_of: dict[int, int] = {}  # id(first command sent for a tick) -> tick
-        self._read_at: dict[int, float] = {}  # id(Received) -> when its servos were read (s, clock): the log's read_t
+        self.tick_of: dict[int, int] = {}  # id(first command sent for a tick) -> tick
+        self.read_at: dict[int, float] = {}  # id(Received) -> when its servos were read (s, clock): the log's read_t
         self._reading_at: dict[int, float] = {}  # the same by id(Reading), for the tracking check
         self.device_late: deque[tuple[float, float]] = deque(maxlen=1000)  # (when seen, how late) of poll answers
 
@@ -229,10 +182,7 @@ class Streamer:
         info = getattr(self.link, "info", None)
         return FEEDBACK_RATE / 2 if info is not None and info.queued else FEEDBACK_RATE
 
-    def _tcp(self, q: np.ndarray) -> np.ndarray:
-        return self.robot.kin.fk(self.robot.full_q(q))[:3, 3]
-
-    def _judge(self, received: Iterable[Received], asked: dict[int, float] | None = None) -> list[Reading]:
+    def judge(self, received: Iterable[Received], asked: dict[int, float] | None = None) -> list[Reading]:
         """Every T:1051 of ``received`` through the validator (raises FeedbackRefused on a run).
         ``asked``: id(Received) -> when the T:105 it answers was sent (its servo reads are dated from that)."""
         out = []
@@ -243,7 +193,7 @@ class Streamer:
             if reading is None:
                 self.refused_lines[id(r)] = self.validator.refusals[-1].reason
                 continue
-            self._read_at[id(r)] = self._reading_at[id(reading)] = self._servos_read_at(reading, (asked or {}).get(id(r)))
+            self.read_at[id(r)] = self._reading_at[id(reading)] = self._servos_read_at(reading, (asked or {}).get(id(r)))
             self.measured = reading.q
             out.append(reading)
         return out
@@ -394,8 +344,8 @@ class Streamer:
         if not 0.0 <= tp <= self.schedule[-1].t:
             return None
         s = self.cfg.speed_scale
-        p = self._tcp(reading.q)
-        err = float(np.linalg.norm(p - self._tcp(sample(self.traj, tp * s))))
+        p = tcp(self, reading.q)
+        err = float(np.linalg.norm(p - tcp(self, sample(self.traj, tp * s))))
         self.tracking.append((t_meas, err))
         slack = self._lateness_window(tp) + max(0.0, SERVO_LAG - self.lead)
         lo, hi = max(0.0, tp - slack - 0.01), tp + self.lead + 0.005
@@ -465,7 +415,7 @@ class Streamer:
                 cmds = tick.commands
                 t_sent = link.send(cmds[0])
                 wire_free = max(wire_free, t_sent) + wire_seconds(len(protocol.encode(cmds[0])))
-                self._tick_of[id(cmds[0])] = k
+                self.tick_of[id(cmds[0])] = k
                 for extra in cmds[1:]:
                     wire_free = max(wire_free, link.send(extra)) + wire_seconds(len(protocol.encode(extra)))
                 pacer.sent(len(cmds), wire_free, k)
@@ -508,7 +458,7 @@ class Streamer:
                 late = polled_before - t_poll - rtt
                 if late > 0.002:
                     self.device_late.append((polled, late))
-        readings = self._judge(new, asked)
+        readings = self.judge(new, asked)
         # feedback is overdue when a question had gone unanswered too long when the link was last read, not
         # when the host itself did not ask or did not look: a busy machine that stopped this process for
         # 0.33 s between two polls, or for 0.36 s between reading the link and this check, ended runs here as
@@ -566,115 +516,16 @@ class Streamer:
         while self.clock() < end:
             r = self.link.request(0.1)
             if r is not None:
-                self._judge([r])
+                self.judge([r])
             self.sleep(0.05)
 
-    # ------------------------------------------------------------------ the hold
+    # ------------------------------------------------------------------ the hold and the results
     def _hold(self, cause: str) -> None:
-        """Hold (see the module docstring). Never torque off. A stop signal arriving during the hold
-        (the first one raises ``KeyboardInterrupt``) does not cut it short: the hold is sent again,
-        and the run's outcome stays what it was."""
-        try:
-            self._hold_once(cause)
-        except KeyboardInterrupt:
-            self.notes.append("a stop signal arrived during the hold; hold sent again")
-            self._hold_once(cause)
+        stream_hold.hold(self, cause)
 
     def hold_target(self, cause: str, now: float) -> tuple[str, np.ndarray | None]:
-        """(kind, firmware radians in field order) of the hold, or (kind, None) for no motion hold.
-
-        ``path``: the plan at the time the hold reaches the servos, never beyond the last set-point
-        sent; ``setpoint``: the last set-point sent; ``measured``: the last validated pose if at most
-        ``hold_max_age`` old (else the path). ``auto`` is ``measured`` after a tracking abort (the arm
-        is not where it was told to go: stop pushing), ``path`` otherwise.
-        """
-        mode = self.cfg.hold
-        if mode == "auto":
-            mode = "measured" if cause == "tracking" else "path"
-        fresh = self.validator.fresh(now, self.cfg.hold_max_age)
-        sp = self.setpoint
-        if mode == "measured" and fresh is not None:
-            wire = np.array([fresh.wire[f] for f in self.wm.field_names])
-            if sp is not None and sp.wire is not None:
-                g = self._gripper_field()
-                if g is not None:
-                    wire[g] = sp.wire[g]  # the gripper keeps its last command (keeps a grip)
-            return "measured", wire
-        if sp is None or sp.wire is None:
-            return ("measured", np.array([fresh.wire[f] for f in self.wm.field_names])) if fresh is not None else ("none", None)
-        if mode == "setpoint" or math.isnan(self.t0):
-            return "setpoint", sp.wire
-        if self._flushes():
-            # the queue is flushed before the hold: the lines not run yet never run, and the arm got as far as the last
-            # line the firmware ran. The last one a poll answer confirmed bounds that from below, on the path: hold its
-            # goal (never ahead of it; before any confirmation, a fresh measured pose or the start)
-            k = self.pacer.confirmed_tick
-            if k is None:
-                if fresh is not None:
-                    return "measured", np.array([fresh.wire[f] for f in self.wm.field_names])
-                return "confirmed", self.wm.to_wire_array(self.traj.positions[0])[0]
-            tick = self.schedule[k]
-            return "confirmed", tick.wire if tick.wire is not None else self.wm.to_wire_array(tick.target)[0]
-        # the goals ran ``lead`` ahead on the plan: the hold stops them where they would be when it arrives
-        arrive = self.plan_time(now - self.t0) + default_latency(self.rate) + self.lead
-        latest = min(arrive, sp.t + 1.0 / self.rate + default_latency(self.rate) + self.lead)
-        q = sample(self.traj, max(0.0, latest) * self.cfg.speed_scale)
-        return "path", self.wm.to_wire_array(q)[0]
-
-    def _flushes(self) -> bool:
-        """Whether this build queues lines and the hold flushes its queue first (the 20260701 build)."""
-        return getattr(self.link, "firmware", None) == "m3-2026"
-
-    def _gripper_field(self) -> int | None:
-        if self.robot.gripper is None:
-            return None
-        return next((k for k, w in enumerate(self.wm.fields) if w.joint == self.robot.gripper.joint), None)
-
-    def _hold_once(self, cause: str) -> None:
-        link = self.link
-        if getattr(link, "closed", False) or getattr(link, "ser", True) is None:
-            self.notes.append("hold not sent: the port was never opened")
-            return
-        try:
-            now = self.clock()
-            kind, wire = self.hold_target(cause, now)
-            if wire is None:
-                try:
-                    r = link.request(0.15)
-                    if r is not None and self._judge([r]):
-                        kind, wire = self.hold_target(cause, self.clock())
-                except DeviceError:
-                    pass
-            if wire is None:
-                self.notes.append("no hold sent: nothing was commanded and no valid pose was read")
-                return
-            spd = HOLD_SPD
-            if kind != "measured" and self.setpoint is not None:
-                spd = max(HOLD_SPD, int(self.setpoint.cmd.get("spd", 0) or 0))
-            # the stream's own polls still unanswered are answered first
-            self.hold_info = send_hold(link, self.wm, wire, spd, kind=kind, cause=cause, earlier=len(self.pacer.polls),
-                                       on_answer=self._judge_quietly, clock=self.clock, sleep=self.sleep)
-            self.pacer.polls.clear()
-            flushed = self.hold_info["flushed_queue"]
-            self.notes.append(f"hold sent ({kind}{', queue flushed first' if flushed else ''})")
-        except DeviceError:
-            self.notes.append("hold could not be sent: the link is gone")
-
-    def _judge_quietly(self, r: Received) -> None:
-        try:
-            self._judge([r])
-        except FeedbackRefused:
-            pass
-
-    # ------------------------------------------------------------------ results
-    def pose_in_frames(self) -> dict[str, Any] | None:
-        """The last measured TCP in the world frame (m) and the robot's other frames (their units)."""
-        if self.measured is None:
-            return None
-        out: dict[str, Any] = {"world_m": [round(float(v), 6) for v in self._tcp(self.measured)]}
-        for name, fr in (getattr(self.robot, "frames", {}) or {}).items():
-            out[f"{name}_{fr.unit}"] = [round(float(v), 3) for v in to_frame(fr, device_point(self.robot, fr, self.measured))]
-        return out
+        """The hold's (kind, firmware radians in field order) at ``now``: ``roarmctl.device.stream_hold.hold_target``."""
+        return stream_hold.hold_target(self, cause, now)
 
     def result(self, outcome: str, message: str) -> Result:
         """The run's Result with its log, as it stands now."""
@@ -682,54 +533,7 @@ class Streamer:
         trk = np.array([e for _, e in self.tracking])
         final = None
         if self.measured is not None and outcome == "completed":
-            final = float(np.linalg.norm(self._tcp(self.measured) - self._tcp(self.traj.positions[-1])))
+            final = float(np.linalg.norm(tcp(self, self.measured) - tcp(self, self.traj.positions[-1])))
         res = Result(outcome, message, len(self.sent_lateness), lat, trk, final, self.t0)
-        res.log = self.log(res)
+        res.log = run_log(self, res)
         return res
-
-    def log(self, res: Result) -> dict[str, Any]:
-        """The execution log: every command sent and every line received, times in s after t0."""
-        t0 = res.t0 if not math.isnan(res.t0) else (self.link.sent[0][0] if self.link.sent else 0.0)
-        lateness = {k: x for k, x in self.sent_lateness}
-        sched_idx = self._tick_of
-        sent = []
-        for t, cmd in self.link.sent:
-            entry: dict[str, Any] = {"t": round(t - t0, 6), "cmd": cmd}
-            k = sched_idx.get(id(cmd))
-            if k is not None:
-                entry["tick"] = k
-                entry["lateness"] = round(lateness.get(k, math.nan), 6)
-            sent.append(entry)
-        received = []
-        for r in self.link.received:
-            e: dict[str, Any] = {"t": round(r.t - t0, 6), "line": r.line[:protocol.MAX_FEEDBACK_LINE]}
-            if r.feedback is not None:
-                e["feedback"] = r.feedback.raw  # x, y, z: the firmware's frame (mm)
-                if id(r) in self._read_at:  # when its servos were read, as the stream judged it (s after t0)
-                    e["read_t"] = round(self._read_at[id(r)] - t0, 6)
-                reason = self.refused_lines.get(id(r))
-                if reason is not None or r.feedback.problems:
-                    e["refused"] = reason or r.feedback.problems[0]
-                elif set(self.wm.field_names) <= set(r.feedback.joints):
-                    # the same pose in the plan's world frame (m), from our FK (frames of this robot's firmware only)
-                    e["tcp_world_m"] = [round(float(v), 6) for v in self._tcp(self.wm.from_wire(r.feedback.joints))]
-            received.append(e)
-        info = getattr(self.link, "info", None)
-        budget = self.link_budget()
-        hold = None if self.hold_info is None else dict(self.hold_info, t=round(self.hold_info["t"] - t0, 6))
-        return ExecLog(
-            robot=self.robot.name, port=self.link.port, firmware=getattr(self.link, "firmware", None),
-            device=None if info is None else info.as_dict(), speed_scale=self.cfg.speed_scale, t0_monotonic=t0,
-            robot_description=getattr(self.traj, "robot_description", None),  # a robot not bundled, carried
-            details={
-                "strategy": self.cfg.strategy, "rate": self.rate, "duration": self.schedule[-1].t,
-                "link_budget": budget.as_dict(), "feedback": self.validator.summary(),
-                "waits": dict(self.waits), "paused": [[round(at, 6), round(d, 6)] for at, d in self.paused],
-                # how much later than the round trip each poll was answered (s; the time it waited behind other lines
-                # at the firmware), the firmware's time per line as measured, where the stream went on at a lower rate
-                "firmware_lag_ms": self.pacer.lag_summary(),
-                "firmware_lag": [[round(t - t0, 6), round(x, 6)] for t, x in self.pacer.lag],
-                "firmware_line_time_s": round(self.pacer.line_time, 6), "rate_changes": self.rate_changes,
-                "hold": hold, "summary": res.summary(), "notes": self.notes, "final_pose": self.pose_in_frames(),
-                "tracking": [{"t": round(t, 6), "error_m": round(e, 6)} for t, e in self.tracking]},
-            sent=sent, received=received).to_dict()
