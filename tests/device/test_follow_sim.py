@@ -22,9 +22,9 @@ from followsim import (
     tracking,
 )
 
-from roarmctl.device.firmware import Bogus
 from roarmctl.device.follow_guard import SourceLost
 from roarmctl.device.follow_session import LeaderSpec, leader_tracking
+from roarmctl.device.sim_config import Bogus
 
 pytestmark = pytest.mark.slow
 

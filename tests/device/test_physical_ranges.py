@@ -14,9 +14,10 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from roarmctl.device.firmware import Firmware, SimConfig
+from roarmctl.device.firmware import Firmware
 from roarmctl.device.fwmath import position_to_rad
 from roarmctl.device.servos import KinematicServos
+from roarmctl.device.sim_config import SimConfig
 from roarmctl.robot.loader import load_robot
 
 ROBOT = load_robot("roarm_m3_pro")

@@ -8,10 +8,11 @@ import sys
 import numpy as np
 import pytest
 
-from roarmctl.device.firmware import Firmware, SimConfig
+from roarmctl.device.firmware import Firmware
 from roarmctl.device.fwmath import position_to_rad, urdf_from_firmware
 from roarmctl.device.guide import Guide, guided_servos, load_guide, urdf_to_steps
 from roarmctl.device.protocol import encode, parse_feedback
+from roarmctl.device.sim_config import SimConfig
 from roarmctl.errors import InputError
 
 Q_A = [0.3, 0.2, 1.2, 0.4, 0.1, 0.5]  # URDF: 5 joints + gripper

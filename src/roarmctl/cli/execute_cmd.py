@@ -19,9 +19,9 @@ if TYPE_CHECKING:
 
     from rich.console import Console
 
-    from roarmctl.device.firmware import Bogus, SimConfig
     from roarmctl.device.schedule import Tick
     from roarmctl.device.servos import ServoModel
+    from roarmctl.device.sim_config import Bogus, SimConfig
     from roarmctl.device.streamer import Status, StreamConfig
     from roarmctl.motion.trajectory import Trajectory
     from roarmctl.robot.model import Robot
@@ -154,7 +154,7 @@ def _write_output(path: Path, schedule: "list[Tick]") -> None:
 def sim_build(firmware: str, loop_pass: float | None, **fields: Any) -> "SimConfig":
     """The simulator's ``SimConfig`` for ``--firmware`` and ``--loop-pass`` (ms: the whole pass, the model's own
     work included), checked; ``fields``: the other ``SimConfig`` fields."""
-    from roarmctl.device.firmware import SimConfig, own_pass
+    from roarmctl.device.sim_config import SimConfig, own_pass
 
     if firmware not in ("m3-0.84", "m3-2026", "m2"):
         raise InputError(f"--firmware: unknown '{firmware}'", "choose m3-0.84, m3-2026 or m2")

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roarmctl.device.firmware import Bogus, Firmware, SimConfig
+from roarmctl.device.firmware import Firmware
 from roarmctl.device.fwmath import (
     INIT_RAD,
     command_to_goal,
@@ -41,6 +41,7 @@ from roarmctl.device.fwmath import (
     urdf_from_firmware,
 )
 from roarmctl.device.servos import JOINTS, KinematicServos, ServoModel
+from roarmctl.device.sim_config import Bogus, SimConfig
 
 if TYPE_CHECKING:
     from multiprocessing.connection import Connection
