@@ -180,7 +180,10 @@ def test_demo_execution_log_commanded_and_measured(demo, suffix):
     assert run_cli(["export", str(log_path), "-o", str(out)]) == 0
     bag = read_bag(out)
     log = json.loads(log_path.read_text())
-    assert set(bag) == {"/joint_states/commanded", "/joint_states/measured", "/tf", "/tf_static"}
+    # the log carries the trajectory it ran: its samples are the planned joint states and its scene the markers
+    assert set(bag) == {"/joint_states/commanded", "/joint_states/measured", "/joint_states/planned", "/scene", "/tf",
+                        "/tf_static"}
+    assert len(bag["/joint_states/planned"]) >= len(log["trajectory"]["points"])
     sent = [s for s in log["sent"] if s["cmd"].get("T") in (101, 102)]
     fb = [r for r in log["received"] if "feedback" in r]
     cmd, meas = bag["/joint_states/commanded"], bag["/joint_states/measured"]
@@ -224,7 +227,11 @@ def test_csv_of_trajectory_and_log(demo):
     out_log = d / "exec.csv"
     assert run_cli(["export", str(log_path), "-o", str(out_log)]) == 0
     rows = list(csv.DictReader(out_log.open()))
-    assert {r["source"] for r in rows} == {"commanded", "measured"}
+    assert {r["source"] for r in rows} == {"commanded", "measured", "planned"}  # planned: the trajectory it carries
+    # the same as with -t and the trajectory file
+    out_given = d / "exec_given.csv"
+    assert run_cli(["export", str(log_path), "-t", str(traj_path), "-o", str(out_given)]) == 0
+    assert out_given.read_text() == out_log.read_text()
 
 
 @pytest.mark.parametrize("name", ["x.txt", "x.png", "x.json"])

@@ -566,13 +566,13 @@ def test_execution_log_shows_the_measured_arm_as_a_ghost(chromium, planned, tmp_
     # the streamer's own tracking error (its time base: when the servos were read) is of the same size
     tracked = np.array([e["error_m"] for e in run["tracking"]])
     assert abs(np.sqrt(np.mean(error[inside] ** 2)) - np.sqrt(np.mean(tracked ** 2))) < 0.003
-    code, out = write_html(tmp_path, log, name="run.html")  # without the trajectory: commanded + measured, no scene
+    code, out = write_html(tmp_path, log, name="run.html")  # no -t: the log carries its trajectory and its table
     assert code == 0
     page, watch = br.open_page(chromium, out.as_uri())
     try:
         assert watch.errors == []
         assert page.is_visible("#ghost-toggle") and "mm" in page.inner_text("#r-ghost")
-        assert "no scene" in page.inner_text("#notes")
+        assert "table" in page.inner_text("#item-clearance") and "give" not in page.inner_text("#notes")
     finally:
         page.close()
 
@@ -599,15 +599,59 @@ def pick_place_run(planned, tmp_path_factory):
     return f, log
 
 
+def _older_log(log: Path, tmp_path: Path) -> Path:
+    """A copy of ``log`` as a roarmctl before logs carried their trajectory wrote it (no ``trajectory``)."""
+    data = json.loads(log.read_text())
+    del data["trajectory"]
+    old = tmp_path / f"older-{log.name}"
+    old.write_text(json.dumps(data))
+    return old
+
+
 @pytest.mark.slow
-def test_a_run_viewed_without_its_trajectory_agrees_with_the_cli(pick_place_run, tmp_path):
-    """A log viewed alone: its tracking figures are the run's (the CLI's summary, and those of the page made with
-    -t), not the distance to commands drawn when their lines were sent (they aim ~80 ms ahead on the plan: 10x too
-    high); the commanded TCP speed stays at the plan's peak (a tick's T:102 and gripper T:101 are one command, not a
-    jump in 0.1 ms); the note names an option visualize-path has, and with it the page has the scene and the marks."""
+def test_a_run_carries_its_trajectory_and_is_shown_whole_without_t(pick_place_run, tmp_path):
+    """A log of `execute` carries the trajectory it ran: viewed alone, its page is the page made with -t and the
+    trajectory file (scene, targets, marks, the commanded arm, the tracking against the plan), number for number;
+    visualize-path RUN -o NAME.html draws the cube and the grasp with no -t."""
     from roarmctl.viz.web.sources import load_view_source, source_document
 
     traj_file, log = pick_place_run
+    carried = source_document(load_view_source(log))
+    given = source_document(load_view_source(log, traj_file))
+    assert carried == given
+    assert [it["name"] for it in carried["items"]] == ["table", "cube"] and carried["targets"]
+    assert carried["ghost"]["error_source"] == "plan"
+    code, out = write_html(tmp_path, log, name="run.html")
+    assert code == 0
+    text = out.read_text()
+    assert '"name":"cube"' in text and '"kind":"grasp"' in text
+
+
+def test_a_damaged_carried_trajectory_is_refused_naming_the_field(pick_place_run, tmp_path, capsys):
+    """A log whose carried trajectory is damaged (a time that goes back) is refused with exit 2 and one line naming
+    the log's field; no page is written."""
+    _, log = pick_place_run
+    data = json.loads(log.read_text())
+    data["trajectory"]["points"][3]["time_from_start"] = -1.0
+    bad = tmp_path / "bad.exec.json"
+    bad.write_text(json.dumps(data))
+    code, out = write_html(tmp_path, bad, name="bad.html")
+    err = capsys.readouterr().err
+    assert code == 2 and not out.exists()
+    assert "trajectory" in err and "points[3]" in err and "Traceback" not in err
+
+
+@pytest.mark.slow
+def test_a_run_viewed_without_its_trajectory_agrees_with_the_cli(pick_place_run, tmp_path):
+    """A log that carries no trajectory (an older roarmctl's) viewed alone: its tracking figures are the run's (the
+    CLI's summary, and those of the page made with -t), not the distance to commands drawn when their lines were
+    sent (they aim ~80 ms ahead on the plan: 10x too high); the commanded TCP speed stays at the plan's peak (a
+    tick's T:102 and gripper T:101 are one command, not a jump in 0.1 ms); the note names an option visualize-path
+    has, and with it the page has the scene and the marks."""
+    from roarmctl.viz.web.sources import load_view_source, source_document
+
+    traj_file, log = pick_place_run
+    log = _older_log(log, tmp_path)
     run = json.loads(log.read_text())
     alone = source_document(load_view_source(log))
     whole = source_document(load_view_source(log, traj_file))
@@ -877,8 +921,10 @@ def test_physics_run_shows_the_simulated_arm_and_where_the_cube_went(planned, tm
     track = np.frombuffer(base64.b64decode(cube["track"]), dtype="<f4").reshape(doc["n"], 3, 4)
     assert np.linalg.norm(track[-1, :, 3] - [0.25, 0.15, 0.02]) < 0.010
     assert np.linalg.norm(track[0, :, 3] - [0.25, -0.15, 0.02]) < 0.002  # it started where it stood
-    # the run file alone carries its scene: the cube and where physics put it, the run's own tracking figures
-    alone = source_document(load_view_source(run))
+    # the run file alone carries its trajectory: the page is the one made with -t
+    assert source_document(load_view_source(run)) == doc
+    # one of an older roarmctl carries only its scene: the cube and where physics put it, the run's own tracking figures
+    alone = source_document(load_view_source(_older_log(run, tmp_path)))
     assert [it["name"] for it in alone["items"]] == [it["name"] for it in doc["items"]]
     (cube_alone,) = alone["ghost"]["items"]
     end = np.frombuffer(base64.b64decode(cube_alone["track"]), dtype="<f4").reshape(alone["n"], 3, 4)[-1, :, 3]

@@ -21,7 +21,7 @@ def register(app: typer.Typer) -> None:
         task: str | None = typer.Option(None, "--task", help="With --lerobot: the episode's instruction (default: the dataset's first task)."),
         fps: int | None = typer.Option(None, "--fps", help="With --lerobot: frames per second of a new dataset (default 30)."),
         trajectory: Path | None = typer.Option(None, "--trajectory", "-t",
-                                                  help="With an execution log: the trajectory it ran, added as planned joint states and scene."),
+                                                  help="With an execution log: the trajectory it ran, added as planned joint states and scene (a log carries its own; this is for an older roarmctl's log, which does not)."),
         force: bool = typer.Option(False, "--force", help="Replace an existing bag folder that roarmctl did not write "
                                    "(deleting everything in it)."),
         json_out: bool = typer.Option(False, "--json", help="Print one JSON object."),

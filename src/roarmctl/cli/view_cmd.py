@@ -24,7 +24,7 @@ def view(
     source: Path = typer.Argument(..., help="Trajectory (.traj.json), plan file (.yaml, planned first) or execution log (.exec.json).",
                                   show_default=False),
     trajectory: Path | None = typer.Option(None, "--trajectory", "-t",
-                                        help="With an execution log: the trajectory it ran (its scene, marks and commanded arm)."),
+                                        help="With an execution log: the trajectory it ran (its scene, marks and commanded arm), for a log that carries none (an older roarmctl's)."),
     port: int = typer.Option(0, "--port", help="TCP port on 127.0.0.1 (0: a free one)."),
     open_browser: bool = typer.Option(False, "--open", help="Also open the page in the default web browser."),
 ) -> None:

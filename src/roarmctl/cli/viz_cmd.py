@@ -60,7 +60,7 @@ def visualize_path(
     dpi: float = typer.Option(100.0, "--dpi", help="Pixels per inch of the PNG."),
     size: str = typer.Option("16x10", "--size", help="Sheet size WxH in inches (pixels = size x dpi)."),
     trajectory: Path | None = typer.Option(None, "--trajectory", "-t",
-                                        help="With an execution log and -o NAME.html: the trajectory it ran (its scene, marks and commanded arm)."),
+                                        help="With an execution log and -o NAME.html: the trajectory it ran (its scene, marks and commanded arm), for a log that carries none (an older roarmctl's)."),
 ) -> None:
     """Draw a planned trajectory (PNG, SVG or PDF): 3D scene and TCP path, joint curves, TCP speed, manipulability.
     With -o NAME.html: the interactive 3D view as one self-contained page (no server, no network), also of an

@@ -10,6 +10,13 @@ was, or null), ``speed_scale`` in (0, 1], ``t0_monotonic`` (s), what the writer 
 the streamer's summary and tracking, teach's waypoints, the physics report), ``sent`` (``{"t", "cmd", ...}``, every
 command sent) and ``received`` (``{"t", "line", "feedback"?, "read_t"?, ...}``, every line read); times ``t`` in s
 after ``t0_monotonic``. A robot not bundled is carried as ``robot_description`` (``roarmctl.robot.bundle``).
+
+A run of a trajectory (``execute``, ``simulate``) carries it whole as ``trajectory``: the document of the trajectory
+that ran (``roarmctl.trajectory/1`` without its ``robot_description``, which is the log's), so the log alone is the
+run with its scene, targets and marks. A copy, not a path and digest: the trajectory that ran is not always a file
+(``execute --from-current`` plans its first motion again from the arm's pose; ``execute`` takes a plan file), a
+path goes stale when files move, and a reader would otherwise open a file that a log names. A log of an older
+roarmctl has none: its readers take the trajectory from the user (``-t``).
 """
 
 from __future__ import annotations
@@ -17,12 +24,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from roarmctl.errors import TrajectoryFileError
 from roarmctl.fileio import atomic_write_json
 from roarmctl.formats import MAX_DURATION, MAX_POINTS, MIN_SPEED_SCALE, read_document
 from roarmctl.validation import Checker, HugeNumber
+
+if TYPE_CHECKING:
+    from roarmctl.motion.trajectory import Trajectory
 
 FORMAT = "roarmctl.execlog/1"
 MAX_LOG_ENTRIES = 10 * MAX_POINTS  # commands sent and lines received
@@ -51,6 +61,8 @@ class ExecLog:
     kind: str | None = None
     robot_description: dict[str, Any] | None = None
     details: dict[str, Any] = field(default_factory=dict)
+    #: the trajectory that ran (``trajectory_document``), None for a run of no trajectory (teach)
+    trajectory: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The ``roarmctl.execlog/1`` document (plain JSON values)."""
@@ -61,7 +73,32 @@ class ExecLog:
         if self.robot_description is not None:  # a robot not bundled, carried (roarmctl.robot.bundle)
             head["robot_description"] = self.robot_description
         head |= {"speed_scale": self.speed_scale, "t0_monotonic": self.t0_monotonic}
-        return head | self.details | {"sent": self.sent, "received": self.received}
+        body = self.details | ({"trajectory": self.trajectory} if self.trajectory is not None else {})
+        return head | body | {"sent": self.sent, "received": self.received}
+
+
+def trajectory_document(traj: Trajectory) -> dict[str, Any]:
+    """The document a log carries of the trajectory that ran: its file's, without the ``robot_description`` (the
+    log carries the run's robot once, at its top)."""
+    doc = traj.to_dict()
+    doc.pop("robot_description", None)
+    return doc
+
+
+def carried_trajectory(log: dict[str, Any], where: str = "execution log") -> Trajectory | None:
+    """The trajectory a log carries (``trajectory``), checked in form by the one trajectory reader
+    (``roarmctl.motion.validate.parse_document``: its bounds on size and values), with the log's robot description;
+    None for a log without one (teach, or an older roarmctl's). A damaged one raises ``TrajectoryFileError`` naming
+    the log's field."""
+    doc = log.get("trajectory")
+    if doc is None:
+        return None
+    from roarmctl.motion.validate import parse_document
+
+    CHECK.mapping(doc, where, "trajectory")
+    traj = parse_document(doc, f"{where}: trajectory")
+    traj.robot_description = log.get("robot_description")
+    return traj
 
 
 def write_log(path: str | Path, log: ExecLog | dict[str, Any]) -> Path:

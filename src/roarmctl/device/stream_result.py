@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.device import protocol
-from roarmctl.device.execlog import ExecLog
+from roarmctl.device.execlog import ExecLog, trajectory_document
 from roarmctl.robot.frames import device_point, to_frame
 
 if TYPE_CHECKING:
@@ -125,4 +125,5 @@ def run_log(s: Streamer, res: Result) -> dict[str, Any]:
             "firmware_line_time_s": round(s.pacer.line_time, 6), "rate_changes": s.rate_changes,
             "hold": hold, "summary": res.summary(), "notes": s.notes, "final_pose": pose_in_frames(s),
             "tracking": [{"t": round(t, 6), "error_m": round(e, 6)} for t, e in s.tracking]},
+        trajectory=trajectory_document(s.traj),  # the one that ran (replanned from the arm's pose, maybe)
         sent=sent, received=received).to_dict()

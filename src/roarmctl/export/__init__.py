@@ -75,12 +75,28 @@ def streams_for(source: str | os.PathLike | Any, trajectory: str | os.PathLike |
             raise InputError("--trajectory goes with an execution log, not with a trajectory",
                              "export the trajectory by itself, or give the .exec.json it produced")
         return trajectory_streams(data, robot_of(data, str(source)))
-    traj = None
+    traj, robot = run_trajectory(data, str(source), trajectory)
+    return log_streams(data, robot, traj)
+
+
+def run_trajectory(log: dict[str, Any], where: str, trajectory: str | os.PathLike | Any | None = None
+                   ) -> tuple[Any, Robot]:
+    """The trajectory a logged run executed and the run's robot: ``trajectory`` (a file or a ``Trajectory``) when
+    given, else the one the log carries (``device.execlog.carried_trajectory``, checked against the log's robot as
+    a trajectory file is), else None (a log of teach, or of a roarmctl before logs carried it)."""
+    from roarmctl.device.execlog import carried_trajectory
+    from roarmctl.motion.validate import check_against_robot
+
     if trajectory is not None:
         tkind, traj = load_source(trajectory)
         if tkind != "trajectory":
             raise InputError(f"--trajectory {trajectory}: not a trajectory file", "give the .traj.json that was executed")
-    return log_streams(data, log_robot(data, str(source), traj, str(trajectory)), traj)
+        return traj, log_robot(log, where, traj, str(trajectory))
+    traj = carried_trajectory(log, where)
+    robot = log_robot(log, where)
+    if traj is not None:
+        check_against_robot(traj, robot, f"{where}: trajectory")
+    return traj, robot
 
 
 def log_robot(log: dict[str, Any], where: str, traj: Any = None, traj_where: str = "trajectory") -> Robot:

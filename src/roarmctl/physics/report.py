@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roarmctl.device.execlog import ExecLog
+from roarmctl.device.execlog import ExecLog, trajectory_document
 from roarmctl.device.fwmath import firmware_fk, position_to_rad
 from roarmctl.device.protocol import M3_FEEDBACK_KEYS, M3_FIELDS, WireMap
 from roarmctl.device.sag import offsets as sag_offsets
@@ -294,7 +294,7 @@ def run_log(traj: Trajectory, robot: Robot, setup: Setup, rec: Recording, option
             "final_pose": {"world_m": [_r(v, 6) for v in robot.kin.fk(rec.q[-1])[:3, 3]]},
             "tracking": tracking,
             "physics": report | {"tracks": tracks, "scene": traj.scene}},
-        sent=sent, received=received).to_dict()
+        trajectory=trajectory_document(traj), sent=sent, received=received).to_dict()
     json.dumps(log, allow_nan=False)  # a NaN in a report is a bug: fail here, not in the reader
     return log
 

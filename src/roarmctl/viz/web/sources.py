@@ -15,7 +15,7 @@ import numpy as np
 
 from roarmctl.device.schedule import STRATEGIES, plan_clock, strategy_rate, target_offset
 from roarmctl.errors import InfeasibleError, InputError, TrajectoryFileError
-from roarmctl.export import load_source, log_robot
+from roarmctl.export import load_source, run_trajectory
 from roarmctl.export.streams import JointStates, log_streams
 from roarmctl.motion.pipeline import plan_file
 from roarmctl.motion.trajectory import Trajectory
@@ -130,12 +130,7 @@ def load_view_source(path: str | os.PathLike, trajectory: str | os.PathLike | No
 
 
 def _log_source(log: dict[str, Any], path: Path, trajectory: str | os.PathLike | None) -> ViewSource:
-    traj = None
-    if trajectory is not None:
-        tkind, traj = load_source(trajectory)
-        if tkind != "trajectory":
-            raise InputError(f"--trajectory {trajectory}: not a trajectory file", "give the .traj.json that was executed")
-    robot = log_robot(log, str(path), traj, str(trajectory))
+    traj, robot = run_trajectory(log, str(path), trajectory)  # -t's file, else the one the log carries
     streams = log_streams(log, robot, traj)
     measured = streams.joint_states["measured"]
     notes = [f"execution log {path.name}: {len(streams.joint_states['commanded'].times)} commands, {len(measured.times)} feedback frames"]
@@ -152,9 +147,11 @@ def _log_source(log: dict[str, Any], path: Path, trajectory: str | os.PathLike |
         scene = log["physics"].get("scene") if isinstance(log.get("physics"), dict) else None
         if isinstance(scene, dict):  # a physics run carries its scene: drawn, checked as a trajectory's is
             main = parse_document(main.to_dict() | {"scene": scene}, f"{path}: physics")
-            notes.append("no targets: give -t/--trajectory with the .traj.json this run executed")
+            notes.append("no targets (a log of an older roarmctl carries no trajectory): "
+                         "give -t/--trajectory with the .traj.json this run executed")
         else:
-            notes.append("no scene, targets or objects: give -t/--trajectory with the .traj.json this run executed")
+            notes.append("no scene, targets or objects (a log of an older roarmctl carries no trajectory): "
+                         "give -t/--trajectory with the .traj.json this run executed")
     ghost = _physics_ghost(log, robot, path)
     if ghost is None and len(measured.times):
         times, positions = measured.times, measured.positions  # when the servos were read, on the run's clock
