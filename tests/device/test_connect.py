@@ -160,3 +160,27 @@ def test_torque_off_or_supply_out_of_range_is_refused_before_any_motion(short, c
         moved = [c for _, c in sim.received() if c.get("T") in MOTION]
     err = capsys.readouterr().err
     assert rc == 4 and words in err and err.count("\n") == 1 and not moved
+
+
+@pytest.mark.parametrize("cfg,found,how", [
+    (SimConfig(boot=True, time_factor=0.5, boot_mission=('{"T":114,"led":64}', '{"T":301,"mode":1}')), 1,
+     "listed at start-up"),
+    (SimConfig(), 3, 'read with {"T":602}'),
+    (SimConfig(firmware="m3-2026"), 3, 'read with {"T":602}'),
+])
+def test_the_esp_now_mode_found_at_connect_is_given_back_when_the_link_closes(cfg, found, how):
+    """Connecting leaves ESP-NOW (no leader may drive the arm during a run); closing gives back the mode the boot
+    mission set (a leader set-up here) or the firmware's default, follower. Before, it stayed off until a reboot."""
+    with PtySimulator(cfg, process=True) as sim:
+        link = Link(sim.path).open()
+        info = link.connect()
+        before_close = sim.state()["esp_now_mode"]
+        link.close()
+        time.sleep(0.2)
+        after = sim.state()["esp_now_mode"]
+        asked = [c for _, _, c in sim.executed() if c.get("T") == 602]
+    assert before_close == 0 and after == found
+    assert info.esp_now is not None and info.esp_now.mode == found and how in info.esp_now.source
+    assert bool(asked) == (how != "listed at start-up")  # the start-up text already listed it: not asked again
+    logged = info.as_dict()["esp_now"]
+    assert logged["found"] == found and logged["restored_on_close"] is True

@@ -60,6 +60,7 @@ from typing import Any
 
 import numpy as np
 
+from roarmctl.device.espnow import boot_mission_listing
 from roarmctl.device.fwmath import (
     INIT_RAD,
     command_to_goal,
@@ -435,6 +436,8 @@ class Firmware:
         elif code == 301:
             if int(num("mode")) in (0, 1, 2, 3):
                 self.esp_now_mode = int(num("mode"))
+        elif code == 602:  # CMD_BOOT_MISSION_INFO: missionContent("boot")
+            c = self._list_boot_mission(c)
         elif code == 210:
             if self.queued_build and not num("cmd"):  # Move_to_location(), then release
                 self._set_goals_steps(range(6), REST_STEPS, 600, 20)
@@ -538,7 +541,13 @@ class Firmware:
         self._block(t0, self.booting_until - t0, during=during)
         self._serial_task_from = self.booting_until
 
+    def _list_boot_mission(self, c: float) -> float:
+        for text in boot_mission_listing(self.cfg.boot_mission):
+            c = self.println(text, c)
+        return c
+
     def _boot_mission(self) -> None:
+        self._list_boot_mission(self.now)  # missionPlay lists the mission before it plays it (A:253-254)
         waiting = bool(self._rx_lines) or bool(self._rx_partial)
         self.boot_mission_aborted = waiting and bool(self.cfg.boot_mission)
         if waiting:

@@ -20,7 +20,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from roarmctl.device import protocol
+from roarmctl.device import espnow, protocol
+from roarmctl.device.espnow import EspNowMode
 from roarmctl.device.feedback import MAX_SUPPLY_V, MIN_SUPPLY_V
 from roarmctl.device.protocol import Feedback, LineBuffer, encode, parse_feedback_report, wire_seconds
 from roarmctl.errors import DeviceError
@@ -52,6 +53,7 @@ class LinkTimings:
     after_setup: float = 0.5  # after the set-up's last line (the MAC address): its boot mission starts; then probe
     quiet_confirm: float = 0.15  # T:605 took effect when no unsolicited frame came for this long
     silent_after: float = 2.0  # no answer to T:105 probes within this -> device silent
+    mission_wait: float = 0.5  # the longest the boot mission's listing ({"T":602}) is waited for
 
 
 @dataclass
@@ -78,6 +80,7 @@ class DeviceInfo:
     torque: dict[str, int] | None = None  # torque-enable flag per joint, builds that report it
     sent: list[str] = field(default_factory=list)  # what connect() sent, in order
     waited: str | None = None  # what connect() waited for before its first line, in one sentence
+    esp_now: EspNowMode | None = None  # the ESP-NOW mode found at connect, given back when the link closes
 
     @property
     def build(self) -> str:
@@ -98,7 +101,8 @@ class DeviceInfo:
         return {"firmware": self.firmware, "build": self.build, "rtt_s": round(self.rtt, 5),
                 "line_time_s": round(self.line_time, 5), "queued": self.queued, "streamed_unasked": self.streamed,
                 "was_booting": self.booted, "voltage_v": self.voltage, "torque": self.torque, "sent": self.sent,
-                "waited_for": self.waited}
+                "waited_for": self.waited,
+                "esp_now": None if self.esp_now is None else dict(self.esp_now.as_dict(), restored_on_close=True)}
 
 
 class Link:
@@ -125,6 +129,7 @@ class Link:
         self.closed = False
         self._restore_info_print: int | None = None
         self.waited: str | None = None  # what connect() waited for before its first line
+        self.esp_now: EspNowMode | None = None  # the ESP-NOW mode found at connect (given back on close)
 
     # ------------------------------------------------------------------ open
     def open(self) -> Link:
@@ -177,14 +182,18 @@ class Link:
         return DeviceError(f"cannot open serial port {self.port}: {text}")
 
     def close(self) -> None:
-        """Give the firmware its feedback stream back (when it had one) and close the port."""
+        """Give the firmware its ESP-NOW mode (as found at connect) and its feedback stream (when it had one) back,
+        and close the port."""
         if self.ser is not None and not self.closed:
+            restore = [] if self.esp_now is None else [{"T": 301, "mode": self.esp_now.mode}]
             if self._restore_info_print is not None:
-                try:
-                    self.send({"T": 605, "cmd": self._restore_info_print})
-                    self.ser.flush()
-                except Exception:  # noqa: BLE001 - a dead port: nothing to restore
-                    pass
+                restore.append({"T": 605, "cmd": self._restore_info_print})
+            try:
+                for cmd in restore:
+                    self.send(cmd)
+                self.ser.flush()
+            except Exception:  # noqa: BLE001 - a dead port: nothing to restore
+                pass
             self.closed = True
             try:
                 self.ser.close()
@@ -301,7 +310,8 @@ class Link:
            stretch before the first probe;
         2. ``{"T":605,"cmd":0}`` and confirm it (no unasked frame for ``quiet_confirm``);
         3. ``{"T":301,"mode":0}``: leave ESP-NOW follower mode (the default, C:16), so no leader arm
-           nearby can drive this one during the run;
+           nearby can drive this one during the run; the mode found (``roarmctl.device.espnow``: the boot
+           mission's, read from the start-up text or with ``{"T":602}``) is given back by ``close()``;
         4. measure the T:105 round trip and the firmware's time per command line, and tell the build
            from its answers (the 20260701 build adds torque flags and supply voltage to T:1051 and
            queues one line per loop pass);
@@ -337,6 +347,7 @@ class Link:
             sent.append("T:605 cmd 0")
         first = self._probe()
         self._check_model(first.feedback)
+        self.esp_now = self._find_esp_now(sent)
         self.send({"T": 301, "mode": 0})
         sent.append("T:301 mode 0")
         rtt, line_time = self._measure()
@@ -354,7 +365,8 @@ class Link:
             v = protocol.number(fb.raw.get("v"))
             voltage = None if v is None else v / 100.0
             torque = {k: int(protocol.number(fb.raw.get(k)) or 0) for k in fb.raw if k.startswith("torswitch")}
-        info = DeviceInfo(fb.firmware, rtt, line_time, queued, streamed, booted, fb, voltage, torque, sent, self.waited)
+        info = DeviceInfo(fb.firmware, rtt, line_time, queued, streamed, booted, fb, voltage, torque, sent, self.waited,
+                          self.esp_now)
         self.info = info
         self.firmware = fb.firmware
         self._check_power(info)
@@ -384,6 +396,21 @@ class Link:
         last = f" (last text: {self.boot_text[-1][:40]!r})" if self.boot_text else ""
         self.waited = f"waited {t.boot_timeout:.0f} s for the arm's set-up to end, without its last line{last}; probing"
         return []
+
+    def _find_esp_now(self, sent: list[str]) -> EspNowMode:
+        """The ESP-NOW mode the arm's boot mission set: from its listing in the start-up text, else from the listing
+        ``{"T":602}`` prints (read until its end line, at most ``mission_wait`` s), else the firmware's default."""
+        if espnow.listing_ended(self.boot_text):
+            found = espnow.mode_from_listing(self.boot_text, "listed at start-up")
+            if found is not None:
+                return found
+        self.send(espnow.BOOT_MISSION_INFO)
+        sent.append("T:602 (boot mission)")
+        text: list[str] = []
+        end = self.clock() + self.timings.mission_wait
+        while self.clock() < end and not espnow.listing_ended(text):
+            text += [r.line for r in self.read_for(0.02) if r.feedback is None]
+        return espnow.mode_from_listing(text, 'read with {"T":602}') or espnow.unread()
 
     def _quiet(self, sent: list[str]) -> None:
         """T:605 cmd 0, confirmed by a window without unasked frames (up to three tries)."""
