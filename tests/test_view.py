@@ -112,8 +112,8 @@ def test_clearance_of_a_sphere_is_the_closed_form_distance_to_the_nearest_box():
 
 def test_every_items_distance_and_the_closest_points_are_the_closed_form():
     """Two balls beside the arm at three poses: the page's distance of *each* item (not only the nearest) is the
-    closed-form point-to-box distance minus the radius over every collision box, and the closest-point pair drawn
-    in 3D spans the nearest distance and ends on the nearest ball's surface."""
+    closed-form point-to-box distance minus the radius over every collision box, and each item's closest-point pair
+    drawn in 3D spans that item's distance, ends on its ball's surface and starts on the surface of an arm box."""
     from roarmctl.motion.trajectory import Trajectory
     from roarmctl.robot.loader import load_robot
     from roarmctl.viz.web.document import view_document
@@ -127,15 +127,17 @@ def test_every_items_distance_and_the_closest_points_are_the_closed_form():
     doc = view_document(traj, robot)
     n = doc["n"]
     each = _decode(doc["item_clearance"]).reshape(n, 2)
-    pts = _decode(doc["closest_points"]).reshape(n, 2, 3)
+    pts = _decode(doc["item_points"]).reshape(n, 2, 2, 3)
     frames = robot.kin.link_frames(qs)
     for i in range(n):
-        expect = [max(min(_point_box_distance(c, frames[i, robot.kin.link_index[s.link]] @ s.origin, s.size)
-                          for s in robot.collision) - r, 0.0) for _, c, r in balls]
+        boxes = [(frames[i, robot.kin.link_index[s.link]] @ s.origin, s.size) for s in robot.collision]
+        expect = [max(min(_point_box_distance(c, *box) for box in boxes) - r, 0.0) for _, c, r in balls]
         assert each[i] == pytest.approx(expect, abs=2e-6)
-        k = int(np.argmin(expect))
-        assert np.linalg.norm(pts[i, 0] - pts[i, 1]) == pytest.approx(expect[k], abs=2e-6)
-        assert np.linalg.norm(pts[i, 1] - balls[k][1]) == pytest.approx(balls[k][2], abs=2e-6)
+        assert min(expect) > 0  # nothing touches: every item has its pair
+        for k, (_, c, r) in enumerate(balls):
+            assert np.linalg.norm(pts[i, k, 0] - pts[i, k, 1]) == pytest.approx(expect[k], abs=2e-6)
+            assert np.linalg.norm(pts[i, k, 1] - c) == pytest.approx(r, abs=2e-6)
+            assert min(_point_box_distance(pts[i, k, 0], *box) for box in boxes) < 2e-6
 
 
 def test_clearance_to_a_mesh_and_a_cloud_agrees_with_the_same_box():
@@ -769,7 +771,8 @@ def test_clearance_strip_goes_to_the_tightest_moment_and_tells_intended_contact(
     """plans/pick_place.yaml: "min" goes to the smallest clearance that is not intended contact (found here from the
     page's per-item arrays and the plan's segments: the jaws on the cube and the cube on the table from its
     descent to its lift, and from its lowering to the retreat, are meant); the panel reads every item's distance
-    there, the 3D label the nearest's; at the grasp the cube's contact reads as intended, not as a violation."""
+    there, and every item's closest-point pair is drawn in 3D with its distance (on screen, in its colour); at the
+    grasp the cube's contact reads as intended, not as a violation, and on the way down its pair is drawn green."""
     f, traj = planned["pick_place"]
     code, out = write_html(tmp_path, f)
     assert code == 0
@@ -796,15 +799,51 @@ def test_clearance_strip_goes_to_the_tightest_moment_and_tells_intended_contact(
         rows = page.locator("#item-clearance tbody tr").all()
         for kk, row in enumerate(rows):
             assert row.locator("td").nth(1).inner_text() == f"{1000 * each[i, kk]:.1f} mm"
-        assert f"{1000 * each[i].min():.1f} mm" in page.locator(".label.gap").inner_text()
+        _check_gaps(page, doc, i)
         grasp = next(e for e in doc["events"] if e["kind"] == "grasp")["index"]
         page.evaluate(f"window.roarmView.setIndex({grasp - 1})")
         cube = rows[names.index("cube")]
         assert "intended" in cube.locator("td").nth(2).inner_text()
         assert cube.locator("td").nth(1).get_attribute("class") == "intended"
+        # on the way down to the cube (intended contact, not yet touching): its pair is drawn in the intended green
+        down = [j for j in range(grasp) if meant[j, names.index("cube")] and each[j, names.index("cube")] > 0]
+        assert down
+        gaps = _check_gaps(page, doc, down[len(down) // 2])
+        assert gaps[names.index("cube")]["color"] == "#1a9850"
         assert watch.errors == []
     finally:
         page.close()
+
+
+def _check_gaps(page, doc: dict, i: int) -> dict[int, dict]:
+    """At sample ``i``: one closest-point pair is drawn per item the arm does not touch (item -> the page's pair),
+    each the document's pair (FCL's, checked against closed forms above), its label the item's distance in mm, and
+    its line on screen: pixels of its colour where the camera projects the pair's points (labels hidden)."""
+    page.evaluate(f"window.roarmView.setIndex({i})")
+    n, m = doc["n"], len(doc["items"])
+    each = _decode(doc["item_clearance"]).reshape(n, m)[i]
+    pts = _decode(doc["item_points"]).reshape(n, m, 2, 3)[i]
+    gaps = {g["item"]: g for g in page.evaluate("window.roarmView.gaps()")}
+    assert set(gaps) == {k for k in range(m) if each[k] > 0 and np.isfinite(pts[k]).all()} and len(gaps) >= 1
+    for k, g in gaps.items():
+        assert np.allclose([g["from"], g["to"]], pts[k], atol=1e-6)
+        assert page.locator(f'.label.gap[data-item="{k}"]').inner_text() == f"{1000 * each[k]:.1f} mm"
+    page.evaluate("document.getElementById('labels').style.visibility = 'hidden'")
+    try:
+        state = page.evaluate("window.roarmView.state()")
+        image = br.screenshot(page).astype(int)
+    finally:
+        page.evaluate("document.getElementById('labels').style.visibility = ''")
+    for k, g in gaps.items():
+        a, b = br.project(state, g["from"]), br.project(state, g["to"])
+        colour = np.array([int(g["color"][j:j + 2], 16) for j in (1, 3, 5)])
+        hits = 0
+        for f in (0.3, 0.5, 0.7):  # along the line, away from its ends (the TCP dot sits on one of them)
+            x, y = np.round(a + f * (b - a)).astype(int)
+            window = image[y - 2:y + 3, x - 2:x + 3]
+            hits += bool(np.any(np.all(np.abs(window - colour) <= 3, axis=-1)))
+        assert hits >= 2, (k, g)
+    return gaps
 
 
 def test_software_gl_draws_without_multisampling_in_few_draw_calls(chromium, planned, tmp_path):

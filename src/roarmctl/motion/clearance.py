@@ -41,11 +41,13 @@ class Clearance:
     part: np.ndarray
     parts: list[str]
     #: with ``per_item``: (N, M) m each item's own smallest distance (``inf``: not measured at that sample), the
-    #: moving part nearest each item (N, M) (-1: none), and the nearest pair's closest points (N, 2, 3) m in the
-    #: world, on the moving part first (NaN where nothing is measured or the nearest pair touches)
+    #: moving part nearest each item (N, M) (-1: none), each item's closest-point pair (N, M, 2, 3) m in the world,
+    #: on the moving part first, and the nearest item's pair (N, 2, 3) (NaN where nothing is measured or the pair
+    #: touches: FCL's points are no pair of closest points then)
     item_distance: np.ndarray | None = None
     item_part: np.ndarray | None = None
     points: np.ndarray | None = None
+    item_points: np.ndarray | None = None
 
 
 @dataclass
@@ -121,8 +123,9 @@ def clearance(robot: Robot, items: list[SceneItem], q: np.ndarray, item_poses: n
     each = np.full((n, m), np.inf) if per_item else None
     each_part = np.full((n, m), -1, dtype=int) if per_item else None
     points = np.full((n, 2, 3), np.nan) if per_item else None
+    each_points = np.full((n, m, 2, 3), np.nan) if per_item else None
     if not moving or not fixed:
-        return Clearance(dist, best_item, best_part, parts, each, each_part, points)
+        return Clearance(dist, best_item, best_part, parts, each, each_part, points, each_points)
     base = set(robot.base_links)
     owner_m = np.array([s.owner for s in moving])
     owner_f = np.array([s.owner for s in fixed])
@@ -153,12 +156,13 @@ def clearance(robot: Robot, items: list[SceneItem], q: np.ndarray, item_poses: n
             continue
         order = cand[np.argsort(gap[i].ravel()[cand], kind="stable")]
         if per_item:
-            assert each is not None and each_part is not None and points is not None
+            assert each is not None and each_part is not None and points is not None and each_points is not None
             _per_item_sample(i, order, nf, gap, moving, fixed, mpose, fpose, owner_m, owner_f, request, each[i],
-                             each_part[i], points)
+                             each_part[i], each_points[i])
             k = int(np.argmin(each[i]))
             if np.isfinite(each[i, k]):
                 dist[i], best_part[i], best_item[i] = each[i, k], each_part[i, k], k
+                points[i] = each_points[i, k]
             continue
         best, ba, bk = np.inf, -1, -1
         for flat in order:
@@ -173,16 +177,15 @@ def clearance(robot: Robot, items: list[SceneItem], q: np.ndarray, item_poses: n
             if best == 0.0:
                 break
         dist[i], best_part[i], best_item[i] = best, ba, bk
-    return Clearance(dist, best_item, best_part, parts, each, each_part, points)
+    return Clearance(dist, best_item, best_part, parts, each, each_part, points, each_points)
 
 
 def _per_item_sample(i: int, order: np.ndarray, nf: int, gap: np.ndarray, moving: list[_Solid], fixed: list[_Solid],
                      mpose: np.ndarray, fpose: np.ndarray, owner_m: np.ndarray, owner_f: np.ndarray,
                      request: fcl.DistanceRequest, each: np.ndarray, each_part: np.ndarray, points: np.ndarray) -> None:
-    """Sample ``i``'s smallest distance per item into ``each`` (M,) and ``each_part`` (M,), and the nearest pair's
-    closest points into ``points[i]``: per item its pairs in ``order`` (by their lower bound), stopping once the bound
+    """Sample ``i``'s smallest distance per item into ``each`` (M,) and ``each_part`` (M,), and each item's closest
+    points into ``points`` (M, 2, 3): per item its pairs in ``order`` (by their lower bound), stopping once the bound
     reaches that item's best (a point cloud's thousands of blocks cost a few FCL calls, not a Python step each)."""
-    best_all = np.inf
     bounds = gap[i].ravel()[order]
     owners = owner_f[order % nf]
     for k in np.unique(owners):
@@ -195,10 +198,8 @@ def _per_item_sample(i: int, order: np.ndarray, nf: int, gap: np.ndarray, moving
             fixed[b].obj.setTransform(fcl.Transform(fpose[i, b, :3, :3], fpose[i, b, :3, 3]))
             result = fcl.DistanceResult()
             d = max(float(fcl.distance(moving[a].obj, fixed[b].obj, request, result)), 0.0)
-            if d < each[k]:
+            if d < each[k]:  # touching or overlapping: FCL's points are not a pair of closest points then
                 each[k], each_part[k] = d, int(owner_m[a])
-            if d < best_all:  # touching or overlapping: FCL's points are not a pair of closest points then
-                best_all = d
-                points[i] = np.asarray(result.nearest_points, dtype=float) if d > 0 else np.nan
+                points[k] = np.asarray(result.nearest_points, dtype=float) if d > 0 else np.nan
             if d == 0.0:
                 break

@@ -168,7 +168,7 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
     items, item_poses, carried = _item_tracks(traj, robot, times)
     scene_items = [SceneItem.from_dict(it) for it in items]
     clear = clearance(robot, scene_items, q, item_poses, carried, per_item=True)
-    assert clear.item_distance is not None and clear.item_part is not None and clear.points is not None
+    assert clear.item_distance is not None and clear.item_part is not None and clear.item_points is not None
     intended = intended_contact(traj, times, carried, clear.item_part, len(robot.collision))
 
     speed = data.tcp_speed[idx]
@@ -246,11 +246,11 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         "torque_share": None if shares is None else _f32(shares[idx]),
         "clearance": _f32(nearest),
         # (n, M) each item's own distance (m, -1: not measured), its nearest moving part, whether it is intended
-        # contact (uint8), the nearest pair's closest points (n, 6) m; the plan's padding (m)
+        # contact (uint8), each item's closest-point pair (n, M, 6) m, on the moving part first; the plan's padding (m)
         "item_clearance": _f32(np.where(np.isfinite(clear.item_distance), clear.item_distance, -1.0)),
         "item_part": _f32(clear.item_part),
         "intended": base64.b64encode(intended.astype(np.uint8).tobytes()).decode("ascii"),
-        "closest_points": _f32(clear.points.reshape(n, 6)),  # NaN: none, or touching
+        "item_points": _f32(clear.item_points.reshape(n, len(items) * 6)),  # NaN: none, or touching
         "padding": _padding(traj),
         "nearest_item": [int(v) for v in clear.item],
         "nearest_part": [int(v) for v in clear.part],

@@ -27,11 +27,14 @@
   const ICLEAR = D.item_clearance ? f32(D.item_clearance) : new Float32Array(N * M).fill(-1);
   const IPART = D.item_part ? f32(D.item_part) : new Float32Array(N * M).fill(-1);
   const INTENDED = D.intended ? bytes(D.intended) : new Uint8Array(N * M);
-  const CPTS = D.closest_points ? f32(D.closest_points) : null;
+  const IPTS = D.item_points ? f32(D.item_points) : new Float32Array(N * M * 6).fill(NaN);  // (N, M, 6) m
   const PAD = D.padding;
   const ITEM_PALETTE = ['#1f77b4', '#ff7f0e', '#9467bd', '#8c564b', '#e377c2', '#7f7f7f', '#bcbd22', '#17becf'];
   const INTENDED_COLOR = '#1a9850', TIGHT_COLOR = '#d62728';
   const itemColor = (k) => ITEM_PALETTE[k % ITEM_PALETTE.length];
+  const tight = (d) => (PAD !== null && PAD !== undefined && d < PAD) || d < 0.005;  // closer than the padding, or 5 mm
+  // an item's colour at a sample: green where the distance is contact the plan means, red where it is tight
+  const gapColor = (k, d, meant) => (meant ? INTENDED_COLOR : tight(d) ? TIGHT_COLOR : itemColor(k));
   // the smallest clearance that is not intended contact: where "min" goes
   const MINIMUM = (() => {
     let best = { index: -1, item: -1, distance: Infinity };
@@ -334,18 +337,48 @@
     scene.add(ghostDot);
   }
 
-  // The nearest pair's closest points at the cursor: a line in 3D with its distance (drawn over everything).
+  // Every item's closest-point pair at the cursor: a line in 3D with its distance at its middle, drawn over
+  // everything, in the item's colour (the strip's and the panel's), green where it is contact the plan means, red
+  // where it is tight. One line object for all of them: the pairs shown are packed first, the draw range ends there.
   const gapGeom = new THREE.BufferGeometry();
-  gapGeom.setAttribute('position', new THREE.BufferAttribute(new Float32Array(6), 3));
-  const gapLine = new THREE.Line(gapGeom, new THREE.LineBasicMaterial({ color: TIGHT_COLOR, depthTest: false, transparent: true }));
-  gapLine.renderOrder = 11;
-  gapLine.frustumCulled = false;
-  scene.add(gapLine);
-  const gapLabel = document.createElement('div');
-  gapLabel.className = 'label gap';
-  $('labels').appendChild(gapLabel);
-  const gapAnchor = { div: gapLabel, anchor: new THREE.Vector3(), dynamic: true };
-  labels.push(gapAnchor);
+  gapGeom.setAttribute('position', new THREE.BufferAttribute(new Float32Array(6 * Math.max(M, 1)), 3));
+  gapGeom.setAttribute('color', new THREE.BufferAttribute(new Float32Array(6 * Math.max(M, 1)), 3));
+  const gapLines = new THREE.LineSegments(gapGeom, new THREE.LineBasicMaterial({ vertexColors: true, depthTest: false, transparent: true }));
+  gapLines.renderOrder = 11;
+  gapLines.frustumCulled = false;
+  scene.add(gapLines);
+  const gapLabels = D.items.map((item, k) => {
+    const div = document.createElement('div');
+    div.className = 'label gap';
+    div.dataset.item = String(k);
+    $('labels').appendChild(div);
+    const anchor = { div: div, anchor: new THREE.Vector3(), dynamic: true, hidden: true };
+    labels.push(anchor);
+    return anchor;
+  });
+  let gapsShown = [];  // what the lines show now: [{item, from, to, distance, color}] (for roarmView.gaps)
+  function showGaps(i) {
+    const pos = gapGeom.attributes.position.array, col = gapGeom.attributes.color.array, colour = new THREE.Color();
+    gapsShown = [];
+    for (let k = 0; k < M; k++) {
+      const d = ICLEAR[i * M + k], o = 6 * (i * M + k), at = gapLabels[k];
+      // touching (no pair of closest points), not measured, or its item hidden: no line
+      at.hidden = !(d > 0 && Number.isFinite(IPTS[o]) && items[k].group.visible);
+      if (at.hidden) continue;
+      const c = gapColor(k, d, INTENDED[i * M + k]), e = 6 * gapsShown.length;
+      colour.set(c);
+      for (let v = 0; v < 6; v++) pos[e + v] = IPTS[o + v];
+      col[e] = col[e + 3] = colour.r; col[e + 1] = col[e + 4] = colour.g; col[e + 2] = col[e + 5] = colour.b;
+      at.anchor.set((IPTS[o] + IPTS[o + 3]) / 2, (IPTS[o + 1] + IPTS[o + 4]) / 2, (IPTS[o + 2] + IPTS[o + 5]) / 2);
+      at.div.textContent = (d * 1000).toFixed(1) + ' mm';
+      at.div.style.color = c;
+      gapsShown.push({ item: k, from: Array.from(IPTS.subarray(o, o + 3)), to: Array.from(IPTS.subarray(o + 3, o + 6)), distance: d, color: c });
+    }
+    gapGeom.attributes.position.needsUpdate = true;
+    gapGeom.attributes.color.needsUpdate = true;
+    gapGeom.setDrawRange(0, 2 * gapsShown.length);
+    gapLines.visible = gapsShown.length > 0;
+  }
 
   // ------------------------------------------------------------------ panel
   $('title').textContent = D.title;
@@ -426,20 +459,9 @@
       const d = ICLEAR[i * M + k], part = IPART[i * M + k], cells = itemRows[k], meant = INTENDED[i * M + k];
       cells[1].textContent = d < 0 ? '—' : (d * 1000).toFixed(1) + ' mm';
       cells[2].textContent = d < 0 ? (D.items[k].track ? 'carried' : '') : (D.parts[part] || '') + (meant ? ' (intended)' : '');
-      cells[1].className = d < 0 ? '' : meant ? 'intended' : (PAD !== null && d < PAD) || d < 0.005 ? 'warn' : '';
+      cells[1].className = d < 0 ? '' : meant ? 'intended' : tight(d) ? 'warn' : '';
     }
-    const pos = gapGeom.attributes.position;
-    const shown = CPTS && c > 0 && Number.isFinite(CPTS[6 * i]);  // touching: no pair of closest points to draw
-    if (shown) {
-      for (let e = 0; e < 6; e++) pos.array[e] = CPTS[6 * i + e];
-      pos.needsUpdate = true;
-      gapLine.material.color.set(INTENDED[i * M + item] ? INTENDED_COLOR : TIGHT_COLOR);
-      gapAnchor.anchor.set((CPTS[6 * i] + CPTS[6 * i + 3]) / 2, (CPTS[6 * i + 1] + CPTS[6 * i + 4]) / 2, (CPTS[6 * i + 2] + CPTS[6 * i + 5]) / 2);
-      gapLabel.textContent = (c * 1000).toFixed(1) + ' mm';
-      gapLabel.style.color = INTENDED[i * M + item] ? INTENDED_COLOR : TIGHT_COLOR;
-    }
-    gapLine.visible = !!shown;
-    gapAnchor.hidden = !shown;
+    showGaps(i);
     $('strip-cursor').style.left = (N > 1 ? 100 * i / (N - 1) : 0) + '%';
     for (let j = 0; j < DOF; j++) {
       const v = Q[i * DOF + j], cells = jointCells[j];
@@ -603,6 +625,8 @@
     setPlaying: setPlaying,
     setTableSeeThrough: setTableSeeThrough,
     minimum: MINIMUM,
+    // the closest-point pairs drawn at the cursor: [{item, from, to (world m), distance (m), color}]
+    gaps: function () { return gapsShown; },
     setView: cam.setView,
     setOrthographic: cam.setOrthographic,
     zoomAt: cam.zoomAt,
@@ -612,6 +636,7 @@
       const it = items.find((x) => x.name === name);
       if (!it) return false;
       it.group.visible = visible;
+      showGaps(index);
       render();
       return true;
     },
