@@ -1,4 +1,4 @@
-"""Every options object checks its own fields (``roarmctl.validation.check_options``): NaN, infinities, negative,
+"""Every options object checks its own fields (``roarmctl.checks.check_options``): NaN, infinities, negative,
 huge and wrong-typed values are refused with an ``OptionError`` naming the field, in the library's words (no file,
 no flag); the defaults and the ends of each range are taken. Every field of every options object is walked, so a
 field added without a bound fails here."""

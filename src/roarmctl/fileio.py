@@ -3,7 +3,7 @@
 Writes: a temporary file in the target's directory, then a rename, so an interrupted run never
 leaves a half-written trajectory, log or picture. Reads (``read_bytes``, ``read_text``): regular
 files only, under a size cap, optionally only inside a description's ``Roots``. Parsing and field
-checks of what was read live in ``roarmctl.validation``.
+checks of what was read live in ``roarmctl.validation`` and ``roarmctl.checks``.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """How a trajectory is streamed to the arm (``StreamConfig``): the device layer's options object, which ``execute``
 (the CLI and ``roarmctl.api.execute``) builds and ``roarmctl.device.streamer.Streamer`` takes. It checks its own
-fields when it is made (``roarmctl.validation.check_options``, bounds in ``STREAM_BOUNDS``): NaN, infinities,
+fields when it is made (``roarmctl.checks.check_options``, bounds in ``STREAM_BOUNDS``): NaN, infinities,
 wrong types and values out of range raise ``OptionError`` naming the field. A NaN tracking bound (``max_error``)
 would switch the tracking stop off (no comparison with NaN is true), so none gets this far.
 """
@@ -10,9 +10,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from roarmctl.checks import Bound, check_options
 from roarmctl.device.schedule import DEFAULT_RATE, DEFAULT_STRATEGY, MAX_LINK_RATE, STRATEGIES, Strategy
 from roarmctl.formats import MIN_SPEED_SCALE
-from roarmctl.validation import Bound, check_options
 
 HOLD_MODES = ("auto", "path", "setpoint", "measured")
 

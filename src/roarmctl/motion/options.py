@@ -1,7 +1,7 @@
 """The motion layer's options: how fast a plan may move (``Limits``) and how its paths are searched
 (``PlannerConfig``). A plan file's ``limits`` and ``planner`` become these (``roarmctl.plan.schema`` reads each
 field against the bound written here, naming the file and line), and so do the arguments of
-``roarmctl.api.Planner``. Each object checks its own fields when it is made (``roarmctl.validation.check_options``):
+``roarmctl.api.Planner``. Each object checks its own fields when it is made (``roarmctl.checks.check_options``):
 NaN, infinities, wrong types and values out of range raise ``OptionError`` naming the field; none exists out of
 bounds, and none changes after (frozen: ``dataclasses.replace`` makes a changed copy, checked again).
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from roarmctl.validation import MAX_WHOLE, Bound, check_options
+from roarmctl.checks import MAX_WHOLE, Bound, check_options
 
 PLANNERS = ("RRTConnect", "RRTstar", "BITstar", "PRM", "KPIECE1")
 

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from roarmctl.checks import Checker
 from roarmctl.errors import InputError, TrajectoryFileError
 from roarmctl.formats import MAX_DURATION, MAX_POINTS, ROLES, SHAPES, read_document
 from roarmctl.motion.options import PLANNERS
@@ -32,7 +33,6 @@ from roarmctl.motion.trajectory import FORMAT, Event, Segment, Trajectory
 from roarmctl.plan.fields import FIELD_BOUNDS
 from roarmctl.robot.bundle import trajectory_robot
 from roarmctl.robot.loader import load_robot
-from roarmctl.validation import Checker
 
 if TYPE_CHECKING:
     from roarmctl.motion.trajectory import Trajectory

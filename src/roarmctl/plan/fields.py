@@ -11,16 +11,17 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from roarmctl.checks import Checker
 from roarmctl.errors import PlanFileError, describe_value
 from roarmctl.motion.options import LIMITS_BOUNDS, PLANNER_BOUNDS
 from roarmctl.robot.frames import from_frame
-from roarmctl.validation import Checker, LocatedDict, LocatedList, locate
+from roarmctl.validation import LocatedDict, LocatedList, locate
 
 DICT_NAME = "<plan dict>"  # stands for the file name in errors about a plan given as a dict
 
 
 class ReadContext:
-    """Where we are in the file, for error messages; the field checks are ``roarmctl.validation``'s."""
+    """Where we are in the file, for error messages; the field checks are ``roarmctl.checks``'s."""
 
     check = Checker(PlanFileError)
 

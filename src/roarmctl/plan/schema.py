@@ -16,6 +16,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from roarmctl.checks import Bound
 from roarmctl.errors import PlanFileError, describe_value
 from roarmctl.formats import MAX_DURATION
 from roarmctl.motion.options import LIMITS_BOUNDS, PLANNER_BOUNDS, Limits, PlannerConfig
@@ -23,7 +24,7 @@ from roarmctl.plan.fields import DICT_NAME, ReadContext
 from roarmctl.plan.items import locate_plan, read_item, read_obstacles
 from roarmctl.plan.tasks import least_duration, read_task
 from roarmctl.plan.types import ItemSpec, Plan
-from roarmctl.validation import Bound, LocatedDict, load_yaml
+from roarmctl.validation import LocatedDict, load_yaml
 
 _O = TypeVar("_O", Limits, PlannerConfig)
 MAX_TASKS = 1000  # tasks in the file, and tasks x cycles

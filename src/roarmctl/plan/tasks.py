@@ -7,10 +7,11 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from roarmctl.checks import closest
 from roarmctl.motion.options import Limits
 from roarmctl.plan.fields import ReadContext, position
 from roarmctl.plan.types import ItemSpec, MoveTask, PickTask, PlaceTask, WaitTask
-from roarmctl.validation import LocatedDict, closest
+from roarmctl.validation import LocatedDict
 
 
 def read_task(ctx: ReadContext, raw: Any, line: int, where: str, objects: dict[str, ItemSpec], poses: list[str] | None,

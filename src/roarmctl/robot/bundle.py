@@ -149,7 +149,7 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
 
 def _decoded(doc: Any, where: str) -> dict[str, bytes]:
     """The files of a bundle document, checked: names, types, base64, total size."""
-    from roarmctl.validation import Checker
+    from roarmctl.checks import Checker
 
     check = Checker(TrajectoryFileError, json=True)
     field = "robot_description"

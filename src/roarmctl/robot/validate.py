@@ -23,10 +23,11 @@ from typing import Any
 
 import numpy as np
 
+from roarmctl.checks import Checker
 from roarmctl.errors import DescriptionError
 from roarmctl.fileio import Roots
 from roarmctl.robot.model import WIRE_FIELDS, Robot
-from roarmctl.validation import Checker, load_yaml
+from roarmctl.validation import load_yaml
 
 AXIS_TOL = 1e-3  # |axis| must be 1 within this (URDF axes are unit vectors)
 MAX_VALUE = 1e6  # any length (m), angle (rad), limit or mass in a description
