@@ -22,6 +22,21 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 
+@pytest.fixture(autouse=True)
+def _scheduling_policy_unchanged():
+    """Every test leaves its worker's scheduling policy as it found it. A library that makes the worker real-time
+    (SVT-AV1 as root: SCHED_FIFO 99, roarmctl.export.lerobot.video) makes every process a later test starts on it
+    real-time too: a busy-loop child then starves everything on its core and the run hangs. Named at the test that
+    did it, not found an hour later in another."""
+    if not hasattr(os, "sched_getscheduler"):
+        yield
+        return
+    before = (os.sched_getscheduler(0), os.sched_getparam(0))
+    yield
+    after = (os.sched_getscheduler(0), os.sched_getparam(0))
+    assert after == before, f"this test changed the worker's scheduling policy/priority from {before} to {after}"
+
+
 @pytest.hookimpl(tryfirst=True)  # before -m "not slow" deselects
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """A test that starts the headless browser (the ``chromium`` fixture of tests/test_view.py) is slow: left out

@@ -211,6 +211,18 @@ def test_a_written_dataset_reads_back_with_pyarrow(tmp_path, codec):
     np.testing.assert_allclose(t, np.arange(12) / 10, atol=1e-6)
 
 
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="SVT-AV1 raises its threads only as root")
+def test_an_av1_encode_as_root_leaves_no_real_time_policy_behind():
+    """SVT-AV1 run as root leaves the calling thread SCHED_FIFO 99 (measured), and a process started from it then
+    inherits that: a busy child would own its core. After roarmctl's encode a child runs under the normal policy."""
+    from roarmctl.export.lerobot import video
+
+    video.encode(np.zeros((3, 32, 32, 3), np.uint8), 10, "av1")
+    child = subprocess.run([sys.executable, "-c", "import os; print(os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)"],
+                           capture_output=True, text=True, timeout=60)
+    assert child.stdout.split() == [str(os.SCHED_OTHER), "0"], child.stdout
+
+
 def test_appending_gives_the_same_bytes_as_writing_all_at_once(tmp_path):
     from roarmctl.export.lerobot.dataset import append_episodes, write_dataset
 

@@ -7,8 +7,8 @@ frame decodes quickly) and one encoder thread, so that the same frames give the 
 * ``h264`` (the default here): x264, preset ``ultrafast``, ``crf`` 23: 0.6-0.7 ms of CPU a 320x240 frame;
 * ``av1`` (lerobot's default): SVT-AV1, preset 12, ``crf`` 30 (lerobot's settings), ``lp=1``: 4-6 ms a frame
   (bench/bench_datagen.py), files about 0.6 times the size.
- An
-episode's video is encoded once (by the worker that rendered it); a dataset's file joins the episodes'
+
+An episode's video is encoded once (by the worker that rendered it); a dataset's file joins the episodes'
 packets without decoding them again (a remux), each episode shifted to start where the previous one ends,
 as lerobot's ``concatenate_video_files`` does, so that ``from_timestamp``/``to_timestamp`` in the
 episodes' metadata are the frame counts before and after it divided by the fps.
@@ -16,9 +16,10 @@ episodes' metadata are the frame counts before and after it divided by the fps.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from fractions import Fraction
 from typing import Any
 
@@ -32,12 +33,37 @@ CODECS: dict[str, tuple[str, dict[str, Any]]] = {
 }
 
 
+@contextlib.contextmanager
+def _scheduling_kept() -> Iterator[None]:
+    """Give the calling thread back the scheduling policy and priority it had before the block.
+
+    SVT-AV1 starts its threads with the real-time policy SCHED_FIFO at priority 99 whenever it is allowed to
+    (``svt_create_thread``, Source/Lib/Common/Codec/EbThreads.c in AOMediaCodec/SVT-AV1): as root it is. Measured
+    with the libsvtav1 PyAV ships: after one AV1 encode as root the *calling* thread is SCHED_FIFO 99 too, and
+    every process it starts afterwards inherits that; a CPU-bound child then owns its core outright (in a
+    clean-clone CI run a busy-loop child starved a planner on the same core so completely that it could not even
+    be killed, and the run hung until its time limit). SVT's own threads end with the encoder."""
+    if not hasattr(os, "sched_getscheduler"):  # not Linux: no such policy change
+        yield
+        return
+    policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+    try:
+        yield
+    finally:
+        if os.sched_getscheduler(0) != policy or os.sched_getparam(0) != param:
+            os.sched_setscheduler(0, policy, param)  # lowering a priority is always allowed
+
+
 def encode(frames: np.ndarray, fps: int, codec: str = "h264") -> bytes:
     """MP4 bytes of ``frames`` (F, height, width, 3) uint8 RGB at ``fps`` in ``codec`` (``CODECS``); frame k at k / fps s."""
+    os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1's own log (its banner on stderr for every video): errors only
+    with _scheduling_kept():
+        return _encode(np.ascontiguousarray(frames, dtype=np.uint8), fps, codec)
+
+
+def _encode(frames: np.ndarray, fps: int, codec: str) -> bytes:
     import av
 
-    os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1's own log (its banner on stderr for every video): errors only
-    frames = np.ascontiguousarray(frames, dtype=np.uint8)
     n, h, w, _ = frames.shape
     buf = io.BytesIO()
     with av.open(buf, "w", format="mp4") as out:
