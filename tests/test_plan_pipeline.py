@@ -257,11 +257,13 @@ def test_same_seed_same_bytes_with_every_core_busy(planned, tmp_path):
             _, stderr = planner.communicate(timeout=300)
         finally:
             planner.kill()
-            planner.wait()
+            for h in hogs:  # before waiting for the planner: a hog that outranks it would keep it from dying
+                h.kill()
+            planner.wait(60)
     finally:
         for h in hogs:
             h.kill()
-            h.wait()
+            h.wait(60)
     assert planner.returncode == 0, stderr
     idle_file, _ = planned["obstacle"]
     assert out.read_bytes() == idle_file.read_bytes()
