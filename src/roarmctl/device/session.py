@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from roarmctl.errors import InputError, RoarmError, signal_name
+from roarmctl.errors import InputError, Interrupted, RoarmError, signal_name
 
 if TYPE_CHECKING:
     import numpy as np
@@ -54,8 +54,9 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
     the arm moves; ``on_status``/``on_start``/``on_note`` feed a progress display, ``on_end`` runs
     when streaming stops (before the port closes). ``shield`` makes the close and the log write
     uninterruptible (the CLI passes its signal shield). ``log_path``: where the execution log goes,
-    written on every way out once the port has opened (a port that never opened exchanged nothing
-    and leaves an existing log alone); a log that cannot be written calls ``on_log_error(path, exc)`` (default: a ``RuntimeWarning``)
+    written on every way out once the port has opened, and on a stop signal from the start (a port that could not
+    be opened exchanged nothing and leaves an existing log alone); a stop signal before streaming raises
+    ``Interrupted`` (its ``result`` carries the log), as one during it does; a log that cannot be written calls ``on_log_error(path, exc)`` (default: a ``RuntimeWarning``)
     instead of hiding the run's own outcome. ``on_info(line)`` hears what connecting learned (the
     firmware build, round trip, pacing) and the link budget. ``sim_servos``: a zero-argument factory of
     the simulator's servo model (``roarmctl.physics.servo_backend.for_firmware``: the physics servos;
@@ -78,15 +79,14 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
         # the simulated arm is the kind the trajectory is for (an M2 trajectory gets the M2 protocol);
         # its firmware runs in a process of its own, with its own time, as the ESP32 does
         config = sim_config or SimConfig(firmware="m2" if model == "m2" else "m3-0.84")
-        simulator = PtySimulator(config, servos=sim_servos, process=True).start()
-        port = simulator.path
+        simulator = PtySimulator(config, servos=sim_servos, process=True)
 
     def replan(q: np.ndarray, mode: str) -> tuple[Trajectory, str]:
         from roarmctl.motion.replan import replan_start
 
         return replan_start(traj, robot, q, mode)
 
-    link = Link(str(port))
+    link = Link(str(port) if port is not None else "the simulator")
     link.expect = model or "m3"
     # Built before the port opens (the schedule is pure), so that every way out has a log.
     streamer = Streamer(link, robot, traj, cfg, on_status=on_status, confirm=confirm, on_start=on_start,
@@ -94,8 +94,11 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
                         extra_lateness=simulator.recent_lateness if simulator is not None else None)
     result = None
     tracking = None
-    opened = False
+    opened = stopped = False
     try:
+        if simulator is not None:
+            simulator.start()
+            port = link.port = simulator.path
         link.open()
         opened = True
         info = link.connect()
@@ -110,24 +113,31 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
     except RoarmError as exc:
         result = getattr(exc, "result", None) or streamer.result("failed", f"{exc.message}; no motion command was sent")
         raise
-    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP while opening or in the handshake
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP while starting the simulator, opening or connecting
         signum = getattr(exc, "signum", 2)
-        result = streamer.result("interrupted" if signum == 2 else "terminated",
-                                 f"stopped by {signal_name(signum)} before streaming (no motion command sent)")
-        raise
+        stopped = True
+        where = "before streaming" if opened else "before the port was opened"
+        message = f"stopped by {signal_name(signum)} {where} (no motion command sent)"
+        result = streamer.result("interrupted" if signum == 2 else "terminated", message)
+        # the run's own stop, as one after streaming began: its one line, its log, 128 + N
+        stop = Interrupted(message, signum=signum)
+        stop.result = result  # type: ignore[attr-defined]
+        raise stop from None
     finally:
         with shield():  # a signal now must not cut the port's close or the log short
             link.close()
             if result is None:
                 result = streamer.result("failed", "stopped before streaming (no motion command sent)")
             if simulator is not None:
-                # streamer.traj: re-planned from the measured pose when the arm was elsewhere
-                tracking = simulator_tracking(simulator, robot, streamer.traj, cfg, result)
-                result.log["simulator"] = tracking
+                if getattr(simulator, "path", None) is not None:
+                    # streamer.traj: re-planned from the measured pose when the arm was elsewhere
+                    tracking = simulator_tracking(simulator, robot, streamer.traj, cfg, result)
+                    result.log["simulator"] = tracking
                 simulator.stop()
-            # a port that never opened exchanged nothing: keep the previous run's log rather than
-            # replace it with an empty one (the error itself says what went wrong)
-            if log_path is not None and opened:
+            # a port that could not be opened exchanged nothing: keep the previous run's log rather than replace it
+            # with an empty one (the error itself says what went wrong). A stop signal is this run's end: its log
+            # says so, also before the port opened (the previous run's log would read as this one's)
+            if log_path is not None and (opened or stopped):
                 try:
                     write_log(log_path, result.log)
                 except (OSError, InputError) as exc:

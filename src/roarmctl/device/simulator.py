@@ -275,6 +275,14 @@ class PtySimulator:
         """Stop serving and close the pseudo-terminal (process mode keeps what the child knew for the accessors)."""
         if self._stopped:
             return
+        if self.process and getattr(self, "path", None) is None:
+            # never started, or stopped while starting (a stop signal): nothing to ask, only a child to end
+            self._stopped = True
+            if self._proc.pid is not None and self._proc.is_alive():
+                self._proc.kill()
+                self._proc.join(1.0)
+            self._conn.close()
+            return
         if self.process:
             try:
                 self._final = {k: self._ask(k) for k in ("recording", "executed", "lateness", "state")}
