@@ -33,10 +33,12 @@ test: $(STAMP) render
 test-fast: $(STAMP) render
 	$(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadgroup -m "not slow"
 
-# Lint and types (rules and why: pyproject.toml, docs/design.md "Lint and types").
+# Lint and types (rules and why: pyproject.toml, docs/design.md "Lint and types"): ruff over everything that is
+# Python (the package, its tests, benches and examples); mypy over the package and the examples users copy from.
 lint: $(STAMP)
-	$(BIN)/ruff check src
+	$(BIN)/ruff check src tests bench examples
 	$(BIN)/mypy
+	$(BIN)/mypy examples
 
 # Chromium from the system's packages, for the browser-view tests (tests/test_view.py: Playwright drives
 # /usr/bin/chromium; nothing is downloaded by Playwright). Installs with apt-get when missing (needs root, as

@@ -23,14 +23,12 @@ import json
 import math
 import statistics
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-from peers import peer_python, urdf_origin
-
 import numpy as np
+from peers import peer_python, urdf_origin
 
 WORKER = r"""
 import json, sys, time, statistics
@@ -154,8 +152,8 @@ def main() -> None:
             version = res["version"]
             ours = inverse_dynamics(robot, q, qd, qdd)
             diff = float(np.max(np.abs(ours - np.asarray(res["tau"]))))
-            single = per_state_us(lambda: [inverse_dynamics(robot, a, b, c) for a, b, c in zip(q, qd, qdd)], n)
-            batch = per_state_us(lambda: inverse_dynamics(robot, q, qd, qdd), n)
+            single = per_state_us(lambda robot=robot, q=q, qd=qd, qdd=qdd: [inverse_dynamics(robot, a, b, c) for a, b, c in zip(q, qd, qdd)], n)
+            batch = per_state_us(lambda robot=robot, q=q, qd=qd, qdd=qdd: inverse_dynamics(robot, q, qd, qdd), n)
             print(f"{name:<14}{diff:>20.2e}{float(np.max(np.abs(ours))):>15.3g}{single:>13.2f}{batch:>12.3f}{res['us']:>12.2f}")
     print(f"Pinocchio {version}")
 

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from roarmctl.device.follow import Follower, FollowConfig
+from roarmctl.device.follow import FollowConfig, Follower
 from roarmctl.device.follow_guard import Guard, GuardLimits, Target
 from roarmctl.device.follow_motion import Smoother
 from roarmctl.device.follow_session import LeaderSpec, follow_live, leader_tracking

@@ -89,16 +89,17 @@ def main() -> None:
           f"{'seq16':>9s}")
     for label, r, p, pitch in cases:
         home = r.full_q(r.named_poses.get("home", np.zeros(r.arm_dof)))
-        all_ms = median_ms(lambda: solve_ik(r, p, pitch=pitch, q_ref=home, all_solutions=True), args.repeats, r)
-        one_ms = median_ms(lambda: solve_ik(r, p, pitch=pitch, q_ref=home), args.repeats, r)
+        all_ms = median_ms(lambda r=r, p=p, pitch=pitch, home=home: solve_ik(r, p, pitch=pitch, q_ref=home, all_solutions=True),
+                           args.repeats, r)
+        one_ms = median_ms(lambda r=r, p=p, pitch=pitch, home=home: solve_ik(r, p, pitch=pitch, q_ref=home), args.repeats, r)
         line = one_by_one = "-"
         if r is hobby or r is roarm:
             q0 = solve_ik(r, p + [0, 0, 0.05], pitch=pitch, q_ref=home)[0]
-            line = f"{median_ms(lambda: cartesian_line(r, q0, p, pitch=pitch), args.repeats, r):10.1f}"
+            line = f"{median_ms(lambda r=r, q0=q0, p=p, pitch=pitch: cartesian_line(r, q0, p, pitch=pitch), args.repeats, r):10.1f}"
             pts = cartesian_line(r, q0, p, pitch=pitch)[1:]
             pts = r.kin.fk(pts)[:, :3, 3]
 
-            def seq():
+            def seq(r=r, q0=q0, pts=pts, pitch=pitch):
                 prev = q0
                 for x in pts:
                     prev = solve_ik_near(r, x, prev, pitch=pitch)
@@ -111,8 +112,9 @@ def main() -> None:
         starts = np.array([r.full_q(rng.uniform(r.lower[arm], r.upper[arm])) for _ in range(16)])
         aim = pitch_aim(r, p, pitch, None, None) if pitch is not None else Aim()
         lo, hi = r.lower[arm], r.upper[arm]
-        b_ms = median_ms(lambda: dls_batch(r, starts, p, aim, lo, hi), args.repeats)
-        s_ms = median_ms(lambda: [dls_batch(r, starts[i:i + 1], p, aim, lo, hi) for i in range(16)], args.repeats)
+        b_ms = median_ms(lambda r=r, starts=starts, p=p, aim=aim, lo=lo, hi=hi: dls_batch(r, starts, p, aim, lo, hi), args.repeats)
+        s_ms = median_ms(lambda r=r, starts=starts, p=p, aim=aim, lo=lo, hi=hi: [dls_batch(r, starts[i:i + 1], p, aim, lo, hi)
+                                                                               for i in range(16)], args.repeats)
         print(f"{label:24s} {all_ms:10.1f} {one_ms:10.1f} {line:>10s} {one_by_one:>9s} {b_ms:9.1f} {s_ms:9.1f}")
     if args.plan:
         import roarmctl.api as rc

@@ -91,7 +91,7 @@ def main() -> None:
         v, a, j = robot.velocity_limits[idx] * vs, robot.acceleration_limits[idx] * as_, robot.jerk_limits[idx]
         full = robot.full_q(robot.named_poses["home"])
 
-        def dev(q):
+        def dev(q, line=line, full=full, idx=idx):
             if line is None:
                 return "-"
             qq = np.repeat(full[None, :], len(q), axis=0)
@@ -100,11 +100,12 @@ def main() -> None:
 
         for option, jm in (("toppra", None), ("toppra+fir", j)):
             # each from scratch: timing.py keeps one-joint line timings (a plan's gripper moves reuse them)
-            tp, ms = median_ms(lambda: (_ONE_JOINT_LINES.clear(), time_parameterise(wps, v, a, jm))[1], args.repeats)
+            tp, ms = median_ms(lambda wps=wps, v=v, a=a, jm=jm: (_ONE_JOINT_LINES.clear(), time_parameterise(wps, v, a, jm))[1],
+                               args.repeats)
             jerk = np.max(np.abs(np.diff(tp.qdd, axis=0)) / np.diff(tp.times)[:, None] / j)
             print(f"{name:<31}{option:<12}{tp.duration:>11.3f}{ms:>9.1f}{jerk:>11.2f}{dev(tp.q):>12}")
         if have_ruckig:
-            traj, ms = median_ms(lambda: ruckig_time(wps, v, a, j), args.repeats)
+            traj, ms = median_ms(lambda wps=wps, v=v, a=a, j=j: ruckig_time(wps, v, a, j), args.repeats)
             t = np.arange(0.0, traj.duration, 0.01)
             q = np.array([traj.at_time(x)[0] for x in t] + [wps[-1].tolist()])
             acc = np.array([traj.at_time(x)[2] for x in t])

@@ -36,7 +36,6 @@ sys.path.insert(0, str(ROOT / "tests"))  # the Chromium driver shared with the b
 
 import browser as br  # noqa: E402
 
-
 PLAY = """() => new Promise((done) => {
   let n = 0; const t0 = performance.now();
   function frame() {

@@ -57,8 +57,8 @@ def main() -> None:
         out = Path(tmp) / "out.png"
         for name, traj in trajs:
             robot = robot_for(traj)
-            med_d, _ = median_time(lambda: path_data(traj, robot), args.runs)
-            med, best = median_time(lambda: visualize_trajectory(traj, out, name=name), args.runs)
+            med_d, _ = median_time(lambda traj=traj, robot=robot: path_data(traj, robot), args.runs)
+            med, best = median_time(lambda traj=traj, name=name: visualize_trajectory(traj, out, name=name), args.runs)
             print(f"visualize-path {name}: {len(traj.times)} samples, {traj.duration:.1f} s of motion: "
                   f"render+save median {med:.3f} s (best {best:.3f} s; data {med_d * 1000:.1f} ms), "
                   f"PNG {out.stat().st_size / 1024:.0f} KiB")

@@ -19,7 +19,7 @@ scene.add_box("table", (0.8, 0.6, 0.02), (0.15, 0.0, -0.01), role="table")
 planner = rc.Planner(robot, scene)
 
 answers = {}
-for name, q in {"home": robot.named_poses["home"], "into the desk": [0.0, 1.4, 1.2, 0.0, 0.0],
+for name, q in {"home": robot.named_poses["home"].tolist(), "into the desk": [0.0, 1.4, 1.2, 0.0, 0.0],
                 "elbow past its limit": [0.0, 0.0, 3.5, 0.0, 0.0]}.items():
     v = planner.is_valid(q)
     answers[name] = [v.valid, v.reason]

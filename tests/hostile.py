@@ -107,7 +107,7 @@ def macro_params_redos(n: int = 40) -> str:
 def repeated_work(n: int = 2000) -> str:
     """A 1 MB string property compared ``n`` times: no value is made, each comparison reads 1 MB."""
     return ('<xacro:property name="big" value="${\'a\'*1000000}"/><xacro:property name="big2" value="${\'a\'*1000000}"/>'
-            + "".join(f'<foo a="${{big == big2}}"/>' for _ in range(n)))
+            + "".join('<foo a="${big == big2}"/>' for _ in range(n)))
 
 
 def self_include(folder: Path) -> Path:
@@ -235,9 +235,7 @@ def evaluate_calls(calls: list[str]) -> dict:
 def _python_names() -> dict:
     import math as m
 
-    from roarmctl.robot.xacro_eval import MATH_FUNCTIONS
-
-    from roarmctl.robot.xacro_eval import FUNCTIONS
+    from roarmctl.robot.xacro_eval import FUNCTIONS, MATH_FUNCTIONS
 
     return {**{n: getattr(builtins, n) for n in FUNCTIONS if n not in MATH_FUNCTIONS}, "inf": m.inf, "nan": m.nan,
             **{n: getattr(m, n) for n in MATH_FUNCTIONS}}

@@ -16,10 +16,10 @@ import pytest
 
 import roarmctl.api as rc
 import roarmctl.errors as errors
-from roarmctl.plan.schema import load_plan
 from roarmctl.motion.collision import CollisionChecker
 from roarmctl.motion.scene import Scene as WorldScene
 from roarmctl.motion.scene import SceneItem
+from roarmctl.plan.schema import load_plan
 from roarmctl.robot.ik import solve_ik
 from roarmctl.robot.model import Robot
 

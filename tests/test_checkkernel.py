@@ -346,7 +346,7 @@ def test_a_full_pass_that_skips_the_coarse_states_keeps_their_flags():
         b = checker._buffers(steps + 1)
         views = b["views"]
 
-        def line(start, stride, skip):
+        def line(start, stride, skip, q0=q0, dq=dq, steps=steps, b=b, views=views):
             kernel.check_line(checker._kf, checker._ki, q0, dq, steps, start, stride, np.zeros(0, dtype=np.int64), 1,
                               *views, 0.004, False, skip)
             return b["valid"][:steps + 1].copy(), b["near"][:steps + 1].copy()

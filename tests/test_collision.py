@@ -130,7 +130,7 @@ def test_explain_names_the_singular_pose_only_when_the_description_models_it(rob
 
 # ----------------------------------------------------------------------------- self-collision
 def test_folded_jaw_inside_link2_is_a_self_collision(robot):
-    jaw, jaw_shape = shape_pose(robot, FOLDED, "jaw_hub")
+    jaw, _jaw_shape = shape_pose(robot, FOLDED, "jaw_hub")
     arm, arm_shape = shape_pose(robot, FOLDED, "link2_upper_arm")
     local = np.linalg.inv(arm) @ np.r_[jaw[:3, 3], 1.0]
     assert np.all(np.abs(local[:3]) < np.asarray(arm_shape.size) / 2)  # the jaw's centre is inside link2
@@ -395,7 +395,7 @@ def test_margin_measure_equals_svd_of_the_generic_jacobian(robot):
     q = rng.uniform(robot.lower[:5], robot.upper[:5], size=(300, 5))
     checker = CollisionChecker(robot, Scene([]), singularity_margin=0.02)
     full = checker._full(q)
-    rot, pos = checker._fk.frames(full)
+    _rot, _pos = checker._fk.frames(full)
     fast = checker.margin_measure(q)
     ref = np.linalg.svd(robot.kin.jacobian(robot.full_q(q))[:, :3, :], compute_uv=False)[:, -1]
     np.testing.assert_allclose(fast, ref, atol=1e-12)

@@ -5,7 +5,6 @@ bundled ones still load. A cycle in the joint tree no longer hangs ``kin fk``.
 
 from __future__ import annotations
 
-import shutil
 import time
 from pathlib import Path
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from clirun import roarmctl
 import yaml
+from clirun import roarmctl
 
 from roarmctl.errors import DescriptionError, InputError
 from roarmctl.robot.loader import bundled_dir, bundled_robots, load_robot

@@ -215,7 +215,7 @@ def _lagrange_torque(robot, q, qd, qdd, payload=None, g=G):
         minus = [com_and_rot(qq - h * e) for e in np.eye(dof)]
         rots = com_and_rot(qq)
         m = np.zeros((dof, dof))
-        for b, (k, body) in enumerate(bodies):
+        for b, (_k, body) in enumerate(bodies):
             jp = np.stack([(plus[i][b][0] - minus[i][b][0]) / (2 * h) for i in range(dof)], axis=1)
             jw = []
             for i in range(dof):

@@ -214,7 +214,7 @@ def test_fuzz_plan_files(tmp_path_factory, data):
     p = work / f"plan{next(_counter)}.yaml"
     p.write_bytes(text_edit(text, data))
     out = work / "out.traj.json"
-    code, err = run_case(["plan", str(p), "-o", str(out)], out, work)
+    code, _err = run_case(["plan", str(p), "-o", str(out)], out, work)
     if code == 0:
         assert out.exists()
 

@@ -215,7 +215,7 @@ def test_ur10_case_c_eight_solutions():
 
 def test_ur10_case_b_unique():
     q = np.radians([45, 90, 0, -90, 0, 60])
-    t, sols = _ur_solve(q)
+    _t, sols = _ur_solve(q)
     assert len(sols) == 1
     assert np.max(_wrapdiff(sols[0], q)) < 1e-6
 
@@ -228,7 +228,7 @@ def test_ur10_zero_pose_two_branches():
 
 def test_ur10_random_round_trip_matches_numerical_count():
     rng = np.random.default_rng(5)
-    for i in range(120):
+    for _i in range(120):
         qa = rng.uniform(-np.pi, np.pi, 6)
         t, sols = _ur_solve(qa)
         _check_all(UR10, sols, t[:3, 3], rot=t[:3, :3])

@@ -228,7 +228,7 @@ def _imported_names(node: ast.Import | ast.ImportFrom) -> list[str]:
 def _module_level_libraries() -> dict[str, set[str]]:
     """The third-party libraries each module imports at module level (run time), directly."""
     out = {}
-    for name, path in MODULES.items():
+    for name, _path in MODULES.items():
         libs = set()
         for site in import_sites()[name]:
             node = site.node

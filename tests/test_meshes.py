@@ -9,9 +9,9 @@ from pathlib import Path
 import fcl
 import numpy as np
 import pytest
-from clirun import roarmctl
 import trimesh
 import yaml
+from clirun import roarmctl
 
 from roarmctl.errors import DescriptionError
 from roarmctl.motion.collision import CollisionChecker

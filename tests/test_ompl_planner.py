@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
 from roarmctl.errors import InputError, PlanningError
 from roarmctl.motion.collision import CollisionChecker, interpolate
-from roarmctl.motion.ompl_planner import PLANNERS, CeilingError, plan_joint_path, plan_joint_path_with_stats, simplify_path
+from roarmctl.motion.ompl_planner import (
+    PLANNERS,
+    CeilingError,
+    plan_joint_path,
+    plan_joint_path_with_stats,
+    simplify_path,
+)
 from roarmctl.motion.scene import SceneItem, example_scene
 from roarmctl.robot.loader import load_robot
 
@@ -31,7 +39,7 @@ def assert_path_valid(robot, path, q_start, q_goal, resolution):
     np.testing.assert_array_equal(path[0], q_start)
     np.testing.assert_array_equal(path[-1], q_goal)
     checker = fresh_checker(robot)
-    dense = np.vstack([interpolate(a, b, resolution / 4) for a, b in zip(path[:-1], path[1:])])
+    dense = np.vstack([interpolate(a, b, resolution / 4) for a, b in itertools.pairwise(path)])
     valid = checker.validity_batch(dense)
     assert valid.all(), checker.explain(dense[np.argmin(valid)])
 
@@ -94,7 +102,7 @@ def test_start_in_collision_names_the_pair(robot):
         plan_joint_path(checker, HOME, LEFT)
     assert "start configuration" in str(err.value) and "hits obstacle 'crate'" in str(err.value)
     assert err.value.exit_code == 3
-    with pytest.raises(PlanningError, match="goal configuration .* joint limit"):
+    with pytest.raises(PlanningError, match=r"goal configuration .* joint limit"):
         plan_joint_path(fresh_checker(robot), LEFT, np.array([0.0, 0.0, 3.1, 0.0, 0.0]))
 
 
@@ -128,7 +136,7 @@ def test_attached_object_is_planned_around(robot):
     checker.set_grasp_target("stick")
     checker.attach("stick", LEFT)
     path = plan_joint_path(checker, LEFT, RIGHT, seed=3)
-    dense = np.vstack([interpolate(a, b, 0.0025) for a, b in zip(path[:-1], path[1:])])
+    dense = np.vstack([interpolate(a, b, 0.0025) for a, b in itertools.pairwise(path)])
     assert checker.validity_batch(dense).all()
 
 
@@ -136,7 +144,7 @@ def test_simplify_path_shortens_and_stays_valid(robot):
     from roarmctl.motion.ompl_planner import simplify_path
 
     checker = fresh_checker(robot)
-    raw, stats = plan_joint_path_with_stats(checker, LEFT, RIGHT, seed=2, simplify_attempts=0, max_step=None)
+    raw, _stats = plan_joint_path_with_stats(checker, LEFT, RIGHT, seed=2, simplify_attempts=0, max_step=None)
     short = simplify_path(checker, raw, seed=2, attempts=60)
     length = lambda p: float(np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1)))  # noqa: E731
     assert length(short) <= length(raw) + 1e-12

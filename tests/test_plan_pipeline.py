@@ -9,7 +9,6 @@ coordinates, finite differences of FK for the TCP speed, and the scaled limits.
 from __future__ import annotations
 
 import contextlib
-
 import json
 import subprocess
 import sys
@@ -46,7 +45,7 @@ def planned(tmp_path_factory) -> dict[str, tuple[Path, dict]]:
 @pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 def test_every_example_plan_is_planned(planned):
     assert {p.stem for p in PLANS} >= {"pick_place", "obstacle", "multi_object"}
-    for name, (path, summary) in planned.items():
+    for _name, (path, summary) in planned.items():
         assert summary["ok"] and Path(summary["output"]) == path and path.is_file()
         traj = load_trajectory(path)
         assert summary["duration"] == pytest.approx(traj.duration)
@@ -570,7 +569,7 @@ def test_the_jaws_close_during_the_descent_and_open_during_the_retreat_but_never
     plan = load_plan(ROOT / "plans" / "pick_place.yaml")
     traj = load_trajectory(planned["pick_place"][0])
     robot = load_robot(traj.robot)
-    gi, arm = robot.joint_index(robot.gripper.joint), robot.arm_indices
+    gi = robot.joint_index(robot.gripper.joint)
     jaws = _moving_jaw_boxes(robot)
     assert jaws and all(s.link != "link5" for s, _ in jaws)  # the fixed jaw on link5 does not move with the joint
     (cube_spec,) = plan.objects

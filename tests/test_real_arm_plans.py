@@ -13,9 +13,9 @@ from clirun import roarmctl
 
 from roarmctl.errors import InfeasibleError, InputError, UnreachableError
 from roarmctl.motion.collision import CollisionChecker
+from roarmctl.motion.options import PlannerConfig
 from roarmctl.motion.pipeline import plan_file
 from roarmctl.motion.scene import Scene
-from roarmctl.motion.options import PlannerConfig
 from roarmctl.robot.frames import from_frame, get_frame
 from roarmctl.robot.ik import pitch_candidates, solve_ik, tool_pitch
 from roarmctl.robot.loader import load_robot

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from clirun import roarmctl
 import yaml
+from clirun import roarmctl
 
 from roarmctl.errors import DescriptionError
 from roarmctl.robot.ik import solve_ik

@@ -301,7 +301,7 @@ def test_a_clipped_cruise_is_taken_without_toppra_only_where_toppra_under_the_ca
         alim = rng.uniform(2.0, 4.0, n)
         cons = [ta.constraint.JointVelocityConstraint(rng.uniform(0.8, 1.5, n)), ta.constraint.JointAccelerationConstraint(alim)]
 
-        def toppra(constraints):
+        def toppra(constraints, path=path, grid=grid):
             inst = ta.algorithm.TOPPRA(constraints, path, gridpoints=grid, parametrizer="ParametrizeConstAccel")
             inst.compute_parameterization(0.0, 0.0)
             return Profile(grid, np.asarray(inst.problem_data.sd_vec, dtype=float))

@@ -191,7 +191,7 @@ def test_roarm_motions_under_torque_limits_with_a_payload_keep_every_promise(roa
         payload = {roarm.tcp_link: Inertial(float(rng.uniform(0.1, 0.5)), np.array([0.0, 0.0, 0.02]), np.eye(3) * 1e-4)}
         limits = roarm.effort_limits[arm] * rng.uniform(0.5, 1.0)
 
-        def rnea(q, qd, qdd):
+        def rnea(q, qd, qdd, payload=payload):
             fd, fdd = np.zeros((len(q), roarm.dof)), np.zeros((len(q), roarm.dof))
             fd[:, arm], fdd[:, arm] = qd, qdd
             return inverse_dynamics(roarm, full(q), fd, fdd, payload=payload)[:, arm]

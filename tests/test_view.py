@@ -405,7 +405,7 @@ def test_timeline_plays_scrubs_and_screenshot(chromium, planned, tmp_path):
     The page's clock is Playwright's (performance.now and requestAnimationFrame): how far 1.2 s of play at
     2x goes is then a number, not a race with a busy machine (on the wall clock, a late click once found the
     playback past the end)."""
-    f, traj = planned["pick_place"]
+    f, _traj = planned["pick_place"]
     code, out = write_html(tmp_path, f)
     assert code == 0
     page, watch = br.open_page(chromium, out.as_uri())
@@ -871,7 +871,7 @@ def test_views_orthographic_zoom_toward_the_cursor_and_the_grid_scale(chromium, 
     """Top / front / side look along -z / -x / +y (two points apart only along that axis land on one pixel with the
     orthographic camera, not with the perspective one); the wheel zooms toward the cursor (the point under it stays
     there, the camera comes closer), in both cameras; the grid's spacing is said and is a round number."""
-    f, traj = planned["pick_place"]
+    f, _traj = planned["pick_place"]
     code, out = write_html(tmp_path, f)
     assert code == 0
     page, watch = br.open_page(chromium, out.as_uri(), {"width": 900, "height": 600})

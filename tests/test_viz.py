@@ -71,7 +71,7 @@ def test_fixture_reaches_its_targets_with_the_gripper_down(pick_place):
 
 # ----------------------------------------------------------------------------- plotted data
 def test_3d_path_is_fk_of_every_sample(pick_place, drawn):
-    data, fig = drawn
+    _data, fig = drawn
     robot = load_robot("roarm_m3_pro")
     (path,) = artists(fig, "tcp_path")
     segs = np.asarray(path._segments3d)
@@ -107,7 +107,7 @@ def test_tcp_speed_agrees_with_finite_differences(drawn):
 
 
 def test_limit_lines_sit_at_scale_times_limit(drawn):
-    data, fig = drawn
+    _data, fig = drawn
     robot = load_robot("roarm_m3_pro")
     for j, name in enumerate(robot.joint_names):
         for tag, lim in (("vlim", robot.velocity_limits[j] * 0.5), ("alim", robot.acceleration_limits[j] * 0.5)):
@@ -130,7 +130,7 @@ def test_event_markers_at_event_times_in_every_time_plot(pick_place, drawn):
 
 
 def test_arm_drawn_at_start_each_event_and_end(pick_place, drawn):
-    data, fig = drawn
+    _data, fig = drawn
     robot = load_robot("roarm_m3_pro")
     arms = artists(fig, "arm:")
     assert [a.get_gid().split(":")[1] for a in arms] == ["start", "grasp", "release", "end"]

@@ -24,8 +24,8 @@ import pytest
 import yaml
 
 from roarmctl.errors import DescriptionError
-from roarmctl.robot.xacro_input import expand
 from roarmctl.robot.xacro_eval import Budget, Evaluator, Refused
+from roarmctl.robot.xacro_input import expand
 
 CORPUS = Path(__file__).parent / "data" / "xacro"
 SOURCES = yaml.safe_load((CORPUS / "SOURCES.yaml").read_text())

@@ -85,7 +85,7 @@ def _timed(robot, path, vmax, amax, vtcp, fill: float = 0.9):
     from scipy.interpolate import CubicSpline
 
     u, p, dp, ddp = path
-    s, ds, dds = _smooth(u)
+    _s, ds, dds = _smooth(u)
     v1 = dp * ds[:, None]  # at duration 1
     a1 = ddp * (ds**2)[:, None] + dp * dds[:, None]
     tcp1 = np.linalg.norm(np.einsum("nij,nj->ni", robot.kin.jacobian(p)[:, :3, :], v1[:, robot.arm_indices]), axis=1)
@@ -113,7 +113,6 @@ def pick_place_trajectory(robot_name: str = "roarm_m3_pro", velocity_scale: floa
     hover = 0.10
     above_pick = ik_down(robot, PICK + [0, 0, hover], home)
     above_pick[-1] = g_open
-    pick = ik_down(robot, PICK, above_pick)
     via = np.array([0.0, 0.0, 1.2, 1.0, 0.0, 0.0])  # leaning back over the divider, gripper tilted 25 deg
     above_place = ik_down(robot, PLACE + [0, 0, hover], above_pick)
 

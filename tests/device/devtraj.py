@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
@@ -55,7 +57,7 @@ def host_lateness(log: dict) -> float:
     dt = 1.0 / float(log["rate"])
     ticks = [s for s in log["sent"] if "tick" in s]
     late = max((s["lateness"] for s in ticks), default=0.0)
-    for a, b in zip(ticks, ticks[1:]):
+    for a, b in itertools.pairwise(ticks):
         late = max(late, b["t"] - (a["t"] - a["lateness"] + dt))
     holds = [s for s in log["sent"] if s["cmd"].get("T") == 102 and "tick" not in s]
     if ticks and holds:

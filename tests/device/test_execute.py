@@ -245,7 +245,7 @@ def test_output_file_exact_bytes_mapping_and_times(traj_file, tmp_path):
     motion = [r for r in rows if r["cmd"]["T"] == 102]
     assert len(motion) == math.ceil(traj.duration * 50 - 1e-9) + 1
     lat = default_latency(50) + STRATEGIES[DEFAULT_STRATEGY].lead  # the default aims ahead by the servos' lag too
-    for k, (line, r) in enumerate(zip(lines, rows)):
+    for line, r in zip(lines, rows):
         cmd = r["cmd"]
         # exact bytes: the command inside the line is exactly what goes on the wire
         assert line == b'{"t":' + repr(r["t"]).encode() + b',"cmd":' + encode(cmd)[:-1] + b"}"
@@ -264,7 +264,7 @@ def test_stalled_arm_aborts_on_tracking_error_and_holds_where_it_is(traj_file, c
     # the shoulder's servo is blocked: the arm does not follow, the feedback says so
     with PtySimulator(SimConfig(stuck=("shoulder",)), process=True) as sim:
         rc = run_cli(["execute", str(traj_file), "--port", sim.path, "--yes", "--max-error", "20"])
-        ts, q, torque = sim.recording()
+        _ts, _q, torque = sim.recording()
     err = capsys.readouterr().err
     assert rc == 4 and "tracking error" in err and "exceeds 20 mm" in err
     data = json.loads(traj_file.with_name("pp.exec.json").read_text())

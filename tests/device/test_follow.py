@@ -12,7 +12,7 @@ import pytest
 from test_follow_guard import CHECKER, HOME, ROBOT
 from test_streamer import FakeClock, FakeLink
 
-from roarmctl.device.follow import Follower, FollowConfig, SourceEnded
+from roarmctl.device.follow import FollowConfig, Follower, SourceEnded
 from roarmctl.device.follow_guard import GuardLimits, SourceLost, Target
 from roarmctl.device.protocol import WireMap
 from roarmctl.errors import Interrupted
@@ -120,7 +120,7 @@ def test_targets_in_the_table_are_never_commanded_and_a_run_of_them_holds_and_en
 def test_a_source_that_falls_silent_is_lost_after_the_timeout():
     frames = ramp_frames(0.0, HOME, HOME + [0.1, 0, 0, 0, 0, 0], 5)  # then nothing
     fol, link = follow(frames, timeout=0.5)
-    with pytest.raises(SourceLost, match="no frame for 0.5"):
+    with pytest.raises(SourceLost, match=r"no frame for 0\.5"):
         fol.run()
     q = ran_setpoints(link)
     assert_all_safe(q)
@@ -128,7 +128,7 @@ def test_a_source_that_falls_silent_is_lost_after_the_timeout():
 
 def test_a_stop_signal_holds_and_says_so():
     frames = ramp_frames(0.0, HOME, HOME + [0.4, 0, 0, 0, 0, 0], 10) + [(0.55, KeyboardInterrupt())]
-    fol, link = follow(frames)
+    fol, _link = follow(frames)
     with pytest.raises(Interrupted) as info:
         fol.run()
     assert info.value.exit_code == 130 and info.value.result.log["hold"]["copies"] == 2

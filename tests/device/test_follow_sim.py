@@ -149,7 +149,7 @@ def test_a_dataset_episode_replays_within_tolerance_of_its_states_and_the_run_is
     # the recording: one episode, its actions the replayed targets (float32), its states within reach of them
     eps = read_episodes(tmp_path / "rec")
     assert len(eps) == 1 and eps[0].task == "follow"
-    ts, act = read_actions(tmp_path / "rec", 0)
+    _ts, act = read_actions(tmp_path / "rec", 0)
     assert np.allclose(act[0], q[0], atol=1e-6) and np.allclose(act[-1], q[-1], atol=1e-3)
     assert np.min(np.abs(act[:, None, :] - q[None].astype(np.float32)).max(axis=2), axis=1).max() < 1e-6  # each row one of q's
     # at the end the arm is at the last target, within the servos' lag: following ends with the last set-point and does

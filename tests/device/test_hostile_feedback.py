@@ -85,7 +85,7 @@ def test_a_400_digit_number_mid_motion_is_exit_4_with_a_hold_and_a_valid_log(tmp
         rc = run_cli(["execute", str(p), "--port", sim.path, "--yes"])
         time.sleep(0.3)
         log = json.loads(p.with_name("pp.exec.json").read_text())  # valid JSON
-        t_hold, hold = _hold_exec(sim, log)
+        _t_hold, _hold = _hold_exec(sim, log)
         _, _, torque = sim.recording()
     err = capsys.readouterr().err
     assert rc == 4 and "feedback refused 5 times in a row: base read 111111111111" in err
@@ -101,7 +101,7 @@ def test_the_hold_after_a_feedback_jump_moves_no_joint_more_than_005_rad(tmp_pat
         rc = run_cli(["execute", str(p), "--port", sim.path, "--yes"])
         time.sleep(0.6)
         log = json.loads(p.with_name("pp.exec.json").read_text())
-        t_hold, hold = _hold_exec(sim, log)
+        _t_hold, hold = _hold_exec(sim, log)
         ts, q, torque = sim.recording()
     err = capsys.readouterr().err
     assert rc == 4 and "elbow read 2.900 rad" in err and "faster than the servos can move" in err
@@ -122,7 +122,7 @@ def test_feedback_that_stops_ends_the_stream_within_half_a_second_with_a_hold_on
         rc = run_cli(["execute", str(p), "--port", sim.path, "--yes"])
         time.sleep(0.3)
         log = json.loads(p.with_name("pp.exec.json").read_text())
-        t_hold, hold = _hold_exec(sim, log)
+        t_hold, _hold = _hold_exec(sim, log)
         muted_at = [t for _, t, c in sim.executed() if c.get("T") in MOTION][99]
     err = capsys.readouterr().err
     assert rc == 4 and "no feedback for" in err

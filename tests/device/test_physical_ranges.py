@@ -49,7 +49,7 @@ def test_the_physics_arm_stays_within_its_joints_ends_one_servo_turn_and_the_fir
         fw.advance(float(t))
         p = fw.servos.positions()
         assert np.all((p >= 0) & (p <= 4095)), p  # one turn of each servo
-    ts, q, _ = fw.recording()
+    _ts, q, _ = fw.recording()
     assert within_the_arm(q), np.degrees(q[np.argmax(np.abs(q).max(axis=1))])
     # the firmware's own reading of it: every joint within its range as the firmware converts it
     rad = [position_to_rad(j, float(fw.read_pos[j])) for j in range(6)]
@@ -100,7 +100,7 @@ def test_waveshares_sdk_sequence_leaves_no_physical_range_on_sim_device():
                               daemon=True)
         th.start()
         time.sleep(9.0)  # boot (about 6 s), then the move
-        ts, q, _ = sim.recording()
+        _ts, q, _ = sim.recording()
         codes = [c.get("T") for _, c in sim.received()]
     assert 122 in codes
     assert within_the_arm(q), np.degrees(q[np.argmax(np.abs(q).max(axis=1))])

@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from roarmctl.device import protocol as P
 from roarmctl.robot.loader import load_robot
@@ -65,10 +67,6 @@ def test_line_buffer_handles_partial_lines_and_crlf():
     lines = lb.feed((FB[30:] + "\r\nboot text\r\n{\"T\":10").encode())
     assert lines == [FB.encode(), b"boot text"]
     assert lb.feed(b"51}\n") == [b'{"T":1051}']
-
-
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 
 @settings(max_examples=200, deadline=None)

@@ -29,7 +29,7 @@ def test_sdk_feedback_at_boot_pose(arm):
     client, _ = arm
     fb = client.feedback_get()
     assert isinstance(fb, list) and len(fb) == 10  # x y z tit b s e t r g
-    x, y, z, tit, b, s, e, t, r, g = fb
+    x, _y, z, _tit, b, s, e, t, r, g = fb
     assert (x, z) == pytest.approx((346.16, 223.13), abs=1.5)
     assert e == pytest.approx(math.pi / 2, abs=1e-5)
     assert g == pytest.approx(0.0, abs=1e-5)  # SDK: pi - hand; boot hand = pi (closed)
@@ -93,7 +93,7 @@ def test_every_sdk_call_the_readme_lists(arm):
     # pose_ctrl: T:1041 (mm, deg); pose_get reads x y z tit + roll, gripper back
     client.pose_ctrl(pose=[300, 40, 120, 10, 0, 20])
     got = _settle(client, [300, 40, 120], [0, 1, 2], 1.5)
-    x, y, z, tit, roll, grip = client.pose_get()
+    x, y, z, tit, _roll, grip = client.pose_get()
     assert (x, y, z) == pytest.approx((300, 40, 120), abs=1.5)
     assert tit == pytest.approx(10, abs=0.3) and grip == pytest.approx(20, abs=0.3)
     # torque_set: T:210 off, the arm goes limp (the SDK then waits for feedback), on again

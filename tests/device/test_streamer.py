@@ -167,7 +167,7 @@ def test_start_far_from_first_point_is_refused():
     clock = FakeClock()
     link = FakeLink(clock)
     t = min_jerk([[0.5, 0.0, 1.5708, 0, 0, 0], [0.6, 0.0, 1.5708, 0, 0, 0]], [0.5])
-    with pytest.raises(InfeasibleError, match="base_link_to_link1 is 0.1 deg, the start is 28.6 deg"):
+    with pytest.raises(InfeasibleError, match=r"base_link_to_link1 is 0\.1 deg, the start is 28\.6 deg"):
         Streamer(link, ROBOT, t, StreamConfig(), clock=clock, sleep=clock.sleep).run()
     assert all(c["T"] == 105 for _, c in link.sent)
 
@@ -176,7 +176,7 @@ def test_trajectory_outside_the_firmware_range_is_refused():
     from roarmctl.errors import InputError
 
     bad = min_jerk([HOME, [0.0, 0.0, -1.0, 0.0, 0.0, 0.0]], [1.0])  # elbow below the 0.84 clamp (-0.785)
-    with pytest.raises(InputError, match="link2_to_link3 .* outside the firmware's range for 'elbow'"):
+    with pytest.raises(InputError, match=r"link2_to_link3 .* outside the firmware's range for 'elbow'"):
         build_schedule(bad, ROBOT)
 
 
@@ -224,6 +224,8 @@ def test_a_host_stall_in_a_detour_makes_the_run_late_never_cut_across_the_obstac
     tick due after such a stall cut the corner into the post (before the fix: stalls of 0.3 s at ticks 6-18, 0.4 s at
     ticks 0-20 of the 61)."""
     import math
+    import tempfile
+    from pathlib import Path
 
     from test_where_the_arm_is import POST, plan_text
 
@@ -232,9 +234,6 @@ def test_a_host_stall_in_a_detour_makes_the_run_late_never_cut_across_the_obstac
     from roarmctl.motion.replan import plan_between
     from roarmctl.motion.scene import Scene
     from roarmctl.robot.ik import solve_ik
-
-    import tempfile
-    from pathlib import Path
 
     with tempfile.TemporaryDirectory() as d:
         plan = Path(d) / "post.yaml"
