@@ -139,3 +139,60 @@ def test_the_bundled_urdf_agrees_with_pinocchio():
         ours = robot.kin.link_frames(q)
         for k, link in enumerate(robot.link_names):
             assert np.allclose(ours[k], theirs[link], atol=1e-9, rtol=0), link
+
+
+LIMITED = """<robot name="r">
+  <link name="base"/><link name="l1"/><link name="l2"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.1"/>
+    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="3" velocity="2"/></joint>
+  <joint name="j2" type="{kind}"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.2"/>
+    <axis xyz="0 1 0"/>{limit}</joint>
+</robot>"""
+#: Each attribute of the varied joint's ``<limit>``: left out, or one of these values.
+LIMIT_VALUES = {"lower": ("-1", "0.5"), "upper": ("2", "-2"), "effort": ("4",), "velocity": ("1.5",)}
+
+
+def limit_variants():
+    """Every joint type with no ``<limit>`` and with every choice of written attributes and values."""
+    import itertools
+
+    choices = [[(key, None)] + [(key, v) for v in values] for key, values in LIMIT_VALUES.items()]
+    for kind in ("revolute", "prismatic", "continuous", "fixed"):
+        yield kind, None
+        for combo in itertools.product(*choices):
+            yield kind, {k: v for k, v in combo if v is not None}
+
+
+@pytest.mark.parametrize("kind, attrs", list(limit_variants()),
+                         ids=lambda v: v if isinstance(v, str) else "-".join(f"{k}{x}" for k, x in (v or {}).items()) or "none")
+def test_a_joint_limit_is_read_as_urdfdom_reads_it(tmp_path, kind, attrs):
+    """The class of ``<limit>`` elements (attributes written or not, for every joint type), against urdfdom itself
+    (through Pinocchio): what urdfdom refuses (a revolute or prismatic joint without ``<limit>``, a ``<limit>``
+    without effort or velocity, urdf_parser/src/joint.cpp) roarmctl refuses with one line naming the joint; what it
+    accepts roarmctl loads with the same bounds (a bound not written is 0), except where they leave no range
+    (lower >= upper), which roarmctl refuses naming the bounds and, when one was not written, that it is 0."""
+    limit = "" if attrs is None else "<limit " + " ".join(f'{k}="{v}"' for k, v in attrs.items()) + "/>"
+    text = LIMITED.format(kind=kind, limit=limit)
+    (tmp_path / "arm.urdf").write_text(text)
+    try:
+        model = pin.buildModelFromXML(text)
+    except ValueError:
+        model = None
+    if model is None:
+        with pytest.raises(DescriptionError) as err:
+            load_robot(str(tmp_path / "arm.urdf"))
+        message = str(err.value)
+        assert "joint 'j2'" in message and "urdfdom" in message and "\n" not in message
+        return
+    if kind in ("revolute", "prismatic"):
+        lower, upper = float(model.lowerPositionLimit[1]), float(model.upperPositionLimit[1])
+        if not lower < upper:
+            with pytest.raises(DescriptionError, match="joint 'j2' limit: lower .* must be below upper") as err:
+                load_robot(str(tmp_path / "arm.urdf"))
+            assert ("reads a missing bound as 0" in str(err.value)) == ("lower" not in attrs or "upper" not in attrs)
+            return
+        robot = load_robot(str(tmp_path / "arm.urdf"))
+        assert (robot.lower[1], robot.upper[1]) == (lower, upper)
+    else:
+        robot = load_robot(str(tmp_path / "arm.urdf"))
+        assert robot.dof == 1 + (kind == "continuous")

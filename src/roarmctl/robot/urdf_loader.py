@@ -151,8 +151,9 @@ def from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
             if np.linalg.norm(axis) == 0 and kind != "fixed":
                 raise DescriptionError(f"{where}: axis is zero")
             lim = j.find("limit")
-            j_lower = _fattr(lim, "lower", -math.pi, f"{where} limit")
-            j_upper = _fattr(lim, "upper", math.pi, f"{where} limit")
+            # a bound not written is 0, as urdfdom reads it (a fixed joint's <limit> means nothing)
+            j_lower = _fattr(lim, "lower", 0.0 if lim is not None else -math.pi, f"{where} limit")
+            j_upper = _fattr(lim, "upper", 0.0 if lim is not None else math.pi, f"{where} limit")
             if j.get("type") == "continuous":
                 j_lower, j_upper = -2 * math.pi, 2 * math.pi
             elif lim is not None and lim.get("lower") is not None and lim.get("upper") is not None:

@@ -292,15 +292,25 @@ def check_urdf(root: ET.Element, where: str) -> None:
                 if abs(n - 1.0) > AXIS_TOL:
                     CHECK.fail(where, f"joint '{name}' axis", f"'{a.get('xyz')}' has length {n:g}, not 1", "give a unit vector")
         lim = j.find("limit")
+        if lim is None and j.get("type") in ("revolute", "prismatic"):
+            # urdfdom (urdf_parser/src/joint.cpp, parseJoint) refuses the model: ROS, MoveIt and Pinocchio never load it
+            CHECK.fail(where, f"joint '{name}'", f"a {j.get('type')} joint needs a <limit> (urdfdom refuses one without)",
+                       "add <limit lower=... upper=... effort=... velocity=...>, or make it type=\"continuous\"")
         if lim is not None:
             for key in ("lower", "upper", "velocity", "effort"):
                 _attr_floats(lim, key, 1, where, f"joint '{name}' limit {key}")
+            for key in ("effort", "velocity"):  # urdfdom's parseJointLimits: required on every <limit>, any joint type
+                if lim.get(key) is None:
+                    CHECK.fail(where, f"joint '{name}' limit", f"no '{key}' attribute (urdfdom refuses a <limit> without "
+                               "effort and velocity)", f"write {key}=\"0\" if it is not known (0 means not given)")
             # URDF reads <limit> on revolute and prismatic joints only: a fixed joint's (Kinova writes
             # lower="0" upper="0" on its fixed end_effector joint) and a continuous one's bounds mean nothing
-            lower, upper = lim.get("lower"), lim.get("upper")
-            if lower is not None and upper is not None and j.get("type") in ("revolute", "prismatic"):
-                if not float(lower) < float(upper):
-                    CHECK.fail(where, f"joint '{name}' limit", f"lower {lower} must be below upper {upper}")
+            # a bound not written is 0, as urdfdom reads it
+            lower, upper = lim.get("lower", "0"), lim.get("upper", "0")
+            if j.get("type") in ("revolute", "prismatic") and not float(lower) < float(upper):
+                unwritten = [k for k in ("lower", "upper") if lim.get(k) is None]
+                CHECK.fail(where, f"joint '{name}' limit", f"lower {lower} must be below upper {upper}"
+                           + (f" ({' and '.join(unwritten)} not written: urdfdom reads a missing bound as 0)" if unwritten else ""))
             # a negative velocity or effort is read as urdfdom reads it (any number, urdf_parser/src/joint.cpp):
             # vendors write -1 for "not given"; the loader takes it so, with a note
     for start in parent_of:  # walking up from every link must reach the root: no cycles
