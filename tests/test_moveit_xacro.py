@@ -68,10 +68,6 @@ def test_xacro_input_expands_arguments(tmp_path):
 @pytest.mark.parametrize("srdf_extra, limits, side_extra, needle", [
     ('<virtual_joint name="v" type="floating" parent_frame="world" child_link="base_link"/>', None, None,
      r"arm.srdf: virtual_joint 'v': type 'floating' is not supported"),
-    ('<group_state name="bad" group="arm"><joint name="base_link_to_link1" value="x"/></group_state>', None, None,
-     r"group_state 'bad' joint 'base_link_to_link1' value: not a number"),
-    ('<group_state name="part" group="arm"><joint name="base_link_to_link1" value="0"/></group_state>', None, None,
-     r"group_state 'part': no value for link1_to_link2"),
     ("", {"joint_limits": {"nojoint": {}}}, None, r"joint_limits.yaml: joint_limits.nojoint: not a joint"),
     ("", None, {"gripper_group": "arm"}, r"arm.srdf: gripper group 'arm' drives 5 joints"),
     ("", {"joint_limits": {"link1_to_link2": {"has_velocity_limits": True, "max_velocity": "fast"}}}, None,
@@ -150,3 +146,62 @@ def test_srdf_with_an_arm_group_of_joints_and_a_composite_state(tmp_path):
     r = load_robot(str(tmp_path / "arm.yaml"))
     assert r.tcp_link == "hand_tcp"
     assert np.allclose(r.named_poses["ready"], [0.2, 0.1, 1.9, 0.3, 0, 0.7])
+
+
+def _ros2_parameter_file(limits: dict, prefix: str = "$(var tf_prefix)") -> str:
+    """``limits`` in a ROS 2 parameter file's layout, as MoveIt 2 launch files load it (the AR4's)."""
+    joints = {prefix + name: spec for name, spec in limits["joint_limits"].items()}
+    return yaml.safe_dump({"/**/move_group": {"ros__parameters": {"robot_description_planning": {
+        "joint_limits": joints, "cartesian_limits": {"max_trans_vel": 0.05}}}}})
+
+
+@pytest.mark.parametrize("prefix, args", [("$(var tf_prefix)", {"tf_prefix": ""}), ("$(var p)", {"p": ""}), ("", None)])
+def test_a_ros2_parameter_file_reads_as_the_moveit1_layout(tmp_path, prefix, args):
+    """The same limits in MoveIt 2's launch-file layout (NODE.ros__parameters.robot_description_planning, keys with
+    ``$(var NAME)`` that the launch replaces by its argument: here from xacro_args) give the same robot."""
+    (tmp_path / "one").mkdir()
+    (tmp_path / "two").mkdir()
+    plain = load_robot(str(setup(tmp_path / "one")))
+    side = setup(tmp_path / "two", side_extra={"xacro_args": args} if args is not None else None)
+    (tmp_path / "two" / "joint_limits.yaml").write_text(_ros2_parameter_file(LIMITS, prefix))
+    r = load_robot(str(side))
+    for key in ("velocity_limits", "acceleration_limits", "lower", "upper"):
+        assert np.array_equal(getattr(r, key), getattr(plain, key)), key
+    assert any("cartesian_limits not used" in n for n in r.notes), r.notes
+
+
+@pytest.mark.parametrize("text, args, needle", [
+    ("$(var tf_prefix)base_link_to_link1: {}", None, r"'\$\(var tf_prefix\)' has no value"),
+    ("$(var tf_prefix)base_link_to_link1: {}", {"other": 1}, r"give it in the sidecar's xacro_args"),
+    ("$(env HOME)base_link_to_link1: {}", {"tf_prefix": ""}, r"only \$\(var NAME\) is read"),
+    ("$(find-pkg-share x)base_link_to_link1: {}", {"tf_prefix": ""}, r"only \$\(var NAME\) is read"),
+])
+def test_a_launch_substitution_without_a_value_is_refused(tmp_path, text, args, needle):
+    side = setup(tmp_path, side_extra={"xacro_args": args} if args is not None else None)
+    (tmp_path / "joint_limits.yaml").write_text("/**/move_group:\n  ros__parameters:\n    robot_description_planning:\n"
+                                               "      joint_limits:\n        " + text + "\n")
+    with pytest.raises(DescriptionError, match=needle):
+        load_robot(str(side))
+
+
+@pytest.mark.parametrize("acc, dec, expected, noted", [(1.1, -0.5, 0.5, True), (1.1, -2.0, 1.1, False), (None, -0.4, 0.4, False)])
+def test_the_smaller_of_acceleration_and_deceleration_is_the_limit(tmp_path, acc, dec, expected, noted):
+    """MoveIt 2's ``max_deceleration`` (negative): roarmctl's timing brakes as it speeds up, so the acceleration
+    limit is the smaller magnitude, said when the deceleration is the smaller."""
+    spec = {"has_deceleration_limits": True, "max_deceleration": dec}
+    if acc is not None:
+        spec.update(has_acceleration_limits=True, max_acceleration=acc)
+    r = load_robot(str(setup(tmp_path, limits={"joint_limits": {"base_link_to_link1": spec}})))
+    assert r.acceleration_limits[0] == expected
+    assert any("max_deceleration" in n for n in r.notes) == noted
+
+
+def test_the_ar4s_published_joint_limits_are_read():
+    """The AR4's published joint_limits.yaml (a ROS 2 parameter file with $(var tf_prefix) keys): its comments say
+    60 deg/s and 30 deg/s^2 for every arm joint, 0.05 m/s and 0.1 m/s^2 for the jaw."""
+    r = load_robot(str(Path(__file__).parent / "data" / "arms" / "ar4" / "robot.yaml"))
+    arm = r.arm_indices
+    assert np.allclose(r.velocity_limits[arm], np.radians(60), rtol=1e-4)
+    assert np.allclose(r.acceleration_limits[arm], np.radians(30), rtol=1e-4)
+    g = r.joint_index(r.gripper.joint)
+    assert (r.velocity_limits[g], r.acceleration_limits[g]) == (0.05, 0.1)

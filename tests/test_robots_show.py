@@ -34,8 +34,12 @@ def test_sidecar_srdf_urdf_and_defaults_are_told_apart():
     info = summary(str(ARMS / "ar4" / "robot.yaml"))
     joints = {j["name"]: j for j in info["joints"]}
     assert joints["joint_1"]["effort"] is None and joints["joint_1"]["effort_source"] == "none given"  # effort="-1"
-    assert joints["joint_1"]["acceleration_source"] == "roarmctl default"
-    assert joints["joint_1"]["velocity_source"] == "URDF"
+    # its published joint_limits.yaml (a ROS 2 parameter file) gives velocity and acceleration; Kinova's Gen3 has
+    # none: its velocity is the URDF's and its acceleration roarmctl's default
+    assert joints["joint_1"]["acceleration_source"] == joints["joint_1"]["velocity_source"] == "joint_limits.yaml"
+    gen3 = {j["name"]: j for j in summary(str(ARMS / "gen3" / "robot.yaml"))["joints"]}
+    assert gen3["joint_1"]["acceleration_source"] == "roarmctl default"
+    assert gen3["joint_1"]["velocity_source"] == "URDF"
     assert joints["gripper_jaw1_joint"]["unit"] == "m" and joints["gripper_jaw1_joint"]["type"] == "prismatic"
     assert info["gripper"]["source"] == "SRDF" and info["gripper"]["joint"] == "gripper_jaw1_joint"
     assert info["tcp"] == {"link": "gripper_base_link", "source": "sidecar",

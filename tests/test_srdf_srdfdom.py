@@ -5,18 +5,26 @@ message, one it cannot use: an element inside a ``<group>`` other than joint, li
 ``<passive_joint>`` written there is never seen), a joint or link the URDF lacks (in a group, a chain, a
 ``passive_joint``, a ``disable_collisions`` pair, a ``group_state``), an unknown top-level element. MoveIt then
 loads the robot. roarmctl does the same: each such element, put anywhere in a working SRDF, leaves the robot
-exactly as without it, and a note names it. (srdfdom is not on PyPI: the cases are read off its source.)
+exactly as without it, and a note names it. (srdfdom is not on PyPI: the cases are read off its source;
+how it reads a ``group_state`` value is C++'s stream extraction, run here by a C++ compiler.)
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import itertools
+import shutil
+import subprocess
+
 import numpy as np
 import pytest
 import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from roarmctl.robot.loader import bundled_dir, load_robot
+from roarmctl.robot.srdf import srdfdom_values
 
 ARM = ("base_link_to_link1", "link1_to_link2", "link2_to_link3", "link3_to_link4", "link4_to_link5")
 SRDF = """<robot name="arm">
@@ -45,6 +53,9 @@ SKIPPED = [
     ("top", '<some_future_element/>', "<some_future_element> not used"),
     ("top", '<group name="other"><chain base_link="nowhere" tip_link="hand_tcp"/></group>',
      "group 'other' chain base_link: 'nowhere' is not a link"),
+    ("top", '<disable_default_collisions link="nolink"/>', "disable_default_collisions: 'nolink' is not a link"),
+    ("top", '<enable_collisions link1="link1" link2="nolink"/>', "enable_collisions link2: 'nolink' is not a link"),
+    ("in_state", '<joint name="link4_to_link5"/>', "joint 'link4_to_link5': no value: skipped"),
 ]
 
 
@@ -78,3 +89,107 @@ def test_the_baseline_reads_the_arm_the_gripper_and_the_pose(tmp_path):
     assert robot.tcp_link == "hand_tcp" and frozenset(("link1", "link4")) in robot.allowed_collisions
     assert (robot.gripper.joint, robot.gripper.open, robot.gripper.closed) == ("link5_to_gripper_link", 1.2, 0.1)
     assert np.allclose(robot.named_poses["home"][:5], [0, 0.1, 0.2, 0.3, 0.4])
+
+
+# ----------------------------------------------------------------------------- group_state values
+#: srdfdom's loop over a group_state joint's value (src/model.cpp, loadGroupStates), one value text a line; the C++
+#: library's ``operator>>`` is the reference for what it stores ("abc" stores 0: the stream fails).
+ORACLE = r"""
+#include <cstdio>
+#include <iostream>
+#include <sstream>
+#include <string>
+int main() {
+  std::string line;
+  while (std::getline(std::cin, line)) {
+    std::istringstream ss(line);
+    while (ss.good() && !ss.eof()) {
+      double val = 0;
+      ss >> val >> std::ws;
+      std::printf("%.17g ", val);
+    }
+    std::printf("\n");
+  }
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def oracle(tmp_path_factory):
+    cxx = shutil.which("g++") or shutil.which("c++")
+    if cxx is None:
+        pytest.skip("no C++ compiler")
+    d = tmp_path_factory.mktemp("oracle")
+    (d / "o.cpp").write_text(ORACLE)
+    subprocess.run([cxx, "-O1", "-o", str(d / "o"), str(d / "o.cpp")], check=True, timeout=120)
+
+    def run(texts: list[str]) -> list[list[float]]:
+        out = subprocess.run([str(d / "o")], input="\n".join(texts) + "\n", capture_output=True, text=True,
+                             check=True, timeout=60).stdout
+        return [[float(v) for v in line.split()] for line in out.splitlines()]
+
+    return run
+
+
+NAMED = ["1.5", "abc", "1.5abc", " 2 ", "1 2", "nan", "inf", "-inf", "1e999", "-1e999", "1e-999", "1e-310", "1e",
+         "0x10", ".5", "+3", "-", "1,5", "1.5.", "3e-2", "e5", "1e+", "${pi/2}", "1E2", "infinity", "-.5e1x", "--1",
+         "1.5\t2", "1.5e3.2", "0.7853981633974483"]
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.lists(st.text(alphabet="0123456789+-.eE x\t", min_size=1, max_size=12).filter(lambda s: s.strip(" \t")),
+                min_size=20, max_size=20))
+def test_a_value_is_read_as_srdfdoms_cxx_stream_reads_it(oracle, texts):
+    """The class of value texts (digits, signs, points, exponents, spaces, junk), against the C++ library running
+    srdfdom's own loop: the same numbers, in the same count (a blank text is left out: C++ leaves it undefined)."""
+    texts = NAMED + texts
+    for text, theirs in zip(texts, oracle(texts), strict=True):
+        assert srdfdom_values(text) == theirs, text
+
+
+def test_a_value_srdfdom_reads_as_one_number_is_that_number_with_a_note(tmp_path):
+    pose = POSE.replace('value="0.2"', 'value="abc"').replace('value="0.30000000000000004"', 'value="nan"')
+    assert pose.count('"abc"') == 1 and pose.count('"nan"') == 1
+    robot = load(tmp_path, pose=pose)
+    assert np.allclose(robot.named_poses["home"][:5], [0, 0.1, 0, 0, 0.4])  # both read as 0, as srdfdom stores them
+    assert any("value 'abc' is not a number: read as 0, as srdfdom reads it" in n for n in robot.notes), robot.notes
+    assert any("value 'nan' is not a number: read as 0" in n for n in robot.notes)
+
+
+@pytest.mark.parametrize("value, said", [("1.5abc", "1.5, 0"), ("", "no number"), ("0.1 0.2", "0.1, 0.2")])
+def test_a_value_srdfdom_reads_as_no_or_several_numbers_leaves_the_state_out(tmp_path, value, said):
+    """MoveIt leaves a joint whose value count does not match out of the state; roarmctl's named poses give every arm
+    joint, so the state is left out with notes, and the robot loads as MoveIt loads it."""
+    robot = load(tmp_path, pose=POSE.replace('value="0.2"', f'value="{value}"'))
+    assert "home" not in robot.named_poses
+    assert any(f"read by srdfdom as {said}, not one number" in n for n in robot.notes), robot.notes
+    assert any("group_state 'home' left out: no value for link2_to_link3" in n for n in robot.notes)
+
+
+# ----------------------------------------------------------------------------- disable_default_collisions
+def _expected_pairs(base, links: list[str], no_default: list[str], enabled: set[frozenset]) -> set[frozenset]:
+    """The allowed pairs by srdfdom's model (model.h: links "disabled by default (and only selectively enabled)",
+    enabled pairs "re-enable collision after having disabled it via a default"), derived pair by pair, on top of
+    the robot's pairs without them (the SRDF's disable_collisions, the adjacent and gripper pairs)."""
+    out = set(base.allowed_collisions)
+    for a, b in itertools.combinations(links, 2):
+        if (a in no_default or b in no_default) and frozenset((a, b)) not in enabled:
+            out.add(frozenset((a, b)))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_disable_default_collisions_allows_a_links_pairs_but_the_enabled_ones(tmp_path, seed):
+    (tmp_path / "with").mkdir()
+    base = load(tmp_path)
+    links = list(base.link_names)
+    rng = np.random.default_rng(seed)
+    no_default = [str(x) for x in rng.choice(links, size=1 + seed % 3, replace=False)]
+    candidates = [frozenset((a, b)) for a in no_default for b in links if a != b]
+    enabled = {candidates[int(k)] for k in rng.choice(len(candidates), size=min(3, len(candidates)), replace=False)}
+    top = "".join(f'<disable_default_collisions link="{n}"/>' for n in no_default) + "".join(
+        '<enable_collisions link1="{}" link2="{}" reason="x"/>'.format(*sorted(p)) for p in enabled)
+    robot = load(tmp_path / "with", top=top)
+    assert robot.allowed_collisions == _expected_pairs(base, links, no_default, enabled - base.allowed_collisions)
+    assert any(f"disable_default_collisions '{no_default[0]}'" in n for n in robot.notes), robot.notes
+    assert summary(robot)[:2] == summary(base)[:2] and robot.named_poses.keys() == base.named_poses.keys()

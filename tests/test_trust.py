@@ -576,20 +576,6 @@ def test_an_old_trajectory_naming_a_description_file_still_reads_as_data(tmp_pat
     assert code == 0, err
 
 
-@pytest.mark.parametrize("edit, needle", [
-    (lambda t: t.replace('value="2.0"', 'value="nan"'), "group_state 'tucked' joint 'link2_to_link3' value: not a finite number"),
-    (lambda t: t.replace('value="2.0"', 'value="inf"'), "not a finite number"),
-], ids=["nan", "inf"])  # an unknown chain link is skipped with a note, as srdfdom does: tests/test_srdf_srdfdom.py
-def test_srdf_values_once_accepted_are_refused(tmp_path, edit, needle):
-    from test_moveit_xacro import SRDF
-
-    d = _desc_dir(tmp_path)
-    (d / "arm.srdf").write_text(edit(SRDF).replace("%s", ""))
-    (d / "arm.urdf").write_text((hostile.bundled_dir() / "roarm_m3_pro.urdf").read_text())
-    side = hostile.sidecar(d, "arm.urdf", srdf="arm.srdf")
-    refused(["kin", "fk", str(side), *hostile.M3_Q[:5]], "arm.srdf", needle)
-
-
 def test_an_srdf_that_is_a_fifo_or_outside_is_refused(tmp_path, secret):
     d = _desc_dir(tmp_path)
     hostile.fifo(d, "arm.srdf")

@@ -73,6 +73,7 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
     import yaml
 
     from roarmctl.robot import loader
+    from roarmctl.robot.joint_limits import JOINT_LIMITS_BYTES, substituted
     from roarmctl.robot.sidecar import read_sidecar
     from roarmctl.robot.urdf_loader import URDF_BYTES, read_urdf
 
@@ -140,8 +141,9 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
             files["robot.srdf"] = read_text(srdf, f"{path}: srdf", URDF_BYTES, roots=roots, error=DescriptionError)
         out["srdf"] = "robot.srdf"
     if side.get("joint_limits") is not None:
-        files["joint_limits.yaml"] = read_text(path.parent / str(side["joint_limits"]), f"{path}: joint_limits",
-                                               URDF_BYTES, roots=roots, error=DescriptionError)
+        limits = path.parent / str(side["joint_limits"])  # $(var NAME) replaced: the bundle keeps no xacro_args
+        files["joint_limits.yaml"] = substituted(read_text(limits, f"{path}: joint_limits", JOINT_LIMITS_BYTES, roots=roots,
+                                                           error=DescriptionError), side.get("xacro_args"), str(limits))
         out["joint_limits"] = "joint_limits.yaml"
     files["robot.yaml"] = yaml.safe_dump(out, sort_keys=False)
     return {"format": FORMAT, "files": files}

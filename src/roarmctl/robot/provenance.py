@@ -17,9 +17,9 @@ import numpy as np
 
 from roarmctl.errors import DescriptionError
 from roarmctl.robot.implied import adjacent_pairs
+from roarmctl.robot.joint_limits import read_joint_limits
 from roarmctl.robot.loader import bundled_dir, load_robot
 from roarmctl.robot.model import Robot
-from roarmctl.robot.srdf import read_joint_limits
 from roarmctl.validation import load_yaml
 
 DEFAULT = "roarmctl default"
@@ -51,7 +51,8 @@ def summary(spec: str, trust_sidecar: bool = True) -> dict[str, Any]:
     kind = "DH table" if "dh" in side else "URDF"
     jl: dict[str, dict[str, float]] = {}
     if side.get("joint_limits") and path is not None:
-        jl = read_joint_limits(path.parent / str(side["joint_limits"]), set(robot.joint_names), str(path))
+        jl = read_joint_limits(path.parent / str(side["joint_limits"]), set(robot.joint_names), str(path),
+                               args=side.get("xacro_args"))
     moveit = "SRDF" if side.get("srdf") else None
     joints = []
     for i, name in enumerate(robot.joint_names):

@@ -1,4 +1,4 @@
-"""MoveIt's SRDF and joint_limits.yaml, turned into sidecar fields.
+"""MoveIt's SRDF, turned into sidecar fields (joint_limits.yaml: ``robot.joint_limits``).
 
 SRDF (``srdf: file.srdf`` in the sidecar; a ``.xacro`` SRDF is expanded like the URDF, with the same
 ``xacro_args`` and ``packages``):
@@ -13,38 +13,39 @@ SRDF (``srdf: file.srdf`` in the sidecar; a ``.xacro`` SRDF is expanded like the
   follow, they are not counted) -> ``gripper.joint``, and its ``group_state``s named ``open`` and
   ``close``/``closed`` (any case) -> ``gripper.open`` / ``gripper.closed``. A sidecar ``gripper:``
   wins over all of it (the SRDF's group is then only used to sort its states);
+- ``disable_default_collisions link=L``: L's pairs with every other link of the robot are allowed, except the
+  ``enable_collisions`` pairs, which re-enable what the default disabled (srdfdom's ``model.h``: "links that
+  should have collision checking disabled by default (and only selectively enabled)"); L is still checked
+  against the scene;
 - ``virtual_joint`` of type fixed is accepted (the URDF root is fixed to the world).
 Other groups' states and unknown elements are left out with a note (``notes``), and so is what srdfdom
 skips (its ``model.cpp`` logs and goes on): an element inside a ``<group>`` other than joint, link, chain and
 group (``<passive_joint>`` written there), a joint or link the URDF does not have (in a group, a chain, a
-``passive_joint``, a ``disable_collisions`` pair, a ``group_state``). Elements whose meaning would change the
-robot (floating virtual joints, ``disable_default_collisions``) are errors.
-
-joint_limits.yaml (``joint_limits: file.yaml``): per joint ``has_velocity_limits`` /
-``max_velocity``, ``has_acceleration_limits`` / ``max_acceleration``, ``has_position_limits`` /
-``min_position`` / ``max_position``; a limit whose ``has_*`` is false is not used (the URDF's or the
-sidecar's applies). ``default_velocity_scaling_factor`` / ``default_acceleration_scaling_factor``
-are MoveIt's per-request defaults: read and checked, not limits (the plan file's
-``velocity_scale`` plays that role). Jerk limits are refused when switched on. Entries for joints
-that roarmctl does not drive (mimic fingers) are read and checked but not used.
+``passive_joint``, a ``disable_collisions``/``enable_collisions`` pair, a ``disable_default_collisions``, a
+``group_state``), a ``group_state`` joint without a value. A ``group_state`` joint value is read as srdfdom reads
+it (``srdfdom_values``: C++ stream extraction, so ``abc`` is 0), with a note where the text is not one plain
+number; a joint whose value srdfdom reads as no number or as several is left out of the state, as MoveIt leaves
+it, and a state without a value for every arm joint is left out with a note. A floating virtual joint is an error.
 """
 
 from __future__ import annotations
 
 import math
+import re
+import sys
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from roarmctl.errors import DescriptionError, describe_value
-from roarmctl.fileio import Roots, read_text
+from roarmctl.errors import DescriptionError
+from roarmctl.fileio import read_text
 from roarmctl.robot.xacro_input import expand
-from roarmctl.validation import check_markup, load_yaml
+from roarmctl.validation import check_markup
 
 SRDF_BYTES = 16 * 1024 * 1024  # an SRDF may have (MoveIt's of published arms: < 100 KiB)
 _KNOWN = {"group", "group_state", "disable_collisions", "end_effector", "virtual_joint", "disable_default_collisions",
-          "passive_joint"}
+          "enable_collisions", "passive_joint"}
 _OPEN = ("open",)
 _CLOSED = ("close", "closed")
 
@@ -62,6 +63,7 @@ def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, s
     groups: dict[str, ET.Element] = {}
     notes: list[str] = []
     passive: list[str] = []
+    no_default: list[str] = []  # disable_default_collisions links
 
     def note(text: str) -> None:
         if text not in notes:
@@ -78,15 +80,15 @@ def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, s
         if not isinstance(el.tag, str):
             continue
         if el.tag not in _KNOWN:
-            notes.append(f"{src}: <{el.tag}> not used (roarmctl reads {', '.join(sorted(_KNOWN - {'disable_default_collisions'}))})")
+            notes.append(f"{src}: <{el.tag}> not used (roarmctl reads {', '.join(sorted(_KNOWN))})")
             continue
         if el.tag == "group":
             groups[el.get("name", "")] = el
         if el.tag == "virtual_joint" and el.get("type") != "fixed":
             raise DescriptionError(f"{src}: virtual_joint '{el.get('name')}': type '{el.get('type')}' is not supported "
                                    f"(only a fixed mounting)")
-        if el.tag == "disable_default_collisions":
-            raise DescriptionError(f"{src}: disable_default_collisions is not supported; list the pairs instead")
+        if el.tag == "disable_default_collisions" and known(el.get("link"), links, "link", "disable_default_collisions"):
+            no_default.append(str(el.get("link")))
         if el.tag == "passive_joint" and known(el.get("name"), joints, "joint", "passive_joint"):
             passive.append(str(el.get("name")))
 
@@ -103,10 +105,19 @@ def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, s
             if not chain_ok(chain, gname):
                 g.remove(chain)
     out: dict[str, Any] = {"passive_joints": passive, "notes": notes}
-    pairs = []
-    for el in root.iter("disable_collisions"):
-        if all([known(el.get(k), links, "link", f"disable_collisions {k}") for k in ("link1", "link2")]):
-            pairs.append([str(el.get("link1")), str(el.get("link2"))])
+    pairs, enabled = [], set()
+    for tag in ("disable_collisions", "enable_collisions"):
+        for el in root.iter(tag):
+            if all([known(el.get(k), links, "link", f"{tag} {k}") for k in ("link1", "link2")]):
+                if tag == "enable_collisions":
+                    enabled.add(frozenset((str(el.get("link1")), str(el.get("link2")))))
+                else:
+                    pairs.append([str(el.get("link1")), str(el.get("link2"))])
+    for link in dict.fromkeys(no_default):
+        pairs += [[link, other] for other in sorted(links) if other != link and frozenset((link, other)) not in enabled]
+        note(f"{src}: disable_default_collisions '{link}': its collisions with the robot's other links are not "
+             f"checked{' except the enable_collisions pairs' if any(link in p for p in enabled) else ''} (with the scene "
+             "they are)")
     out["allowed_collisions"] = pairs
 
     def group_joints(name: str, seen: tuple[str, ...] = ()) -> list[str]:
@@ -197,15 +208,21 @@ def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, s
         for j in gs.findall("joint"):
             if not known(j.get("name"), joints, "joint", f"group_state '{name}' joint"):
                 continue
-            jname = str(j.get("name"))
-            try:
-                values[jname] = float(j.get("value", ""))
-            except (TypeError, ValueError):
-                raise DescriptionError(f"{src}: group_state '{name}' joint '{jname}' value: not a number: "
-                                       f"{str(j.get('value'))[:40]!r}") from None
-            if not math.isfinite(values[jname]):
-                raise DescriptionError(f"{src}: group_state '{name}' joint '{jname}' value: not a finite number: "
-                                       f"{j.get('value')!r}")
+            jname, text = str(j.get("name")), j.get("value")
+            where_value = f"{src}: group_state '{name}' joint '{jname}'"
+            if text is None:
+                note(f"{where_value}: no value: skipped (as srdfdom does)")
+                continue
+            read = srdfdom_values(text)
+            shown = text if len(text) <= 40 else text[:37] + "..."
+            if len(read) != 1 or read[0] is None:
+                said = "no number" if read == [None] else ", ".join(f"{v:g}" for v in read if v is not None)
+                note(f"{where_value}: value '{shown}' is read by srdfdom as {said}, not one number: the joint is left "
+                     "out of the state (as MoveIt leaves it)")
+                continue
+            values[jname] = read[0]
+            if not _plain_number(text):
+                note(f"{where_value}: value '{shown}' is not a number: read as {read[0]:g}, as srdfdom reads it")
         if group == grip_group and grip_group is not None:
             grip_states[str(name).lower()] = values.get(gripper_joint, math.nan) if gripper_joint else math.nan
         elif group == arm_group:
@@ -227,6 +244,64 @@ def read_srdf(root: ET.Element, src: str, joints: Mapping[str, tuple[str, str, s
     return out
 
 
+_WS = " \t\n\v\f\r"  # C's isspace in the "C" locale
+_MANTISSA = re.compile(r"[+-]?[0-9]*(?:\.[0-9]*)?")
+_EXPONENT = re.compile(r"[eE][+-]?[0-9]*")
+_DOUBLE_MAX = sys.float_info.max
+
+
+def _plain_number(text: str) -> bool:
+    """Whether ``text`` is one finite decimal number and nothing else (spaces around it aside)."""
+    return _extract(text.strip(_WS), 0) == (len(text.strip(_WS)), True) and math.isfinite(float(text))
+
+
+def _extract(text: str, pos: int) -> tuple[int, bool]:
+    """C++'s ``operator>>(double&)`` from ``pos`` (after the leading white space): where the characters it takes end,
+    and whether they make a number (libstdc++'s ``num_get``: a sign, digits, one point, digits, then an exponent only
+    after a digit; what strtod cannot read whole is a failure)."""
+    m = _MANTISSA.match(text, pos)
+    end = m.end() if m else pos
+    if any(c.isdigit() for c in text[pos:end]):
+        e = _EXPONENT.match(text, end)
+        if e:
+            end = e.end()
+    try:
+        float(text[pos:end])
+        return end, True
+    except ValueError:
+        return end, False
+
+
+def srdfdom_values(text: str) -> list[float | None]:
+    """The numbers srdfdom's ``loadGroupStates`` stores for a ``group_state`` joint's ``value`` text: its loop
+    ``while (ss.good() && !ss.eof()) { ss >> val >> std::ws; push_back(val); }`` on an ``istringstream``.
+
+    A failed extraction stores 0 and ends the loop (``abc`` -> [0], ``1.5abc`` -> [1.5, 0]); an overflow stores the
+    largest double with its sign and ends it; an empty or blank text stores a value the C++ leaves undefined (None).
+    """
+    out: list[float | None] = []
+    n, pos = len(text), 0
+    while pos < n and text[pos] in _WS:
+        pos += 1
+    if pos >= n:
+        return [None]
+    while True:
+        start = pos
+        pos, ok = _extract(text, start)
+        if not ok:
+            out.append(0.0)
+            return out
+        value = float(text[start:pos])
+        if math.isinf(value):  # strtod's overflow: the largest double, and the stream fails
+            out.append(math.copysign(_DOUBLE_MAX, value))
+            return out
+        out.append(value)
+        while pos < n and text[pos] in _WS:
+            pos += 1
+        if pos >= n:
+            return out
+
+
 def parse_srdf(path: Path, side: dict, sidecar: Path, where: str) -> tuple[ET.Element, str]:
     """The SRDF's XML root and its name for messages: read inside the description's roots (``side['_roots']``),
     a ``.xacro`` SRDF expanded like the URDF (the sidecar's ``xacro_args`` and ``packages``, the same roots)."""
@@ -245,63 +320,3 @@ def parse_srdf(path: Path, side: dict, sidecar: Path, where: str) -> tuple[ET.El
         return ET.fromstring(text), str(path)
     except ET.ParseError as exc:
         raise DescriptionError(f"{path}: not valid XML ({exc})") from None
-
-
-_JL_KEYS = {"has_velocity_limits", "max_velocity", "has_acceleration_limits", "max_acceleration",
-            "has_position_limits", "min_position", "max_position", "has_jerk_limits", "max_jerk",
-            "has_effort_limits", "max_effort", "angle_wraparound"}
-
-
-def read_joint_limits(path: Path, joints: set[str], where: str,
-                      roots: Roots | None = None) -> dict[str, dict[str, float]]:
-    """MoveIt joint_limits.yaml -> {joint: {velocity, acceleration, lower, upper}} (only the limits in force).
-
-    Read by ``roarmctl.validation.load_yaml`` (size, nesting, UTF-8, inside ``roots``)."""
-    data = load_yaml(path, DescriptionError, what=f"{where}: joint_limits", roots=roots, empty_ok=True) or {}
-    src = str(path)
-    if not isinstance(data, dict):
-        raise DescriptionError(f"{src}: expected a mapping at the top level")
-    for key in ("default_velocity_scaling_factor", "default_acceleration_scaling_factor"):
-        v = data.get(key, 1.0)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v <= 1:
-            raise DescriptionError(f"{src}: {key}: expected a number in (0, 1], got {v!r}")
-    unknown = set(data) - {"joint_limits", "default_velocity_scaling_factor", "default_acceleration_scaling_factor"}
-    if unknown:
-        raise DescriptionError(f"{src}: unknown key(s) {sorted(unknown)}")
-    out: dict[str, dict[str, float]] = {}
-    limits = data.get("joint_limits") or {}
-    if not isinstance(limits, dict):
-        raise DescriptionError(f"{src}: joint_limits: expected a mapping joint -> limits, got {describe_value(limits)}")
-    for jname, spec in limits.items():
-        loc = f"{src}: joint_limits.{jname}"
-        if jname not in joints:
-            raise DescriptionError(f"{loc}: not a joint of the URDF")
-        if not isinstance(spec, dict):
-            raise DescriptionError(f"{loc}: expected a mapping")
-        bad = set(spec) - _JL_KEYS
-        if bad:
-            raise DescriptionError(f"{loc}: unknown key(s) {sorted(bad)}")
-
-        def num(key: str, spec: dict = spec, loc: str = loc) -> float:
-            v = spec.get(key)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise DescriptionError(f"{loc}.{key}: expected a number, got {v!r}")
-            return float(v)
-
-        got: dict[str, float] = {}
-        for flag, key, name in (("has_velocity_limits", "max_velocity", "velocity"),
-                                ("has_acceleration_limits", "max_acceleration", "acceleration")):
-            if spec.get(flag) is True:
-                v = num(key)
-                if v <= 0:
-                    raise DescriptionError(f"{loc}.{key}: must be positive when {flag} is true")
-                got[name] = v
-        if spec.get("has_position_limits") is True:
-            got["lower"], got["upper"] = num("min_position"), num("max_position")
-            if got["lower"] >= got["upper"]:
-                raise DescriptionError(f"{loc}: min_position must be below max_position")
-        if spec.get("has_jerk_limits") is True:
-            raise DescriptionError(f"{loc}.has_jerk_limits: jerk limits are not supported by roarmctl's timing",
-                                   "set has_jerk_limits: false")
-        out[jname] = got
-    return out

@@ -17,11 +17,12 @@ from roarmctl.fileio import read_text, resolved
 from roarmctl.robot import validate as checks
 from roarmctl.robot import visuals
 from roarmctl.robot.implied import DEFAULT_ACCELERATION, DEFAULT_VELOCITY, held_fixed, mimic_bounds, rest_value
+from roarmctl.robot.joint_limits import read_joint_limits
 from roarmctl.robot.meshes import description_roots, load_mesh, mesh_modes, package_map, resolve, unit_notes
 from roarmctl.robot.model import CollisionShape, Inertial, Joint, JointKind, Robot
 from roarmctl.robot.padding import sidecar_padding
 from roarmctl.robot.sidecar import common_fields, tool_joint
-from roarmctl.robot.srdf import parse_srdf, read_joint_limits, read_srdf
+from roarmctl.robot.srdf import parse_srdf, read_srdf
 from roarmctl.robot.urdf_values import fattr as _fattr
 from roarmctl.robot.urdf_values import floats as _floats
 from roarmctl.robot.urdf_values import origin as _origin
@@ -58,14 +59,14 @@ def _moveit(side: dict, sidecar: Path, ordered: list[Joint], links: dict, actuat
     jl: dict = {}
     if side.get("joint_limits") is not None:
         jl = read_joint_limits(sidecar.parent / str(side["joint_limits"]), {j.name for j in ordered if j.kind != "fixed"},
-                               str(sidecar), roots=side.get("_roots"))
+                               str(sidecar), roots=side.get("_roots"), args=side.get("xacro_args"), notes=side["_notes"])
     if side.get("srdf") is None:
         return side, jl
     jinfo = {j.name: (j.kind, j.child, j.mimic, j.parent) for j in ordered}
     root, src = parse_srdf(resolved(sidecar.parent / str(side["srdf"]), f"{sidecar}: srdf", DescriptionError), side, sidecar,
                            str(sidecar))
     got = read_srdf(root, src, jinfo, set(links), side, str(sidecar))
-    side["_notes"] = list(got["notes"])
+    side["_notes"] += list(got["notes"])
     driven = [a for a in actuated if a not in got["passive_joints"]]
     if got.get("planned_joints"):
         driven = [a for a in driven if a in got["planned_joints"]]
@@ -82,9 +83,10 @@ def _moveit(side: dict, sidecar: Path, ordered: list[Joint], links: dict, actuat
     poses = dict(side.get("named_poses") or {})
     for pname, values in got["named_poses_by_joint"].items():
         missing = [n for n in arm if n not in values]
-        if missing:
-            raise DescriptionError(f"{side['srdf']}: group_state '{pname}': no value for {', '.join(missing)}",
-                                   "give every arm joint a value, or define the pose in the sidecar's named_poses")
+        if missing:  # MoveIt keeps a partial state; a named pose of roarmctl gives every arm joint
+            side["_notes"].append(f"{side['srdf']}: group_state '{pname}' left out: no value for {', '.join(missing)} "
+                                  "(give every arm joint a value, or define the pose in the sidecar's named_poses)")
+            continue
         grip_value = [values[grip]] if grip is not None and grip in values and grip in names else []
         poses.setdefault(pname, [values[n] for n in arm] + grip_value)
     side["named_poses"] = poses

@@ -115,7 +115,8 @@ ARMS: dict[str, dict] = {
         licence="MIT", licence_file="LICENSE",
         packages={"annin_ar4_description": "annin_ar4_description", "annin_ar4_moveit_config": "annin_ar4_moveit_config"},
         urdf="annin_ar4_description/urdf/ar.urdf.xacro", srdf="annin_ar4_moveit_config/srdf/ar.srdf.xacro",
-        xacro_args={"ar_model": "mk3", "name": "ar"}),  # its joint_limits.yaml is a launch file's ($(var tf_prefix) keys)
+        joint_limits="annin_ar4_moveit_config/config/joint_limits.yaml",  # a ROS 2 parameter file, $(var tf_prefix) keys
+        xacro_args={"ar_model": "mk3", "name": "ar", "tf_prefix": ""}),
     "gp7": dict(
         repo="ros-industrial/motoman", commit="433be15f6a27cb9a5715cc3887b1cd15ff33a8cb",
         licence="BSD-3-Clause (motoman_gp7_support/package.xml)", licence_file=None,
