@@ -1,10 +1,13 @@
 """Mesh units (issue 33, item 2): a COLLADA file's ``<unit meter=...>`` is honoured, STL is metres times the URDF
 ``scale``, and a link whose mesh is far off its link's size gets a note (the usual sign of millimetres read as
-metres: myCobot's finger DAE declares millimetres and loaded 1000 times too large, with no word)."""
+metres: myCobot's finger DAE declares millimetres and loaded 1000 times too large, with no word); its ``<up_axis>`` is
+not applied, as RViz and MoveIt read it."""
 
 from __future__ import annotations
 
+import os
 import re
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +51,54 @@ def test_a_collada_unit_that_is_no_length_is_refused(tmp_path, unit):
     path.write_bytes(re.sub(rb'meter="[^"]*"', f'meter="{unit}"'.encode(), dae(0.001)))
     with pytest.raises(DescriptionError, match=r"<unit meter=.*not a length unit"):
         read_triangles(path, 1.0, "mesh", error=DescriptionError)
+
+
+#: A node transform (a quarter turn about z and a shift, in file units) so that the file's frames matter.
+NODE_MATRIX = "<matrix>0 -1 0 30  1 0 0 -5  0 0 1 7  0 0 0 1</matrix>"
+
+
+def assimp_cli():
+    """The ``assimp`` command of the cmeel-assimp wheel (Pinocchio's dependency) and its library folder; None without."""
+    import sysconfig
+
+    prefix = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix"
+    return (prefix / "bin" / "assimp", prefix / "lib") if (prefix / "bin" / "assimp").is_file() else None
+
+
+def assimp_vertices(path: Path, tmp: Path) -> np.ndarray:
+    """The distinct vertices assimp makes of ``path`` with every node transform applied (``export -ptv``)."""
+    cli = assimp_cli()
+    if cli is None:
+        pytest.skip("no assimp command (cmeel-assimp)")
+    out = tmp / (path.stem + ".obj")
+    subprocess.run([str(cli[0]), "export", str(path), str(out), "-ptv"], env={**os.environ, "LD_LIBRARY_PATH": str(cli[1])},
+                   check=True, capture_output=True, timeout=60)
+    return np.unique(np.round(trimesh.load(out, process=False, force="mesh").vertices, 7), axis=0)
+
+
+@pytest.mark.parametrize("unit", [None, 0.001, 0.0254])
+@pytest.mark.parametrize("up", ["Z_UP", "Y_UP", "X_UP", None])
+def test_collada_up_axis_is_not_applied_as_rviz_and_moveit_read_it(tmp_path, unit, up):
+    """RViz and MoveIt (geometric_shapes) read a COLLADA file with assimp and drop the rotation assimp puts on its
+    root for a file that is not Y_UP, keeping the unit's scale (ros-visualization/rviz#1689, moveit/geometric_shapes
+    #52): a robot's mesh is in its link's frame whatever <up_axis> says. So roarmctl's triangles for every <up_axis>
+    (and none) equal assimp's for the same file marked Y_UP (assimp's own convention: no root rotation), the node
+    transform and the unit applied; and assimp itself turns the Z_UP and X_UP files (the rotation dropped)."""
+    base = dae(unit).decode().replace('<node id="node0" name="node0">', f'<node id="node0" name="node0">{NODE_MATRIX}', 1)
+    assert NODE_MATRIX in base
+
+    def variant(axis):
+        text = re.sub(r"<up_axis>.*?</up_axis>", f"<up_axis>{axis}</up_axis>" if axis else "", base)
+        path = tmp_path / f"m_{axis}.dae"
+        path.write_text(text)
+        return path
+
+    reference = assimp_vertices(variant("Y_UP"), tmp_path)
+    v, _ = read_triangles(variant(up), 1.0, "mesh")
+    ours = np.unique(np.round(v, 7), axis=0)
+    assert ours.shape == reference.shape and np.allclose(ours, reference, atol=1e-6)
+    if up in ("Z_UP", "X_UP"):  # what the ROS tools undo: assimp's own reading turns the mesh
+        assert not np.allclose(assimp_vertices(variant(up), tmp_path), reference, atol=1e-6)
 
 
 URDF = """<robot name="r">

@@ -7,7 +7,9 @@ or the command line's ``--package-path NAME=FOLDER`` (``PACKAGE_PATHS``; the sid
 Formats: whatever trimesh reads as one triangle mesh, STL, OBJ, DAE (COLLADA, through pycollada)
 among them; a scene with several meshes is concatenated in its own frame. A COLLADA file's
 ``<unit meter="0.001"/>`` is honoured (its vertices are in that unit, as assimp, so RViz and Gazebo, read
-them; trimesh records it and leaves the numbers as written); STL, OBJ and the rest are in metres.
+them; trimesh records it and leaves the numbers as written); its ``<up_axis>`` is not applied, as RViz and MoveIt
+read it (they drop the rotation assimp puts on the root of a file that is not Y_UP and keep the unit's scale:
+ros-visualization/rviz#1689, moveit/geometric_shapes#52; trimesh applies none). STL, OBJ and the rest are in metres.
 ``scale`` multiplies the vertices after that, as in URDF. ``unit_notes``: a link whose mesh is more than
 ``UNIT_RATIO`` times larger or smaller than the longest joint offset at its ends, the usual sign of a mesh
 in the wrong unit.
