@@ -30,14 +30,22 @@ def describe_value(value: Any, *, json: bool = False) -> str:
 
 
 class RoarmError(Exception):
-    """Base class. ``exit_code`` is what the CLI exits with; ``hint`` is an optional fix."""
+    """Base class. ``exit_code`` is what the CLI exits with; ``hint`` is an optional fix.
+
+    ``option``: the input at fault in the library's own words (an argument or field name, ``"from_current"``), when
+    there is one; the message is then ``"{option}: {message}"`` and ``problem`` the message alone. The CLI names
+    its flag instead when it prints (``roarmctl.cli.common.cli_words``), as it does for the option names a hint
+    gives (``move_to_start``)."""
 
     exit_code: int = 1
 
-    def __init__(self, message: str, hint: str | None = None) -> None:
-        super().__init__(message)
-        self.message = message
+    def __init__(self, message: str, hint: str | None = None, *, option: str | None = None) -> None:
+        text = f"{option}: {message}" if option else message
+        super().__init__(text)
+        self.message = text
         self.hint = hint
+        self.option = option
+        self.problem = message
 
     def __str__(self) -> str:
         return self.message if not self.hint else f"{self.message} ({self.hint})"
@@ -55,9 +63,8 @@ class OptionError(InputError):
     its flag instead when it prints (``roarmctl.cli.common``)."""
 
     def __init__(self, field: str, problem: str, hint: str | None = None) -> None:
-        super().__init__(f"{field}: {problem}", hint)
+        super().__init__(problem, hint, option=field)
         self.field = field
-        self.problem = problem
 
 
 class DescriptionError(InputError):

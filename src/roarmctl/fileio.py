@@ -189,11 +189,11 @@ class Roots:
         if str(p).startswith(UNKNOWN_PACKAGE + "/"):
             name = str(p)[len(UNKNOWN_PACKAGE) + 1:].split("/")[0]
             raise error(f"{what}: $(find {name}): package '{name}' is unknown",
-                        f"map it in the sidecar (packages: {{{name}: DIR}}) or give --package-path {name}=DIR")
+                        f"map it in the sidecar (packages: {{{name}: DIR}}) or give package_path {name}=DIR")
         if not self.contains(real):
             where = ", ".join(str(f) for f in self.folders) or "none"
             raise error(f"{what}: '{_short(p)}' lies outside the folders this description may read ({where})",
-                        hint or "keep the files in the description's folder, or give their package with --package-path NAME=DIR")
+                        hint or "keep the files in the description's folder, or give their package with package_path NAME=DIR")
         return real
 
     def __repr__(self) -> str:
@@ -384,27 +384,28 @@ def check_output_folder(path: str | os.PathLike, force: bool = False,
     target = Path(path)
     name = target.name
     if not name or name in (".", ".."):
-        raise InputError(f"-o {path}: give the name of a new folder, not '{path}'", "e.g. -o out/run1_bag")
+        raise InputError(f"give the name of a new folder, not '{path}'", "e.g. out/run1_bag", option="output")
     if len(os.fsencode(name)) > MAX_NAME_BYTES:
-        raise InputError(f"-o {_short(path)}: the name is longer than {MAX_NAME_BYTES} bytes", "give a shorter name")
+        raise InputError(f"{_short(path)}: the name is longer than {MAX_NAME_BYTES} bytes", "give a shorter name",
+                         option="output")
     try:
         real = target.resolve()
         cwd = Path.cwd().resolve()
         exists = os.path.lexists(target)
     except (OSError, RuntimeError, ValueError) as exc:
-        raise InputError(f"-o {_short(path)}: cannot use this path ({_reason(exc)})") from None
+        raise InputError(f"{_short(path)}: cannot use this path ({_reason(exc)})", option="output") from None
     if real == cwd or real in cwd.parents or real == Path(real.anchor):
-        raise InputError(f"-o {path}: that folder holds the current folder; roarmctl would replace it",
-                         "give the name of a new folder")
+        raise InputError(f"{path}: that folder holds the current folder; roarmctl would replace it",
+                         "give the name of a new folder", option="output")
     if not exists or force:
         return target
     if target.is_symlink() or not target.is_dir():
-        raise InputError(f"-o {path}: exists and is not a folder roarmctl wrote",
-                         "choose another name, or add --force to replace it")
+        raise InputError(f"{path} exists and is not a folder roarmctl wrote",
+                         "choose another name, or add force to replace it", option="output")
     if (target / MARKER).is_file() or (made_by_us is not None and made_by_us(target)):
         return target
-    raise InputError(f"-o {path}: the folder exists and roarmctl did not write it (no {MARKER} in it); "
-                     "replacing it would delete its files", "choose another name, or add --force to replace it")
+    raise InputError(f"the folder {path} exists and roarmctl did not write it (no {MARKER} in it); "
+                     "replacing it would delete its files", "choose another name, or add force to replace it", option="output")
 
 
 def new_folder_beside(target: str | os.PathLike) -> Path:

@@ -218,7 +218,7 @@ def _run_command(argv: list[str] | None, guard: "signals.Guard") -> int:
         guard.live = False
         if common.STATE.debug:
             traceback.print_exc()
-        common.error(common.cli_words(exc), exc.hint)
+        common.error(common.cli_words(exc), common.cli_hint(exc))
         code = exc.exit_code
     except KeyboardInterrupt as exc:  # before the command started (typer turns one inside it into Exit(130))
         guard.live = False

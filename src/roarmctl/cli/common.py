@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from roarmctl.errors import InputError, OptionError, RoarmError
+from roarmctl.errors import InputError, RoarmError
 
 if TYPE_CHECKING:
     import numpy as np
@@ -60,11 +61,22 @@ def print_json(obj: Any) -> None:
 
 
 def cli_words(exc: RoarmError) -> str:
-    """The message of a library error as the CLI prints it: an options object's field (``speed_scale``, the library's
-    neutral words) named by its flag (``--speed-scale``); any other error as it is."""
-    if isinstance(exc, OptionError):
-        return f"--{exc.field.replace('_', '-')}: {exc.problem}"
+    """The message of a library error as the CLI prints it: the option at fault (``speed_scale``, ``from_current``:
+    the library's neutral words) named by its flag (``--speed-scale``); any other error as it is."""
+    if exc.option:
+        return f"--{exc.option.replace('_', '-')}: {exc.problem}"
     return exc.message
+
+
+#: The library's names of options that a hint may name (``"use move_to_start instead"``) and the CLI's flags for them.
+HINT_FLAGS = {name: "--" + name.replace("_", "-") for name in (
+    "move_to_start", "from_current", "max_tries", "package_path", "max_error", "speed_scale", "resume", "force")}
+_HINT_WORD = re.compile(r"\b(" + "|".join(HINT_FLAGS) + r")\b")
+
+
+def cli_hint(exc: RoarmError) -> str | None:
+    """The hint of a library error as the CLI prints it: the option names it gives written as flags."""
+    return None if exc.hint is None else _HINT_WORD.sub(lambda m: HINT_FLAGS[m.group(1)], exc.hint)
 
 
 def error(message: str, hint: str | None = None) -> None:

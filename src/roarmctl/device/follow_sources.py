@@ -161,14 +161,14 @@ class SocketSource:
         self.path = Path(path)
         self.name = f"socket {self.path}"
         if self.path.exists() or self.path.is_symlink():
-            raise InputError(f"--socket {self.path}: the file exists", "give a new path (roarmctl creates the socket)")
+            raise InputError(f"{self.path}: the file exists", "give a new path (roarmctl creates the socket)", option="socket")
         self.parser = JsonLines(robot, self.name)
         self.server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
             self.server.bind(str(self.path))
         except OSError as exc:
             self.server.close()
-            raise InputError(f"--socket {self.path}: cannot create it ({exc.strerror or exc})") from None
+            raise InputError(f"{self.path}: cannot create it ({exc.strerror or exc})", option="socket") from None
         self._inode = self.path.stat().st_ino
         self.server.listen(1)
         self.server.setblocking(False)

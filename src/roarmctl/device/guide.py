@@ -107,7 +107,7 @@ class GuidedServos:
 
     def __init__(self, inner: ServoModel, guide: Guide) -> None:
         if not hasattr(inner, "place"):
-            raise InputError("--guide needs servos that a hand can move (--servos ideal)")
+            raise InputError("needs servos that a hand can move (the ideal ones)", option="guide")
         self.inner = inner
         self.guide = guide
         self.t = 0.0

@@ -220,8 +220,8 @@ class Streamer:
             mode = "move_to_start"
         else:
             raise InfeasibleError(f"the arm is not at the trajectory's start: {diff}",
-                                  "pass --move-to-start (a planned, collision-checked motion there first) or "
-                                  "--from-current (plan the first free motion again from here)")
+                                  "pass move_to_start (a planned, collision-checked motion there first) or "
+                                  "from_current (plan the first free motion again from here)")
         if self.replan is None:
             raise InfeasibleError(f"the arm is not at the trajectory's start: {diff}", "move it there first")
         traj, sentence = self.replan(within_limits(self.robot, reading.q), mode)

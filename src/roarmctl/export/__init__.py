@@ -37,8 +37,9 @@ def format_for(path: str | os.PathLike) -> str:
         folder = False
     if suffix == "" or str(path).endswith(os.sep) or folder or p.name in ("", ".", ".."):
         return "bag"
-    raise InputError(f"-o {path}: unknown export format '{suffix}'",
-                     "use NAME.mcap (Foxglove), NAME.csv (spreadsheet) or a folder name without an extension (ROS 2 bag)")
+    raise InputError(f"{path}: unknown export format '{suffix}'",
+                     "use NAME.mcap (Foxglove), NAME.csv (spreadsheet) or a folder name without an extension (ROS 2 bag)",
+                     option="output")
 
 
 def load_source(path: str | os.PathLike | Any) -> tuple[str, Any]:
@@ -72,8 +73,8 @@ def streams_for(source: str | os.PathLike | Any, trajectory: str | os.PathLike |
     kind, data = load_source(source)
     if kind == "trajectory":
         if trajectory is not None:
-            raise InputError("--trajectory goes with an execution log, not with a trajectory",
-                             "export the trajectory by itself, or give the .exec.json it produced")
+            raise InputError("goes with an execution log, not with a trajectory",
+                             "export the trajectory by itself, or give the .exec.json it produced", option="trajectory")
         return trajectory_streams(data, robot_of(data, str(source)))
     traj, robot = run_trajectory(data, str(source), trajectory)
     return log_streams(data, robot, traj)
@@ -90,7 +91,8 @@ def run_trajectory(log: dict[str, Any], where: str, trajectory: str | os.PathLik
     if trajectory is not None:
         tkind, traj = load_source(trajectory)
         if tkind != "trajectory":
-            raise InputError(f"--trajectory {trajectory}: not a trajectory file", "give the .traj.json that was executed")
+            raise InputError(f"{trajectory} is not a trajectory file", "give the .traj.json that was executed",
+                             option="trajectory")
         return traj, log_robot(log, where, traj, str(trajectory))
     traj = carried_trajectory(log, where)
     robot = log_robot(log, where)

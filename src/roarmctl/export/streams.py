@@ -142,8 +142,8 @@ def log_streams(log: dict[str, Any], robot: Robot, traj: Trajectory | None = Non
                                   "export a log written by 'roarmctl execute'") from None
     if traj is not None:
         if list(traj.joint_names) != list(robot.joint_names):
-            raise InputError(f"--trajectory: its joints {traj.joint_names} are not those of the log's robot '{robot.name}'",
-                             "give the trajectory this log executed")
+            raise InputError(f"its joints {traj.joint_names} are not those of the log's robot '{robot.name}'",
+                             "give the trajectory this log executed", option="trajectory")
         if not 0 < scale <= 1:
             raise TrajectoryFileError(f"execution log: speed_scale {scale!r} is not in (0, 1]")
         streams.joint_states["planned"] = planned_states(traj, scale, paused)

@@ -74,7 +74,7 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
     plan = load_plan(path, base_dir=base_dir)  # form first, so typos are reported before anything heavy
     if isinstance(plan.start, str) and plan.start == "current" and current is None:
         raise InputError(f"{plan.path}: start: current needs the arm to read its pose from",
-                         "pass --port PORT (or --sim), or give a named pose or joint values as start")
+                         "connect to the arm (its port, or the simulated one), or give a named pose or joint values as start")
     load_planning_libraries()
     try:
         robot = load_robot(robot_spec(plan), confine=plan.path.name != DICT_NAME)  # a dict plan is the caller's own

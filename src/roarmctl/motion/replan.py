@@ -141,20 +141,20 @@ def replan_start(traj: Trajectory, robot: Robot, q_measured: np.ndarray, mode: s
                        f"(was {traj.duration:.2f} s from its start)")
     free = next((s for s in traj.segments if s.kind == "free"), None)
     if free is None:
-        raise InfeasibleError("--from-current: the trajectory has no free motion to plan again",
-                              "use --move-to-start instead")
+        raise InfeasibleError("the trajectory has no free motion to plan again", "use move_to_start instead",
+                              option="from_current")
     before = [s for s in traj.segments if s.end <= free.start + 1e-9]
     if any(s.kind == "cartesian" for s in before):
-        raise InfeasibleError("--from-current: the trajectory starts with a straight-line motion before its first free one",
-                              "use --move-to-start instead")
+        raise InfeasibleError("the trajectory starts with a straight-line motion before its first free one",
+                              "use move_to_start instead", option="from_current")
     if any(e.time <= free.end + 1e-9 for e in traj.events):
-        raise InfeasibleError("--from-current: the trajectory grasps or releases before its first free motion ends",
-                              "use --move-to-start instead")
+        raise InfeasibleError("the trajectory grasps or releases before its first free motion ends",
+                              "use move_to_start instead", option="from_current")
     rest = tail(traj, free.end)
     if np.max(np.abs(rest.velocities[0])) > 1e-6:
-        raise InfeasibleError("--from-current: the first free motion blends into the next one and the trajectory's plan "
+        raise InfeasibleError("the first free motion blends into the next one and the trajectory's plan "
                               f"file ({(traj.plan or {}).get('path')}) is not there unchanged to plan it again",
-                              "use --move-to-start, or plan again with start: current")
+                              "use move_to_start, or plan again with start: current", option="from_current")
     first = plan_between(traj, robot, q, rest.positions[0].copy(), f"{free.label} (planned again from the measured pose)")
     what = (f"re-planned the first free motion from the measured pose: {first.duration:.2f} s instead of "
             f"{free.end:.2f} s to reach '{free.label}''s end")

@@ -154,7 +154,7 @@ _HULLS: Kept[tuple[np.ndarray, np.ndarray, np.ndarray]] = Kept(512)  # key -> (h
 
 #: Why a description named by a plan, trajectory or log may not point elsewhere, and the fix.
 CONFINED_HINT = ("a description named by a plan, trajectory or execution log reads only inside its own folder and "
-                 "--package-path folders: keep its files there, or give the folder with --package-path NAME=DIR")
+                 "package_path folders: keep its files there, or give the folder with package_path NAME=DIR")
 
 
 def description_roots(side: dict, sidecar: Path, confined: bool = False) -> Roots:
@@ -191,7 +191,7 @@ def resolve(filename: str, urdf: Path, packages: dict[str, Path], where: str, ro
         if folder is None:
             raise DescriptionError(
                 f"{where} mesh filename: package '{name}' of '{filename}' is unknown",
-                f"map it in the sidecar (packages: {{{name}: path/to/{name}}}) or give --package-path {name}=DIR")
+                f"map it in the sidecar (packages: {{{name}: path/to/{name}}}) or give package_path {name}=DIR")
         path = Path(folder) / sub
     elif filename.startswith("file://"):
         path = Path(filename[len("file://"):])

@@ -209,7 +209,7 @@ class _Ray:
         try:
             import ray
         except ImportError:
-            raise InputError("--ray: Ray is not installed", "pip install 'ray[data]' (make install does)") from None
+            raise InputError("Ray is not installed", "pip install 'ray[data]' (make install does)", option="ray") from None
         self.ray = ray
         self.started = not ray.is_initialized()
         if self.started:
@@ -221,9 +221,9 @@ class _Ray:
             try:
                 ray.init(**kwargs)
             except Exception as exc:  # noqa: BLE001  (Ray raises a bare Exception when its raylet is not up in 30 s)
-                raise DeviceError(f"--ray {address or 'local'}: Ray did not start or answer: {str(exc).splitlines()[0]}",
-                                  "on a busy machine try again, check the address (ray status), or leave out --ray "
-                                  "for the process pool") from None
+                raise DeviceError(f"{address or 'local'}: Ray did not start or answer: {str(exc).splitlines()[0]}",
+                                  "on a busy machine try again, check the address (ray status), or leave Ray out "
+                                  "for the process pool", option="ray") from None
         self.task = ray.remote(num_cpus=1)(run_shard)
         self.slots = workers
 
@@ -247,22 +247,23 @@ def _check_out(out: Path, options: DatagenOptions, state: dict[str, Any]) -> dic
     """The staged outcomes to resume from (none for a new run); refuses a folder that is not this run's."""
     staging = out / STAGING
     if out.exists() and not out.is_dir():
-        raise InputError(f"-o {out}: exists and is not a folder", "give the name of a new folder")
+        raise InputError(f"{out} exists and is not a folder", "give the name of a new folder", option="output")
     if not options.resume:
         if out.exists() and any(out.iterdir()):
-            raise InputError(f"-o {out}: the folder is not empty", "give a new folder, or --resume a killed run into it")
+            raise InputError(f"the folder {out} is not empty", "give a new folder, or resume a killed run into it",
+                             option="output")
         return {}
     if not (staging / STATE_FILE).is_file():
         if (out / "meta" / "info.json").is_file():
             raise Complete(out)
         if out.exists() and any(out.iterdir()):
-            raise InputError(f"-o {out}: no run of roarmctl datagen to resume there (no {STAGING}/{STATE_FILE})")
+            raise InputError(f"{out}: no run of roarmctl datagen to resume there (no {STAGING}/{STATE_FILE})", option="output")
         return {}
     had = load_json(staging / STATE_FILE, InputError, limit=1 << 16)
     if had != state:
         diff = [k for k in state if not isinstance(had, dict) or had.get(k) != state[k]]
-        raise InputError(f"-o {out}: the run there had other settings ({', '.join(diff)})",
-                         "resume with the same template, seed and image size, or give a new folder")
+        raise InputError(f"{out}: the run there had other settings ({', '.join(diff)})",
+                         "resume with the same template, seed and image size, or give a new folder", option="output")
     outcomes = {}
     for p in sorted(staging.iterdir()):
         if p.name.startswith(".tmp-"):
@@ -354,7 +355,7 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
         worst = max(summary.causes, key=lambda c: summary.causes[c])
         raise InfeasibleError(f"datagen: {summary.kept} of {options.episodes} episodes kept in {summary.tried} tries "
                               f"(most rejected: {worst}, {summary.causes[worst]})",
-                              f"widen or move the template's regions, or raise --max-tries; {out} keeps the tries for --resume")
+                              f"widen or move the template's regions, or raise max_tries; {out} keeps the tries to resume")
     used = [outcomes[t] for t in range(chosen[-1] + 1)]  # the tries the dataset depends on (later ones: spare work)
     summary.tried = len(used)
     summary.causes = dict.fromkeys(CAUSES, 0) | {c: sum(1 for o in used if o["cause"] == c) for c in CAUSES}

@@ -56,17 +56,19 @@ def export_run(source: str | os.PathLike, dataset: str | os.PathLike, *, task: s
     """Append the run ``source`` to the dataset at ``dataset`` (made if missing); returns a summary."""
     kind, _ = load_source(source)
     if kind != "log":
-        raise InputError(f"{source}: --lerobot takes an execution log (.exec.json or a simulate run file), not a trajectory",
+        raise InputError(f"{source}: a LeRobot episode is made of an execution log (.exec.json or a simulate run file), "
+                         "not of a trajectory",
                          "execute or simulate it first; datagen makes datasets of plans")
     streams = streams_for(source)
     root = Path(dataset)
     if (root / INFO_PATH).exists():
         have = spec_of(root)
         if have.cameras:
-            raise InputError(f"--lerobot {root}: the dataset has cameras ({', '.join(have.cameras)}) and the run has no video",
-                             "append to a dataset made with 'datagen --cameras none', or give a new folder")
+            raise InputError(f"{root}: the dataset has cameras ({', '.join(have.cameras)}) and the run has no video",
+                             "append to a dataset datagen made without cameras, or give a new folder", option="lerobot")
         if fps is not None and fps != have.fps:
-            raise InputError(f"--fps {fps}: the dataset has {have.fps} frames per second", f"leave out --fps or give {have.fps}")
+            raise InputError(f"{fps}: the dataset has {have.fps} frames per second", f"leave it out or give {have.fps}",
+                             option="fps")
         spec = have
         if task is None:
             import pyarrow.parquet as pq
@@ -77,9 +79,9 @@ def export_run(source: str | os.PathLike, dataset: str | os.PathLike, *, task: s
         spec = DatasetSpec(fps or DEFAULT_FPS, streams.robot.name, list(streams.joint_names))
     task = DEFAULT_TASK if task is None else task
     if not task.strip() or "\n" in task or len(task) > 500:
-        raise InputError("--task: expected one line of text (1 to 500 characters)")
+        raise InputError("expected one line of text (1 to 500 characters)", option="task")
     if not 1 <= spec.fps <= 120:
-        raise InputError(f"--fps {spec.fps}: out of range", "1 to 120 frames per second")
+        raise InputError(f"{spec.fps} is out of range", "1 to 120 frames per second", option="fps")
     episode = episode_of(streams, spec.fps, task.strip())
     append_episodes(root, spec, [episode])
     info = spec_of(root)

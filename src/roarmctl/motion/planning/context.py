@@ -135,7 +135,7 @@ def robot_spec(plan: Plan) -> str:
         candidate = plan.path.parent / Path(plan.robot)
         Roots([plan.path.parent], PACKAGE_PATHS).check(
             candidate, f"'{plan.robot[:80]}'", InputError,
-            "a plan names a description beside it (or under a --package-path folder): copy or link the folder there")
+            "a plan names a description beside it (or under a package_path folder): copy or link the folder there")
     try:
         return str(candidate) if candidate.is_file() else plan.robot
     except (OSError, ValueError):  # a name the OS refuses as a path (too long)

@@ -175,7 +175,7 @@ class Roarm5IK:
                     f"orientation not achievable by a 5-joint arm: the approach axis (tool +x) must lie in the "
                     f"vertical plane through the base axis and the target; the requested one leaves it by "
                     f"{math.degrees(math.asin(min(1.0, abs(lateral)))):.2f} deg",
-                    "orientation", "give --pitch (and --roll) instead of --rpy, or turn the target about the vertical")
+                    "orientation", "give a pitch (and roll) instead of a full orientation, or turn the target about the vertical")
             pitch = math.atan2(-a[2], float(np.dot(a, u_h)))
         elif roll is not None:
             want_roll = float(roll)

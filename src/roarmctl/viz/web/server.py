@@ -123,8 +123,10 @@ class ViewServer:
             self.httpd = Server((HOST, port), Handler)
         except OSError as exc:
             if exc.errno == errno.EADDRINUSE:
-                raise InputError(f"--port {port}: already in use on {HOST}", "pick another port, or 0 for a free one") from None
-            raise InputError(f"--port {port}: cannot listen on {HOST} ({exc.strerror})", "pick a port above 1023, or 0") from None
+                raise InputError(f"{port} is already in use on {HOST}", "pick another port, or 0 for a free one",
+                                 option="port") from None
+            raise InputError(f"cannot listen on {HOST}:{port} ({exc.strerror})", "pick a port above 1023, or 0",
+                             option="port") from None
 
     @property
     def port(self) -> int:

@@ -110,7 +110,7 @@ def load_view_source(path: str | os.PathLike, trajectory: str | os.PathLike | No
     name = path.name
     if path.suffix.lower() in PLAN_SUFFIXES:
         if trajectory is not None:
-            raise InputError("--trajectory goes with an execution log", "give the plan file alone")
+            raise InputError("goes with an execution log", "give the plan file alone", option="trajectory")
         try:
             traj = trajectory_or_plan(path)
         except InfeasibleError as exc:
@@ -124,7 +124,7 @@ def load_view_source(path: str | os.PathLike, trajectory: str | os.PathLike | No
     kind, data = load_source(path)
     if kind == "trajectory":
         if trajectory is not None:
-            raise InputError("--trajectory goes with an execution log, not with a trajectory", "give the trajectory alone")
+            raise InputError("goes with an execution log, not with a trajectory", "give the trajectory alone", option="trajectory")
         return ViewSource(data, robot_for(data), name)
     return _log_source(data, path, trajectory)
 
