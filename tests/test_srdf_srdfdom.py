@@ -11,11 +11,10 @@ how it reads a ``group_state`` value is C++'s stream extraction, run here by a C
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import itertools
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest

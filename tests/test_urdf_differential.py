@@ -187,7 +187,7 @@ def test_a_joint_limit_is_read_as_urdfdom_reads_it(tmp_path, kind, attrs):
     if kind in ("revolute", "prismatic"):
         lower, upper = float(model.lowerPositionLimit[1]), float(model.upperPositionLimit[1])
         if not lower < upper:
-            with pytest.raises(DescriptionError, match="joint 'j2' limit: lower .* must be below upper") as err:
+            with pytest.raises(DescriptionError, match=r"joint 'j2' limit: lower .* must be below upper") as err:
                 load_robot(str(tmp_path / "arm.urdf"))
             assert ("reads a missing bound as 0" in str(err.value)) == ("lower" not in attrs or "upper" not in attrs)
             return
