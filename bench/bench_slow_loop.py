@@ -8,8 +8,9 @@ Per loop pass it prints:
 - overrun: the last motion line ran this much after the plan's end (ms; negative: before);
 - rate: the tick rate the stream went on at (Hz; it asks for 50);
 - lag p50 / max: the firmware's lag the execution log records (ms);
-- hold travel: Ctrl-C at 20, 30, ... 80 % of the motion, the TCP's travel from the interrupt to where the arm
-  stopped (mm, the worst and the median), and its largest distance from the planned path meanwhile (mm).
+- hold travel: Ctrl-C at 20, 30, ... 80 % of the motion, the farthest the TCP got from where it was at the
+  interrupt (mm, the worst and the median), how far the hold then brought it back (mm, the worst: a reversal), and
+  its largest distance from the planned path meanwhile (mm).
 The servos are the firmware model's kinematic servos (no lag, no gravity): the figures are the stream's.
 """
 
@@ -70,7 +71,9 @@ def run(traj, robot, loop_pass: float, stop: float | None = None) -> dict:
 
     path = robot.kin.fk(robot.full_q(sample(traj, np.linspace(0.0, traj.duration, 4001))))[:, :3, 3]
     off = max(float(np.min(np.linalg.norm(path - p, axis=1))) for p in tcp[:: max(1, len(tcp) // 200)])
-    return out | {"travel": float(np.linalg.norm(tcp[-1] - tcp[0])) * 1e3, "off": off * 1e3}
+    far = np.linalg.norm(tcp - tcp[0], axis=1)
+    # travel: the farthest the TCP got from where it was at the interrupt; back: how far the hold then pulled it back
+    return out | {"travel": float(far.max()) * 1e3, "back": float(far.max() - far[-1]) * 1e3, "off": off * 1e3}
 
 
 def main() -> None:
@@ -88,14 +91,15 @@ def main() -> None:
     robot = load_robot(traj.robot)
     print(f"trajectory: {traj_path.name}, {traj.duration:.2f} s; 20260701 build model, virtual clock; asked 50 Hz")
     print(f"{'pass':>5}{'wait p50':>9}{'max':>6}{'overrun':>9}{'rate':>6}{'lag p50':>8}{'max':>6}"
-          f"{'hold travel max':>16}{'p50':>6}{'off path':>9}   (ms, ms, ms, Hz, ms, ms, mm, mm, mm)")
+          f"{'hold travel max':>16}{'p50':>6}{'back':>6}{'off path':>9}   (ms, ms, ms, Hz, ms, ms, mm, mm, mm, mm)")
     for ms in (float(x) for x in args.passes.split(",")):
         full = run(traj, robot, ms / 1e3)
         holds = [run(traj, robot, ms / 1e3, stop=f) for f in (0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8)]
         travel = [h["travel"] for h in holds]
         print(f"{ms:>5.0f}{full['wait50']:>9.0f}{full['wait_max']:>6.0f}{full['overrun']:>9.0f}{full['rate']:>6.1f}"
               f"{full['lag'].get('p50') or 0:>8.0f}{full['lag'].get('max') or 0:>6.0f}{max(travel):>16.1f}"
-              f"{statistics.median(travel):>6.1f}{max(h['off'] for h in holds):>9.1f}", flush=True)
+              f"{statistics.median(travel):>6.1f}{max(h['back'] for h in holds):>6.1f}{max(h['off'] for h in holds):>9.1f}",
+              flush=True)
 
 
 if __name__ == "__main__":
