@@ -342,11 +342,56 @@ def test_page_with_visual_meshes_shows_them(chromium, tmp_path):
 
     try:
         assert watch.errors == [] and page.is_visible("#visual-toggle")
+        assert "drawn from its collision shapes" not in page.inner_text("#notes")
         assert orange() > 200
         page.uncheck("#show-visual")
         assert orange() < 30  # the world axes' x axis (three.js draws it red to orange) is a line a pixel wide
     finally:
         page.close()
+
+
+def test_large_visual_meshes_are_decimated_to_the_budget(tmp_path, monkeypatch):
+    """Visual meshes over the pictures' budget are decimated (fast-simplification) so that all fit, each by the same
+    factor; the result stays on the surface it draws (two spheres: every vertex within 1 % of the radius, the
+    volume within 2 % of 4/3 pi r^3), the same input gives the same triangles, and a note says how many went."""
+    import trimesh
+
+    from roarmctl.robot import visuals as vis
+    from roarmctl.robot.loader import load_robot
+
+    monkeypatch.setattr(vis, "MAX_TRIANGLES", 20_000)
+    radius = 0.03
+    trimesh.creation.icosphere(subdivisions=5, radius=radius).export(tmp_path / "ball.stl")  # 20,480 triangles
+    side = visual_robot(tmp_path)
+    urdf = (tmp_path / "arm.urdf").read_text()
+    ball = '<visual><geometry><mesh filename="ball.stl"/></geometry></visual>'
+    (tmp_path / "arm.urdf").write_text(urdf.replace('<link name="link2">', f'<link name="link2">{ball}{ball}', 1))
+    robot = load_robot(str(side))
+    shapes, notes = vis.visual_shapes(robot)
+    balls = [v.shape.mesh for v in shapes if v.shape.link == "link2"]
+    assert len(balls) == 2 and all(len(b.faces) < 20_480 for b in balls)
+    assert sum(len(v.shape.mesh.faces) for v in shapes if v.shape.kind == "mesh") <= 20_000
+    for b in balls:
+        r = np.linalg.norm(b.vertices, axis=1)
+        assert np.all(np.abs(r - radius) < 0.01 * radius)
+        volume = trimesh.Trimesh(b.vertices, b.faces).volume
+        assert abs(volume - 4 / 3 * np.pi * radius ** 3) < 0.02 * 4 / 3 * np.pi * radius ** 3
+    (said,) = [n for n in notes if "decimated" in n]
+    assert "from 40,984 to" in said and "at most 20,000" in said  # 2 x 20,480 + the forearm's 24
+    again, _ = vis.visual_shapes(load_robot(str(side)))
+    assert all(np.array_equal(a.shape.mesh.vertices, b.shape.mesh.vertices) for a, b in zip(shapes, again)
+               if a.shape.kind == "mesh")
+
+
+def test_a_robot_without_visuals_is_said_to_be_drawn_from_its_collision_shapes(planned):
+    from roarmctl.motion.validate import load_trajectory
+    from roarmctl.robot.loader import load_robot
+    from roarmctl.viz.web.document import view_document
+
+    traj = load_trajectory(planned["pick_place"][0])
+    doc = view_document(traj, load_robot(traj.robot))
+    assert doc["notes"][0] == "drawn from its collision shapes: its description has no visual meshes"
+    assert not any(link["visual"] for link in doc["links"])
 
 
 def test_page_is_one_file_with_no_outside_reference(planned, tmp_path):
@@ -575,6 +620,7 @@ def test_execution_log_shows_the_measured_arm_as_a_ghost(chromium, planned, tmp_
         assert watch.errors == []
         assert page.is_visible("#ghost-toggle") and "mm" in page.inner_text("#r-ghost")
         assert "table" in page.inner_text("#item-clearance") and "give" not in page.inner_text("#notes")
+        assert "drawn from its collision shapes: its description has no visual meshes" in page.inner_text("#notes")
     finally:
         page.close()
 

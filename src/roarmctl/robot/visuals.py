@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -21,9 +21,12 @@ from roarmctl.errors import DescriptionError
 from roarmctl.robot.meshes import MeshGeometry
 from roarmctl.robot.model import CollisionShape, Robot
 
-#: Triangles of all the visual meshes of one robot that a picture takes; beyond it the rest are left out
-#: (said), so a high-resolution CAD export cannot make a page of hundreds of MB.
-MAX_TRIANGLES = 300_000
+#: Triangles of all the visual meshes of one robot that a picture takes (a page holds 36 bytes of each: 200,000 make
+#: 7.2 MB): beyond it the large meshes are decimated to fit (``decimated``, said), so a high-resolution CAD export
+#: cannot make a page of hundreds of MB; what still does not fit is left out (said).
+MAX_TRIANGLES = 200_000
+#: Meshes with fewer triangles are never decimated (a few hundred already draw a part coarsely).
+DECIMATE_ABOVE = 2_000
 
 
 @dataclass(frozen=True)
@@ -92,6 +95,7 @@ def visual_shapes(robot: Robot) -> tuple[list[Visual], list[str]]:
         return [], []
     out: list[Visual] = []
     notes: list[str] = []
+    read: list[tuple[str, CollisionShape, Any]] = []
     budget = MAX_TRIANGLES
     for link, k, el in src.elements:
         where = f"link '{link}' visual[{k}]"
@@ -106,11 +110,46 @@ def visual_shapes(robot: Robot) -> tuple[list[Visual], list[str]]:
         if mat is not None:
             color = mat.find("color")
             rgba = _rgba(color.get("rgba")) if color is not None else src.materials.get(str(mat.get("name")))
-        for shape in shapes:
-            n = len(shape.mesh.faces) if isinstance(shape.mesh, MeshGeometry) else 0
-            if n > budget:
-                notes.append(f"{where} left out: its {n} triangles pass the {MAX_TRIANGLES} of all visual meshes")
-                continue
-            budget -= n
-            out.append(Visual(shape, rgba))
+        read.extend((where, shape, rgba) for shape in shapes)
+    read, said = decimated(read, MAX_TRIANGLES)
+    notes += said
+    for where, shape, rgba in read:
+        n = _faces(shape)
+        if n > budget:
+            notes.append(f"{where} left out: its {n} triangles pass the {MAX_TRIANGLES:,} of all visual meshes")
+            continue
+        budget -= n
+        out.append(Visual(shape, rgba))
     return out, notes
+
+
+def _faces(shape: CollisionShape) -> int:
+    return len(shape.mesh.faces) if isinstance(shape.mesh, MeshGeometry) else 0
+
+
+def decimated(read: list[tuple[str, CollisionShape, Any]], budget: int) -> tuple[list[tuple[str, CollisionShape, Any]], list[str]]:
+    """The visual shapes ``read`` (where, shape, colour) with their meshes of more than ``DECIMATE_ABOVE`` triangles
+    decimated, each by the same factor, so that all of them hold at most ``budget`` triangles; unchanged when they
+    fit. Quadric decimation (fast-simplification, through trimesh): the same input gives the same triangles. Returns
+    the shapes and a note naming the triangles before and after."""
+    total = sum(_faces(s) for _, s, _ in read)
+    large = sum(_faces(s) for _, s, _ in read if _faces(s) > DECIMATE_ABOVE)
+    room = budget - (total - large)  # what the large meshes may keep
+    if total <= budget or large == 0 or room <= 0:
+        return read, []
+    import trimesh
+
+    factor = room / large
+    out = []
+    for where, shape, rgba in read:
+        n = _faces(shape)
+        if n > DECIMATE_ABOVE and isinstance(shape.mesh, MeshGeometry):
+            mesh = trimesh.Trimesh(shape.mesh.vertices, shape.mesh.faces, process=False)
+            mesh.merge_vertices()  # an STL repeats each corner per triangle: decimated apart, the surface tears
+            fewer = mesh.simplify_quadric_decimation(face_count=max(int(n * factor), 4))
+            geometry = MeshGeometry(np.asarray(fewer.vertices, dtype=float), np.asarray(fewer.faces, dtype=np.int64),
+                                    shape.mesh.exact, shape.mesh.source)
+            shape = replace(shape, mesh=geometry)
+        out.append((where, shape, rgba))
+    after = sum(_faces(s) for _, s, _ in out)
+    return out, [f"visual meshes decimated from {total:,} to {after:,} triangles (pictures take at most {budget:,})"]

@@ -93,7 +93,7 @@ def _speed_colors(speed: np.ndarray, vmax: float) -> tuple[np.ndarray, list[str]
 def _links(robot: Robot) -> tuple[list[int], list[dict[str, Any]], list[str]]:
     """Links that carry geometry: their kinematic indices; per link its collision shapes' triangles (as the
     checker sees them) and its visual shapes' triangles and colours (``robot.visuals``), in the link frame; and
-    notes on visuals left out."""
+    notes on visuals left out or decimated, first of all that the robot is drawn without visuals when it is."""
     collision: dict[int, list[np.ndarray]] = {}
     names: dict[int, list[str]] = {}
     for shape in robot.collision:
@@ -101,6 +101,10 @@ def _links(robot: Robot) -> tuple[list[int], list[dict[str, Any]], list[str]]:
         collision.setdefault(k, []).append(triangles(robot_shape_faces(shape)))
         names.setdefault(k, []).append(shape.name or shape.link)
     visuals, notes = visual_shapes(robot)
+    if not visuals:  # the page draws what the checker sees: said, so that nobody takes it for the arm's looks
+        why = "its description has no visual meshes" if not notes else "none of its visual meshes could be read"
+        notes = [f"drawn from its collision shapes: {why}" if robot.collision else
+                 f"drawn as lines from joint to joint: {why} and no collision shapes"] + notes
     visual: dict[int, list[dict[str, Any]]] = {}
     for v in visuals:
         k = robot.kin.link_index[v.shape.link]
