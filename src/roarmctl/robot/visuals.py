@@ -21,8 +21,8 @@ from roarmctl.errors import DescriptionError
 from roarmctl.robot.meshes import MeshGeometry
 from roarmctl.robot.model import CollisionShape, Robot
 
-#: Triangles of all the visual meshes of one robot that a picture takes (a page holds 36 bytes of each: 200,000 make
-#: 7.2 MB): beyond it the large meshes are decimated to fit (``decimated``, said), so a high-resolution CAD export
+#: Triangles of all the visual meshes of one robot that a picture takes (a page holds 36 bytes of each, 48 as base64:
+#: 200,000 make 9.6 MB): beyond it the large meshes are decimated to fit (``decimated``, said), so a high-resolution CAD export
 #: cannot make a page of hundreds of MB; what still does not fit is left out (said).
 MAX_TRIANGLES = 200_000
 #: Meshes with fewer triangles are never decimated (a few hundred already draw a part coarsely).
