@@ -267,3 +267,31 @@ def test_a_datagen_template_given_to_plan_names_the_command_that_reads_it():
     assert f"pick_place.yaml:{line}: datagen: this is a datagen template" in str(exc.value)
     assert "roarmctl datagen" in (exc.value.hint or "")
     assert exc.value.exit_code == 2
+
+
+@pytest.mark.parametrize("plan", ["pick_place.yaml", "multi_object.yaml"])
+def test_a_plan_and_its_robot_are_read_once(plan, monkeypatch):
+    """``load_plan_and_robot`` (what planning, teach and follow start from) reads the file once and checks each task and
+    item once, against the robot's poses and frames: counted by wrapping the reader's functions; the same Plan as
+    ``load_plan`` given the robot's poses and frames."""
+    import roarmctl.plan.schema as schema
+    from roarmctl.motion.pipeline import load_plan_and_robot
+
+    counts = {"yaml": 0, "task": 0, "item": 0}
+
+    def counted(name, real):
+        def wrapper(*args, **kwargs):
+            counts[name] += 1
+            return real(*args, **kwargs)
+        return wrapper
+
+    monkeypatch.setattr(schema, "load_yaml", counted("yaml", schema.load_yaml))
+    monkeypatch.setattr(schema, "read_task", counted("task", schema.read_task))
+    monkeypatch.setattr(schema, "read_item", counted("item", schema.read_item))
+    got, robot = load_plan_and_robot(ROOT / "plans" / plan)
+    assert counts["yaml"] == 1 and counts["task"] == len(got.tasks) and counts["item"] == len(got.objects) + 1  # + the table
+    monkeypatch.undo()
+    ref = load_plan(ROOT / "plans" / plan, list(robot.named_poses), frames=robot.frames)
+    assert [type(t) for t in got.tasks] == [type(t) for t in ref.tasks] and got.sha256 == ref.sha256
+    assert [(s.name, s.role, s.shape) for s in got.scene + got.objects] == [(s.name, s.role, s.shape) for s in ref.scene + ref.objects]
+    assert all(np.array_equal(a.pose, b.pose) for a, b in zip(got.scene + got.objects, ref.scene + ref.objects))

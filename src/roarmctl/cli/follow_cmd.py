@@ -73,10 +73,9 @@ def follow(
     from roarmctl.device.protocol import WireMap
     from roarmctl.motion.collision import CollisionChecker
     from roarmctl.motion.options import PlannerConfig
-    from roarmctl.motion.pipeline import robot_spec
+    from roarmctl.motion.pipeline import load_plan_and_robot
     from roarmctl.motion.planning.context import scene_item
     from roarmctl.motion.scene import Scene
-    from roarmctl.plan.schema import load_plan
     from roarmctl.robot.loader import load_robot
 
     if (port is None) == (not sim):
@@ -86,10 +85,8 @@ def follow(
     is_leader = leader is not None or leader_guide is not None
     if sum((is_leader, socket_path is not None, dataset is not None)) > 1:
         raise InputError("give one source: a leader arm, --socket or --dataset")
-    source_plan = load_plan(scene) if scene is not None else None
-    robot = common.load_robot(robot_spec(source_plan)) if source_plan is not None else load_robot("roarm_m3_pro")
-    if source_plan is not None and scene is not None:
-        source_plan = load_plan(scene, list(robot.named_poses), frames=robot.frames, parsed=source_plan)
+    source_plan, robot = (load_plan_and_robot(scene, load=common.load_robot) if scene is not None
+                          else (None, load_robot("roarm_m3_pro")))
     WireMap(robot)  # a robot without a RoArm wire map cannot be driven: say so before opening anything
     planner = source_plan.planner if source_plan is not None else PlannerConfig()
     items = [scene_item(s) for s in source_plan.scene + source_plan.objects] if source_plan is not None else []

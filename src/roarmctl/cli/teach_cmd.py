@@ -64,19 +64,16 @@ def teach(
     from roarmctl.device.protocol import WireMap
     from roarmctl.device.teach import SURPRISES, Judge, TeachSession
     from roarmctl.motion.options import PlannerConfig
-    from roarmctl.motion.pipeline import robot_spec
+    from roarmctl.motion.pipeline import load_plan_and_robot
     from roarmctl.motion.planning.context import scene_item
-    from roarmctl.plan.schema import load_plan
     from roarmctl.robot.loader import load_robot
 
     if (port is None) == (not sim):
         raise InputError("give exactly one of --port PORT and --sim", "e.g. roarmctl teach --sim --guide hand.yaml")
     if guide is not None and not sim:
         raise InputError("--guide goes with --sim (a real arm is moved by your hand)")
-    source = load_plan(plan) if plan is not None else None
-    robot = common.load_robot(robot_spec(source)) if source is not None else load_robot("roarm_m3_pro")
-    if source is not None and plan is not None:
-        source = load_plan(plan, list(robot.named_poses), frames=robot.frames, parsed=source)
+    source, robot = (load_plan_and_robot(plan, load=common.load_robot) if plan is not None
+                     else (None, load_robot("roarm_m3_pro")))
     WireMap(robot)  # a robot without a RoArm wire map cannot be taught: say so before opening anything
     cfg = source.planner if source is not None else PlannerConfig()
     items = [scene_item(s) for s in source.scene + source.objects] if source is not None else []

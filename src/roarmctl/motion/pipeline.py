@@ -30,7 +30,7 @@ from roarmctl.motion.scene import Scene
 from roarmctl.motion.timing import TimedPath
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
 from roarmctl.plan.fields import DICT_NAME
-from roarmctl.plan.schema import load_plan
+from roarmctl.plan.schema import load_plan, read_plan_document
 from roarmctl.plan.types import PickTask, PlaceTask, Plan
 from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import Robot
@@ -70,29 +70,38 @@ def plan_file(path: str | Path | dict, seed: int | None = None, progress: Progre
     ``start_here``: start from ``current(robot)`` whatever the plan's ``start`` says (execute
     --from-current plans a trajectory's plan again from the measured pose).
     """
-    path = path if isinstance(path, dict) else Path(path)
-    plan = load_plan(path, base_dir=base_dir)  # form first, so typos are reported before anything heavy
+    plan, robot = load_plan_and_robot(path, base_dir)
     if isinstance(plan.start, str) and plan.start == "current" and current is None:
         raise InputError(f"{plan.path}: start: current needs the arm to read its pose from",
                          "connect to the arm (its port, or the simulated one), or give a named pose or joint values as start")
-    load_planning_libraries()
-    try:
-        robot = load_robot(robot_spec(plan), confine=plan.path.name != DICT_NAME)  # a dict plan is the caller's own
-    except DescriptionError:
-        raise
-    except InputError as exc:  # unknown robot: name the plan's line (a dict has none: say where paths start)
-        if plan.path.name == DICT_NAME:
-            raise PlanFileError(f"{DICT_NAME}: robot: {exc.message}",
-                                f"a plan dict's relative robot path starts at base_dir (here {plan.path.parent.resolve()}); "
-                                f"pass base_dir=, an absolute path, or a bundled name ({exc.hint})") from None
-        raise PlanFileError(f"{plan.path}:{plan.lines.get('robot', 1)}: robot: {exc.message}", exc.hint) from None
-    plan = load_plan(path, named_poses=list(robot.named_poses), base_dir=base_dir, frames=robot.frames, parsed=plan)
+    load_planning_libraries()  # after the plan's form is checked: a typo is reported before the heavy imports
     if start_here or (isinstance(plan.start, str) and plan.start == "current"):
         assert current is not None  # checked above for start: current; start_here comes with it
         plan = replace(plan, start=np.asarray(current(robot), dtype=float))
     if seed is not None:
         plan = replace(plan, planner=replace(plan.planner, seed=seed))  # the options check the seed
     return Planner(plan, robot, progress).run()
+
+
+def load_plan_and_robot(source: str | Path | dict, base_dir: str | Path | None = None,
+                        load: Callable[[str], Robot] | None = None) -> tuple[Plan, Robot]:
+    """A plan (a YAML file path or a dict) and the robot it names, the plan read once: its document and ``robot``
+    first (``read_plan_document``), then the robot (``load(spec)``, by default ``load_robot``, confined to the plan's
+    folder and the package paths unless the plan is a dict), then every field checked against the robot's named
+    poses and frames (``load_plan``). An unknown robot is a ``PlanFileError`` naming the plan's line."""
+    doc = read_plan_document(source if isinstance(source, dict) else Path(source), base_dir)
+    try:
+        spec = robot_spec(doc)
+        robot = load(spec) if load is not None else load_robot(spec, confine=doc.path.name != DICT_NAME)
+    except DescriptionError:
+        raise
+    except InputError as exc:  # unknown robot: name the plan's line (a dict has none: say where paths start)
+        if doc.path.name == DICT_NAME:
+            raise PlanFileError(f"{DICT_NAME}: robot: {exc.message}",
+                                f"a plan dict's relative robot path starts at base_dir (here {doc.path.parent.resolve()}); "
+                                f"pass base_dir=, an absolute path, or a bundled name ({exc.hint})") from None
+        raise PlanFileError(f"{doc.path}:{doc.robot_line}: robot: {exc.message}", exc.hint) from None
+    return load_plan(source, named_poses=list(robot.named_poses), base_dir=base_dir, frames=robot.frames, parsed=doc), robot
 
 
 _LIBRARIES_LOADED = False  # load_planning_libraries has imported them all

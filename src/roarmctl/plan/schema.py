@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -34,8 +35,52 @@ MAX_ITEMS = 500  # obstacles, and objects
 TOP_KEYS = ("robot", "start", "scene", "objects", "tasks", "cycles", "limits", "planner")
 
 
+@dataclass(frozen=True)
+class PlanDocument:
+    """A plan file read but not yet checked against its robot: the parsed ``document`` (located values), its
+    ``path`` (``<plan dict>`` under ``base_dir`` for a dict), ``sha256`` and the ``robot`` it names (a string, at
+    line ``robot_line``). ``load_plan(..., parsed=doc)`` checks every field from it without reading it again."""
+
+    path: Path
+    sha256: str
+    robot: str
+    robot_line: int
+    document: Any
+    item_specs: dict = field(default_factory=dict, repr=False)  # none yet: the items are checked once, by load_plan
+
+
+def _read(source: str | Path | dict, base_dir: str | Path | None) -> tuple[Any, Path, str]:
+    """The parsed document, path and sha256 of a plan file or dict."""
+    if isinstance(source, dict):
+        return locate_plan(source), Path(base_dir or ".") / DICT_NAME, _dict_digest(source)
+    path = Path(source)
+    raw, digest = load_yaml(path, PlanFileError, digest=True)
+    return raw, path, digest
+
+
+def _top(ctx: ReadContext, raw: Any, path: Path) -> LocatedDict:
+    """The plan's top-level mapping, its keys checked (a datagen template named as such)."""
+    # top-level keys starting with 'x-' are ignored: a place to define YAML anchors for '<<: *name'
+    extensions = tuple(k for k in raw if isinstance(k, str) and k.startswith("x-")) if isinstance(raw, dict) else ()
+    if isinstance(raw, dict) and "datagen" in raw:  # a template names the plan it varies: say which command reads it
+        ctx.fail(raw.line_of("datagen") if isinstance(raw, LocatedDict) else 1, "datagen",
+                 "this is a datagen template, not a plan", f"make a dataset from it: roarmctl datagen {path} -n N -o DIR")
+    return ctx.mapping(raw, getattr(raw, "line", 1), "", TOP_KEYS + extensions, required=("robot", "tasks"))
+
+
+def read_plan_document(source: str | Path | dict, base_dir: str | Path | None = None) -> PlanDocument:
+    """Read a plan (a YAML file path or a dict) once, and check what finding its robot needs: the top level's keys
+    and ``robot``. The rest is checked by ``load_plan(source, named_poses, frames=..., parsed=doc)`` once the
+    robot (its poses and frames) is known."""
+    raw, path, digest = _read(source, base_dir)
+    ctx = ReadContext(path)
+    top = _top(ctx, raw, path)
+    robot = ctx.string(top["robot"], top.line_of("robot"), "robot")
+    return PlanDocument(path, digest, robot, top.line_of("robot"), raw)
+
+
 def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, base_dir: str | Path | None = None,
-              frames: dict | None = None, parsed: Plan | None = None) -> Plan:
+              frames: dict | None = None, parsed: Plan | PlanDocument | None = None) -> Plan:
     """Read and validate a plan: a YAML file path, or a dict of the same form (built in code).
 
     ``named_poses``, when given, are the robot's pose names (for checking ``start`` and
@@ -43,26 +88,17 @@ def load_plan(source: str | Path | dict, named_poses: list[str] | None = None, b
     ``<plan dict>`` instead of a file and line, and a relative ``robot`` path is taken from
     ``base_dir`` (default: the current directory). ``frames``: the robot's frames (positions written
     as ``{FRAME: [x, y, z]}`` are converted to the world frame). ``start: current`` stays the string
-    ``"current"`` (the caller measures it). ``parsed``: a ``Plan`` this function returned for the same
-    ``source``; its parsed document is validated again (with ``named_poses`` and ``frames``), not read again.
+    ``"current"`` (the caller measures it). ``parsed``: the ``PlanDocument`` of ``read_plan_document`` (the file
+    read once, its robot found first), or a ``Plan`` this function returned for the same ``source``: its parsed
+    document is checked (with ``named_poses`` and ``frames``), not read again.
     """
     if parsed is not None and parsed.document is not None:
         raw, path, digest = parsed.document, parsed.path, parsed.sha256
-    elif isinstance(source, dict):
-        digest = _dict_digest(source)
-        raw = locate_plan(source)
-        path = Path(base_dir or ".") / DICT_NAME
     else:
-        path = Path(source)
-        raw, digest = load_yaml(path, PlanFileError, digest=True)
+        raw, path, digest = _read(source, base_dir)
     ctx = ReadContext(path)
     ctx.known = parsed.item_specs if parsed is not None and parsed.document is raw else {}
-    # top-level keys starting with 'x-' are ignored: a place to define YAML anchors for '<<: *name'
-    extensions = tuple(k for k in raw if isinstance(k, str) and k.startswith("x-")) if isinstance(raw, dict) else ()
-    if isinstance(raw, dict) and "datagen" in raw:  # a template names the plan it varies: say which command reads it
-        ctx.fail(raw.line_of("datagen") if isinstance(raw, LocatedDict) else 1, "datagen",
-                 "this is a datagen template, not a plan", f"make a dataset from it: roarmctl datagen {path} -n N -o DIR")
-    top = ctx.mapping(raw, getattr(raw, "line", 1), "", TOP_KEYS + extensions, required=("robot", "tasks"))
+    top = _top(ctx, raw, path)
     robot = ctx.string(top["robot"], top.line_of("robot"), "robot")
 
     start: str | np.ndarray = "home"

@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     from roarmctl.motion.planning.targets import Target
     from roarmctl.motion.scene import Scene, SceneItem
     from roarmctl.motion.timing import TimedPath
+    from roarmctl.plan.schema import PlanDocument
     from roarmctl.plan.types import ItemSpec, Plan
     from roarmctl.robot.model import Robot
 
@@ -120,7 +121,7 @@ class PlanContext:
 _BUNDLED: frozenset[str] | None = None
 
 
-def robot_spec(plan: Plan) -> str:
+def robot_spec(plan: Plan | PlanDocument) -> str:
     """The plan's ``robot``: a bundled name as is; any other name is a path relative to the plan file's
     directory, which it may not leave (a plan reads only beside itself and in ``--package-path`` folders;
     a plan given as a dict is the caller's own and takes any path)."""
