@@ -140,6 +140,40 @@ def test_every_items_distance_and_the_closest_points_are_the_closed_form():
             assert min(_point_box_distance(pts[i, k, 0], *box) for box in boxes) < 2e-6
 
 
+def test_primitives_are_wound_outward_with_the_same_triangles():
+    """The page draws convex primitives without back faces, so each triangle must face out: over random boxes,
+    cylinders and spheres every normal of ``outward``'s triangles points away from the centre, and the triangles
+    are the shape's own (the same corners, only some in the other order). The document marks them closed, a mesh
+    not (it may be concave)."""
+    from roarmctl.viz.shapes import item_faces, outward, triangles
+    from roarmctl.viz.web.document import view_document
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        size = rng.uniform(0.005, 0.8, 3)
+        for item in ({"shape": "box", "size": size.tolist()}, {"shape": "cylinder", "radius": size[0], "length": size[1]},
+                     {"shape": "sphere", "radius": size[2]}):
+            tris = triangles(item_faces(item, local=True))
+            out = outward(tris)
+            normal = np.cross(out[:, 1] - out[:, 0], out[:, 2] - out[:, 0])
+            assert np.all(np.einsum("ij,ij->i", normal, out.mean(axis=1)) > 0), item
+            assert np.allclose(np.sort(out, axis=1), np.sort(tris, axis=1))
+    import trimesh
+
+    from roarmctl.motion.trajectory import Trajectory
+    from roarmctl.robot.loader import load_robot
+
+    robot = load_robot("roarm_m3_pro")
+    tm = trimesh.creation.box((0.05, 0.05, 0.05))
+    scene = {"items": [{"name": "b", "role": "obstacle", "shape": "box", "size": [0.1, 0.1, 0.1], "xyz": [0.3, 0, 0.1], "rpy": [0, 0, 0]},
+                       {"name": "m", "role": "obstacle", "shape": "mesh", "xyz": [0.3, 0.2, 0.1], "rpy": [0, 0, 0],
+                        "pieces": [{"vertices": tm.vertices.tolist(), "faces": tm.faces.tolist()}]}]}
+    q = robot.full_q(robot.named_poses["home"])[None]
+    doc = view_document(Trajectory(robot.name, list(robot.joint_names), np.array([0.0]), q, 0 * q, 0 * q, scene=scene), robot)
+    assert [it["closed"] for it in doc["items"]] == [True, False]
+    assert all(link["closed"] for link in doc["links"] if link["collision"])  # the M3's shapes are boxes
+
+
 def test_clearance_to_a_mesh_and_a_cloud_agrees_with_the_same_box():
     """The same 6 x 4 x 10 cm block as a box, as a (rotated, offset) mesh, and as a point cloud of 5 mm cells:
     the arm's clearance to the mesh is the box's; to the cloud within a cell's half-diagonal of it."""

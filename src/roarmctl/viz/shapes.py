@@ -166,3 +166,17 @@ def item_extent(item: dict, index: int = 0) -> np.ndarray:
         half = 0.5 * float(item["resolution"])
         return np.stack([pts.min(axis=0) - half, pts.max(axis=0) + half])
     return np.stack([pts.min(axis=0), pts.max(axis=0)])
+
+
+def outward(tris: np.ndarray, inside: np.ndarray | None = None) -> np.ndarray:
+    """Triangles (T, 3, 3) of a convex solid, each wound counter-clockwise seen from outside (its normal points away
+    from ``inside``, a point within the solid; default the origin), so a renderer that skips back faces fills only
+    the near side. Only for convex shapes (the primitives): a non-convex mesh has no such point."""
+    t = np.array(tris, dtype=float, copy=True)
+    if not len(t):
+        return t
+    centre = np.zeros(3) if inside is None else np.asarray(inside, dtype=float)
+    normal = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    flip = np.einsum("ij,ij->i", normal, t.mean(axis=1) - centre) < 0
+    t[flip] = t[flip][:, ::-1]
+    return t

@@ -21,10 +21,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.export.streams import item_tracks
+from roarmctl.formats import PRIMITIVES
 from roarmctl.motion.scene import SceneItem
 from roarmctl.robot.visuals import visual_shapes
 from roarmctl.viz.data import PathData, path_data, robot_for
-from roarmctl.viz.shapes import item_extent, item_faces, item_pose, robot_shape_faces, triangles
+from roarmctl.viz.shapes import item_extent, item_faces, item_pose, outward, robot_shape_faces, triangles
 
 if TYPE_CHECKING:
     from roarmctl.motion.planning.assembly import PartialPlan
@@ -34,6 +35,7 @@ if TYPE_CHECKING:
 FORMAT = "roarmctl.view/1"
 MAX_SAMPLES = 4000  # per page; a longer motion is thinned evenly (events, blends and the ends are kept)
 COLOR_STOPS = 11  # of the speed colour bar
+CONVEX_KINDS = ("box", "cylinder", "sphere", "capsule")  # a robot's collision shapes wound outward (not its meshes)
 
 
 @dataclass
@@ -96,9 +98,13 @@ def _links(robot: Robot) -> tuple[list[int], list[dict[str, Any]], list[str]]:
     notes on visuals left out or decimated, first of all that the robot is drawn without visuals when it is."""
     collision: dict[int, list[np.ndarray]] = {}
     names: dict[int, list[str]] = {}
+    closed: dict[int, bool] = {}  # every shape of the link convex and wound outward (drawn without back faces)
     for shape in robot.collision:
         k = robot.kin.link_index[shape.link]
-        collision.setdefault(k, []).append(triangles(robot_shape_faces(shape)))
+        tris = triangles(robot_shape_faces(shape))
+        convex = shape.kind in CONVEX_KINDS
+        collision.setdefault(k, []).append(outward(tris, np.asarray(shape.origin)[:3, 3]) if convex else tris)
+        closed[k] = closed.get(k, True) and convex
         names.setdefault(k, []).append(shape.name or shape.link)
     visuals, notes = visual_shapes(robot)
     if not visuals:  # the page draws what the checker sees: said, so that nobody takes it for the arm's looks
@@ -113,6 +119,7 @@ def _links(robot: Robot) -> tuple[list[int], list[dict[str, Any]], list[str]]:
     order = sorted(set(collision) | set(visual))
     links = [{"name": robot.kin.link_names[k], "shapes": names.get(k, []),
               "collision": _f32(np.concatenate(collision[k])) if k in collision else None,
+              "closed": closed.get(k, False),
               "visual": visual.get(k, [])} for k in order]
     return order, links, notes
 
@@ -196,9 +203,11 @@ def view_document(traj: Trajectory, robot: Robot | None = None, *, name: str = "
         faces = item_faces(it, k, local=True)
         moves = bool(carried[:, k].any()) or not np.allclose(item_poses[:, k], item_poses[:1, k])
         style = ROLE_STYLE.get(str(it.get("role")), ROLE_STYLE["obstacle"])
+        primitive = it.get("shape") in PRIMITIVES  # convex about its own origin: wound outward, no back faces drawn
         doc_items.append({"name": str(it.get("name", f"item {k}")), "role": str(it.get("role", "obstacle")),
                           "color": hex_color(style["facecolor"]),
-                          "triangles": None if cloud else _f32(triangles(faces)),
+                          "triangles": None if cloud else _f32(outward(triangles(faces)) if primitive else triangles(faces)),
+                          "closed": primitive,
                           "points": _f32(faces[0]) if cloud else None,
                           "point_size": float(it["resolution"]) if cloud else None,
                           "pose": _pose12(item_pose(it, f"scene.items[{k}]")).tolist(),

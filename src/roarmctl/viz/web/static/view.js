@@ -112,12 +112,18 @@
   // depth, a closed shape looks inside out); they sit a little behind their own plane, so the grid and edges on
   // them never flicker. See-through ones (the checker's shapes over visual meshes, the table on request) draw after
   // every opaque thing, their back faces first.
-  function surface(color, opacity) {
+  // A closed solid wound outward (the document's ``closed``: convex primitives) is drawn opaque without its back
+  // faces: software GL fills each pixel once, not twice (a table's bottom under its top: 1.5x the frame rate of
+  // pick_place, bench/bench_view.py); see-through, its back faces show.
+  function surface(color, opacity, closed) {
     const o = opacity === undefined ? 1 : opacity;
-    return new THREE.MeshLambertMaterial({ color: color, side: THREE.DoubleSide, transparent: o < 1, opacity: o, depthWrite: o >= 1,
-      polygonOffset: o >= 1, polygonOffsetFactor: 1, polygonOffsetUnits: 1 });
+    const m = new THREE.MeshLambertMaterial({ color: color, side: closed && o >= 1 ? THREE.FrontSide : THREE.DoubleSide,
+      transparent: o < 1, opacity: o, depthWrite: o >= 1, polygonOffset: o >= 1, polygonOffsetFactor: 1, polygonOffsetUnits: 1 });
+    m.userData.closed = !!closed;
+    return m;
   }
   function seeThrough(material, on, opacity) {
+    material.side = material.userData.closed && !on ? THREE.FrontSide : THREE.DoubleSide;
     material.transparent = on;
     material.opacity = on ? opacity : 1;
     material.depthWrite = !on;
@@ -127,11 +133,11 @@
     material.needsUpdate = true;
   }
 
-  function solid(triangles, color, opacity, edges) {
+  function solid(triangles, color, opacity, edges, closed) {
     const geom = new THREE.BufferGeometry();
     geom.setAttribute('position', new THREE.BufferAttribute(triangles, 3));
     geom.computeVertexNormals();
-    const mat = surface(color, opacity);
+    const mat = surface(color, opacity, closed);
     const group = new THREE.Group();
     group.add(new THREE.Mesh(geom, mat));
     if (edges) {
@@ -151,7 +157,7 @@
   const linkGroups = [], visualGroups = [], collisionGroups = [];
   for (const link of D.links) {
     const g = placed(new THREE.Group());
-    const c = link.collision ? solid(f32(link.collision), 0x9aa3ae, HAS_VISUAL ? 0.35 : 1.0, 0x39414b) : new THREE.Group();
+    const c = link.collision ? solid(f32(link.collision), 0x9aa3ae, HAS_VISUAL ? 0.35 : 1.0, 0x39414b, link.closed) : new THREE.Group();
     g.add(c);
     collisionGroups.push(c);
     const v = new THREE.Group();
@@ -195,7 +201,7 @@
       geom.setAttribute('position', new THREE.BufferAttribute(f32(item.points), 3));
       g = placed(new THREE.Points(geom, new THREE.PointsMaterial({ color: item.color, size: item.point_size })));
     } else {
-      g = placed(solid(f32(item.triangles), item.color, 1.0, 0x444444));
+      g = placed(solid(f32(item.triangles), item.color, 1.0, 0x444444, item.closed));
     }
     g.matrix.copy(matrixOf(item.pose));
     return { name: item.name, role: item.role, group: g, track: item.track ? f32(item.track) : null };
@@ -225,15 +231,42 @@
   const path = new THREE.Group();
   scene.add(path);
   const lineMaterials = [];
+  // A line of ``width`` pixels (three.js's LineMaterial). three.js draws it as one instance of an 8-vertex quad per
+  // segment; software GL (SwiftShader) pays per instance what a GPU does not (pick_place's path halved the frame rate:
+  // bench/bench_view.py), so the same quads are written out per segment and drawn in one plain draw, by the same shader
+  // (its per-instance attributes are ordinary per-vertex ones here).
   function fatLine(positions, colors, width, segments) {
-    const geom = segments ? new THREE.LineSegmentsGeometry() : new THREE.LineGeometry();
-    geom.setPositions(positions);
-    geom.setColors(colors);
+    const instanced = segments ? new THREE.LineSegmentsGeometry() : new THREE.LineGeometry();
+    instanced.setPositions(positions);
+    instanced.setColors(colors);
     const mat = new THREE.LineMaterial({ linewidth: width, vertexColors: true });
     lineMaterials.push(mat);
-    const line = segments ? new THREE.LineSegments2(geom, mat) : new THREE.Line2(geom, mat);
-    line.computeLineDistances();
+    const line = new THREE.Mesh(unrolled(instanced), mat);
+    line.frustumCulled = false;  // its 'position' is the quad's corners, not where it lies
     return line;
+  }
+  function unrolled(instanced) {
+    const quad = instanced.index.array, per = instanced.attributes.position.count;
+    const k = instanced.attributes.instanceStart.count;
+    const geom = new THREE.BufferGeometry();
+    for (const [name, attr] of Object.entries(instanced.attributes)) {
+      const size = attr.itemSize, out = new Float32Array(k * per * size);
+      const perSegment = !!(attr.data && attr.data.isInstancedInterleavedBuffer);
+      for (let sgm = 0; sgm < k; sgm++) {
+        for (let v = 0; v < per; v++) {
+          const i = perSegment ? sgm : v, o = (sgm * per + v) * size;
+          out[o] = attr.getX(i);
+          if (size > 1) out[o + 1] = attr.getY(i);
+          if (size > 2) out[o + 2] = attr.getZ(i);
+        }
+      }
+      geom.setAttribute(name, new THREE.BufferAttribute(out, size));
+    }
+    const index = new Uint32Array(k * quad.length);
+    for (let sgm = 0; sgm < k; sgm++) for (let j = 0; j < quad.length; j++) index[sgm * quad.length + j] = sgm * per + quad[j];
+    geom.setIndex(new THREE.BufferAttribute(index, 1));
+    instanced.dispose();
+    return geom;
   }
   const pathColors = Array.from(COLORS, (c) => c / 255);
   if (N > 1) {
@@ -440,39 +473,45 @@
 
   function fmt(v, digits) { return Number.isFinite(v) ? v.toFixed(digits) : '—'; }
 
+  // A cell is written only when its text or class changes: every write invalidates the panel's layout and paint,
+  // which software rendering pays per frame (bench/bench_view.py).
+  function put(el, text, cls) {
+    if (el.textContent !== text) el.textContent = text;
+    if (cls !== undefined && el.className !== cls) el.className = cls;
+  }
+
   function showReadout(i) {
-    $('r-time').textContent = fmt(T[i], 3) + ' s of ' + fmt(D.duration, 3) + ' s (sample ' + (i + 1) + '/' + N + ')';
-    $('clock').textContent = fmt(T[i], 2) + ' / ' + fmt(D.duration, 2) + ' s';
-    $('r-segment').textContent = D.segment_kinds[D.segment[i]] || '—';
+    put($('r-time'), fmt(T[i], 3) + ' s of ' + fmt(D.duration, 3) + ' s (sample ' + (i + 1) + '/' + N + ')');
+    put($('clock'), fmt(T[i], 2) + ' / ' + fmt(D.duration, 2) + ' s');
+    put($('r-segment'), D.segment_kinds[D.segment[i]] || '—');
     const vmax = D.limits.max_tcp_speed;
-    $('r-speed').textContent = fmt(SPEED[i], 3) + ' m/s' + (vmax ? ' (limit ' + vmax + ')' : '');
+    put($('r-speed'), fmt(SPEED[i], 3) + ' m/s' + (vmax ? ' (limit ' + vmax + ')' : ''));
     const margin = D.limits.min_singular_value;
-    $('r-sigma').textContent = fmt(SIGMA[i], 4) + ' m/rad' + (margin ? ' (margin ' + margin + ')' : '');
-    $('r-sigma').className = margin && SIGMA[i] < margin ? 'warn' : '';
+    put($('r-sigma'), fmt(SIGMA[i], 4) + ' m/rad' + (margin ? ' (margin ' + margin + ')' : ''), margin && SIGMA[i] < margin ? 'warn' : '');
     const c = CLEAR[i], item = D.nearest_item[i], part = D.nearest_part[i];
-    $('r-clearance').textContent = c < 0 ? 'no scene item' :
-      (c * 1000).toFixed(1) + ' mm: ' + D.parts[part] + ' to ' + D.items[item].name;
-    $('r-clearance').className = c >= 0 && c < 0.005 ? 'warn' : '';
-    if (GHOST) $('r-ghost').textContent = (GHOST.error[i] * 1000).toFixed(1) + ' mm';
-    if (c >= 0 && INTENDED[i * M + item]) { $('r-clearance').textContent += ' (intended contact)'; $('r-clearance').className = 'intended'; }
+    const meantNearest = c >= 0 && INTENDED[i * M + item];
+    put($('r-clearance'), (c < 0 ? 'no scene item' : (c * 1000).toFixed(1) + ' mm: ' + D.parts[part] + ' to ' + D.items[item].name) +
+      (meantNearest ? ' (intended contact)' : ''), meantNearest ? 'intended' : c >= 0 && c < 0.005 ? 'warn' : '');
+    if (GHOST) put($('r-ghost'), (GHOST.error[i] * 1000).toFixed(1) + ' mm');
     for (let k = 0; k < M; k++) {
       const d = ICLEAR[i * M + k], part = IPART[i * M + k], cells = itemRows[k], meant = INTENDED[i * M + k];
-      cells[1].textContent = d < 0 ? '—' : (d * 1000).toFixed(1) + ' mm';
-      cells[2].textContent = d < 0 ? (D.items[k].track ? 'carried' : '') : (D.parts[part] || '') + (meant ? ' (intended)' : '');
-      cells[1].className = d < 0 ? '' : meant ? 'intended' : tight(d) ? 'warn' : '';
+      put(cells[1], d < 0 ? '—' : (d * 1000).toFixed(1) + ' mm', d < 0 ? '' : meant ? 'intended' : tight(d) ? 'warn' : '');
+      put(cells[2], d < 0 ? (D.items[k].track ? 'carried' : '') : (D.parts[part] || '') + (meant ? ' (intended)' : ''));
     }
     showGaps(i);
-    $('strip-cursor').style.left = (N > 1 ? 100 * i / (N - 1) : 0) + '%';
+    const at = (N > 1 ? 100 * i / (N - 1) : 0) + '%', cursor = $('strip-cursor');
+    if (cursor.style.left !== at) cursor.style.left = at;
     for (let j = 0; j < DOF; j++) {
       const v = Q[i * DOF + j], cells = jointCells[j];
-      if (D.joint_units[j] === 'm') { cells[1].textContent = (v * 1000).toFixed(1) + ' mm'; cells[2].textContent = ''; }
-      else { cells[1].textContent = v.toFixed(4) + ' rad'; cells[2].textContent = (v * 180 / Math.PI).toFixed(1) + '°'; }
+      if (D.joint_units[j] === 'm') { put(cells[1], (v * 1000).toFixed(1) + ' mm'); put(cells[2], ''); }
+      else { put(cells[1], v.toFixed(4) + ' rad'); put(cells[2], (v * 180 / Math.PI).toFixed(1) + '°'); }
       // the torque as a share of this joint's own limit (as the PNG's panel); N m where the joint has no limit
       const tau = TORQUE ? TORQUE[i * DOF + j] : NaN, share = SHARE ? SHARE[i * DOF + j] : NaN;
       const unit = D.joint_units[j] === 'm' ? ' N' : ' N m';
-      cells[3].textContent = Number.isFinite(share) ? (Math.round(share) || 0) + ' %' : (Number.isFinite(tau) ? tau.toFixed(2) + unit : '—');
-      cells[3].title = Number.isFinite(tau) ? tau.toFixed(3) + unit : '';
-      cells[3].className = Number.isFinite(share) && Math.abs(share) >= 100 ? 'warn' : '';
+      put(cells[3], Number.isFinite(share) ? (Math.round(share) || 0) + ' %' : (Number.isFinite(tau) ? tau.toFixed(2) + unit : '—'),
+        Number.isFinite(share) && Math.abs(share) >= 100 ? 'warn' : '');
+      const title = Number.isFinite(tau) ? tau.toFixed(3) + unit : '';
+      if (cells[3].title !== title) cells[3].title = title;
     }
   }
 
@@ -482,14 +521,16 @@
     for (let k = 0; k < ghostGroups.length; k++) matrixOf(GHOST.poses, (index * L + k) * 12, ghostGroups[k].matrix);
     for (const it of items) if (it.track) matrixOf(it.track, index * 12, it.group.matrix);
     for (const it of ghostItems) matrixOf(it.track, index * 12, it.group.matrix);
-    const bp = boneGeom.attributes.position;
-    D.bones.forEach((pair, k) => {
-      for (let e = 0; e < 2; e++) {
-        const o = 3 * (index * NB + pair[e]);
-        bp.setXYZ(2 * k + e, BONES[o], BONES[o + 1], BONES[o + 2]);
-      }
-    });
-    bp.needsUpdate = true;
+    if (skeleton.visible) {  // (hidden, its buffer is not sent to GL every frame)
+      const bp = boneGeom.attributes.position;
+      D.bones.forEach((pair, k) => {
+        for (let e = 0; e < 2; e++) {
+          const o = 3 * (index * NB + pair[e]);
+          bp.setXYZ(2 * k + e, BONES[o], BONES[o + 1], BONES[o + 2]);
+        }
+      });
+      bp.needsUpdate = true;
+    }
     const p = tcpGeom.attributes.position;
     p.setXYZ(0, TCP[3 * index], TCP[3 * index + 1], TCP[3 * index + 2]);
     p.needsUpdate = true;
@@ -504,16 +545,31 @@
   }
 
   let live = false;  // no frame before the first sample is placed (each costs in software GL)
+  // The labels: a label fixed in the world moves on screen only with the camera, so it is placed again only when the
+  // camera moved (or the view's size or the labels' toggle changed: ``labelsStale``); those at the cursor (the gaps'
+  // distances) every frame. A label's style is written only when it changes (each write costs a layout).
+  let viewW = 1, viewH = 1, labelsStale = true;  // the canvas's CSS size, read on resize (not in a frame: a forced layout)
+  const seenView = new THREE.Matrix4(), seenProjection = new THREE.Matrix4(), at = new THREE.Vector3();
+  function placeLabel(l, showAll) {
+    at.copy(l.anchor).project(cam.camera);
+    const visible = !l.hidden && (l.dynamic || showAll) && at.z > -1 && at.z < 1;
+    const display = visible ? '' : 'none';
+    if (l.div.style.display !== display) l.div.style.display = display;
+    if (!visible) return;
+    const left = ((at.x + 1) / 2 * viewW).toFixed(1) + 'px', top = ((1 - at.y) / 2 * viewH).toFixed(1) + 'px';
+    if (l.div.style.left !== left) l.div.style.left = left;
+    if (l.div.style.top !== top) l.div.style.top = top;
+  }
   function render() {
     if (!live) return;
-    renderer.render(scene, cam.camera);
-    const w = canvas.clientWidth, h = canvas.clientHeight, v = new THREE.Vector3();
-    for (const l of labels) {
-      v.copy(l.anchor).project(cam.camera);
-      const visible = !l.hidden && (l.dynamic || $('show-labels').checked) && v.z > -1 && v.z < 1;
-      l.div.style.display = visible ? '' : 'none';
-      if (visible) { l.div.style.left = ((v.x + 1) / 2 * w) + 'px'; l.div.style.top = ((1 - v.y) / 2 * h) + 'px'; }
-    }
+    const camera = cam.camera;
+    renderer.render(scene, camera);
+    const moved = labelsStale || !seenView.equals(camera.matrixWorldInverse) || !seenProjection.equals(camera.projectionMatrix);
+    seenView.copy(camera.matrixWorldInverse);
+    seenProjection.copy(camera.projectionMatrix);
+    labelsStale = false;
+    const showAll = $('show-labels').checked;
+    for (const l of labels) if (moved || l.dynamic) placeLabel(l, showAll);
   }
 
   // The clearance strip under the timeline (static/strip.js), drawn once per size, not per frame.
@@ -526,6 +582,9 @@
   function resize() {
     drawStrip();
     const w = canvas.parentElement.clientWidth, h = canvas.parentElement.clientHeight;
+    viewW = canvas.clientWidth || w;
+    viewH = canvas.clientHeight || h;
+    labelsStale = true;
     renderer.setSize(w, h, false);
     cam.setAspect(w / Math.max(h, 1));
     for (const m of lineMaterials) m.resolution.set(w, h);
@@ -587,7 +646,7 @@
   $('show-visual').addEventListener('change', (ev) => { for (const v of visualGroups) v.visible = ev.target.checked; render(); });
   $('show-path').addEventListener('change', (ev) => { path.visible = ev.target.checked; render(); });
   $('see-through-table').addEventListener('change', (ev) => setTableSeeThrough(ev.target.checked));
-  $('show-labels').addEventListener('change', render);
+  $('show-labels').addEventListener('change', () => { labelsStale = true; render(); });
   $('show-ghost').addEventListener('change', (ev) => {
     for (const g of ghostGroups) g.visible = ev.target.checked;
     for (const g of ghostItems) g.group.visible = ev.target.checked;
