@@ -15,10 +15,13 @@ from hypothesis import strategies as st
 import roarmctl.api as rc
 from roarmctl.device.options import STREAM_BOUNDS, StreamConfig
 from roarmctl.errors import OptionError
+from roarmctl.export import EXPORT_BOUNDS, ExportOptions
 from roarmctl.motion.options import LIMITS_BOUNDS, PLANNER_BOUNDS, Limits, PlannerConfig
+from roarmctl.viz.web.server import VIEW_BOUNDS, ViewOptions
 
 #: every options object of the library and the bounds it checks against
-OPTIONS: list[tuple[type, dict]] = [(Limits, LIMITS_BOUNDS), (PlannerConfig, PLANNER_BOUNDS), (StreamConfig, STREAM_BOUNDS)]
+OPTIONS: list[tuple[type, dict]] = [(Limits, LIMITS_BOUNDS), (PlannerConfig, PLANNER_BOUNDS), (StreamConfig, STREAM_BOUNDS),
+                                    (ExportOptions, EXPORT_BOUNDS), (ViewOptions, VIEW_BOUNDS)]
 FIELDS = [(cls, f.name, bounds[f.name] if f.name in bounds else None) for cls, bounds in OPTIONS
           for f in dataclasses.fields(cls)]
 BAD_NUMBERS = [math.nan, math.inf, -math.inf, -1.0, 1e300, -1e300, "1", True, [1.0]]
@@ -33,7 +36,7 @@ def test_every_field_has_a_bound(cls, name, bound):
 def test_bad_values_are_refused_naming_the_field(cls, name, bound):
     bad = [v for v in BAD_NUMBERS if not (bound.optional and v is None)]
     if bound.choices:
-        bad = ["", "nope", 3, None]
+        bad = ["", "nope", 3] + ([] if bound.optional else [None])
     elif bound.flag:
         bad = [1, "yes", None, math.nan]
     for value in bad:

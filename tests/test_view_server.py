@@ -12,7 +12,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from roarmctl.viz.web.server import ViewServer
+from roarmctl.viz.web.server import ViewOptions, ViewServer
 
 PAGE = b"<!doctype html><title>plan</title>SECRET-PLAN-BYTES" + b"x" * 1000
 
@@ -22,7 +22,7 @@ def serve() -> Iterator:
     servers: list[tuple[ViewServer, threading.Thread]] = []
 
     def start(page: bytes = PAGE, **kw) -> ViewServer:
-        srv = ViewServer(page, 0, **kw)
+        srv = ViewServer(page, ViewOptions(**kw))
         t = threading.Thread(target=srv.serve_forever, daemon=True)
         t.start()
         servers.append((srv, t))

@@ -18,7 +18,17 @@ from dataclasses import dataclass, fields
 from typing import Any, NoReturn
 
 from roarmctl.errors import InputError, OptionError, describe_value
-from roarmctl.validation import HugeNumber
+
+
+class HugeNumber:
+    """A JSON integer of more than ``roarmctl.validation.MAX_DIGITS`` digits, kept as text so that the field checker that
+    meets it can refuse it by name (``Checker.number``); no other code takes it for a number."""
+
+    def __init__(self, text: str) -> None:
+        self.text = text
+
+    def __repr__(self) -> str:
+        return f"{self.text[:12]}... ({len(self.text.lstrip('-'))} digits)"
 
 
 def closest(word: str, options: Iterable[object]) -> str | None:

@@ -33,6 +33,7 @@ from yaml.reader import Reader
 from yaml.resolver import Resolver
 from yaml.scanner import Scanner
 
+from roarmctl.checks import HugeNumber
 from roarmctl.errors import InputError, PlanFileError
 from roarmctl.fileio import Roots, read_bytes
 
@@ -389,17 +390,6 @@ def check_markup(text: str, name: str, error: type[InputError]) -> str:
 # --------------------------------------------------------------------------- JSON
 class _Refused(ValueError):
     pass
-
-
-class HugeNumber:
-    """A JSON integer of more than ``MAX_DIGITS`` digits, kept as text so that the field checker that
-    meets it can refuse it by name (``Checker.number``); no other code takes it for a number."""
-
-    def __init__(self, text: str) -> None:
-        self.text = text
-
-    def __repr__(self) -> str:
-        return f"{self.text[:12]}... ({len(self.text.lstrip('-'))} digits)"
 
 
 def _parse_int(text: str) -> int | HugeNumber:

@@ -57,8 +57,8 @@ from roarmctl.errors import (
     TrajectoryFileError,
     UnreachableError,
 )
+from roarmctl.export import ExportOptions
 from roarmctl.export import export as _export
-from roarmctl.export import format_for
 from roarmctl.motion.options import Limits, PlannerConfig
 from roarmctl.motion.pipeline import plan_file
 from roarmctl.motion.scene import SceneItem
@@ -238,11 +238,12 @@ def draw(traj: TrajectoryLike, output: PathLike, *, view: str = "iso", dpi: floa
     return visualize_trajectory(t, output, view=view, dpi=dpi, size=size, name=output.stem)
 
 
-def export(source: TrajectoryLike, output: PathLike, *, trajectory: TrajectoryLike | None = None) -> dict[str, Any]:
+def export(source: TrajectoryLike, output: PathLike, *, trajectory: TrajectoryLike | None = None,
+           force: bool = False) -> dict[str, Any]:
     """Export a trajectory (or a trajectory / execution-log file) like ``roarmctl export``: ``.mcap``
     (ROS 2 messages for Foxglove), ``.csv``, or a name without extension (a ROS 2 bag folder).
     Returns ``{"output", "format", "topics": {topic: count}, "time_offset_s"}`` (s added to every time of the
     source in the bag) (CSV: ``"rows"``; its times are the source's). For an execution
-    log, ``trajectory`` (the one it ran) adds its planned joint states and the scene."""
-    format_for(output)  # refuse an unknown extension before any work
-    return _export(source, output, trajectory=trajectory)
+    log, ``trajectory`` (the one it ran) adds its planned joint states and the scene. ``force`` replaces a bag
+    folder roarmctl did not write (``ExportOptions``, as the CLI's ``--force``)."""
+    return _export(source, output, trajectory=trajectory, options=ExportOptions(force=force))

@@ -6,7 +6,7 @@ import typer
 
 from roarmctl.cli import common
 from roarmctl.errors import InputError
-from roarmctl.export import export
+from roarmctl.export import ExportOptions, export
 
 
 def register(app: typer.Typer) -> None:
@@ -45,7 +45,7 @@ def register(app: typer.Typer) -> None:
         if task is not None or fps is not None:
             raise InputError("--task and --fps go with --lerobot")
         assert output is not None  # one of the two (checked above)
-        summary = export(source, output, trajectory=trajectory, force=force)
+        summary = export(source, output, trajectory=trajectory, options=ExportOptions(force=force))
         if json_out:
             common.print_json({"ok": True, **summary})
             return

@@ -11,6 +11,7 @@ import typer
 from roarmctl.cli import common, signals
 from roarmctl.errors import InputError, Interrupted
 from roarmctl.fileio import check_output_file
+from roarmctl.motion.options import PlannerConfig
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -72,7 +73,6 @@ def follow(
     from roarmctl.device.follow_sources import SocketSource, StreamSource
     from roarmctl.device.protocol import WireMap
     from roarmctl.motion.collision import CollisionChecker
-    from roarmctl.motion.options import PlannerConfig
     from roarmctl.motion.pipeline import load_plan_and_robot
     from roarmctl.motion.planning.context import scene_item
     from roarmctl.motion.scene import Scene

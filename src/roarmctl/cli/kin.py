@@ -19,6 +19,7 @@ if TYPE_CHECKING:  # numpy itself is imported where a command runs (start-up tim
 
 from roarmctl.cli import common
 from roarmctl.errors import InputError, RoarmError, UnreachableError
+from roarmctl.motion.options import PlannerConfig
 from roarmctl.motion.rejection import rejection_cause
 
 kin_app = typer.Typer(help="Kinematics and dynamics: fk, ik, jacobian, dynamics.", no_args_is_help=True)
@@ -294,7 +295,6 @@ def ik(
     try:
         if auto:  # the pitch nearest to --ref's (else straight down) that is valid and clear of the margin
             from roarmctl.motion.collision import CollisionChecker
-            from roarmctl.motion.options import PlannerConfig
             from roarmctl.motion.scene import Scene
 
             checker = CollisionChecker(r, Scene([]), singularity_margin=PlannerConfig().singularity_margin)

@@ -21,6 +21,7 @@ except ImportError:  # pragma: no cover - Windows
 from roarmctl.cli import common, signals
 from roarmctl.errors import DeviceError, InputError, Interrupted, signal_name
 from roarmctl.fileio import check_output_file
+from roarmctl.motion.options import PlannerConfig
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -63,7 +64,6 @@ def teach(
     from roarmctl.device.link import Link
     from roarmctl.device.protocol import WireMap
     from roarmctl.device.teach import SURPRISES, Judge, TeachSession
-    from roarmctl.motion.options import PlannerConfig
     from roarmctl.motion.pipeline import load_plan_and_robot
     from roarmctl.motion.planning.context import scene_item
     from roarmctl.robot.loader import load_robot

@@ -33,12 +33,13 @@ def view(
     import webbrowser
 
     from roarmctl.viz.web.page import render_page
-    from roarmctl.viz.web.server import ViewServer
+    from roarmctl.viz.web.server import ViewOptions, ViewServer
     from roarmctl.viz.web.sources import load_view_source, source_document
 
+    options = ViewOptions(port=port)  # checked before the page is built
     src = load_view_source(source, trajectory)
     page = render_page(source_document(src)).encode("utf-8")
-    server = ViewServer(page, port)
+    server = ViewServer(page, options)
     try:
         if src.error is not None:
             common.warn(f"{src.error.message}; the view shows the path up to the failure")

@@ -26,11 +26,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from roarmctl.checks import Checker
+from roarmctl.checks import Checker, HugeNumber
 from roarmctl.errors import TrajectoryFileError
 from roarmctl.fileio import atomic_write_json
 from roarmctl.formats import MAX_DURATION, MAX_POINTS, MIN_SPEED_SCALE, read_document
-from roarmctl.validation import HugeNumber
 
 if TYPE_CHECKING:
     from roarmctl.motion.trajectory import Trajectory

@@ -9,11 +9,13 @@ Anything else is an input error (exit 2).
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Any
 
-from roarmctl.errors import InputError, OptionError, TrajectoryFileError
+from roarmctl.checks import Bound, check_options
+from roarmctl.errors import InputError, TrajectoryFileError
 from roarmctl.fileio import atomic_write_text, check_output_folder, note_output_folder
 
 if TYPE_CHECKING:
@@ -21,6 +23,25 @@ if TYPE_CHECKING:
     from roarmctl.robot.model import Robot
 
 FORMATS = ("mcap", "bag", "csv")
+
+EXPORT_BOUNDS: dict[str, Bound] = {
+    "format": Bound(choices=FORMATS, optional=True),  # None: from the output's name
+    "force": Bound(flag=True),  # replace a bag folder roarmctl did not write
+}
+
+
+@dataclass(frozen=True)
+class ExportOptions:
+    """How ``export`` writes: ``format`` ('mcap', 'bag', 'csv'; None: from the output's name, ``format_for``) and
+    ``force`` (replace an existing bag folder roarmctl did not write). Checks its own fields when made
+    (``EXPORT_BOUNDS``): an unknown format or a flag that is not true or false raise ``OptionError`` naming the
+    field. The CLI and ``roarmctl.api.export`` build one."""
+
+    format: str | None = None
+    force: bool = False
+
+    def __post_init__(self) -> None:
+        check_options(self, EXPORT_BOUNDS)
 
 
 def format_for(path: str | os.PathLike) -> str:
@@ -111,23 +132,22 @@ def log_robot(log: dict[str, Any], where: str, traj: Any = None, traj_where: str
     return robot_of(SimpleNamespace(robot=log["robot"], robot_description=log.get("robot_description")), where)
 
 
-def export(source: str | os.PathLike | Any, path: str | os.PathLike, fmt: str | None = None,
-           trajectory: str | os.PathLike | Any | None = None, force: bool = False) -> dict[str, Any]:
+def export(source: str | os.PathLike | Any, path: str | os.PathLike, trajectory: str | os.PathLike | Any | None = None,
+           options: ExportOptions | None = None) -> dict[str, Any]:
     """Export the trajectory or execution log at ``source`` (or a ``Trajectory``) to ``path``; returns a summary
     (``output``, ``format``, ``topics``: message count per topic and ``time_offset_s``: s added to every time of
     the source in the bag, or ``rows`` for CSV, whose times are the source's). For a log,
-    ``trajectory`` adds the executed plan (``planned`` joint states and the scene). An existing bag
-    folder that roarmctl did not write is replaced only with ``force``."""
-    fmt = fmt or format_for(path)
-    if fmt not in FORMATS:
-        raise OptionError("format", f"'{fmt}' is not one of {', '.join(FORMATS)}")
+    ``trajectory`` adds the executed plan (``planned`` joint states and the scene). ``options``: the format (default:
+    from ``path``) and whether an existing bag folder that roarmctl did not write is replaced (``ExportOptions``)."""
+    options = options or ExportOptions()
+    fmt = options.format or format_for(path)
     if fmt == "bag":  # refuse before the work
         from roarmctl.export.ros import is_bag_we_wrote
 
-        check_output_folder(path, force, made_by_us=is_bag_we_wrote)
+        check_output_folder(path, options.force, made_by_us=is_bag_we_wrote)
         note_output_folder(path)  # a signal from here on is reported with what is at `path`
     streams = streams_for(source, trajectory)
-    return write(streams, path, fmt, force)
+    return write(streams, path, fmt, options.force)
 
 
 def write(streams: Streams, path: str | os.PathLike, fmt: str, force: bool = False) -> dict[str, Any]:

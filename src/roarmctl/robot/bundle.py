@@ -29,6 +29,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
+from roarmctl.checks import Checker
 from roarmctl.errors import DescriptionError, InputError, TrajectoryFileError
 from roarmctl.fileio import Roots, read_bytes, read_text, resolved
 from roarmctl.kept import Kept
@@ -151,8 +152,6 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
 
 def _decoded(doc: Any, where: str) -> dict[str, bytes]:
     """The files of a bundle document, checked: names, types, base64, total size."""
-    from roarmctl.checks import Checker
-
     check = Checker(TrajectoryFileError, json=True)
     field = "robot_description"
     check.mapping(doc, where, field)

@@ -19,11 +19,13 @@ import secrets
 import socket
 import sys
 import threading
+from dataclasses import dataclass
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from roarmctl.errors import InputError, OptionError
+from roarmctl.checks import Bound, check_options
+from roarmctl.errors import InputError
 
 HOST = "127.0.0.1"
 PATHS = ("/", "/index.html")
@@ -31,13 +33,33 @@ PATHS = ("/", "/index.html")
 MAX_CONNECTIONS = 16
 #: Seconds a connection may stay silent (reading its request, or sending the page to a reader that stalls).
 TIMEOUT = 10.0
+
+VIEW_BOUNDS: dict[str, Bound] = {
+    "port": Bound(0, 65535, whole=True),  # TCP port on 127.0.0.1; 0: a free one
+    "timeout": Bound(0.0, 3600.0, strict_lo=True),  # s a connection may stay silent
+    "max_connections": Bound(1, 1024, whole=True),  # connections served at once
+}
+
+
+@dataclass(frozen=True)
+class ViewOptions:
+    """How the view's page is served: ``port`` (0: a free one), ``timeout`` (s a silent connection is kept) and
+    ``max_connections`` (served at once). Checks its own fields when made (``VIEW_BOUNDS``): a port out of
+    0..65535, a NaN, infinite or negative time, a wrong type raise ``OptionError`` naming the field."""
+
+    port: int = 0
+    timeout: float = TIMEOUT
+    max_connections: int = MAX_CONNECTIONS
+
+    def __post_init__(self) -> None:
+        check_options(self, VIEW_BOUNDS)
 #: What a client that hangs up or stalls raises in its connection's thread: its own business, not an error.
 HANGUPS = (ConnectionError, TimeoutError, socket.timeout)
 
 
 class ViewServer:
-    """Serve ``page`` (UTF-8 HTML bytes) at ``url`` (``http://127.0.0.1:PORT/?token=TOKEN``); ``port`` 0
-    picks a free one; ``timeout`` (s) and ``max_connections`` bound each connection and their number.
+    """Serve ``page`` (UTF-8 HTML bytes) at ``url`` (``http://127.0.0.1:PORT/?token=TOKEN``) as ``options`` say
+    (``ViewOptions``: the port, 0 a free one; the time (s) each connection may stay silent and their number).
 
     ``serve_forever()`` blocks until ``close()`` or an exception in the calling thread (Ctrl-C reaches it
     as ``KeyboardInterrupt``); ``requests`` counts the pages served, ``refused`` the requests answered 403,
@@ -45,10 +67,9 @@ class ViewServer:
     unexpected failure in a connection's thread (nothing is printed: the library never prints).
     """
 
-    def __init__(self, page: bytes, port: int = 0, *, timeout: float = TIMEOUT,
-                 max_connections: int = MAX_CONNECTIONS) -> None:
-        if not 0 <= port <= 65535:
-            raise OptionError("port", f"{port} is not a TCP port", "use 1 to 65535, or 0 for a free one")
+    def __init__(self, page: bytes, options: ViewOptions | None = None) -> None:
+        options = options or ViewOptions()
+        port, timeout, max_connections = options.port, options.timeout, options.max_connections
         self.page = page
         self.token = secrets.token_urlsafe(32)  # 256 bits, as Jupyter's
         self.requests = self.refused = self.dropped = 0
