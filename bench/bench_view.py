@@ -19,6 +19,10 @@ counted over 3 s; "calls" = draw calls of one frame (three.js counts them); "GL"
 software GL (then it draws without multisampling).
 
 ``--screenshot PATH`` also writes the README's picture: pick_place at its grasp, 1200 x 760 px.
+
+``--fps-of A.html B.html ...``: only frames/s (as above) of the given page files, each in turn for 3 rounds in one
+browser, so that two builds of one page (e.g. written by ``visualize-path`` before and after a change) meet the same
+load; prints each round and the medians.
 """
 
 from __future__ import annotations
@@ -57,13 +61,33 @@ def frames_per_second(chromium, url: str) -> tuple[float, int, bool]:
         page.close()
 
 
+def fps_of(pages: list[Path], rounds: int = 3) -> None:
+    """Frames/s of each page file in turn, ``rounds`` times, in one browser (see the module doc)."""
+    from playwright.sync_api import sync_playwright
+
+    print(f"load average {os.getloadavg()[0]:.2f} (2 cores); frames/s at 1400 x 900, {rounds} rounds in turn")
+    seen: list[list[float]] = [[] for _ in pages]
+    with sync_playwright() as pw:
+        chromium = br.launch(pw)
+        for r in range(rounds):
+            for k, p in enumerate(pages):
+                seen[k].append(frames_per_second(chromium, p.resolve().as_uri())[0])
+            print(f"round {r + 1}: " + "  ".join(f"{p.name} {f[-1]:.1f}" for p, f in zip(pages, seen)), flush=True)
+        chromium.close()
+    print(f"medians (load average now {os.getloadavg()[0]:.2f}): " + "  ".join(f"{p.name} {statistics.median(f):.1f}" for p, f in zip(pages, seen)))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--loads", type=int, default=5)
     ap.add_argument("--screenshot", type=Path, default=None)
+    ap.add_argument("--fps-of", type=Path, nargs="+", default=None, metavar="PAGE")
     args = ap.parse_args()
     if br.chromium_path() is None:
         sys.exit("bench_view: Chromium not found (make browser, or set ROARMCTL_CHROMIUM)")
+    if args.fps_of:
+        fps_of(args.fps_of)
+        return
 
     import matplotlib  # noqa: F401  (paid once, not per page)
 
