@@ -625,14 +625,18 @@ def main_code(args: list[str]) -> int:
 
 
 # ------------------------------------------------------------------ execution logs
-LOG_KEYS = ["format", "robot", "speed_scale", "sent", "received", "t", "cmd", "feedback", "T", "base", "b", "line"]
+LOG_KEYS = ["format", "robot", "speed_scale", "sent", "received", "t", "cmd", "feedback", "T", "base", "b", "line",
+            "trajectory", "points", "positions", "time_from_start", "joint_names", "scene"]
 
 
 @settings(max_examples=COUNTS["logs"], **SETTINGS)
 @given(data=st.data())
 def test_fuzz_execution_logs(tmp_path_factory, data):
     work = tmp_path_factory.mktemp("log", numbered=True)
-    doc = mutate(hostile.execlog_doc(n=8), data, LOG_KEYS, rounds=3)
+    doc = hostile.execlog_doc(n=8)
+    if data.draw(st.booleans()):  # a log carries the trajectory it ran (read by export, view and visualize-path)
+        doc["trajectory"] = hostile.trajectory_doc()
+    doc = mutate(doc, data, LOG_KEYS, rounds=3)
     if data.draw(st.integers(0, 4)) == 0:  # times scaled far out, reversed or squeezed
         scale = data.draw(st.sampled_from([1e-300, 1e15, 1e308, -1.0, 0.0]))
         for e in (doc.get("sent") or []) if isinstance(doc.get("sent"), list) else []:
