@@ -68,15 +68,17 @@ def cli_words(exc: RoarmError) -> str:
     return exc.message
 
 
-#: The library's names of options that a hint may name (``"use move_to_start instead"``) and the CLI's flags for them.
+#: What a library hint says (an option as the API spells it, ``move_to_start``; a way to reach the arm) and the CLI's
+#: words for it.
 HINT_FLAGS = {name: "--" + name.replace("_", "-") for name in (
-    "move_to_start", "from_current", "max_tries", "package_path", "max_error", "speed_scale", "resume", "force")}
-_HINT_WORD = re.compile(r"\b(" + "|".join(HINT_FLAGS) + r")\b")
+    "move_to_start", "from_current", "max_tries", "package_path", "max_error", "speed_scale", "resume", "force")} | {
+    "connect to the arm (its port, or the simulated one)": "pass --port PORT (or --sim)"}
+_HINT_WORD = re.compile("|".join(rf"\b{re.escape(k)}(?!\w)" for k in sorted(HINT_FLAGS, key=len, reverse=True)))
 
 
 def cli_hint(exc: RoarmError) -> str | None:
     """The hint of a library error as the CLI prints it: the option names it gives written as flags."""
-    return None if exc.hint is None else _HINT_WORD.sub(lambda m: HINT_FLAGS[m.group(1)], exc.hint)
+    return None if exc.hint is None else _HINT_WORD.sub(lambda m: HINT_FLAGS[m.group(0)], exc.hint)
 
 
 def error(message: str, hint: str | None = None) -> None:
