@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal, TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -32,7 +32,7 @@ from roarmctl.motion.planning import motions
 from roarmctl.motion.planning.assembly import assemble
 from roarmctl.motion.planning.context import PlanContext
 from roarmctl.motion.planning.pieces import TaskStep, UntimedMotion
-from roarmctl.motion.rejection import rejection_cause
+from roarmctl.motion.rejection import RejectionKind, Validity, judge
 from roarmctl.robot.ik import solve_ik
 from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import Robot, rpy_from_matrix
@@ -80,7 +80,6 @@ class Pose:
         return cls(tuple(t[:3, 3]), rpy=tuple(rpy_from_matrix(t[:3, :3])))
 
 
-RejectionKind = Literal["", "joint_limit", "collision", "singularity"]
 
 
 @dataclass(frozen=True)
@@ -128,20 +127,6 @@ class IKResult:
         else:
             why = f"its {n} IK solutions are rejected: {counted}"
         return UnreachableError(f"{what}: {why}", reason, hint)
-
-
-@dataclass(frozen=True)
-class Validity:
-    """``Planner.is_valid``'s answer: ``valid``, and ``reason`` when not ("joint 2 outside its limits",
-    "link4 hits obstacle 'wall'", ...), ``kind`` its cause ("joint_limit", "collision" or "singularity"; ""
-    when valid). True in an ``if``."""
-
-    valid: bool
-    reason: str = ""
-    kind: RejectionKind = ""
-
-    def __bool__(self) -> bool:
-        return self.valid
 
 
 @dataclass(frozen=True)
@@ -248,10 +233,7 @@ class Planner:
         if touching is not None:
             self.scene[touching]  # noqa: B018 - names the items when it is not one
         ctx.set_state(full[ctx.gi] if ctx.gi is not None else None, grasp_target=touching)
-        c, q_arm = ctx.checker, full[ctx.arm]
-        if c.is_valid(q_arm):
-            return Validity(True)
-        return Validity(False, c.explain(q_arm), rejection_cause(c, q_arm))  # in limits: checked above, as the checker's
+        return judge(ctx.checker, full[ctx.arm])  # in limits: checked above (the gripper too, which the checker leaves)
 
     def ik(self, pose: Pose, q_ref: npt.ArrayLike | None = None, *, touching: str | None = None) -> IKResult:
         """Every IK solution for ``pose`` that ``is_valid`` (with ``touching``), nearest to ``q_ref`` (dof or arm

@@ -20,7 +20,7 @@ if TYPE_CHECKING:  # numpy itself is imported where a command runs (start-up tim
 from roarmctl.cli import common
 from roarmctl.errors import InputError, RoarmError, UnreachableError
 from roarmctl.motion.options import PlannerConfig
-from roarmctl.motion.rejection import rejection_cause
+from roarmctl.motion.rejection import judge
 
 kin_app = typer.Typer(help="Kinematics and dynamics: fk, ik, jacobian, dynamics.", no_args_is_help=True)
 
@@ -301,7 +301,7 @@ def ik(
             preferred = tool_pitch(r, q_ref, target) if q_ref is not None else float(np.pi / 2)
             sols, _ = solve_ik_auto_pitch(
                 r, xyz_arr, preferred=preferred, roll=None if roll is None else conv(roll), q_ref=q_ref,
-                all_solutions=all_solutions, accept=lambda qq: checker.is_valid(qq[r.arm_indices]) or rejection_cause(checker, qq[r.arm_indices]),
+                all_solutions=all_solutions, accept=lambda qq: (v := judge(checker, qq[r.arm_indices])).valid or v.kind,
                 solve=lambda p, **kw: solve_ik_frame(r, fr, p, **kw))
         else:
             sols = solve_ik_frame(r, fr, xyz_arr, pitch=None if pitch is None else conv(pitch),

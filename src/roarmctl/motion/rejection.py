@@ -1,4 +1,5 @@
-"""Why the collision checker rejects a configuration: the cause an IK candidate is counted under.
+"""Why the collision checker rejects a configuration: the one verdict (``judge``: valid, or why not and the cause) that
+the api's ``Planner.is_valid`` and ``ik``, a plan's IK choice and ``kin ik``'s pitch choice all take.
 
 ``rejection_cause(checker, q_arm)`` gives "singularity" or "collision" for a configuration within the joint
 limits that ``checker`` does not accept; ``errors.rejection`` counts the causes of a set of candidates into an
@@ -7,6 +8,7 @@ limits that ``checker`` does not accept; ``errors.rejection`` counts the causes 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
 if TYPE_CHECKING:
@@ -15,6 +17,21 @@ if TYPE_CHECKING:
     from roarmctl.motion.collision import CollisionChecker
 
 Cause = Literal["singularity", "collision"]
+RejectionKind = Literal["", "joint_limit", "collision", "singularity"]
+
+
+@dataclass(frozen=True)
+class Validity:
+    """A configuration's verdict: ``valid``, and ``reason`` when not ("joint 2 outside its limits", "link4 hits
+    obstacle 'wall'", ...), ``kind`` its cause ("joint_limit", "collision" or "singularity"; "" when valid). True
+    in an ``if``."""
+
+    valid: bool
+    reason: str = ""
+    kind: RejectionKind = ""
+
+    def __bool__(self) -> bool:
+        return self.valid
 
 
 def rejection_cause(checker: CollisionChecker, q_arm: np.ndarray) -> Cause:
@@ -23,3 +40,11 @@ def rejection_cause(checker: CollisionChecker, q_arm: np.ndarray) -> Cause:
     ``CollisionChecker.explain`` does, else "collision"."""
     m = checker.singularity_margin
     return "singularity" if m is not None and float(checker.margin_measure(q_arm)[0]) < m else "collision"
+
+
+def judge(checker: CollisionChecker, q_arm: np.ndarray) -> Validity:
+    """``checker``'s verdict on ``q_arm`` ((arm_dof,) rad/m, within the joint limits): valid, or its reason
+    (``CollisionChecker.explain``) and cause (``rejection_cause``)."""
+    if checker.is_valid(q_arm):
+        return Validity(True)
+    return Validity(False, checker.explain(q_arm), rejection_cause(checker, q_arm))

@@ -16,7 +16,7 @@ from roarmctl.motion.planning import fixed_jaw as jaws
 from roarmctl.motion.planning.grasp import grasp_closed_q, grasp_width
 from roarmctl.motion.planning.pieces import TaskStep, with_value
 from roarmctl.motion.planning.targets import Target
-from roarmctl.motion.rejection import rejection_cause
+from roarmctl.motion.rejection import judge
 from roarmctl.motion.trajectory import Event
 from roarmctl.plan.types import MoveTask, PickTask, PlaceTask, WaitTask
 from roarmctl.robot.ik import accepts_pitch, pitch_candidates, solve_ik, solve_ik_near, takes_pitch
@@ -405,10 +405,10 @@ def _choose_ik(ctx: PlanContext, targets: list[tuple[np.ndarray, float | None, f
             chain.append(with_value(nxt, ctx.gi, g))
         if not ok:
             continue
-        bad = next((c for c in chain if not ctx.checker.is_valid(c[ctx.arm])), None)
+        bad = next((v for v in (judge(ctx.checker, c[ctx.arm]) for c in chain) if not v), None)
         if bad is not None:
-            reasons.append(ctx.checker.explain(bad[ctx.arm]))
-            causes.append(rejection_cause(ctx.checker, bad[ctx.arm]))
+            reasons.append(bad.reason)
+            causes.append(bad.kind or "collision")  # an invalid verdict always has its cause
             continue
         cost = float(np.sum(np.abs(chain[-1][ctx.arm] - q[ctx.arm])))
         if cost < best_cost:
