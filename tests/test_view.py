@@ -946,6 +946,44 @@ def test_software_gl_draws_without_multisampling_in_few_draw_calls(chromium, pla
         page.close()
 
 
+WATCH_WRITES = """() => {
+  window.__writes = { fixed: 0, cursor: 0, panel: 0 };
+  new MutationObserver((ms) => { for (const m of ms) window.__writes[m.target.classList.contains('gap') ? 'cursor' : 'fixed']++; })
+    .observe(document.getElementById('labels'), { attributes: true, subtree: true, attributeFilter: ['style'] });
+  new MutationObserver((ms) => { window.__writes.panel += ms.length; })
+    .observe(document.getElementById('panel'), { attributes: true, childList: true, characterData: true, subtree: true });
+}"""
+WRITES = "() => new Promise((done) => setTimeout(() => { const w = Object.assign({}, window.__writes); " \
+         "for (const k in window.__writes) window.__writes[k] = 0; done(w); }, 0))"
+
+
+def test_a_frame_writes_only_what_changed(chromium, planned, tmp_path):
+    """Work per frame, counted (MutationObserver): the same sample again changes nothing in the panel (a cell written
+    with its own text would replace its text node: 27 changes a frame when every cell is written); stepping the
+    cursor with the camera still changes no label fixed in the world (events, targets), only those at the cursor
+    (each item's distance); turning the camera moves the fixed ones."""
+    f, _ = planned["pick_place"]
+    code, out = write_html(tmp_path, f)
+    assert code == 0
+    page, watch = br.open_page(chromium, out.as_uri(), {"width": 640, "height": 400})
+    try:
+        n = page.evaluate("window.roarmView.data.n")
+        page.evaluate(WATCH_WRITES)
+        for i in range(0, n, max(1, n // 12)):
+            page.evaluate(f"window.roarmView.setIndex({i})")
+        writes = page.evaluate(WRITES)
+        assert writes["fixed"] == 0 and writes["cursor"] > 0 and writes["panel"] > 0
+        page.evaluate(f"window.roarmView.setIndex({n // 2})")
+        page.evaluate(WRITES)
+        page.evaluate(f"window.roarmView.setIndex({n // 2})")
+        assert page.evaluate(WRITES)["panel"] == 0
+        page.evaluate("window.roarmView.lookAt([0.7, -0.4, 0.5], [0.2, 0.0, 0.05])")
+        assert page.evaluate(WRITES)["fixed"] > 0
+        assert watch.errors == []
+    finally:
+        page.close()
+
+
 @pytest.mark.slow
 def test_views_orthographic_zoom_toward_the_cursor_and_the_grid_scale(chromium, planned, tmp_path):
     """Top / front / side look along -z / -x / +y (two points apart only along that axis land on one pixel with the
