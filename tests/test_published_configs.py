@@ -190,3 +190,11 @@ def test_a_mimic_joints_own_limits_bound_its_leader(tmp_path):
     i = r.joint_index("finger")
     assert r.lower[i] == 0.0 and r.upper[i] == pytest.approx((0.149 + 0.3) / 0.676, abs=1e-12)
     assert any("'finger' limited to [0, 0.664201]" in n for n in r.notes)
+
+
+def test_a_tcp_moved_by_a_finger_that_mimics_the_gripper_is_refused(tmp_path):
+    """A mimic joint of the arm is a share of its leader's Jacobian column (tests/test_urdf_differential.py, the IRB
+    5400's wrist); one that follows the gripper joint would make the gripper a column of the arm: refused, naming it."""
+    with pytest.raises(DescriptionError, match=r"tcp_link: 'right' is moved by 'finger_mirror', which mimics the "
+                                               r"gripper joint 'finger'"):
+        load_robot(str(write(tmp_path, {"tcp_link": "right"})))

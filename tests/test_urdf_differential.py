@@ -29,12 +29,10 @@ from test_xacro_differential import CASES, INNER, job  # noqa: E402 - after the 
 
 URDF_CASES = sorted(n for n in CASES if not n.endswith("_srdf"))
 RNG_SEED = 33
-#: Published files that load only with a sidecar line: case -> (roarmctl's refusal, the sidecar fields). The
-#: IRB 5400's wrist has a mimic joint (joint5b follows joint5) between joint5 and the flange: roarmctl's TCP
-#: Jacobian takes one column per joint of the chain and refuses a TCP that a mimic joint moves.
-NEEDS_SIDECAR: dict[str, tuple[str, dict]] = {
-    "abb_irb5400": ("is moved by the mimic joint 'joint5b'", {"tcp_link": "link_5"}),
-}
+#: Published files that load only with a sidecar line: case -> (roarmctl's refusal, the sidecar fields). None
+#: since a mimic joint of the arm (the IRB 5400's joint5b, which follows joint5 in the wrist) adds to its leader's
+#: Jacobian column: test_a_mimic_joint_in_the_wrist_is_a_column_of_its_leader.
+NEEDS_SIDECAR: dict[str, tuple[str, dict]] = {}
 
 
 def for_pinocchio(urdf: str) -> str:
@@ -196,3 +194,69 @@ def test_a_joint_limit_is_read_as_urdfdom_reads_it(tmp_path, kind, attrs):
     else:
         robot = load_robot(str(tmp_path / "arm.urdf"))
         assert robot.dof == 1 + (kind == "continuous")
+
+
+#: A box put on every link of the IRB 5400 for the sweep bound (its meshes are not in the corpus): corners (8, 3).
+BOX_AT, BOX_SIZE = np.array([0.05, 0.02, 0.03]), 0.1
+CORNERS = BOX_AT + BOX_SIZE / 2 * np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
+
+
+def _irb5400(tmp_path: Path):
+    j = job("abb_irb5400")
+    urdf = without_meshes(expand(Path(j["file"]), j["args"], "abb_irb5400", {p: Path(f) for p, f in j["packages"].items()}))
+    root = ET.fromstring(urdf)
+    for link in root.iter("link"):
+        link.append(ET.fromstring(f'<collision><origin xyz="{" ".join(map(str, BOX_AT))}"/><geometry>'
+                                  f'<box size="{BOX_SIZE} {BOX_SIZE} {BOX_SIZE}"/></geometry></collision>'))
+    (tmp_path / "irb5400.urdf").write_text(ET.tostring(root, encoding="unicode"))
+    return load_robot(str(tmp_path / "irb5400.urdf")), urdf
+
+
+def test_a_mimic_joint_in_the_wrist_is_a_column_of_its_leader(tmp_path):
+    """ABB's IRB 5400 (ros-industrial/abb, published): joint5b mimics joint5 between the wrist and the flange. It loads
+    unchanged with the TCP at the flange; the Jacobian's joint5 column holds both joints' motion (the chain rule), so
+    it equals the central difference of FK (an independent method) to 1e-7 at random joint values; the checker's
+    singularity margin is its smallest singular value; the collision sweep bound holds for random steps (no point of
+    a moving shape's bounding sphere centre moves further than sweep_gain times the step); IK reaches FK's poses."""
+    from roarmctl.motion.collision import CollisionChecker
+    from roarmctl.motion.scene import Scene
+    from roarmctl.robot.ik import solve_ik
+
+    robot, urdf = _irb5400(tmp_path)
+    assert "joint5b" not in robot.joint_names and robot.tcp_link == "tool0" and robot.arm_dof == 6
+    assert next(j for j in robot.joints if j.name == "joint5b").mimic == "joint5"
+    model = pin.buildModelFromXML(for_pinocchio(urdf))
+    data = model.createData()
+    rng = np.random.default_rng(RNG_SEED)
+    checker = CollisionChecker(robot, Scene())
+    eps = 1e-6
+    for q in rng.uniform(robot.lower * 0.9, robot.upper * 0.9, size=(6, robot.dof)):
+        jac = robot.kin.jacobian(q)
+        tcp = robot.kin.fk(q)
+        for k, i in enumerate(robot.arm_indices):
+            dq = np.zeros(robot.dof)
+            dq[i] = eps
+            a, b = robot.kin.fk(q + dq), robot.kin.fk(q - dq)
+            turn = (a[:3, :3] - b[:3, :3]) / (2 * eps) @ tcp[:3, :3].T
+            fd = np.concatenate([(a[:3, 3] - b[:3, 3]) / (2 * eps), [turn[2, 1], turn[0, 2], turn[1, 0]]])
+            assert np.allclose(jac[:, k], fd, atol=1e-7), (k, q)
+        assert np.allclose(pin_frames(model, data, robot, q)["tool0"], tcp, atol=1e-9)
+        sv = np.linalg.svd(jac[:3], compute_uv=False)[-1]
+        assert checker.margin_measure(q[robot.arm_indices][None])[0] == pytest.approx(sv, rel=1e-9, abs=1e-12)
+        step = rng.normal(size=robot.arm_dof) * 0.01
+        q2 = q.copy()
+        q2[robot.arm_indices] += step
+        moving = sorted({robot.kin.link_index[s.link] for s in robot.collision} - {robot.kin.link_index[robot.root]})
+        corners = [np.einsum("lij,cj->lci", f[moving, :3, :3], CORNERS) + f[moving, None, :3, 3]
+                   for f in (robot.kin.link_frames(q), robot.kin.link_frames(q2))]
+        assert checker.sweep_gain > 0
+        assert np.linalg.norm(corners[1] - corners[0], axis=2).max() <= checker.sweep_gain * np.linalg.norm(step)
+        (sol,) = solve_ik(robot, tcp[:3, 3], rpy=_rpy(tcp[:3, :3]), q_ref=q)[:1]
+        reached = robot.kin.fk(sol)
+        assert np.linalg.norm(reached[:3, 3] - tcp[:3, 3]) < 1e-4 and np.allclose(reached[:3, :3], tcp[:3, :3], atol=1e-3)
+
+
+def _rpy(rot: np.ndarray) -> list[float]:
+    """URDF roll-pitch-yaw of a rotation (R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    return [float(np.arctan2(rot[2, 1], rot[2, 2])), float(np.arcsin(-np.clip(rot[2, 0], -1, 1))),
+            float(np.arctan2(rot[1, 0], rot[0, 0]))]

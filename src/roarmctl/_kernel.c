@@ -34,15 +34,17 @@
  * n_joints), const link indices, steps (STEPI each), TCP chain (CHAINI each), joints (JOINTI each).
  * Floats: constant link frames (16 each), steps (STEPF each), chain (CHAINF each), joints (JOINTF each).
  * Steps are the joints that move a link (links reached from the root through fixed joints only are
- * constant); the chain is the moving joints between the root and the TCP (the Jacobian's columns); the
+ * constant); the chain is the moving joints between the root and the TCP (each adds to one Jacobian column:
+ * its own, or, multiplier times, its leader's for a mimic joint; n_cols columns, the arm joints); the
  * joints are every joint of the tree in order (the dynamics). */
 #define KHEADER 7
 #define STEPI 5    /* kind (0 fixed, 1 revolute about local z, 2 revolute about another axis, 3 prismatic),
                       parent link, child link, q index, has post */
 #define STEPF 66   /* offset, A (16), B (16), C (16), post (16), multiplier; see fk(). The joint value is
                       multiplier * q + offset (1 for every joint but a URDF mimic joint's) */
-#define CHAINI 2   /* parent link, kind (0 revolute, 1 prismatic) */
-#define CHAINF 6   /* joint axis (3) and joint origin point (3), both in the parent link's frame */
+#define CHAINI 3   /* parent link, kind (0 revolute, 1 prismatic), the Jacobian column its motion adds to */
+#define CHAINF 7   /* joint axis (3) and joint origin point (3), both in the parent link's frame; the multiplier
+                    * of the column's joint (1, or a mimic joint's: it moves multiplier times as fast) */
 #define JOINTI 6   /* kind (0 fixed, 1 revolute, 2 prismatic), parent link, child link, q index or -1,
                       axis at the child's origin (revolute or fixed without post), joint above the parent or -1 */
 #define JOINTF 19  /* axis (3, joint frame), origin (16) */
@@ -50,6 +52,7 @@
 
 typedef struct {
     int64_t dof, n_links, n_steps, n_const, n_chain, tcp, n_joints;
+    int64_t n_cols;  /* Jacobian columns: the arm joints (a mimic joint of the chain adds to its leader's) */
     const int64_t *const_idx, *steps, *chain, *joints;
     const double *const_fr, *stepf, *chainf, *jointf;
 } Kin;
@@ -59,8 +62,8 @@ static int parse_kin(Kin *k, const int64_t *I, Py_ssize_t ni, const double *F, P
     if (ni < KHEADER) goto bad;
     k->dof = I[0]; k->n_links = I[1]; k->n_steps = I[2]; k->n_const = I[3]; k->n_chain = I[4]; k->tcp = I[5];
     k->n_joints = I[6];
-    if (k->dof < 0 || k->n_links < 1 || k->n_steps < 0 || k->n_const < 1 || k->n_chain < 0 || k->n_joints < 0
-        || k->tcp < 0 || k->tcp >= k->n_links)
+    if (k->dof < 0 || k->n_links < 1 || k->n_steps < 0 || k->n_const < 1 || k->n_chain < 0 || k->n_chain > MAXDOF
+        || k->n_joints < 0 || k->tcp < 0 || k->tcp >= k->n_links)
         goto bad;
     if (ni != KHEADER + k->n_const + STEPI * k->n_steps + CHAINI * k->n_chain + JOINTI * k->n_joints) goto bad;
     if (nf != 16 * k->n_const + STEPF * k->n_steps + CHAINF * k->n_chain + JOINTF * k->n_joints) goto bad;
@@ -83,8 +86,12 @@ static int parse_kin(Kin *k, const int64_t *I, Py_ssize_t ni, const double *F, P
             || (si[0] != 0 && (si[3] < 0 || si[3] >= k->dof)))
             goto bad;
     }
-    for (int64_t j = 0; j < k->n_chain; j++)
-        if (k->chain[CHAINI * j] < 0 || k->chain[CHAINI * j] >= k->n_links) goto bad;
+    k->n_cols = 0;
+    for (int64_t j = 0; j < k->n_chain; j++) {
+        const int64_t *ci = k->chain + CHAINI * j;
+        if (ci[0] < 0 || ci[0] >= k->n_links || ci[2] < 0 || ci[2] >= k->n_chain) goto bad;
+        if (ci[2] + 1 > k->n_cols) k->n_cols = ci[2] + 1;
+    }
     for (int64_t j = 0; j < k->n_joints; j++) {
         const int64_t *ji = k->joints + JOINTI * j;
         if (ji[0] < 0 || ji[0] > 2 || ji[1] < 0 || ji[1] >= k->n_links || ji[2] < 0 || ji[2] >= k->n_links
@@ -168,31 +175,42 @@ static void fk_held(const Kin *m, const double *qf, double *Fr, const FkHeld *he
 
 static void fk(const Kin *m, const double *qf, double *Fr) { fk_held(m, qf, Fr, NULL); }
 
-/* Geometric Jacobian at the TCP from the link frames Fr: column j (6 values: linear, angular) of the chain's
- * joint j is (z x (p_tcp - o), z) for a revolute joint and (z, 0) for a prismatic one, with z the joint axis
- * and o its origin point in the root frame. With linear_only, the angular rows are not written. */
+/* Geometric Jacobian at the TCP from the link frames Fr: the motion of the chain's joint j is (z x (p_tcp - o), z)
+ * for a revolute joint and (z, 0) for a prismatic one, with z the joint axis and o its origin point in the root
+ * frame; it is column ci[2] (6 values: linear, angular), or multiplier times it is added there (a mimic joint of the
+ * chain moves with its leader). With linear_only, the angular rows are not written. */
 static void jac_cols(const Kin *m, const double *Fr, double *J, int linear_only) {
     const double *T = Fr + 16 * m->tcp;
+    uint8_t seen[MAXDOF] = {0};
+    int nr = linear_only ? 3 : 6;
     for (int64_t j = 0; j < m->n_chain; j++) {
         const int64_t *ci = m->chain + CHAINI * j;
         const double *cf = m->chainf + CHAINF * j;
-        const double *Pa = Fr + 16 * ci[0], *la = cf, *pt = cf + 3;
-        double o[3], z[3];
+        const double *Pa = Fr + 16 * ci[0], *la = cf, *pt = cf + 3, mult = cf[6];
+        double o[3], z[3], v[6];
         for (int r = 0; r < 3; r++) {
             o[r] = Pa[4 * r + 3] + Pa[4 * r] * pt[0] + Pa[4 * r + 1] * pt[1] + Pa[4 * r + 2] * pt[2];
             z[r] = Pa[4 * r] * la[0] + Pa[4 * r + 1] * la[1] + Pa[4 * r + 2] * la[2];
         }
-        double *col = J + 6 * j;
         if (ci[1] == 0) {
             double d[3] = {T[3] - o[0], T[7] - o[1], T[11] - o[2]};
-            col[0] = z[1] * d[2] - z[2] * d[1];
-            col[1] = z[2] * d[0] - z[0] * d[2];
-            col[2] = z[0] * d[1] - z[1] * d[0];
-            if (!linear_only) { col[3] = z[0]; col[4] = z[1]; col[5] = z[2]; }
+            v[0] = z[1] * d[2] - z[2] * d[1];
+            v[1] = z[2] * d[0] - z[0] * d[2];
+            v[2] = z[0] * d[1] - z[1] * d[0];
+            v[3] = z[0]; v[4] = z[1]; v[5] = z[2];
         } else {
-            col[0] = z[0]; col[1] = z[1]; col[2] = z[2];
-            if (!linear_only) col[3] = col[4] = col[5] = 0.0;
+            v[0] = z[0]; v[1] = z[1]; v[2] = z[2];
+            v[3] = v[4] = v[5] = 0.0;
         }
+        double *col = J + 6 * ci[2];
+        if (!seen[ci[2]] && mult == 1.0) {  /* the column's own joint: its values as they are */
+            for (int r = 0; r < nr; r++) col[r] = v[r];
+        } else {
+            if (!seen[ci[2]])
+                for (int r = 0; r < nr; r++) col[r] = 0.0;
+            for (int r = 0; r < nr; r++) col[r] += mult * v[r];
+        }
+        seen[ci[2]] = 1;
     }
 }
 
@@ -444,7 +462,7 @@ bad:
 /* Gram matrix of the 3 x n translational Jacobian J: J J^T (3 x 3) when n >= 3, else J^T J (n x n);
  * returns its size. Its smallest eigenvalue is the square of J's smallest singular value. */
 static int gram(const Model *m, const double *Fr, double A[3][3]) {
-    int64_t n = m->k.n_chain;
+    int64_t n = m->k.n_cols;
     double J[6 * MAXDOF];
     jac_cols(&m->k, Fr, J, 1);
     if (n >= 3) {
@@ -1120,8 +1138,8 @@ done:
     return result;
 }
 
-/* jacobian(KF, KI, q, tcp, jac): TCP poses tcp (N, 4, 4) and geometric Jacobians jac (N, 6, n_chain), rows
- * (vx, vy, vz, wx, wy, wz). tcp_velocity(KF, KI, q, qd, out): out (N, 3) = J_v(q) @ qd, qd (N, n_chain). */
+/* jacobian(KF, KI, q, tcp, jac): TCP poses tcp (N, 4, 4) and geometric Jacobians jac (N, 6, n_cols), rows
+ * (vx, vy, vz, wx, wy, wz). tcp_velocity(KF, KI, q, qd, out): out (N, 3) = J_v(q) @ qd, qd (N, n_cols). */
 static PyObject *jacobian_or_velocity(PyObject *const *args, Py_ssize_t nargs, int velocity) {
     if (nargs != 5) {
         PyErr_SetString(PyExc_TypeError, "takes 5 arguments");
@@ -1135,7 +1153,7 @@ static PyObject *jacobian_or_velocity(PyObject *const *args, Py_ssize_t nargs, i
     if (get_kin(args, b, &got, &k) < 0) goto done;
     for (; got < 5; got++)
         if ((got == 2 || (velocity && got == 3) ? get_in(args[got], &b[got]) : get_out(args[got], &b[got])) < 0) goto done;
-    int64_t nc = k.n_chain;
+    int64_t nc = k.n_cols;
     Py_ssize_t N = k.dof ? b[2].len / (8 * k.dof) : 0;
     if (b[2].len != N * 8 * k.dof
         || (velocity ? (b[3].len != N * 8 * nc || b[4].len != N * 8 * 3)

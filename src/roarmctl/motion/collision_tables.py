@@ -267,20 +267,19 @@ class KernelTables(CheckerWorld):
     def _sweep_gain(self) -> float:
         """Bound (m per rad) on how far any point of a moving shape moves for a joint step of
         Euclidean norm 1: sqrt(sum_i rho_i^2), rho_i = the largest distance from arm joint i's axis
-        point to a point of a shape it moves, taken over 512 sampled configurations plus 10 %."""
+        point to a point of a shape it moves, taken over 512 sampled configurations plus 10 %. A mimic joint of
+        the chain moves |multiplier| times as far as its leader: its rho, so scaled, adds to its leader's."""
         rng = np.random.default_rng(0)
         q = rng.uniform(self._lower, self._upper, (512, len(self._arm)))
         rot, pos = self._fk.frames(self._full(q))
         centres = pos[:, self._mv_link] + np.einsum("nsij,sj->nsi", rot[:, self._mv_link], self._mv_pos)
         kin = self.robot.kin
-        rho = []
+        rho: dict[str, float] = {}
         for parent, joint in self._chain:
             origin = pos[:, parent] + rot[:, parent] @ joint.origin[:3, 3]
             distal = [a for a, mv in enumerate(self._moving_shapes)
                       if self._moves_with(kin, mv.link, joint)]
-            if not distal:
-                rho.append(0.0)
-                continue
-            d = np.linalg.norm(centres[:, distal] - origin[:, None, :], axis=2) + self._mv_radius[distal]
-            rho.append(float(d.max()))
-        return 1.1 * float(np.sqrt(np.sum(np.square(rho))))
+            d = np.linalg.norm(centres[:, distal] - origin[:, None, :], axis=2) + self._mv_radius[distal] if distal else None
+            column = joint.mimic or joint.name
+            rho[column] = rho.get(column, 0.0) + (abs(joint.multiplier) * float(d.max()) if d is not None else 0.0)
+        return 1.1 * float(np.sqrt(np.sum(np.square(list(rho.values())))))

@@ -8,7 +8,9 @@ about its local z axis (every URDF joint of the RoArm, every DH joint) as cos(q)
 (fixed 4x4 A, B, C), one about another unit axis u as origin @ Rodrigues(u, q), a prismatic one as
 the origin moved along its axis, and a DH ``post`` as a fixed product after the motion. A mimic joint
 reads the value of the joint it follows: its value is multiplier * q + offset (URDF ``<mimic>``; the
-step's multiplier is 1 for every other joint); a continuous joint is a revolute joint without limits. The collision
+step's multiplier is 1 for every other joint); a continuous joint is a revolute joint without limits. The
+Jacobian has one column per arm joint; a mimic joint between the root and the TCP adds multiplier times its own
+column to its leader's (the chain rule). The collision
 checker, the Jacobian and the inverse dynamics (robot/dynamics.py) run on the same tables and the
 same C function.
 
@@ -86,7 +88,8 @@ class Kinematics:
             chain.append(j)
             link = self._parent[j]
         self.tcp_chain_joints = list(reversed(chain))
-        self.tcp_chain_indices = [self._qidx[j] for j in self.tcp_chain_joints if self._qidx[j] >= 0]
+        # the arm: the q indices that move the TCP, once each (a mimic joint of the chain moves with its leader)
+        self.tcp_chain_indices = list(dict.fromkeys(self._qidx[j] for j in self.tcp_chain_joints if self._qidx[j] >= 0))
         self.n_links = len(self.link_names)
         self._pack()
 
@@ -142,10 +145,11 @@ class Kinematics:
             if joint.kind == "fixed":
                 continue
             o, ax = joint.origin, [float(v) for v in joint.axis]
-            # the axis in the parent frame, summed as the kernel sums (no FMA, this order)
-            chain_i += [self._parent[j], 0 if joint.kind == "revolute" else 1]
+            # the axis in the parent frame, summed as the kernel sums (no FMA, this order); the Jacobian column
+            # the joint's motion adds to (its leader's for a mimic joint, multiplier times)
+            chain_i += [self._parent[j], 0 if joint.kind == "revolute" else 1, self.tcp_chain_indices.index(self._qidx[j])]
             chain_f += [float(o[r, 0]) * ax[0] + float(o[r, 1]) * ax[1] + float(o[r, 2]) * ax[2] for r in range(3)]
-            chain_f += [float(v) for v in o[:3, 3]]
+            chain_f += [float(v) for v in o[:3, 3]] + [float(joint.multiplier)]
         joints_i: list[int] = []
         joints_f: list[np.ndarray] = []
         for j, joint in enumerate(robot.joints):
@@ -156,7 +160,7 @@ class Kinematics:
             # a mimic joint turns multiplier times as fast as the joint it follows, and its load counts
             # multiplier times on that joint (virtual work): both are the axis scaled by the multiplier
             joints_f += [np.asarray(joint.axis, dtype=float) * float(joint.multiplier), joint.origin.ravel()]
-        n_chain = len(chain_i) // 2
+        n_chain = len(chain_i) // 3
         ints = [robot.dof, self.n_links, len(steps_i) // 5, len(const_links), n_chain, self.tcp_index, len(robot.joints)]
         self._ki = np.array(ints + const_links + steps_i + chain_i + joints_i, dtype=np.int64)
         self._kf = np.concatenate([const[const_links].ravel(), *steps_f, np.array(chain_f, dtype=float),
@@ -222,11 +226,12 @@ class Kinematics:
         (N, dof), rad/m, from one FK pass (the iterative IK's hot path: no conversion or checks).
 
         Column k of a revolute joint is (z_k x (p_tcp - o_k), z_k), of a prismatic one (z_k, 0), with
-        z_k the joint axis and o_k its origin in the root frame, both taken from the parent link's frame.
+        z_k the joint axis and o_k its origin in the root frame, both taken from the parent link's frame; a mimic
+        joint of the chain adds multiplier times its own to its leader's column (the chain rule).
         """
         q = np.ascontiguousarray(q, dtype=float)
         tcp = np.empty((q.shape[0], 4, 4))
-        jac = np.empty((q.shape[0], 6, self._n_chain))
+        jac = np.empty((q.shape[0], 6, len(self.tcp_chain_indices)))
         _kernel.jacobian(self._kfm, self._kim, q, tcp, jac)
         return tcp, jac
 

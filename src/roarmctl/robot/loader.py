@@ -94,10 +94,12 @@ def _load(spec: str, trust_sidecar: bool, confine: bool) -> Robot:
     for f in robot.frames.values():
         if f.point_link is not None and f.point_link not in robot.link_names:
             raise DescriptionError(f"{path}: frames.{f.name}.point.link: '{f.point_link}' is not a link of {robot.name}")
-    mimic = [robot.joints[j].name for j in robot.kin.tcp_chain_joints if robot.joints[j].mimic]
-    if mimic:
-        raise DescriptionError(f"{path}: tcp_link: '{robot.tcp_link}' is moved by the mimic joint '{mimic[0]}'",
-                               "put the TCP on a link the arm joints move, e.g. the hand between the fingers")
+    grip = robot.gripper.joint if robot.gripper is not None else None
+    mimic = [robot.joints[j].name for j in robot.kin.tcp_chain_joints if grip is not None and robot.joints[j].mimic == grip]
+    if mimic:  # a mimic joint of the arm (ABB's IRB 5400 wrist) is a column of the Jacobian; one of the gripper is not
+        raise DescriptionError(f"{path}: tcp_link: '{robot.tcp_link}' is moved by '{mimic[0]}', which mimics the "
+                               f"gripper joint '{grip}'", "put the TCP on a link the arm joints move, e.g. the hand "
+                               "between the fingers")
     robot = _link_roles(robot, data, str(path))
     robot.notes = [f"{robot.name}: {n}" for n in robot.notes] + default_notes(robot)
     robot.spec = spec if path == bundled_dir() / f"{spec}.yaml" else str(path.resolve())

@@ -40,9 +40,9 @@ def chain_reach(robot: Robot) -> tuple[np.ndarray, float]:
     reach = float(sum(np.linalg.norm(b - a) for a, b in itertools.pairwise(pts)))
     for j in movable:
         jt = robot.joints[j]
-        if jt.kind == "prismatic":
-            i = robot.joint_index(jt.name)
-            reach += max(abs(robot.lower[i]), abs(robot.upper[i]))
+        if jt.kind == "prismatic":  # a mimic one moves |multiplier| times its leader's travel
+            i = robot.joint_index(jt.mimic or jt.name)
+            reach += abs(jt.multiplier) * max(abs(robot.lower[i]), abs(robot.upper[i])) + (abs(jt.offset) if jt.mimic else 0.0)
     return start, reach
 
 
