@@ -74,11 +74,17 @@ class Teach:
 
 def executed_until_torque_on(sim, timeout: float = 10.0) -> list:
     """The commands the simulated firmware ran, once it ran the torque-on (its serving thread and its queue
-    may lag the teach process's exit on a loaded machine), plus a little for the servos to settle."""
+    may lag the teach process's exit on a loaded machine), and once the simulator's own clock has run 0.5 s past
+    it for the servos to settle (counted on its recording, not on the wall: a loaded machine only takes longer).
+    ``timeout`` (s, wall) only detects a hang."""
     end = time.monotonic() + timeout
-    while time.monotonic() < end and {"T": 210, "cmd": 1} not in [c for _, _, c in sim.executed()]:
+    on = None
+    while time.monotonic() < end:
+        on = next((t for _, t, c in sim.executed() if c == {"T": 210, "cmd": 1}), None)
+        if on is not None and sim.recording()[0][-1] >= on + 0.5:
+            break
         time.sleep(0.05)
-    time.sleep(0.5)
+    assert on is not None, "the torque-on never ran"
     return sim.executed()
 
 

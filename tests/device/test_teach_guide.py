@@ -130,8 +130,11 @@ def test_sim_device_guide_moves_the_served_arm_while_torque_is_off(tmp_path):
         with link:
             link.connect()
             link.send({"T": 210, "cmd": 0})
-            time.sleep(1.0)
-            q = read_valid(link, FeedbackValidator(robot, firmware=link.firmware, expect_torque=None)).q
+            check = FeedbackValidator(robot, firmware=link.firmware, expect_torque=None)
+            end = time.monotonic() + 60  # a hang detector: the script's 0.5 s run on the simulator's clock
+            q = read_valid(link, check).q
+            while time.monotonic() < end and not np.allclose(q, Q_A, atol=2e-3):
+                q = read_valid(link, check).q
     finally:
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=30)
