@@ -946,6 +946,50 @@ def test_software_gl_draws_without_multisampling_in_few_draw_calls(chromium, pla
         page.close()
 
 
+def test_the_tcp_path_is_drawn_where_fk_puts_it_in_its_speed_colour(chromium, planned, tmp_path):
+    """The fat-line path (drawn as one plain draw of three.js's line quads, not one instance per segment): with the
+    arm and the scene hidden, the pixels where the camera projects the TCP of the trajectory's samples (FK of its
+    joints, computed here) carry that sample's speed colour (the PNG's colour map at |J(q) qdot|, computed here)."""
+    from matplotlib import colormaps
+
+    from roarmctl.viz.data import path_data, robot_for
+    from roarmctl.viz.path_figure import PATH_CMAP
+
+    f, traj = planned["pick_place"]
+    robot = robot_for(traj)
+    data = path_data(traj, robot)
+    code, out = write_html(tmp_path, f)
+    assert code == 0
+    page, watch = br.open_page(chromium, out.as_uri())
+    try:
+        page.uncheck("#show-collision")
+        for it in page.evaluate("window.roarmView.data.items.map((it) => it.name)"):
+            assert page.evaluate(f"window.roarmView.showItem({json.dumps(it)}, false)")
+        page.evaluate("document.getElementById('labels').style.visibility = 'hidden'")
+        page.evaluate("window.roarmView.setView('top')")
+        state = page.evaluate("window.roarmView.state()")
+        image = br.screenshot(page).astype(int)
+        doc = page.evaluate("window.roarmView.data")
+        vmax = doc["speed_max"]
+        marks = [e["target"] for e in doc["events"]] + [t["position"] for t in doc["targets"]] + [data.tcp[0], data.tcp[-1]]
+        marks += [data.tcp[int(np.argmin(np.abs(traj.times - b["time"])))] for b in doc["blends"]]
+        marked = np.array([br.project(state, m) for m in marks])
+        checked = found = 0
+        for i in range(5, len(traj.times) - 5, 4):
+            xy = br.project(state, robot.kin.fk(traj.positions[i])[:3, 3])
+            if np.min(np.linalg.norm(marked - xy, axis=1)) < 25:
+                continue  # under a mark (a ball, a cross, a label's anchor)
+            colour = np.round(np.asarray(colormaps[PATH_CMAP](min(data.tcp_speed[i] / vmax, 1.0)))[:3] * 255)
+            x, y = np.round(xy).astype(int)
+            window = image[y - 1:y + 2, x - 1:x + 2]
+            checked += 1
+            found += bool(np.any(np.abs(window - colour).max(axis=-1) <= 24))
+        assert checked >= 40 and found >= 0.9 * checked, (found, checked)
+        assert watch.errors == []
+    finally:
+        page.close()
+
+
 WATCH_WRITES = """() => {
   window.__writes = { fixed: 0, cursor: 0, panel: 0 };
   new MutationObserver((ms) => { for (const m of ms) window.__writes[m.target.classList.contains('gap') ? 'cursor' : 'fixed']++; })
