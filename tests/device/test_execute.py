@@ -350,3 +350,26 @@ def test_execute_sim_options_are_checked(tmp_path, capsys, args, why):
     rc = run_cli(["execute", str(p), "--yes", *extra, *args])
     err = capsys.readouterr().err
     assert rc == 2 and why in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("face", ["cli", "api"])
+def test_one_execute_builds_its_schedule_once_and_refuses_before_anything_opens(tmp_path, monkeypatch, face):
+    """The schedule of a run is built once (by the streamer, before the port opens or the simulator starts), whether
+    the CLI or the API executes (each built it once more to check it first). Counted by wrapping build_schedule
+    where the streamer and the API call it, and the simulator's start."""
+    import roarmctl.api as rc
+    import roarmctl.device.streamer as streamer_mod
+    from roarmctl.device.simulator import PtySimulator as Pty
+
+    calls, starts = [], []
+    real, real_start = streamer_mod.build_schedule, Pty.start
+    monkeypatch.setattr(streamer_mod, "build_schedule", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(rc, "build_schedule", lambda *a, **k: calls.append(1) or real(*a, **k), raising=False)
+    monkeypatch.setattr(Pty, "start", lambda self: starts.append(1) or real_start(self))
+    p = tmp_path / "short.traj.json"
+    min_jerk([HOME, [0.2, 0.1, 1.7, 0.0, 0.0, 0.0]], [0.5]).save(p)
+    if face == "cli":
+        assert run_cli(["execute", str(p), "--sim", "--yes", "--servos", "ideal", "--log", str(tmp_path / "x.exec.json")]) == 0
+    else:
+        assert rc.execute(p, sim=True, servos="ideal")["outcome"] == "completed"
+    assert len(calls) == 1 and len(starts) == 1

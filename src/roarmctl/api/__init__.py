@@ -41,7 +41,7 @@ from roarmctl.api.planner import IKResult, JointPath, Planner, Pose, Validity
 from roarmctl.api.scene import Scene
 from roarmctl.device.sag import wanted
 from roarmctl.device.session import run_execution
-from roarmctl.device.streamer import StreamConfig, build_schedule
+from roarmctl.device.streamer import StreamConfig
 from roarmctl.device.streamer import sample as _sample
 from roarmctl.errors import (
     DescriptionError,
@@ -208,7 +208,6 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
     robot = robot_of(t)
     cfg = StreamConfig(rate=rate, speed_scale=speed_scale, max_error=max_error, move_to_start=move_to_start,
                        from_current=from_current, sag=wanted(sag, ideal=sim and servos == "ideal"))
-    build_schedule(t, robot, rate=rate, speed_scale=speed_scale, strategy=cfg.strategy, sag=cfg.sag)  # refuse before opening
     factory = None
     if sim:
         confirm = confirm or (lambda message: True)

@@ -123,7 +123,6 @@ def execute(
             extra = f" + {gripper} gripper commands" if gripper else ""
             common.console(stderr=True).print(f"wrote {info['commands']} motion commands{extra} ({schedule[-1].t:.2f} s at {rate:g} Hz) to {output}")
         return
-    build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy, sag=sag)  # validate before opening
     if port is not None and not yes and not sys.stdin.isatty():
         raise InputError("refusing to ask for confirmation: stdin is not a terminal", "pass --yes to execute without asking")
     sim_config = None

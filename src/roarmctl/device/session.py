@@ -88,7 +88,8 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
 
     link = Link(str(port) if port is not None else "the simulator")
     link.expect = model or "m3"
-    # Built before the port opens (the schedule is pure), so that every way out has a log.
+    # Built before the port opens or the simulator starts (the schedule is pure), so that every way out has a log and
+    # a trajectory the firmware cannot take is refused before anything opens; the CLI and the API leave it to this.
     streamer = Streamer(link, robot, traj, cfg, on_status=on_status, confirm=confirm, on_start=on_start,
                         replan=replan, on_note=on_note,
                         extra_lateness=simulator.recent_lateness if simulator is not None else None)
