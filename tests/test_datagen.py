@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -148,7 +149,8 @@ def _spec(size: int = 64):
 
 
 def _check_dataset(root: Path, lengths: list[int], fps: int, cams: list[str]) -> None:
-    """The layout and contents, read with pyarrow, numpy, pandas and PyAV (not the writer's reader)."""
+    """The layout and contents, read with pyarrow (each folder as one dataset: every file in it), numpy,
+    pandas and PyAV (not the writer's reader)."""
     import av
     import pandas as pd
     import pyarrow.parquet as pq
@@ -160,29 +162,36 @@ def _check_dataset(root: Path, lengths: list[int], fps: int, cams: list[str]) ->
     assert info["video_path"] == "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"
     feats = info["features"]
     assert feats["observation.state"]["names"] == feats["action"]["names"] and feats["action"]["shape"] == [6]
-    data = pq.read_table(root / "data/chunk-000/file-000.parquet")
+    data = pq.read_table(root / "data").sort_by("index")
     assert data.num_rows == sum(lengths)
     ep = data["episode_index"].to_numpy()
     fi = data["frame_index"].to_numpy()
     assert data["index"].to_numpy().tolist() == list(range(sum(lengths)))
     assert np.array_equal(data["timestamp"].to_numpy(), (fi / fps).astype(np.float32))
-    episodes = pq.read_table(root / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
+    episodes = pq.read_table(root / "meta/episodes").sort_by("episode_index").to_pylist()
+    assert len(episodes) == len(lengths)
     tasks = pd.read_parquet(root / "meta/tasks.parquet")
     state = np.stack(data["observation.state"].to_numpy(zero_copy_only=False))
     before = 0
+    in_file: dict = {}  # (camera, chunk, file) -> frames of the episodes before, in that file
     for k, (row, n) in enumerate(zip(episodes, lengths)):
         assert row["episode_index"] == k and row["length"] == n
         a, b = row["dataset_from_index"], row["dataset_to_index"]
         assert (a, b) == (before, before + n)
         assert np.all(ep[a:b] == k) and fi[a:b].tolist() == list(range(n))
+        rows_there = pq.read_table(root / f"data/chunk-{row['data/chunk_index']:03d}/file-{row['data/file_index']:03d}.parquet")
+        assert (rows_there["episode_index"].to_numpy() == k).sum() == n  # the episode is whole in the file it names
         assert tasks.loc[row["tasks"][0], "task_index"] == data["task_index"].to_numpy()[a]
         s = state[a:b]
         np.testing.assert_allclose(row["stats/observation.state/mean"], s.mean(axis=0), rtol=1e-5, atol=1e-6)
         np.testing.assert_allclose(row["stats/observation.state/q50"], np.quantile(s.astype(np.float64), 0.5, axis=0), rtol=1e-6, atol=1e-7)
         for cam in cams:
             key = f"observation.images.{cam}"
-            assert row[f"videos/{key}/from_timestamp"] == pytest.approx(before / fps)
-            assert row[f"videos/{key}/to_timestamp"] == pytest.approx((before + n) / fps)
+            where = (cam, row[f"videos/{key}/chunk_index"], row[f"videos/{key}/file_index"])
+            first = in_file.get(where, 0)
+            assert row[f"videos/{key}/from_timestamp"] == pytest.approx(first / fps)
+            assert row[f"videos/{key}/to_timestamp"] == pytest.approx((first + n) / fps)
+            in_file[where] = first + n
         before += n
     total = json.loads((root / "meta/stats.json").read_text())
     np.testing.assert_allclose(total["observation.state"]["mean"], state.mean(axis=0), rtol=1e-5, atol=1e-6)
@@ -191,10 +200,15 @@ def _check_dataset(root: Path, lengths: list[int], fps: int, cams: list[str]) ->
     for cam in cams:
         key = f"observation.images.{cam}"
         assert np.asarray(total[key]["mean"]).shape == (3, 1, 1)
-        with av.open(str(root / f"videos/{key}/chunk-000/file-000.mp4")) as f:
-            times = [fr.time for fr in f.decode(video=0)]
-        assert len(times) == sum(lengths)
-        np.testing.assert_allclose(times, np.arange(sum(lengths)) / fps, atol=1e-6)
+        files = sorted((root / f"videos/{key}").glob("chunk-*/file-*.mp4"))
+        assert len(files) == len([w for w in in_file if w[0] == cam])
+        for (c, chunk, file), frames in in_file.items():
+            if c != cam:
+                continue
+            with av.open(str(root / f"videos/{key}/chunk-{chunk:03d}/file-{file:03d}.mp4")) as f:
+                times = [fr.time for fr in f.decode(video=0)]
+            assert len(times) == frames
+            np.testing.assert_allclose(times, np.arange(frames) / fps, atol=1e-6)
         assert feats[key]["info"]["video.codec"] in ("h264", "av1") and feats[key]["info"]["video.fps"] == fps
         assert feats[key]["info"]["video.pix_fmt"] == "yuv420p" and feats[key]["info"]["video.g"] == 2
 
@@ -226,13 +240,64 @@ def test_an_av1_encode_as_root_leaves_no_real_time_policy_behind():
 def test_appending_gives_the_same_bytes_as_writing_all_at_once(tmp_path):
     from roarmctl.export.lerobot.dataset import append_episodes, write_dataset
 
-    eps = _synthetic([6, 9, 4], seed=3)
-    write_dataset(tmp_path / "all", _spec(), eps)
-    append_episodes(tmp_path / "grown", _spec(), eps[:2])
-    append_episodes(tmp_path / "grown", _spec(), eps[2:])
-    for rel in ("data/chunk-000/file-000.parquet", "meta/episodes/chunk-000/file-000.parquet", "meta/tasks.parquet",
-                "meta/stats.json", "meta/info.json", "videos/observation.images.front/chunk-000/file-000.mp4"):
+    eps = _synthetic([6, 9, 4, 7, 5], seed=3)
+    spec = _small_files_spec(eps)  # the files roll over too
+    write_dataset(tmp_path / "all", spec, eps)
+    append_episodes(tmp_path / "grown", spec, eps[:2])
+    append_episodes(tmp_path / "grown", spec, eps[2:])
+    files = sorted(p.relative_to(tmp_path / "all") for p in (tmp_path / "all").rglob("*") if p.is_file())
+    assert len([p for p in files if p.suffix == ".mp4"]) >= 2
+    assert files == sorted(p.relative_to(tmp_path / "grown") for p in (tmp_path / "grown").rglob("*")
+                           if p.is_file() and not p.name.startswith("."))
+    for rel in files:
         assert (tmp_path / "all" / rel).read_bytes() == (tmp_path / "grown" / rel).read_bytes(), rel
+
+
+def _small_files_spec(eps: list, per_file: float = 2.5):
+    """A spec whose files roll over every few episodes: video files at ``per_file`` episodes' MP4s, data files
+    at about a kilobyte, two files a chunk."""
+    from dataclasses import replace
+
+    mean = np.mean([len(e.videos["front"]) for e in eps])
+    return replace(_spec(), chunks_size=2, data_files_size_in_mb=1000 / 1024**2,
+                   video_files_size_in_mb=per_file * mean / 1024**2)
+
+
+def test_files_roll_over_as_lerobot_rolls_them_and_a_reader_sees_every_episode(tmp_path):
+    """Small limits (lerobot's rule, huggingface/lerobot datasets/dataset_writer.py: a video file is full when its
+    episodes' MP4 bytes plus the next episode's reach video_files_size_in_mb MiB; a new chunk every chunks_size
+    files): several data and video files in several chunks, each episode whole in the files its metadata names,
+    and pyarrow reading each folder as one dataset sees every frame and episode."""
+    import pyarrow.parquet as pq
+
+    from roarmctl.export.lerobot.dataset import read_actions, read_episodes, write_dataset
+
+    lengths = [7, 12, 5, 9, 6, 8, 4, 11, 3]
+    eps = _synthetic(lengths, seed=5)
+    spec = _small_files_spec(eps)
+    write_dataset(tmp_path / "ds", spec, eps)
+    _check_dataset(tmp_path / "ds", lengths, 10, ["front"])
+    limit = spec.video_files_size_in_mb * 1024**2
+    want, size, file = [], 0, 0  # lerobot's rule by hand: the file of each episode's video
+    for k, e in enumerate(eps):
+        if k and size + len(e.videos["front"]) >= limit:
+            file, size = file + 1, 0
+        size += len(e.videos["front"])
+        want.append((file // 2, file % 2))
+    rows = pq.read_table(tmp_path / "ds" / "meta/episodes").sort_by("episode_index").to_pylist()
+    got = [(r["videos/observation.images.front/chunk_index"], r["videos/observation.images.front/file_index"]) for r in rows]
+    assert got == want and len(set(want)) >= 3
+    data_files = sorted((tmp_path / "ds" / "data").glob("chunk-*/file-*.parquet"))
+    assert len(data_files) >= 3 and (tmp_path / "ds" / "data" / "chunk-001").is_dir()
+    assert {(r["data/chunk_index"], r["data/file_index"]) for r in rows} == {
+        (int(p.parent.name[6:]), int(p.stem[5:])) for p in data_files}
+    info = json.loads((tmp_path / "ds" / "meta/info.json").read_text())
+    assert info["chunks_size"] == 2 and info["video_files_size_in_mb"] == spec.video_files_size_in_mb
+    back = read_episodes(tmp_path / "ds")  # the writer's own reader, across the files
+    assert [e.length for e in back] == lengths
+    for k in (0, 4, 8):
+        np.testing.assert_array_equal(back[k].state, eps[k].state)
+        np.testing.assert_array_equal(read_actions(tmp_path / "ds", k)[1], eps[k].action)
 
 
 def test_appending_other_joints_or_cameras_is_refused(tmp_path):
@@ -467,17 +532,43 @@ def test_a_run_does_not_join_a_dataset_with_cameras_or_a_trajectory(run_file, tm
 
 
 @pytest.mark.slow  # Ray started on this machine (tens of seconds on a busy one) and the four episodes again
-def test_ray_tasks_write_the_same_dataset_as_the_process_pool(dataset4, tmp_path):
-    from roarmctl.errors import DeviceError
-
+def test_ray_tasks_write_the_same_dataset_as_the_process_pool_and_nothing_outside_it(dataset4, tmp_path):
+    """``--ray local`` in a process of its own whose home and temporary folders are empty folders here: the same
+    bytes as the process pool, and afterwards both folders are empty again (Ray's session files and token were
+    kept in roarmctl's own temporary folder and environment) and no process of that Ray is left."""
     pytest.importorskip("ray")
+    import tempfile
+
     out, _ = dataset4
+    home = tmp_path / "home"
+    home.mkdir()
+    tmp = Path(tempfile.mkdtemp(prefix="dg-", dir="/tmp"))  # short: Ray's sockets go below it (107 bytes a path)
+    request_cleanup = tmp
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+    # MPLCONFIGDIR: matplotlib (which TOPP-RA imports) keeps a font cache in the home folder, planning's and not Ray's
+    env |= {"HOME": str(home), "TMPDIR": str(tmp), "COLUMNS": "80", "MPLCONFIGDIR": str(tmp_path / "mpl")}
+    cmd = [sys.executable, "-m", "roarmctl", "datagen", str(TEMPLATE), "-n", "4", "-o", str(tmp_path / "ray"),
+           "--size", f"{SIZE}x{SIZE}", "--workers", "2", "--ray", "local", "--json"]
     try:
-        _generate(tmp_path / "ray", workers=2, ray="")
-    except DeviceError as exc:  # Ray gives its raylet 30 s to start, which a loaded 2-core machine can exceed
-        pytest.skip(exc.message)
+        r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=550)
+        left = [p for p in Path("/proc").glob("[0-9]*") if str(tmp).encode() in _cmdline(p)]
+        assert not left, "a process of the test's Ray is still running"
+        assert sorted(home.rglob("*")) == [] and sorted(tmp.rglob("*")) == [], (sorted(home.rglob("*")), sorted(tmp.rglob("*"))[:5])
+    finally:
+        shutil.rmtree(request_cleanup, ignore_errors=True)
+    if r.returncode == 4 and "Ray did not start" in r.stderr:  # Ray's fixed 30 s for its raylet, on a loaded machine
+        assert len(r.stderr.strip().splitlines()) == 1 and "load average" in r.stderr and "--ray" in r.stderr
+        pytest.skip(r.stderr.strip())
+    assert r.returncode == 0, r.stderr
     for rel in FILES + VIDEOS:
         assert (out / rel).read_bytes() == (tmp_path / "ray" / rel).read_bytes(), rel
+
+
+def _cmdline(proc: Path) -> bytes:
+    try:
+        return (proc / "cmdline").read_bytes()
+    except OSError:
+        return b""
 
 
 def test_cameras_after_mujoco_was_imported_without_a_gl_back_end_are_refused_not_an_abort():

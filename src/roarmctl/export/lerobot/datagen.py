@@ -7,12 +7,12 @@ for one worker, a process pool, or Ray tasks), each writing its tries into the s
 folder renamed into place when whole; then, for every try, a small outcome file, the try's commit). The
 dataset is the first ``n`` kept tries in try order: the same whatever the number of workers or the engine,
 and shards still running past the ``n``-th kept try are waited for and left unused. When the kept tries
-are known, ``roarmctl.export.lerobot.dataset.write_dataset`` writes the dataset into ``DATASET/`` and the
-staging folder is removed.
+are known, ``roarmctl.export.lerobot.dataset.write_dataset`` writes the dataset into ``DATASET/.datagen/dataset``
+(reading the staged tries one at a time), its folders move into ``DATASET/`` and the staging folder is removed.
 
 A killed run leaves only whole staged tries (a half-written try is a ``.tmp-`` folder, removed on resume);
-``resume=True`` takes them and runs only the missing tries. Nothing is written outside ``DATASET/``
-(Ray keeps its own session files in its temporary folder).
+``resume=True`` takes them and runs only the missing tries. Nothing is written outside ``DATASET/`` (a local
+Ray's session: ``_Ray``).
 """
 
 from __future__ import annotations
@@ -21,6 +21,8 @@ import json
 import multiprocessing
 import os
 import shutil
+import signal
+import sys
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -30,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from roarmctl.errors import DeviceError, InfeasibleError, InputError
+from roarmctl.errors import DeviceError, InfeasibleError, InputError, RoarmError
 from roarmctl.export.lerobot import stats, video
 from roarmctl.export.lerobot.dataset import DatasetSpec, Episode, read_info, write_dataset
 from roarmctl.fileio import atomic_write_json
@@ -45,6 +47,9 @@ STATE_FILE = "run.json"
 SHARD = 2  # tries per shard: small, so that few tries run past the last episode needed
 FORMAT = "roarmctl.datagen/1"
 STAGES = ("sample", "plan", "physics", "render", "encode", "stage")
+RAY_STARTS = 3  # tries to start a local Ray (each given 30 s by Ray)
+POLL_S = 1.0  # s between looks at the running shards (progress, Ctrl-C)
+SHARD_CEILING_S = 3600.0  # s without any shard finishing: a worker hangs (a shard takes seconds to minutes)
 
 
 @dataclass
@@ -190,56 +195,144 @@ class _Pool:
         return self.executor.submit(run_shard, *args)
 
     def wait(self, pending: list[Any]) -> list[Any]:
-        done, _ = wait(pending, return_when=FIRST_COMPLETED)
+        done, _ = wait(pending, timeout=POLL_S, return_when=FIRST_COMPLETED)
         return [f for f in pending if f in done]
 
     @staticmethod
     def result(f: Any) -> list[dict[str, Any]]:
-        return f.result()
+        return f.result(timeout=SHARD_CEILING_S)
 
     def close(self) -> None:
         if self.executor is not None:
             self.executor.shutdown(wait=True, cancel_futures=True)
 
 
+def _children(pid: int) -> set[int]:
+    """The processes descended from ``pid`` (Linux ``/proc``; elsewhere none)."""
+    parent: dict[int, int] = {}
+    for d in Path("/proc").glob("[0-9]*"):
+        try:
+            stat = (d / "stat").read_text()
+            parent[int(d.name)] = int(stat.rsplit(")", 1)[1].split()[1])
+        except (OSError, ValueError, IndexError):
+            continue
+    out: set[int] = set()
+    frontier = {pid}
+    while frontier:
+        frontier = {c for c, p in parent.items() if p in frontier} - out
+        out |= frontier
+    return out
+
+
 class _Ray:
-    """The same shards as Ray tasks: a local Ray started here (``address`` "") or an existing cluster."""
+    """The same shards as Ray tasks: a local Ray started here (``address`` "") or an existing cluster.
+
+    A local Ray keeps its session (sockets, logs, spilled objects) in a temporary folder of its own, removed
+    by ``close``, and its token (Ray's token authentication) in this process's environment, not in
+    ``~/.ray``. Ray gives a starting raylet a fixed 30 s to register (``ray/_private/node.py``), which a
+    machine at a load of a few times its cores exceeds: a start is tried ``RAY_STARTS`` times, the processes
+    a failed one left are ended, and then it is a ``DeviceError`` naming the load and the ways round it."""
 
     def __init__(self, address: str, workers: int) -> None:
+        self.temp: Path | None = None
+        self.env: dict[str, str | None] = {}
+        self.slots = workers
+        self.started = False
+        if not address and "RAY_AUTH_MODE" not in os.environ and "RAY_AUTH_TOKEN" not in os.environ and "ray" not in sys.modules:
+            # before Ray is imported: its token loader reads the environment once
+            self._set_env({"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": os.urandom(32).hex()})
         try:
             import ray
         except ImportError:
+            self.close()
             raise InputError("Ray is not installed", "pip install 'ray[data]' (make install does)", option="ray") from None
         self.ray = ray
         self.started = not ray.is_initialized()
-        if self.started:
-            kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
-            if address:
-                kwargs["address"] = address
-            else:
-                kwargs["num_cpus"] = workers
-            try:
-                ray.init(**kwargs)
-            except Exception as exc:  # noqa: BLE001  (Ray raises a bare Exception when its raylet is not up in 30 s)
-                raise DeviceError(f"{address or 'local'}: Ray did not start or answer: {str(exc).splitlines()[0]}",
-                                  "on a busy machine try again, check the address (ray status), or leave Ray out "
-                                  "for the process pool", option="ray") from None
+        if not self.started:
+            self.task = ray.remote(num_cpus=1)(run_shard)
+            return
+        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
+        if address:
+            kwargs["address"] = address
+        else:
+            import tempfile
+
+            # a short path: Ray's Unix sockets live about 70 bytes below it, and a socket's path has 107 at most
+            base = tempfile.gettempdir()
+            self.temp = Path(tempfile.mkdtemp(prefix="roarmctl-ray-", dir=base if len(base) <= 24 else "/tmp"))
+            kwargs |= {"num_cpus": workers, "_temp_dir": str(self.temp)}
+        try:
+            self._start(kwargs, address)
+        except BaseException:
+            self.close()
+            raise
         self.task = ray.remote(num_cpus=1)(run_shard)
-        self.slots = workers
+
+    def _set_env(self, values: dict[str, str]) -> None:
+        for k, v in values.items():
+            self.env.setdefault(k, os.environ.get(k))
+            os.environ[k] = v
+
+    def _start(self, kwargs: dict[str, Any], address: str) -> None:
+        before = _children(os.getpid())
+        for attempt in range(1, RAY_STARTS + 1):
+            try:
+                self.ray.init(**kwargs)
+                return
+            except Exception as exc:  # noqa: BLE001  (Ray raises a bare Exception when its raylet misses its 30 s)
+                reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                self.ray.shutdown()
+                for pid in _children(os.getpid()) - before:  # what the failed start left running
+                    try:
+                        os.kill(pid, signal.SIGKILL)
+                    except OSError:
+                        pass
+                if address or attempt == RAY_STARTS or "timed out" not in reason:  # only the 30 s is worth another try
+                    break
+        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+        if address:
+            raise DeviceError(f"{address}: no Ray cluster answered there: {reason}",
+                              "check the address (ray status on the head node), or leave Ray out for the process pool",
+                              option="ray")
+        if "timed out" not in reason:
+            raise DeviceError(f"local: Ray did not start: {reason}", "leave Ray out for the process pool, or start Ray "
+                              "yourself (ray start --head) and give its address", option="ray")
+        raise DeviceError(f"local: Ray did not start in {RAY_STARTS} tries ({reason}); Ray gives its raylet a fixed 30 s "
+                          f"and this machine's load average is {load:.1f} on {os.cpu_count()} CPUs",
+                          "try when the machine is less busy, start Ray yourself (ray start --head) and give its address, "
+                          "or leave Ray out for the process pool", option="ray")
 
     def submit(self, *args: Any) -> Any:
         return self.task.remote(*args)
 
     def wait(self, pending: list[Any]) -> list[Any]:
-        done, _ = self.ray.wait(pending, num_returns=1)
+        done, _ = self.ray.wait(pending, num_returns=1, timeout=POLL_S)
         return [f for f in pending if f in done]
 
     def result(self, f: Any) -> list[dict[str, Any]]:
-        return self.ray.get(f)
+        try:
+            return self.ray.get(f, timeout=SHARD_CEILING_S)
+        except self.ray.exceptions.RayTaskError as exc:  # the shard's own error, as the process pool gives it
+            if isinstance(exc.cause, RoarmError):
+                raise exc.cause from None
+            raise
+        except self.ray.exceptions.GetTimeoutError:
+            raise DeviceError(f"datagen: a Ray task gave no result in {SHARD_CEILING_S:.0f} s",
+                              "check the cluster (ray status), then resume the run", option="ray") from None
 
     def close(self) -> None:
         if self.started:
             self.ray.shutdown()
+            self.started = False
+        for k, v in self.env.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        self.env = {}
+        if self.temp is not None:
+            shutil.rmtree(self.temp, ignore_errors=True)
+            self.temp = None
 
 
 # ------------------------------------------------------------------------------------------- the run
@@ -332,13 +425,21 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
         try:
             shards = _shards(0, set(outcomes))
             pending: list[Any] = []
+            last = time.monotonic()  # when a shard last finished
             while chosen is None:
                 while len(pending) < engine.slots and summary.tried + SHARD * len(pending) < options.limit:
                     pending.append(engine.submit(str(template_path), str(staging), next(shards), options.seed,
                                                  options.width, options.height, options.cameras, options.codec))
                 if not pending:
                     break
-                for f in engine.wait(pending):
+                done = engine.wait(pending)
+                if not done:
+                    if time.monotonic() - last > SHARD_CEILING_S:
+                        raise DeviceError(f"datagen: no shard finished in {SHARD_CEILING_S:.0f} s: a worker hangs",
+                                          f"resume the run (the {summary.tried} tries done are kept)")
+                    continue
+                last = time.monotonic()
+                for f in done:
                     pending.remove(f)
                     for o in engine.result(f):
                         outcomes[int(o["try"])] = o
@@ -361,19 +462,30 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
     summary.causes = dict.fromkeys(CAUSES, 0) | {c: sum(1 for o in used if o["cause"] == c) for c in CAUSES}
     cams = {c: (options.height, options.width) for c in options.cameras}
     spec = DatasetSpec(template.fps, robot.name, list(robot.joint_names), cams)
-    episodes = []
-    for t in chosen:
-        d = staging / f"{t:08d}"
-        img = json.loads((d / "image_stats.json").read_text())
-        episodes.append(Episode(template.task, np.load(d / "state.npy"), np.load(d / "action.npy"),
-                                videos={c: (d / f"{c}.mp4").read_bytes() for c in cams},
-                                image_stats={c: {k: np.asarray(v) for k, v in img[c].items()} for c in cams}))
+    frames = [0]
+
+    def episodes() -> Iterator[Episode]:  # read from the staging folder one at a time: videos stay on disk
+        for t in chosen:
+            d = staging / f"{t:08d}"
+            img = json.loads((d / "image_stats.json").read_text())
+            e = Episode(template.task, np.load(d / "state.npy"), np.load(d / "action.npy"),
+                        videos={c: d / f"{c}.mp4" for c in cams},
+                        image_stats={c: {k: np.asarray(v) for k, v in img[c].items()} for c in cams})
+            frames[0] += e.length
+            yield e
+
     t0 = time.process_time()
-    write_dataset(out, spec, episodes)
+    written = staging / "dataset"  # whole before any of it moves into DATASET/ (metadata last: readers start there)
+    shutil.rmtree(written, ignore_errors=True)
+    write_dataset(written, spec, episodes())
+    for part in ("data", "videos", "meta"):
+        if (written / part).exists():
+            shutil.rmtree(out / part, ignore_errors=True)  # moved in by a run killed here, resumed now
+            os.replace(written / part, out / part)
     summary.stages["write"] = time.process_time() - t0
     shutil.rmtree(staging)
     summary.kept = len(chosen)
-    summary.frames = sum(e.length for e in episodes)
+    summary.frames = frames[0]
     summary.bytes = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
     summary.wall = time.perf_counter() - t_start
     if progress is not None:

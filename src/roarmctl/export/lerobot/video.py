@@ -87,32 +87,52 @@ def _encode(frames: np.ndarray, fps: int, codec: str) -> bytes:
     return buf.getvalue()
 
 
-def join(parts: Sequence[bytes], frames: Sequence[int], fps: int, out: Any) -> None:
-    """Write one MP4 to the binary file ``out`` holding the episodes ``parts`` (MP4 bytes, as ``encode``
-    makes them, ``frames[i]`` frames each) one after the other, packets copied, not decoded."""
-    import av
+class Joiner:
+    """One MP4 written to ``out`` (a path or a binary file) from episodes' MP4s (as ``encode`` makes them) added
+    one after the other, packets copied, not decoded; ``close()`` finishes the file."""
 
-    with av.open(out, "w", format="mp4") as dst:
-        stream = None
-        offset = 0  # frames before this part
+    def __init__(self, out: Any, fps: int) -> None:
+        import av
+
+        self.fps = fps
+        self._av = av
+        self.dst: Any = av.open(str(out) if isinstance(out, os.PathLike) else out, "w", format="mp4")
+        self.stream: Any = None
+        self.offset = 0  # frames before the next part
+
+    def add(self, data: bytes, frames: int) -> None:
+        """Append one episode's MP4 bytes (``frames`` frames), shifted to start where the previous one ends."""
+        with self._av.open(io.BytesIO(data), "r") as src:
+            s = src.streams.video[0]
+            if self.stream is None:
+                self.stream = self.dst.add_stream_from_template(s, opaque=True)
+                self.stream.time_base = Fraction(1, self.fps)
+            for packet in src.demux(s):
+                if packet.dts is None:
+                    continue
+                scale = Fraction(packet.time_base) * self.fps
+                packet.pts = int(round(packet.pts * scale)) + self.offset if packet.pts is not None else None
+                packet.dts = int(round(packet.dts * scale)) + self.offset
+                packet.duration = int(round(packet.duration * scale)) if packet.duration else 1
+                packet.time_base = Fraction(1, self.fps)
+                packet.stream = self.stream
+                self.dst.mux(packet)
+        self.offset += int(frames)
+
+    def close(self) -> None:
+        """Finish the file (its index written)."""
+        self.dst.close()
+
+
+def join(parts: Sequence[bytes], frames: Sequence[int], fps: int, out: Any) -> None:
+    """Write one MP4 to ``out`` (a path or a binary file) holding the episodes ``parts`` (MP4 bytes, as
+    ``encode`` makes them, ``frames[i]`` frames each) one after the other (``Joiner``)."""
+    joiner = Joiner(out, fps)
+    try:
         for data, n in zip(parts, frames):
-            with av.open(io.BytesIO(data), "r") as src:
-                s = src.streams.video[0]
-                if stream is None:
-                    stream = dst.add_stream_from_template(s, opaque=True)
-                    stream.time_base = Fraction(1, fps)
-                shift = offset  # in 1/fps
-                for packet in src.demux(s):
-                    if packet.dts is None:
-                        continue
-                    scale = Fraction(packet.time_base) * fps
-                    packet.pts = int(round(packet.pts * scale)) + shift if packet.pts is not None else None
-                    packet.dts = int(round(packet.dts * scale)) + shift
-                    packet.duration = int(round(packet.duration * scale)) if packet.duration else 1
-                    packet.time_base = Fraction(1, fps)
-                    packet.stream = stream
-                    dst.mux(packet)
-            offset += int(n)
+            joiner.add(data, n)
+    finally:
+        joiner.close()
 
 
 def cut(path: Any, start: int, count: int, fps: int) -> bytes:
