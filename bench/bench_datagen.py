@@ -1,6 +1,7 @@
 """datagen benchmark: episodes per hour per core, CPU time per stage, success rate and size per episode.
 
     .venv/bin/python bench/bench_datagen.py [--episodes 4] [--sizes 320x240,640x480] [--workers 1,2] [--ray]
+    .venv/bin/python bench/bench_datagen.py --stages 8 [--sizes 320x240]      # the steady state, per try
 
 Runs ``roarmctl datagen --json`` (a fresh process per run: no library or plan cached from a previous run) on
 the bundled template (plans/datagen/pick_place.yaml, seed 0) for each image size and worker count (h264), once
@@ -13,6 +14,11 @@ wall includes waiting for a core); episodes per hour per core by CPU time (kept 
 all stages of all workers: what a free core gives); the CPU seconds of each stage (sample, plan, physics,
 render, encode, stage, write) and their share; render+encode CPU against planning CPU (issue 34's goal: at
 most 3x at 320x240); and the dataset's size per episode.
+
+``--stages N`` runs N tries in this process after one try that pays the imports (OMPL, FCL, TOPP-RA, MuJoCo,
+PyAV: about 1 s of CPU, once per worker), as a worker of a long run does, and prints each stage's CPU per kept
+try (median and total) and render+encode against planning over those tries: the steady-state figure, which
+a short run's totals hide under the imports.
 """
 
 from __future__ import annotations
@@ -36,7 +42,13 @@ def main() -> int:
     ap.add_argument("--workers", default="1,2")
     ap.add_argument("--ray", action="store_true", help="also the largest worker count as Ray tasks (local Ray)")
     ap.add_argument("--success", type=int, default=0, help="also N episodes without cameras: the success rate and its causes")
+    ap.add_argument("--stages", type=int, default=0, help="only: N tries in this process after a warm-up try, CPU per stage")
+    ap.add_argument("--codec", default="h264")
     args = ap.parse_args()
+    if args.stages:
+        for size in args.sizes.split(","):
+            steady_state(args.stages, size, args.codec)
+        return 0
     template = ROOT / "plans" / "datagen" / "pick_place.yaml"
     first = args.sizes.split(",")[0]
     runs: list[tuple[str, int, bool, str]] = [(s, int(w), False, "h264") for s in args.sizes.split(",") for w in args.workers.split(",")]
@@ -79,6 +91,30 @@ def main() -> int:
         print(f"success rate: {s['episodes']} kept of {s['tried']} tries ({100 * s['episodes'] / s['tried']:.0f} %); "
               f"rejected: {causes}")
     return 0
+
+
+def steady_state(n: int, size: str, codec: str) -> None:
+    """``--stages``: CPU seconds per stage of each kept try among tries 1..n (try 0 pays the imports)."""
+    import statistics
+
+    from roarmctl.export.lerobot.datagen import run_shard
+
+    w, h = (int(v) for v in size.split("x"))
+    template = str(ROOT / "plans" / "datagen" / "pick_place.yaml")
+    tmp = tempfile.mkdtemp(prefix="bench_datagen_")
+    load0 = os.getloadavg()[0]
+    try:
+        run_shard(template, tmp, [0], 0, w, h, codec=codec)
+        outs = [o for o in run_shard(template, tmp, list(range(1, n + 1)), 0, w, h, codec=codec) if o["kept"]]
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    names = ("plan", "physics", "render", "encode")
+    per = {k: [o["timings"].get(k, 0.0) for o in outs] for k in names}
+    total = {k: sum(v) for k, v in per.items()}
+    print(f"{size} {codec}: {len(outs)} kept of {n} tries, one process, load {load0:.1f} -> {os.getloadavg()[0]:.1f}; "
+          "CPU s per kept try, median (total):")
+    print("  " + ", ".join(f"{k} {statistics.median(v):.3f} ({total[k]:.2f})" for k, v in per.items()))
+    print(f"  (render+encode)/plan over those tries: {(total['render'] + total['encode']) / total['plan']:.2f}")
 
 
 if __name__ == "__main__":

@@ -141,7 +141,7 @@ class Cameras:
             self._mujoco.mj_camlight(self.model, self.data)  # the cameras' poses (mj_kinematics leaves them)
             for c in cameras:
                 self.renderer.update_scene(self.data, camera=c)
-                out[c][k] = self.renderer.render()
+                self.renderer.render(out=out[c][k])  # read into the frame itself, not into a new image then copied
         return out
 
     def close(self) -> None:

@@ -4,8 +4,9 @@
 Per episode and feature: ``min``, ``max``, ``mean``, ``std`` (population), ``count`` (frames, shape (1,)) and
 the quantiles ``q01``, ``q10``, ``q50``, ``q90``, ``q99`` (lerobot's ``DEFAULT_QUANTILES``; lerobot estimates
 them from a 5,000-bin histogram, here they are exact: ``numpy.quantile``, linear). Vectors per
-dimension; images per channel over every frame shrunk as lerobot shrinks them (about 150 pixels a side; lerobot
-also samples up to 100 frames), scaled to 0-1, shape (3, 1, 1). The
+dimension; images per channel over the frames lerobot samples (``sample_indices``: 100 spread evenly over an
+episode of up to about 500 frames), each shrunk as lerobot shrinks them (about 150 pixels a side), scaled to 0-1,
+shape (3, 1, 1), ``count`` the frames sampled. The
 dataset's stats aggregate the episodes' as lerobot's ``aggregate_feature_stats`` does: min of the mins,
 max of the maxes, the count-weighted mean, the pooled variance, and for each quantile the min (q <= 50)
 or the max (q > 50) over the episodes.
@@ -33,14 +34,23 @@ def vector_stats(x: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
+def sample_indices(n: int) -> np.ndarray:
+    """The frames of an ``n``-frame episode whose images lerobot's stats read (``compute_stats.sample_indices``):
+    ``max(min(100, n), min(int(n ** 0.75), 10000))`` of them, spread evenly from the first to the last."""
+    k = max(min(100, n), min(int(n**0.75), 10_000))
+    return np.round(np.linspace(0, n - 1, k)).astype(int)
+
+
 def image_stats(frames: np.ndarray) -> dict[str, np.ndarray]:
-    """Stats of (F, H, W, C) uint8 frames per channel over the pixels of every frame (every ``step``-th row and
-    column, as lerobot shrinks a frame of 300 pixels or more to about 150 a side), scaled to 0-1, each of
-    shape (C, 1, 1); ``count``: the frames. From each channel's 256-value histogram, so exact (the quantiles as
-    ``numpy.quantile``'s linear method gives them) at a fraction of sorting the pixels."""
+    """Stats of (F, H, W, C) uint8 frames per channel over the pixels of lerobot's sample of the frames
+    (``sample_indices``), every ``step``-th row and column of each (as lerobot shrinks a frame of 300 pixels
+    or more to about 150 a side), scaled to 0-1, each of shape (C, 1, 1); ``count``: the frames sampled. From
+    each channel's 256-value histogram, so exact (the quantiles as ``numpy.quantile``'s linear method gives
+    them) at a fraction of sorting the pixels."""
+    picked = sample_indices(len(frames))
     side = max(frames.shape[1], frames.shape[2])
     step = side // 150 if side >= 300 else 1  # lerobot's auto_downsample_height_width: about 150 pixels a side
-    px = np.ascontiguousarray(frames[:, ::step, ::step], dtype=np.uint8).reshape(-1, frames.shape[-1])
+    px = np.ascontiguousarray(frames[picked, ::step, ::step], dtype=np.uint8).reshape(-1, frames.shape[-1])
     values = np.arange(256, dtype=np.float64)
     rows: dict[str, list[float]] = {k: [] for k in KEYS if k != "count"}
     for c in range(px.shape[1]):
@@ -63,7 +73,7 @@ def image_stats(frames: np.ndarray) -> dict[str, np.ndarray]:
             lo = np.floor(h)
             rows[key].append(nth(lo) + (h - lo) * (nth(min(lo + 1, n - 1)) - nth(lo)))
     out = {k: np.array(v).reshape(-1, 1, 1) / 255.0 for k, v in rows.items()}
-    out["count"] = np.array([len(frames)])
+    out["count"] = np.array([len(picked)])
     return {k: out[k] for k in KEYS}
 
 
