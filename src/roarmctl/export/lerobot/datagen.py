@@ -295,11 +295,11 @@ class _Ray:
                               "check the address (ray status on the head node), or leave Ray out for the process pool",
                               option="ray")
         if "timed out" not in reason:
-            raise DeviceError(f"local: Ray did not start: {reason}", "leave Ray out for the process pool, or start Ray "
-                              "yourself (ray start --head) and give its address", option="ray")
+            raise DeviceError(f"local: Ray did not start: {reason}", "leave Ray out for the process pool, or start a Ray head "
+                              "node yourself (Ray's own 'ray start') and give its address", option="ray")
         raise DeviceError(f"local: Ray did not start in {RAY_STARTS} tries ({reason}); Ray gives its raylet a fixed 30 s "
                           f"and this machine's load average is {load:.1f} on {os.cpu_count()} CPUs",
-                          "try when the machine is less busy, start Ray yourself (ray start --head) and give its address, "
+                          "try when the machine is less busy, start a Ray head node yourself (Ray's own 'ray start') and give its address, "
                           "or leave Ray out for the process pool", option="ray")
 
     def submit(self, *args: Any) -> Any:
