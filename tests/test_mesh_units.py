@@ -101,6 +101,27 @@ def test_collada_up_axis_is_not_applied_as_rviz_and_moveit_read_it(tmp_path, uni
         assert not np.allclose(assimp_vertices(variant(up), tmp_path), reference, atol=1e-6)
 
 
+PUBLISHED = Path(__file__).parent / "data" / "collada" / "ur5e"
+
+
+def test_a_published_z_up_collada_lies_where_its_collision_stl_does(tmp_path):
+    """UR5e's wrist-3 visual DAE (published, <up_axis>Z_UP</up_axis>) and its collision STL sit at one origin in UR's
+    URDF: read as roarmctl reads them (up_axis not applied) their boxes agree to 0.5 mm, and the triangles equal
+    assimp's of the file marked Y_UP (RViz's reading); assimp's own reading of the Z_UP file is turned (a box
+    off by centimetres), the rotation RViz and MoveIt drop."""
+    dae_text = (PUBLISHED / "wrist3.dae").read_text()
+    assert "<up_axis>Z_UP</up_axis>" in dae_text
+    v, _ = read_triangles(PUBLISHED / "wrist3.dae", 1.0, "mesh")
+    c, _ = read_triangles(PUBLISHED / "wrist3.stl", 1.0, "mesh")
+    assert np.allclose(v.min(axis=0), c.min(axis=0), atol=5e-4) and np.allclose(v.max(axis=0), c.max(axis=0), atol=5e-4)
+    (tmp_path / "y_up.dae").write_text(dae_text.replace("<up_axis>Z_UP</up_axis>", "<up_axis>Y_UP</up_axis>"))
+    reference = assimp_vertices(tmp_path / "y_up.dae", tmp_path)
+    ours = np.unique(np.round(v, 7), axis=0)
+    assert ours.shape == reference.shape and np.allclose(ours, reference, atol=1e-6)
+    turned = assimp_vertices(PUBLISHED / "wrist3.dae", tmp_path)
+    assert np.abs(turned.max(axis=0) - c.max(axis=0)).max() > 0.01
+
+
 URDF = """<robot name="r">
   <link name="base"/>
   <link name="l1"><collision><geometry><mesh filename="{mesh}"{scale}/></geometry></collision></link>
