@@ -25,8 +25,9 @@ install: $(STAMP)
 # real-time tests mostly wait (on the simulated arm's clock, on Chromium), and a second worker per core fills
 # those waits (idle, 2 cores: 256 s with one worker per core, 202 s with two; docs/design.md "Tests").
 TEST_JOBS ?= $(shell echo $$(( 2 * $$(nproc 2>/dev/null || echo 1) )))
+# --durations: the 15 slowest tests are printed at the end, so one over ~5 s that lacks @pytest.mark.slow is seen.
 test: $(STAMP) render
-	$(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadgroup
+	$(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadgroup --durations=15
 
 # The inner loop: everything but the tests marked slow (real-time runs on the simulated arm, fresh
 # interpreters, CPU-heavy sweeps); under a minute.

@@ -323,6 +323,7 @@ def test_pick_and_place_across_the_base_warns_and_keeps_the_margin(tmp_path):
 UR5E_PLAN = Path(__file__).parent / "data" / "arms" / "ur5e" / "plan.yaml"
 
 
+@pytest.mark.slow  # plans a whole plan per arm (25 s for the UR5e at load 20)
 @pytest.mark.parametrize("plan_path", ["roarm_m3_pro", UR5E_PLAN])
 def test_the_collinear_warning_names_a_singular_pose_only_where_the_description_models_it(plan_path):
     """A pick and a place across the base: the RoArm's description (singularity_model: roarm5) has a singular class

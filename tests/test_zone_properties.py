@@ -178,6 +178,7 @@ def sweep(arm: str, seeds: range) -> None:
     assert planned >= 0.5 * len(seeds), f"{arm}: only {planned} of {len(seeds)} draws planned (seeds {seeds})"
 
 
+@pytest.mark.slow  # plans and times generated plans on three arms: 10-30 s each idle (97 s for xarm6 at load 20)
 @pytest.mark.parametrize("arm", list(ARMS))
 def test_a_few_generated_plans_reach_their_targets(arm):
     sweep(arm, range(3))

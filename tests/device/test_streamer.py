@@ -216,6 +216,7 @@ def test_a_host_stall_makes_the_plan_wait_the_arm_stays_on_it_and_a_stalled_arm_
         run()
 
 
+@pytest.mark.slow  # plans the detour around the post first (62 s at load 20)
 def test_a_host_stall_in_a_detour_makes_the_run_late_never_cut_across_the_obstacle():
     """The move to the start around a post (tests/device/test_where_the_arm_is.py), streamed while the host stops
     for 0.4 s after one tick, at every tick of the detour in turn: the plan waits for the host (the next tick goes
