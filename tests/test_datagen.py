@@ -316,6 +316,26 @@ def test_appending_other_joints_or_cameras_is_refused(tmp_path):
         append_episodes(tmp_path / "ds", other, [])
 
 
+@pytest.mark.parametrize(("field", "value"), [("chunks_size", 0), ("data_files_size_in_mb", "big"), ("video_files_size_in_mb", None),
+                                             ("video_files_size_in_mb", -1.0), ("fps", [30]), ("features", 7)])
+def test_appending_to_a_dataset_whose_info_is_broken_is_an_input_error(tmp_path, field, value):
+    """A dataset's info.json is data: a missing or wrong field is an InputError naming the file (exit 2), not a
+    traceback, and the dataset is left as it was."""
+    from roarmctl.errors import InputError
+    from roarmctl.export.lerobot.dataset import append_episodes, write_dataset
+
+    eps = _synthetic([4, 3])
+    write_dataset(tmp_path / "ds", _spec(), eps[:1])
+    path = tmp_path / "ds" / "meta" / "info.json"
+    info = json.loads(path.read_text())
+    info[field] = value
+    path.write_text(json.dumps(info))
+    before = sorted((p.relative_to(tmp_path), p.read_bytes()) for p in tmp_path.rglob("*") if p.is_file())
+    with pytest.raises(InputError, match=r"info\.json"):
+        append_episodes(tmp_path / "ds", _spec(), eps[1:])
+    assert sorted((p.relative_to(tmp_path), p.read_bytes()) for p in tmp_path.rglob("*") if p.is_file()) == before
+
+
 # ------------------------------------------------------------------------------------------- whole runs
 def _generate(out: Path, workers: int = 1, **kw):
     from roarmctl.export.lerobot.datagen import DatagenOptions, generate

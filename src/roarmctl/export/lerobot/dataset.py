@@ -343,14 +343,21 @@ def read_info(root: str | Path) -> dict[str, Any]:
 
 
 def spec_of(root: str | Path) -> DatasetSpec:
-    """The ``DatasetSpec`` a dataset was written with."""
+    """The ``DatasetSpec`` a dataset was written with; ``InputError`` naming ``info.json`` when a field it needs
+    is missing or of the wrong kind."""
     info = read_info(root)
-    f = info["features"]
-    cams = {k.removeprefix("observation.images."): (int(v["shape"][0]), int(v["shape"][1])) for k, v in f.items() if v.get("dtype") == "video"}
-    return DatasetSpec(int(info["fps"]), str(info.get("robot_type")), list(f[STATE]["names"]), cams,
-                       chunks_size=int(info.get("chunks_size", CHUNKS_SIZE)),
-                       data_files_size_in_mb=float(info.get("data_files_size_in_mb", DATA_FILES_SIZE_IN_MB)),
-                       video_files_size_in_mb=float(info.get("video_files_size_in_mb", VIDEO_FILES_SIZE_IN_MB)))
+    try:
+        f = info["features"]
+        cams = {k.removeprefix("observation.images."): (int(v["shape"][0]), int(v["shape"][1])) for k, v in f.items()
+                if v.get("dtype") == "video"}
+        return DatasetSpec(int(info["fps"]), str(info.get("robot_type")), list(f[STATE]["names"]), cams,
+                           chunks_size=int(info.get("chunks_size", CHUNKS_SIZE)),
+                           data_files_size_in_mb=float(info.get("data_files_size_in_mb", DATA_FILES_SIZE_IN_MB)),
+                           video_files_size_in_mb=float(info.get("video_files_size_in_mb", VIDEO_FILES_SIZE_IN_MB)))
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError, InputError) as exc:
+        why = exc.message if isinstance(exc, InputError) else f"{type(exc).__name__}: {exc}"
+        raise InputError(f"{Path(root) / INFO_PATH}: not a dataset of this layout ({why})",
+                         "give a LeRobot v3.0 dataset written by roarmctl or lerobot, or a new folder") from None
 
 
 def read_episode_rows(root: str | Path) -> list[dict[str, Any]]:
