@@ -39,7 +39,6 @@ import numpy.typing as npt
 
 from roarmctl.api.planner import IKResult, JointPath, Planner, Pose, Validity
 from roarmctl.api.scene import Scene
-from roarmctl.device.sag import wanted
 from roarmctl.device.session import run_execution
 from roarmctl.device.streamer import StreamConfig
 from roarmctl.device.streamer import sample as _sample
@@ -64,7 +63,7 @@ from roarmctl.motion.pipeline import plan_file
 from roarmctl.motion.scene import SceneItem
 from roarmctl.motion.trajectory import Event, Segment, Trajectory
 from roarmctl.motion.validate import robot_of, validate_trajectory
-from roarmctl.physics.servo_backend import for_firmware
+from roarmctl.physics.sim_servos import check_servos, sim_servos
 from roarmctl.robot.loader import load_robot as _load
 from roarmctl.viz.formats import picture_format
 
@@ -200,19 +199,14 @@ def execute(traj: TrajectoryLike, *, port: str | None = None, sim: bool = False,
     (T:102/T:101 lines sent while streaming), ``lateness_ms``, ``tracking_mm``, ``final_error_mm``, ``log``;
     with ``sim``, ``simulator``: the simulated servos' true tracking.
     """
-    if servos not in ("physics", "ideal"):
-        raise InputError(f"servos: '{servos}' is not physics or ideal")
-    if servos != "physics" and not sim:
-        raise InputError("servos: only with sim=True (a real arm has its own servos)")
+    check_servos(servos, sim=sim)
     t = _trajectory(traj)
     robot = robot_of(t)
+    factory, sagged = sim_servos(robot, t, servos, sim=sim, sag=sag)
     cfg = StreamConfig(rate=rate, speed_scale=speed_scale, max_error=max_error, move_to_start=move_to_start,
-                       from_current=from_current, sag=wanted(sag, ideal=sim and servos == "ideal"))
-    factory = None
+                       from_current=from_current, sag=sagged)
     if sim:
         confirm = confirm or (lambda message: True)
-        if servos == "physics":
-            factory = for_firmware(robot, t)
     run = run_execution(t, robot, cfg, port=None if port is None else str(port), sim=sim, log_path=None if log is None else Path(log),
                         confirm=confirm or (lambda message: False), sim_servos=factory)
     summary = run.result.summary() | {"log": None if log is None else str(log), "port": run.port}

@@ -83,6 +83,7 @@ def execute(
     """
     from roarmctl.device.streamer import STRATEGIES, StreamConfig, build_schedule
     from roarmctl.motion.validate import robot_of, validate_trajectory
+    from roarmctl.physics.sim_servos import check_servos, sim_servos
 
     chosen = [n for n, v in (("--port", port), ("--sim", sim or None), ("--output", output)) if v]
     if len(chosen) != 1:
@@ -98,13 +99,10 @@ def execute(
     if given and not sim:
         raise InputError(f"{given[0]}: only with --sim (a real arm has its own firmware)")
     servos = servos or "physics"
-    if servos not in ("physics", "ideal"):
-        raise InputError(f"--servos: '{servos}' is not physics or ideal")
-    from roarmctl.device.sag import wanted
-
-    sag = wanted(sag, ideal=sim and servos == "ideal")
+    check_servos(servos, sim=sim)
     traj = validate_trajectory(traj_path)  # limits, speeds and steps: nothing unchecked reaches the port
     robot = robot_of(traj, str(traj_path))
+    factory, sag = sim_servos(robot, traj, servos, sim=sim, sag=sag)
     if move_to_start and from_current:
         raise InputError("give one of --move-to-start and --from-current, not both")
     cfg = StreamConfig(rate=rate, speed_scale=speed_scale, strategy=strategy, max_error=max_error / 1e3,
@@ -134,11 +132,6 @@ def execute(
         if (sim_config.firmware == "m2") != (model == "m2"):
             raise InputError(f"--firmware {sim_config.firmware}: the trajectory is for a RoArm-{(model or 'm3').upper()}",
                              "give the firmware of the arm it is for")
-    factory = None
-    if sim and servos == "physics":
-        from roarmctl.physics.servo_backend import for_firmware
-
-        factory = for_firmware(robot, traj)
     _run(traj, traj_path, robot, cfg, port, sim, yes, log or default_log_path(traj_path), json_out, factory, sim_config)
 
 

@@ -11,6 +11,7 @@ Modules (each one job):
   generic position servo for robots without servo data.
 * ``actuation``: which servo drives which joint, and how a firmware command becomes a servo goal.
 * ``servo_backend``: the physics servos behind the firmware simulator (``roarmctl.device``).
+* ``sim_servos``: which servos an execute's simulated arm runs (physics or ideal), for the CLI and the API alike.
 * ``run``: ``simulate``: a trajectory's commands (the streamer's schedule) played into the model.
 * ``report``: what a run measured (tracking, torque, TCP, contacts, objects) and its run file.
 
