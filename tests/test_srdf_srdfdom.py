@@ -22,6 +22,7 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from roarmctl.errors import DescriptionError
 from roarmctl.robot.loader import bundled_dir, load_robot
 from roarmctl.robot.srdf import srdfdom_values
 
@@ -192,3 +193,18 @@ def test_disable_default_collisions_allows_a_links_pairs_but_the_enabled_ones(tm
     assert robot.allowed_collisions == _expected_pairs(base, links, no_default, enabled - base.allowed_collisions)
     assert any(f"disable_default_collisions '{no_default[0]}'" in n for n in robot.notes), robot.notes
     assert summary(robot)[:2] == summary(base)[:2] and robot.named_poses.keys() == base.named_poses.keys()
+
+
+@pytest.mark.parametrize("value", ["9", "1e999", "-7.5"])
+def test_a_state_outside_the_limits_is_left_out_not_refused(tmp_path, value):
+    """srdfdom stores any number (1e999: the largest double) and MoveIt loads the robot with such a state; roarmctl's
+    named poses lie within the limits, so the state is left out with a note naming the joint, its value and limits.
+    The same pose written in the sidecar is still refused: the user's own file says something impossible."""
+    robot = load(tmp_path, pose=POSE.replace('value="0.2"', f'value="{value}"'))
+    assert "home" not in robot.named_poses
+    assert any("group_state 'home' left out: link2_to_link3 = " in n and "outside its limits" in n for n in robot.notes)
+    side = yaml.safe_load((tmp_path / "arm.yaml").read_text())
+    side["named_poses"] = {"bad": [0, 0, float(value) if value != "1e999" else 9.0, 0, 0]}
+    (tmp_path / "arm.yaml").write_text(yaml.safe_dump(side))
+    with pytest.raises(DescriptionError, match=r"named_poses.bad: link2_to_link3 = .* is outside its limits"):
+        load_robot(str(tmp_path / "arm.yaml"))

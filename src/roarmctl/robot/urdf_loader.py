@@ -55,7 +55,7 @@ def _moveit(side: dict, sidecar: Path, ordered: list[Joint], links: dict, actuat
     The copy's ``_driven`` holds the joints to drive when the sidecar lists none (the SRDF's arm and
     gripper groups' joints, passive joints left out), ``_notes`` what was left out."""
     side = dict(side)
-    side["_driven"], side["_notes"] = list(actuated), []
+    side["_driven"], side["_notes"], side["_srdf_poses"] = list(actuated), [], []
     jl: dict = {}
     if side.get("joint_limits") is not None:
         jl = read_joint_limits(sidecar.parent / str(side["joint_limits"]), {j.name for j in ordered if j.kind != "fixed"},
@@ -88,7 +88,9 @@ def _moveit(side: dict, sidecar: Path, ordered: list[Joint], links: dict, actuat
                                   "(give every arm joint a value, or define the pose in the sidecar's named_poses)")
             continue
         grip_value = [values[grip]] if grip is not None and grip in values and grip in names else []
-        poses.setdefault(pname, [values[n] for n in arm] + grip_value)
+        if pname not in poses:
+            poses[pname] = [values[n] for n in arm] + grip_value
+            side["_srdf_poses"].append(pname)
     side["named_poses"] = poses
     side["_driven"] = driven
     return side, jl
@@ -244,6 +246,14 @@ def from_urdf(urdf: Path, side: dict, sidecar: Path) -> Robot:
     acc_default = {n for n in names if "acceleration" not in jl.get(n, {})}
     common = common_fields(side, sidecar, names, np.array(urdf_vel), acc, np.array(urdf_eff),
                      {"velocity": vel_default, "acceleration": acc_default})
+    for pname in side.get("_srdf_poses", []):  # MoveIt loads a state outside the limits; a named pose lies within
+        pose = common["named_poses"].get(pname)
+        off = np.zeros(0, dtype=int) if pose is None else np.flatnonzero((pose < lower - 1e-6) | (pose > upper + 1e-6))
+        if pose is not None and len(off):
+            k = int(off[0])
+            del common["named_poses"][pname]
+            notes.append(f"{side['srdf']}: group_state '{pname}' left out: {names[k]} = {pose[k]:g} is outside its limits "
+                         f"[{lower[k]:g}, {upper[k]:g}] (MoveIt loads such a state; roarmctl's named poses lie within)")
     return Robot(
         name=str(side.get("name", root.get("name", urdf.stem))),
         source=str(side.get("source", urdf.name)),
