@@ -42,19 +42,29 @@ def test_sdk_joint_commands_move_the_simulated_arm(arm):
     client.echo_set(0)
     target = [0.4, -0.3, 1.2, 0.5, -0.6, 1.0]  # URDF convention; the SDK sends hand = pi - 1.0
     client.joints_radian_ctrl(radians=list(target), speed=2000, acc=0)
-    time.sleep(0.6)
-    got = client.joints_radian_get()
+    got = _until(client.joints_radian_get, lambda q: q == pytest.approx(target, abs=2 * COUNT))
     assert got == pytest.approx(target, abs=2 * COUNT)
     # single-joint command (T:101): wrist to -0.2
     client.joint_radian_ctrl(joint=4, radian=-0.2, speed=1500, acc=0)
-    time.sleep(0.5)
-    assert client.joints_radian_get()[3] == pytest.approx(-0.2, abs=2 * COUNT)
+    got = _until(client.joints_radian_get, lambda q: q[3] == pytest.approx(-0.2, abs=2 * COUNT))
+    assert got[3] == pytest.approx(-0.2, abs=2 * COUNT)
     # the simulator saw the SDK's own (spaced) JSON and executed it
     codes = [c["T"] for _, c in sim.received()]
     assert 102 in codes and 101 in codes and 605 in codes
 
 
-def _settle(client, want, index, tol, timeout=4.0):
+def _until(read, done, timeout: float = 60.0):
+    """``read()`` again until ``done(value)`` (the servos arrive on the simulator's clock, however busy the machine);
+    the last value. ``timeout`` (s, wall) only detects a hang."""
+    end = time.monotonic() + timeout
+    value = read()
+    while not done(value) and time.monotonic() < end:
+        time.sleep(0.05)
+        value = read()
+    return value
+
+
+def _settle(client, want, index, tol, timeout=60.0):
     """Poll the SDK's own feedback until ``value[index]`` is within ``tol`` of ``want`` (or time out)."""
     end = time.monotonic() + timeout
     got = None
@@ -74,8 +84,7 @@ def test_every_sdk_call_the_readme_lists(arm):
     client.dynamic_adaptation_set(mode=0, torques=[500] * 6)  # T:112: accepted, nothing moves
     # joints_angle_ctrl: T:122 in degrees; the SDK turns speed (steps/s) into deg/s, the firmware back
     client.joints_angle_ctrl(angles=[20, -10, 80, 15, -30, 40], speed=1200, acc=0)
-    time.sleep(0.1)
-    st = sim.state()
+    st = _until(sim.state, lambda st: st["move_spd"] == 1200)
     assert st["spd"][0] == 1200 and st["move_spd"] == 1200  # persistent, as the firmware's moveSpd
     got = _settle(client, [math.radians(v) for v in (20, -10, 80, 15, -30, 40)], range(4, 10), 2 * COUNT)
     assert client.joints_angle_get() == pytest.approx([20, -10, 80, 15, -30, 40], abs=math.degrees(2 * COUNT))
@@ -98,15 +107,12 @@ def test_every_sdk_call_the_readme_lists(arm):
     assert tit == pytest.approx(10, abs=0.3) and grip == pytest.approx(20, abs=0.3)
     # torque_set: T:210 off, the arm goes limp (the SDK then waits for feedback), on again
     client.torque_set(cmd=0)
-    time.sleep(0.1)
-    assert not any(sim.state()["torque"])
+    assert not any(_until(lambda: sim.state()["torque"], lambda t: not any(t)))
     client.torque_set(cmd=1)
-    time.sleep(0.1)
-    assert all(sim.state()["torque"])
+    assert all(_until(lambda: sim.state()["torque"], all))
     # move_init: a T:102 to the SDK's home pose at speed 100
     client.move_init()
-    time.sleep(0.1)
-    st = sim.state()
+    st = _until(sim.state, lambda st: st["spd"][2] == 100)
     assert st["spd"][2] == 100 and st["move_spd"] == 0  # a T:102 zeroes the shared moveSpd
     codes = {c["T"] for _, c in sim.received()}
     assert {605, 114, 112, 122, 121, 101, 1041, 105, 210, 102} <= codes
