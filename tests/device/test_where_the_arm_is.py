@@ -186,6 +186,12 @@ def test_from_current_replans_the_first_free_motion(tmp_path, capsys):
         log = json.loads((tmp_path / "pp.exec.json").read_text())
         # never went back to the trajectory's own start (home) before the pick
         assert log["duration"] < traj.duration + 1.0
+        # the log carries the trajectory that ran (planned from where the arm stood), not the file's
+        from roarmctl.device.execlog import carried_trajectory
+
+        ran = carried_trajectory(log)
+        assert ran is not None and ran.positions[0][ARM] == pytest.approx(q_away[ARM], abs=0.02)
+        assert np.abs(ran.positions[0][ARM] - traj.positions[0][ARM]).max() > 0.1
 
 
 def test_from_current_without_the_plan_file_replaces_the_first_free_motion(tmp_path, capsys):
