@@ -177,3 +177,22 @@ def test_codes_that_do_not_move_are_accepted_and_ignored():
     f.advance(0.5)
     assert (f.servos.goal == before).all() and f.servos.torque().all()
     assert f.pop_output(0.5) == b""
+
+
+def test_a_question_to_a_stalled_simulator_process_fails_instead_of_waiting_for_ever(monkeypatch):
+    """The simulator's child process stopped (SIGSTOP: it holds its state but runs nothing) must not hold its
+    caller: the question fails after the bound, naming that the process is still there, and the run can stop it."""
+    import os
+    import signal
+
+    from roarmctl.device import simulator
+    from roarmctl.device.simulator import PtySimulator
+
+    monkeypatch.setattr(simulator, "ASK_TIMEOUT", 0.5)
+    with PtySimulator(SimConfig(), process=True) as sim:
+        os.kill(sim._proc.pid, signal.SIGSTOP)
+        try:
+            with pytest.raises(RuntimeError, match=r"gave no answer to 'executed' within 0.5 s \(still running\)"):
+                sim.executed()
+        finally:
+            os.kill(sim._proc.pid, signal.SIGCONT)

@@ -69,6 +69,7 @@ LATE = 0.002  # a wake-up this much after the firmware's next event counts as la
 RECENT = 0.25  # s over which recent_lateness() takes its maximum
 SLICE = 0.05  # s of firmware time advanced between two looks at the stop flag
 JOIN = 10.0  # s stop() waits for the serving thread (it sees the stop within a SLICE of model time)
+ASK_TIMEOUT = 120.0  # s a question to the simulator's process may take (a recording of minutes, on a loaded machine)
 
 
 class _Server:
@@ -331,6 +332,11 @@ class PtySimulator:
             raise RuntimeError(f"the simulator has stopped; ask for {kind!r} before stop()")
         with self._lock:
             self._conn.send((kind,))
+            # bounded: a child that died or hangs must fail the caller, not hold it (and a test run) for ever
+            if not self._conn.poll(ASK_TIMEOUT):
+                alive = self._proc is not None and self._proc.is_alive()
+                raise RuntimeError(f"the simulator's process gave no answer to {kind!r} within {ASK_TIMEOUT:g} s "
+                                   f"({'still running' if alive else 'it has ended'})")
             return self._conn.recv()
 
     def recording(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
