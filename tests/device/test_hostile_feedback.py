@@ -69,11 +69,18 @@ def test_from_current_and_plan_port_refuse_it_too(away, tmp_path, capsys):
     assert rc2 == 4 and "base read 111111111111" in err2 and not (tmp_path / "here.traj.json").exists()
 
 
-def _hold_exec(sim, log: dict) -> tuple[float, dict]:
-    """(when the hold ran at the firmware, the hold's first copy) from the simulator's record and the log."""
+def _hold_exec(sim, log: dict, settle: float = 0.0, timeout: float = 60.0) -> tuple[float, dict]:
+    """(when the hold ran at the firmware, the hold's first copy) from the simulator's record and the log, once the
+    simulator's own clock has run ``settle`` s past it (its recording then shows the arm after the hold, however
+    busy the machine). ``timeout`` (s, wall) only detects a hang."""
     hold = [s for s in log["sent"] if s["cmd"]["T"] == 102][-log["hold"]["copies"]]
     t_sent = log["t0_monotonic"] + hold["t"]
-    runs = [(t, c) for _, t, c in sim.executed() if c == hold["cmd"] and t >= t_sent - 1e-3]
+    end = time.monotonic() + timeout
+    while True:
+        runs = [(t, c) for _, t, c in sim.executed() if c == hold["cmd"] and t >= t_sent - 1e-3]
+        if (runs and sim.recording()[0][-1] >= runs[0][0] + settle) or time.monotonic() > end:
+            break
+        time.sleep(0.02)
     assert runs, "the hold never ran"
     return runs[0][0], hold
 
@@ -83,9 +90,8 @@ def test_a_400_digit_number_mid_motion_is_exit_4_with_a_hold_and_a_valid_log(tmp
     pick_place().save(p)
     with PtySimulator(SimConfig(bogus=(Bogus("b", HUGE, 60, 0),)), process=True) as sim:
         rc = run_cli(["execute", str(p), "--port", sim.path, "--yes"])
-        time.sleep(0.3)
         log = json.loads(p.with_name("pp.exec.json").read_text())  # valid JSON
-        _t_hold, _hold = _hold_exec(sim, log)
+        _t_hold, _hold = _hold_exec(sim, log, settle=0.3)
         _, _, torque = sim.recording()
     err = capsys.readouterr().err
     assert rc == 4 and "feedback refused 5 times in a row: base read 111111111111" in err
@@ -99,9 +105,8 @@ def test_the_hold_after_a_feedback_jump_moves_no_joint_more_than_005_rad(tmp_pat
     # from the 150th motion command on, the elbow reads 2.9 rad (the servo is nowhere near)
     with PtySimulator(SimConfig(bogus=(Bogus("e", "2.9", 150, 0),)), process=True) as sim:
         rc = run_cli(["execute", str(p), "--port", sim.path, "--yes"])
-        time.sleep(0.6)
         log = json.loads(p.with_name("pp.exec.json").read_text())
-        _t_hold, hold = _hold_exec(sim, log)
+        _t_hold, hold = _hold_exec(sim, log, settle=0.6)
         ts, q, torque = sim.recording()
     err = capsys.readouterr().err
     assert rc == 4 and "elbow read 2.900 rad" in err and "faster than the servos can move" in err
@@ -120,9 +125,8 @@ def test_feedback_that_stops_ends_the_stream_within_half_a_second_with_a_hold_on
     pick_place().save(p)
     with PtySimulator(SimConfig(mute_after=100), process=True) as sim:
         rc = run_cli(["execute", str(p), "--port", sim.path, "--yes"])
-        time.sleep(0.3)
         log = json.loads(p.with_name("pp.exec.json").read_text())
-        t_hold, _hold = _hold_exec(sim, log)
+        t_hold, _hold = _hold_exec(sim, log, settle=0.3)
         muted_at = [t for _, t, c in sim.executed() if c.get("T") in MOTION][99]
     err = capsys.readouterr().err
     assert rc == 4 and "no feedback for" in err
@@ -143,9 +147,8 @@ def test_on_the_queuing_build_the_hold_reaches_the_servos_within_60_ms(tmp_path,
 
         threading.Thread(target=interrupt, daemon=True).start()
         rc = run_cli(["execute", str(p), "--port", sim.path, "--yes"])
-        time.sleep(0.3)
         log = json.loads(p.with_name("pp.exec.json").read_text())
-        t_hold, hold = _hold_exec(sim, log)
+        t_hold, hold = _hold_exec(sim, log, settle=0.3)
         late = sim.lateness()
         _, _, torque = sim.recording()
     assert rc == 130 and log["hold"]["flushed_queue"] and torque.all()
