@@ -454,7 +454,7 @@ def test_a_killed_run_resumes_to_the_same_dataset(dataset4, tmp_path):
             time.sleep(0.05)
     finally:
         proc.send_signal(signal.SIGKILL)
-        proc.wait()
+        proc.wait(timeout=60)
     staged = target / ".datagen"
     assert staged.is_dir() and not (target / "meta").exists()  # killed before the dataset was written
     r = roarmctl("datagen", str(TEMPLATE), "-n", "4", "-o", str(target), "--size", f"{SIZE}x{SIZE}")

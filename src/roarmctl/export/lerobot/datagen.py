@@ -49,6 +49,7 @@ FORMAT = "roarmctl.datagen/1"
 STAGES = ("sample", "plan", "physics", "render", "encode", "stage")
 RAY_STARTS = 3  # tries to start a local Ray (each given 30 s by Ray)
 POLL_S = 1.0  # s between looks at the running shards (progress, Ctrl-C)
+CLOSE_S = 60.0  # s a worker gets to finish its shard when the run ends early
 SHARD_CEILING_S = 3600.0  # s without any shard finishing: a worker hangs (a shard takes seconds to minutes)
 
 
@@ -203,8 +204,20 @@ class _Pool:
         return f.result(timeout=SHARD_CEILING_S)
 
     def close(self) -> None:
-        if self.executor is not None:
-            self.executor.shutdown(wait=True, cancel_futures=True)
+        """Stop the workers: queued shards cancelled, each worker given ``CLOSE_S`` to finish the shard it runs
+        (its tries are staged whole or not at all), then killed; a hung worker does not hold the run."""
+        if self.executor is None:
+            return
+        # the executor's own handles on its processes (Python 3.14 adds kill_workers() for this)
+        procs = list((self.executor._processes or {}).values())
+        self.executor.shutdown(wait=False, cancel_futures=True)
+        deadline = time.monotonic() + CLOSE_S
+        for proc in procs:
+            proc.join(max(0.0, deadline - time.monotonic()))
+            if proc.is_alive():
+                proc.kill()
+                proc.join(5.0)
+        self.executor = None
 
 
 def _children(pid: int) -> set[int]:
