@@ -96,11 +96,33 @@ def commanded_on_plan_clock(log: dict[str, Any], cmd: JointStates) -> tuple[np.n
         return cmd.times, cmd.positions
     rate = strategy_rate(strategy, rate)
     last = np.append(ticks[1:] != ticks[:-1], True) | (ticks < 0)
-    times = np.where(ticks >= 0, ticks / rate + target_offset(strategy, rate), cmd.times)[last]
+    on_plan = ticks / rate + target_offset(strategy, rate)
+    # a stream that lowered its rate for a slow firmware went on from each change's tick at the new rate (the log's
+    # rate_changes: the tick, its time, the new rate); one rate for the whole run put the later commands ever earlier
+    # on the plan, and their TCP speed spiked (10 m/s drawn for a 0.41 m/s plan)
+    for change in sorted(_rate_changes(log), key=lambda c: c[0]):
+        tick, t0, hz = change
+        later = ticks >= tick
+        on_plan[later] = t0 + (ticks[later] - tick) / hz + target_offset(strategy, hz)
+    times = np.where(ticks >= 0, on_plan, cmd.times)[last]
     duration = float(log.get("duration") or 0.0)
     if np.isfinite(duration) and duration > 0:
         times = np.minimum(times, duration)
     return times, cmd.positions[last]
+
+
+def _rate_changes(log: dict[str, Any]) -> list[tuple[int, float, float]]:
+    """(tick, its time on the run's clock in s, the rate from there in Hz) of each well-formed ``rate_changes``
+    entry of an execution log; malformed entries are left out (the log's own reader checks its fields)."""
+    out = []
+    for c in log.get("rate_changes") or []:
+        try:
+            tick, t0, hz = int(c["tick"]), float(c["t"]), float(c["to_hz"])
+        except (KeyError, TypeError, ValueError):
+            continue
+        if tick >= 0 and np.isfinite(t0) and np.isfinite(hz) and hz > 0:
+            out.append((tick, t0, hz))
+    return out
 
 
 def load_view_source(path: str | os.PathLike, trajectory: str | os.PathLike | None = None) -> ViewSource:
