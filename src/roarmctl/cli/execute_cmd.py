@@ -81,7 +81,7 @@ def execute(
     it is (torque stays on) and exits 130; a lost link exits 4. Every command and every feedback
     line is written to the execution log.
     """
-    from roarmctl.device.streamer import STRATEGIES, StreamConfig, build_schedule
+    from roarmctl.device.streamer import StreamConfig, build_schedule
     from roarmctl.motion.validate import robot_of, validate_trajectory
     from roarmctl.physics.sim_servos import check_servos, sim_servos
 
@@ -89,8 +89,6 @@ def execute(
     if len(chosen) != 1:
         raise InputError("give exactly one of --port PORT, --sim, --output FILE" + (f" (got {', '.join(chosen)})" if chosen else ""),
                          "e.g. roarmctl execute pick_place.traj.json --port /dev/ttyUSB0")
-    if strategy not in STRATEGIES:
-        raise InputError(f"--strategy: unknown '{strategy}'", f"choose one of {', '.join(STRATEGIES)}")
     if not 0 < max_error <= 1000:  # StreamConfig's bound is in m; a NaN is refused here too
         raise InputError(f"--max-error: {max_error:g} mm is outside (0, 1000]", "the TCP tracking bound, e.g. 30")
     if servos is not None and not sim:
