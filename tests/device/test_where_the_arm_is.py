@@ -77,6 +77,12 @@ def plan_text(start: str = "home", obstacles: str = "", end: str = "  - move: {p
             "limits: {" + limits + "}\nplanner: {seed: 2}\n")
 
 
+def about_the_start(notes: list[str]) -> list[str]:
+    """A run's notes but the stream's own pacing ("rate lowered ...": on a busy machine the firmware's answers come
+    late and the stream slows down for them, as it should), which say nothing about where the arm started."""
+    return [n for n in notes if not n.startswith("rate lowered")]
+
+
 def test_start_current_after_the_arm_was_moved_by_hand(tmp_path, capsys):
     plan = tmp_path / "here.yaml"
     plan.write_text(plan_text(start="current"))
@@ -94,7 +100,7 @@ def test_start_current_after_the_arm_was_moved_by_hand(tmp_path, capsys):
         assert traj.positions[0] == pytest.approx(measured(sim), abs=1e-6)
         rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--json"])  # no flag needed: it is there
         assert rc == 0, capsys.readouterr().err
-        assert json.loads(capsys.readouterr().out)["notes"] == []
+        assert about_the_start(json.loads(capsys.readouterr().out)["notes"]) == []
 
 
 def test_the_demo_trajectory_runs_twice_in_a_row(tmp_path, capsys):
@@ -109,7 +115,7 @@ def test_the_demo_trajectory_runs_twice_in_a_row(tmp_path, capsys):
             assert rc == 0 and res["outcome"] == "completed", (run, res)
             # it ended where it started: nothing to re-plan (at most the gripper, whose servo may still be
             # creeping to its last goal at the final command's low speed, is closed the last bit first)
-            assert all("gripper differs" in n for n in res["notes"]), res["notes"]
+            assert all("gripper differs" in n for n in about_the_start(res["notes"])), res["notes"]
             at = measured(sim)
             assert at[ARM] == pytest.approx(traj.positions[-1][ARM], abs=0.01)
             assert abs(at[GI] - traj.positions[-1][GI]) < 0.35  # the streamer's gripper start tolerance
