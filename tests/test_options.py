@@ -17,11 +17,13 @@ from roarmctl.device.options import STREAM_BOUNDS, StreamConfig
 from roarmctl.errors import OptionError
 from roarmctl.export import EXPORT_BOUNDS, ExportOptions
 from roarmctl.motion.options import LIMITS_BOUNDS, PLANNER_BOUNDS, Limits, PlannerConfig
+from roarmctl.physics.run import SIMULATE_BOUNDS
+from roarmctl.physics.run import Options as SimulateOptions
 from roarmctl.viz.web.server import VIEW_BOUNDS, ViewOptions
 
 #: every options object of the library and the bounds it checks against
 OPTIONS: list[tuple[type, dict]] = [(Limits, LIMITS_BOUNDS), (PlannerConfig, PLANNER_BOUNDS), (StreamConfig, STREAM_BOUNDS),
-                                    (ExportOptions, EXPORT_BOUNDS), (ViewOptions, VIEW_BOUNDS)]
+                                    (ExportOptions, EXPORT_BOUNDS), (ViewOptions, VIEW_BOUNDS), (SimulateOptions, SIMULATE_BOUNDS)]
 FIELDS = [(cls, f.name, bounds[f.name] if f.name in bounds else None) for cls, bounds in OPTIONS
           for f in dataclasses.fields(cls)]
 BAD_NUMBERS = [math.nan, math.inf, -math.inf, -1.0, 1e300, -1e300, "1", True, [1.0]]

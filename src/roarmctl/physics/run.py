@@ -23,10 +23,19 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from roarmctl.checks import Bound, check_options
 from roarmctl.device.fwmath import command_to_goal
 from roarmctl.device.protocol import M3_FIELDS
-from roarmctl.device.schedule import DEFAULT_STRATEGY, build_schedule, default_latency, sample
+from roarmctl.device.schedule import (
+    DEFAULT_STRATEGY,
+    MAX_LINK_RATE,
+    STRATEGIES,
+    build_schedule,
+    default_latency,
+    sample,
+)
 from roarmctl.errors import RoarmError
+from roarmctl.formats import MIN_SPEED_SCALE
 from roarmctl.physics.actuation import Actuation
 from roarmctl.physics.contacts import Episode, Episodes, Policy
 from roarmctl.physics.servo_backend import PhysicsServos, physics_step
@@ -41,11 +50,26 @@ if TYPE_CHECKING:
 CONTACT_EVERY = 2  # physics steps between two looks at the contacts (2 ms: an episode shorter than that is missed)
 
 
-@dataclass
+SIMULATE_BOUNDS: dict[str, Bound] = {
+    "rate": Bound(0.0, MAX_LINK_RATE, strict_lo=True),  # Hz, as execute's
+    "strategy": Bound(choices=tuple(STRATEGIES)),
+    "speed_scale": Bound(MIN_SPEED_SCALE, 1.0),
+    "settle": Bound(0.0, 60.0),  # s
+    "tolerance": Bound(1e-4, 1.0),  # m
+    "track_rate": Bound(0.0, 1000.0, strict_lo=True),  # Hz
+    "feedback_rate": Bound(0.0, 1000.0, strict_lo=True),  # Hz
+    "sag": Bound(flag=True),
+    "frame_rate": Bound(0.0, 1000.0),  # Hz; 0: no frames
+}
+
+
+@dataclass(frozen=True)
 class Options:
     """How to run: the streamer's ``rate`` (Hz), ``strategy`` and ``speed_scale``; ``settle`` (s) after the
     last command; ``tolerance`` (m) of a placement; ``track_rate`` (Hz) of the run file's tracks and
-    ``feedback_rate`` (Hz) of its feedback lines."""
+    ``feedback_rate`` (Hz) of its feedback lines. Checks its own fields when made (``SIMULATE_BOUNDS``: NaN,
+    infinities, wrong types and values out of range raise ``OptionError`` naming the field), as execute's
+    ``StreamConfig`` does; simulate (CLI and API) and datagen's episodes build one."""
 
     rate: float = 50.0  # roarmctl.device.schedule.DEFAULT_RATE
     strategy: str = DEFAULT_STRATEGY  # what execute sends by default
@@ -56,6 +80,9 @@ class Options:
     feedback_rate: float = 25.0
     sag: bool = True  # the schedule's sag compensation (roarmctl.device.sag), on as execute sends it by default
     frame_rate: float = 0.0  # Hz: the whole state (MuJoCo qpos) at frame k / frame_rate, for rendering (0: none)
+
+    def __post_init__(self) -> None:
+        check_options(self, SIMULATE_BOUNDS)
 
 
 @dataclass
