@@ -78,17 +78,18 @@ def simulate(
     options = Options(rate=rate, strategy=strategy, speed_scale=speed_scale, settle=settle, tolerance=tolerance / 1e3,
                       sag=wanted(sag))  # execute's default: the physics servos sag
     sag = options.sag
-    if robot.wire:
+    schedule = None
+    if robot.wire:  # built once, here: its input errors come before the model is built
         from roarmctl.device.schedule import build_schedule
 
-        build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy, sag=sag)  # its input errors first
+        schedule = build_schedule(traj, robot, rate=rate, speed_scale=speed_scale, strategy=strategy, sag=sag)
     motion = traj.duration / speed_scale + settle
     if speed_scale < 1.0 and motion > LONG_RUN_S:  # physics costs per simulated second: 1,000x slower, 1,000x longer
         common.warn(f"--speed-scale {speed_scale:g} makes {motion:,.0f} s of motion to simulate ({1 / speed_scale:,.0f}x "
                     f"the trajectory's {traj.duration:.1f} s; the physics takes about as long or longer): give a larger "
                     "--speed-scale, or Ctrl-C to stop")
     setup = build(traj, robot)
-    setup, rec = _with_progress(lambda progress: run(traj, robot, options, setup=setup, progress=progress),
+    setup, rec = _with_progress(lambda progress: run(traj, robot, options, setup=setup, progress=progress, schedule=schedule),
                                 traj.duration / speed_scale + settle, json_out)
     report = measure(traj, robot, setup, rec, options)
     if output is not None:

@@ -45,6 +45,7 @@ from roarmctl.robot.dynamics import inverse_dynamics
 from roarmctl.robot.model import Robot
 
 if TYPE_CHECKING:
+    from roarmctl.device.schedule import Tick
     from roarmctl.motion.trajectory import Trajectory
 
 CONTACT_EVERY = 2  # physics steps between two looks at the contacts (2 ms: an episode shorter than that is missed)
@@ -109,9 +110,12 @@ class Recording:
 
 
 def simulate(traj: Trajectory, robot: Robot, options: Options | None = None, *, setup: Setup | None = None,
-             progress: Callable[[float, float], None] | None = None) -> tuple[Setup, Recording]:
+             progress: Callable[[float, float], None] | None = None,
+             schedule: list[Tick] | None = None) -> tuple[Setup, Recording]:
     """Run ``traj`` on the physics model of ``robot``; ``progress(done_s, total_s)`` is called about every
-    0.1 s of simulated time. Returns the setup and what was recorded."""
+    0.1 s of simulated time. ``schedule``: the streamer's schedule of ``traj`` under ``options`` when the caller
+    built it already (to refuse its input errors before the model is built), else built here. Returns the setup and
+    what was recorded."""
     options = options or Options()
     setup = setup or build(traj, robot)
     world, act = setup.world, setup.actuation
@@ -120,7 +124,7 @@ def simulate(traj: Trajectory, robot: Robot, options: Options | None = None, *, 
     rec = _Recorder(world, act, policy, options)
     t_wall, t_cpu = time.perf_counter(), time.thread_time()
     if act.streamed:
-        _drive_streamed(traj, robot, setup, options, rec, progress)
+        _drive_streamed(traj, robot, setup, options, rec, progress, schedule)
     else:
         _drive_generic(traj, robot, setup, options, rec, progress)
     out = rec.result()
@@ -194,10 +198,11 @@ def _progress_every(total: float, progress: Callable[[float, float], None] | Non
 
 
 def _drive_streamed(traj: Trajectory, robot: Robot, setup: Setup, options: Options, rec: _Recorder,
-                    progress: Callable[[float, float], None] | None) -> None:
+                    progress: Callable[[float, float], None] | None, schedule: list[Tick] | None = None) -> None:
 
-    schedule = build_schedule(traj, robot, rate=options.rate, speed_scale=options.speed_scale, strategy=options.strategy,
-                              sag=options.sag)
+    if schedule is None:
+        schedule = build_schedule(traj, robot, rate=options.rate, speed_scale=options.speed_scale,
+                                  strategy=options.strategy, sag=options.sag)
     latency = default_latency(options.rate)
     servos = PhysicsServos(setup.world, setup.actuation, traj.positions[0], recorder=rec)
     rec()  # the state at time 0
