@@ -31,13 +31,12 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 
 def run(traj, robot, loop_pass: float, stop: float | None = None) -> dict:
-    from test_streamer import FakeClock, queued_link
-
     from roarmctl.device.protocol import WireMap, encode
     from roarmctl.device.streamer import StreamConfig, Streamer
+    from roarmctl.device.virtual import VirtualClock, queued_link
     from roarmctl.errors import Interrupted
 
-    clock = FakeClock()
+    clock = VirtualClock()
     link = queued_link(clock, loop_pass)
     link.fw.receive(encode(WireMap(robot).command(traj.positions[0], 0, 0)), clock())  # the arm at the start
     clock.now += 3.0

@@ -8,16 +8,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_streamer import ROBOT, FakeClock, FakeLink, traj
+from test_streamer import ROBOT, traj
 
 from roarmctl.device.execlog import write_log
 from roarmctl.device.streamer import StreamConfig, Streamer
+from roarmctl.device.virtual import VirtualClock, VirtualLink
 from roarmctl.export import streams_for
 
 
 def test_export_of_a_paused_run_holds_the_plan_and_matches_the_streamers_tracking(tmp_path: Path) -> None:
-    clock = FakeClock()
-    link = FakeLink(clock)
+    clock = VirtualClock()
+    link = VirtualLink(clock)
     t = traj(1.0)
 
     def hook(k: int) -> None:

@@ -10,11 +10,11 @@ import math
 import numpy as np
 import pytest
 from test_follow_guard import CHECKER, HOME, ROBOT
-from test_streamer import FakeClock, FakeLink
 
 from roarmctl.device.follow import FollowConfig, Follower, SourceEnded
 from roarmctl.device.follow_guard import GuardLimits, SourceLost, Target
 from roarmctl.device.protocol import WireMap
+from roarmctl.device.virtual import VirtualClock, VirtualLink
 from roarmctl.errors import Interrupted
 
 WM = WireMap(ROBOT)
@@ -55,8 +55,8 @@ def ramp_frames(t0: float, a, b, n: int, hz: float = 10.0) -> list:
 
 
 def follow(frames, **guard):
-    clock = FakeClock()
-    link = FakeLink(clock)
+    clock = VirtualClock()
+    link = VirtualLink(clock)
     src = ScriptSource([(clock.now + 0.5 + t, q) for t, q in frames])
     fol = Follower(link, ROBOT, CHECKER, src, FollowConfig(guard=GuardLimits(**guard)), clock=clock, sleep=clock.sleep,
                    timer=lambda: 0.0)

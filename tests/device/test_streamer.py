@@ -1,4 +1,4 @@
-"""The streaming loop with an injected clock and a fake link: deterministic schedule, speed scale,
+"""The streaming loop on the virtual clock and link (roarmctl.device.virtual): deterministic schedule, speed scale,
 interrupt -> hold, abort on tracking error. No serial port, no real time."""
 
 from __future__ import annotations
@@ -7,69 +7,13 @@ import numpy as np
 import pytest
 from devtraj import HOME, min_jerk
 
-from roarmctl.device.link import Received
-from roarmctl.device.protocol import WireMap, encode, parse_feedback_report
-from roarmctl.device.simulator import Firmware, SimConfig
+from roarmctl.device.protocol import WireMap, encode
 from roarmctl.device.streamer import StreamConfig, Streamer, build_schedule
+from roarmctl.device.virtual import VirtualClock, VirtualLink, queued_link
 from roarmctl.errors import DeviceError, InfeasibleError, Interrupted
 from roarmctl.robot.loader import load_robot
 
 ROBOT = load_robot("roarm_m3_pro")
-
-
-class FakeClock:
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
-
-    def sleep(self, dt: float) -> None:
-        self.now += max(0.0, dt)
-
-
-class FakeLink:
-    """The pure firmware model behind a link-shaped object, on the fake clock (ideal, instant wire)."""
-
-    port = "fake"
-    firmware = "m3-0.84"
-
-    def __init__(self, clock: FakeClock, write_latency: float = 0.0, stall: bool = False) -> None:
-        self.clock = clock
-        self.fw = Firmware(SimConfig(info_print=0, deaf=stall), t0=clock())
-        self.sent: list[tuple[float, dict]] = []
-        self.received: list[Received] = []
-        self.write_latency = write_latency
-
-    def send(self, cmd: dict, fresh_line: bool = False) -> float:
-        t = self.clock()
-        self.clock.now += self.write_latency  # a slow driver: the schedule must not drift
-        self.sent.append((t, cmd))
-        self.fw.receive((b"\n" if fresh_line else b"") + encode(cmd), t)
-        return t
-
-    def poll(self) -> list[Received]:
-        self.fw.advance(self.clock())
-        out = []
-        for raw in self.fw.pop_output(self.clock()).split(b"\r\n"):
-            if raw:
-                out.append(Received(self.clock(), raw.decode(), parse_feedback_report(raw)))
-        self.received += out
-        return out
-
-    def request(self, timeout: float = 0.3, earlier: int = 0):
-        from roarmctl.device.protocol import feedback_request
-
-        self.send(feedback_request())
-        end = self.clock() + timeout
-        while self.clock() < end:
-            self.clock.now += 0.005
-            for r in self.poll():
-                if r.feedback is not None:
-                    if earlier <= 0:
-                        return r
-                    earlier -= 1
-        return None
 
 
 def traj(dur=1.0):
@@ -77,8 +21,8 @@ def traj(dur=1.0):
 
 
 def test_absolute_schedule_without_drift_despite_write_latency():
-    clock = FakeClock()
-    link = FakeLink(clock, write_latency=0.003)
+    clock = VirtualClock()
+    link = VirtualLink(clock, write_latency=0.003)
     st = Streamer(link, ROBOT, traj(), StreamConfig(rate=50, settle=0.0), clock=clock, sleep=clock.sleep)
     res = st.run()
     sends = [(t, c) for t, c in link.sent if c["T"] == 102]
@@ -98,8 +42,8 @@ def test_speed_scale_doubles_times_and_halves_speeds():
 
 
 def test_interrupt_at_tick_k_holds_on_the_planned_path_never_beyond_the_last_set_point_and_never_torque_off():
-    clock = FakeClock()
-    link = FakeLink(clock)
+    clock = VirtualClock()
+    link = VirtualLink(clock)
 
     def hook(k):
         if k == 20:
@@ -133,8 +77,8 @@ def test_a_hold_lost_to_a_full_receive_buffer_is_sent_again_and_runs():
     up at its UART: the ESP32's receive buffer (256 + 128 bytes) loses the newest bytes, the hold's line among them,
     and the T:105 behind it. The second copy of the hold, sent once the firmware has read what came before, runs.
     (Before: one copy, lost; the arm went on to its last set-point.)"""
-    clock = FakeClock()
-    link = FakeLink(clock)
+    clock = VirtualClock()
+    link = VirtualLink(clock)
 
     def hook(k):
         if k == 20:
@@ -155,8 +99,8 @@ def test_a_hold_lost_to_a_full_receive_buffer_is_sent_again_and_runs():
 
 
 def test_stalled_arm_aborts_on_tracking_error():
-    clock = FakeClock()
-    link = FakeLink(clock, stall=True)
+    clock = VirtualClock()
+    link = VirtualLink(clock, stall=True)
     link.fw.info_print = 2  # a deaf device still streams its (unchanging) pose
     st = Streamer(link, ROBOT, traj(0.6), StreamConfig(rate=50, max_error=0.01), clock=clock, sleep=clock.sleep)
     with pytest.raises(DeviceError, match="tracking error"):
@@ -164,8 +108,8 @@ def test_stalled_arm_aborts_on_tracking_error():
 
 
 def test_start_far_from_first_point_is_refused():
-    clock = FakeClock()
-    link = FakeLink(clock)
+    clock = VirtualClock()
+    link = VirtualLink(clock)
     t = min_jerk([[0.5, 0.0, 1.5708, 0, 0, 0], [0.6, 0.0, 1.5708, 0, 0, 0]], [0.5])
     with pytest.raises(InfeasibleError, match=r"base_link_to_link1 is 0\.1 deg, the start is 28\.6 deg"):
         Streamer(link, ROBOT, t, StreamConfig(), clock=clock, sleep=clock.sleep).run()
@@ -186,8 +130,8 @@ def test_a_host_stall_makes_the_plan_wait_the_arm_stays_on_it_and_a_stalled_arm_
     order, and the arm, stopped on the path meanwhile, is compared with the plan's own time: no tracking error
     beyond what a run without the stall has. The same stall with an arm that does not follow still aborts."""
     def stalled_at(k_stall: float, stall: float, deaf: bool, max_error: float = 0.03):
-        clock = FakeClock()
-        link = FakeLink(clock, stall=deaf)
+        clock = VirtualClock()
+        link = VirtualLink(clock, stall=deaf)
         if deaf:
             link.fw.info_print = 2
 
@@ -247,8 +191,8 @@ def test_a_host_stall_in_a_detour_makes_the_run_late_never_cut_across_the_obstac
     wm = WireMap(ROBOT)
     n_ticks = len(build_schedule(detour, ROBOT, rate=50))
     for j in range(0, n_ticks - 1, 2):
-        clock = FakeClock()
-        link = FakeLink(clock)
+        clock = VirtualClock()
+        link = VirtualLink(clock)
         link.fw.receive(encode(wm.command(q_away, 0, 0)), clock())  # the arm stands on the far side of the post
         clock.now += 3.0
         link.fw.advance(clock())
@@ -270,31 +214,6 @@ def test_a_host_stall_in_a_detour_makes_the_run_late_never_cut_across_the_obstac
 
 
 # ----------------------------------------------------------------------------- a slow 20260701 loop
-def queued_link(clock: FakeClock, loop_pass: float) -> FakeLink:
-    """The 20260701 build (one queued line per loop pass) with passes of ``loop_pass`` s, its round trip and time per
-    line measured as connect() measures them (T:105 alone; six filler lines ahead of one)."""
-    from roarmctl.device.link import DeviceInfo
-    from roarmctl.device.protocol import quiet_command
-
-    link = FakeLink(clock)
-    link.firmware = "m3-2026"
-    base = 6 * 0.0005 * 1.3 + 0.002  # the model's own pass on that build: six servo reads and its other work
-    link.fw = Firmware(SimConfig(firmware="m3-2026", info_print=0, loop_period=loop_pass - base), t0=clock())
-    rtts = []
-    for _ in range(3):
-        t0 = clock()
-        rtts.append(link.request(0.5).t - t0)
-    t0 = clock()
-    for _ in range(6):
-        link.send(quiet_command())
-    r = link.request(1.0)
-    line_time = (r.t - t0 - min(rtts)) / 6
-    link.info = DeviceInfo("m3-2026", float(np.median(rtts)), line_time, True, False, False, r.feedback)
-    link.sent.clear()
-    link.received.clear()
-    return link
-
-
 def pick_like(dur=2.0):
     """An arm move with the gripper closing on the way (its own T:101 lines beside the T:102)."""
     return min_jerk([HOME, [0.8, 0.3, 1.9, -0.5, 0.3, 1.2], [-0.4, 0.2, 1.6, 0.2, -0.3, 0.2]], [dur / 2, dur / 2])
@@ -306,7 +225,7 @@ def test_a_slow_queued_loop_is_paced_by_its_measured_time_the_rate_lowered_and_i
     it (plus the line ahead of it), the motion ends when planned (the rate was lowered so the firmware keeps up), and
     the log has the firmware's lag. Before: 12 lines in flight by count and an allowance that grew with the lag
     measured: at 22 ms a pass lines waited 230-270 ms and the motion ran 7.6 s long on the bundled pick and place."""
-    clock = FakeClock()
+    clock = VirtualClock()
     link = queued_link(clock, loop_pass)
     t = pick_like()
     st = Streamer(link, ROBOT, t, StreamConfig(rate=50, settle=0.0), clock=clock, sleep=clock.sleep)
@@ -340,7 +259,7 @@ def test_the_queued_hold_stops_where_the_firmware_stopped_never_ahead_never_back
     taus = np.linspace(0.0, t.duration, 4001)
     path = sample(t, taus)
     for stop in (0.2, 0.35, 0.5, 0.65, 0.8):
-        clock = FakeClock()
+        clock = VirtualClock()
         link = queued_link(clock, 0.022)
         st = Streamer(link, ROBOT, t, StreamConfig(rate=50), clock=clock, sleep=clock.sleep)
 

@@ -37,7 +37,7 @@ from roarmctl.device.protocol import SAFE_WIRE_RANGE, STEPS_PER_RAD, Feedback, W
 from roarmctl.errors import DeviceError
 
 if TYPE_CHECKING:
-    from roarmctl.device.link import Link
+    from roarmctl.device.link import LinkLike
     from roarmctl.robot.model import Robot
 
 COUNT = 1.0 / STEPS_PER_RAD  # one servo step, rad
@@ -225,7 +225,7 @@ def _field_of(problem: str) -> str | None:
     return head if head in protocol.M3_FIELDS else None
 
 
-def read_valid(link: Link, validator: FeedbackValidator, n: int = 2, tries: int = 8, timeout: float = 0.5,
+def read_valid(link: LinkLike, validator: FeedbackValidator, n: int = 2, tries: int = 8, timeout: float = 0.5,
                on_refused: Callable[[Any, Refusal], None] | None = None) -> Reading:
     """Ask ``link`` (``request(timeout) -> Received | None``) for frames until ``n`` in a row were
     accepted (the speed check makes consecutive frames agree); return the last. ``on_refused``

@@ -37,7 +37,7 @@ from roarmctl.device.protocol import WireMap, spd_register
 from roarmctl.errors import DeviceError, InputError, Interrupted, signal_name
 
 if TYPE_CHECKING:
-    from roarmctl.device.link import Link, Received
+    from roarmctl.device.link import LinkLike, Received
     from roarmctl.motion.collision import CollisionChecker
     from roarmctl.robot.model import Robot
 
@@ -121,7 +121,7 @@ class Follower:
     refusal and end (the screen). ``extra_lateness() -> s``: how late the device itself is (the simulator
     measures its own), added to the time a poll may stay unanswered."""
 
-    def __init__(self, link: Link, robot: Robot, checker: CollisionChecker, source: Source,
+    def __init__(self, link: LinkLike, robot: Robot, checker: CollisionChecker, source: Source,
                  config: FollowConfig | None = None, *, clock: Callable[[], float] = time.monotonic,
                  sleep: Callable[[float], None] = time.sleep, timer: Callable[[], float] = time.perf_counter,
                  on_event: Callable[[str], None] | None = None,

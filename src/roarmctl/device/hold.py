@@ -20,12 +20,12 @@ from roarmctl.device import protocol
 from roarmctl.device.protocol import WireMap
 
 if TYPE_CHECKING:
-    from roarmctl.device.link import Link, Received
+    from roarmctl.device.link import LinkLike, Received
 
 HOLD_SPD = 600  # the firmware's own ARM_SERVO_INIT_SPEED, steps/s: the least speed of a hold
 
 
-def flush_queue(link: Link, outstanding: int, clock: Callable[[], float], sleep: Callable[[float], None],
+def flush_queue(link: LinkLike, outstanding: int, clock: Callable[[], float], sleep: Callable[[float], None],
                 timeout: float = 0.3) -> list[Received]:
     """On the build that queues lines (20260701): flush its queue, then ask where the arm is. Returns the feedback
     read after the flush, in order: the answers to those of the ``outstanding`` polls sent before that ran before the
@@ -40,7 +40,7 @@ def flush_queue(link: Link, outstanding: int, clock: Callable[[], float], sleep:
     return answers_after_flush(link, outstanding, clock, sleep, timeout)
 
 
-def send_hold(link: Link, wm: WireMap, wire: np.ndarray, spd: int, *, kind: str, cause: str, earlier: int = 0,
+def send_hold(link: LinkLike, wm: WireMap, wire: np.ndarray, spd: int, *, kind: str, cause: str, earlier: int = 0,
               on_answer: Callable[[Received], object] | None = None, clock: Callable[[], float] | None = None,
               sleep: Callable[[float], None] | None = None, flushed: bool = False) -> dict[str, Any]:
     """Send the hold to firmware radians ``wire`` (fields order) at ``spd`` steps/s (at least ``HOLD_SPD``);
@@ -82,7 +82,7 @@ def send_hold(link: Link, wm: WireMap, wire: np.ndarray, spd: int, *, kind: str,
     return info
 
 
-def answers_after_flush(link: Link, outstanding: int, clock: Callable[[], float], sleep: Callable[[float], None],
+def answers_after_flush(link: LinkLike, outstanding: int, clock: Callable[[], float], sleep: Callable[[float], None],
                         timeout: float = 0.3) -> list[Received]:
     """Send a T:105 after a flushed queue and return the feedback read, its answer last (none if nothing came within
     ``timeout`` s).

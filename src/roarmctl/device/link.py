@@ -18,7 +18,7 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 from roarmctl.device import espnow, protocol
 from roarmctl.device.espnow import EspNowMode
@@ -103,6 +103,61 @@ class DeviceInfo:
                 "was_booting": self.booted, "voltage_v": self.voltage, "torque": self.torque, "sent": self.sent,
                 "waited_for": self.waited,
                 "esp_now": None if self.esp_now is None else dict(self.esp_now.as_dict(), restored_on_close=True)}
+
+
+class LinkLike(Protocol):
+    """What the streamer, the follower and the hold use of a link: ``Link`` on a serial port, or
+    ``roarmctl.device.virtual.VirtualLink`` (the firmware model on a virtual clock, for tests and benches).
+    Times are the link's ``clock`` (s)."""
+
+    @property
+    def port(self) -> str:
+        """The port's name (for messages and the log)."""
+        ...
+
+    @property
+    def firmware(self) -> str | None:
+        """The build ``connect()`` found ("m3-0.84", "m3-2026", "m2")."""
+        ...
+
+    @property
+    def info(self) -> DeviceInfo | None:
+        """What ``connect()`` measured."""
+        ...
+
+    @property
+    def sent(self) -> list[tuple[float, dict[str, Any]]]:
+        """Every line written, with its time, in order."""
+        ...
+
+    @property
+    def received(self) -> list[Received]:
+        """Every line read, in order."""
+        ...
+
+    @property
+    def clock(self) -> Callable[[], float]:
+        """The link's clock (s)."""
+        ...
+
+    @property
+    def sleep(self) -> Callable[[float], None]:
+        """Wait on the link's clock (s)."""
+        ...
+
+    def send(self, cmd: dict[str, Any], fresh_line: bool = False) -> float:
+        """Write one command line; return the time it was handed over."""
+        ...
+
+    def poll(self) -> list[Received]:
+        """The complete lines that have arrived (without waiting), parsed."""
+        ...
+
+    def request(self, timeout: float = 0.3, ahead: list[dict[str, Any]] | None = None,
+                earlier: int = 0) -> Received | None:
+        """Send ``T:105`` after the lines ``ahead`` and wait up to ``timeout`` s for its answer, passing over the
+        ``earlier`` answers due before it; None on timeout."""
+        ...
 
 
 class Link:

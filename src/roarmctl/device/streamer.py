@@ -59,7 +59,7 @@ from roarmctl.device.stream_result import Result, Status, run_log, tcp
 from roarmctl.errors import DeviceError, InfeasibleError, Interrupted, signal_name
 
 if TYPE_CHECKING:
-    from roarmctl.device.link import Link, Received
+    from roarmctl.device.link import LinkLike, Received
     from roarmctl.motion.trajectory import Trajectory
     from roarmctl.robot.model import Robot
 
@@ -96,7 +96,7 @@ class _Abort(Exception):
 
 
 class Streamer:
-    """Run one trajectory over an open, connected ``Link``.
+    """Run one trajectory over an open, connected link (``LinkLike``: a ``Link``, or a ``VirtualLink`` in tests).
 
     ``clock``/``sleep`` are injectable (tests); ``on_status(Status)`` is called after each tick
     (the live display; ``on_start()`` before the first); ``hook(k)`` is called before tick k is sent
@@ -108,7 +108,7 @@ class Streamer:
     real ESP32 has none), added to the tracking check's time window.
     """
 
-    def __init__(self, link: Link, robot: Robot, traj: Trajectory, config: StreamConfig | None = None, *,
+    def __init__(self, link: LinkLike, robot: Robot, traj: Trajectory, config: StreamConfig | None = None, *,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
                  on_status: Callable[[Status], None] | None = None, hook: Callable[[int], None] | None = None,
                  confirm: Callable[[str], bool] | None = None, on_start: Callable[[], None] | None = None,

@@ -1,0 +1,124 @@
+"""The firmware model behind a link-shaped object, on a virtual clock: the streamer, the follower and the hold run
+against it with no serial port and no real time, so the same inputs give the same bytes on an idle or a busy machine.
+
+``VirtualClock`` is a clock (``clock()``, s) and its ``sleep``, which advances it and waits for nothing;
+``VirtualLink`` is a ``LinkLike`` whose wire is ideal and instant, its other end the firmware model
+(``roarmctl.device.firmware.Firmware``) stepped to the clock's time at every read. Tests and benches use them; the
+product's links are ``roarmctl.device.link.Link`` on a serial port (or the simulator's pty).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from roarmctl.device.firmware import Firmware
+from roarmctl.device.link import DeviceInfo, LinkLike, Received
+from roarmctl.device.protocol import encode, feedback_request, parse_feedback_report, quiet_command
+from roarmctl.device.sim_config import SimConfig
+from roarmctl.errors import DeviceError
+
+__all__ = ["VirtualClock", "VirtualLink", "queued_link"]
+
+SILENT_HINT = "give the model a loop pass it can answer within (loop_pass under 0.5 s)"
+
+
+class VirtualClock:
+    """A clock that moves only when told: ``sleep(dt)`` or ``now += dt`` (s; starts at ``start``)."""
+
+    def __init__(self, start: float = 100.0) -> None:
+        self.now = start
+
+    def __call__(self) -> float:
+        """The time now (s)."""
+        return self.now
+
+    def sleep(self, dt: float) -> None:
+        """Advance the clock by ``dt`` s (a negative ``dt`` waits for nothing)."""
+        self.now += max(0.0, dt)
+
+
+class VirtualLink:
+    """The firmware model behind a ``LinkLike`` on ``clock`` (an ideal, instant wire).
+
+    ``write_latency``: s each ``send`` takes (the clock advances by it: a slow driver); ``stall``: the firmware reads
+    nothing (``SimConfig.deaf``). ``fw`` is the model (its ``recording()`` and ``executed`` say what the arm did).
+    """
+
+    def __init__(self, clock: VirtualClock, write_latency: float = 0.0, stall: bool = False) -> None:
+        self.port = "fake"
+        self.firmware: str | None = "m3-0.84"
+        self.info: DeviceInfo | None = None
+        self.clock = clock
+        self.sleep = clock.sleep
+        self.fw = Firmware(SimConfig(info_print=0, deaf=stall), t0=clock())
+        self.sent: list[tuple[float, dict[str, Any]]] = []
+        self.received: list[Received] = []
+        self.write_latency = write_latency
+
+    def send(self, cmd: dict[str, Any], fresh_line: bool = False) -> float:
+        """Hand one line to the model; return the time it was written (before the write's latency)."""
+        t = self.clock()
+        self.clock.now += self.write_latency  # a slow driver: the schedule must not drift
+        self.sent.append((t, cmd))
+        self.fw.receive((b"\n" if fresh_line else b"") + encode(cmd), t)
+        return t
+
+    def poll(self) -> list[Received]:
+        """Step the model to now; return the lines it printed, parsed."""
+        self.fw.advance(self.clock())
+        out = []
+        for raw in self.fw.pop_output(self.clock()).split(b"\r\n"):
+            if raw:
+                out.append(Received(self.clock(), raw.decode(), parse_feedback_report(raw)))
+        self.received += out
+        return out
+
+    def request(self, timeout: float = 0.3, ahead: list[dict[str, Any]] | None = None,
+                earlier: int = 0) -> Received | None:
+        """As ``Link.request``: send ``T:105`` after the lines ``ahead`` and read every 5 ms of the clock for its
+        answer (``earlier`` answers due before it passed over); None when none came within ``timeout`` s."""
+        for cmd in ahead or []:
+            self.send(cmd)
+        self.send(feedback_request())
+        end = self.clock() + timeout
+        while self.clock() < end:
+            self.clock.now += 0.005
+            for r in self.poll():
+                if r.feedback is not None:
+                    if earlier <= 0:
+                        return r
+                    earlier -= 1
+        return None
+
+
+if TYPE_CHECKING:  # mypy holds the virtual link to the protocol the streamer is typed against
+    _CONFORMS: type[LinkLike] = VirtualLink
+
+
+def queued_link(clock: VirtualClock, loop_pass: float) -> VirtualLink:
+    """The 20260701 build (one queued line per loop pass) with passes of ``loop_pass`` s, its round trip and time per
+    line measured as ``Link.connect()`` measures them (T:105 alone; six filler lines ahead of one)."""
+    link = VirtualLink(clock)
+    link.firmware = "m3-2026"
+    base = 6 * 0.0005 * 1.3 + 0.002  # the model's own pass on that build: six servo reads and its other work
+    link.fw = Firmware(SimConfig(firmware="m3-2026", info_print=0, loop_period=loop_pass - base), t0=clock())
+    rtts = []
+    for _ in range(3):
+        t0 = clock()
+        r = link.request(0.5)
+        if r is None:
+            raise DeviceError("device silent: the firmware model did not answer T:105", SILENT_HINT)
+        rtts.append(r.t - t0)
+    t0 = clock()
+    for _ in range(6):
+        link.send(quiet_command())
+    r = link.request(1.0)
+    if r is None or r.feedback is None:
+        raise DeviceError("device silent: the firmware model did not answer T:105", SILENT_HINT)
+    line_time = (r.t - t0 - min(rtts)) / 6
+    link.info = DeviceInfo("m3-2026", float(np.median(rtts)), line_time, True, False, False, r.feedback)
+    link.sent.clear()
+    link.received.clear()
+    return link
