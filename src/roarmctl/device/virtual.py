@@ -14,12 +14,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from roarmctl.device.firmware import Firmware
-from roarmctl.device.link import DeviceInfo, LinkLike, Received
+from roarmctl.device.link import DeviceInfo, Link, LinkLike, Received
 from roarmctl.device.protocol import encode, feedback_request, parse_feedback_report, quiet_command
 from roarmctl.device.sim_config import SimConfig
 from roarmctl.errors import DeviceError
 
-__all__ = ["VirtualClock", "VirtualLink", "queued_link"]
+__all__ = ["VirtualClock", "VirtualLink", "VirtualSerial", "queued_link", "serial_link"]
 
 SILENT_HINT = "give the model a loop pass it can answer within (loop_pass under 0.5 s)"
 
@@ -91,6 +91,64 @@ class VirtualLink:
                         return r
                     earlier -= 1
         return None
+
+
+class VirtualSerial:
+    """A serial port whose other end is the firmware model ``fw`` on ``clock``: what ``Link`` uses of pyserial's
+    ``Serial`` (``write``, ``in_waiting``, ``read`` with its ``timeout``, ``reset_input_buffer``, ``flush``,
+    ``close``), so the real ``Link.connect()`` and everything after it run on virtual time. A read with nothing
+    there moves the clock to the model's next event (a loop pass, a line done on the wire), at most ``timeout`` s."""
+
+    def __init__(self, fw: Firmware, clock: VirtualClock, timeout: float = 0.01) -> None:
+        self.fw = fw
+        self.clock = clock
+        self.timeout = timeout
+        self._rx = bytearray()
+
+    def _pull(self) -> None:
+        self.fw.advance(self.clock())
+        self._rx += self.fw.pop_output(self.clock())
+
+    def write(self, data: bytes) -> int:
+        """Bytes that reach the firmware's UART now (the model times their wire)."""
+        self.fw.receive(data, self.clock())
+        return len(data)
+
+    @property
+    def in_waiting(self) -> int:
+        """Bytes that have arrived and were not read yet."""
+        self._pull()
+        return len(self._rx)
+
+    def read(self, size: int = 1) -> bytes:
+        """Up to ``size`` bytes; with none there, wait on the clock for the first, at most ``timeout`` s."""
+        self._pull()
+        end = self.clock() + self.timeout
+        while not self._rx and self.clock() < end:
+            self.clock.now = min(end, max(self.fw.next_event(), self.clock() + 1e-4))
+            self._pull()
+        out = bytes(self._rx[:size])
+        del self._rx[:size]
+        return out
+
+    def reset_input_buffer(self) -> None:
+        """Drop what arrived and was not read."""
+        self._pull()
+        self._rx.clear()
+
+    def flush(self) -> None:
+        """Nothing waits to be written: each write reached the model at once."""
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+def serial_link(config: SimConfig, clock: VirtualClock) -> Link:
+    """A ``Link`` (opened: its port a ``VirtualSerial``) to a new firmware model of ``config`` started now on
+    ``clock``, its timings on that clock; its ``ser.fw`` is the model."""
+    link = Link("virtual", clock=clock, sleep=clock.sleep)
+    link.ser = VirtualSerial(Firmware(config, t0=clock()), clock, link.timings.read_timeout)
+    return link
 
 
 if TYPE_CHECKING:  # mypy holds the virtual link to the protocol the streamer is typed against
