@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from devtraj import HOME, min_jerk
+from simwait import run_on
 
 from roarmctl.device.simulator import PtySimulator, SimConfig
 from roarmctl.robot.loader import load_robot
@@ -56,7 +57,7 @@ def stop_mid_motion(tmp_path: Path, signals: list[tuple[int, float]]):
             time.sleep(delay)
             proc.send_signal(signum)
         _, err = proc.communicate(timeout=20)
-        time.sleep(0.8)
+        run_on(sim, 0.8)  # on the firmware's clock: the hold has run and the arm stood still
         ts, q, torque = sim.recording()
     return proc.returncode, err, json.loads(log.read_text()) if log.exists() else None, traj, (ts, q, torque, t_sig), tmp_path
 

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from devtraj import HOME, min_jerk
+from simwait import run_on, until
 
 from roarmctl.device.simulator import PtySimulator, SimConfig
 
@@ -68,13 +69,15 @@ def test_ctrl_c_while_connect_waits_for_set_up_sends_nothing_and_logs(plan):
         try:
             wait_for(lambda: holds_open(proc.pid, sim.path), proc)
             time.sleep(0.3)
+            at_signal = sim.state()
             proc.send_signal(signal.SIGINT)
             _, err = proc.communicate(timeout=30)
         finally:
             proc.kill()
-        time.sleep(7.0)  # the rest of set-up: the boot mission runs or is aborted
-        st = sim.state()
+        # the rest of set-up on the firmware's clock: the boot mission runs or is aborted
+        st = until(sim, lambda st: st["now"] > st["booting_until"] + 0.5)
         got = sim.received()
+    assert at_signal["now"] < at_signal["booting_until"]  # the stop came while the arm was setting up
     assert proc.returncode == 130 and err.count("\n") == 1 and "before streaming" in err, err
     data = json.loads(log.read_text())
     assert data["summary"]["outcome"] == "interrupted" and data["summary"]["commands"] == 0
@@ -97,7 +100,7 @@ def test_ctrl_c_after_connecting_holds_where_the_arm_stands_and_logs(plan):
             _, err = proc.communicate(timeout=30)
         finally:
             proc.kill()
-        time.sleep(0.5)
+        run_on(sim, 0.5)
         ts, q, torque = sim.recording()
         executed = [c for _, _, c in sim.executed()]
     assert proc.returncode == 130 and err.count("\n") == 1 and "Ctrl-C" in err, err

@@ -206,7 +206,8 @@ def _query(fw: Firmware, server: _Server, kind: str) -> Any:
     if kind == "state":
         return {"now": fw.now, "torque": fw.servos.torque().tolist(), "info_print": fw.info_print,
                 "esp_now_mode": fw.esp_now_mode, "stop_flag": fw.stop_flag, "motion_count": fw.motion_count,
-                "boot_mission_aborted": fw.boot_mission_aborted, "rx_dropped": fw._rx_dropped,
+                "boot_mission_aborted": fw.boot_mission_aborted, "booting_until": fw.booting_until,
+                "rx_dropped": fw._rx_dropped,
                 "queue": len(fw._queue), "positions": fw.servos.positions().tolist(), "move_spd": fw.move_spd,
                 "spd": [float(x) for x in getattr(fw.servos, "spd", [])],
                 "passes_ms": (np.array(fw.passes) * 1e3).tolist()[-2000:], "priority": server.priority}
@@ -363,5 +364,6 @@ class PtySimulator:
         return max((x for t, x in self._server.late if t >= now - RECENT), default=0.0)
 
     def state(self) -> dict[str, Any]:
-        """The firmware's state now: torque, InfoPrint, ESP-NOW mode, StopFlag, queue, pass times, ..."""
+        """The firmware's state now (``now``: its clock, s): torque, InfoPrint, ESP-NOW mode, StopFlag, queue, pass times,
+        when its set-up ends (``booting_until``), ..."""
         return self._ask("state")
