@@ -5,7 +5,6 @@ bundled ones still load. A cycle in the joint tree no longer hangs ``kin fk``.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import pytest
@@ -102,12 +101,10 @@ DH_CASES = {
 
 
 def _expect_exit_2(capsys, args, field):
-    t = time.monotonic()
-    rc = run_cli(args)
+    rc = run_cli(args)  # a hang is pytest-timeout's to catch: no wall-clock assert
     err = capsys.readouterr().err
     assert rc == 2 and err.count("\n") == 1, err
     assert field in err, err
-    assert time.monotonic() - t < 30  # no hang
 
 
 @pytest.mark.parametrize("name", sorted(URDF_CASES))

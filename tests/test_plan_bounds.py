@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import time
 from pathlib import Path
 
 import numpy as np
@@ -23,17 +22,15 @@ HEAD = "robot: roarm_m3_pro\n"
 
 
 
-def plan_text(tmp_path: Path, text: str | bytes, capsys) -> tuple[int, str, Path, float]:
+def plan_text(tmp_path: Path, text: str | bytes, capsys) -> tuple[int, str, Path]:
     p = tmp_path / "p.yaml"
     (p.write_bytes if isinstance(text, bytes) else p.write_text)(text)
     out = tmp_path / "p.traj.json"
-    t = time.monotonic()
     rc = run_cli(["plan", str(p), "-o", str(out)])
-    elapsed = time.monotonic() - t
     err = capsys.readouterr().err
     assert not out.exists() or rc == 0
     assert not list(tmp_path.glob(".*.tmp"))
-    return rc, err, p, elapsed
+    return rc, err, p
 
 
 BAD = {
@@ -67,15 +64,14 @@ BAD = {
 @pytest.mark.parametrize("name", sorted(BAD))
 def test_bad_plans_exit_2_naming_file_line_and_field(tmp_path, capsys, name):
     text, expected = BAD[name]
-    rc, err, p, elapsed = plan_text(tmp_path, text, capsys)
+    rc, err, p = plan_text(tmp_path, text, capsys)
     assert rc == 2 and err.count("\n") == 1, err
     assert err.startswith(f"error: {p}") and expected in err, err
-    assert elapsed < 30  # no hang (a generous ceiling for a loaded machine; these take milliseconds)
 
 
 def test_a_dh_robot_plans(tmp_path, capsys):
     # SCARA (DH table, no collision geometry): joints (0.3, 0.5) -> (0.9, 1.2) rad
-    rc, err, _, _ = plan_text(tmp_path, "robot: scara_2r\nstart: [0.3, 0.5]\ntasks:\n  - move: {joints: [0.9, 1.2]}\n", capsys)
+    rc, err, _ = plan_text(tmp_path, "robot: scara_2r\nstart: [0.3, 0.5]\ntasks:\n  - move: {joints: [0.9, 1.2]}\n", capsys)
     assert rc == 0, err
     traj = validate_trajectory(tmp_path / "p.traj.json")
     assert np.allclose(traj.positions[0], [0.3, 0.5]) and np.allclose(traj.positions[-1], [0.9, 1.2], atol=1e-6)
@@ -87,7 +83,7 @@ def test_relative_robot_path_without_suffix_is_relative_to_the_plan(tmp_path, ca
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
-    rc, err, _, _ = plan_text(tmp_path, "robot: robots/myscara\nstart: [0.3, 0.5]\ntasks:\n  - move: {joints: [0.5, 0.2]}\n", capsys)
+    rc, err, _ = plan_text(tmp_path, "robot: robots/myscara\nstart: [0.3, 0.5]\ntasks:\n  - move: {joints: [0.5, 0.2]}\n", capsys)
     assert rc == 0, err
     doc = json.loads((tmp_path / "p.traj.json").read_text())
     # the trajectory carries the description it was planned for (issue 19): the file beside the plan
@@ -97,7 +93,7 @@ def test_relative_robot_path_without_suffix_is_relative_to_the_plan(tmp_path, ca
 
 def test_short_waits_are_sampled_at_the_declared_rate(tmp_path, capsys):
     # a 14 ms wait used to be one 14 ms step, longer than a sample at 100 Hz: execute refused the file
-    rc, err, _, _ = plan_text(tmp_path, "robot: roarm_m3_pro\ntasks: [{wait: 0.014}, {wait: 0.5}]\n", capsys)
+    rc, err, _ = plan_text(tmp_path, "robot: roarm_m3_pro\ntasks: [{wait: 0.014}, {wait: 0.5}]\n", capsys)
     assert rc == 0, err
     traj = validate_trajectory(tmp_path / "p.traj.json")
     assert traj.duration == pytest.approx(0.514) and np.diff(traj.times).max() <= 0.01 + 1e-9
