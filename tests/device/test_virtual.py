@@ -1,0 +1,59 @@
+"""The real ``Link`` over a ``VirtualSerial`` (roarmctl.device.virtual): connect and stream a move on the firmware
+model's clock. The model's own recording is the witness of where the arm went; the same inputs give the same log,
+byte for byte, however busy the machine."""
+
+from __future__ import annotations
+
+import json
+import threading
+
+import numpy as np
+import pytest
+from devtraj import HOME, min_jerk
+
+from roarmctl.device.sim_config import SimConfig
+from roarmctl.device.streamer import StreamConfig, Streamer
+from roarmctl.device.virtual import VirtualClock, serial_link
+from roarmctl.robot.loader import load_robot
+
+ROBOT = load_robot("roarm_m3_pro")
+GOAL = [0.8, 0.3, 1.9, -0.5, 0.3, 0.5]
+STEP = 2 * np.pi / 4096  # rad: one ST3235 position step (4096 a turn)
+
+
+def stream(firmware: str) -> tuple[str, np.ndarray, dict]:
+    """Connect to a model of ``firmware`` and stream a 1 s move at 50 Hz; (the log as JSON, the arm's last recorded
+    joints, the summary)."""
+    clock = VirtualClock()
+    link = serial_link(SimConfig(firmware=firmware), clock)
+    link.connect()
+    res = Streamer(link, ROBOT, min_jerk([HOME, GOAL], [1.0]), StreamConfig(rate=50), clock=clock,
+                   sleep=clock.sleep).run()
+    link.close()
+    _, q, _ = link.ser.fw.recording()
+    return json.dumps(res.log, sort_keys=True, default=str), q[-1], res.log["summary"]
+
+
+@pytest.mark.parametrize("firmware", ["m3-0.84", "m3-2026"])
+def test_the_real_link_streams_a_move_to_its_end_on_the_virtual_clock(firmware):
+    _, last, summary = stream(firmware)
+    assert summary["outcome"] == "completed" and summary["commands"] == 51  # ticks 0..50 of 1 s at 50 Hz
+    assert np.abs(last - GOAL).max() <= 2 * STEP  # the model's servos stand at the goal, to their resolution
+
+
+def test_the_same_run_gives_the_same_log_bytes_on_an_idle_or_a_busy_interpreter():
+    idle, _, _ = stream("m3-2026")
+    stop = threading.Event()
+
+    def spin() -> None:  # takes the interpreter's time from the run: the virtual clock does not see it
+        while not stop.is_set():
+            sum(range(1000))
+
+    hog = threading.Thread(target=spin, daemon=True)
+    hog.start()
+    try:
+        busy, _, _ = stream("m3-2026")
+    finally:
+        stop.set()
+        hog.join(timeout=10)
+    assert busy == idle
