@@ -14,7 +14,7 @@ def until(sim: PtySimulator, done: Callable[[dict[str, Any]], bool], limit: floa
     """Poll the simulator's state until ``done(state)``; return that state. ``limit`` (wall s) detects a hang only."""
     end = time.monotonic() + limit
     while not done(st := sim.state()):
-        assert time.monotonic() < end, "the simulator's clock stood still"
+        assert time.monotonic() < end, f"the simulated firmware did not get there within {limit} s (its clock at {st['now']:.2f} s)"
         time.sleep(0.02)
     return st
 

@@ -8,11 +8,11 @@ deg, past its end at 0."""
 from __future__ import annotations
 
 import math
-import time
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+from simwait import run_on, until
 
 from roarmctl.device.firmware import Firmware
 from roarmctl.device.fwmath import position_to_rad
@@ -99,7 +99,9 @@ def test_waveshares_sdk_sequence_leaves_no_physical_range_on_sim_device():
         th = threading.Thread(target=lambda: arm.joints_angle_ctrl(angles=[30, 0, 90, 0, 0, 45], speed=1000, acc=100),
                               daemon=True)
         th.start()
-        time.sleep(9.0)  # boot (about 6 s), then the move
+        # the move run (after the set-up, about 6 s), then 3 s of the firmware's clock (30 degrees at 1000 steps/s: 0.35 s)
+        until(sim, lambda st: any(c.get("T") == 122 for _, c in sim.received()))
+        run_on(sim, 3.0)
         _ts, q, _ = sim.recording()
         codes = [c.get("T") for _, c in sim.received()]
     assert 122 in codes
