@@ -22,7 +22,7 @@ RejectionKind = Literal["", "joint_limit", "collision", "singularity"]
 
 @dataclass(frozen=True)
 class Validity:
-    """A configuration's verdict: ``valid``, and ``reason`` when not ("joint 2 outside its limits", "link4 hits
+    """A configuration's verdict: ``valid``, and ``reason`` when not ("joint 2 outside its limits", "forearm hits
     obstacle 'wall'", ...), ``kind`` its cause ("joint_limit", "collision" or "singularity"; "" when valid). True
     in an ``if``."""
 
