@@ -107,28 +107,6 @@ def test_a_400_digit_number_mid_motion_is_exit_4_with_a_hold_and_a_valid_log(tmp
     assert sum(1 for e in log["received"] if "refused" in e) >= 5
 
 
-@REAL_TIME
-def test_the_hold_after_a_feedback_jump_moves_no_joint_more_than_005_rad(tmp_path, capsys):
-    p = tmp_path / "pp.traj.json"
-    pick_place().save(p)
-    # from the 150th motion command on, the elbow reads 2.9 rad (the servo is nowhere near)
-    with PtySimulator(SimConfig(bogus=(Bogus("e", "2.9", 150, 0),)), process=True) as sim:
-        rc = run_cli(["execute", str(p), "--port", sim.path, "--yes"])
-        log = json.loads(p.with_name("pp.exec.json").read_text())
-        _t_hold, hold = _hold_exec(sim, log, settle=0.6)
-        ts, q, torque = sim.recording()
-    err = capsys.readouterr().err
-    assert rc == 4 and "elbow read 2.900 rad" in err and "faster than the servos can move" in err
-    assert abs(hold["cmd"]["elbow"] - 2.9) > 0.3  # never toward the refused frame
-    t_sent = log["t0_monotonic"] + hold["t"]  # from the moment the hold was sent
-    at_hold = q[np.searchsorted(ts, t_sent)]
-    after = q[ts >= t_sent]
-    moved = np.max(np.abs(after - at_hold), axis=0)
-    print(f"\njoint motion after the hold was sent (rad): {np.round(moved, 4).tolist()}")
-    assert moved[:5].max() <= 0.05 and torque.all()
-    assert np.ptp(q[ts > ts[-1] - 0.2], axis=0).max() < 1e-6  # and it stopped
-
-
 def stream_until_held(cfg: SimConfig, hook=None) -> tuple[RoarmError, dict, Firmware, float, float]:
     """Stream the pick and place over the real ``Link`` to a firmware model of ``cfg`` on the virtual clock until it
     stops (``hook(k)`` before tick k); (the error it stopped with, its log, the model, when the hold's first copy was
@@ -156,6 +134,22 @@ def test_feedback_that_stops_ends_the_stream_within_half_a_second_with_a_hold_on
     assert log["hold"]["kind"] == "path" and fw.servos.torque().all()
     # not 1 s of blind streaming: 0.3 s without feedback, and the hold's way to the servos (on the model's clock)
     assert t_hold - muted_at < 0.5
+
+
+def test_the_hold_after_a_feedback_jump_moves_no_joint_more_than_005_rad():
+    # from the 150th motion command on, the elbow reads 2.9 rad (the servo is nowhere near)
+    err, log, fw, t_sent, _ = stream_until_held(SimConfig(bogus=(Bogus("e", "2.9", 150, 0),)))
+    fw.advance(t_sent + 1.0)  # a second of the model's clock after the hold was sent
+    ts, q, torque = fw.recording()
+    hold = [s for s in log["sent"] if s["cmd"]["T"] == 102][-log["hold"]["copies"]]
+    assert err.exit_code == 4 and "elbow read 2.900 rad" in err.message and "faster than the servos can move" in err.message
+    assert abs(hold["cmd"]["elbow"] - 2.9) > 0.3  # never toward the refused frame
+    at_hold = q[np.searchsorted(ts, t_sent)]
+    assert np.abs(at_hold - q[np.searchsorted(ts, t_sent - 0.1)]).max() > 0.03  # the arm was moving (0.8 rad/s)
+    moved = np.max(np.abs(q[ts >= t_sent] - at_hold), axis=0)
+    print(f"\njoint motion after the hold was sent (rad): {np.round(moved, 4).tolist()}")
+    assert moved[:5].max() <= 0.05 and torque.all()
+    assert np.ptp(q[ts > ts[-1] - 0.2], axis=0).max() < 1e-6  # and it stopped
 
 
 def test_on_the_queuing_build_the_hold_reaches_the_servos_within_60_ms():
