@@ -100,10 +100,9 @@ def test_speed_scale_slows_down(tmp_path, capsys):
     log = json.loads((tmp_path / "slow.json").read_text())
     assert rc == 0 and log["duration"] == pytest.approx(2.0)
     ticks = [s for s in log["sent"] if "tick" in s]
-    # every tick sent, in order; the last one on time, after whatever the plan waited for a busy host (logged)
-    assert [s["tick"] for s in ticks] == list(range(51))
-    waited = sum(d for _, d in log["paused"])
-    assert ticks[-1]["t"] == pytest.approx(2.0 + waited, abs=0.01 + ticks[-1]["lateness"])
+    # the flags reach the stream: 25 Hz over the 2 s the scale gives, every tick in order (when each went out is
+    # asserted on the model's clock, tests/device/test_virtual.py: a real-time run can only be late)
+    assert [s["tick"] for s in ticks] == list(range(51)) and log["rate"] == 25
     assert out["simulator"]["rms_aligned_mm"] < 5.0
 
 

@@ -57,3 +57,23 @@ def test_the_same_run_gives_the_same_log_bytes_on_an_idle_or_a_busy_interpreter(
         stop.set()
         hog.join(timeout=10)
     assert busy == idle
+
+
+def test_half_speed_sends_the_last_tick_at_twice_the_plans_time_and_the_arm_follows():
+    """A 1 s move at speed scale 0.5 and 25 Hz: ticks 0..50 go out at exactly k/25 s of the model's clock (no pause, no
+    lateness to allow for), and the model's arm is half way at 1 s and at the goal after 2 s."""
+    clock = VirtualClock()
+    link = serial_link(SimConfig(), clock)
+    link.connect()
+    res = Streamer(link, ROBOT, min_jerk([HOME, GOAL], [1.0]), StreamConfig(rate=25, speed_scale=0.5), clock=clock,
+                   sleep=clock.sleep).run()
+    link.close()
+    ticks = [s for s in res.log["sent"] if "tick" in s]
+    assert [s["tick"] for s in ticks] == list(range(51)) and not res.log["paused"]
+    assert np.allclose([s["t"] for s in ticks], np.arange(51) / 25, atol=1e-9)
+    fw = link.ser.fw
+    fw.advance(res.t0 + 2.5)
+    ts, q, _ = fw.recording()
+    halfway = q[np.searchsorted(ts, res.t0 + 1.0)]
+    assert np.abs(halfway - (np.asarray(HOME) + np.asarray(GOAL)) / 2).max() < 0.1  # min-jerk: half way at half time
+    assert np.abs(q[-1] - GOAL).max() <= 2 * STEP
