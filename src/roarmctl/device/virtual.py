@@ -3,8 +3,10 @@ against it with no serial port and no real time, so the same inputs give the sam
 
 ``VirtualClock`` is a clock (``clock()``, s) and its ``sleep``, which advances it and waits for nothing;
 ``VirtualLink`` is a ``LinkLike`` whose wire is ideal and instant, its other end the firmware model
-(``roarmctl.device.firmware.Firmware``) stepped to the clock's time at every read. Tests and benches use them; the
-product's links are ``roarmctl.device.link.Link`` on a serial port (or the simulator's pty).
+(``roarmctl.device.firmware.Firmware``) stepped to the clock's time at every read; ``VirtualSerial`` puts the same
+model under the real ``Link`` instead (``serial_link``), so ``connect()`` and the link's own reads run on the clock too.
+Tests and benches use them; the product's links are ``roarmctl.device.link.Link`` on a serial port (or the
+simulator's pty).
 """
 
 from __future__ import annotations
