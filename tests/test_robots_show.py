@@ -13,6 +13,8 @@ from clirun import roarmctl
 from roarmctl.robot.provenance import summary
 from roarmctl.robot.validate import COMMON_KEYS, DH_KEYS, NESTED_KEYS, URDF_KEYS
 
+ROOT = Path(__file__).resolve().parents[1]
+
 ARMS = Path(__file__).parent / "data" / "arms"
 REFERENCE = Path(__file__).parents[1] / "docs" / "reference.md"
 
@@ -67,3 +69,20 @@ def test_the_cli_prints_the_same_and_refuses_a_bad_name():
 @pytest.mark.parametrize("key", sorted(set(COMMON_KEYS + URDF_KEYS + DH_KEYS) | {k for v in NESTED_KEYS.values() for k in v}))
 def test_every_sidecar_key_is_documented(key):
     assert f"`{key}" in REFERENCE.read_text() or f" {key}" in REFERENCE.read_text(), key
+
+
+def test_a_description_folder_is_refused_naming_the_files_it_holds(tmp_path):
+    """A user names the folder of a published arm (as the corpus keeps them): one line, exit 2, naming the files
+    in it that could be meant; a plan naming a folder gets no names of what is there (its folder is not the user's
+    choice)."""
+    r = roarmctl("robots", "show", str(ROOT / "tests" / "data" / "arms" / "ur5e"))
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "is a folder" in r.stderr and "plan.yaml, robot.yaml" in r.stderr
+    (tmp_path / "arm").mkdir()
+    (tmp_path / "arm" / "secret.yaml").write_text("x: 1\n")
+    from roarmctl.errors import InputError
+    from roarmctl.robot.loader import load_robot
+
+    with pytest.raises(InputError, match="is a folder") as err:
+        load_robot(str(tmp_path / "arm"), confine=True)
+    assert "secret" not in str(err.value) and "secret" not in (err.value.hint or "")

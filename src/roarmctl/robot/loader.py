@@ -62,11 +62,26 @@ def load_robot(spec: str, trust_sidecar: bool = False, confine: bool = False) ->
     return _CACHE.keep(key, (robot, files))[0]
 
 
+def _listed(folder: Path, most: int = 200) -> list[Path]:
+    """Up to ``most`` entries of ``folder`` (a huge folder is not read whole for a message); none if unreadable."""
+    try:
+        with os.scandir(folder) as it:
+            return [Path(e.path) for _, e in zip(range(most), it)]
+    except OSError:
+        return []
+
+
 def _load(spec: str, trust_sidecar: bool, confine: bool) -> Robot:
     """``load_robot`` itself (not kept)."""
     path = bundled_dir() / f"{spec}.yaml"
     if "/" in spec or os.sep in spec or not _is_file(path):  # a bundled name is a plain name
         path = Path(spec).expanduser()
+        if _is_dir(path):  # a description's folder (tests/data/arms/ur5e): name the files in it that could be meant
+            # names found in a folder a plan, trajectory or log named are not put in a message (issue 40's rule)
+            found = [] if confine else sorted(p.name for p in _listed(path) if p.suffix.lower() in (".yaml", ".yml", ".urdf", ".xacro"))
+            raise InputError(f"robot '{spec[:80]}' is a folder, not a description file",
+                             f"give one of its files: {', '.join(found[:5])}" if found
+                             else "give the path of its .yaml sidecar or its .urdf/.xacro file")
         if not _is_file(path):
             raise InputError(
                 f"unknown robot '{spec[:80]}'",
@@ -166,6 +181,14 @@ def _link_roles(robot: Robot, data: dict, where: str) -> Robot:
     if "ur6" in (sm, ik):
         robot.derived["ur6_params"] = ur6_params(robot)  # refuses a table the ur6 model cannot serve
     return robot
+
+
+def _is_dir(path: Path) -> bool:
+    """``is_dir`` that answers False for names the OS refuses (too long, NUL byte)."""
+    try:
+        return path.is_dir()
+    except (OSError, ValueError):
+        return False
 
 
 def _is_file(path: Path) -> bool:
