@@ -38,7 +38,45 @@ def test_commands_of_a_stream_that_lowered_its_rate_land_where_the_plan_has_them
         rate = hz
     ticks = np.arange(len(schedule))
     sent = JointStates(np.array([tk.t for tk in schedule]), np.array([tk.target for tk in schedule]), ticks=ticks)
-    log = {"rate": 50.0, "strategy": DEFAULT_STRATEGY, "duration": traj.duration, "rate_changes": changes}
+    # the log's rate is the last one the stream ran at, as the streamer writes it (stream_result.run_log)
+    log = {"rate": rate, "strategy": DEFAULT_STRATEGY, "duration": traj.duration, "rate_changes": changes}
     times, positions = commanded_on_plan_clock(log, sent)
     assert len(times) == len(schedule)
     np.testing.assert_allclose(positions, sample(traj, times), atol=1e-9)
+
+
+@pytest.mark.slow  # a real-time run on the simulated queued build with a slow loop
+def test_a_real_run_that_lowered_its_rate_is_drawn_on_the_plan(tmp_path):
+    """The queued 20260701 build with a 22 ms loop pass makes the streamer lower its rate (more than once); the page of
+    its log (without the trajectory it carries, as an older roarmctl wrote it) draws the commanded TCP where the plan
+    has it (RMS under 5 mm: the servo sag offset) and no faster than the plan's peak."""
+    import base64
+    import json
+    import subprocess
+    import sys
+
+    from roarmctl.viz.web.sources import load_view_source, source_document
+
+    def _decode(a: str) -> np.ndarray:  # the page document's arrays: base64 of little-endian float32
+        return np.frombuffer(base64.b64decode(a), dtype="<f4")
+
+    def _rms(a: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(np.asarray(a, dtype=float) ** 2)))
+
+    traj_file = tmp_path / "pp.traj.json"
+    api.plan(ROOT / "plans" / "pick_place.yaml").trajectory.save(traj_file)
+    log = tmp_path / "run.json"
+    done = subprocess.run([sys.executable, "-m", "roarmctl", "execute", str(traj_file), "--sim", "--yes", "--firmware",
+                           "m3-2026", "--loop-pass", "22", "--log", str(log)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    data = json.loads(log.read_text())
+    assert data["rate_changes"], "the slow loop should have lowered the rate"
+    del data["trajectory"]
+    older = tmp_path / "older.json"
+    older.write_text(json.dumps(data))
+    alone, whole = source_document(load_view_source(older)), source_document(load_view_source(older, traj_file))
+    t_a, tcp_a = _decode(alone["times"]), _decode(alone["tcp"]).reshape(-1, 3)
+    t_w, tcp_w = _decode(whole["times"]), _decode(whole["tcp"]).reshape(-1, 3)
+    planned_at = np.column_stack([np.interp(t_a, t_w, tcp_w[:, k]) for k in range(3)])
+    assert _rms(np.linalg.norm(tcp_a - planned_at, axis=1)) < 0.005
+    assert _decode(alone["speed"]).max() < 1.05 * _decode(whole["speed"]).max()

@@ -94,14 +94,15 @@ def commanded_on_plan_clock(log: dict[str, Any], cmd: JointStates) -> tuple[np.n
     ticks = cmd.ticks if cmd.ticks is not None else np.full(len(cmd.times), -1)
     if not (np.isfinite(rate) and rate > 0) or strategy not in STRATEGIES or not np.any(ticks >= 0):
         return cmd.times, cmd.positions
-    rate = strategy_rate(strategy, rate)
+    # a stream that lowered its rate for a slow firmware went on from each change's tick at the new rate (the log's
+    # rate_changes: the tick, its time, the rate before and after); the log's own ``rate`` is the last one. One rate
+    # for the whole run put the commands off the plan by up to seconds, and their TCP speed spiked (10 m/s drawn for a
+    # 0.41 m/s plan)
+    changes = sorted(_rate_changes(log), key=lambda c: c[0])
+    rate = strategy_rate(strategy, changes[0][3] if changes else rate)  # the rate the stream began at
     last = np.append(ticks[1:] != ticks[:-1], True) | (ticks < 0)
     on_plan = ticks / rate + target_offset(strategy, rate)
-    # a stream that lowered its rate for a slow firmware went on from each change's tick at the new rate (the log's
-    # rate_changes: the tick, its time, the new rate); one rate for the whole run put the later commands ever earlier
-    # on the plan, and their TCP speed spiked (10 m/s drawn for a 0.41 m/s plan)
-    for change in sorted(_rate_changes(log), key=lambda c: c[0]):
-        tick, t0, hz = change
+    for tick, t0, hz, _ in changes:
         later = ticks >= tick
         on_plan[later] = t0 + (ticks[later] - tick) / hz + target_offset(strategy, hz)
     times = np.where(ticks >= 0, on_plan, cmd.times)[last]
@@ -111,17 +112,18 @@ def commanded_on_plan_clock(log: dict[str, Any], cmd: JointStates) -> tuple[np.n
     return times, cmd.positions[last]
 
 
-def _rate_changes(log: dict[str, Any]) -> list[tuple[int, float, float]]:
-    """(tick, its time on the run's clock in s, the rate from there in Hz) of each well-formed ``rate_changes``
-    entry of an execution log; malformed entries are left out (the log's own reader checks its fields)."""
+def _rate_changes(log: dict[str, Any]) -> list[tuple[int, float, float, float]]:
+    """(tick, its time on the run's clock in s, the rate from there in Hz, the rate before it in Hz) of each
+    well-formed ``rate_changes`` entry of an execution log; malformed entries are left out (the log's own reader
+    checks its fields)."""
     out = []
     for c in log.get("rate_changes") or []:
         try:
-            tick, t0, hz = int(c["tick"]), float(c["t"]), float(c["to_hz"])
+            tick, t0, hz, before = int(c["tick"]), float(c["t"]), float(c["to_hz"]), float(c["from_hz"])
         except (KeyError, TypeError, ValueError):
             continue
-        if tick >= 0 and np.isfinite(t0) and np.isfinite(hz) and hz > 0:
-            out.append((tick, t0, hz))
+        if tick >= 0 and all(np.isfinite(v) and v > 0 for v in (hz, before)) and np.isfinite(t0):
+            out.append((tick, t0, hz, before))
     return out
 
 
