@@ -741,10 +741,14 @@ def test_a_run_viewed_without_its_trajectory_agrees_with_the_cli(pick_place_run,
     err_alone = _decode(alone["ghost"]["error"])[inside(alone)]
     err_whole = _decode(whole["ghost"]["error"])[inside(whole)]
     assert abs(_rms(err_alone) * 1000 - run["summary"]["tracking_mm"]["rms"]) < 0.5
-    assert abs(_rms(err_alone) - _rms(err_whole)) < 0.0005
+    # the page's own comparison with the plan (-t) against the streamer's (which widens its window by the lateness it
+    # measured, host and device): equal on an unhurried run, apart by at most what that lateness lets the TCP travel
+    plan_peak = float(_decode(whole["speed"]).max())
+    late = max([float(e.get("lateness", 0.0)) for e in run.get("sent", [])] + [0.0])
+    late += float(run.get("firmware_lag_ms", {}).get("max", 0.0) if isinstance(run.get("firmware_lag_ms"), dict) else 0.0) / 1000
+    assert abs(_rms(err_alone) - _rms(err_whole)) < 0.0005 + plan_peak * late
     assert err_alone.max() * 1000 < run["summary"]["tracking_mm"]["max"] + 0.5
     # the commanded arm on the plan's clock: its TCP speed peaks where the plan's does
-    plan_peak = float(_decode(whole["speed"]).max())
     assert _decode(alone["speed"]).max() < 1.05 * plan_peak
     # commanded and planned TCP on one clock: within the sag offset (a few mm), not the ~16 mm of 80 ms ahead
     t_a, tcp_a = _decode(alone["times"]), _decode(alone["tcp"]).reshape(-1, 3)
