@@ -675,8 +675,16 @@ def pick_place_run(planned, tmp_path_factory):
     d = tmp_path_factory.mktemp("pick_place_run")
     f, _ = planned["pick_place"]
     log = d / "pick_place.exec.json"
-    done = subprocess.run([sys.executable, "-m", "roarmctl", "execute", str(f), "--sim", "--yes", "--log", str(log)],
-                          capture_output=True, text=True, timeout=300)
+    cmd = [sys.executable, "-m", "roarmctl", "execute", str(f), "--sim", "--yes", "--log", str(log)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    if done.returncode == 4 and "tracking error" in done.stderr:
+        # The simulated servos (MuJoCo, in the simulator's process, in real time) fell behind on a machine running
+        # the suite's other workers, and the streamer's tracking stop did its job (seen once in four clean-clone CI
+        # runs: 50.7 mm at 0.88 s). These tests are about drawing a completed run, so one more try; a second abort
+        # fails the tests that need it, with both messages.
+        first = done.stderr.strip()
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, f"twice: {first} / {done.stderr}"
     assert done.returncode == 0, done.stderr
     return f, log
 
