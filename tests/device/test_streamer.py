@@ -288,3 +288,49 @@ def test_the_queued_hold_stops_where_the_firmware_stopped_never_ahead_never_back
         tcp = ROBOT.kin.fk(ROBOT.full_q(q[ts >= flush]))[:, :3, 3]
         far = np.linalg.norm(tcp - tcp[0], axis=1)
         assert far.max() - far[-1] < 1e-3  # not pulled back along the path
+
+
+@pytest.mark.parametrize("where", ["in_send", "after_send"])
+def test_a_stop_signal_at_any_point_of_a_send_leaves_the_log_counting_what_went_out(monkeypatch, where):
+    """A real SIGTERM arrives while tick 20's line is going out (inside the link's send) or just after (while the
+    pacing records it), with the CLI's signal handling: the log's count of motion commands, its message and its
+    tick-tagged 'sent' entries all equal the ticks whose line went out (a clean-clone CI run logged 41 ticks sent
+    and counted 40: the signal had come between the send and its record)."""
+    import os
+    import signal
+
+    from roarmctl.cli import signals
+    from roarmctl.device import pacing
+
+    clock = VirtualClock()
+    ticks_out = []
+
+    class SignalledLink(VirtualLink):
+        def send(self, cmd, fresh_line=False):
+            t = super().send(cmd, fresh_line)
+            if cmd.get("T") == 102 and len(self.sent) and where == "in_send":
+                ticks_out.append(cmd)
+                if len(ticks_out) == 20:
+                    os.kill(os.getpid(), signal.SIGTERM)  # the handler runs at the next bytecode: still in send
+            return t
+
+    link = SignalledLink(clock)
+    if where == "after_send":
+        real = pacing.Pacer.sent
+
+        def sent(self, n_lines, arrive, tick=None):
+            real(self, n_lines, arrive, tick)
+            if tick == 19:
+                os.kill(os.getpid(), signal.SIGTERM)
+
+        monkeypatch.setattr(pacing.Pacer, "sent", sent)
+    st = Streamer(link, ROBOT, traj(), StreamConfig(rate=50), clock=clock, sleep=clock.sleep, shield=signals.shielded)
+    with signals.installed(), pytest.raises(Interrupted) as info:
+        st.run()
+    log = info.value.result.log
+    scheduled = {id(tk.cmd) for tk in st.schedule}
+    on_wire = sum(1 for _, c in link.sent if id(c) in scheduled)
+    tagged = sum(1 for e in log["sent"] if "tick" in e)
+    assert log["summary"]["outcome"] == "terminated"
+    assert on_wire == 20 and tagged == 20 and log["summary"]["commands"] == 20
+    assert "after 20 of " in log["summary"]["message"]

@@ -92,7 +92,7 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
     # a trajectory the firmware cannot take is refused before anything opens; the CLI and the API leave it to this.
     streamer = Streamer(link, robot, traj, cfg, on_status=on_status, confirm=confirm, on_start=on_start,
                         replan=replan, on_note=on_note,
-                        extra_lateness=simulator.recent_lateness if simulator is not None else None)
+                        extra_lateness=simulator.recent_lateness if simulator is not None else None, shield=shield)
     result = None
     tracking = None
     opened = stopped = False
