@@ -132,7 +132,7 @@ class Follower:
         self.extra_lateness = extra_lateness
         self.wm = WireMap(robot)
         self.dt = 1.0 / self.cfg.rate
-        self.validator = FeedbackValidator(robot, firmware=getattr(link, "firmware", None))
+        self.validator = FeedbackValidator(robot, firmware=link.firmware)
         self.guard: Guard | None = None
         self.smoother: Smoother | None = None
         self.t0 = math.nan
@@ -188,7 +188,7 @@ class Follower:
             self.on_event(text)
 
     def _start(self) -> None:
-        self.validator.firmware = getattr(self.link, "firmware", None)
+        self.validator.firmware = self.link.firmware
         reading = read_valid(self.link, self.validator, 2)
         start = np.clip(reading.q, self.robot.lower, self.robot.upper)
         g = self.cfg.guard
@@ -201,7 +201,7 @@ class Follower:
     def _loop(self) -> None:
         assert self.guard is not None and self.smoother is not None
         cfg, link = self.cfg, self.link
-        info = getattr(link, "info", None)
+        info = link.info
         rtt = info.rtt if info is not None else 0.03
         poll_every = max(1, round(cfg.rate / cfg.feedback_rate))
         lines, confirmed, k = 0, 0, 0
@@ -366,7 +366,7 @@ class Follower:
         hold = None if self.hold_info is None else dict(self.hold_info, t=round(self.hold_info["t"] - t0, 6))
         return {
             "format": "roarmctl.followlog/1", "robot": self.robot.name, "source": self.source.name,
-            "port": getattr(self.link, "port", None), "firmware": getattr(self.link, "firmware", None),
+            "port": self.link.port, "firmware": self.link.firmware,
             "rate": self.cfg.rate, "joint_names": list(self.robot.joint_names), "t0_monotonic": t0,
             "summary": {"outcome": outcome, "message": message, "setpoints": len(self.commanded),
                         "targets": self.guard.summary() if self.guard is not None else None,

@@ -52,7 +52,7 @@ def send_hold(link: LinkLike, wm: WireMap, wire: np.ndarray, spd: int, *, kind: 
     (``flush_queue``) and read its answers; otherwise a build that queues lines has it flushed here first.
     Raises DeviceError when the link is gone.
     """
-    queued = getattr(link, "firmware", None) == "m3-2026"
+    queued = link.firmware == "m3-2026"
     flush_here = queued and not flushed
     if flush_here:
         link.send({"T": 0}, fresh_line=True)

@@ -109,7 +109,7 @@ def nearest_on_plan(s: Streamer, q: np.ndarray, lo: float, hi: float) -> np.ndar
 
 def flushes(s: Streamer) -> bool:
     """Whether the build on the link of ``s`` queues lines and the hold flushes its queue first (20260701)."""
-    return getattr(s.link, "firmware", None) == "m3-2026"
+    return s.link.firmware == "m3-2026"
 
 
 def gripper_field(s: Streamer) -> int | None:

@@ -107,11 +107,11 @@ def run_log(s: Streamer, res: Result) -> dict[str, Any]:
                 # the same pose in the plan's world frame (m), from our FK (frames of this robot's firmware only)
                 e["tcp_world_m"] = [round(float(v), 6) for v in tcp(s, s.wm.from_wire(r.feedback.joints))]
         received.append(e)
-    info = getattr(s.link, "info", None)
+    info = s.link.info
     budget = s.link_budget()
     hold = None if s.hold_info is None else dict(s.hold_info, t=round(s.hold_info["t"] - t0, 6))
     return ExecLog(
-        robot=s.robot.name, port=s.link.port, firmware=getattr(s.link, "firmware", None),
+        robot=s.robot.name, port=s.link.port, firmware=s.link.firmware,
         device=None if info is None else info.as_dict(), speed_scale=s.cfg.speed_scale, t0_monotonic=t0,
         robot_description=getattr(s.traj, "robot_description", None),  # a robot not bundled, carried
         details={

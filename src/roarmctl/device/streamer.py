@@ -142,7 +142,7 @@ class Streamer:
         # s the targets lie ahead on the plan (timed-lead)
         self.lead = (STRATEGIES[strat] if isinstance(strat, str) else strat).lead
         self.schedule = self._schedule(traj)
-        self.validator = FeedbackValidator(robot, firmware=getattr(link, "firmware", None))
+        self.validator = FeedbackValidator(robot, firmware=link.firmware)
         self.measured: np.ndarray | None = None
         self.setpoint: Tick | None = None  # the last tick sent
         self.t0 = math.nan
@@ -171,8 +171,8 @@ class Streamer:
     def link_budget(self) -> LinkBudget:
         """The schedule's ``LinkBudget`` on this link: its poll rate, the length of the feedback lines it
         has seen (0.84: about 230 bytes; 20260701: about 324) and, on a queuing build, its line time."""
-        info = getattr(self.link, "info", None)
-        seen = [len(r.line) + 2 for r in getattr(self.link, "received", [])[-20:] if r.feedback is not None]
+        info = self.link.info
+        seen = [len(r.line) + 2 for r in self.link.received[-20:] if r.feedback is not None]
         return link_budget(self.schedule, self.poll_rate(), reply_bytes=max(seen) if seen else 230,
                            line_time=info.line_time if info is not None and info.queued else None)
 
@@ -185,7 +185,7 @@ class Streamer:
         5.3-5.9 mm and 20-22 ms."""
         if self.cfg.feedback_rate is not None:
             return self.cfg.feedback_rate
-        info = getattr(self.link, "info", None)
+        info = self.link.info
         return FEEDBACK_RATE / 2 if info is not None and info.queued else FEEDBACK_RATE
 
     def judge(self, received: Iterable[Received], asked: dict[int, float] | None = None) -> list[Reading]:
@@ -212,7 +212,7 @@ class Streamer:
         return reading
 
     def _check_start(self) -> None:
-        self.validator.firmware = getattr(self.link, "firmware", None)
+        self.validator.firmware = self.link.firmware
         reading = self._read_frames(2)
         q0 = self.traj.positions[0]
         diff = self._start_diff(reading.q, q0)
@@ -336,7 +336,7 @@ class Streamer:
         question (a busy host reads the answer late; the firmware did not read the servos later)."""
         t = reading.t - wire_seconds(reading.nbytes) - READ_BEFORE_PRINT
         if asked is not None:
-            info = getattr(self.link, "info", None)
+            info = self.link.info
             rtt = info.rtt if info is not None else 0.03
             t = min(t, asked + rtt - wire_seconds(reading.nbytes) - READ_BEFORE_PRINT / 2)
         return t
@@ -367,7 +367,7 @@ class Streamer:
         link, cfg = self.link, self.cfg
         self.poll_every = self._poll_every(self.rate)
         self._polled_tick = 0
-        info = getattr(link, "info", None)
+        info = link.info
         rtt = info.rtt if info is not None else 0.03
         pacer = self.pacer = Pacer(rtt, info.line_time if info is not None else 0.0, cfg.in_flight)
         link.poll()
