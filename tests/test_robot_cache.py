@@ -123,3 +123,35 @@ def test_a_yaml_file_xacro_loads_edited_is_seen(tmp_path: Path, monkeypatch: pyt
     head, tail = text[:at], text[at:]
     limits.write_text(head + tail.replace("max_position: !degrees  360.0", "max_position: !degrees  300.0", 1))
     assert _upper(load_robot(spec), "shoulder_lift_joint") == pytest.approx(math.radians(300))
+
+
+# make_bundle (what a plan for a description carries) is kept the same way: each edit above reaches the next bundle
+@pytest.mark.parametrize("edit", ["include", "srdf", "mesh", "sidecar"])
+def test_a_bundle_is_made_again_when_a_file_it_read_changed(arm: Path, edit: str) -> None:
+    from roarmctl.robot.bundle import make_bundle
+
+    first = make_bundle(str(arm))
+    assert first is not None
+    again = make_bundle(str(arm))
+    assert again == first and again is not first  # kept, handed out as a copy: a caller's change stays its own
+    again["files"].clear()
+    assert make_bundle(str(arm)) == first
+    if edit == "include":
+        _edit(arm.parent / ARM_XACRO, 'lower="${-1.5}" upper="${1.4}"', 'lower="${-1.5}" upper="${1.25}"')
+        seen = 'upper="1.25"'
+    elif edit == "srdf":
+        _edit(arm.parent / SRDF, '<joint name="joint3" value="0.7"/>', '<joint name="joint3" value="0.55"/>')
+        seen = 'value="0.55"'
+    elif edit == "mesh":
+        shutil.copyfile(arm.parent / MESHES / "link2.stl", arm.parent / MESHES / "link3.stl")
+        seen = ""
+    else:
+        _edit(arm, "tool: {xyz: [0.012, 0, 0]}", "tool: {xyz: [0.012, 0, 0]}\nname: renamed")
+        seen = "name: renamed"
+    second = make_bundle(str(arm))
+    assert second is not None and second != first
+    text = "".join(v for v in second["files"].values() if isinstance(v, str))
+    assert seen in text
+    if edit == "mesh":  # the two meshes' bytes are now the same file's
+        meshes = [v["base64"] for k, v in second["files"].items() if k.startswith("meshes/")]
+        assert len(set(meshes)) < len(meshes)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import base64
 import binascii
+import copy
 import hashlib
 import json
 import os
@@ -31,7 +32,7 @@ from typing import Any
 
 from roarmctl.checks import Checker
 from roarmctl.errors import DescriptionError, InputError, TrajectoryFileError
-from roarmctl.fileio import Roots, read_bytes, read_text, resolved
+from roarmctl.fileio import FilesRead, Roots, read_bytes, read_text, resolved
 from roarmctl.kept import Kept
 from roarmctl.robot.meshes import (
     CONFINED_HINT,
@@ -54,6 +55,10 @@ MAX_BUNDLE_FILES = 1000
 VISUAL_BYTES = 16 * 1024 * 1024
 FILE_NAME = re.compile(r"^(robot\.yaml|robot\.urdf|robot\.srdf|joint_limits\.yaml|meshes/m\d{1,5}\.(stl|obj|dae|ply|off|glb))$")
 _LOADED: Kept[Robot] = Kept(64)  # robots of bundles, by their files' digests
+# bundles made, by the spec (and the current folder for a relative one) and the options, with the files each read: a
+# hit is handed out only while every one of them is unchanged (as loader.load_robot's robots; every plan of a
+# xacro description expanded its URDF and SRDF again: a third of planning the xArm6's short plans)
+_MADE: Kept[tuple[dict[str, Any], FilesRead]] = Kept(64)
 
 
 def _plain(value: Any) -> Any:
@@ -70,7 +75,23 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
 
     Reads exactly what loading it reads (inside its roots, bounded; ``confine`` as ``load_robot``'s, for a
     description a plan named); xacro is expanded as loading it from a plan would (the safe evaluator,
-    unless the user's ``--trust-xacro``)."""
+    unless the user's ``--trust-xacro``). Made once while none of the files it read changed (a fresh copy each call)."""
+    from roarmctl.robot import loader, xacro_input
+
+    if spec in loader.bundled_robots():
+        return None
+    here = "" if os.path.isabs(spec) else os.getcwd()
+    key = (spec, here, confine, xacro_input.TRUST_ALL, tuple(sorted((k, str(v)) for k, v in PACKAGE_PATHS.items())))
+    hit = _MADE.get(key)
+    if hit is not None and hit[1].unchanged():
+        return copy.deepcopy(hit[0])
+    _MADE.pop(key, None)
+    with FilesRead() as files:
+        bundle = _make_bundle(spec, confine)
+    return copy.deepcopy(_MADE.keep(key, (bundle, files))[0])
+
+
+def _make_bundle(spec: str, confine: bool) -> dict[str, Any]:
     import yaml
 
     from roarmctl.robot import loader
@@ -78,8 +99,6 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
     from roarmctl.robot.sidecar import read_sidecar
     from roarmctl.robot.urdf_loader import URDF_BYTES, read_urdf
 
-    if spec in loader.bundled_robots():
-        return None
     path = Path(spec)
     files: dict[str, Any] = {}
     if path.suffix.lower() in (".urdf", ".xacro"):
