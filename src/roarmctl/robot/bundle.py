@@ -94,7 +94,6 @@ def make_bundle(spec: str, confine: bool = False) -> dict[str, Any] | None:
 def _make_bundle(spec: str, confine: bool) -> dict[str, Any]:
     import yaml
 
-    from roarmctl.robot import loader
     from roarmctl.robot.joint_limits import JOINT_LIMITS_BYTES, substituted
     from roarmctl.robot.sidecar import read_sidecar
     from roarmctl.robot.urdf_loader import URDF_BYTES, read_urdf
