@@ -47,3 +47,23 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     # The browser-view tests are one xdist group (one worker, about two minutes of mostly waiting on Chromium): handed
     # out first, they run beside the rest instead of after it (collected last, they were the suite's tail).
     items.sort(key=lambda item: not any(m.args == ("browser-view",) for m in item.iter_markers("xdist_group")))
+
+
+@pytest.fixture
+def virtual_sim(monkeypatch: pytest.MonkeyPatch) -> list:
+    """``execute --sim`` (in this process) and ``roarmctl.api.execute(sim=True)`` run on a virtual clock: the
+    simulator's firmware and servo models (``roarmctl.device.virtual.VirtualSimulator``) behind the real ``Link``,
+    no pty and no real time, so a test of what a run does costs its computation only and its numbers are the same on
+    an idle or a busy machine. The pty and real time keep their own tests (tests/device/test_execute.py, marked slow).
+    Returns the simulators made, in order (their ``recording()`` is the witness of where the arm went)."""
+    from roarmctl.device import session
+    from roarmctl.device.virtual import VirtualClock, VirtualSimulator
+
+    made: list[VirtualSimulator] = []
+
+    def simulator(config, servos):
+        made.append(VirtualSimulator(config, VirtualClock(), servos=servos))
+        return made[-1]
+
+    monkeypatch.setattr(session, "pty_simulator", simulator)
+    return made

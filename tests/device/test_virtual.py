@@ -9,11 +9,12 @@ import threading
 
 import numpy as np
 import pytest
-from devtraj import HOME, min_jerk
+from devtraj import HOME, min_jerk, pick_place
 
+from roarmctl.device.session import run_execution
 from roarmctl.device.sim_config import SimConfig
 from roarmctl.device.streamer import StreamConfig, Streamer
-from roarmctl.device.virtual import VirtualClock, serial_link
+from roarmctl.device.virtual import VirtualClock, VirtualSimulator, serial_link
 from roarmctl.robot.loader import load_robot
 
 ROBOT = load_robot("roarm_m3_pro")
@@ -77,3 +78,41 @@ def test_half_speed_sends_the_last_tick_at_twice_the_plans_time_and_the_arm_foll
     halfway = q[np.searchsorted(ts, res.t0 + 1.0)]
     assert np.abs(halfway - (np.asarray(HOME) + np.asarray(GOAL)) / 2).max() < 0.1  # min-jerk: half way at half time
     assert np.abs(q[-1] - GOAL).max() <= 2 * STEP
+
+
+def execute_on_model(traj, **stream) -> tuple[object, VirtualSimulator]:
+    """``run_execution`` (the CLI's and the API's entry) with the simulator on a virtual clock."""
+    sims: list[VirtualSimulator] = []
+
+    def simulator(config, servos):
+        sims.append(VirtualSimulator(config, VirtualClock(), servos=servos))
+        return sims[-1]
+
+    run = run_execution(traj, ROBOT, StreamConfig(**stream), sim=True, confirm=lambda message: True, simulator=simulator)
+    return run, sims[0]
+
+
+def test_an_execution_runs_on_the_simulators_clock_on_time_and_the_arm_follows():
+    traj = pick_place()
+    run, sim = execute_on_model(traj)
+    log = run.result.log
+    assert log["summary"]["outcome"] == "completed" and run.port == "virtual"
+    ticks = [s for s in log["sent"] if "tick" in s]
+    k = np.array([s["tick"] for s in ticks])
+    assert k.tolist() == list(range(len(ticks))) and len(ticks) == round(traj.duration * 50) + 1
+    # the host is never late on the virtual clock: tick k leaves at exactly k/50 s (the log's times are from the start), no pause
+    t = np.array([s["t"] for s in ticks])
+    assert np.abs(t - np.minimum(k / 50.0, log["duration"])).max() < 1e-9 and not log["paused"]
+    assert max(s["lateness"] for s in ticks) < 1e-9
+    # the model's recording (the servos' true positions, on the same clock) covers the run and ends where the plan
+    # ends; the run's figures of the simulator's tracking were taken from it
+    ts, q, torque = sim.recording()
+    assert ts[-1] - run.result.t0 >= traj.duration and torque.all() and np.abs(q[-1, :5] - traj.positions[-1, :5]).max() < 3 * STEP
+    assert run.simulator is not None and run.simulator["samples"] > 0 and run.simulator["lateness_max_ms"] == 0
+
+
+def test_an_execution_on_the_virtual_clock_gives_the_same_log_bytes_twice():
+    traj = min_jerk([HOME, GOAL], [1.0])
+    a, _ = execute_on_model(traj, rate=25)
+    b, _ = execute_on_model(traj, rate=25)
+    assert json.dumps(a.result.log, sort_keys=True, default=str) == json.dumps(b.result.log, sort_keys=True, default=str)

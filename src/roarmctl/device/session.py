@@ -14,17 +14,67 @@ from collections.abc import Callable
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from roarmctl.errors import InputError, Interrupted, RoarmError, signal_name
 
 if TYPE_CHECKING:
     import numpy as np
 
-    from roarmctl.device.simulator import PtySimulator
+    from roarmctl.device.link import Link
+    from roarmctl.device.sim_config import SimConfig
     from roarmctl.device.streamer import Result, StreamConfig
     from roarmctl.motion.trajectory import Trajectory
     from roarmctl.robot.model import Robot
+
+
+class SimulatedArm(Protocol):
+    """What an execution uses of the firmware simulator: ``roarmctl.device.simulator.PtySimulator`` (a pty, real time,
+    the product's) or ``roarmctl.device.virtual.VirtualSimulator`` (the same model on a virtual clock, for tests)."""
+
+    path: str  # the device it serves on once started ("" before)
+
+    @property
+    def clock(self) -> Callable[[], float]:
+        """The clock the host's link and streamer run on beside it (s)."""
+        ...
+
+    @property
+    def sleep(self) -> Callable[[float], None]:
+        """The host's wait on that clock (s)."""
+        ...
+
+    def start(self) -> object:
+        """Power the simulated arm up."""
+        ...
+
+    def attach(self, link: Link) -> None:
+        """Open ``link`` on it (after ``start``)."""
+        ...
+
+    def recording(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(times (N,) s, joints (N, 6) rad in the URDF convention, torque on (N,))."""
+        ...
+
+    def lateness(self) -> np.ndarray:
+        """(M, 2): when and how late (s) the simulated firmware woke after its schedule."""
+        ...
+
+    def recent_lateness(self) -> float:
+        """The largest of those lateness values (s) in the last moments."""
+        ...
+
+    def stop(self) -> None:
+        """Stop it (what it recorded stays readable)."""
+        ...
+
+
+def pty_simulator(config: SimConfig, servos: Callable[[], Any] | None) -> SimulatedArm:
+    """The simulator of ``execute --sim``: the firmware model of ``config`` in a process of its own, with its own
+    time, as the ESP32 does, on a pseudo-terminal; ``servos``: its servo model's factory (None: the ideal ones)."""
+    from roarmctl.device.simulator import PtySimulator
+
+    return PtySimulator(config, servos=servos, process=True)
 
 
 @dataclass
@@ -46,7 +96,8 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
                   shield: Callable[[], AbstractContextManager] = contextlib.nullcontext,
                   on_log_error: Callable[[Path, Exception], None] | None = None,
                   on_info: Callable[[str], None] | None = None,
-                  sim_servos: Callable[[], Any] | None = None, sim_config: Any = None) -> Execution:
+                  sim_servos: Callable[[], Any] | None = None, sim_config: Any = None,
+                  simulator: Callable[[SimConfig, Callable[[], Any] | None], SimulatedArm] | None = None) -> Execution:
     """Stream ``traj`` (a validated ``Trajectory`` for ``robot``) with ``cfg`` (``StreamConfig``).
 
     Exactly one of ``port`` (a serial port name or pyserial URL) and ``sim=True`` (the firmware
@@ -61,8 +112,10 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
     firmware build, round trip, pacing) and the link budget. ``sim_servos``: a zero-argument factory of
     the simulator's servo model (``roarmctl.physics.servo_backend.for_firmware``: the physics servos;
     default the ideal kinematic ones); ``sim_config``: its ``SimConfig`` (build, boot, loop pass; default the
-    build of the trajectory's robot, already running, the model's own pass). Errors propagate after the log is written; the stream
-    result of a failed run is the exception's ``result`` attribute when it has one.
+    build of the trajectory's robot, already running, the model's own pass). ``simulator(config, servos)``: makes the
+    simulated arm (default ``pty_simulator``, real time; ``roarmctl.device.virtual.VirtualSimulator`` runs the same
+    model on a virtual clock, the link and the streamer on that clock too). Errors propagate after the log is written;
+    the stream result of a failed run is the exception's ``result`` attribute when it has one.
     """
     from roarmctl.device.execlog import write_log
     from roarmctl.device.link import Link
@@ -72,35 +125,39 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
     if (port is None) == (not sim):
         raise InputError("execute: give exactly one of a port or the simulator")
     model = WireMap(robot).model
-    simulator = None
+    arm: SimulatedArm | None = None
     if sim:
-        from roarmctl.device.simulator import PtySimulator, SimConfig
+        from roarmctl.device.sim_config import SimConfig
 
-        # the simulated arm is the kind the trajectory is for (an M2 trajectory gets the M2 protocol);
-        # its firmware runs in a process of its own, with its own time, as the ESP32 does
+        # the simulated arm is the kind the trajectory is for (an M2 trajectory gets the M2 protocol)
         config = sim_config or SimConfig(firmware="m2" if model == "m2" else "m3-0.84")
-        simulator = PtySimulator(config, servos=sim_servos, process=True)
+        arm = (simulator or pty_simulator)(config, sim_servos)
 
     def replan(q: np.ndarray, mode: str) -> tuple[Trajectory, str]:
         from roarmctl.motion.replan import replan_start
 
         return replan_start(traj, robot, q, mode)
 
-    link = Link(str(port) if port is not None else "the simulator")
+    if arm is not None:  # the link and the stream on the simulated arm's clock
+        link = Link("the simulator", clock=arm.clock, sleep=arm.sleep)
+    else:
+        link = Link(str(port))
     link.expect = model or "m3"
     # Built before the port opens or the simulator starts (the schedule is pure), so that every way out has a log and
     # a trajectory the firmware cannot take is refused before anything opens; the CLI and the API leave it to this.
-    streamer = Streamer(link, robot, traj, cfg, on_status=on_status, confirm=confirm, on_start=on_start,
-                        replan=replan, on_note=on_note,
-                        extra_lateness=simulator.recent_lateness if simulator is not None else None, shield=shield)
+    streamer = Streamer(link, robot, traj, cfg, clock=link.clock, sleep=link.sleep, on_status=on_status,
+                        confirm=confirm, on_start=on_start, replan=replan, on_note=on_note,
+                        extra_lateness=arm.recent_lateness if arm is not None else None, shield=shield)
     result = None
     tracking = None
     opened = stopped = False
     try:
-        if simulator is not None:
-            simulator.start()
-            port = link.port = simulator.path
-        link.open()
+        if arm is not None:
+            arm.start()
+            arm.attach(link)
+            port = link.port
+        else:
+            link.open()
         opened = True
         info = link.connect()
         if on_info is not None:
@@ -129,12 +186,12 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
             link.close()
             if result is None:
                 result = streamer.result("failed", "stopped before streaming (no motion command sent)")
-            if simulator is not None:
-                if getattr(simulator, "path", None) is not None:
+            if arm is not None:
+                if arm.path:
                     # streamer.traj: re-planned from the measured pose when the arm was elsewhere
-                    tracking = simulator_tracking(simulator, robot, streamer.traj, cfg, result)
+                    tracking = simulator_tracking(arm, robot, streamer.traj, cfg, result)
                     result.log["simulator"] = tracking
-                simulator.stop()
+                arm.stop()
             # a port that could not be opened exchanged nothing: keep the previous run's log rather than replace it
             # with an empty one (the error itself says what went wrong). A stop signal is this run's end: its log
             # says so, also before the port opened (the previous run's log would read as this one's)
@@ -149,7 +206,7 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
     return Execution(result, streamer.traj, str(port), tracking)
 
 
-def simulator_tracking(simulator: PtySimulator, robot: Robot, traj: Trajectory, cfg: StreamConfig,
+def simulator_tracking(simulator: SimulatedArm, robot: Robot, traj: Trajectory, cfg: StreamConfig,
                        result: Result) -> dict[str, Any]:
     """TCP error (mm) of the simulator's true servo positions against the plan, over the motion, on the plan's
     time (its pauses for a late host taken out): raw, and aligned within the lateness measured on both sides and

@@ -47,6 +47,8 @@ if TYPE_CHECKING:
     from multiprocessing.connection import Connection
     from multiprocessing.sharedctypes import Synchronized
 
+    from roarmctl.device.link import Link
+
 __all__ = [
     "INIT_RAD",
     "JOINTS",
@@ -227,6 +229,8 @@ class PtySimulator:
                  servos: ServoModel | Callable[[], ServoModel] | None = None, process: bool = False) -> None:
         self.config = config or SimConfig()
         self.clock = clock
+        self.sleep: Callable[[float], None] = time.sleep  # the host's wait beside it: real time
+        self.path = ""  # the pty's device, once it serves
         self.process = process
         self.error: BaseException | None = None
         self._stopped = False
@@ -259,6 +263,13 @@ class PtySimulator:
             self._thread.start()
         return self
 
+    def attach(self, link: Link) -> None:
+        """Open ``link`` on this simulator's pty (after ``start``), as a serial port to the arm is opened."""
+        if not self.path:
+            raise RuntimeError("start() the simulator before opening a link on it")
+        link.port = self.path
+        link.open()
+
     def __enter__(self) -> PtySimulator:
         return self.start()
 
@@ -277,7 +288,7 @@ class PtySimulator:
         """Stop serving and close the pseudo-terminal (process mode keeps what the child knew for the accessors)."""
         if self._stopped:
             return
-        if self.process and getattr(self, "path", None) is None:
+        if self.process and not self.path:
             # never started, or stopped while starting (a stop signal): nothing to ask, only a child to end
             self._stopped = True
             if self._proc.pid is not None and self._proc.is_alive():

@@ -11,6 +11,7 @@ simulator's pty).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -18,10 +19,11 @@ import numpy as np
 from roarmctl.device.firmware import Firmware
 from roarmctl.device.link import DeviceInfo, Link, LinkLike, Received
 from roarmctl.device.protocol import encode, feedback_request, parse_feedback_report, quiet_command
+from roarmctl.device.servos import ServoModel
 from roarmctl.device.sim_config import SimConfig
 from roarmctl.errors import DeviceError
 
-__all__ = ["VirtualClock", "VirtualLink", "VirtualSerial", "queued_link", "serial_link"]
+__all__ = ["VirtualClock", "VirtualLink", "VirtualSerial", "VirtualSimulator", "queued_link", "serial_link"]
 
 SILENT_HINT = "give the model a loop pass it can answer within (loop_pass under 0.5 s)"
 
@@ -151,6 +153,65 @@ def serial_link(config: SimConfig, clock: VirtualClock) -> Link:
     link = Link("virtual", clock=clock, sleep=clock.sleep)
     link.ser = VirtualSerial(Firmware(config, t0=clock()), clock, link.timings.read_timeout)
     return link
+
+
+class VirtualSimulator:
+    """The firmware simulator of ``execute --sim`` (``roarmctl.device.simulator.PtySimulator``'s face: ``start``,
+    ``path``, ``attach``, ``recording``, ``lateness``, ``recent_lateness``, ``executed``, ``stop``) on ``clock``: the same
+    firmware model and servo model, behind a ``VirtualSerial`` instead of a pty, so a whole execution runs in virtual
+    time (``roarmctl.device.session.run_execution(simulator=...)``). ``servos``: the servo model or a zero-argument
+    factory, as ``PtySimulator``'s (default the ideal kinematic servos)."""
+
+    def __init__(self, config: SimConfig | None = None, clock: VirtualClock | None = None, *,
+                 servos: ServoModel | Callable[[], ServoModel] | None = None) -> None:
+        self.config = config or SimConfig()
+        self.clock = clock or VirtualClock()
+        self._servos = servos
+        self.firmware: Firmware | None = None
+        self.path = ""  # "virtual" once started
+
+    def start(self) -> VirtualSimulator:
+        """Power the model up now (on the clock); return self."""
+        servos = self._servos
+        model = servos() if callable(servos) and not isinstance(servos, ServoModel) else servos
+        self.firmware = Firmware(self.config, t0=self.clock(), servos=model)
+        self.path = "virtual"
+        return self
+
+    @property
+    def sleep(self) -> Callable[[float], None]:
+        """The host's wait beside the model: the clock's (it advances the clock)."""
+        return self.clock.sleep
+
+    def attach(self, link: Link) -> None:
+        """Open ``link`` (on this clock: ``Link(..., clock=sim.clock, sleep=sim.sleep)``) on the model (after
+        ``start``): its port a ``VirtualSerial``."""
+        link.port = self.path
+        link.ser = VirtualSerial(self._model(), self.clock, link.timings.read_timeout)
+
+    def _model(self) -> Firmware:
+        if self.firmware is None:
+            raise RuntimeError("the virtual simulator was never started")
+        return self.firmware
+
+    def recording(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(times (N,) s on the clock, joints (N, 6) rad in the URDF convention, torque on (N,))."""
+        return self._model().recording()
+
+    def executed(self) -> list[tuple[float, float, dict]]:
+        """Every command the model ran: (its last byte at the UART, when it ran, the parsed object)."""
+        return list(self._model().executed)
+
+    def lateness(self) -> np.ndarray:
+        """(0, 2): a model on a virtual clock is never late."""
+        return np.zeros((0, 2))
+
+    def recent_lateness(self) -> float:
+        """0 s: never late."""
+        return 0.0
+
+    def stop(self) -> None:
+        """Nothing runs: the model stays readable."""
 
 
 if TYPE_CHECKING:  # mypy holds the virtual link to the protocol the streamer is typed against
