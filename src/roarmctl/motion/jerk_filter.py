@@ -52,7 +52,9 @@ class Profile:
         self.s_end = float(self.s[-1])
         # integral of s over [0, t_i]
         self.S = np.concatenate([[0.0], np.cumsum(self.s[:-1] * dt + sd[:-1] * dt**2 / 2 + self.sdd * dt**3 / 6)])
-        self._last: tuple[np.ndarray, _Samples] | None = None  # (t, eval(t)) of the last _eval_grid call
+        # per grid interval: its start time, s, sdot, integral of s and its sddot, rows gathered at once by eval
+        self._starts = np.stack([self.t[:-1], self.s[:-1], sd[:-1], self.S[:-1], self.sdd])
+        self._last: tuple[np.ndarray, tuple] | None = None  # (t, its _eval_grid values) of the last _eval_grid call
         self.jerk_answers: dict = {}  # _jerk_ok's answers for this profile ("path": the path they are for)
 
     def slowed(self, factor: float) -> Profile:
@@ -60,10 +62,10 @@ class Profile:
         accelerations / factor**2)."""
         return Profile(self.grid, self.sd / factor)
 
-    def _eval_grid(self, t: np.ndarray) -> _Samples:
-        """``eval(t)``, reusing the previous call's values where ``t`` and the previous ``t`` agree: the jerk
-        check asks for the same fine grid (growing with the filter width) at every width it tries. ``eval`` is
-        elementwise in ``t``, so the result is the same bit for bit."""
+    def _eval_grid(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``eval(t)``'s integral of s, s and sdot, reusing the previous call's values where ``t`` and the previous
+        ``t`` agree: the jerk check asks for the same fine grid (growing with the filter width) at every width it
+        tries. ``eval`` is elementwise in ``t``, so the result is the same bit for bit."""
         last = self._last
         if last is not None:
             lt, lv = last
@@ -71,39 +73,42 @@ class Profile:
             if m and np.array_equal(t[:m], lt[:m]):
                 if len(t) <= len(lt):
                     k = len(t)
-                    return lv[0][:k], lv[1][:k], lv[2][:k], lv[3][:k]
-                more = self.eval(t[m:])
-                out = (np.concatenate([lv[0], more[0]]), np.concatenate([lv[1], more[1]]),
-                       np.concatenate([lv[2], more[2]]), np.concatenate([lv[3], more[3]]))
+                    return lv[0][:k], lv[1][:k], lv[2][:k]
+                more = self.eval(t[m:], acc=False)
+                out = (np.concatenate([lv[0], more[0]]), np.concatenate([lv[1], more[1]]), np.concatenate([lv[2], more[2]]))
                 self._last = (t, out)
                 return out
-        out = self.eval(t)
-        self._last = (t, out)
-        return out
+        S, s, sdot, _ = self.eval(t, acc=False)
+        self._last = (t, (S, s, sdot))
+        return S, s, sdot
 
-    def eval(self, t: np.ndarray) -> _Samples:
-        """Integral of s, s, sdot, sddot at times ``t`` (any shape); at rest before 0 and after the end."""
+    def eval(self, t: np.ndarray, acc: bool = True) -> _Samples:
+        """Integral of s, s, sdot, sddot at times ``t`` (any shape); at rest before 0 and after the end. ``acc``
+        False: sddot is left out (returned as None; the filter does not need it)."""
         t = np.asarray(t, dtype=float)
-        i = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.sdd) - 1)
-        tau = np.clip(t, 0.0, self.T) - self.t[i]
-        a, v, s0 = self.sdd[i], self.sd[i], self.s[i]
-        s = s0 + v * tau + a * tau**2 / 2
-        S = self.S[i] + s0 * tau + v * tau**2 / 2 + a * tau**3 / 6
+        i = np.searchsorted(self.t, t, side="right") - 1
+        np.minimum(np.maximum(i, 0, out=i), len(self.sdd) - 1, out=i)
+        t0, s0, v, S0, a = self._starts.take(i, axis=1)
+        tau = np.minimum(np.maximum(t, 0.0), self.T) - t0
+        tau2 = tau**2
+        s = s0 + v * tau + a * tau2 / 2
+        S = S0 + s0 * tau + v * tau2 / 2 + a * tau**3 / 6
         before, after = t < 0, t > self.T
+        outside = before | after
         S = np.where(before, 0.0, np.where(after, S + self.s_end * (t - self.T), S))
-        sdot = np.where(before | after, 0.0, v + a * tau)
-        sddot = np.where(before | after, 0.0, a)
+        sdot = np.where(outside, 0.0, v + a * tau)
+        sddot = np.where(outside, 0.0, a) if acc else None
         s = np.where(before, 0.0, s)
-        return S, s, sdot, sddot
+        return S, s, sdot, sddot  # type: ignore[return-value]
 
     def filtered(self, t: np.ndarray, w: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """s, sdot, sddot of the moving average of width ``w`` (s) at times ``t``; ``w`` = 0: unfiltered."""
         if w <= 0:
             _, s, v, a = self.eval(t)
             return s, v, a
-        S1, s1, v1, _ = self._eval_grid(t)
-        S0, s0, v0, _ = self.eval(t - w)
-        s = np.clip((S1 - S0) / w, 0.0, self.s_end)
+        S1, s1, v1 = self._eval_grid(t)
+        S0, s0, v0, _ = self.eval(t - w, acc=False)
+        s = np.minimum(np.maximum((S1 - S0) / w, 0.0), self.s_end)  # np.clip's values, without its overhead
         return s, (s1 - s0) / w, (v1 - v0) / w
 
 
@@ -143,7 +148,10 @@ def _jerk_ok(path: toppra.interpolator.AbstractGeometricPath, prof: Profile, w: 
         t = np.arange(0.0, prof.T + w + FINE_DT, FINE_DT)
         s, sd, sdd = prof.filtered(t, w)
         qdd = path(s, 1) * sdd[:, None] + path(s, 2) * (sd**2)[:, None]  # as in sample, without the positions
-        memo[key] = bool(np.all(np.abs(np.diff(qdd, axis=0)) / FINE_DT <= jmax * (1 + 1e-9)))
+        jerk = qdd[1:] - qdd[:-1]  # np.diff's values, then in place
+        np.abs(jerk, out=jerk)
+        jerk /= FINE_DT
+        memo[key] = bool((jerk <= jmax * (1 + 1e-9)).all())
     return memo[key]
 
 
