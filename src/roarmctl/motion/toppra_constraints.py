@@ -37,6 +37,11 @@ InverseDynamics = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 # every margin. Earlier, 80 rather than 100 points cost 0.02-0.06 % on the wall and post queries of
 # bench/bench_vs_mplib.py.
 GRID_MIN, GRID_MAX, GRID_PER_SEGMENT, GRID_PER_WAYPOINT = 80, 800, 4, 5
+# A path of two waypoints is a straight line in joint space (q'' = 0: no curvature for the grid to follow; the joint
+# limits are the same everywhere on it, only the TCP speed and torque bounds vary, slowly): GRID_LINE intervals,
+# not GRID_MIN. Over every such timing of queries a-e (seeds 100-111) and of four bundled plans (seeds 1-4), 30
+# rather than 80 changed single motion times by -0.09 .. +0.14 % (summed +0.01 %) and cut their timing by a third.
+GRID_LINE = 30
 
 
 
@@ -82,9 +87,10 @@ def quiet_toppra() -> None:
 
 def toppra_grid(ss: np.ndarray) -> np.ndarray:
     """TOPP-RA grid (G,) over path parameters ``ss`` (K,) of the waypoints (strictly increasing):
-    about uniform at ``ss[-1] / clip(GRID_PER_WAYPOINT K, GRID_MIN, GRID_MAX)``, with the waypoints on the grid
-    and at least ``GRID_PER_SEGMENT`` intervals per segment."""
-    h = ss[-1] / int(np.clip(GRID_PER_WAYPOINT * len(ss), GRID_MIN, GRID_MAX))
+    about uniform at ``ss[-1] / clip(GRID_PER_WAYPOINT K, GRID_MIN, GRID_MAX)`` (``ss[-1] / GRID_LINE`` for two
+    waypoints, a straight line), with the waypoints on the grid and at least ``GRID_PER_SEGMENT`` intervals per
+    segment."""
+    h = ss[-1] / (GRID_LINE if len(ss) == 2 else int(np.clip(GRID_PER_WAYPOINT * len(ss), GRID_MIN, GRID_MAX)))
     d = np.diff(ss)
     m = np.maximum(GRID_PER_SEGMENT, np.rint(d / h)).astype(int)
     seg = np.repeat(np.arange(len(d)), m)
