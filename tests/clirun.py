@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -57,16 +58,38 @@ def roarmctl(*args: str, env: dict[str, str] | None = None, cwd: str | Path | No
     return Result(code, out.getvalue(), err.getvalue())
 
 
+@contextlib.contextmanager
+def virtual_simulator() -> Iterator[list]:
+    """Within the block, ``execute --sim`` in this process (and ``roarmctl.api.execute(sim=True)``) runs on a virtual
+    clock: the simulator's firmware and servo models (``roarmctl.device.virtual.VirtualSimulator``, each on a clock of
+    its own) behind the real ``Link``, with no pty and no real time. Yields the simulators made, in order."""
+    import pytest
+
+    from roarmctl.device import session
+    from roarmctl.device.virtual import VirtualClock, VirtualSimulator
+
+    made: list[VirtualSimulator] = []
+
+    def simulator(config, servos):
+        made.append(VirtualSimulator(config, VirtualClock(), servos=servos))
+        return made[-1]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(session, "pty_simulator", simulator)
+        yield made
+
+
 def planned_and_run_on_sim(folder: Path, plan_text: str) -> tuple[Path, Path]:
     """Plan ``plan_text`` (a plan file's YAML; the default seed) into ``folder/short.traj.json`` and run it with
-    ``execute --sim --yes`` (the simulated arm, in real time), its log in ``folder/short.exec.json``: (trajectory,
-    log). Fails the test when the run does not complete."""
+    ``execute --sim --yes`` (the simulated arm, on a virtual clock: ``virtual_simulator``), its log in
+    ``folder/short.exec.json``: (trajectory, log). Fails the test when the run does not complete."""
     from roarmctl.motion.pipeline import plan_file
 
     plan = folder / "short.yaml"
     plan.write_text(plan_text)
     traj, log = folder / "short.traj.json", folder / "short.exec.json"
     plan_file(plan, seed=None).trajectory.save(traj)
-    run = roarmctl("execute", str(traj), "--sim", "--yes", "--log", str(log))
+    with virtual_simulator():
+        run = roarmctl("execute", str(traj), "--sim", "--yes", "--log", str(log))
     assert run.returncode == 0, run.stderr
     return traj, log

@@ -50,20 +50,13 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 
 @pytest.fixture
-def virtual_sim(monkeypatch: pytest.MonkeyPatch) -> list:
-    """``execute --sim`` (in this process) and ``roarmctl.api.execute(sim=True)`` run on a virtual clock: the
-    simulator's firmware and servo models (``roarmctl.device.virtual.VirtualSimulator``) behind the real ``Link``,
-    no pty and no real time, so a test of what a run does costs its computation only and its numbers are the same on
-    an idle or a busy machine. The pty and real time keep their own tests (tests/device/test_execute.py, marked slow).
+def virtual_sim():
+    """``execute --sim`` (in this process) and ``roarmctl.api.execute(sim=True)`` run on a virtual clock for the test
+    (``clirun.virtual_simulator``): the simulator's firmware and servo models behind the real ``Link``, no pty and no
+    real time, so a test of what a run does costs its computation only and its numbers are the same on an idle or a
+    busy machine. The pty and real time keep their own tests (tests/device/test_execute.py, marked slow).
     Returns the simulators made, in order (their ``recording()`` is the witness of where the arm went)."""
-    from roarmctl.device import session
-    from roarmctl.device.virtual import VirtualClock, VirtualSimulator
+    from clirun import virtual_simulator
 
-    made: list[VirtualSimulator] = []
-
-    def simulator(config, servos):
-        made.append(VirtualSimulator(config, VirtualClock(), servos=servos))
-        return made[-1]
-
-    monkeypatch.setattr(session, "pty_simulator", simulator)
-    return made
+    with virtual_simulator() as made:
+        yield made

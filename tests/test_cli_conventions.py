@@ -175,7 +175,7 @@ def test_units_and_singularity_are_spelled_out(cli):
 
 
 @pytest.mark.slow  # includes a run on the simulated arm (real time)
-def test_commands_mean_the_same_in_output_json_text_and_sim(tmp_path):
+def test_commands_mean_the_same_in_output_json_text_and_sim(tmp_path, virtual_sim):
     plan = tmp_path / "short.yaml"
     plan.write_text("robot: roarm_m3_pro\ntasks:\n  - move: {joints: [0.4, 0.1, 1.4, 0.1, 0.0]}\n  - move: {pose: home}\n"
                     "objects: []\n")

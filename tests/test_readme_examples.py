@@ -100,9 +100,11 @@ def test_the_readme_shows_the_main_commands():
     assert {"plan", "visualize-path", "execute", "kin", "export", "ports", "sim-device", "workspace", "robots"} <= verbs
 
 
-@pytest.mark.slow  # execute --sim runs in real time; three commands start an interpreter of their own
+# execute --sim runs on a virtual clock (virtual_sim: the pty and real time have tests/device/test_execute.py);
+# datagen renders and encodes, and three commands start an interpreter of their own
+@pytest.mark.slow
 @pytest.mark.parametrize("cmd", COMMANDS)
-def test_readme_command(cmd, workdir):
+def test_readme_command(cmd, workdir, virtual_sim):
     if cmd.startswith("roarmctl follow"):
         pytest.skip("follow needs a live source (a leader arm, a policy process, a recorded dataset) and the user's scene: "
                     "tests/device/test_follow_cli.py and test_follow_sim.py run it end to end")

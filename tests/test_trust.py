@@ -625,7 +625,7 @@ def test_a_fifo_given_as_the_input_file_is_refused_at_once(tmp_path, args):
     refused([a.format(f=f, d=tmp_path) for a in args], "FIFO")
 
 
-def test_the_execution_log_of_a_carried_robot_exports_by_itself(tmp_path):
+def test_the_execution_log_of_a_carried_robot_exports_by_itself(tmp_path, virtual_sim):
     """Run on the simulator: the log carries the robot the trajectory carried, so `export LOG` needs no file."""
     import shutil
 

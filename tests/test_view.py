@@ -22,7 +22,7 @@ from pathlib import Path
 import browser as br
 import numpy as np
 import pytest
-from clirun import planned_and_run_on_sim
+from clirun import planned_and_run_on_sim, roarmctl, virtual_simulator
 
 from roarmctl.cli import run as run_cli
 
@@ -671,20 +671,13 @@ def _rms(a: np.ndarray) -> float:
 
 @pytest.fixture(scope="module")
 def pick_place_run(planned, tmp_path_factory):
-    """plans/pick_place.yaml run on the simulated arm (``execute --sim``, real time): (trajectory, log)."""
+    """plans/pick_place.yaml run on the simulated arm (``execute --sim``, its physics servos, on a virtual clock:
+    ``clirun.virtual_simulator``; the same run on a busy or an idle machine): (trajectory, log)."""
     d = tmp_path_factory.mktemp("pick_place_run")
     f, _ = planned["pick_place"]
     log = d / "pick_place.exec.json"
-    cmd = [sys.executable, "-m", "roarmctl", "execute", str(f), "--sim", "--yes", "--log", str(log)]
-    done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-    if done.returncode == 4 and "tracking error" in done.stderr:
-        # The simulated servos (MuJoCo, in the simulator's process, in real time) fell behind on a machine running
-        # the suite's other workers, and the streamer's tracking stop did its job (seen once in four clean-clone CI
-        # runs: 50.7 mm at 0.88 s). These tests are about drawing a completed run, so one more try; a second abort
-        # fails the tests that need it, with both messages.
-        first = done.stderr.strip()
-        done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-        assert done.returncode == 0, f"twice: {first} / {done.stderr}"
+    with virtual_simulator():
+        done = roarmctl("execute", str(f), "--sim", "--yes", "--log", str(log))
     assert done.returncode == 0, done.stderr
     return f, log
 

@@ -76,7 +76,7 @@ def test_sim_run_follows_the_plan_and_keeps_time(traj_file, capsys):
     assert any("feedback" in r for r in log["received"])
 
 
-def test_sim_tracks_the_planned_blended_jerk_limited_pick_and_place(tmp_path, capsys):
+def test_sim_tracks_the_planned_blended_jerk_limited_pick_and_place(tmp_path, capsys, virtual_sim):
     """The bundled plan as planned (blended joins, jerk limits), streamed to the simulated arm."""
     root = Path(__file__).resolve().parents[2]
     out = tmp_path / "planned.traj.json"
@@ -91,7 +91,7 @@ def test_sim_tracks_the_planned_blended_jerk_limited_pick_and_place(tmp_path, ca
     assert res["simulator"]["rms_aligned_mm"] < 5.0
 
 
-def test_speed_scale_slows_down(tmp_path, capsys):
+def test_speed_scale_slows_down(tmp_path, capsys, virtual_sim):
     p = tmp_path / "short.traj.json"
     min_jerk([HOME, [0.8, 0.3, 1.9, -0.5, 0.3, 0.5]], [1.0]).save(p)
     rc = run_cli(["execute", str(p), "--sim", "--yes", "--json", "--speed-scale", "0.5", "--rate", "25",
@@ -100,9 +100,10 @@ def test_speed_scale_slows_down(tmp_path, capsys):
     log = json.loads((tmp_path / "slow.json").read_text())
     assert rc == 0 and log["duration"] == pytest.approx(2.0)
     ticks = [s for s in log["sent"] if "tick" in s]
-    # the flags reach the stream: 25 Hz over the 2 s the scale gives, every tick in order (when each went out is
-    # asserted on the model's clock, tests/device/test_virtual.py: a real-time run can only be late)
+    # the flags reach the stream: 25 Hz over the 2 s the scale gives, every tick in order, each on time on the
+    # simulator's (virtual) clock
     assert [s["tick"] for s in ticks] == list(range(51)) and log["rate"] == 25
+    assert max(abs(s["t"] - s["tick"] / 25) for s in ticks) < 1e-9
     assert out["simulator"]["rms_aligned_mm"] < 5.0
 
 
@@ -326,7 +327,7 @@ def test_permission_denied_names_the_dialout_fix():
     assert err.exit_code == 4 and "permission denied" in err.message and "usermod -aG dialout" in err.hint
 
 
-def test_execute_sim_rehearses_a_slow_20260701_loop(tmp_path, capsys):
+def test_execute_sim_rehearses_a_slow_20260701_loop(tmp_path, capsys, virtual_sim):
     """``execute --sim`` takes sim-device's build and the loop pass: on the 20260701 build at 22 ms a pass the stream
     measures the slow firmware and goes on at a lower rate, and the motion keeps its time. (Before: --sim ran only the
     0.84 build with boot off.)"""

@@ -26,7 +26,7 @@ def planned(tmp_path_factory) -> Path:
     return out
 
 
-def test_a_lagging_arm_is_not_a_fault(planned, capsys):
+def test_a_lagging_arm_is_not_a_fault(planned, capsys, virtual_sim):
     """Streamed without a lead, the physics arm's TCP is 20 mm behind the plan at speed (bench_stream:
     timed, 0.84 build): more than a 15 mm bound, yet the run completes, because the arm is on the path,
     late by the servos' own lag."""
@@ -53,7 +53,7 @@ def test_a_blocked_joint_on_the_physics_arm_still_aborts_with_a_hold(planned, ca
 
 
 
-def test_the_default_strategy_follows_the_plan_on_the_physics_arm(planned, capsys):
+def test_the_default_strategy_follows_the_plan_on_the_physics_arm(planned, capsys, virtual_sim):
     """The default strategy aims ahead by the loop's lag: the arm is on the plan, not behind it."""
     capsys.readouterr()
     rc = run_cli(["execute", str(planned), "--sim", "--yes", "--json", "--log", str(planned.with_name("lead.exec.json"))])
