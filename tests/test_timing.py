@@ -344,3 +344,28 @@ def test_a_one_joint_line_timed_again_either_way_gives_the_bytes_of_a_fresh_timi
         again = arrays(time_parameterise(np.array([[x1], [x0]]), v, a, j))
         assert all(np.array_equal(p, q) for p, q in zip(again, want))
         assert not np.array_equal(again[1], arrays(fresh(x0, x1))[1])  # a different motion, not a copy
+
+
+def test_the_joint_path_is_scipys_not_a_knot_spline_for_every_waypoint_count():
+    """joint_path gives three waypoints their parabola by end slopes (scipy's own not-a-knot spline solves it
+    densely): against scipy's CubicSpline (not-a-knot) on random waypoints of 2-6 points, values, slopes and
+    curvatures agree to 1e-12 (relative to their size), and are the same bits for every count but three."""
+    from scipy.interpolate import CubicSpline
+
+    from roarmctl.motion.toppra_constraints import import_toppra, joint_path
+
+    ta = import_toppra()
+    rng = np.random.default_rng(39)
+    for trial in range(60):
+        k, n = 2 + trial % 5, 1 + trial % 6
+        wp = rng.uniform(-2.0, 2.0, size=(k, n)) * rng.uniform(0.01, 1.0)
+        ss = np.concatenate([[0.0], np.cumsum(rng.uniform(0.01, 1.0, k - 1))])
+        path, ref = joint_path(ta, ss, wp), CubicSpline(ss, wp, bc_type="not-a-knot")
+        refs = (ref, ref.derivative(), ref.derivative().derivative())  # as toppra differentiates it
+        x = np.concatenate([ss, rng.uniform(0.0, ss[-1], 50)])
+        for order in (0, 1, 2):
+            got, want = path(x, order), refs[order](x)
+            scale = max(1.0, float(np.max(np.abs(want))))
+            assert np.max(np.abs(got - want)) <= 1e-12 * scale
+            assert k == 3 or np.array_equal(got, want)
+        assert np.allclose(path(ss), wp, rtol=0.0, atol=1e-12)

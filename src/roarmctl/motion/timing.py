@@ -41,6 +41,7 @@ from roarmctl.motion.toppra_constraints import (
     geometric_jerk_constraint,
     import_toppra,
     joint_limit_constraints,
+    joint_path,
     path_jerk,
     quiet_toppra,
     tcp_speed_constraint,
@@ -138,7 +139,7 @@ def time_parameterise(
     vmax, amax = np.asarray(vmax, dtype=float), np.asarray(amax, dtype=float)
     chord = np.linalg.norm(np.diff(wp, axis=0), axis=1)
     ss = np.concatenate([[0.0], np.cumsum(chord)])
-    path = ta.SplineInterpolator(ss, wp, bc_type="not-a-knot")
+    path = joint_path(ta, ss, wp)
     gridpoints = toppra_grid(ss)
     hold = check_holding(torque, path(gridpoints), label) if torque is not None else None
     torque_limited = torque is not None and bool(np.any(np.isfinite(torque.limits)))
