@@ -741,7 +741,21 @@ def test_a_run_viewed_without_its_trajectory_agrees_with_the_cli(pick_place_run,
     inside = lambda d: (_decode(d["times"]) > 0.1) & (_decode(d["times"]) < d["duration"] - 0.1)  # noqa: E731
     err_alone = _decode(alone["ghost"]["error"])[inside(alone)]
     err_whole = _decode(whole["ghost"]["error"])[inside(whole)]
-    assert abs(_rms(err_alone) * 1000 - run["summary"]["tracking_mm"]["rms"]) < 0.5
+    # the page draws the run's own errors: at each frame, between the two feedback samples around it (float32)
+    from roarmctl.device.schedule import plan_clock
+
+    rows_t = plan_clock(np.array([r["t"] for r in run["tracking"]]), run.get("paused", []) or [])
+    rows_e = np.array([r["error_m"] for r in run["tracking"]])
+    t_alone = _decode(alone["times"])[inside(alone)]
+    right = np.clip(np.searchsorted(rows_t, t_alone), 1, len(rows_t) - 1)
+    lo = np.minimum(rows_e[right - 1], rows_e[right]) - 1e-6
+    hi = np.maximum(rows_e[right - 1], rows_e[right]) + 1e-6
+    assert np.all((err_alone >= lo) & (err_alone <= hi))
+    # so its RMS is the run's, up to the resampling: the page's frames are evenly spaced in time, the feedback frames
+    # are not when the host is busy (0.75 mm apart at 5.4 mm RMS in a loaded CI run), never the 10x of drawing the
+    # commands when their lines were sent
+    summary_rms = run["summary"]["tracking_mm"]["rms"]
+    assert abs(_rms(err_alone) * 1000 - summary_rms) < max(0.5, 0.2 * summary_rms)
     # the page's own comparison with the plan (-t) against the streamer's (which widens its window by the lateness it
     # measured, host and device): equal on an unhurried run, apart by at most what that lateness lets the TCP travel
     plan_peak = float(_decode(whole["speed"]).max())
