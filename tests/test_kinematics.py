@@ -209,30 +209,35 @@ def test_scara_ellipsoid_at_stretched_singularity_seed_004():
 
 # ------------------------------------------------------------- the one FK vs a naive chain product
 def naive_link_frames(robot, q: np.ndarray) -> np.ndarray:
-    """Reference FK for one full q: each joint as origin @ motion(q) @ post, full 4x4 products,
-    rotations from scipy-free Rodrigues written out here (a different method from the library's
-    cos/sin-linear steps and constant-link folding)."""
+    """Reference FK for a full q (dof,), or a batch of them (N, dof): each joint as origin @ motion(q) @ post, full
+    4x4 products, rotations from scipy-free Rodrigues written out here (a different method from the library's
+    cos/sin-linear steps and constant-link folding). (L, 4, 4) per q, (N, L, 4, 4) for a batch."""
+    q = np.asarray(q, dtype=float)
+    qs = np.atleast_2d(q)
+    n = len(qs)
     names = robot.link_names
-    frames = {names[0]: np.eye(4)}
+    frames = {names[0]: np.broadcast_to(np.eye(4), (n, 4, 4))}
     for joint in robot.joints:
-        motion = np.eye(4)
+        motion = np.repeat(np.eye(4)[None], n, axis=0)
         # a mimic joint moves with the joint it follows: multiplier * q + offset (URDF <mimic>)
         qi = robot.joint_names.index(joint.mimic or joint.name) if joint.kind != "fixed" else None
         if joint.kind == "revolute":
             k = np.asarray(joint.axis, dtype=float)
             kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-            ang = joint.multiplier * q[qi] + joint.offset
-            motion[:3, :3] = np.eye(3) + math.sin(ang) * kx + (1 - math.cos(ang)) * kx @ kx
+            ang = joint.multiplier * qs[:, qi] + joint.offset
+            motion[:, :3, :3] = np.eye(3) + np.sin(ang)[:, None, None] * kx + (1 - np.cos(ang))[:, None, None] * (kx @ kx)
         elif joint.kind == "prismatic":
-            motion[:3, 3] = (joint.multiplier * q[qi] + joint.offset) * np.asarray(joint.axis, dtype=float)
+            motion[:, :3, 3] = (joint.multiplier * qs[:, qi] + joint.offset)[:, None] * np.asarray(joint.axis, dtype=float)
         frames[joint.child] = frames[joint.parent] @ joint.origin @ motion @ joint.post
-    return np.array([frames[n] for n in names])
+    out = np.stack([frames[nm] for nm in names], axis=1)
+    return out[0] if q.ndim == 1 else out
 
 
 @pytest.mark.parametrize("robot", ALL, ids=lambda r: r.name)
 def test_fk_equals_a_naive_chain_product(robot):
     q = np.random.default_rng(1).uniform(robot.lower, robot.upper, (32, robot.dof))
     ref = np.array([naive_link_frames(robot, qi) for qi in q])
+    np.testing.assert_allclose(naive_link_frames(robot, q), ref, atol=1e-12, rtol=0)  # the reference batched, too
     np.testing.assert_allclose(robot.kin.link_frames(q), ref, atol=1e-12, rtol=0)  # batched
     for qi, ri in zip(q[:8], ref[:8]):
         np.testing.assert_allclose(robot.kin.link_frames(qi), ri, atol=1e-12, rtol=0)  # one configuration

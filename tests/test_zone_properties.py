@@ -138,7 +138,7 @@ def check(arm: str, seed: int) -> bool:
         return False
     traj = result.trajectory
     robot = robot_of(arm)
-    tcp = np.array([naive_link_frames(robot, q)[robot.kin.tcp_index][:3, 3] for q in traj.positions])
+    tcp = naive_link_frames(robot, traj.positions)[:, robot.kin.tcp_index, :3, 3]
     for tgt, sel in zip(named, windows(traj, [t["kind"] for t in named])):
         miss = float(np.min(np.linalg.norm(tcp[sel] - tgt["xyz"] if tgt["kind"] == "move" else tcp[sel] - grasp_point(traj, tgt), axis=1)))
         assert miss <= max(tgt["zone"], 5e-4) + 1e-9, f"seed {seed} ({arm}): {tgt['kind']} at {tgt['xyz']} missed by {miss * 1e3:.2f} mm (zone {tgt['zone']})"

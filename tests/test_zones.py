@@ -34,7 +34,7 @@ def six_moves(limits: str = "", zones: dict[int, float] | None = None) -> str:
 def independent_misses(robot, traj, points) -> list[float]:
     """Closest TCP distance (m) to each of ``points``, the k-th measured over the k-th free segment and the next,
     by the naive chain product."""
-    tcp = np.array([naive_link_frames(robot, q)[robot.kin.tcp_index][:3, 3] for q in traj.positions])
+    tcp = naive_link_frames(robot, traj.positions)[:, robot.kin.tcp_index, :3, 3]
     free = [i for i, s in enumerate(traj.segments) if s.kind == "free"]
     out = []
     for k, p in enumerate(points):
@@ -64,7 +64,7 @@ def test_the_issues_six_moves_reach_every_target_by_default(tmp_path, roarm):
     traj = load_trajectory(out)
     misses = independent_misses(roarm, traj, SIX)
     assert max(misses) <= 5e-4, misses
-    tcp_z = [naive_link_frames(roarm, q)[roarm.kin.tcp_index][2, 3] for q in traj.positions]
+    tcp_z = naive_link_frames(roarm, traj.positions)[:, roarm.kin.tcp_index, 2, 3]
     assert min(tcp_z) == pytest.approx(0.04, abs=5e-4)  # it goes down to 4 cm on both sides
     summary = json.loads(r.stdout)
     assert summary["targets_summary"].startswith("6 targets reached (max ")
