@@ -64,6 +64,7 @@ class MeshGeometry:
     exact: bool
     source: str
     _grown: dict = field(default_factory=dict, compare=False, repr=False)
+    _thickness: list = field(default_factory=list, init=False, compare=False, repr=False)  # worked out once (every plan asks)
 
     @property
     def half_extents(self) -> np.ndarray:
@@ -73,6 +74,11 @@ class MeshGeometry:
     def thickness(self) -> float:
         """The smallest width (m) of the convex hull across one of its faces: how thick the part is at its
         thinnest (a finger plate's thickness). For an exact mesh, that of its hull."""
+        if not self._thickness:
+            self._thickness.append(self._hull_width())
+        return self._thickness[0]
+
+    def _hull_width(self) -> float:
         v, f = (self.vertices, self.faces) if not self.exact else convex_hull(self.vertices, self.source)
         n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
         norm = np.linalg.norm(n, axis=1)
