@@ -6,6 +6,7 @@ they are installed."""
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
@@ -232,12 +233,43 @@ def test_a_written_dataset_reads_back_with_pyarrow(tmp_path, codec):
 
 
 @pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="SVT-AV1 raises its threads only as root")
-def test_an_av1_encode_as_root_leaves_no_real_time_policy_behind():
-    """SVT-AV1 run as root leaves the calling thread SCHED_FIFO 99 (measured), and a process started from it then
-    inherits that: a busy child would own its core. After roarmctl's encode a child runs under the normal policy."""
+def test_an_av1_encode_as_root_runs_and_leaves_no_real_time_policy():
+    """SVT-AV1 run as root starts its encoder threads SCHED_FIFO 99 and leaves the calling thread so (measured), and a
+    process started from it then inherits that: a busy child would own its core. With roarmctl's encode no thread
+    of the process is real-time while it runs (a watcher reads every thread's policy from /proc every millisecond),
+    the right to be is back afterwards, and a child runs under the normal policy."""
+    import threading
+
+    import pyprctl
+
     from roarmctl.export.lerobot import video
 
-    video.encode(np.zeros((3, 32, 32, 3), np.uint8), 10, "av1")
+    def policies() -> set[int]:
+        out = set()
+        for tid in os.listdir("/proc/self/task"):
+            with contextlib.suppress(OSError):
+                stat = Path(f"/proc/self/task/{tid}/stat").read_text()
+                out.add(int(stat.rsplit(")", 1)[1].split()[38]))  # field 41, policy (proc(5))
+        return out
+
+    seen: set[int] = set()
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.is_set():
+            seen.update(policies())
+            done.wait(0.001)
+
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    try:
+        frames = np.random.default_rng(0).integers(0, 255, (60, 96, 96, 3), dtype=np.uint8)
+        video.encode(frames, 30, "av1")
+    finally:
+        done.set()
+        watcher.join(timeout=10)
+    assert seen == {os.SCHED_OTHER}, seen
+    assert pyprctl.Cap.SYS_NICE in pyprctl.CapState.get_current().effective
     child = subprocess.run([sys.executable, "-c", "import os; print(os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)"],
                            capture_output=True, text=True, timeout=60)
     assert child.stdout.split() == [str(os.SCHED_OTHER), "0"], child.stdout

@@ -35,23 +35,43 @@ CODECS: dict[str, tuple[str, dict[str, Any]]] = {
 
 @contextlib.contextmanager
 def _scheduling_kept() -> Iterator[None]:
-    """Give the calling thread back the scheduling policy and priority it had before the block.
+    """Run the block without the right to real-time scheduling, and give the calling thread back the scheduling
+    policy and priority it had before it.
 
     SVT-AV1 starts its threads with the real-time policy SCHED_FIFO at priority 99 whenever it is allowed to
-    (``svt_create_thread``, Source/Lib/Common/Codec/EbThreads.c in AOMediaCodec/SVT-AV1): as root it is. Measured
-    with the libsvtav1 PyAV ships: after one AV1 encode as root the *calling* thread is SCHED_FIFO 99 too, and
-    every process it starts afterwards inherits that; a CPU-bound child then owns its core outright (in a
-    clean-clone CI run a busy-loop child starved a planner on the same core so completely that it could not even
-    be killed, and the run hung until its time limit). SVT's own threads end with the encoder."""
+    (``svt_create_thread``, Source/Lib/Common/Codec/EbThreads.c in AOMediaCodec/SVT-AV1): as root it is, and its
+    busy encoder threads then own their cores while they run. Where that right is refused (``EPERM``) it creates
+    them under the normal policy, so the block runs with CAP_SYS_NICE out of this thread's *effective*
+    capabilities (``capabilities(7)``: per thread, inherited by the threads it creates; it stays in the permitted
+    set and comes back after). Measured with the libsvtav1 PyAV ships, as root: without this, the encoder's threads
+    were SCHED_FIFO 99 during the encode and the *calling* thread stayed so afterwards, and every process it
+    started inherited it (in a clean-clone CI run a busy-loop child starved a planner on the same core so
+    completely that it could not even be killed, and the run hung until its time limit)."""
     if not hasattr(os, "sched_getscheduler"):  # not Linux: no such policy change
         yield
         return
     policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+    with _without_sys_nice():
+        try:
+            yield
+        finally:
+            if os.sched_getscheduler(0) != policy or os.sched_getparam(0) != param:
+                os.sched_setscheduler(0, policy, param)  # lowering a priority is always allowed
+
+
+@contextlib.contextmanager
+def _without_sys_nice() -> Iterator[None]:
+    """CAP_SYS_NICE out of the calling thread's effective capabilities for the block, if it had it (pyprctl)."""
+    import pyprctl
+
+    had = pyprctl.Cap.SYS_NICE in pyprctl.CapState.get_current().effective
+    if had:
+        pyprctl.cap_effective.drop(pyprctl.Cap.SYS_NICE)
     try:
         yield
     finally:
-        if os.sched_getscheduler(0) != policy or os.sched_getparam(0) != param:
-            os.sched_setscheduler(0, policy, param)  # lowering a priority is always allowed
+        if had:
+            pyprctl.cap_effective.add(pyprctl.Cap.SYS_NICE)
 
 
 def encode(frames: np.ndarray, fps: int, codec: str = "h264") -> bytes:
