@@ -1,9 +1,9 @@
 """The timing stage alone, this tree against another revision's, call by call: an A/B that a busy machine cannot tilt.
 
-Run: .venv/bin/python bench/bench_timing.py [--base REV] [--rounds 15] [--split]
+Run: .venv/bin/python bench/bench_timing.py [--base REV] [--rounds 15] [--split] [--seeds 1-3]
 
 Every ``time_parameterise`` call that planning makes (the free motions a-e of bench/bench_vs_mplib.py, each planned
-through ``roarmctl.api.plan`` as a one-motion plan, and the bundled plans; seeds 1-3) is recorded with its arguments,
+through ``roarmctl.api.plan`` as a one-motion plan, and the bundled plans; seeds 1-3 unless ``--seeds``) is recorded with its arguments,
 then replayed ``--rounds`` times with REV's timing modules (``motion/timing.py``, ``jerk_filter.py`` and
 ``toppra_constraints.py`` read with ``git show REV:...``; default HEAD, i.e. the change not yet committed) and with
 this tree's, one after the other for each call, in alternating order (so load that comes and goes hits both sides
@@ -158,6 +158,7 @@ def main() -> None:
     parser.add_argument("--base", default="HEAD", help="the revision to compare this tree with (default HEAD)")
     parser.add_argument("--rounds", type=int, default=15)
     parser.add_argument("--split", action="store_true", help="where this tree's timing spends its time, no A/B")
+    parser.add_argument("--seeds", default="1-3", help="planning seeds FIRST-LAST (bench_vs_mplib.py's rounds: 100-119)")
     args = parser.parse_args()
 
     from roarmctl.motion import timing
@@ -166,7 +167,8 @@ def main() -> None:
     load_planning_libraries()
     with tempfile.TemporaryDirectory() as folder:
         sides = {"base": revision_timing(args.base, Path(folder)).time_parameterise, "tree": timing.time_parameterise}
-    seeds = range(1, 4)
+    first, last = (int(v) for v in args.seeds.split("-"))
+    seeds = range(first, last + 1)
     calls = record_calls(query_docs(), seeds)
     if args.split:
         split(calls, args.rounds, len(seeds))

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import json
 import os
 import statistics
@@ -244,7 +245,7 @@ def roarmctl_query(ctx, step, q, seed: int):
     Returns (wall s, geometry s, motion duration s, waypoints)."""
     from roarmctl.motion.planning import motions
 
-    ctx.plan.planner.seed = seed
+    ctx.config = dataclasses.replace(ctx.config, seed=seed)  # the planner's options are frozen (issue 37)
     ctx.free_count = 0
     ctx.timed.clear()  # the query is timed afresh in every round (a plan keeps what it timed: motions.time_path)
     t0 = time.perf_counter()
@@ -262,7 +263,7 @@ def roarmctl_like_mplib(ctx, step, q, seed: int):
     from roarmctl.motion.planning.pieces import SAMPLE_DT
     from roarmctl.motion.timing import time_parameterise
 
-    ctx.plan.planner.seed = seed
+    ctx.config = dataclasses.replace(ctx.config, seed=seed)  # the planner's options are frozen (issue 37)
     ctx.free_count = 0
     ctx.timed.clear()  # the query is timed afresh in every round (a plan keeps what it timed: motions.time_path)
     arm = ctx.arm
