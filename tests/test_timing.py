@@ -369,3 +369,46 @@ def test_the_joint_path_is_scipys_not_a_knot_spline_for_every_waypoint_count():
             assert np.max(np.abs(got - want)) <= 1e-12 * scale
             assert k == 3 or np.array_equal(got, want)
         assert np.allclose(path(ss), wp, rtol=0.0, atol=1e-12)
+
+
+def test_a_clipped_profile_answers_the_jerk_check_as_a_fresh_one_does():
+    """_jerk_ok answers a clipped profile (Profile.clipped) from its family's failures where the two are the same
+    motion: over random paths, speed profiles, caps, widths and jerk limits, every answer equals that of the same
+    clipped profile built on its own (no family), asked in the plateau's order (the parent first, then the caps)."""
+    from roarmctl.motion.jerk_filter import Profile, _jerk_ok
+    from roarmctl.motion.toppra_constraints import import_toppra, joint_path, toppra_grid
+
+    ta = import_toppra()
+    rng = np.random.default_rng(391)
+    told = answers = 0
+    for trial in range(12):
+        wp = np.cumsum(rng.uniform(-0.4, 0.4, size=(2 + trial % 5, 4)), axis=0)
+        ss = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(wp, axis=0), axis=1))])
+        path, grid = joint_path(ta, ss, wp), toppra_grid(ss)
+        bumps = 1.0 + 0.3 * np.sin(rng.uniform(2.0, 9.0) * grid / grid[-1])  # switches of the path acceleration
+        prof = Profile(grid, rng.uniform(0.5, 1.5) * bumps * np.sqrt(np.sin(np.pi * grid / grid[-1]).clip(0.0)))
+        jm = rng.uniform(5.0, 60.0, 4)
+        widths = [0.05 * 1.04**k for k in range(5)]
+        for w in widths:
+            _jerk_ok(path, prof, w, jm)
+        for share in (0.95, 0.8):
+            cap = share * float(np.max(prof.sd))
+            kin, alone = prof.clipped(cap), Profile(grid, np.minimum(prof.sd, cap))
+            assert kin.same_until < kin.T and np.array_equal(kin.sd, alone.sd)
+            for w in widths:
+                told += (w, jm.tobytes()) in kin.family and kin.family[(w, jm.tobytes())] <= kin.same_until
+                answers += 1
+                assert _jerk_ok(path, kin, w, jm) == _jerk_ok(path, alone, w, jm)
+    assert 0 < told < answers  # some answers came from the family, some were sampled
+
+    # The plateau's own case: a straight line accelerated at a, then decelerated at a, one step of 2a at the top. At
+    # width w a jerk limit of 1.5 a / w (along the line) fails the top alone; a cruise there passes, though the
+    # unclipped profile failed, so a failure found past where the two part must not be lent.
+    wp = np.array([[0.0, 0.0, 0.0, 0.0], [0.6, -0.3, 0.2, 0.6]])
+    ss = np.array([0.0, float(np.linalg.norm(wp[1] - wp[0]))])
+    path, grid = joint_path(ta, ss, wp), toppra_grid(ss)
+    prof = Profile(grid, np.sqrt(2.0 * np.minimum(grid, ss[-1] - grid)))  # sdot^2 = 2 a s up, then down; a = 1
+    jm = 1.5 * np.abs(wp[1] - wp[0]) / ss[-1] / 0.1
+    assert not _jerk_ok(path, prof, 0.1, jm)
+    kin = prof.clipped(0.8 * float(np.max(prof.sd)))
+    assert _jerk_ok(path, kin, 0.1, jm) and _jerk_ok(path, Profile(grid, kin.sd), 0.1, jm)

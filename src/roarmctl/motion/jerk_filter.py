@@ -56,6 +56,22 @@ class Profile:
         self._starts = np.stack([self.t[:-1], self.s[:-1], sd[:-1], self.S[:-1], self.sdd])
         self._last: tuple[np.ndarray, tuple] | None = None  # (t, its _eval_grid values) of the last _eval_grid call
         self.jerk_answers: dict = {}  # _jerk_ok's answers for this profile ("path": the path they are for)
+        # Profiles clipped from this one (a cruise cap) are the same motion up to some time: ``family`` (shared with
+        # them) keeps, per filter width, the earliest failed jerk check found there (``_jerk_ok``); ``same_until``
+        # (s) is how long this profile is the family's first one (inf: it is the first).
+        self.family: dict = {}
+        self.same_until = float("inf")
+
+    def clipped(self, cap: float) -> Profile:
+        """This profile with the path speed capped at ``cap`` (sdot) at every grid point, in this one's family: up to
+        the last grid point before the first capped one it is the same motion, bit for bit (the same times, s, sdot and
+        integral of s at every grid point up to there; what follows a time depends only on what came before)."""
+        out = Profile(self.grid, np.minimum(self.sd, cap))
+        capped = np.flatnonzero(out.sd != self.sd)
+        if len(capped):
+            out.family = self.family
+            out.same_until = min(self.same_until, float(self.t[capped[0] - 1]) if capped[0] > 0 else -1.0)
+        return out
 
     def slowed(self, factor: float) -> Profile:
         """The same profile ``factor`` times slower: path speed / factor at every grid point (times * factor, path
@@ -138,20 +154,35 @@ def _jerk_ok(path: toppra.interpolator.AbstractGeometricPath, prof: Profile, w: 
     accelerations qdd = q'(s) sddot + q''(s) sdot^2 (as in ``sample``) change by at most jmax * FINE_DT
     (to 1e-9) from one sample to the next.
 
-    Answers are kept on ``prof`` per path (the filter search asks again for w0, which the plateau test asked)."""
-    memo = prof.jerk_answers
+    Answers are kept on ``prof`` per path (the filter search asks again for w0, which the plateau test asked), and a
+    failure also on its family (``Profile.clipped``): a profile clipped from another fails at a width where the other
+    failed before either was clipped, without being sampled (the plateau's two cruises try the same widths)."""
+    memo, family = prof.jerk_answers, prof.family
     if memo.get("path") is not path:
         memo.clear()
         memo["path"] = path
+    if family.get("path") is not path:
+        family.clear()
+        family["path"] = path
     key = (w, jmax.tobytes())
     if key not in memo:
+        failed_at = family.get(key)
+        if failed_at is not None and failed_at <= prof.same_until:
+            memo[key] = False  # a profile of its family failed there, where the two are the same motion
+            return False
         t = np.arange(0.0, prof.T + w + FINE_DT, FINE_DT)
         s, sd, sdd = prof.filtered(t, w)
         qdd = path(s, 1) * sdd[:, None] + path(s, 2) * (sd**2)[:, None]  # as in sample, without the positions
         jerk = qdd[1:] - qdd[:-1]  # np.diff's values, then in place
         np.abs(jerk, out=jerk)
         jerk /= FINE_DT
-        memo[key] = bool((jerk <= jmax * (1 + 1e-9)).all())
+        within = (jerk <= jmax * (1 + 1e-9)).all(axis=1)
+        memo[key] = bool(within.all())
+        if not memo[key]:
+            # the failed pair of samples depends on the motion up to its later sample's time (the filter looks back)
+            until = float(t[int(np.argmin(within)) + 1])
+            if until <= prof.same_until and (failed_at is None or until < failed_at):
+                family[key] = until
     return memo[key]
 
 
@@ -219,7 +250,7 @@ def _plateau_profile(algo: ModuleType, constraints: list, path: toppra.interpola
     if c is None:
         return None
     if alim is not None:
-        clipped = Profile(gridpoints, np.minimum(prof.sd, c))
+        clipped = prof.clipped(c)
         ps, pss = path(gridpoints, 1), path(gridpoints, 2)
 
         def grid_acc(p: Profile) -> np.ndarray:
