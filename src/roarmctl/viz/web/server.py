@@ -117,6 +117,9 @@ class ViewServer:
 
         class Server(ThreadingHTTPServer):
             daemon_threads = True
+            # connections waiting to be accepted (socketserver's default is 5): a burst beyond the backlog has each
+            # extra client's connect retried by its kernel after a second or more, before the bound above can answer
+            request_queue_size = 128
 
             def process_request(self, request: Any, client_address: Any) -> None:
                 if not server.slots.acquire(blocking=False):
