@@ -6,6 +6,7 @@ the commands that need them so that ``roarmctl --help`` answers at once. The com
 compile and evaluate each string annotation twice (about a tenth of ``--help``).
 """
 
+import functools
 import os
 import sys
 import traceback
@@ -157,9 +158,11 @@ def _on_disk() -> str | None:
     return interrupted_write_state()
 
 
+@functools.cache
 def command() -> "click.Command":
     """The click command behind ``app``, with boolean flags shown as flags in ``--help`` (typer
-    would print ``--json <bool>``, which reads as if it took a value)."""
+    would print ``--json <bool>``, which reads as if it took a value). Built once per process (click makes a new
+    context for every call; a process that runs many command lines, a test worker or a notebook, pays it once)."""
     cmd = typer.main.get_command(app)
 
     def fix(c: "click.Command") -> None:
