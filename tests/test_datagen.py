@@ -589,15 +589,29 @@ def test_a_run_does_not_join_a_dataset_with_cameras_or_a_trajectory(run_file, tm
     assert r.returncode == 2 and "--lerobot" in r.stderr
 
 
-@pytest.mark.slow  # Ray started on this machine (tens of seconds on a busy one) and the four episodes again
-def test_ray_tasks_write_the_same_dataset_as_the_process_pool_and_nothing_outside_it(dataset4, tmp_path):
-    """``--ray local`` in a process of its own whose home and temporary folders are empty folders here: the same
-    bytes as the process pool, and afterwards both folders are empty again (Ray's session files and token were
-    kept in roarmctl's own temporary folder and environment) and no process of that Ray is left."""
+def guide_ray_command() -> list[str]:
+    """The docs' ``datagen ... --ray local`` command line, as written (its arguments after ``roarmctl``)."""
+    from test_readme_examples import COMMANDS
+
+    (cmd,) = [c for c in COMMANDS if c.startswith("roarmctl datagen") and "--ray local" in c]
+    return cmd.split()[1:]
+
+
+@pytest.mark.slow  # Ray started on this machine (tens of seconds on a busy one), the episodes again in the pool
+def test_ray_tasks_write_the_same_dataset_as_the_process_pool_and_nothing_outside_it(tmp_path):
+    """The guide's ``--ray local`` command as written (test_readme_examples leaves it to this test, so Ray starts
+    once), in a process of its own whose home and temporary folders are empty folders here: the same bytes as the
+    process pool given the same command without ``--ray``, and afterwards both folders are empty again (Ray's session
+    files and token were kept in roarmctl's own temporary folder and environment) and no process of that Ray is left."""
     pytest.importorskip("ray")
     import tempfile
 
-    out, _ = dataset4
+    args = guide_ray_command()
+    at = args.index("--ray")
+    pool_args = args[:at] + args[at + 2:]
+    out = args[args.index("-o") + 1]
+    work = tmp_path / "work"
+    shutil.copytree(ROOT / "plans", work / "plans")  # the command's paths are the docs' (from the clone's top)
     home = tmp_path / "home"
     home.mkdir()
     tmp = Path(tempfile.mkdtemp(prefix="dg-", dir="/tmp"))  # short: Ray's sockets go below it (107 bytes a path)
@@ -605,10 +619,9 @@ def test_ray_tasks_write_the_same_dataset_as_the_process_pool_and_nothing_outsid
     env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
     # MPLCONFIGDIR: matplotlib (which TOPP-RA imports) keeps a font cache in the home folder, planning's and not Ray's
     env |= {"HOME": str(home), "TMPDIR": str(tmp), "COLUMNS": "80", "MPLCONFIGDIR": str(tmp_path / "mpl")}
-    cmd = [sys.executable, "-m", "roarmctl", "datagen", str(TEMPLATE), "-n", "4", "-o", str(tmp_path / "ray"),
-           "--size", f"{SIZE}x{SIZE}", "--workers", "2", "--ray", "local", "--json"]
     try:
-        r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=550)
+        r = subprocess.run([sys.executable, "-m", "roarmctl", *args, "--json"], cwd=work, env=env, capture_output=True,
+                           text=True, timeout=550)
         left = [p for p in Path("/proc").glob("[0-9]*") if str(tmp).encode() in _cmdline(p)]
         assert not left, "a process of the test's Ray is still running"
         assert sorted(home.rglob("*")) == [] and sorted(tmp.rglob("*")) == [], (sorted(home.rglob("*")), sorted(tmp.rglob("*"))[:5])
@@ -618,8 +631,11 @@ def test_ray_tasks_write_the_same_dataset_as_the_process_pool_and_nothing_outsid
         assert len(r.stderr.strip().splitlines()) == 1 and "load average" in r.stderr and "--ray" in r.stderr
         pytest.skip(r.stderr.strip())
     assert r.returncode == 0, r.stderr
+    pool_args[pool_args.index("-o") + 1] = "pool"
+    p = roarmctl(*pool_args, cwd=work)
+    assert p.returncode == 0, p.stderr
     for rel in FILES + VIDEOS:
-        assert (out / rel).read_bytes() == (tmp_path / "ray" / rel).read_bytes(), rel
+        assert (work / "pool" / rel).read_bytes() == (work / out / rel).read_bytes(), rel
 
 
 def _cmdline(proc: Path) -> bytes:
