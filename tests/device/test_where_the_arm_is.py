@@ -78,9 +78,10 @@ def plan_text(start: str = "home", obstacles: str = "", end: str = "  - move: {p
 
 
 def about_the_start(notes: list[str]) -> list[str]:
-    """A run's notes but the stream's own pacing ("rate lowered ...": on a busy machine the firmware's answers come
-    late and the stream slows down for them, as it should), which say nothing about where the arm started."""
-    return [n for n in notes if not n.startswith("rate lowered")]
+    """A run's notes but the stream's own pacing ("rate lowered ...", "the firmware is the bottleneck ...": on a busy
+    machine the firmware's answers come late and the stream slows down for them, as it should), which say nothing
+    about where the arm started."""
+    return [n for n in notes if not n.startswith(("rate lowered", "the firmware is the bottleneck"))]
 
 
 def test_start_current_after_the_arm_was_moved_by_hand(tmp_path, capsys):

@@ -23,6 +23,7 @@ The choice and its figures: ``docs/guide.md``, "Talking to the firmware".
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import gc
 import math
 import signal
@@ -87,7 +88,11 @@ __all__ = [
 #: (1.5 x). The tracking check compares the arm with the plan anywhere in that window (less what the
 #: strategy's lead already makes up), so a lagging arm is not a fault and a stalled one still is.
 SERVO_LAG = 1.5 * st3235.LOOP_LAG
-CONFIRM_EVERY = 0.1  # s: the longest a stream goes without a poll (a rate lowered for a slow firmware keeps it)
+CONFIRM_EVERY = 0.1  # s: the longest a stream goes without a poll (while the firmware keeps up)
+#: Polls per second once the firmware is the bottleneck (``Streamer.firmware_bound``): on the 20260701 build each poll's
+#: 324-byte answer holds the loop while the UART drains, so a poll costs the firmware more than a motion line; at 12.5
+#: polls/s they took most of a 22 ms loop, the rate fell to 10 Hz, and a hold had up to 97 ms of line left to run
+FIRMWARE_BOUND_POLL_RATE = 5.0
 READ_EVERY = 0.005  # s: the stream reads the link at least this often while it waits
 READ_BEFORE_PRINT = protocol.READ_BEFORE_PRINT  # s between the firmware's servo reads and the start of its T:1051 line
 
@@ -157,6 +162,7 @@ class Streamer:
         self.hold_info: dict[str, Any] | None = None
         self.pacer = Pacer(0.03, 0.0, self.cfg.in_flight)  # lines and polls in flight (replaced when streaming starts)
         self.poll_every = 1  # a T:105 with every this many ticks
+        self.firmware_bound = False  # the firmware's time per line limits the stream: fewer polls, no gripper line
         self.rate_changes: list[dict[str, Any]] = []  # where the stream went on at a lower rate, and why
         self.refused_lines: dict[int, str] = {}  # id(Received) -> reason, for the log
         self.tick_of: dict[int, int] = {}  # id(first command sent for a tick) -> tick
@@ -182,9 +188,11 @@ class Streamer:
         on a build that runs one queued line per loop pass (20260701): each of its 324-byte answers blocks
         its loop while the UART drains, and the commands wait behind it. On the physics servos (pick_place,
         timed-lead, three runs each) 12.5 polls/s there gave 3.9-4.0 mm TCP RMS and 12 ms of lag, 25 polls/s
-        5.3-5.9 mm and 20-22 ms."""
+        5.3-5.9 mm and 20-22 ms. Once the firmware is the bottleneck (``firmware_bound``): ``FIRMWARE_BOUND_POLL_RATE``."""
         if self.cfg.feedback_rate is not None:
             return self.cfg.feedback_rate
+        if self.firmware_bound:
+            return FIRMWARE_BOUND_POLL_RATE
         info = self.link.info
         return FEEDBACK_RATE / 2 if info is not None and info.queued else FEEDBACK_RATE
 
@@ -490,8 +498,9 @@ class Streamer:
 
     def _poll_every(self, rate: float) -> int:
         """Ticks from one T:105 to the next at ``rate``: ``poll_rate()`` polls/s, and one at least every
-        ``CONFIRM_EVERY`` s."""
-        return max(1, min(int(round(rate / self.poll_rate())), int(rate * CONFIRM_EVERY)))
+        ``CONFIRM_EVERY`` s (once the firmware is the bottleneck: every 1 / ``FIRMWARE_BOUND_POLL_RATE`` s)."""
+        longest = 1.0 / FIRMWARE_BOUND_POLL_RATE if self.firmware_bound else CONFIRM_EVERY
+        return max(1, min(int(round(rate / self.poll_rate())), int(rate * longest)))
 
     def _fit_rate(self, k: int) -> None:
         """Go on from tick ``k`` at a lower rate when the firmware's time per line (measured at connect, then from
@@ -506,20 +515,29 @@ class Streamer:
         lines = np.array([len(tk.commands) for tk in sched[k:]], dtype=float)
         w = max(1, min(len(lines), int(round(0.5 * self.rate))))
         peak = float(np.convolve(lines, np.ones(w) / w, mode="valid").max())
-        fit = self.pacer.fitting_rate(self.rate, peak + 1.0 / self.poll_every)
-        if fit is None:
+        if self.pacer.fitting_rate(self.rate, peak + 1.0 / self.poll_every) is None:
             return
-        for _ in range(3):  # fewer ticks a second: a poll with more of them (CONFIRM_EVERY)
-            fit = self.pacer.fitting_rate(self.rate, peak + 1.0 / self._poll_every(fit), lower_by=1.0) or fit
+        if not self.firmware_bound:
+            # the firmware is the bottleneck: from here its time goes to motion lines. Fewer polls (each 324-byte answer
+            # holds the 20260701 loop while the UART drains: it cost more than a motion line) and no line of the
+            # gripper's own (one T:102 a tick, the spd of the fastest joint, the gripper included)
+            self.firmware_bound = True
+            self.notes.append(f"the firmware is the bottleneck ({self.pacer.line_time * 1e3:.1f} ms a line): from t = "
+                              f"{sched[k].t:.2f} s a poll every {1.0 / self.poll_rate():.1f} s and the gripper in the "
+                              "T:102 (no T:101 of its own)")
+        fit = self.rate
+        for _ in range(4):  # fewer ticks a second: a poll with more of them
+            fit = self.pacer.fitting_rate(fit, 1.0 + 1.0 / self._poll_every(fit), lower_by=1.0) or fit
         self.poll_every = self._poll_every(fit)
         start = sched[k - 1].t + 1.0 / fit if k > 0 else 0.0
         tail = build_schedule(self.traj, self.robot, rate=fit, speed_scale=self.cfg.speed_scale, sag=self.cfg.sag,
-                              strategy=self.cfg.strategy, start=min(start, sched[-1].t))
+                              strategy=dataclasses.replace(strat, split_gripper=False), start=min(start, sched[-1].t))
         self.schedule = sched[:k] + tail
-        self.rate_changes.append({"tick": k, "t": round(self.schedule[k].t, 6), "from_hz": round(self.rate, 3),
-                                  "to_hz": round(fit, 3), "line_time_s": round(self.pacer.line_time, 5)})
-        self.notes.append(f"rate lowered from {self.rate:.0f} to {fit:.0f} Hz at t = {self.schedule[k].t:.2f} s: the "
-                          f"firmware takes {self.pacer.line_time * 1e3:.1f} ms a line")
+        if fit < self.rate:
+            self.rate_changes.append({"tick": k, "t": round(self.schedule[k].t, 6), "from_hz": round(self.rate, 3),
+                                      "to_hz": round(fit, 3), "line_time_s": round(self.pacer.line_time, 5)})
+            self.notes.append(f"rate lowered from {self.rate:.0f} to {fit:.0f} Hz at t = {self.schedule[k].t:.2f} s: "
+                              f"the firmware takes {self.pacer.line_time * 1e3:.1f} ms a line")
         self.rate = fit
 
     def _settle(self) -> None:
