@@ -412,3 +412,49 @@ def test_a_clipped_profile_answers_the_jerk_check_as_a_fresh_one_does():
     assert not _jerk_ok(path, prof, 0.1, jm)
     kin = prof.clipped(0.8 * float(np.max(prof.sd)))
     assert _jerk_ok(path, kin, 0.1, jm) and _jerk_ok(path, Profile(grid, kin.sd), 0.1, jm)
+
+
+def test_the_cruise_search_skips_only_widths_that_fail():
+    """_plateau takes a filter width narrower than the trigger's as failing when the unclipped profile failed at the
+    trigger's width before the cruise begins (a narrower filter makes the jerk of a step of path acceleration larger).
+    Over TOPP-RA profiles of random curved paths, the plateau found is the same with the rule as without it (the
+    profile's family forgotten, so every width is sampled), and the rule did skip widths."""
+    from roarmctl.motion import jerk_filter
+    from roarmctl.motion.jerk_filter import PLATEAU_TRIGGER, _jerk_ok, _plateau
+    from roarmctl.motion.toppra_constraints import import_toppra, joint_path, toppra_grid
+
+    ta = import_toppra()
+    rng = np.random.default_rng(3939)
+    skipped = compared = cruises = 0
+    for trial in range(24):
+        k = 3 + trial % 4  # short, gently curved paths (a cruise helps there) and longer, bent ones
+        line = np.linspace(0.0, 1.0, k)[:, None] * rng.uniform(-0.6, 0.6, 4)
+        wp = line + rng.uniform(-0.02, 0.02, size=(k, 4)) * (1 + 10 * (trial % 2))
+        ss = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(wp, axis=0), axis=1))])
+        path, grid = joint_path(ta, ss, wp), toppra_grid(ss)
+        alim, jm = rng.uniform(2.0, 4.0, 4), rng.uniform(20.0, 60.0, 4)
+        cons = [ta.constraint.JointVelocityConstraint(rng.uniform(0.8, 1.5, 4)), ta.constraint.JointAccelerationConstraint(alim)]
+        inst = ta.algorithm.TOPPRA(cons, path, gridpoints=grid, parametrizer="ParametrizeConstAccel")
+        inst.compute_parameterization(0.0, 0.0)
+        results = []
+        for rule in (True, False):
+            prof = jerk_filter.Profile(grid, np.asarray(inst.problem_data.sd_vec, dtype=float))
+            w0 = max(float(np.max(alim / jm)), 2 * jerk_filter.FINE_DT)
+            if _jerk_ok(path, prof, w0, jm) or _jerk_ok(path, prof, PLATEAU_TRIGGER * w0, jm):
+                break  # jerk_filtered would not look for a cruise
+            if not rule:
+                prof.family.clear()
+            asked = []
+            plain = jerk_filter._jerk_ok
+            jerk_filter._jerk_ok = lambda *a: asked.append(a[2]) or plain(*a)  # noqa: B023 (called at once)
+            try:
+                found = _plateau(ta.algorithm, cons, path, grid, prof, w0, jm, alim)
+            finally:
+                jerk_filter._jerk_ok = plain
+            results.append((None if found is None else (found[0].sd.tobytes(), found[1]), len(asked)))
+        if len(results) == 2:
+            compared += 1
+            cruises += results[0][0] is not None
+            assert results[0][0] == results[1][0]
+            skipped += results[1][1] - results[0][1]
+    assert compared >= 4 and skipped > 0 and cruises >= 2, (compared, skipped, cruises)
