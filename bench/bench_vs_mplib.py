@@ -5,7 +5,8 @@ Run: .venv/bin/python bench/bench_vs_mplib.py [--rounds 20] [--venv /tmp/mplib-v
 At the end it prints issue 25's figures in one table, each beside mplib's where mplib has one: api.plan and
 Planner.run on queries a-e (the public API on the five queries below, nothing held), the wall query with 200
 boxes off the path (and its set-up: api.plan outside Planner.run, against mplib adding the boxes), the desk
-cloud, and from the same interleaved rounds: a fresh ``roarmctl plan plans/pick_place.yaml`` process and
+cloud (wall, and in CPU time: each side's process, every thread of it, around the same call, which the machine's load
+does not inflate as it does wall time), and from the same interleaved rounds: a fresh ``roarmctl plan plans/pick_place.yaml`` process and
 ``roarmctl --help`` (wall, beside ``python -c pass``; bytecode compiled first, as bench/bench_startup.py does), and
 the planning time per task of a 20-task plan (pick_place's cube carried there and back, 5 cycles of 4 tasks)
 with TOPP-RA's share.
@@ -119,20 +120,20 @@ for line in sys.stdin:
         q = spec["api"][cmd["query"]]
         p = api_planners[cmd["query"]]
         mplib.set_global_seed(cmd["seed"])
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         add_items(p, q["items"])
         if q.get("cloud") is not None:
             p.update_point_cloud(np.array(q["cloud"]), resolution=q["resolution"])
             p.planning_world.get_allowed_collision_matrix().set_entry("scene_pcd", spec["base_links"], True)
         t1 = time.perf_counter()
         res = p.plan_qpos([np.array(q["goal"])], np.array(q["start"]), time_step=0.01, planning_time=1.0)
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         for it in q["items"]:
             p.remove_object(it["name"])
         if q.get("cloud") is not None:
             p.remove_point_cloud()
         ok = res["status"] == "Success"
-        out = {"ok": ok, "wall": wall, "setup": t1 - t0, "duration": float(res["duration"]) if ok else None,
+        out = {"ok": ok, "wall": wall, "cpu": cpu, "setup": t1 - t0, "duration": float(res["duration"]) if ok else None,
                "path": res["position"].tolist() if ok else None}
     elif cmd["op"] == "plan":
         p = planners[cmd["query"]]
@@ -464,6 +465,9 @@ def main() -> None:
     api_ours = {k: ([], []) for k in api}  # (api.plan wall, Planner.run wall)
     api_cpu = {k: ([], []) for k in api}  # the same, this thread's CPU time
     api_theirs = {k: ([], []) for k in api}  # (set-up + plan_qpos wall, set-up wall)
+    # each side's process CPU time of the call (every thread of it: OpenBLAS's too), which the machine's load
+    # does not inflate as it does wall time: (roarmctl api.plan, mplib set-up + plan_qpos)
+    api_pcpu = {k: ([], []) for k in api}
     api_clear = {k: ([], []) for k in api}
     api_fails = {k: [0, 0] for k in api}
     cmds, env, _ = fresh_processes()
@@ -484,10 +488,11 @@ def main() -> None:
         per_task.append((long_plan.planning_time / 20, long_plan.timings.get("toppra", 0.0) / long_plan.planning_time))
         for name, (doc, _, _) in api.items():
             try:
-                t0, c0 = time.perf_counter(), time.thread_time()
+                t0, c0, p0 = time.perf_counter(), time.thread_time(), time.process_time()
                 result = rc.plan(doc, seed=100 + r, base_dir=folder)
                 api_ours[name][0].append(time.perf_counter() - t0)
                 api_cpu[name][0].append(time.thread_time() - c0)
+                api_pcpu[name][0].append(time.process_time() - p0)
                 api_ours[name][1].append(run_times[-1])
                 api_cpu[name][1].append(run_cpu[-1])
                 if r < args.metric_rounds:
@@ -499,6 +504,7 @@ def main() -> None:
             if res["ok"]:
                 api_theirs[name][0].append(res["wall"])
                 api_theirs[name][1].append(res["setup"])
+                api_pcpu[name][1].append(res["cpu"])
                 if r < args.metric_rounds:
                     path = np.array(res["path"])
                     full = np.repeat(np.array(doc["start"])[None, :], len(path), axis=0)
@@ -573,6 +579,11 @@ def main() -> None:
               f"{b:>10.1f}{setup:>12.1f}{a / b:>7.2f}x"
               f"   {sum(c < padding - 1e-6 for c in ca)} of {len(ca)} / {sum(c < padding - 1e-6 for c in cb)} of {len(cb)}"
               f"{'':>16}{api_fails[name][0]}/{api_fails[name][1]}")
+    print("\nthe same calls in CPU time (each side's process, all its threads; medians, ms): roarmctl.api.plan against "
+          "mplib's set-up + plan_qpos")
+    for name in api:
+        a, b = (statistics.median(v) * 1000 for v in api_pcpu[name])
+        print(f"  {name:<6}{a:>10.1f}{b:>10.1f}{a / b:>7.2f}x")
     print_issue_table(api, api_ours, api_theirs, fresh, fresh_planning, per_task)
     print("roarmctl's part, medians (ms): geometry (OMPL tries + shortcutting) | timing + re-check (TOPP-RA etc.)")
     for name in QUERIES:
