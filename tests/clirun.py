@@ -14,6 +14,7 @@ import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 
 @dataclass
@@ -59,10 +60,12 @@ def roarmctl(*args: str, env: dict[str, str] | None = None, cwd: str | Path | No
 
 
 @contextlib.contextmanager
-def virtual_simulator() -> Iterator[list]:
+def virtual_simulator(arm: Any = None) -> Iterator[list]:
     """Within the block, ``execute --sim`` in this process (and ``roarmctl.api.execute(sim=True)``) runs on a virtual
     clock: the simulator's firmware and servo models (``roarmctl.device.virtual.VirtualSimulator``, each on a clock of
-    its own) behind the real ``Link``, with no pty and no real time. Yields the simulators made, in order."""
+    its own) behind the real ``Link``, with no pty and no real time. ``arm``: one ``VirtualSimulator`` every run
+    connects to instead (the arm stays where the last run or a hand left it, as on ``sim-device``). Yields the
+    simulators made, in order."""
     import pytest
 
     from roarmctl.device import session
@@ -71,7 +74,7 @@ def virtual_simulator() -> Iterator[list]:
     made: list[VirtualSimulator] = []
 
     def simulator(config, servos):
-        made.append(VirtualSimulator(config, VirtualClock(), servos=servos))
+        made.append(arm if arm is not None else VirtualSimulator(config, VirtualClock(), servos=servos))
         return made[-1]
 
     with pytest.MonkeyPatch.context() as mp:

@@ -1,8 +1,9 @@
-"""Where the arm is, run after run, on the firmware simulator over a real pty: start: current after
-the arm was moved by T:102 commands, a trajectory run twice in a row, the gripper opened/closed
-first, --move-to-start around an obstacle and --from-current. The simulator's recorded servo
-positions are the independent check (collisions with python-fcl through the checker at padding 0,
-TCP by FK)."""
+"""Where the arm is, run after run, on the firmware simulator: start: current after the arm was moved by T:102
+commands (over a real pty: plan --port reads it), and on one simulated arm on a virtual clock that every
+``execute --sim`` connects to (``clirun.virtual_simulator(arm)``: the arm stays where the last run or the hand left
+it, as on sim-device, with no real time) a trajectory run twice in a row, the gripper opened/closed first,
+--move-to-start around an obstacle and --from-current. The simulator's recorded servo positions are the independent
+check (collisions with python-fcl through the checker at padding 0, TCP by FK)."""
 
 from __future__ import annotations
 
@@ -13,15 +14,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from clirun import virtual_simulator
 
 from roarmctl.cli import main
 from roarmctl.device.protocol import WireMap, encode
 from roarmctl.device.simulator import PtySimulator, SimConfig
+from roarmctl.device.virtual import VirtualClock, VirtualSimulator
 from roarmctl.motion.validate import load_trajectory
 from roarmctl.robot.ik import solve_ik
 from roarmctl.robot.loader import load_robot
 
-pytestmark = pytest.mark.slow  # real time: whole trajectories run on the simulated arm
+pytestmark = pytest.mark.slow  # plans and runs whole trajectories (one of them in real time on a pty)
+
+# execute --sim on the one virtual arm: ideal servos, as behind sim-device's pty; goals compensated for sag, as
+# execute --port sends them
+SIM = ["--sim", "--servos", "ideal", "--sag"]
 
 R = load_robot("roarm_m3_pro")
 ARM = R.arm_indices
@@ -55,9 +62,28 @@ def hand_move(sim: PtySimulator, q: np.ndarray, timeout: float = 15.0) -> None:
     raise AssertionError(f"the arm did not reach {q} within {timeout} s")
 
 
-def measured(sim: PtySimulator) -> np.ndarray:
+def measured(sim: PtySimulator | VirtualSimulator) -> np.ndarray:
     _, q, _ = sim.recording()
     return q[-1]
+
+
+def virtual_arm() -> VirtualSimulator:
+    """The simulated arm (the 0.84 build, ideal servos) on a virtual clock, powered up."""
+    return VirtualSimulator(SimConfig(), VirtualClock()).start()
+
+
+def virtual_hand_move(sim: VirtualSimulator, q: np.ndarray) -> None:
+    """``hand_move`` on the virtual arm: the T:102 into its UART, then its clock on until its servos stand still at
+    ``q`` (within 3 counts)."""
+    assert sim.firmware is not None
+    sim.firmware.receive(encode(WireMap(R).command(q, 800, 0)), sim.clock())
+    for _ in range(300):  # 30 s of its clock: a hang detector
+        sim.clock.sleep(0.1)
+        sim.firmware.advance(sim.clock())
+        ts, qs, _ = sim.recording()
+        if np.abs(qs[-1] - q).max() < 3 * COUNT and np.ptp(qs[ts > ts[-1] - 0.1], axis=0).max() < 1e-9:
+            return
+    raise AssertionError(f"the arm did not reach {q} within 30 s of its clock")
 
 
 POST = "    - {name: post, shape: box, size: [0.12, 0.04, 0.22], xyz: [0.2146, 0.1468, 0.11], rpy: [0, 0, 0.6]}\n"
@@ -85,6 +111,7 @@ def about_the_start(notes: list[str]) -> list[str]:
 
 
 def test_start_current_after_the_arm_was_moved_by_hand(tmp_path, capsys):
+    """In real time on the simulator's pty: plan --port reads where the hand left the arm, execute --port runs it."""
     plan = tmp_path / "here.yaml"
     plan.write_text(plan_text(start="current"))
     q_hand = R.full_q(np.array([-0.6, 0.3, 1.3, 0.4, 0.2]))
@@ -109,9 +136,10 @@ def test_the_demo_trajectory_runs_twice_in_a_row(tmp_path, capsys):
     assert run_cli(["plan", str(ROOT / "plans" / "pick_place.yaml"), "-o", str(out), "--json"]) == 0
     capsys.readouterr()
     traj = load_trajectory(out)
-    with PtySimulator(SimConfig(), process=True) as sim:
+    sim = virtual_arm()
+    with virtual_simulator(sim):
         for run in range(2):
-            rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--json"])
+            rc = run_cli(["execute", str(out), *SIM, "--yes", "--json"])
             res = json.loads(capsys.readouterr().out)
             assert rc == 0 and res["outcome"] == "completed", (run, res)
             # it ended where it started: nothing to re-plan (at most the gripper, whose servo may still be
@@ -120,7 +148,7 @@ def test_the_demo_trajectory_runs_twice_in_a_row(tmp_path, capsys):
             at = measured(sim)
             assert at[ARM] == pytest.approx(traj.positions[-1][ARM], abs=0.01)
             assert abs(at[GI] - traj.positions[-1][GI]) < 0.35  # the streamer's gripper start tolerance
-        grips = [c for _, c in sim.received() if c.get("T") == 101 and c.get("joint") == 6]
+        grips = [c for _, _, c in sim.executed() if c.get("T") == 101 and c.get("joint") == 6]
         assert grips  # the gripper really moved in the runs
 
 
@@ -132,9 +160,10 @@ def test_only_the_gripper_differs_it_is_opened_or_closed_first(tmp_path, capsys)
     capsys.readouterr()
     traj = load_trajectory(out)
     assert abs(traj.positions[-1][GI] - traj.positions[0][GI]) > 1.0
-    with PtySimulator(SimConfig(), process=True) as sim:
-        hand_move(sim, traj.positions[-1])  # where a run of it left the arm: its end, the gripper open
-        rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--json"])
+    sim = virtual_arm()
+    with virtual_simulator(sim):
+        virtual_hand_move(sim, traj.positions[-1])  # where a run of it left the arm: its end, the gripper open
+        rc = run_cli(["execute", str(out), *SIM, "--yes", "--json"])
         res = json.loads(capsys.readouterr().out)
         assert rc == 0 and res["outcome"] == "completed"
         assert any("gripper" in n and "planned and checked" in n for n in res["notes"])
@@ -159,12 +188,13 @@ def test_move_to_start_goes_around_an_obstacle(tmp_path, capsys):
     q_away = solve_ik(R, [0.3 * math.cos(1.2), 0.3 * math.sin(1.2), 0.06], pitch=math.pi / 2)[0]
     straight = np.linspace(q_away, traj.positions[0], 200)
     assert strict.first_invalid(straight[:, ARM]) is not None
-    with PtySimulator(SimConfig(), process=True) as sim:
-        hand_move(sim, q_away)
-        t_start = sim.state()["now"]
-        rc = run_cli(["execute", str(out), "--port", sim.path, "--yes"])
+    sim = virtual_arm()
+    with virtual_simulator(sim):
+        virtual_hand_move(sim, q_away)
+        t_start = sim.clock()
+        rc = run_cli(["execute", str(out), *SIM, "--yes"])
         assert rc == 3 and "--move-to-start" in capsys.readouterr().err
-        rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--move-to-start", "--json"])
+        rc = run_cli(["execute", str(out), *SIM, "--yes", "--move-to-start", "--json"])
         res = json.loads(capsys.readouterr().out)
         assert rc == 0 and res["outcome"] == "completed"
         assert any("collision-checked motion" in n for n in res["notes"])
@@ -174,7 +204,7 @@ def test_move_to_start_goes_around_an_obstacle(tmp_path, capsys):
     assert arrived > 100  # it did travel from the far side to the start
     # what the servos really did on the way to the start never touched the post (or the table)
     assert strict.first_invalid(moving[:arrived:2, :][:, ARM]) is None
-    assert not any(c.get("spd") == 300 and c.get("acc") == 10 for _, c in sim.received())  # no bare T:102
+    assert not any(c.get("spd") == 300 and c.get("acc") == 10 for _, _, c in sim.executed())  # no bare T:102
 
 
 def test_from_current_replans_the_first_free_motion(tmp_path, capsys):
@@ -183,9 +213,10 @@ def test_from_current_replans_the_first_free_motion(tmp_path, capsys):
     capsys.readouterr()
     traj = load_trajectory(out)
     q_away = R.full_q(np.array([0.4, 0.1, 1.4, 0.2, 0.0]))
-    with PtySimulator(SimConfig(), process=True) as sim:
-        hand_move(sim, q_away)
-        rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--from-current", "--json"])
+    sim = virtual_arm()
+    with virtual_simulator(sim):
+        virtual_hand_move(sim, q_away)
+        rc = run_cli(["execute", str(out), *SIM, "--yes", "--from-current", "--json"])
         res = json.loads(capsys.readouterr().out)
         assert rc == 0 and res["outcome"] == "completed", res
         assert any("again from the measured pose" in n for n in res["notes"])  # the plan file is there: planned again
@@ -211,9 +242,10 @@ def test_from_current_without_the_plan_file_replaces_the_first_free_motion(tmp_p
     traj = load_trajectory(out)
     free = next(s for s in traj.segments if s.kind == "free")
     q_away = R.full_q(np.array([-0.5, 0.1, 1.4, 0.2, 0.0]))
-    with PtySimulator(SimConfig(), process=True) as sim:
-        hand_move(sim, q_away)
-        rc = run_cli(["execute", str(out), "--port", sim.path, "--yes", "--from-current", "--json"])
+    sim = virtual_arm()
+    with virtual_simulator(sim):
+        virtual_hand_move(sim, q_away)
+        rc = run_cli(["execute", str(out), *SIM, "--yes", "--from-current", "--json"])
         res = json.loads(capsys.readouterr().out)
         assert rc == 0 and res["outcome"] == "completed", res
         assert any("re-planned the first free motion" in n for n in res["notes"])

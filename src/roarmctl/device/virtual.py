@@ -171,7 +171,10 @@ class VirtualSimulator:
         self.path = ""  # "virtual" once started
 
     def start(self) -> VirtualSimulator:
-        """Power the model up now (on the clock); return self."""
+        """Power the model up now (on the clock), unless it runs already: a second run finds the arm where the first
+        left it, as a second command on ``sim-device``'s pty does; return self."""
+        if self.firmware is not None:
+            return self
         servos = self._servos
         model = servos() if callable(servos) and not isinstance(servos, ServoModel) else servos
         self.firmware = Firmware(self.config, t0=self.clock(), servos=model)
@@ -211,7 +214,7 @@ class VirtualSimulator:
         return 0.0
 
     def stop(self) -> None:
-        """Nothing runs: the model stays readable."""
+        """Nothing runs: the model stays readable (and can be connected to again)."""
 
 
 if TYPE_CHECKING:  # mypy holds the virtual link to the protocol the streamer is typed against
