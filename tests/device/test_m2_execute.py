@@ -31,18 +31,20 @@ def m2_traj(tmp_path_factory) -> Path:
     return out
 
 
-def test_m2_plan_executes_on_the_m2_simulator(m2_traj, capsys):
+def test_m2_plan_executes_on_the_m2_simulator(m2_traj, capsys, virtual_sim):
+    """execute --sim on an M2 trajectory runs the M2 firmware model (on a virtual clock: virtual_sim)."""
     from roarmctl.motion.validate import load_trajectory
 
     traj = load_trajectory(m2_traj)
     robot = load_robot("roarm_m2_s")
-    with PtySimulator(SimConfig(firmware="m2"), process=True) as sim:
-        # ideal servos behind a port: --no-sag, the plan's own goals (compensated goals would stand an arm
-        # that does not sag off the plan by the offsets; the compensation is tested in tests/test_physics.py)
-        rc = run_cli(["execute", str(m2_traj), "--port", sim.path, "--yes", "--json", "--no-sag"])
-        out = json.loads(capsys.readouterr().out)
-        received = [c for _, c in sim.received()]
-        _, rec, _ = sim.recording()
+    # ideal servos: --no-sag, the plan's own goals (compensated goals would stand an arm that does not sag off the
+    # plan by the offsets; the compensation is tested in tests/test_physics.py)
+    rc = run_cli(["execute", str(m2_traj), "--sim", "--servos", "ideal", "--yes", "--json", "--no-sag"])
+    out = json.loads(capsys.readouterr().out)
+    (sim,) = virtual_sim
+    assert sim.config.firmware == "m2"
+    received = [c for _, _, c in sim.executed()]
+    _, rec, _ = sim.recording()
     assert rc == 0 and out["outcome"] == "completed"
     moves = [c for c in received if c.get("T") == 102]
     assert len(moves) > 100
