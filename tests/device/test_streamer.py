@@ -310,24 +310,50 @@ def ctrl_c_at(t, loop_pass: float, stop: float):
     return st, link, clock, stopped[0], info.value.result.log
 
 
+HOLD_STOPS = (0.2, 0.35, 0.5, 0.65, 0.8)  # Ctrl-C at these shares of the motion
+
+
+def hold_travel(t, link, stopped_at: float) -> float:
+    """The farthest (m) the TCP got from where it was at the Ctrl-C (the model's recording, the arm at rest after)."""
+    ts, q, _ = link.fw.recording()
+    tcp = ROBOT.kin.fk(ROBOT.full_q(q[ts >= stopped_at]))[:, :3, 3]
+    return float(np.linalg.norm(tcp - tcp[0], axis=1).max())
+
+
+@pytest.fixture(scope="module")
+def fast_loop_hold_travel():
+    """The hold's farthest TCP travel after a Ctrl-C at ``HOLD_STOPS`` when the 20260701 loop keeps up (6 ms a pass)."""
+    travels = []
+    for stop in HOLD_STOPS:
+        _, link, clock, stopped_at, _ = ctrl_c_at(pick_like(), 0.006, stop)
+        clock.now += 1.0
+        link.fw.advance(clock())
+        travels.append(hold_travel(pick_like(), link, stopped_at))
+    return max(travels)
+
+
 @pytest.mark.parametrize("loop_pass", LOOP_PASSES)
 def test_the_queued_hold_stops_on_the_path_never_ahead_never_back_and_its_answer_is_paired(loop_pass,
-                                                                                             fast_loop_off_path):
+                                                                                             fast_loop_off_path,
+                                                                                             fast_loop_hold_travel):
     """Ctrl-C on the 20260701 build at times all through the move (wherever the stream is then, mostly waiting for its
     next tick, as a real Ctrl-C comes): the queue is flushed first, then the answers of the polls that ran are read,
     the arm is let finish the last line the firmware ran, and the hold is the point of the plan nearest where it
     stopped: on the planned path, never ahead of the last line the firmware ran, not pulled back (the hold at the last
     confirmed tick, sent before anything was read, brought the arm back up to 8.7 mm along the path at 22 ms:
-    bench/bench_slow_loop.py), and from the interrupt on the arm is no further off the path than at a 6 ms pass (before
-    the stream's changes for a slow firmware: 8-15 mm at 22-30 ms). Its confirmation does not wait for the answers to
-    polls the flush discarded: every hold has its ``answered_after_s`` (7 of 10 on the 20260701 build had none once)."""
+    bench/bench_slow_loop.py), and from the interrupt on the arm goes no farther and no further off the path than at a
+    6 ms pass (before the stream's changes for a slow firmware, the servos fell behind a draining queue and ran 10-100 ms
+    chords: up to 22.4 mm at 14 ms and 50.0 mm at 30 ms against 18.3 at 6 ms, 8-15 mm off the path). Its confirmation
+    does not wait for the answers to polls the flush discarded: every hold has its ``answered_after_s`` (7 of 10 on the
+    20260701 build had none once)."""
     from roarmctl.device.streamer import sample
 
     t = pick_like()
     wm = WireMap(ROBOT)
     taus = np.linspace(0.0, t.duration, 4001)
     path = sample(t, taus)
-    for stop in (0.2, 0.35, 0.5, 0.65, 0.8):
+    travels = []
+    for stop in HOLD_STOPS:
         st, link, clock, stopped_at, log = ctrl_c_at(t, loop_pass, stop)
         hold = log["hold"]
         assert hold["flushed_queue"] and hold["kind"] == "measured_on_path" and "answered_after_s" in hold
@@ -347,6 +373,8 @@ def test_the_queued_hold_stops_on_the_path_never_ahead_never_back_and_its_answer
         far = np.linalg.norm(tcp - tcp[0], axis=1)
         assert far.max() - far[-1] < 1e-3  # not pulled back along the path
         assert off_path(t, link.fw.recording(), stopped_at) <= fast_loop_off_path + 5e-4
+        travels.append(hold_travel(t, link, stopped_at))
+    assert max(travels) <= fast_loop_hold_travel + 5e-4  # the hold moves the TCP no more than at a 6 ms pass
 
 
 @pytest.mark.parametrize("where", ["in_send", "after_send"])

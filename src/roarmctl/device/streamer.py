@@ -519,19 +519,25 @@ class Streamer:
             return
         if not self.firmware_bound:
             # the firmware is the bottleneck: from here its time goes to motion lines. Fewer polls (each 324-byte answer
-            # holds the 20260701 loop while the UART drains: it cost more than a motion line) and no line of the
-            # gripper's own (one T:102 a tick, the spd of the fastest joint, the gripper included)
+            # holds the 20260701 loop while the UART drains: it cost more than a motion line), no line of the gripper's
+            # own (one T:102 a tick, the spd of the fastest joint, the gripper included) and servos fast enough to
+            # keep up with a queue that drains
             self.firmware_bound = True
             self.notes.append(f"the firmware is the bottleneck ({self.pacer.line_time * 1e3:.1f} ms a line): from t = "
-                              f"{sched[k].t:.2f} s a poll every {1.0 / self.poll_rate():.1f} s and the gripper in the "
-                              "T:102 (no T:101 of its own)")
+                              f"{sched[k].t:.2f} s a poll every {1.0 / self.poll_rate():.1f} s, the gripper in the "
+                              "T:102 (no T:101 of its own), spd for a tick's plan in one of its passes")
         fit = self.rate
         for _ in range(4):  # fewer ticks a second: a poll with more of them
             fit = self.pacer.fitting_rate(fit, 1.0 + 1.0 / self._poll_every(fit), lower_by=1.0) or fit
         self.poll_every = self._poll_every(fit)
         start = sched[k - 1].t + 1.0 / fit if k > 0 else 0.0
+        # a line that waited in the queue runs one pass after the one before it when the queue drains: its servos must
+        # run a tick's plan in one pass to keep up. With the strategy's 5 % they fell 5.5 ms behind a line at 14 ms a
+        # pass, and a Ctrl-C after such a catch-up let the arm run 58 ms of plan to the last goal the firmware took
+        margin = max(strat.margin, 1.0 / (fit * self.pacer.line_time))
         tail = build_schedule(self.traj, self.robot, rate=fit, speed_scale=self.cfg.speed_scale, sag=self.cfg.sag,
-                              strategy=dataclasses.replace(strat, split_gripper=False), start=min(start, sched[-1].t))
+                              strategy=dataclasses.replace(strat, split_gripper=False, margin=margin),
+                              start=min(start, sched[-1].t))
         self.schedule = sched[:k] + tail
         if fit < self.rate:
             self.rate_changes.append({"tick": k, "t": round(self.schedule[k].t, 6), "from_hz": round(self.rate, 3),
