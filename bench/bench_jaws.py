@@ -1,6 +1,8 @@
-"""How far apart the physics' jaws and the planner's jaws are (issue 35): at each row of a gripper's jaw table (the
-opening the planner closes by, from Waveshare's CAD meshes), the distance between the description's fixed-jaw shape
-and each shape of the moving jaw, measured with FCL (python-fcl) at that gripper value, beside the table's width.
+"""How far the description's collision boxes of the jaws are from the jaw table (issue 35): at each row of a gripper's
+jaw table (the fingertips' gap, from Waveshare's CAD meshes), the distance between the description's fixed-jaw box
+and each box of the moving jaw, measured with FCL (python-fcl) at that gripper value, beside the table's width. The
+physics' jaws were these boxes; they are now the jaw meshes' convex pieces (tests/test_jaw_pieces.py holds those to
+the table within 1 mm), and the boxes meet the table, obstacles and the arm only.
 
 Run: .venv/bin/python bench/bench_jaws.py [--robot roarm_m3_pro]
 Prints, per gripper value (rad): the table's width, each moving shape's least distance to the fixed jaw's shape (mm,

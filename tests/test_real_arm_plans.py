@@ -109,7 +109,8 @@ def test_jaws_that_do_not_clear_the_object_are_refused(tmp_path):
 
 
 def test_default_grip_closes_to_the_width_minus_the_squeeze(tmp_path):
-    res = plan_file(write(tmp_path, "  - pick: {object: cube, gripper_open: 1.0}\n"))
+    # a grasp_width: the jaw table, not the jaw meshes (test_physics checks those against the physics' jaws)
+    res = plan_file(write(tmp_path, "  - pick: {object: cube, gripper_open: 1.0}\n", extra=", grasp_width: 0.04"))
     grip = segment_end(res.trajectory, "grasp 'cube'")[GI]
     # by hand from the description's table: 37 mm lies between 0.50 rad (34.5 mm) and 0.75 rad (46.4 mm)
     assert grip == pytest.approx(0.5 + 0.25 * (37.0 - 34.5) / (46.4 - 34.5), abs=1e-6)

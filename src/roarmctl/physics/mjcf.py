@@ -14,7 +14,9 @@ trajectory's ``Scene``.
 * Collision: the description's primitives as they are, meshes as their convex hulls (the collision
   checker's default; MuJoCo collides every mesh as its hull, so ``exact`` meshes are hulls here too and
   a note says so). Pairs the description allows to touch (SRDF ``disable_collisions``) are excluded,
-  and so are the links on the table (``base_links``) against items of role ``table``.
+  and so are the links on the table (``base_links``) against items of role ``table``. Where the description
+  gives its jaws' meshes (``Gripper.jaw_meshes``), objects meet those links only through the meshes' convex pieces
+  (``roarmctl.robot.jaw_pieces``: the geometry the planner closes by), the links' own shapes everything else.
 * Scene: tables and obstacles are fixed; objects are free bodies with the plan's masses (payloads of
   the trajectory), other objects at ``DEFAULT_OBJECT_DENSITY``. A mesh item is its convex pieces (the
   checker's: the hull of each connected part), one mesh geom each; a point-cloud item is its occupied cells
@@ -38,6 +40,7 @@ import numpy as np
 import numpy.typing as npt
 
 from roarmctl.errors import InputError
+from roarmctl.robot.jaw_pieces import Piece, jaw_pieces
 from roarmctl.robot.model import Robot, quaternions
 
 if TYPE_CHECKING:
@@ -64,6 +67,11 @@ MAX_CLOUD_BOXES = 20_000
 #: Contact bits (MuJoCo: two geoms collide when one's contype shares a bit with the other's conaffinity):
 #: every geom has both bits; a point-cloud table's boxes only TABLE_BIT, the base links' geoms only the other.
 EVERY_BIT, TABLE_BIT = 3, 2
+#: (contype, conaffinity) where the jaws meet objects through the convex pieces of their meshes
+#: (``roarmctl.robot.jaw_pieces``): objects carry bit 4 and accept every bit; a piece carries bit 4 only and accepts
+#: none (it meets objects alone); a jaw link's collision shapes carry none and accept bits 1-2 (the table, obstacles
+#: and the arm, not objects).
+OBJECT_BITS, PIECE_BITS, JAW_BITS = (4, 7), (4, 0), (0, EVERY_BIT)
 
 
 def body_name(link: str) -> str:
@@ -230,7 +238,10 @@ def build_document(robot: Robot, scene: Scene, masses: dict[str, float] | None =
         a, b = pair
         if a in bodies and b in bodies and a != b:
             ET.SubElement(contact, "exclude", body1=body_name(a), body2=body_name(b))
-    _scene(doc, robot, scene, world, contact, asset, bodies, masses)
+    pieces = {link: p for link, p in jaw_pieces(robot).items() if link in bodies}
+    for link, link_pieces in pieces.items():
+        _jaw_pieces(doc, link, link_pieces, bodies[link], asset)
+    _scene(doc, robot, scene, world, contact, asset, bodies, masses, bool(pieces))
     if not len(equality):
         root.remove(equality)
     if not len(contact):
@@ -239,6 +250,23 @@ def build_document(robot: Robot, scene: Scene, masses: dict[str, float] | None =
         root.remove(asset)
     doc.xml = ET.tostring(root, encoding="unicode")
     return doc
+
+
+def _jaw_pieces(doc: BuiltDocument, link: str, pieces: list[Piece], link_body: ET.Element, asset: ET.Element) -> None:
+    """A jaw link meets objects through the convex pieces of its jaw mesh (``roarmctl.robot.jaw_pieces``), one
+    mesh geom each that touches objects only (``PIECE_BITS``), while the link's collision shapes touch everything but
+    objects (``JAW_BITS``; an ``exclude`` of the link's body would leave out the pieces too)."""
+    for g in link_body.findall("geom"):
+        g.set("contype", str(JAW_BITS[0]))
+        g.set("conaffinity", str(JAW_BITS[1]))
+    for k, v in enumerate(pieces):
+        mname, gname = f"mesh:jaw:{link}:{k}", f"robot:{link}:jaw{k}"
+        ET.SubElement(asset, "mesh", name=mname, vertex=_f(np.asarray(v).ravel()))  # MuJoCo: their convex hull
+        ET.SubElement(link_body, "geom", name=gname, type="mesh", mesh=mname, density="0", rgba="0.2 0.6 0.9 1",
+                      contype=str(PIECE_BITS[0]), conaffinity=str(PIECE_BITS[1]))
+        doc.geom_owner[gname] = ("link", link)
+    doc.notes.append(f"link {link} meets objects through the {len(pieces)} convex pieces of its jaw mesh (CoACD), "
+                     f"the geometry of the gripper's jaw table, not through its collision shapes")
 
 
 def _inertial(doc: BuiltDocument, robot: Robot, link: str, body: ET.Element, has_shapes: bool, jointed: bool) -> None:
@@ -262,7 +290,7 @@ def _inertial(doc: BuiltDocument, robot: Robot, link: str, body: ET.Element, has
 
 
 def _scene(doc: BuiltDocument, robot: Robot, scene: Scene, world: ET.Element, contact: ET.Element, asset: ET.Element,
-           bodies: dict[str, ET.Element], masses: dict[str, float]) -> None:
+           bodies: dict[str, ET.Element], masses: dict[str, float], jaws_from_meshes: bool = False) -> None:
     base = [link for link in robot.base_links if link in bodies]
     for item in scene.items:
         if item.role == "object":
@@ -270,6 +298,9 @@ def _scene(doc: BuiltDocument, robot: Robot, scene: Scene, world: ET.Element, co
             _place(body, item.pose)
             ET.SubElement(body, "freejoint", name=f"free:{item.name}")
             g = ET.SubElement(body, "geom", name=f"item:{item.name}", rgba="0.9 0.5 0.1 1")
+            if jaws_from_meshes:  # jaws built from their meshes: objects meet the jaw links through those pieces only
+                g.set("contype", str(OBJECT_BITS[0]))
+                g.set("conaffinity", str(OBJECT_BITS[1]))
             _geom_shape(g, item.shape, item.size, item.radius, item.length)
             volume = _volume(item)
             mass = masses.get(item.name)

@@ -19,6 +19,7 @@ from roarmctl.robot import xacro_input
 from roarmctl.robot.dh_loader import from_dh
 from roarmctl.robot.ik import IK_FAMILIES, ur6_params
 from roarmctl.robot.implied import adjacent_pairs, default_notes, gripper_part_pairs
+from roarmctl.robot.jaw_meshes import with_jaw_meshes
 from roarmctl.robot.meshes import PACKAGE_PATHS, description_roots
 from roarmctl.robot.model import Robot
 from roarmctl.robot.sidecar import read_sidecar
@@ -116,6 +117,7 @@ def _load(spec: str, trust_sidecar: bool, confine: bool) -> Robot:
                                f"gripper joint '{grip}'", "put the TCP on a link the arm joints move, e.g. the hand "
                                "between the fingers")
     robot = _link_roles(robot, data, str(path))
+    robot = with_jaw_meshes(robot, data, path, data.get("_roots") or (description_roots(data, path) if data else None))
     robot.notes = [f"{robot.name}: {n}" for n in robot.notes] + default_notes(robot)
     robot.spec = spec if path == bundled_dir() / f"{spec}.yaml" else str(path.resolve())
     robot.allowed_collisions |= adjacent_pairs(robot)

@@ -207,6 +207,19 @@ class FixedJaw:
 
 
 @dataclass(frozen=True)
+class JawMesh:
+    """A jaw's own mesh, the geometry its gripper's ``jaw_width`` table was measured on: the mesh file ``file``
+    (checked to lie inside ``roots``, the description's folders) in ``link``'s frame, its vertices times ``scale``
+    in m. Read only when asked (``roarmctl.robot.jaw_meshes.jaw_triangles``): picks close by its convex pieces
+    (``roarmctl.robot.jaw_pieces``, ``roarmctl.motion.planning.jaw_reach``) and the physics' jaws are those pieces."""
+
+    link: str
+    file: str
+    scale: float = 1.0
+    roots: Any = field(default=None, compare=False, repr=False)
+
+
+@dataclass(frozen=True)
 class Gripper:
     """Which actuated joint is the gripper, and its open and closed values (rad).
 
@@ -215,6 +228,7 @@ class Gripper:
     how far below an object's width a pick closes by default; ``clearance`` (m): how much wider than
     the object the open jaws must be. ``fixed_jaw``: the face of a jaw that does not move (a claw
     gripper such as the RoArm's), when the description gives it: picks then put the object against it.
+    ``jaw_meshes``: the jaws' own meshes (``JawMesh``), when the description gives them.
     """
 
     joint: str
@@ -225,6 +239,7 @@ class Gripper:
     squeeze: float = 0.002
     clearance: float = 0.004
     fixed_jaw: FixedJaw | None = None
+    jaw_meshes: tuple[JawMesh, ...] = field(default=(), compare=False)
 
     @property
     def has_widths(self) -> bool:

@@ -129,7 +129,7 @@ def common_fields(data: dict, path: Path, names: list[str], velocity: np.ndarray
         extra = {k: number(g[k], f"{where}: gripper.{k}") for k in ("squeeze", "clearance") if g.get(k) is not None}
         jaw = None if g.get("fixed_jaw") is None else _fixed_jaw(g["fixed_jaw"], f"{where}: gripper.fixed_jaw")
         gripper = Gripper(g["joint"], number(g.get("open"), f"{where}: gripper.open"), number(g.get("closed"), f"{where}: gripper.closed"),
-                          jq, jw, fixed_jaw=jaw, **extra)
+                          jq, jw, extra.get("squeeze", Gripper.squeeze), extra.get("clearance", Gripper.clearance), fixed_jaw=jaw)
     poses = {}
     for pname, values in (data.get("named_poses") or {}).items():
         vals = list(values) if isinstance(values, list) else values

@@ -49,6 +49,9 @@ def _xyz_rpy(v: Any, where: str, field: str) -> None:
             CHECK.numbers(v[k], 3, where, f"{field}.{k}")
 
 
+#: Jaw meshes one gripper may name (``gripper.jaw_meshes``): a gripper has a few jaws, each one mesh.
+MAX_JAW_MESHES = 8
+
 # Every field a description may have. A key outside these is refused rather than ignored: a typo such
 # as ``allowed_colisions`` would otherwise silently drop a safety-relevant setting.
 COMMON_KEYS = ("format", "name", "source", "description", "limits", "gripper", "named_poses", "wire",
@@ -58,7 +61,7 @@ URDF_KEYS = ("urdf", "srdf", "joint_limits", "packages", "xacro_args", "mesh_col
 DH_KEYS = ("dh", "convention", "length_unit", "angle_unit", "base", "tool", "inertials")
 NESTED_KEYS = {
     "limits": ("velocity", "acceleration", "jerk", "effort"),
-    "gripper": ("joint", "open", "closed", "jaw_width", "squeeze", "clearance", "fixed_jaw"),
+    "gripper": ("joint", "open", "closed", "jaw_width", "squeeze", "clearance", "fixed_jaw", "jaw_meshes"),
     "gripper.jaw_width": ("q", "mm"),
     "gripper.fixed_jaw": ("link", "point", "normal"),
     "tool": ("xyz", "rpy"),
@@ -134,6 +137,18 @@ def check_document(data: Any, where: str) -> None:
         CHECK.name(g.get("joint"), where, "gripper.joint")
         CHECK.number(g.get("open"), where, "gripper.open")
         CHECK.number(g.get("closed"), where, "gripper.closed")
+        meshes = g.get("jaw_meshes")
+        if meshes is not None:
+            if not isinstance(meshes, list) or len(meshes) > MAX_JAW_MESHES:
+                CHECK.fail(where, "gripper.jaw_meshes", f"expected a list of at most {MAX_JAW_MESHES} {{link, file, scale}}, "
+                           f"got {len(meshes) if isinstance(meshes, list) else CHECK.kind(meshes)}")
+            for i, m in enumerate(meshes):
+                CHECK.mapping(m, where, f"gripper.jaw_meshes[{i}]")
+                CHECK.known_keys(m, ("link", "file", "scale"), where, f"gripper.jaw_meshes[{i}]")
+                CHECK.name(m.get("link"), where, f"gripper.jaw_meshes[{i}].link")
+                CHECK.name(m.get("file"), where, f"gripper.jaw_meshes[{i}].file")
+                if m.get("scale") is not None:
+                    CHECK.number(m["scale"], where, f"gripper.jaw_meshes[{i}].scale", lo=0.0, strict_lo=True)
     poses = data.get("named_poses")
     if poses is not None:
         CHECK.mapping(poses, where, "named_poses")

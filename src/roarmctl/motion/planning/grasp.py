@@ -10,6 +10,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from roarmctl.errors import InfeasibleError, PlanningError
+from roarmctl.motion.planning.fixed_jaw import MARGIN as FIXED_JAW_MARGIN
+from roarmctl.motion.planning.jaw_reach import JawReach, available
 from roarmctl.motion.planning.payloads import attach_payload
 from roarmctl.motion.planning.pieces import (
     LIMIT_TOL,
@@ -58,15 +60,14 @@ def grasp_width(spec: ItemSpec) -> float:
     return 2.0 * float(spec.radius)
 
 
-def grasp_closed_q(ctx: PlanContext, task: PickTask, g_open: float, where: str) -> float:
-    """The gripper joint value (rad) that closes the jaws on the picked object (``gripper_closed``, else from the
-    object's width less the squeeze); checks that ``g_open`` (rad) clears the object (jaw widths known)."""
+def check_opening(ctx: PlanContext, task: PickTask, g_open: float, where: str) -> None:
+    """Refuse (InfeasibleError, with the opening that would do) a ``g_open`` (rad) that does not open the jaws
+    ``clearance`` wider than the picked object (jaw widths known)."""
     gr = ctx.robot.gripper
     assert gr is not None  # a plan with picks needs a gripper (checked by the Planner)
     if not gr.has_widths:
-        return task.gripper_closed if task.gripper_closed is not None else gr.closed
-    spec = next(o for o in ctx.objects if o.name == task.object)
-    width = grasp_width(spec)
+        return
+    width = grasp_width(next(o for o in ctx.objects if o.name == task.object))
     opening = gr.width(g_open)
     if opening < width + gr.clearance:
         need = gr.q_for_width(width + gr.clearance)
@@ -75,19 +76,39 @@ def grasp_closed_q(ctx: PlanContext, task: PickTask, g_open: float, where: str) 
         raise InfeasibleError(
             f"{where}: gripper_open {g_open:.3f} rad opens the jaws {opening * 1000:.1f} mm; '{task.object}' is "
             f"{width * 1000:.1f} mm wide (+{gr.clearance * 1000:.0f} mm clearance)", fix)
+
+
+def grasp_closed_q(ctx: PlanContext, task: PickTask, g_open: float, where: str, q_grasp: np.ndarray | None = None) -> float:
+    """The gripper joint value (rad) that closes the jaws on the picked object (``gripper_closed``, else the
+    object's width less the squeeze), with a warning where ``gripper_closed`` would not hold it.
+
+    With the jaws' meshes and the grasp configuration ``q_grasp`` (dof,) rad (``jaw_reach.available``), by the
+    moving jaw's own pieces where the object sits (``jaw_reach``); else by the jaw table (the fingertips' gap)."""
+    gr = ctx.robot.gripper
+    assert gr is not None  # a plan with picks needs a gripper (checked by the Planner)
+    if not gr.has_widths:
+        return task.gripper_closed if task.gripper_closed is not None else gr.closed
+    spec = next(o for o in ctx.objects if o.name == task.object)
+    width = grasp_width(spec)
+    squeeze = task.squeeze if task.squeeze is not None else gr.squeeze
+    if q_grasp is not None and available(ctx.robot, spec):
+        return _closed_by_meshes(ctx, task, spec, g_open, where, q_grasp, width, squeeze)
+    # a claw gripper puts the object's side MARGIN off its fixed jaw: the moving jaw meets it at the width plus that
+    # margin, pushes it onto the fixed jaw, and squeezes it only below its width
+    margin = FIXED_JAW_MARGIN if gr.fixed_jaw is not None else 0.0
     if task.gripper_closed is not None:
         closed = task.gripper_closed
         if closed <= gr.closed + 1e-9 and width > gr.width(gr.closed) + 1e-6:
             ctx.warnings.append(
                 f"{where}: gripper_closed {closed:.3f} rad closes the jaws fully on '{task.object}' ({width * 1000:.1f} mm "
                 f"wide): the servo presses until it stalls; leave gripper_closed out to close to "
-                f"{(width - (task.squeeze if task.squeeze is not None else gr.squeeze)) * 1000:.1f} mm")
+                f"{(width - squeeze) * 1000:.1f} mm")
         elif gr.width(closed) >= width:
             ctx.warnings.append(
                 f"{where}: gripper_closed {closed:.3f} rad leaves the jaws {gr.width(closed) * 1000:.1f} mm apart on "
-                f"'{task.object}' ({width * 1000:.1f} mm wide): it would not hold; leave gripper_closed out")
+                f"'{task.object}' ({width * 1000:.1f} mm wide{_held_off(gr.width(closed) - width, margin)}): it would "
+                f"not hold; leave gripper_closed out")
         return closed
-    squeeze = task.squeeze if task.squeeze is not None else gr.squeeze
     want = width - squeeze
     if want <= gr.width(gr.closed):
         ctx.warnings.append(f"{where}: '{task.object}' ({width * 1000:.1f} mm) is narrower than the closed jaws "
@@ -96,6 +117,49 @@ def grasp_closed_q(ctx: PlanContext, task: PickTask, g_open: float, where: str) 
     closed = gr.q_for_width(want)
     ctx.notes.append(f"{where}: grip '{task.object}' ({width * 1000:.1f} mm) at {want * 1000:.1f} mm: gripper {closed:.3f} rad")
     return closed
+
+
+def _held_off(short: float, margin: float) -> str:
+    """What a jaw that stops ``short`` (m, >= 0) of squeezing an object held ``margin`` (m) off the fixed jaw does."""
+    if not margin:
+        return ""
+    if short < margin:
+        return f", held {margin * 1000:.0f} mm off the fixed jaw: the moving jaw pushes it onto the fixed jaw and stops"
+    return f", held {margin * 1000:.0f} mm off the fixed jaw: the moving jaw does not reach it"
+
+
+def _closed_by_meshes(ctx: PlanContext, task: PickTask, spec: ItemSpec, g_open: float, where: str,
+                      q_grasp: np.ndarray, width: float, squeeze: float) -> float:
+    """``grasp_closed_q`` by the jaws' pieces (``jaw_reach``): the value at which the moving jaw squeezes the object,
+    pressed onto the fixed jaw, by ``squeeze`` (m); a ``gripper_closed`` at which it does not touch the pressed
+    object would not hold it (warned, with how far it stops: before the object's side, or after pushing it the
+    fixed-jaw margin)."""
+    gr = ctx.robot.gripper
+    assert gr is not None
+    reach = JawReach(ctx.robot, q_grasp, spec, ctx.object_pose[task.object], FIXED_JAW_MARGIN)
+    if task.gripper_closed is not None:
+        closed = task.gripper_closed
+        if closed <= gr.closed + 1e-9:
+            ctx.warnings.append(
+                f"{where}: gripper_closed {closed:.3f} rad closes the jaws fully on '{task.object}' ({width * 1000:.1f} mm "
+                f"wide): the servo presses until it stalls; leave gripper_closed out to squeeze it {squeeze * 1000:.1f} mm")
+        elif not reach.touches(closed, 0.0):
+            how = ("pushes it onto the fixed jaw and stops there" if reach.touches(closed, -FIXED_JAW_MARGIN)
+                   else "does not reach it")
+            ctx.warnings.append(
+                f"{where}: gripper_closed {closed:.3f} rad: the moving jaw {how} ('{task.object}', {width * 1000:.1f} mm "
+                f"wide, held {FIXED_JAW_MARGIN * 1000:.0f} mm off the fixed jaw; by the jaw meshes): it would not hold; "
+                f"leave gripper_closed out")
+        return closed
+    found = reach.closing(squeeze, gr.closed, g_open)
+    if found is None:
+        ctx.warnings.append(f"{where}: the closed jaws do not squeeze '{task.object}' ({width * 1000:.1f} mm) by "
+                            f"{squeeze * 1000:.1f} mm (by the jaw meshes): the gripper closes fully")
+        return gr.closed
+    ctx.notes.append(f"{where}: grip '{task.object}' ({width * 1000:.1f} mm), squeezed {squeeze * 1000:.1f} mm by the "
+                     f"jaw meshes where it sits: gripper {found:.3f} rad (the fingertips {gr.width(found) * 1000:.1f} mm "
+                     f"apart by the jaw table)")
+    return found
 
 # m and rad: where a released object lands is recorded to this step (``scene.settled``: repeated cycles of a plan then
 # meet the same world bit for bit and reuse their timings)

@@ -13,7 +13,7 @@ import numpy as np
 
 from roarmctl.errors import InfeasibleError, PlanFileError, UnreachableError, UnreachableReason, rejection
 from roarmctl.motion.planning import fixed_jaw as jaws
-from roarmctl.motion.planning.grasp import grasp_closed_q, grasp_width
+from roarmctl.motion.planning.grasp import check_opening, grasp_closed_q, grasp_width
 from roarmctl.motion.planning.pieces import TaskStep, with_value
 from roarmctl.motion.planning.targets import Target
 from roarmctl.motion.rejection import judge
@@ -123,13 +123,14 @@ def expand_pick(ctx: PlanContext, task: PickTask, q: np.ndarray, at: str) -> lis
     grasp = centre + np.array([0.0, 0.0, task.grasp_offset])
     above = grasp + np.array([0.0, 0.0, task.approach_height])
     g_open = task.gripper_open if task.gripper_open is not None else gr.open
-    g_closed = grasp_closed_q(ctx, task, g_open, at)
+    check_opening(ctx, task, g_open, at)
     ctx.set_state(g_open, grasp_target=task.object)
     (q_grasp, q_above), pitch = choose_ik_pitch(ctx, [grasp, above], held_pitch(ctx, task, at), task.pitch_auto,
                                                 task.roll, q, at, gripper=g_open)
     roll = task.roll
     if jaw_fixed(ctx, task.object):
         q_grasp, q_above, grasp, above, roll = against_fixed_jaw(ctx, task, centre, q_grasp, pitch, q, at, g_open)
+    g_closed = grasp_closed_q(ctx, task, g_open, at, q_grasp if jaw_fixed(ctx, task.object) else None)
     ctx.set_state(q[gi])
     lab = pitch_label(pitch, task.pitch_auto and pitch is not None)
     steps = [TaskStep("free", f"{at}: transit above '{task.object}'{lab}", q_to=with_value(q_above, gi, q[gi]),
