@@ -1,6 +1,7 @@
 """The jaws' convex pieces (``roarmctl.robot.jaw_pieces``): CoACD's CPU time per jaw mesh, the pieces' size, and
-how far the pieces stand outside the mesh they come from; ``--write`` puts the pieces of the bundled descriptions
-into the package (``jaw_pieces.BUNDLED``), where the physics reads them instead of decomposing.
+how far the pieces stand outside the mesh they come from; ``--write`` puts the pieces of the bundled descriptions'
+jaws, made from Waveshare's published meshes (tests/data/meshes, see its README.md), into the package
+(``jaw_pieces.BUNDLED``, the files the sidecars' ``jaw_meshes`` name), where the planner and the physics read them.
 
 Run: .venv/bin/python bench/bench_jaw_pieces.py [--robot roarm_m3_pro --robot roarm_m2_s] [--write]
 Prints, per jaw mesh: triangles, CPU s of one decomposition (process time: the same on a busy machine), pieces,
@@ -13,6 +14,12 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
+
+MESHES = Path(__file__).resolve().parents[1] / "tests" / "data" / "meshes"
+#: bundled robot -> link -> (Waveshare's published mesh of that jaw, its scale to m)
+PUBLISHED = {"roarm_m3_pro": {link: (MESHES / "waveshare_roarm_m3" / f"{link}.stl", 0.001) for link in ("link5", "gripper_link")},
+             "roarm_m2_s": {link: (MESHES / "waveshare_roarm_m2_s" / f"{link}.stl", 1.0) for link in ("link3", "gripper_link")}}
 
 
 def main() -> None:
@@ -24,12 +31,15 @@ def main() -> None:
 
     from roarmctl.fileio import atomic_write_text
     from roarmctl.robot.jaw_meshes import jaw_triangles
-    from roarmctl.robot.jaw_pieces import BUNDLED, cache_key, cache_text, decompose
+    from roarmctl.robot.jaw_pieces import cache_key, cache_text, decompose
     from roarmctl.robot.loader import load_robot
+    from roarmctl.robot.model import JawMesh
 
-    for name in args.robot or ["roarm_m3_pro", "roarm_m2_s"]:
+    for name in args.robot or sorted(PUBLISHED):
         robot = load_robot(name)
-        for mesh in robot.gripper.jaw_meshes if robot.gripper is not None else ():
+        for bundled in robot.gripper.jaw_meshes if robot.gripper is not None else ():
+            path, scale = PUBLISHED[name][bundled.link]
+            mesh = JawMesh(bundled.link, str(path), scale)
             v, f = jaw_triangles(mesh)
             t = time.process_time()
             pieces = decompose(v, f)
@@ -44,9 +54,8 @@ def main() -> None:
             print(f"{name} {mesh.link}: {len(f)} triangles, {cpu:.1f} s CPU, {len(pieces)} pieces, "
                   f"{sum(len(p) for p in pieces)} vertices, {len(text) / 1e3:.0f} kB, outside the mesh by at most "
                   f"{outside * 1e3:.2f} mm", flush=True)
-            if args.write:
-                BUNDLED.mkdir(exist_ok=True)
-                atomic_write_text(BUNDLED / f"{cache_key(v, f)}.json", text)
+            if args.write and bundled.pieces is not None:
+                atomic_write_text(bundled.pieces, text)
 
 
 if __name__ == "__main__":

@@ -23,6 +23,19 @@ ROBOTS = Path(jp.__file__).resolve().parent.parent / "robots"
 #: the fixed fingertip (...) to the moving jaw"): the fixed jaw mesh's vertices beyond this plane of its link.
 TIPS = {"roarm_m3_pro": (2, 1.0, 0.118),    # link5 z > 0.118 m
         "roarm_m2_s": (1, -1.0, -0.278)}    # link3 y < -0.278 m
+#: Waveshare's published jaw meshes (tests/data/meshes/README.md: repository, path, commit), which the bundled
+#: descriptions' pieces were made from: link -> (file, scale to m)
+MESHES = Path(__file__).resolve().parent / "data" / "meshes"
+PUBLISHED = {"roarm_m3_pro": {link: (MESHES / "waveshare_roarm_m3" / f"{link}.stl", 0.001) for link in ("link5", "gripper_link")},
+             "roarm_m2_s": {link: (MESHES / "waveshare_roarm_m2_s" / f"{link}.stl", 1.0) for link in ("link3", "gripper_link")}}
+
+
+def _published(name: str, link: str):
+    """The published mesh of ``link`` of bundled robot ``name`` as a ``JawMesh`` (vertices in m)."""
+    from roarmctl.robot.model import JawMesh
+
+    path, scale = PUBLISHED[name][link]
+    return JawMesh(link, str(path), scale)
 
 
 def _object_world(robot):
@@ -65,10 +78,10 @@ def test_the_physics_jaws_open_as_the_jaw_table_says(name):
     joint = next(j for j in robot.joints if j.name == gr.joint)
     world = _object_world(robot)
     probe = mujoco.mj_name2id(world.model, mujoco.mjtObj.mjOBJ_GEOM, "item:probe")
-    fixed = next(m for m in gr.jaw_meshes if m.link == gr.fixed_jaw.link)
-    mesh = trimesh.load(fixed.file, force="mesh")
+    path, scale = PUBLISHED[name][gr.fixed_jaw.link]
+    mesh = trimesh.load(path, force="mesh")
     axis, sign, cut = TIPS[name]
-    v = np.asarray(mesh.vertices) * fixed.scale
+    v = np.asarray(mesh.vertices) * scale
     tip = v[sign * v[:, axis] > sign * cut]
     assert len(tip) > 10
     moving = [g for g in range(world.model.ngeom) if world.doc.geom_owner.get(mujoco.mj_id2name(
@@ -91,14 +104,21 @@ def test_the_physics_jaws_open_as_the_jaw_table_says(name):
 
 
 @pytest.mark.parametrize("name", sorted(TIPS))
-def test_the_bundled_descriptions_pieces_ship_with_the_package(name):
-    """Every jaw mesh of a bundled description has its pieces in the package under its key (no run decomposes)."""
+def test_the_bundled_descriptions_pieces_are_those_of_the_published_meshes(name):
+    """Every jaw of a bundled description is a pieces file in the package (no run decomposes, no vendor mesh ships),
+    made from that link's published mesh with today's settings (its key is the mesh's), and read as the pieces."""
     from roarmctl.robot.jaw_meshes import jaw_triangles
 
-    for mesh in load_robot(name).gripper.jaw_meshes:
-        key = jp.cache_key(*jaw_triangles(mesh))
-        data = json.loads((jp.BUNDLED / f"{key}.json").read_text())
-        assert data["key"] == key and data["parameters"] == jp.PARAMETERS and len(data["pieces"]) >= 4
+    robot = load_robot(name)
+    assert {m.link for m in robot.gripper.jaw_meshes} == set(PUBLISHED[name])
+    for mesh in robot.gripper.jaw_meshes:
+        assert mesh.pieces is not None and Path(mesh.pieces).parent == jp.BUNDLED and not mesh.file
+        data = json.loads(Path(mesh.pieces).read_text())
+        assert data["key"] == jp.cache_key(*jaw_triangles(_published(name, mesh.link)))
+        assert data["parameters"] == jp.PARAMETERS and len(data["pieces"]) >= 4
+        pieces = jp.convex_pieces(mesh)
+        assert len(pieces) == len(data["pieces"]) and np.array_equal(pieces[0], np.asarray(data["pieces"][0]))
+    assert not list(ROBOTS.rglob("*.stl")) and not list(ROBOTS.rglob("*.STL"))
 
 
 def _claw(tmp_path: Path) -> Path:
@@ -164,6 +184,31 @@ def test_a_bad_jaw_mesh_entry_is_refused_in_one_line(tmp_path, entry, words):
     assert words in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.parametrize("text, words", [
+    ("{\"format\": \"something else\"}", "is not a file of convex pieces"),
+    ("not json", "is not a file of convex pieces"),
+    ("{\"format\": \"roarmctl.jaw_pieces/1\", \"pieces\": [[[0, 0, 0], [1, 0, 0]]]}", "is not a file of convex pieces"),
+    ("{\"format\": \"roarmctl.jaw_pieces/1\", \"pieces\": []}", "is not a file of convex pieces"),
+])
+def test_a_bad_pieces_file_is_refused_in_one_line_when_read(tmp_path, text, words):
+    (tmp_path / "jaw.json").write_text(text)
+    robot = load_robot(str(_sidecar(tmp_path, f"{{link: link3, pieces: {tmp_path}/jaw.json}}")))
+    with pytest.raises(DescriptionError) as err:
+        jp.jaw_pieces(robot)
+    assert words in str(err.value) and "jaw.json" in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("entry, words", [
+    ("{link: link3, pieces: TMP/jaw.json, file: TMP/jaw.stl}", "exactly one of file"),
+    ("{link: link3}", "exactly one of file"),
+    ("{link: link3, pieces: TMP/jaw.json, scale: 0.001}", "no scale"),
+])
+def test_a_jaw_entry_gives_a_mesh_or_its_pieces(tmp_path, entry, words):
+    with pytest.raises(DescriptionError) as err:
+        load_robot(str(_sidecar(tmp_path, entry.replace("TMP", str(tmp_path)))))
+    assert words in str(err.value) and "\n" not in str(err.value)
+
+
 def test_a_missing_jaw_mesh_is_left_out_with_a_note(tmp_path):
     robot = load_robot(str(_sidecar(tmp_path, f"{{link: link3, file: {tmp_path}/missing.stl}}")))
     assert robot.gripper.jaw_meshes == () and any("missing.stl' not found" in n for n in robot.notes)
@@ -186,7 +231,7 @@ def test_a_fresh_decomposition_is_the_bundled_file_byte_for_byte():
     from roarmctl.robot.jaw_meshes import jaw_triangles
 
     robot = load_robot("roarm_m2_s")
-    mesh = next(m for m in robot.gripper.jaw_meshes if m.link == robot.gripper.fixed_jaw.link)
-    v, f = jaw_triangles(mesh)
+    bundled = next(m for m in robot.gripper.jaw_meshes if m.link == robot.gripper.fixed_jaw.link)
+    v, f = jaw_triangles(_published("roarm_m2_s", bundled.link))
     key = jp.cache_key(v, f)
-    assert jp.cache_text(key, jp.decompose(v, f)).encode() == (jp.BUNDLED / f"{key}.json").read_bytes()
+    assert jp.cache_text(key, jp.decompose(v, f)).encode() == Path(str(bundled.pieces)).read_bytes()

@@ -157,10 +157,10 @@ def test_renamed_links_plan_pick_and_place_exactly_as_the_original(tmp_path):
     (tmp_path / "arm.urdf").write_text(urdf)
     side = yaml.safe_load(renamed((bundled_dir() / "roarm_m3_pro.yaml").read_text()))
     side["urdf"] = "arm.urdf"
-    for m in side["gripper"]["jaw_meshes"]:  # the jaw meshes beside the URDF, under their renamed links' names
-        (tmp_path / m["file"]).parent.mkdir(parents=True, exist_ok=True)
+    for m in side["gripper"]["jaw_meshes"]:  # the jaws' pieces beside the URDF, under their renamed links' names
+        (tmp_path / m["pieces"]).parent.mkdir(parents=True, exist_ok=True)
         original = {v: k for k, v in rename.items()}[m["link"]]
-        (tmp_path / m["file"]).write_bytes((bundled_dir() / "meshes" / "roarm_m3" / f"{original}.stl").read_bytes())
+        (tmp_path / m["pieces"]).write_bytes((bundled_dir() / "jaw_pieces" / f"roarm_m3_{original}.json").read_bytes())
     (tmp_path / "arm.yaml").write_text(yaml.safe_dump(side))
     plans = Path(__file__).resolve().parents[1] / "plans"
     plan = yaml.safe_load((plans / "pick_place.yaml").read_text())

@@ -11,9 +11,10 @@ the ``coacd`` package). ``roarmctl.motion.planning.jaw_reach`` closes a pick on 
 Deterministic and cached: CoACD runs with a fixed seed and the fixed ``PARAMETERS`` (its work is bounded by them
 and by ``MAX_TRIANGLES``: no clock); a piece is its vertices rounded to a micrometre (MuJoCo collides a mesh as the
 convex hull of its vertices), kept as JSON under a key of the mesh's exact vertices and faces, the parameters and
-CoACD's version: the same input gives the same file, byte for byte. The bundled descriptions' pieces ship with the
-package (``BUNDLED``, checked against a fresh decomposition by the tests); others are made once (~15-60 s of CPU
-per jaw mesh) and kept in ``cache_folder()``.
+CoACD's version: the same input gives the same file, byte for byte. A description may name such a file instead of
+its mesh (``JawMesh.pieces``): the bundled descriptions ship their pieces (``BUNDLED``, made from the vendor's
+published meshes and checked against a fresh decomposition of them by the tests), not the meshes; the pieces of a
+mesh are made once (~15-60 s of CPU per jaw mesh) and kept in ``cache_folder()``.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ MAX_TRIANGLES = 50_000
 #: Bytes of one cache file read back (32 pieces of at most 256 vertices are ~0.7 MB as JSON).
 CACHE_BYTES = 4 * 1024 * 1024
 CACHE_FORMAT = "roarmctl.jaw_pieces/1"
-#: The pieces of the bundled descriptions' jaw meshes, shipped (read-only; looked up before ``cache_folder()``).
+#: The pieces of the bundled descriptions' jaw meshes, shipped (named by their sidecars' ``jaw_meshes``).
 BUNDLED = Path(__file__).resolve().parent.parent / "robots" / "jaw_pieces"
 
 Piece = np.ndarray  # the vertices (V, 3) m of one convex piece (MuJoCo and FCL take their convex hull)
@@ -74,9 +75,11 @@ def cache_key(vertices: np.ndarray, faces: np.ndarray) -> str:
 
 
 def convex_pieces(mesh: JawMesh) -> list[Piece]:
-    """The convex pieces of ``mesh`` (vertices in its link's frame, m): shipped (``BUNDLED``), cached, or made by
+    """The convex pieces of ``mesh`` (vertices in its link's frame, m): the pieces file it names, cached, or made by
     CoACD (then cached; a cache folder that cannot be written is passed over). Raises DescriptionError for a mesh
-    over ``MAX_TRIANGLES``."""
+    over ``MAX_TRIANGLES`` or a pieces file that is not one."""
+    if mesh.pieces is not None:
+        return _named(mesh)
     vertices, faces = jaw_triangles(mesh)
     if len(faces) > MAX_TRIANGLES:
         raise DescriptionError(f"gripper.jaw_meshes: '{mesh.file}' has {len(faces)} triangles, more than "
@@ -84,11 +87,9 @@ def convex_pieces(mesh: JawMesh) -> list[Piece]:
     key = cache_key(vertices, faces)
     if (key,) in _READ:  # every pick of a plan asks again
         return _READ[(key,)]
-    for folder in (BUNDLED, cache_folder()):
-        cached = _read_cache(folder / f"{key}.json", key)
-        if cached is not None:
-            _READ.keep((key,), cached)
-            return cached
+    cached = _read_cache(cache_folder() / f"{key}.json", key)
+    if cached is not None:
+        return _READ.keep((key,), cached)
     text = cache_text(key, decompose(vertices, faces))
     path = cache_folder() / f"{key}.json"
     try:
@@ -97,6 +98,24 @@ def convex_pieces(mesh: JawMesh) -> list[Piece]:
     except OSError:
         pass  # no cache (a read-only home): the next run decomposes again, to the same pieces
     return _READ.keep((key,), _parse(json.loads(text)))
+
+
+def _named(mesh: JawMesh) -> list[Piece]:
+    """The pieces in the file a description names (``JawMesh.pieces``), read once per process, bounded in size."""
+    path = str(mesh.pieces)
+    if (path,) in _READ:
+        return _READ[(path,)]
+    where = f"gripper.jaw_meshes ({mesh.link}): pieces"
+    raw = read_bytes(path, where, CACHE_BYTES, roots=mesh.roots, error=DescriptionError)
+    try:
+        data = json.loads(raw)
+        if not isinstance(data, dict) or data.get("format") != CACHE_FORMAT:
+            raise ValueError(f"not a {CACHE_FORMAT} file")
+        pieces = _parse(data)
+    except (TypeError, ValueError, KeyError) as exc:
+        raise DescriptionError(f"{where}: '{path}' is not a file of convex pieces ({exc})",
+                               "name the mesh itself (file:), or a pieces file roarmctl wrote") from None
+    return _READ.keep((path,), pieces)
 
 
 def jaw_pieces(robot: Robot) -> dict[str, list[Piece]]:

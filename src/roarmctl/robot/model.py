@@ -208,15 +208,18 @@ class FixedJaw:
 
 @dataclass(frozen=True)
 class JawMesh:
-    """A jaw's own mesh, the geometry its gripper's ``jaw_width`` table was measured on: the mesh file ``file``
-    (checked to lie inside ``roots``, the description's folders) in ``link``'s frame, its vertices times ``scale``
-    in m. Read only when asked (``roarmctl.robot.jaw_meshes.jaw_triangles``): picks close by its convex pieces
-    (``roarmctl.robot.jaw_pieces``, ``roarmctl.motion.planning.jaw_reach``) and the physics' jaws are those pieces."""
+    """A jaw's own geometry, the one its gripper's ``jaw_width`` table was measured on, in ``link``'s frame: the mesh
+    file ``file`` (checked to lie inside ``roots``, the description's folders), its vertices times ``scale`` in m, or
+    (``pieces``, then ``file`` is empty) a file of that mesh's convex pieces already made (``roarmctl.robot.
+    jaw_pieces``' format). Read only when asked (``roarmctl.robot.jaw_meshes.jaw_triangles``): picks close by the
+    convex pieces (``roarmctl.robot.jaw_pieces``, ``roarmctl.motion.planning.jaw_reach``) and the physics' jaws are
+    those pieces."""
 
     link: str
     file: str
     scale: float = 1.0
     roots: Any = field(default=None, compare=False, repr=False)
+    pieces: str | None = None
 
 
 @dataclass(frozen=True)

@@ -140,13 +140,18 @@ def check_document(data: Any, where: str) -> None:
         meshes = g.get("jaw_meshes")
         if meshes is not None:
             if not isinstance(meshes, list) or len(meshes) > MAX_JAW_MESHES:
-                CHECK.fail(where, "gripper.jaw_meshes", f"expected a list of at most {MAX_JAW_MESHES} {{link, file, scale}}, "
-                           f"got {len(meshes) if isinstance(meshes, list) else CHECK.kind(meshes)}")
+                CHECK.fail(where, "gripper.jaw_meshes", f"expected a list of at most {MAX_JAW_MESHES} {{link, file, scale}} "
+                           f"or {{link, pieces}}, got {len(meshes) if isinstance(meshes, list) else CHECK.kind(meshes)}")
             for i, m in enumerate(meshes):
                 CHECK.mapping(m, where, f"gripper.jaw_meshes[{i}]")
-                CHECK.known_keys(m, ("link", "file", "scale"), where, f"gripper.jaw_meshes[{i}]")
+                CHECK.known_keys(m, ("link", "file", "scale", "pieces"), where, f"gripper.jaw_meshes[{i}]")
                 CHECK.name(m.get("link"), where, f"gripper.jaw_meshes[{i}].link")
-                CHECK.name(m.get("file"), where, f"gripper.jaw_meshes[{i}].file")
+                if ("file" in m) == ("pieces" in m):
+                    CHECK.fail(where, f"gripper.jaw_meshes[{i}]", "give exactly one of file (a mesh) and pieces (its "
+                               "convex pieces, made by roarmctl)")
+                CHECK.name(m.get("file", m.get("pieces")), where, f"gripper.jaw_meshes[{i}].{'file' if 'file' in m else 'pieces'}")
+                if "pieces" in m and m.get("scale") is not None:
+                    CHECK.fail(where, f"gripper.jaw_meshes[{i}].scale", "a pieces file is in metres: no scale")
                 if m.get("scale") is not None:
                     CHECK.number(m["scale"], where, f"gripper.jaw_meshes[{i}].scale", lo=0.0, strict_lo=True)
     poses = data.get("named_poses")
