@@ -235,3 +235,40 @@ def test_a_fresh_decomposition_is_the_bundled_file_byte_for_byte():
     v, f = jaw_triangles(_published("roarm_m2_s", bundled.link))
     key = jp.cache_key(v, f)
     assert jp.cache_text(key, jp.decompose(v, f)).encode() == Path(str(bundled.pieces)).read_bytes()
+
+
+def test_a_jaw_mesh_is_cut_into_pieces_under_a_progress_stage_of_its_own(tmp_path, monkeypatch):
+    """A description that gives its jaws as meshes (here the M3 with Waveshare's, as a user's copy would): the pieces
+    are made (CoACD, 15-60 s of CPU a mesh the first time) while the plan's progress names that stage, not the first
+    pick's IK; the plan then closes by them as by the bundled pieces (same trajectory bytes)."""
+    import shutil
+
+    import yaml
+
+    from roarmctl.motion.pipeline import plan_file
+
+    shutil.copy(ROBOTS / "roarm_m3_pro.urdf", tmp_path / "roarm_m3_pro.urdf")
+    side = yaml.safe_load((ROBOTS / "roarm_m3_pro.yaml").read_text())
+    for path, _ in PUBLISHED["roarm_m3_pro"].values():  # inside the description's folder, as a user keeps them
+        shutil.copy(path, tmp_path / path.name)
+    side["gripper"]["jaw_meshes"] = [{"link": link, "file": path.name, "scale": scale}
+                                     for link, (path, scale) in PUBLISHED["roarm_m3_pro"].items()]
+    (tmp_path / "arm.yaml").write_text(yaml.safe_dump(side))
+    plan = yaml.safe_load((ROBOTS.parents[2] / "plans" / "pick_place.yaml").read_text())
+    monkeypatch.setenv("ROARMCTL_CACHE", str(tmp_path / "cache"))
+    stages: list[str] = []
+    during: list[str] = []
+    bundled = {m.link: jp.convex_pieces(m) for m in load_robot("roarm_m3_pro").gripper.jaw_meshes}
+
+    def decompose(v, f):  # the bundled pieces are CoACD's of these meshes (checked above): not 30 s of CPU again
+        during.append(stages[-1])
+        link = "link5" if len(during) == 1 else "gripper_link"
+        return bundled[link]
+
+    monkeypatch.setattr(jp, "decompose", decompose)
+    mine = plan_file(dict(plan, robot=str(tmp_path / "arm.yaml")), seed=1,
+                     progress=lambda stage, done, total: stages.append(stage))
+    assert len(during) == 2 and all("jaw meshes' convex pieces" in s for s in during)
+    assert stages.index(during[0]) < next(i for i, s in enumerate(stages) if s.startswith("task 1/"))
+    ours = plan_file(dict(plan), seed=1)
+    assert np.array_equal(mine.trajectory.positions, ours.trajectory.positions)

@@ -169,12 +169,25 @@ class Planner:
         if thin is not None:
             self.ctx.warnings.append(thin)
 
+    def _jaw_pieces(self, all_tasks: list) -> None:
+        """Make the convex pieces of jaw meshes the description gives as meshes before the first pick needs them, under
+        a stage of their own: CoACD takes 15-60 s of CPU per mesh the first time (then they are cached), which the
+        progress display would otherwise show as the first pick's IK."""
+        gr = self.ctx.robot.gripper
+        if gr is None or not any(m.file for m in gr.jaw_meshes) or not any(isinstance(t, PickTask) for t in all_tasks):
+            return
+        from roarmctl.robot.jaw_pieces import jaw_pieces
+
+        self.progress("the jaw meshes' convex pieces (made once, then cached)", 0, len(all_tasks))
+        jaw_pieces(self.ctx.robot)
+
     def run(self) -> PlanResult:
         """Plan every task (``cycles`` times over) and return the checked trajectory with its report."""
         ctx = self.ctx
         q = self._start_configuration()
         all_tasks = [t for _ in range(self.plan.cycles) for t in self.plan.tasks]
         tasks.warn_collinear(ctx, all_tasks)
+        self._jaw_pieces(all_tasks)
         pieces: list[TimedPiece] = []
         chain: list[UntimedMotion] = []  # free and straight motions not yet timed: timed as one when blending
         for i, task in enumerate(all_tasks):
