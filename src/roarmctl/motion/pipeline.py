@@ -32,6 +32,7 @@ from roarmctl.motion.trajectory import Event, Segment, Trajectory
 from roarmctl.plan.fields import DICT_NAME
 from roarmctl.plan.schema import load_plan, read_plan_document
 from roarmctl.plan.types import PickTask, PlaceTask, Plan
+from roarmctl.robot.jaw_pieces import jaw_pieces
 from roarmctl.robot.loader import load_robot
 from roarmctl.robot.model import Robot
 from roarmctl.robot.padding import thin_parts
@@ -176,8 +177,6 @@ class Planner:
         gr = self.ctx.robot.gripper
         if gr is None or not any(m.file for m in gr.jaw_meshes) or not any(isinstance(t, PickTask) for t in all_tasks):
             return
-        from roarmctl.robot.jaw_pieces import jaw_pieces
-
         self.progress("the jaw meshes' convex pieces (made once, then cached)", 0, len(all_tasks))
         jaw_pieces(self.ctx.robot)
 
