@@ -237,10 +237,11 @@ def test_a_fresh_decomposition_is_the_bundled_file_byte_for_byte():
     assert jp.cache_text(key, jp.decompose(v, f)).encode() == Path(str(bundled.pieces)).read_bytes()
 
 
-def test_a_jaw_mesh_is_cut_into_pieces_under_a_progress_stage_of_its_own(tmp_path, monkeypatch):
+def test_a_jaw_mesh_is_cut_into_pieces_under_a_progress_stage_of_its_own_and_carried(tmp_path, monkeypatch):
     """A description that gives its jaws as meshes (here the M3 with Waveshare's, as a user's copy would): the pieces
     are made (CoACD, 15-60 s of CPU a mesh the first time) while the plan's progress names that stage, not the first
-    pick's IK; the plan then closes by them as by the bundled pieces (same trajectory bytes)."""
+    pick's IK; the plan then closes by them as by the bundled pieces (same trajectory bytes), and its trajectory
+    carries them."""
     import shutil
 
     import yaml
@@ -272,3 +273,14 @@ def test_a_jaw_mesh_is_cut_into_pieces_under_a_progress_stage_of_its_own(tmp_pat
     assert stages.index(during[0]) < next(i for i, s in enumerate(stages) if s.startswith("task 1/"))
     ours = plan_file(dict(plan), seed=1)
     assert np.array_equal(mine.trajectory.positions, ours.trajectory.positions)
+    # the trajectory carries the pieces it closed by: loaded with its description's folder gone, on a machine
+    # without the cache, its robot has the same jaws (the physics squeezes with them, not the links' boxes)
+    from roarmctl.motion.validate import robot_of
+
+    for f in tmp_path.glob("*"):
+        shutil.rmtree(f) if f.is_dir() else f.unlink()
+    carried = robot_of(mine.trajectory)
+    assert [m.link for m in carried.gripper.jaw_meshes] == ["link5", "gripper_link"]
+    assert not [n for n in carried.notes if "jaw" in n] and len(during) == 2  # nothing decomposed again
+    for link, pieces in jp.jaw_pieces(carried).items():
+        assert len(pieces) == len(bundled[link]) and all(np.array_equal(a, b) for a, b in zip(pieces, bundled[link]))

@@ -6,7 +6,9 @@ description the planner writes its ``robot_description``: the files the loader r
 ``robot.yaml`` (the sidecar, its file references pointing into the bundle), ``robot.urdf`` (the URDF
 after xacro, checked; every collision mesh renamed ``meshes/mK.ext``, and the visual meshes too within
 ``VISUAL_BYTES``, their shapes read when the bundle is loaded, for pictures),
-``robot.srdf`` and ``joint_limits.yaml`` when the sidecar has them, and the mesh files' bytes (base64).
+``robot.srdf`` and ``joint_limits.yaml`` when the sidecar has them, the mesh files' bytes (base64), and the
+convex pieces of the gripper's jaw meshes the plan closed by (``jaw_pieces/jN.json``; the sidecar's
+``jaw_meshes`` name them).
 No xacro is left to evaluate and no path leads outside the bundle.
 
 Reading one (``load_bundle``) checks the form (known file names only, sizes, base64), writes the
@@ -34,6 +36,8 @@ from roarmctl.checks import Checker
 from roarmctl.errors import DescriptionError, InputError, TrajectoryFileError
 from roarmctl.fileio import FilesRead, Roots, read_bytes, read_text, resolved
 from roarmctl.kept import Kept
+from roarmctl.robot.jaw_meshes import jaw_triangles
+from roarmctl.robot.jaw_pieces import CACHE_BYTES, cache_key, cache_text, convex_pieces, keep_jaw_pieces
 from roarmctl.robot.meshes import (
     CONFINED_HINT,
     MESH_BYTES,
@@ -43,7 +47,7 @@ from roarmctl.robot.meshes import (
     package_map,
     resolve,
 )
-from roarmctl.robot.model import Robot
+from roarmctl.robot.model import JawMesh, Robot
 from roarmctl.robot.visuals import keep_visuals
 from roarmctl.robot.xacro_input import expand
 
@@ -53,7 +57,8 @@ MAX_BUNDLE_BYTES = 64 * 1024 * 1024  # all files of a bundle together, decoded
 MAX_BUNDLE_FILES = 1000
 #: Bytes of visual mesh files a bundle carries (pictures only; a CAD export over it is left out, drawn as collision).
 VISUAL_BYTES = 16 * 1024 * 1024
-FILE_NAME = re.compile(r"^(robot\.yaml|robot\.urdf|robot\.srdf|joint_limits\.yaml|meshes/m\d{1,5}\.(stl|obj|dae|ply|off|glb))$")
+FILE_NAME = re.compile(r"^(robot\.yaml|robot\.urdf|robot\.srdf|joint_limits\.yaml|meshes/m\d{1,5}\.(stl|obj|dae|ply|off|glb)"
+                       r"|jaw_pieces/j\d{1,2}\.json)$")
 _LOADED: Kept[Robot] = Kept(64)  # robots of bundles, by their files' digests
 # bundles made, by the spec (and the current folder for a relative one) and the options, with the files each read: a
 # hit is handed out only while every one of them is unchanged (as loader.load_robot's robots; every plan of a
@@ -164,8 +169,35 @@ def _make_bundle(spec: str, confine: bool) -> dict[str, Any]:
         files["joint_limits.yaml"] = substituted(read_text(limits, f"{path}: joint_limits", JOINT_LIMITS_BYTES, roots=roots,
                                                            error=DescriptionError), side.get("xacro_args"), str(limits))
         out["joint_limits"] = "joint_limits.yaml"
+    _carry_jaw_pieces(out, files, urdf, packages, roots)
     files["robot.yaml"] = yaml.safe_dump(out, sort_keys=False)
     return {"format": FORMAT, "files": files}
+
+
+def _carry_jaw_pieces(side: dict[str, Any], files: dict[str, Any], urdf: Path, packages: dict, roots: Roots) -> None:
+    """The sidecar ``side``'s ``gripper.jaw_meshes`` as the convex pieces the plan closed by, carried in ``files``
+    (``jaw_pieces/jN.json``, ``roarmctl.robot.jaw_pieces``' format), each entry rewritten to name them: the physics
+    of a run from the trajectory alone squeezes with the planner's jaws, not the links' collision shapes, and no
+    machine decomposes a mesh again. An entry whose file is not there is left out, as loading left it out."""
+    gripper = side.get("gripper")
+    if not isinstance(gripper, dict) or not gripper.get("jaw_meshes"):
+        return
+    entries = gripper["jaw_meshes"]
+    carried: list[dict[str, Any]] = []
+    for i, entry in enumerate(entries):
+        where = f"{urdf}: gripper.jaw_meshes[{i}]"
+        given = str(entry["pieces"] if "pieces" in entry else entry["file"])
+        path = resolve(given, urdf, packages, where, roots)
+        if not path.is_file():
+            continue
+        name = f"jaw_pieces/j{len(carried)}.json"
+        if "pieces" in entry:
+            files[name] = read_text(path, where, CACHE_BYTES, roots=roots, error=DescriptionError)
+        else:
+            mesh = JawMesh(str(entry["link"]), str(path), float(entry.get("scale", 1.0)), roots)
+            files[name] = cache_text(cache_key(*jaw_triangles(mesh)), convex_pieces(mesh))
+        carried.append({"link": entry["link"], "pieces": name})
+    gripper["jaw_meshes"] = carried
 
 
 def _decoded(doc: Any, where: str) -> dict[str, bytes]:
@@ -185,7 +217,7 @@ def _decoded(doc: Any, where: str) -> dict[str, bytes]:
         at = f"{field}.files.{str(name)[:60]}"
         if not isinstance(name, str) or not FILE_NAME.match(name):
             check.fail(where, at, "not a file a robot description bundle holds",
-                       "robot.yaml, robot.urdf, robot.srdf, joint_limits.yaml, meshes/mN.EXT")
+                       "robot.yaml, robot.urdf, robot.srdf, joint_limits.yaml, meshes/mN.EXT, jaw_pieces/jN.json")
         if isinstance(value, str):
             data = value.encode("utf-8")
         elif isinstance(value, dict) and set(value) == {"base64"} and isinstance(value["base64"], str):
@@ -221,6 +253,7 @@ def load_bundle(doc: Any, where: str) -> Robot:
         try:
             robot = load_robot(str(folder / "robot.yaml"), confine=True)
             keep_visuals(robot)  # read now: the folder goes at the end of this block
+            keep_jaw_pieces(robot)
         except InputError as exc:
             message = exc.message.replace(str(folder), f"{where}: robot_description")
             raise type(exc)(message, exc.hint) from None

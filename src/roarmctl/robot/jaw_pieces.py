@@ -22,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+from dataclasses import replace
 from importlib import metadata
 from pathlib import Path
 
@@ -78,6 +79,8 @@ def convex_pieces(mesh: JawMesh) -> list[Piece]:
     """The convex pieces of ``mesh`` (vertices in its link's frame, m): the pieces file it names, cached, or made by
     CoACD (then cached; a cache folder that cannot be written is passed over). Raises DescriptionError for a mesh
     over ``MAX_TRIANGLES`` or a pieces file that is not one."""
+    if mesh.kept is not None:
+        return list(mesh.kept)
     if mesh.pieces is not None:
         return _named(mesh)
     vertices, faces = jaw_triangles(mesh)
@@ -116,6 +119,15 @@ def _named(mesh: JawMesh) -> list[Piece]:
         raise DescriptionError(f"{where}: '{path}' is not a file of convex pieces ({exc})",
                                "name the mesh itself (file:), or a pieces file roarmctl wrote") from None
     return _READ.keep((path,), pieces)
+
+
+def keep_jaw_pieces(robot: Robot) -> None:
+    """Read the pieces of ``robot``'s jaws now and keep them in its ``JawMesh``es (``kept``): its files are about to
+    go (a description carried in a trajectory, loaded from a temporary folder)."""
+    if robot.gripper is None or not robot.gripper.jaw_meshes:
+        return
+    kept = tuple(replace(m, kept=tuple(convex_pieces(m))) for m in robot.gripper.jaw_meshes)
+    robot.gripper = replace(robot.gripper, jaw_meshes=kept)
 
 
 def jaw_pieces(robot: Robot) -> dict[str, list[Piece]]:

@@ -220,6 +220,9 @@ class JawMesh:
     scale: float = 1.0
     roots: Any = field(default=None, compare=False, repr=False)
     pieces: str | None = None
+    #: the pieces themselves (each (V, 3) m), read already: a description carried in a trajectory is loaded from a
+    #: temporary folder that is gone when they are asked for (``roarmctl.robot.jaw_pieces.keep_jaw_pieces``)
+    kept: tuple[Any, ...] | None = field(default=None, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
