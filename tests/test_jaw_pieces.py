@@ -284,3 +284,25 @@ def test_a_jaw_mesh_is_cut_into_pieces_under_a_progress_stage_of_its_own_and_car
     assert not [n for n in carried.notes if "jaw" in n] and len(during) == 2  # nothing decomposed again
     for link, pieces in jp.jaw_pieces(carried).items():
         assert len(pieces) == len(bundled[link]) and all(np.array_equal(a, b) for a, b in zip(pieces, bundled[link]))
+
+
+def test_what_a_description_leaves_out_is_in_the_physics_notes(tmp_path):
+    """A jaw mesh the description names but does not have: the physics model says so in its notes (the run's
+    ``model.notes``, printed by simulate), as the plan does, instead of squeezing with the links' boxes unsaid."""
+    import shutil
+
+    import yaml
+
+    from roarmctl.motion.pipeline import plan_file
+    from roarmctl.physics.setup import build
+
+    shutil.copy(ROBOTS / "roarm_m3_pro.urdf", tmp_path / "roarm_m3_pro.urdf")
+    side = yaml.safe_load((ROBOTS / "roarm_m3_pro.yaml").read_text())
+    side["gripper"]["jaw_meshes"] = [{"link": "link5", "file": "missing.stl", "scale": 0.001}]
+    (tmp_path / "arm.yaml").write_text(yaml.safe_dump(side))
+    robot = load_robot(str(tmp_path / "arm.yaml"))
+    assert robot.gripper.jaw_meshes == ()
+    traj = plan_file(dict(yaml.safe_load((ROBOTS.parents[2] / "plans" / "pick_place.yaml").read_text()),
+                          robot=str(tmp_path / "arm.yaml")), seed=1)
+    assert any("missing.stl' not found" in n for n in traj.notes)
+    assert any("missing.stl' not found" in n for n in build(traj.trajectory, robot).notes)

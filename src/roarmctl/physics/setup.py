@@ -58,7 +58,8 @@ def build(traj: Trajectory, robot: Robot, *, masses: dict[str, float] | None = N
     given.update(masses or {})
     act = for_robot(robot, traj)
     world = World(robot, scene, given, act.dynamics(robot))
-    notes = list(world.doc.notes) + list(act.notes)
+    # what the description lacks or left out (a jaw mesh not found, a link without inertia), as plan says it
+    notes = list(robot.notes) + [n for n in world.doc.notes if n not in robot.notes] + list(act.notes)
     for k, n in enumerate(names):
         if n is None:
             notes.append(f"payload {k + 1} (grasp at {traj.payloads[k]['start']:.2f} s) matches no object of the scene")
