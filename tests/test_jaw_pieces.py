@@ -189,6 +189,7 @@ def test_a_bad_jaw_mesh_entry_is_refused_in_one_line(tmp_path, entry, words):
     ("not json", "is not a file of convex pieces"),
     ("{\"format\": \"roarmctl.jaw_pieces/1\", \"pieces\": [[[0, 0, 0], [1, 0, 0]]]}", "is not a file of convex pieces"),
     ("{\"format\": \"roarmctl.jaw_pieces/1\", \"pieces\": []}", "is not a file of convex pieces"),
+    ("[" * 200_000 + "]" * 200_000, "is not a file of convex pieces"),  # nested deeper than json goes
 ])
 def test_a_bad_pieces_file_is_refused_in_one_line_when_read(tmp_path, text, words):
     (tmp_path / "jaw.json").write_text(text)

@@ -115,8 +115,8 @@ def _named(mesh: JawMesh) -> list[Piece]:
         if not isinstance(data, dict) or data.get("format") != CACHE_FORMAT:
             raise ValueError(f"not a {CACHE_FORMAT} file")
         pieces = _parse(data)
-    except (TypeError, ValueError, KeyError) as exc:
-        raise DescriptionError(f"{where}: '{path}' is not a file of convex pieces ({exc})",
+    except (TypeError, ValueError, KeyError, RecursionError) as exc:  # RecursionError: nested deeper than json goes
+        raise DescriptionError(f"{where}: '{path}' is not a file of convex pieces ({type(exc).__name__}: {exc})"[:400],
                                "name the mesh itself (file:), or a pieces file roarmctl wrote") from None
     return _READ.keep((path,), pieces)
 
@@ -165,7 +165,7 @@ def _read_cache(path: Path, key: str) -> list[Piece] | None:
     again)."""
     try:
         data = json.loads(read_bytes(path, "jaw pieces cache", CACHE_BYTES))
-    except (InputError, ValueError):  # missing, too large, not JSON: decomposed again
+    except (InputError, ValueError, RecursionError):  # missing, too large, not JSON: decomposed again
         return None
     if not isinstance(data, dict) or data.get("format") != CACHE_FORMAT or data.get("key") != key:
         return None
