@@ -657,3 +657,17 @@ def test_cameras_after_mujoco_was_imported_without_a_gl_back_end_are_refused_not
     out = subprocess.run([sys.executable, "-c", code], env={**env, "MUJOCO_GL": "egl"}, capture_output=True, text=True,
                          timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "went on", out
+
+
+def test_a_shard_that_never_ends_is_a_device_error_naming_the_workers(monkeypatch):
+    """The process pool's wait for a shard's result is bounded and ends as the Ray engine's does: a DeviceError (exit 4)
+    naming the workers, not a bare TimeoutError (a traceback)."""
+    from concurrent.futures import Future
+
+    from roarmctl.errors import DeviceError
+    from roarmctl.export.lerobot import datagen
+
+    monkeypatch.setattr(datagen, "SHARD_CEILING_S", 0.01)
+    with pytest.raises(DeviceError) as err:
+        datagen._Pool.result(Future())
+    assert err.value.exit_code == 4 and "workers" in str(err.value) and "\n" not in str(err.value)

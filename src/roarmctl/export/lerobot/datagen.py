@@ -26,6 +26,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import TimeoutError as FuturesTimeout
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -201,7 +202,11 @@ class _Pool:
 
     @staticmethod
     def result(f: Any) -> list[dict[str, Any]]:
-        return f.result(timeout=SHARD_CEILING_S)
+        try:
+            return f.result(timeout=SHARD_CEILING_S)
+        except FuturesTimeout:  # a hung worker: said as the Ray engine says it, not a bare TimeoutError
+            raise DeviceError(f"datagen: a worker gave no result in {SHARD_CEILING_S:.0f} s",
+                              "check the machine (a worker hangs), then resume the run", option="workers") from None
 
     def close(self) -> None:
         """Stop the workers: queued shards cancelled, each worker given ``CLOSE_S`` to finish the shard it runs
