@@ -420,10 +420,14 @@ def read_episodes(root: str | Path) -> list[Episode]:
     state = np.asarray(data[STATE].combine_chunks().flatten().to_numpy()).reshape(-1, n)
     action = np.asarray(data[ACTION].combine_chunks().flatten().to_numpy()).reshape(-1, n)
     index = data["index"].to_numpy()
+    by_index = np.argsort(index, kind="stable")  # the frames in index order: an episode is one run of it
+    sorted_index = index[by_index]
     out = []
     for row in rows:
         a, b = int(row["dataset_from_index"]), int(row["dataset_to_index"])
-        at = np.flatnonzero((index >= a) & (index < b))
+        # its frames by bisection (a scan of every frame per episode was episodes x frames on each append)
+        lo, hi = np.searchsorted(sorted_index, [a, b])
+        at = by_index[lo:hi]
         e = Episode(str(row["tasks"][0]), state[at].copy(), action[at].copy())
         for cam in spec.cameras:
             key = image_key(cam)
