@@ -181,7 +181,9 @@ def test_codes_that_do_not_move_are_accepted_and_ignored():
 
 def test_a_question_to_a_stalled_simulator_process_fails_instead_of_waiting_for_ever(monkeypatch):
     """The simulator's child process stopped (SIGSTOP: it holds its state but runs nothing) must not hold its
-    caller: the question fails after the bound, naming that the process is still there, and the run can stop it."""
+    caller: the question fails after the bound, naming that the process is still there, and the process is ended
+    (its late answer would otherwise be taken for the next question's)."""
+    import contextlib
     import os
     import signal
 
@@ -194,5 +196,24 @@ def test_a_question_to_a_stalled_simulator_process_fails_instead_of_waiting_for_
         try:
             with pytest.raises(RuntimeError, match=r"gave no answer to 'executed' within 0.5 s \(still running\)"):
                 sim.executed()
+            assert not sim.alive()
         finally:
-            os.kill(sim._proc.pid, signal.SIGCONT)
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(sim._proc.pid, signal.SIGCONT)
+
+
+def test_a_simulator_process_that_died_is_one_error_and_stops_cleanly():
+    """The simulator's process ended under the host (killed, out of memory): a question to it is one RuntimeError
+    naming what was asked (an EOFError from the pipe before), and stop() then neither raises nor waits for it."""
+    import time
+
+    from roarmctl.device.simulator import PtySimulator, SimConfig
+
+    sim = PtySimulator(SimConfig(), process=True).start()
+    sim._proc.kill()
+    sim._proc.join(5.0)
+    with pytest.raises(RuntimeError, match="'recording'"):
+        sim.recording()
+    t = time.monotonic()
+    sim.stop()
+    assert not sim.alive() and time.monotonic() - t < 5.0

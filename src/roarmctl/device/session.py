@@ -187,11 +187,16 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
             if result is None:
                 result = streamer.result("failed", "stopped before streaming (no motion command sent)")
             if arm is not None:
-                if arm.path:
-                    # streamer.traj: re-planned from the measured pose when the arm was elsewhere
-                    tracking = simulator_tracking(arm, robot, streamer.traj, cfg, result)
-                    result.log["simulator"] = tracking
-                arm.stop()
+                try:
+                    if arm.path:
+                        # streamer.traj: re-planned from the measured pose when the arm was elsewhere
+                        tracking = simulator_tracking(arm, robot, streamer.traj, cfg, result)
+                        result.log["simulator"] = tracking
+                except (RuntimeError, EOFError, OSError) as exc:  # the simulator's process gave no answer or ended:
+                    # the run's own outcome and its log stand; the simulator's view of it is missing, said in the log
+                    result.log.setdefault("notes", []).append(f"no tracking from the simulator: {exc}"[:300])
+                finally:
+                    arm.stop()
             # a port that could not be opened exchanged nothing: keep the previous run's log rather than replace it
             # with an empty one (the error itself says what went wrong). A stop signal is this run's end: its log
             # says so, also before the port opened (the previous run's log would read as this one's)

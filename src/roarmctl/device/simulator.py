@@ -299,7 +299,7 @@ class PtySimulator:
         if self.process:
             try:
                 self._final = {k: self._ask(k) for k in ("recording", "executed", "lateness", "state")}
-            except (OSError, EOFError, BrokenPipeError):
+            except (OSError, EOFError, BrokenPipeError, RuntimeError):  # no answer: it was ended (_broken)
                 self._final = {}
             self._stopped = True
             try:
@@ -343,13 +343,30 @@ class PtySimulator:
                 return self._final[kind]
             raise RuntimeError(f"the simulator has stopped; ask for {kind!r} before stop()")
         with self._lock:
-            self._conn.send((kind,))
+            try:
+                self._conn.send((kind,))
+            except OSError:  # BrokenPipeError: the process has ended
+                self._broken()
+                raise RuntimeError(f"the simulator's process ended before it was asked {kind!r}") from None
             # bounded: a child that died or hangs must fail the caller, not hold it (and a test run) for ever
             if not self._conn.poll(ASK_TIMEOUT):
                 alive = self._proc is not None and self._proc.is_alive()
+                self._broken()  # a late answer would be taken for the next question's
                 raise RuntimeError(f"the simulator's process gave no answer to {kind!r} within {ASK_TIMEOUT:g} s "
                                    f"({'still running' if alive else 'it has ended'})")
-            return self._conn.recv()
+            try:
+                return self._conn.recv()
+            except (EOFError, OSError):
+                self._broken()
+                raise RuntimeError(f"the simulator's process ended before it answered {kind!r}") from None
+
+    def _broken(self) -> None:
+        """The child no longer answers in step: end it, so that ``stop()`` asks nothing more of it."""
+        self._final, self._stopped = {}, True
+        if self._proc is not None and self._proc.is_alive():
+            self._proc.kill()
+            self._proc.join(1.0)
+        self._conn.close()
 
     def recording(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(times (N,) s on the monotonic clock, joints (N, 6) rad in the URDF convention, torque on (N,))."""
