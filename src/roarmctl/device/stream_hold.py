@@ -93,6 +93,9 @@ def hold_target(s: Streamer, cause: str, now: float, after_flush: Reading | None
     return "path", s.wm.to_wire_array(q)[0]
 
 
+MAX_HOLD_SAMPLES = 20_001  # plan points the queued build's hold compares with the measured pose
+
+
 def nearest_on_plan(s: Streamer, q: np.ndarray, lo: float, hi: float) -> np.ndarray:
     """Firmware radians (field order) of the plan's point nearest joint vector ``q`` (dof,) by TCP distance, between
     the goals of ticks at schedule times ``lo`` and ``hi`` (s; a tick's goal is ``target_offset`` later on the plan:
@@ -100,11 +103,13 @@ def nearest_on_plan(s: Streamer, q: np.ndarray, lo: float, hi: float) -> np.ndar
     fast joint's plan moved 2-3 mm of TCP between samples, and the hold pulled the stopped arm back by about half that)."""
     ahead = target_offset(s.cfg.strategy, s.rate)
     a, b = (min(max(0.0, x + ahead), s.traj.duration / s.cfg.speed_scale) * s.cfg.speed_scale for x in (lo, hi))
-    taus = np.linspace(a, max(a, b), max(2, int((b - a) / 0.0005) + 2))
+    # at most MAX_HOLD_SAMPLES (10 s of plan at 0.5 ms): without a confirmed tick the window runs from the start, and
+    # a long plan would cost the stop ~100,000 FK evaluations
+    taus = np.linspace(a, max(a, b), min(MAX_HOLD_SAMPLES, max(2, int((b - a) / 0.0005) + 2)))
     qs = sample(s.traj, taus)
-    tcp = s.robot.kin.fk(s.robot.full_q(qs))[:, :3, 3]
+    tcps = s.robot.kin.fk(s.robot.full_q(qs))[:, :3, 3]
     here = s.robot.kin.fk(s.robot.full_q(q))[:3, 3]
-    best = int(np.argmin(np.linalg.norm(tcp - here, axis=1)))
+    best = int(np.argmin(np.linalg.norm(tcps - here, axis=1)))
     return s.wm.to_wire_array(qs[best])[0]
 
 
