@@ -171,12 +171,12 @@ class Planner:
             self.ctx.warnings.append(thin)
 
     def _jaw_pieces(self, all_tasks: list) -> None:
-        """Make the convex pieces of jaw meshes the description gives as meshes before the first pick needs them, under
+        """Make the convex pieces of jaw meshes the description gives as meshes before the first task, under
         a stage of their own: CoACD takes 15-60 s of CPU per mesh the first time (then they are cached), which the
-        progress display would otherwise show as the first pick's IK. Also when no pick closes by them (a grasp_width):
-        the trajectory carries the pieces (``robot.bundle``) and the physics' jaws are made of them."""
+        progress display would otherwise show as the first pick's IK. Also when no pick closes by them (a grasp_width, no
+        pick at all): the trajectory carries the pieces (``robot.bundle``) and the physics' jaws are made of them."""
         gr = self.ctx.robot.gripper
-        if gr is None or not any(m.file for m in gr.jaw_meshes) or not any(isinstance(t, PickTask) for t in all_tasks):
+        if gr is None or not any(m.file for m in gr.jaw_meshes):
             return
         self.progress("the jaw meshes' convex pieces (made once, then cached)", 0, len(all_tasks))
         jaw_pieces(self.ctx.robot)
