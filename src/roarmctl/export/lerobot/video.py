@@ -77,7 +77,8 @@ def _without_sys_nice() -> Iterator[None]:
 def encode(frames: np.ndarray, fps: int, codec: str = "h264") -> bytes:
     """MP4 bytes of ``frames`` (F, height, width, 3) uint8 RGB at ``fps`` in ``codec`` (``CODECS``); frame k at k / fps s."""
     os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1's own log (its banner on stderr for every video): errors only
-    with _scheduling_kept():
+    # SVT-AV1 (below) is the encoder that asks for real-time threads; x264 runs as it is
+    with _scheduling_kept() if CODECS[codec][0] == "libsvtav1" else contextlib.nullcontext():
         return _encode(np.ascontiguousarray(frames, dtype=np.uint8), fps, codec)
 
 
