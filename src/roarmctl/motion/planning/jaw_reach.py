@@ -18,10 +18,12 @@ Units: m, rad.
 
 from __future__ import annotations
 
+import hashlib
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from roarmctl.kept import Kept
 from roarmctl.robot.jaw_pieces import jaw_pieces
 from roarmctl.robot.meshes import convex_hull
 
@@ -33,6 +35,24 @@ if TYPE_CHECKING:
 STEPS = 30
 
 
+_CONVEXES: Kept[list] = Kept(16)  # the pieces' vertices (bytes) -> their FCL convex hulls: every pick asks again
+
+
+def _convexes(pieces: list[np.ndarray], link: str) -> list:
+    """FCL convex polytopes of ``pieces`` (each (V, 3) m, their convex hulls), made once per process for the same
+    pieces: their hulls took ~0.15 s a jaw of 32 pieces, at every pick of every cycle."""
+    import fcl  # FCL loads when a pick first needs it, as the planner's checker does
+
+    key = (link, hashlib.sha256(b"".join(np.ascontiguousarray(v, dtype="<f8").tobytes() for v in pieces)).hexdigest())
+    if key in _CONVEXES:
+        return _CONVEXES[key]
+    out = []
+    for v in pieces:
+        hv, hf = convex_hull(np.asarray(v, dtype=float), f"gripper.jaw_meshes ({link})")
+        out.append(fcl.Convex(hv, len(hf), np.hstack([np.full((len(hf), 1), 3), hf]).ravel()))
+    return _CONVEXES.keep(key, out)
+
+
 class JawReach:
     """The moving jaw's pieces against one object held at one arm configuration.
 
@@ -41,7 +61,6 @@ class JawReach:
     """
 
     def __init__(self, robot: Robot, q: np.ndarray, spec: ItemSpec, pose: np.ndarray, margin: float) -> None:
-        import fcl  # FCL (and the collision module) load when a pick first needs them, as the planner's checker does
 
         from roarmctl.motion.geometry import fcl_geometry
 
@@ -55,10 +74,7 @@ class JawReach:
         self.normal = n / np.linalg.norm(n)  # world: from the fixed face toward the moving jaw
         self.pose, self.margin = np.asarray(pose, dtype=float), float(margin)
         self.shape = fcl_geometry(spec.shape, spec.size, spec.radius, spec.length)
-        self.pieces = []
-        for v in jaw_pieces(robot).get(self.link, []):
-            hv, hf = convex_hull(np.asarray(v, dtype=float), f"gripper.jaw_meshes ({self.link})")
-            self.pieces.append(fcl.Convex(hv, len(hf), np.hstack([np.full((len(hf), 1), 3), hf]).ravel()))
+        self.pieces = _convexes(jaw_pieces(robot).get(self.link, []), self.link)
 
     def touches(self, g: float, into: float) -> bool:
         """Whether, at gripper value ``g`` (rad), the moving jaw's pieces touch the object pressed onto the fixed jaw
