@@ -10,7 +10,7 @@ all: test
 
 # The install compiles the C kernel (FK, dynamics and state checker) into the source tree (editable install):
 # a change to the C source needs a new install too.
-$(STAMP): pyproject.toml setup.py src/roarmctl/_kernel.c
+$(STAMP): pyproject.toml setup.py src/roarmctl/_kernel.c src/roarmctl/_kernel_jerk.c
 	$(PYTHON) -m venv $(VENV)
 	rm -f src/roarmctl/*.so src/roarmctl/motion/*.so roarmctl/*.so  # an older build's module would shadow the new abi3 one
 	$(BIN)/pip install --quiet --upgrade pip

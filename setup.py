@@ -37,7 +37,7 @@ class BuildExt(build_ext):
             raise PlatformError(f"building the kernel failed ({exc}). {HINT}") from None
 
 
-KERNEL = Extension("roarmctl._kernel", sources=["src/roarmctl/_kernel.c"], py_limited_api=True,
+KERNEL = Extension("roarmctl._kernel", sources=["src/roarmctl/_kernel.c", "src/roarmctl/_kernel_jerk.c"], py_limited_api=True,
                    define_macros=[("Py_LIMITED_API", "0x030B0000")],
                    extra_compile_args=["-O3", "-fno-fast-math", "-ffp-contract=off"])
 

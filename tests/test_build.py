@@ -1,7 +1,7 @@
 """The install without a working C compiler: setup.py's build of the kernel stops with one line saying what to
 install, not a traceback or a compiler's log.
 
-The build runs as ``python setup.py build_ext`` in a scratch copy of setup.py and src/roarmctl/_kernel.c (nothing is
+The build runs as ``python setup.py build_ext`` in a scratch copy of setup.py and the kernel's C sources (nothing is
 written into the tree), with ``CC`` naming a compiler that does not exist, or one that fails (``false``): the same
 ``BuildExt.run`` a ``pip install`` reaches, without pip's isolated build environment (which would download
 setuptools)."""
@@ -23,7 +23,8 @@ def build_ext(tmp_path: Path, cc: str) -> subprocess.CompletedProcess:
     pytest.importorskip("setuptools", reason="setup.py runs on setuptools (pip's build would fetch it)")
     shutil.copy(ROOT / "setup.py", tmp_path / "setup.py")
     (tmp_path / "src" / "roarmctl").mkdir(parents=True)
-    shutil.copy(ROOT / "src" / "roarmctl" / "_kernel.c", tmp_path / "src" / "roarmctl" / "_kernel.c")
+    for source in ("_kernel.c", "_kernel_jerk.c"):
+        shutil.copy(ROOT / "src" / "roarmctl" / source, tmp_path / "src" / "roarmctl" / source)
     env = dict(os.environ, CC=cc)
     return subprocess.run([sys.executable, "setup.py", "-q", "build_ext", "--build-lib", "lib", "--build-temp", "tmp"],
                           cwd=tmp_path, capture_output=True, text=True, timeout=120, env=env)

@@ -458,3 +458,51 @@ def test_the_cruise_search_skips_only_widths_that_fail():
             assert results[0][0] == results[1][0]
             skipped += results[1][1] - results[0][1]
     assert compared >= 4 and skipped > 0 and cruises >= 2, (compared, skipped, cruises)
+
+
+def test_the_compiled_jerk_check_answers_as_the_numpy_check(monkeypatch):
+    """_jerk_ok's compiled check (_kernel.jerk_check, stopping at the first pair certainly over a limit) gives the
+    numpy check's answer on the whole grid (_jerk_sampled), over TOPP-RA profiles of random paths (1-6 joints, 2-7
+    waypoints), widths around a / j and jerk limits that both pass and fail; a failure it finds is a pair the numpy
+    check fails too, at or after numpy's first. With a tolerance so wide that no pass is certain, every pass comes
+    from the numpy check, the same answers."""
+    from roarmctl import _kernel
+    from roarmctl.motion import jerk_filter
+    from roarmctl.motion.jerk_filter import FINE_DT, Profile, _derivative_table, _jerk_ok, _jerk_sampled
+    from roarmctl.motion.toppra_constraints import import_toppra, joint_path, toppra_grid
+
+    ta = import_toppra()
+    rng = np.random.default_rng(3940)
+    tol = jerk_filter.JERK_CHECK_TOL
+    outcomes = {True: 0, False: 0}
+    for trial in range(30):
+        k, n = 2 + trial % 6, 1 + trial % 6
+        wp = np.cumsum(rng.uniform(-0.5, 0.5, size=(k, n)), axis=0)
+        ss = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(wp, axis=0), axis=1))])
+        path, grid = joint_path(ta, ss, wp), toppra_grid(ss)
+        alim = rng.uniform(2.0, 6.0, n)
+        cons = [ta.constraint.JointVelocityConstraint(rng.uniform(0.8, 2.0, n)), ta.constraint.JointAccelerationConstraint(alim)]
+        inst = ta.algorithm.TOPPRA(cons, path, gridpoints=grid, parametrizer="ParametrizeConstAccel")
+        inst.compute_parameterization(0.0, 0.0)
+        sd = np.asarray(inst.problem_data.sd_vec, dtype=float)
+        jm = rng.uniform(10.0, 80.0, n)
+        table = _derivative_table(path)
+        assert table is not None
+        for w in (max(float(np.max(alim / jm)), 2 * FINE_DT) * 1.25**i for i in range(-2, 8)):
+            prof = Profile(grid, sd)
+            t = np.arange(0.0, prof.T + w + FINE_DT, FINE_DT)
+            first = _jerk_sampled(path, prof, w, jm, t)
+            assert _jerk_ok(path, prof, w, jm) == (first < 0)
+            outcomes[first < 0] += 1
+            status, pair = _kernel.jerk_check(prof.t, prof._starts, prof.T, prof.s_end, table[0], table[1], w, FINE_DT,
+                                              len(t), jm, tol)
+            # certain either way (the one-joint lines meet their limit exactly at w = a / j: within the 1e-9 allowed)
+            assert status == (1 if first < 0 else 0)
+            if status == 0:
+                s, sdot, sddot = prof.filtered(t[pair:pair + 2], w)
+                qdd = path(s, 1) * sddot[:, None] + path(s, 2) * (sdot**2)[:, None]
+                assert pair >= first and np.any(np.abs(qdd[1] - qdd[0]) / FINE_DT > jm * (1 + 1e-9))
+            monkeypatch.setattr(jerk_filter, "JERK_CHECK_TOL", 10.0)  # nothing is certain: numpy answers all
+            assert _jerk_ok(path, Profile(grid, sd), w, jm) == (first < 0)
+            monkeypatch.setattr(jerk_filter, "JERK_CHECK_TOL", tol)
+    assert outcomes[True] >= 20 and outcomes[False] >= 20, outcomes

@@ -1280,6 +1280,9 @@ done:
     return result;
 }
 
+/* _kernel_jerk.c: the timing's jerk check (motion/jerk_filter.py), compiled into this module. */
+PyObject *jerk_check(PyObject *self, PyObject *const *args, Py_ssize_t nargs);
+
 static PyMethodDef methods[] = {
     {"check", (PyCFunction)(void (*)(void))check, METH_FASTCALL, "Batch state check (see collision.py)."},
     {"check_line", (PyCFunction)(void (*)(void))check_line, METH_FASTCALL, "Check states of a straight segment."},
@@ -1290,6 +1293,7 @@ static PyMethodDef methods[] = {
     {"rnea", (PyCFunction)(void (*)(void))rnea, METH_FASTCALL, "Inverse dynamics of a batch (Newton-Euler)."},
     {"sigma", (PyCFunction)(void (*)(void))sigma, METH_FASTCALL, "Margin measure of a batch."},
     {"apart", (PyCFunction)(void (*)(void))apart, METH_FASTCALL, "Separating-axis test of two boxes."},
+    {"jerk_check", (PyCFunction)(void (*)(void))jerk_check, METH_FASTCALL, "The timing's jerk check, sample by sample."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from roarmctl import _kernel
 from roarmctl.motion.toppra_constraints import sdot_bound_constraint
 
 if TYPE_CHECKING:
@@ -23,6 +24,9 @@ if TYPE_CHECKING:
     import toppra
 
 FINE_DT = 0.002  # s: grid on which the jerk is checked (finite differences of the acceleration)
+# The compiled jerk check's answer is taken where it is certain: a ratio of jerk to limit more than this above 1
+# (fails) or every ratio more than this below 1 (passes); its rounding differs from numpy's by ~1e-12 of a limit.
+JERK_CHECK_TOL = 1e-10
 # A timed result over a limit by ratio r on its samples is slowed by r * (1 + SLOWDOWN_SLACK) (the square root
 # of it for accelerations), at most SLOWDOWN_TRIES times, before TOPP-RA runs again at the next margin.
 SLOWDOWN_TRIES, SLOWDOWN_SLACK = 3, 1e-3
@@ -148,19 +152,54 @@ def ends_at_rest(samples: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     return q, qd, qdd, s
 
 
+def _derivative_table(path: toppra.interpolator.AbstractGeometricPath) -> tuple[np.ndarray, np.ndarray] | None:
+    """The breakpoints (K,) and the polynomial coefficients (5, K - 1, n) of toppra's spline's first and second
+    derivatives (its ``cspld`` and ``cspldd``: scipy PPoly of 3 and 2 coefficients per interval, extended past the
+    ends), for the compiled jerk check; None for any other path (the numpy check alone then)."""
+    d, e = getattr(path, "cspld", None), getattr(path, "cspldd", None)
+    dc, ec = getattr(d, "c", None), getattr(e, "c", None)
+    dx, ex = getattr(d, "x", None), getattr(e, "x", None)
+    if not (isinstance(dc, np.ndarray) and isinstance(ec, np.ndarray) and dc.ndim == 3 and dc.shape[0] == 3
+            and ec.shape == (2,) + dc.shape[1:] and getattr(d, "extrapolate", None) is True
+            and getattr(e, "extrapolate", None) is True and isinstance(dx, np.ndarray) and isinstance(ex, np.ndarray)
+            and np.array_equal(dx, ex)):
+        return None
+    return np.ascontiguousarray(dx, dtype=float), np.ascontiguousarray(np.concatenate([dc, ec]), dtype=float)
+
+
+def _jerk_sampled(path: toppra.interpolator.AbstractGeometricPath, prof: Profile, w: float, jmax: np.ndarray,
+                  t: np.ndarray) -> int:
+    """The jerk check in numpy on the whole grid ``t`` (``_jerk_ok``): -1 if every pair of samples keeps ``jmax``,
+    else the first pair (k, k + 1) that does not."""
+    s, sd, sdd = prof.filtered(t, w)
+    qdd = path(s, 1) * sdd[:, None] + path(s, 2) * (sd**2)[:, None]  # as in sample, without the positions
+    jerk = qdd[1:] - qdd[:-1]  # np.diff's values, then in place
+    np.abs(jerk, out=jerk)
+    jerk /= FINE_DT
+    within = (jerk <= jmax * (1 + 1e-9)).all(axis=1)
+    return -1 if within.all() else int(np.argmin(within))
+
+
 def _jerk_ok(path: toppra.interpolator.AbstractGeometricPath, prof: Profile, w: float, jmax: np.ndarray) -> bool:
     """Whether the jerk of ``prof`` filtered at width ``w`` (s), sampled every FINE_DT, keeps ``jmax`` (n,):
     with s, sdot, sddot of ``prof.filtered`` on the grid t = 0, FINE_DT, ... past ``prof.T + w``, the joint
     accelerations qdd = q'(s) sddot + q''(s) sdot^2 (as in ``sample``) change by at most jmax * FINE_DT
     (to 1e-9) from one sample to the next.
 
+    The compiled check (``_kernel.jerk_check``) samples from the start and stops at the first pair certainly over a
+    limit (more than JERK_CHECK_TOL of it; most widths the search asks fail near the start); what it cannot tell
+    for certain, the numpy check on the whole grid (``_jerk_sampled``) answers, so every answer is the numpy check's.
+
     Answers are kept on ``prof`` per path (the filter search asks again for w0, which the plateau test asked), and a
     failure also on its family (``Profile.clipped``): a profile clipped from another fails at a width where the other
-    failed before either was clipped, without being sampled (the plateau's two cruises try the same widths)."""
+    failed before either was clipped, without being sampled (the plateau's two cruises try the same widths). A
+    failure is kept with the time of a failing pair (the first the numpy check finds, the first certain one the
+    compiled check finds): any failing pair before the clip is one the clipped profile has too."""
     memo, family = prof.jerk_answers, prof.family
     if memo.get("path") is not path:
         memo.clear()
         memo["path"] = path
+        memo["table"] = _derivative_table(path)
     if family.get("path") is not path:
         family.clear()
         family["path"] = path
@@ -171,16 +210,17 @@ def _jerk_ok(path: toppra.interpolator.AbstractGeometricPath, prof: Profile, w: 
             memo[key] = False  # a profile of its family failed there, where the two are the same motion
             return False
         t = np.arange(0.0, prof.T + w + FINE_DT, FINE_DT)
-        s, sd, sdd = prof.filtered(t, w)
-        qdd = path(s, 1) * sdd[:, None] + path(s, 2) * (sd**2)[:, None]  # as in sample, without the positions
-        jerk = qdd[1:] - qdd[:-1]  # np.diff's values, then in place
-        np.abs(jerk, out=jerk)
-        jerk /= FINE_DT
-        within = (jerk <= jmax * (1 + 1e-9)).all(axis=1)
-        memo[key] = bool(within.all())
-        if not memo[key]:
+        status, pair = -1, -1
+        table = memo["table"]
+        if table is not None and w > 0.0 and len(prof.t) > 1:
+            status, pair = _kernel.jerk_check(prof.t, prof._starts, prof.T, prof.s_end, table[0], table[1], w, FINE_DT,
+                                              len(t), np.ascontiguousarray(jmax, dtype=float), JERK_CHECK_TOL)
+        if status < 0:
+            pair = _jerk_sampled(path, prof, w, jmax, t)
+        memo[key] = pair < 0
+        if pair >= 0:
             # the failed pair of samples depends on the motion up to its later sample's time (the filter looks back)
-            until = float(t[int(np.argmin(within)) + 1])
+            until = float(t[pair + 1])
             if until <= prof.same_until and (failed_at is None or until < failed_at):
                 family[key] = until
     return memo[key]
