@@ -506,3 +506,20 @@ def test_the_compiled_jerk_check_answers_as_the_numpy_check(monkeypatch):
             assert _jerk_ok(path, Profile(grid, sd), w, jm) == (first < 0)
             monkeypatch.setattr(jerk_filter, "JERK_CHECK_TOL", tol)
     assert outcomes[True] >= 20 and outcomes[False] >= 20, outcomes
+
+
+def test_toppra_looks_for_its_optional_solvers_once_per_process(monkeypatch):
+    """toppra asks importlib for qpoases and cvxpy at every TOPP-RA instance; after import_toppra it is answered from
+    the first search (the same answer: the installed packages), and a timing searches sys.path for neither."""
+    import importlib.util
+
+    from roarmctl.motion.toppra_constraints import import_toppra
+
+    ta = import_toppra()
+    looked: list[str] = []
+    plain = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: looked.append(name) or plain(name, *a))
+    assert dict(ta.solverwrapper.available_solvers(output_msg=False))["seidel"]
+    time_parameterise(np.array([[0.0, 0.0], [0.5, -0.3], [0.9, 0.1]]), np.array([1.0, 1.0]), np.array([2.0, 2.0]),
+                      np.array([20.0, 20.0]))
+    assert not {"qpoases", "cvxpy"} & set(looked), looked

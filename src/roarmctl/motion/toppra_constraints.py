@@ -73,7 +73,33 @@ def import_toppra() -> ModuleType:
     import toppra.algorithm  # noqa: F401
     import toppra.constraint  # noqa: F401
 
+    _solvers_asked_once(toppra)
     return toppra
+
+
+_SOLVERS_KNOWN = False  # _solvers_asked_once has run
+
+
+def _solvers_asked_once(toppra: ModuleType) -> None:
+    """toppra asks importlib whether qpoases and cvxpy are installed at every TOPP-RA instance it makes
+    (``ReachabilityAlgorithm.__init__`` calls ``toppra.solverwrapper.available_solvers``): two searches of
+    ``sys.path``, about 0.2 ms a timing, as much as a free motion's spline. Which packages are installed does not
+    change while a process plans, so the answer is found once and given again (the same tuple; toppra picks its
+    solver from it as before: seidel, with neither installed)."""
+    global _SOLVERS_KNOWN
+    if _SOLVERS_KNOWN:
+        return
+    wrapper = toppra.solverwrapper
+    found = wrapper.available_solvers(output_msg=False)
+
+    def available_solvers(output_msg: bool = True) -> tuple:
+        """toppra's ``available_solvers``, answered from the first call."""
+        if output_msg:
+            print(found)  # noqa: T201 (toppra's own behaviour when asked to say it)
+        return found
+
+    wrapper.available_solvers = available_solvers
+    _SOLVERS_KNOWN = True
 
 
 def quiet_toppra() -> None:
