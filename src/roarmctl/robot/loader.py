@@ -7,6 +7,7 @@ Every mistake in a description raises ``DescriptionError`` naming the file and t
 
 from __future__ import annotations
 
+import functools
 import os
 from importlib import resources
 from pathlib import Path
@@ -33,8 +34,14 @@ def bundled_dir() -> Path:
 
 
 def bundled_robots() -> list[str]:
-    """Names of the robots shipped with roarmctl."""
-    return sorted(p.stem for p in bundled_dir().glob("*.yaml"))
+    """Names of the robots shipped with roarmctl (the package's own files: listed once per process; every plan's
+    trajectory asks whether its robot is one of them)."""
+    return list(_bundled_names())
+
+
+@functools.cache
+def _bundled_names() -> tuple[str, ...]:
+    return tuple(sorted(p.stem for p in bundled_dir().glob("*.yaml")))
 
 
 # loaded robots, by the spec (and the current folder for a relative one) and the options, with the files each
