@@ -28,7 +28,7 @@ import numpy as np
 from roarmctl.device.protocol import M3_FIELDS, WireMap
 from roarmctl.device.schedule import sample
 from roarmctl.errors import InfeasibleError, InputError, PlanFileError, UnreachableError
-from roarmctl.physics.render import Cameras, offscreen
+from roarmctl.physics.render import Cameras, FrameBuffers, offscreen
 from roarmctl.physics.setup import build
 from roarmctl.plan.template import Range, Template
 
@@ -225,8 +225,10 @@ def goals_at(traj: Trajectory, robot: Robot, rec: Recording, times: np.ndarray) 
     return out
 
 
-def run_episode(template: Template, robot: Robot, try_index: int, seed: int, options: EpisodeOptions) -> EpisodeResult:
-    """Try ``try_index`` of the run with ``seed`` (see the module doc)."""
+def run_episode(template: Template, robot: Robot, try_index: int, seed: int, options: EpisodeOptions,
+                buffers: FrameBuffers | None = None) -> EpisodeResult:
+    """Try ``try_index`` of the run with ``seed`` (see the module doc); the images in arrays lent by ``buffers``
+    when given (valid until its next episode), else new ones."""
     from roarmctl.motion.pipeline import plan_file
     from roarmctl.physics.report import measure
     from roarmctl.physics.run import Options, simulate
@@ -278,11 +280,7 @@ def run_episode(template: Template, robot: Robot, try_index: int, seed: int, opt
     out.action = goals_at(traj, robot, rec, nominal).astype(np.float32)
     if options.cameras:
         t0 = time.process_time()
-        cams = Cameras(w, options.width, options.height, colors)
-        try:
-            out.images = cams.render(rec.frame_qpos, options.cameras)
-        finally:
-            cams.close()
+        out.images = Cameras(w, options.width, options.height, colors).render(rec.frame_qpos, options.cameras, buffers)
         out.timings["render"] = time.process_time() - t0
     out.kept = True
     return out

@@ -38,7 +38,7 @@ from roarmctl.export.lerobot import stats, video
 from roarmctl.export.lerobot.dataset import DatasetSpec, Episode, read_info, write_dataset
 from roarmctl.fileio import atomic_write_json
 from roarmctl.physics.episode import CAUSES, EpisodeOptions, run_episode
-from roarmctl.physics.render import CAMERAS
+from roarmctl.physics.render import CAMERAS, FrameBuffers
 from roarmctl.plan.template import check_reach, load_template
 from roarmctl.robot.loader import load_robot
 from roarmctl.validation import load_json
@@ -116,6 +116,7 @@ class Complete(Exception):  # noqa: N818  (not an error: the run has nothing lef
 
 # ------------------------------------------------------------------------------------------- the workers
 _CACHE: dict[str, Any] = {}
+_FRAMES = FrameBuffers()  # this worker's frame arrays, lent to one try after the other
 
 
 def _loaded(template_path: str) -> tuple[Any, Any]:
@@ -133,7 +134,7 @@ def run_shard(template_path: str, staging: str, tries: list[int], seed: int, wid
     options = EpisodeOptions(width=width, height=height, fps=template.fps, cameras=tuple(cameras))
     out = []
     for t in tries:
-        r = run_episode(template, robot, t, seed, options)
+        r = run_episode(template, robot, t, seed, options, _FRAMES)  # encoded before the next try renders
         outcome: dict[str, Any] = {"try": t, "kept": r.kept, "cause": r.cause, "detail": r.detail, "timings": dict(r.timings)}
         if r.kept:
             assert r.state is not None and r.action is not None  # kept
