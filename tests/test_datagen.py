@@ -671,3 +671,35 @@ def test_a_shard_that_never_ends_is_a_device_error_naming_the_workers(monkeypatc
     with pytest.raises(DeviceError) as err:
         datagen._Pool.result(Future())
     assert err.value.exit_code == 4 and "workers" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_kept_gl_context_draws_the_next_scene_as_a_fresh_one_would():
+    """Datagen's episodes differ in their objects, not in the meshes MuJoCo keeps on the GL side, so the renderer
+    keeps its GL context for the next scene with the same assets (``render._Context``). A second scene (the cube
+    elsewhere in another colour, a distractor more) drawn with the kept context is pixel for pixel what a context
+    made for it draws, and both show the cube's colour where the scenes differ."""
+    from roarmctl.motion.scene import Scene
+    from roarmctl.physics import render
+    from roarmctl.physics.world import World
+    from roarmctl.robot.loader import load_robot
+
+    robot = load_robot("roarm_m3_pro")
+    table = {"name": "table", "role": "table", "shape": "box", "size": [0.8, 0.6, 0.02], "xyz": [0.15, 0.0, -0.01]}
+    cube = {"name": "cube", "role": "object", "shape": "box", "size": [0.04, 0.04, 0.04], "mass": 0.03}
+    first = World(robot, Scene.from_dict({"items": [table, {**cube, "xyz": [0.25, -0.15, 0.02]}]}))
+    second = World(robot, Scene.from_dict({"items": [table, {**cube, "xyz": [0.22, 0.12, 0.02]},
+                                                     {**cube, "name": "other", "size": [0.02, 0.02, 0.02], "xyz": [0.17, 0.0, 0.01]}]}))
+    qpos = np.repeat(second.model.qpos0[None], 3, axis=0)
+    qpos[:, second.qpos_adr[:3]] += np.array([[0.0, 0.0, 0.0], [0.3, 0.2, -0.2], [-0.4, 0.4, 0.3]])
+    render.Cameras(first, 64, 48, {"cube": (0.1, 0.9, 0.1)}).render(np.repeat(first.model.qpos0[None], 2, axis=0))
+    kept = render._Context.key
+    seen = render.Cameras(second, 64, 48, {"cube": (0.9, 0.1, 0.1)}).render(qpos)
+    assert render._Context.key == kept  # the same meshes: the context was kept
+    render._Context.free()
+    fresh = render.Cameras(second, 64, 48, {"cube": (0.9, 0.1, 0.1)}).render(qpos)
+    for cam in render.CAMERAS:
+        assert np.array_equal(seen[cam], fresh[cam]), cam
+    red = (fresh["front"][..., 0] > 150) & (fresh["front"][..., 1] < 80)
+    assert red.sum() > 5  # the red cube is in the picture
+    render.Cameras(second, 64, 64).render(qpos[:1])
+    assert render._Context.key != kept  # another size: a context of its own
