@@ -523,3 +523,37 @@ def test_toppra_looks_for_its_optional_solvers_once_per_process(monkeypatch):
     time_parameterise(np.array([[0.0, 0.0], [0.5, -0.3], [0.9, 0.1]]), np.array([1.0, 1.0]), np.array([2.0, 2.0]),
                       np.array([20.0, 20.0]))
     assert not {"qpoases", "cvxpy"} & set(looked), looked
+
+
+def test_the_cruise_cap_is_the_step_by_step_bisection_bit_for_bit():
+    """_plateau_cap decides its 30 bisection steps a batch of levels at a time; over random speed profiles (grids of
+    5 to 900 points, flat tops and bumps) and cruise lengths its cap is the one the step by step search finds, bit
+    for bit (the same mids, the same sums)."""
+    from roarmctl.motion.jerk_filter import Profile, _plateau_cap
+
+    def stepwise(prof: Profile, hold: float) -> float | None:
+        top = float(np.max(prof.sd))
+        x0, x1, ds = prof.sd[:-1] ** 2, prof.sd[1:] ** 2, np.diff(prof.s)
+        x_lo, x_hi = np.minimum(x0, x1), np.maximum(x0, x1)
+        span = np.maximum(x_hi - x_lo, 1e-300)
+        lo, hi = 0.0, top
+        for _ in range(30):
+            mid = 0.5 * (lo + hi)
+            c2 = mid * mid
+            frac = np.where(x_lo >= c2, 1.0, np.where(x_hi <= c2, 0.0, (x_hi - c2) / span))
+            lo, hi = (mid, hi) if float(np.sum(frac * ds)) / mid >= hold else (lo, mid)
+        return lo if lo > 0.0 else None
+
+    rng = np.random.default_rng(3941)
+    found = 0
+    for trial in range(60):
+        g = int(rng.integers(5, 900))
+        grid = np.sort(np.concatenate([[0.0], rng.uniform(0.0, 2.0, g - 2), [2.0]]))
+        sd = np.sqrt(np.sin(np.pi * grid / 2.0).clip(0.0)) * (1 + 0.2 * np.sin(rng.uniform(1, 20) * grid))
+        sd = np.minimum(sd, rng.uniform(0.6, 1.2)) * rng.uniform(0.5, 3.0)
+        prof = Profile(grid, sd)
+        for hold in (rng.uniform(0.001, 0.3), rng.uniform(0.0, 3.0 * prof.T)):
+            cap = _plateau_cap(prof, hold)
+            assert cap == stepwise(prof, hold)
+            found += cap is not None
+    assert found > 60

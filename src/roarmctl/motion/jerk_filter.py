@@ -36,6 +36,7 @@ FILTER_TRIES = 16
 # again with a cruise at its top speed (``_plateau_profile``) of PLATEAU_SHARES times that width (the next
 # one if no filter up to the cruise's length passes), the filter widened by PLATEAU_GROWTH per try.
 PLATEAU_TRIGGER, PLATEAU_SHARES, PLATEAU_GROWTH = 1.2, (1.1, 1.3), 1.04
+PLATEAU_LEVELS = 3  # the cruise speed's bisection decides this many of its 30 steps per batch (_plateau_cap)
 
 
 _Samples = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # integral of s, s, sdot, sddot (Profile.eval)
@@ -257,16 +258,27 @@ def _plateau_cap(prof: Profile, hold: float) -> float | None:
     span = np.maximum(x_hi - x_lo, 1e-300)
 
     # 30 bisection steps of c in [0, top] on cruise(c) = sum(frac * ds) / c >= hold, frac the share of each grid
-    # interval where sdot^2 > c^2: 1 where x_lo >= c^2, 0 where x_hi <= c^2, else (x_hi - c^2) / span
-    def cruise(c: float) -> float:
-        c2 = c * c
-        frac = np.where(x_lo >= c2, 1.0, np.where(x_hi <= c2, 0.0, (x_hi - c2) / span))
-        return float(np.sum(frac * ds)) / c
-
+    # interval where sdot^2 > c^2: 1 where x_lo >= c^2, 0 where x_hi <= c^2, else (x_hi - c^2) / span. The steps
+    # are taken PLATEAU_LEVELS at a time: the mids every outcome of those steps could ask (a tree of
+    # 2**PLATEAU_LEVELS - 1, each made as the step by step search makes it) are evaluated in one batch of rows (a
+    # row's sum is the same as that of its 1-d array), then the search walks down the tree: the same mids, the
+    # same sums, the same cap, with a few numpy calls per PLATEAU_LEVELS steps rather than per step.
     lo, hi = 0.0, top
-    for _ in range(30):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if cruise(mid) >= hold else (lo, mid)
+    for _ in range(30 // PLATEAU_LEVELS):
+        bounds, mids = [(lo, hi)], []
+        for k in range(2**PLATEAU_LEVELS - 1):  # node k: its interval's mid; children 2k + 1 (cruise >= hold), 2k + 2
+            a, b = bounds[k]
+            mid = 0.5 * (a + b)
+            mids.append(mid)
+            bounds += [(mid, b), (a, mid)]
+        c = np.array(mids)
+        c2 = (c * c)[:, None]
+        frac = np.where(x_lo >= c2, 1.0, np.where(x_hi <= c2, 0.0, (x_hi - c2) / span))
+        cruise = ((frac * ds).sum(axis=1) / c).tolist()
+        k = 0
+        for _ in range(PLATEAU_LEVELS):
+            k = 2 * k + 1 if cruise[k] >= hold else 2 * k + 2
+        lo, hi = bounds[k]
     return lo if lo > 0.0 else None
 
 
