@@ -546,7 +546,7 @@ def test_the_cruise_cap_is_the_step_by_step_bisection_bit_for_bit():
 
     rng = np.random.default_rng(3941)
     found = 0
-    for trial in range(60):
+    for _ in range(60):
         g = int(rng.integers(5, 900))
         grid = np.sort(np.concatenate([[0.0], rng.uniform(0.0, 2.0, g - 2), [2.0]]))
         sd = np.sqrt(np.sin(np.pi * grid / 2.0).clip(0.0)) * (1 + 0.2 * np.sin(rng.uniform(1, 20) * grid))
