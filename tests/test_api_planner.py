@@ -269,6 +269,7 @@ def check_example(number: str, out: Path) -> None:
         raise AssertionError(f"example {number}: nothing checks what it does")
 
 
+@pytest.mark.slow
 def test_dict_plans_name_the_task_and_field_and_find_a_relative_robot(tmp_path, monkeypatch):
     """A plan given as a dict has no lines: its messages name the task and the field, never 'line 0' or ':1';
     a relative robot path starts at base_dir (default the current folder)."""
@@ -372,6 +373,7 @@ def test_the_bounds_themselves_are_taken_by_both(section, name, value):
     assert getattr(planner._limits if section == "limits" else planner._config, name) == value
 
 
+@pytest.mark.slow
 def test_a_trajectory_file_records_a_margin_within_the_same_bound():
     """The trajectory validator took a recorded singularity margin up to 10 m/rad, which neither a plan file nor the
     Planner can give; it now checks FIELD_BOUNDS' 0 to 1 as they do (1 taken, 1.5 refused in one line)."""

@@ -76,6 +76,7 @@ def test_files_are_the_published_ones_and_the_sidecar_is_short(arm):
             assert data[key] in entries, key
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("arm", LOADING_FAST)
 def test_kin_fk_matches_an_independent_chain_product(arm, capsys):
     """``kin fk --json`` at a configuration inside the limits equals the naive chain product of the loaded
@@ -101,6 +102,7 @@ def _first_target(plan: dict) -> list[float]:
     return list(plan["tasks"][0]["move"]["xyz"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("arm", LOADING_FAST)
 def test_kin_ik_solutions_reach_the_target_by_fk(arm, capsys):
     """``kin ik`` to the plan's first target with the tool pointing straight down: each solution is within

@@ -30,6 +30,7 @@ def build_ext(tmp_path: Path, cc: str) -> subprocess.CompletedProcess:
                           cwd=tmp_path, capture_output=True, text=True, timeout=120, env=env)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cc, first", [("/nonexistent/cc", "error: missing a C compiler ('/nonexistent/cc')"),
                                        ("false", "error: building the kernel failed")])
 def test_a_missing_or_failing_compiler_is_one_line_naming_what_to_install(tmp_path, cc, first):

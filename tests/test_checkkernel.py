@@ -90,6 +90,7 @@ def _random_rotation(rng) -> np.ndarray:
     return q if np.linalg.det(q) > 0 else -q
 
 
+@pytest.mark.slow
 def test_separating_axis_never_clears_boxes_that_fcl_finds_touching():
     """4000 random box pairs around the touching distance (a third of them with parallel or shared axes):
     whenever the kernel's separating-axis test calls them apart, FCL finds no contact; and it clears most
@@ -125,6 +126,7 @@ def _hold_a_box(checker: CollisionChecker) -> None:
     checker.attach("held", q0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("attached", [False, True])
 def test_pairs_the_kernel_clears_are_apart_for_fcl(attached):
     """On 1500 random RoArm states in the example scene (padding 5 mm, with and without a held box), every
@@ -276,6 +278,7 @@ def _states_near_items(checker: CollisionChecker, seed: int, n: int) -> np.ndarr
     return q[:n]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("attached", [False, True])
 def test_a_state_that_is_not_near_is_clear_for_its_whole_sweep(attached):
     """The "near" flag is what segment_valid's proof rests on: a state not near at sweep s (m) must stay valid for
@@ -316,6 +319,7 @@ def test_a_state_that_is_not_near_is_clear_for_its_whole_sweep(attached):
     assert checked > 20000 and box_cleared > 300 and pairs > 300, (checked, box_cleared, pairs)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("attached", [False, True])
 def test_valid_segments_have_no_colliding_state_at_eight_times_the_resolution(attached):
     """segment_valid's verdict against a dense re-check (validity_batch, FCL on every candidate) of 1500 random

@@ -75,6 +75,7 @@ def test_an_execution_log_as_a_picture_is_exit_2_pointing_to_the_html_page(tmp_p
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.exec.json"]
 
 
+@pytest.mark.slow
 def test_failing_plan_is_drawn_with_the_failing_target_and_exits_3(far_plan, tmp_path):
     out = tmp_path / "far.svg"
     r = roarmctl("visualize-path", str(far_plan), "-o", str(out))

@@ -107,6 +107,7 @@ def test_singularity_margin_uses_the_smallest_singular_value(robot):
 UR5E = Path(__file__).parent / "data" / "arms" / "ur5e" / "robot.yaml"
 
 
+@pytest.mark.slow
 def test_explain_names_the_singular_pose_only_when_the_description_models_it(robot):
     """explain() says what the margin measures for any arm; the RoArm's description (singularity_model: roarm5)
     also names the pose (TCP on the base axis, by FK); the UR5e's has no model, so no base axis nor any class is
@@ -368,6 +369,7 @@ def test_segment_refinement_catches_what_the_coarse_grid_skips(robot):
     assert not checker.segment_valid(a, b, resolution=0.01)
 
 
+@pytest.mark.slow
 def test_valid_segments_stay_valid_at_four_times_the_resolution(robot):
     # Short segments from low TCP poses, near the table: where a coarse grid can skip a graze.
     checker = CollisionChecker(robot, example_scene())
@@ -408,6 +410,7 @@ def _rotation(rng) -> np.ndarray:
     return q if np.linalg.det(q) > 0 else -q
 
 
+@pytest.mark.slow
 def test_second_box_of_a_cylinder_never_clears_what_fcl_finds_touching():
     """A cylinder item's second box (its box turned 45 degrees about the axis, grown 10 um) against 4000 random boxes
     around the touching distance: whenever the separating-axis test calls a box apart from it, FCL finds the box
@@ -441,6 +444,7 @@ def test_second_box_of_a_cylinder_never_clears_what_fcl_finds_touching():
     assert corner > 100 and cleared >= 0.4 * corner, (corner, cleared)
 
 
+@pytest.mark.slow
 def test_checks_near_a_cylinder_answer_as_exhaustive_fcl_does(robot):
     """A cylinder post beside the arm: on 1500 random states close to it, batch validity equals explain()'s
     exhaustive FCL pass (no filters), and segments give the verdict of their states checked one by one."""

@@ -220,6 +220,7 @@ def _check_dataset(root: Path, lengths: list[int], fps: int, cams: list[str]) ->
         assert feats[key]["info"]["video.pix_fmt"] == "yuv420p" and feats[key]["info"]["video.g"] == 2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("codec", ["h264", "av1"])
 def test_a_written_dataset_reads_back_with_pyarrow(tmp_path, codec):
     from roarmctl.export.lerobot.dataset import read_actions, write_dataset
@@ -275,6 +276,7 @@ def test_an_av1_encode_as_root_runs_and_leaves_no_real_time_policy():
     assert child.stdout.split() == [str(os.SCHED_OTHER), "0"], child.stdout
 
 
+@pytest.mark.slow
 def test_appending_gives_the_same_bytes_as_writing_all_at_once(tmp_path):
     from roarmctl.export.lerobot.dataset import append_episodes, write_dataset
 
@@ -301,6 +303,7 @@ def _small_files_spec(eps: list, per_file: float = 2.5):
                    video_files_size_in_mb=per_file * mean / 1024**2)
 
 
+@pytest.mark.slow
 def test_files_roll_over_as_lerobot_rolls_them_and_a_reader_sees_every_episode(tmp_path):
     """Small limits (lerobot's rule, huggingface/lerobot datasets/dataset_writer.py: a video file is full when its
     episodes' MP4 bytes plus the next episode's reach video_files_size_in_mb MiB; a new chunk every chunks_size
@@ -348,6 +351,7 @@ def test_appending_other_joints_or_cameras_is_refused(tmp_path):
         append_episodes(tmp_path / "ds", other, [])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("field", "value"), [("chunks_size", 0), ("data_files_size_in_mb", "big"), ("video_files_size_in_mb", None),
                                              ("video_files_size_in_mb", -1.0), ("fps", [30]), ("features", 7)])
 def test_appending_to_a_dataset_whose_info_is_broken_is_an_input_error(tmp_path, field, value):
@@ -542,6 +546,7 @@ def run_file(tmp_path_factory):
     return d / "pp.run.json"
 
 
+@pytest.mark.slow
 def test_an_executed_run_appends_as_an_episode_of_measured_state_and_sent_goals(run_file, tmp_path):
     """The episode against the log itself: at each frame the last T:1051 reading (firmware radians, by the time the
     servos were read: the log's one measured-frame time, ``frame_read_time``) and the last T:102 goals sent, both mapped to joints by the robot's wire map."""
@@ -576,6 +581,7 @@ def test_an_executed_run_appends_as_an_episode_of_measured_state_and_sent_goals(
         np.testing.assert_allclose(action[k][:5], want_action[0][:5], atol=1e-6)  # the gripper's own T:101 may follow
 
 
+@pytest.mark.slow
 def test_a_run_does_not_join_a_dataset_with_cameras_or_a_trajectory(run_file, tmp_path):
     from roarmctl.export.lerobot.dataset import write_dataset
 
@@ -645,6 +651,7 @@ def _cmdline(proc: Path) -> bytes:
         return b""
 
 
+@pytest.mark.slow
 def test_cameras_after_mujoco_was_imported_without_a_gl_back_end_are_refused_not_an_abort():
     """MuJoCo imported first with no MUJOCO_GL renders through GLFW, which aborts a process without a display (a
     pytest worker died of it): ``offscreen`` refuses with a RenderError (exit 4) naming MUJOCO_GL instead; imported

@@ -37,6 +37,7 @@ def logs(draw: st.DrawFn) -> ExecLog:
                    details=draw(st.dictionaries(st.sampled_from(["strategy", "rate", "notes"]), finite, max_size=3)))
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(log=logs())
 def test_what_is_written_reads_back_the_same(tmp_path_factory: pytest.TempPathFactory, log: ExecLog) -> None:

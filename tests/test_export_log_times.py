@@ -54,6 +54,7 @@ def test_out_of_order_read_times_export_from_the_earliest(tmp_path: Path) -> Non
     assert times["/joint_states/commanded"] == [round(-t0 * 1e9)]
 
 
+@pytest.mark.slow
 def test_a_run_exports_measured_states_at_read_t_and_the_logs_tracking_error(tmp_path: Path) -> None:
     """A short run on the simulator (real time, its physics servos), exported as MCAP, bag folder and CSV with the
     trajectory it ran: each measured stamp is the frame's read_t (plus the bag's stated offset), and the planned

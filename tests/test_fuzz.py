@@ -629,6 +629,7 @@ LOG_KEYS = ["format", "robot", "speed_scale", "sent", "received", "t", "cmd", "f
             "trajectory", "points", "positions", "time_from_start", "joint_names", "scene"]
 
 
+@pytest.mark.slow
 @settings(max_examples=COUNTS["logs"], **SETTINGS)
 @given(data=st.data())
 def test_fuzz_execution_logs(tmp_path_factory, data):

@@ -360,6 +360,7 @@ def test_dls_wraps_to_small_angles():
     assert np.all(np.abs(q) <= math.pi + 1e-9)
 
 
+@pytest.mark.slow
 def test_roarm_position_only_with_reference_returns_the_reference():
     rng = np.random.default_rng(9)
     for qa in _random_roarm(rng, 100):
@@ -371,6 +372,7 @@ def test_roarm_position_only_with_reference_returns_the_reference():
         assert np.max(np.abs(q - qa)) < 1e-6
 
 
+@pytest.mark.slow
 def test_roarm_near_stretched_elbow():
     """Targets the real arm reaches almost stretched: the ideal planar model (1 um off) must not call them
     out of reach, and the solutions must still meet 1e-6 m by FK."""
@@ -405,6 +407,7 @@ def _line_targets(rng, n_lines):
     return out
 
 
+@pytest.mark.slow
 def test_line_ik_batch_equals_one_solve_per_sample(monkeypatch):
     """LineIK (every sample's closed form and polish in one batch) answers exactly as one solve_ik_near
     per sample from the previous sample's solution does: the same bits, the same errors; every solution

@@ -64,6 +64,7 @@ def _geom_points(world, geom: int) -> np.ndarray:
     return local @ d.geom_xmat[geom].reshape(3, 3).T + d.geom_xpos[geom]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(TIPS))
 def test_the_physics_jaws_open_as_the_jaw_table_says(name):
     """At every row of the jaw table, the least distance from the fixed fingertip (the jaw mesh's own vertices, read
@@ -131,6 +132,7 @@ def _claw(tmp_path: Path) -> Path:
     return tmp_path / "jaw.stl"
 
 
+@pytest.mark.slow
 def test_pieces_are_cached_and_the_same_bytes_each_time(tmp_path, monkeypatch):
     """A decomposition is written once (the second call reads it: CoACD is not run again), a fresh one gives the
     same bytes, a spoiled cache file is made again, and the pieces cover the mesh's concave U, not its hull."""
@@ -238,6 +240,7 @@ def test_a_fresh_decomposition_is_the_bundled_file_byte_for_byte():
     assert jp.cache_text(key, jp.decompose(v, f)).encode() == Path(str(bundled.pieces)).read_bytes()
 
 
+@pytest.mark.slow
 def test_a_jaw_mesh_is_cut_into_pieces_under_a_progress_stage_of_its_own_and_carried(tmp_path, monkeypatch):
     """A description that gives its jaws as meshes (here the M3 with Waveshare's, as a user's copy would): the pieces
     are made (CoACD, 15-60 s of CPU a mesh the first time) while the plan's progress names that stage, not the first
@@ -287,6 +290,7 @@ def test_a_jaw_mesh_is_cut_into_pieces_under_a_progress_stage_of_its_own_and_car
         assert len(pieces) == len(bundled[link]) and all(np.array_equal(a, b) for a, b in zip(pieces, bundled[link]))
 
 
+@pytest.mark.slow
 def test_what_a_description_leaves_out_is_in_the_physics_notes(tmp_path):
     """A jaw mesh the description names but does not have: the physics model says so in its notes (the run's
     ``model.notes``, printed by simulate), as the plan does, instead of squeezing with the links' boxes unsaid."""

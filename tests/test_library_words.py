@@ -28,6 +28,7 @@ def _raised_texts(path: Path) -> list[tuple[int, str]]:
     return out
 
 
+@pytest.mark.slow
 def test_no_library_error_names_a_command_line_flag():
     found = [f"{p.relative_to(PKG)}:{line}: {text!r}" for p in sorted(PKG.rglob("*.py")) if "cli" not in p.relative_to(PKG).parts
              for line, text in _raised_texts(p) if FLAG.search(text)]

@@ -157,6 +157,7 @@ def test_a_mesh_far_off_its_link_size_gets_a_note(tmp_path, mesh, scale, noted):
                                   "tiny.stl": 1e-4}[mesh], rel=1e-6)  # STL holds float32
 
 
+@pytest.mark.slow
 def test_no_published_arm_of_the_corpus_gets_the_note():
     for sidecar in sorted((Path(__file__).parent / "data" / "arms").glob("*/robot.yaml")):
         robot = load_robot(str(sidecar))

@@ -59,6 +59,7 @@ def test_the_ends_of_each_range_are_taken(cls, name, bound):
         assert getattr(cls(**{name: value}), name) == value
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(data=st.data())
 def test_any_number_is_taken_exactly_when_inside_its_bound(data):

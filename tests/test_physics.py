@@ -146,6 +146,7 @@ def trajs(tmp_path_factory) -> dict[str, Path]:
     return {name: _plan(ROOT / "plans" / f"{name}.yaml", tmp / f"{name}.traj.json") for name in ("pick_place", "payload")}
 
 
+@pytest.mark.slow
 def test_pick_place_places_the_cube_and_writes_a_run_file_export_reads(trajs, tmp_path, capsys):
     run = tmp_path / "pp.run.json"
     code, rep = _simulate(capsys, str(trajs["pick_place"]), "-o", str(run), "--strategy", "timed")  # goals not aimed ahead
@@ -165,6 +166,7 @@ def test_pick_place_places_the_cube_and_writes_a_run_file_export_reads(trajs, tm
     assert cli(["export", str(run), "-o", str(tmp_path / "run.csv")]) == 0  # the run file is an execution log
 
 
+@pytest.mark.slow
 def test_a_pick_whose_object_is_not_in_the_scene_is_exit_3_and_the_notes_say_where_the_stiffness_comes_from(
         trajs, tmp_path, capsys):
     """The pick and place with its cube taken out of the trajectory's scene: the jaws close on nothing, and the run

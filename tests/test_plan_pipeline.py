@@ -42,6 +42,7 @@ def planned(tmp_path_factory) -> dict[str, tuple[Path, dict]]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 def test_every_example_plan_is_planned(planned):
     assert {p.stem for p in PLANS} >= {"pick_place", "obstacle", "multi_object"}
@@ -103,6 +104,7 @@ def _fine(q: np.ndarray, substeps: int) -> np.ndarray:
     return q[i] * (1 - f) + q[i + 1] * f
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 @pytest.mark.parametrize("name", ["pick_place", "obstacle", "multi_object"])
 def test_samples_are_within_limits_and_collision_free(planned, name):
@@ -119,6 +121,7 @@ def test_samples_are_within_limits_and_collision_free(planned, name):
     assert hit is None, f"{name}: collision at fine sample {hit}"
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 def test_the_obstacle_forces_a_detour(planned):
     """In obstacle.yaml the wall stands between pick and place: the TCP must pass above or around it."""
@@ -135,6 +138,7 @@ def test_the_obstacle_forces_a_detour(planned):
     assert np.all((tcp[crossing, 2] > top) | (radial < front) | (radial > back))
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("planned-examples")  # the bundled plans planned once (module fixture)
 @pytest.mark.parametrize("name", ["pick_place", "obstacle", "multi_object"])
 def test_objects_sit_against_the_fixed_jaw_and_reach_their_place(planned, name):

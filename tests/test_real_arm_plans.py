@@ -66,6 +66,7 @@ def test_straight_down_fails_where_pitch_auto_finds_the_nearest_valid_pitch(tmp_
         solve_ik(R, HIGH, pitch=math.radians(chosen + 1.0), all_solutions=True)
 
 
+@pytest.mark.slow
 def test_pitch_auto_with_a_preferred_angle_and_for_pick_and_place(tmp_path):
     res = plan_file(write(tmp_path, "  - pick: {object: cube, pitch: {auto: {deg: 60}}}\n"
                                     "  - place: {xyz: [0.25, 0.15, 0.02], pitch: auto}\n"))
@@ -78,6 +79,7 @@ def test_pitch_auto_with_a_preferred_angle_and_for_pick_and_place(tmp_path):
 ON_AXIS = [0.0, 0.0, 0.3]  # above the base axis: the pitches that reach it do so only inside the margin
 
 
+@pytest.mark.slow
 def test_pitch_auto_on_the_base_axis_says_the_singularity_margin_rejects_it(tmp_path):
     """Every pitch that reaches a point above the base axis has its IK solutions inside the (default 0.02 m/rad)
     singularity margin, measured here by a fresh checker; plan and ``kin ik`` (the pitch chosen too) say so,

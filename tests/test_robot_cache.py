@@ -59,6 +59,7 @@ def test_an_included_xacro_file_edited_is_seen(arm: Path) -> None:
     assert load_robot(str(arm)) is second  # and kept again
 
 
+@pytest.mark.slow
 def test_the_top_xacro_file_edited_is_seen(arm: Path) -> None:
     first = load_robot(str(arm))
     _edit(arm.parent / TOP_XACRO, '<robot name="open_manipulator_x"', '<robot name="edited_arm"')
@@ -100,6 +101,7 @@ def test_a_file_removed_is_not_served_from_the_store(arm: Path) -> None:
         load_robot(str(arm))
 
 
+@pytest.mark.slow
 def test_a_relative_name_is_read_in_the_current_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     for name in ("a", "b"):
         shutil.copytree(ARM, tmp_path / name)
@@ -110,6 +112,7 @@ def test_a_relative_name_is_read_in_the_current_folder(tmp_path: Path, monkeypat
     assert _upper(load_robot("robot.yaml"), "joint3") == pytest.approx(1.25)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("trusted", [False, True])
 def test_a_yaml_file_xacro_loads_edited_is_seen(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, trusted: bool) -> None:
     """UR's xacro reads its limits with xacro.load_yaml: by roarmctl's reader, or by xacro itself when trusted."""

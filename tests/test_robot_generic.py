@@ -36,6 +36,7 @@ UR10_STANDARD = {
 }
 
 
+@pytest.mark.slow
 def test_no_roarm_link_names_outside_descriptions():
     """The planner, device, drawing and CLI code never names a RoArm link or joint."""
     urdf = (bundled_dir() / "roarm_m3_pro.urdf").read_text()
@@ -139,6 +140,7 @@ def test_unknown_ik_family_is_an_error(tmp_path):
         load_robot(str(p))
 
 
+@pytest.mark.slow
 def test_renamed_links_plan_pick_and_place_exactly_as_the_original(tmp_path):
     """Every link and joint of the M3 renamed (URDF and sidecar alike): the bundled pick-and-place
     gives the same trajectory, sample for sample."""

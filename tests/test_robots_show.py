@@ -32,6 +32,7 @@ def test_joint_limits_yaml_values_are_named_as_such():
     assert info["tcp"]["source"] == "SRDF" and info["named_poses"]["all-zeros"]["source"] == "SRDF"
 
 
+@pytest.mark.slow
 def test_sidecar_srdf_urdf_and_defaults_are_told_apart():
     info = summary(str(ARMS / "ar4" / "robot.yaml"))
     joints = {j["name"]: j for j in info["joints"]}

@@ -136,6 +136,7 @@ NAMED = ["1.5", "abc", "1.5abc", " 2 ", "1 2", "nan", "inf", "-inf", "1e999", "-
          "1.5\t2", "1.5e3.2", "0.7853981633974483"]
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, derandomize=True)
 @given(st.lists(st.text(alphabet="0123456789+-.eE x\t", min_size=1, max_size=12).filter(lambda s: s.strip(" \t")),
                 min_size=20, max_size=20))

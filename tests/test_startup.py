@@ -50,6 +50,7 @@ def test_toppra_is_imported_as_it_is_with_no_stand_in_modules():
     assert "toppra" in mods and "scipy.interpolate" in mods
 
 
+@pytest.mark.slow
 def test_help_and_a_command_load_neither_rich_markdown_nor_pydantic(tmp_path):
     """``--help`` is click's plain help (typer's rich panels load rich's markdown renderer); a command's options
     are parsed without pydantic (typer 0.28 and later build a TypeAdapter per parameter)."""

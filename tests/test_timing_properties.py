@@ -96,6 +96,7 @@ def _walk(rng, k: int, n: int, step: float) -> np.ndarray:
     return np.cumsum(np.vstack([rng.uniform(-0.5, 0.5, n), rng.uniform(-step, step, (k - 1, n))]), axis=0)
 
 
+@pytest.mark.slow
 def test_random_joint_paths_keep_every_promise(slowdowns):
     """Random walks in 2-6 joints (with and without jerk limits, sample steps of 10, 5 and 13.7 ms), very short ones
     (0.1-10 mrad) and paths with a segment of 1 urad-10 mrad between long ones."""

@@ -269,6 +269,7 @@ def test_a_plan_names_a_description_only_beside_itself(tmp_path, secret):
 
 
 # --------------------------------------------------------------------------- no limits
+@pytest.mark.slow
 @pytest.mark.parametrize("bomb, needle", [
     (lambda d: hostile.m3_xacro(d, hostile.POW_BOMB), "larger than 256 bits"),
     (lambda d: hostile.m3_xacro(d, "'a'", hostile.macro_doubling(20)), "to expand"),
@@ -296,6 +297,7 @@ def test_expressions_that_build_something_huge_are_refused_by_a_bound(tmp_path, 
     assert needle in err, err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("extra, needle", [(hostile.lexer_bomb(), "tokens"),
                                            (hostile.macro_params_redos(), "Undefined parameters")],
                          ids=["lexer: a million $a", "macro params: unclosed quote"])
@@ -500,6 +502,7 @@ def test_allowed_collisions_naming_an_unknown_link_is_refused(tmp_path):
 
 
 # --------------------------------------------------------------------------- the robot a trajectory carries
+@pytest.mark.slow
 def test_a_trajectory_carries_its_description_and_needs_no_file(tmp_path):
     """Planned for a xacro description with a package mesh: the trajectory holds the expanded URDF and the
     mesh; with the description's folder gone, every command still reads the same robot (FK, limits, the
@@ -567,6 +570,7 @@ def test_a_damaged_carried_description_is_exit_2_naming_the_field(tmp_path, edit
     refused(["visualize-path", str(t), "-o", str(tmp_path / "t.png")], "t.traj.json", needle)
 
 
+@pytest.mark.slow
 def test_an_old_trajectory_naming_a_description_file_still_reads_as_data(tmp_path):
     d = _desc_dir(tmp_path)
     hostile.m3_xacro(d, "'arm'")
@@ -861,6 +865,7 @@ def test_the_user_s_own_sidecar_may_name_files_elsewhere(tmp_path, secret):
     refused(["plan", str(d / "p.yaml"), "-o", str(d / "p.traj.json")], "joint_limits: '", "lies outside the folders")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["trajectory", "execution log"])
 def test_an_old_file_naming_a_description_path_reads_it_only_beside_itself(tmp_path, secret, kind):
     """A trajectory or log written before bundles names its description by path: beside the file (or under
@@ -905,6 +910,7 @@ def test_execute_and_export_hold_speed_scale_to_one_bound(tmp_path, traj, scale,
         assert "speed_scale" in err, err
 
 
+@pytest.mark.slow
 def test_a_carried_robot_holds_its_visuals_as_data_and_is_drawn_without_the_files(tmp_path):
     """The choice for visuals (docs/reference.md, Trajectories and logs): the bundle carries the visual meshes
     (within a byte budget, renamed into it), so the picture of a carried robot draws them with the files gone."""
@@ -943,6 +949,7 @@ def test_a_description_large_in_structure_is_refused_before_it_is_walked(tmp_pat
     refused(["kin", "fk", str(tmp_path / f"arm.{kind}"), *hostile.M3_Q], f"arm.{kind}", needle)
 
 
+@pytest.mark.slow
 def test_a_chain_of_frames_without_geometry_loads_and_makes_its_ends_adjacent(tmp_path):
     """290 geometry-less frames in a chain (under the cap): loads (it hung before), and the links at both ends are
     adjacent through them (robot.implied.adjacent_pairs, MoveIt Setup Assistant's rule)."""

@@ -204,6 +204,7 @@ def _plan_with(folder: Path, item: dict) -> Path:
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["cloud 1e30", "cloud 1e308", "stl 1e38", "stl 1e30 scaled", "obj 1e300"])
 def test_huge_coordinates_are_one_error_line_without_numpy_warnings(tmp_path, case):
     """A cloud or a mesh with coordinates near float32's or float64's end: exit 2 and the one error line, no
@@ -253,6 +254,7 @@ def test_view_prints_a_file_name_s_terminal_sequences_as_text(tmp_path, monkeypa
 
 
 # --------------------------------------------------------------------------- a tiny --speed-scale in physics
+@pytest.mark.slow
 @pytest.mark.parametrize("scale, warned", [(0.001, True), (0.005, True), (0.5, False), (1.0, False)])
 def test_simulate_warns_before_a_slowed_run_of_minutes_of_physics(tmp_path, monkeypatch, scale, warned):
     """--speed-scale 0.001 makes the 0.6 s trajectory 600 s of physics (pick_place: 27 min): a warning line

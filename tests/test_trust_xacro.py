@@ -118,6 +118,7 @@ def test_a_pattern_through_a_symlink_out_is_refused_naming_the_link_not_what_is_
     assert "OUTSIDE-NAME" not in err, err
 
 
+@pytest.mark.slow
 def test_a_pattern_that_looks_at_too_many_entries_is_refused(tmp_path):
     d = _desc(tmp_path)
     many = d / "many"

@@ -228,6 +228,7 @@ def test_clearance_rules_base_on_the_table_and_a_carried_object():
     assert held.distance[0] == pytest.approx(min(cube_bottom, c.distance[0]), abs=1e-6)
 
 
+@pytest.mark.slow
 def test_document_carries_the_object_with_the_hand_and_keeps_the_marks(planned):
     """pick_place: the cube's pose follows the TCP rigidly from grasp to release and ends at the plan's place
     target; events and blends sit at their sample times; every page array has one entry per sample."""
@@ -259,6 +260,7 @@ def test_document_carries_the_object_with_the_hand_and_keeps_the_marks(planned):
     assert [b["time"] for b in doc["blends"]] == pytest.approx(traj.blends)
 
 
+@pytest.mark.slow
 def test_long_motion_is_thinned_but_keeps_its_marks(planned):
     from roarmctl.viz.web.document import view_document
 
@@ -417,6 +419,7 @@ def test_large_visual_meshes_are_decimated_to_the_budget(tmp_path, monkeypatch):
                if a.shape.kind == "mesh")
 
 
+@pytest.mark.slow
 def test_a_robot_without_visuals_is_said_to_be_drawn_from_its_collision_shapes(planned):
     from roarmctl.motion.validate import load_trajectory
     from roarmctl.robot.loader import load_robot
@@ -428,6 +431,7 @@ def test_a_robot_without_visuals_is_said_to_be_drawn_from_its_collision_shapes(p
     assert not any(link["visual"] for link in doc["links"])
 
 
+@pytest.mark.slow
 def test_page_is_one_file_with_no_outside_reference(planned, tmp_path):
     code, out = write_html(tmp_path, planned["pick_place"][0])
     assert code == 0
@@ -710,6 +714,7 @@ def test_a_run_carries_its_trajectory_and_is_shown_whole_without_t(pick_place_ru
     assert '"name":"cube"' in text and '"kind":"grasp"' in text
 
 
+@pytest.mark.slow
 def test_a_damaged_carried_trajectory_is_refused_naming_the_field(pick_place_run, tmp_path, capsys):
     """A log whose carried trajectory is damaged (a time that goes back) is refused with exit 2 and one line naming
     the log's field; no page is written."""

@@ -70,6 +70,7 @@ def test_fixture_reaches_its_targets_with_the_gripper_down(pick_place):
 
 
 # ----------------------------------------------------------------------------- plotted data
+@pytest.mark.slow
 def test_3d_path_is_fk_of_every_sample(pick_place, drawn):
     _data, fig = drawn
     robot = load_robot("roarm_m3_pro")
@@ -81,6 +82,7 @@ def test_3d_path_is_fk_of_every_sample(pick_place, drawn):
     assert np.allclose(segs[:, 1], expected[1:], atol=1e-12)
 
 
+@pytest.mark.slow
 def test_cartesian_segments_are_drawn_thicker_and_straight(pick_place, drawn):
     data, fig = drawn
     (path,) = artists(fig, "tcp_path")
@@ -99,6 +101,7 @@ def test_cartesian_segments_are_drawn_thicker_and_straight(pick_place, drawn):
         assert np.abs(off).max() < 1e-6
 
 
+@pytest.mark.slow
 def test_tcp_speed_agrees_with_finite_differences(drawn):
     data, _ = drawn
     fd = np.linalg.norm(np.gradient(data.tcp, data.times, axis=0), axis=1)
@@ -106,6 +109,7 @@ def test_tcp_speed_agrees_with_finite_differences(drawn):
     assert data.tcp_speed.max() <= 0.25 + 1e-9  # the fixture was timed to its max_tcp_speed
 
 
+@pytest.mark.slow
 def test_limit_lines_sit_at_scale_times_limit(drawn):
     _data, fig = drawn
     robot = load_robot("roarm_m3_pro")
@@ -119,6 +123,7 @@ def test_limit_lines_sit_at_scale_times_limit(drawn):
     assert margin.get_ydata()[0] == pytest.approx(0.02)
 
 
+@pytest.mark.slow
 def test_event_markers_at_event_times_in_every_time_plot(pick_place, drawn):
     _, fig = drawn
     for e in pick_place.events:
@@ -144,6 +149,7 @@ def test_arm_drawn_at_start_each_event_and_end(pick_place, drawn):
         assert np.min(np.linalg.norm(ends - links[robot.kin.tcp_index], axis=1)) < 1e-12
 
 
+@pytest.mark.slow
 def test_placed_object_ghost_follows_the_grasp_offset(drawn):
     data, _ = drawn
     (ghost,) = data.placed_items
@@ -170,6 +176,7 @@ def test_manipulability_of_the_two_link_arm_matches_closed_form():
     assert np.allclose(data.velocity_limit, robot.velocity_limits)
 
 
+@pytest.mark.slow
 def test_minimal_trajectory_renders(tmp_path):
     traj = viz_fixtures.planar_trajectory()
     out = visualize_trajectory(traj, tmp_path / "p.png", view="side", dpi=30, size=(10, 6))
@@ -177,6 +184,7 @@ def test_minimal_trajectory_renders(tmp_path):
 
 
 # ----------------------------------------------------------------------------- CLI and PNG
+@pytest.mark.slow
 def test_cli_writes_png_of_requested_size(traj_file):
     proc = roarmctl("visualize-path", str(traj_file), "--dpi", "40", "--size", "12x8", "--view", "top")
     assert proc.returncode == 0, proc.stderr
@@ -208,6 +216,7 @@ def test_cli_bad_inputs_exit_2(tmp_path, traj_file):
     assert not (tmp_path / "other.png").exists()
 
 
+@pytest.mark.slow
 def test_library_errors_are_input_errors(tmp_path, pick_place, traj_file):
     with pytest.raises(TrajectoryFileError):
         load_trajectory(tmp_path / "missing.traj.json")
@@ -254,6 +263,7 @@ def test_bundled_plans_render(tmp_path, plan):
     assert imread(out).shape[:2] == (200, 320)
 
 
+@pytest.mark.slow
 def test_cli_plans_a_yaml_first(tmp_path):
     src = PLANS[0] if PLANS else pytest.skip("no bundled plans")
     plan = tmp_path / src.name
@@ -296,6 +306,7 @@ def test_workspace_section_only_uses_samples_at_that_height():
     assert side.count == 5000
 
 
+@pytest.mark.slow
 def test_workspace_cli(tmp_path):
     out = tmp_path / "ws.png"
     proc = roarmctl("workspace", "roarm_m3_pro", "-o", str(out), "--dpi", "50", "--samples", "20000")
@@ -309,6 +320,7 @@ def test_planar_arm_gets_one_map():
     assert len([a for a in fig.axes if a.images]) == 1
 
 
+@pytest.mark.slow
 def test_single_sample_trajectory_renders(tmp_path):
     robot = load_robot("roarm_m3_pro")
     q = robot.full_q(robot.named_poses["home"])[None]
@@ -321,6 +333,7 @@ def test_single_sample_trajectory_renders(tmp_path):
     assert imread(out).shape[:2] == (200, 320)
 
 
+@pytest.mark.slow
 def test_torque_panel_with_limits_and_blended_joins_marked():
     """The planned payload example: torque curves are RNEA with the held weight, each as a share of its own joint's
     limit (the M3's limits differ: 2.94 N m on the shoulder, 0.88 on the gripper) with one dashed limit at

@@ -70,6 +70,7 @@ documents = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_si
                                                           st.dictionaries(keys, inner, max_size=5)), max_leaves=40)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(documents, st.sampled_from([None, True, False]), st.booleans())
 def test_generated_documents_read_as_pyyaml_reads_them(doc, flow, canonical):
@@ -82,6 +83,7 @@ def shipped_yaml() -> list[Path]:
     return sorted(p for p in ROOT.glob("**/*.yaml") if ".venv" not in p.parts and "out" not in p.parts)
 
 
+@pytest.mark.slow
 def test_every_shipped_yaml_file_reads_as_pyyaml_reads_it():
     files = shipped_yaml()
     assert len(files) > 20, files

@@ -161,6 +161,7 @@ def test_the_table_in_the_trajectory_file_is_checked_when_read(tmp_path):
     assert bad.returncode == 2 and "targets[2].distance" in bad.stderr, bad.stderr
 
 
+@pytest.mark.slow
 def test_the_png_marks_each_target_with_its_miss(tmp_path, roarm):
     """visualize-path's figure: one cross per target at its position and a line from it to the TCP at its closest
     sample, as long as the table's distance, labelled with it (zone 30 mm: some corners are rounded)."""

@@ -37,6 +37,7 @@ def physics_firmware() -> Firmware:
     return Firmware(SimConfig(info_print=0), t0=0.0, servos=for_firmware(ROBOT)())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("lines", [[FIRST, SDK_T122], [b'{"T":122,"h":135}\n'],
                                    [b'{"T":102,"base":9,"shoulder":-9,"elbow":9,"wrist":9,"roll":-9,"hand":-9,"spd":0,'
                                     b'"acc":0}\n']], ids=["sdk-sequence", "t122-hand-alone", "every-field-far-out"])

@@ -69,6 +69,7 @@ def test_line_buffer_handles_partial_lines_and_crlf():
     assert lb.feed(b"51}\n") == [b'{"T":1051}']
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(st.binary(max_size=300), st.lists(st.integers(1, 50), max_size=20))
 def test_garbage_never_raises_and_chunking_does_not_matter(junk, cuts):

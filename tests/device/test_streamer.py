@@ -124,6 +124,7 @@ def test_trajectory_outside_the_firmware_range_is_refused():
         build_schedule(bad, ROBOT)
 
 
+@pytest.mark.slow
 def test_a_host_stall_makes_the_plan_wait_the_arm_stays_on_it_and_a_stalled_arm_still_aborts():
     """A busy machine stops the streaming process for 150 ms mid-motion, where the TCP moves fastest: the plan
     waits (its clock pauses for the stall, less what was left until the tick was due), every tick goes out in
@@ -332,6 +333,7 @@ def fast_loop_hold_travel():
     return max(travels)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("loop_pass", LOOP_PASSES)
 def test_the_queued_hold_stops_on_the_path_never_ahead_never_back_and_its_answer_is_paired(loop_pass,
                                                                                              fast_loop_off_path,

@@ -100,6 +100,7 @@ def test_guide_file_is_checked(tmp_path):
             load_guide(p)
 
 
+@pytest.mark.slow
 def test_sim_device_guide_option_refuses_physics_servos(tmp_path):
     p = tmp_path / "g.yaml"
     p.write_text("- {t: 1.0, joints: [0.3, 0.2, 1.2, 0.4, 0.1], gripper: 0.5}\n")
@@ -108,6 +109,7 @@ def test_sim_device_guide_option_refuses_physics_servos(tmp_path):
     assert r.returncode == 2 and "ideal" in r.stderr
 
 
+@pytest.mark.slow
 def test_sim_device_guide_moves_the_served_arm_while_torque_is_off(tmp_path):
     """`sim-device --guide` end to end: a client switches torque off, and the feedback follows the script."""
     import signal

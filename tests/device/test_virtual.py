@@ -92,6 +92,7 @@ def execute_on_model(traj, **stream) -> tuple[object, VirtualSimulator]:
     return run, sims[0]
 
 
+@pytest.mark.slow
 def test_an_execution_runs_on_the_simulators_clock_on_time_and_the_arm_follows():
     traj = pick_place()
     run, sim = execute_on_model(traj)
