@@ -107,9 +107,10 @@ def test_aggregated_stats_equal_the_stats_of_all_frames(lengths, seed):
     np.testing.assert_array_equal(agg["min"], every.min(axis=0))
     np.testing.assert_array_equal(agg["max"], every.max(axis=0))
     assert agg["count"].tolist() == [len(every)]
-    # lerobot's rule for the quantiles: the lowest of the episodes' (q <= 50), the highest (q > 50)
-    np.testing.assert_array_equal(agg["q01"], np.min([np.quantile(p, 0.01, axis=0) for p in parts], axis=0))
-    np.testing.assert_array_equal(agg["q99"], np.max([np.quantile(p, 0.99, axis=0) for p in parts], axis=0))
+    # lerobot's rule for the quantiles (aggregate_feature_stats, lerobot 0.4.4): the episodes' weighted by their frames
+    for key, q in (("q01", 0.01), ("q50", 0.5), ("q99", 0.99)):
+        by_frames = sum(len(p) * np.quantile(p, q, axis=0) for p in parts) / len(every)
+        np.testing.assert_allclose(agg[key], by_frames, rtol=1e-12, atol=1e-12)
 
 
 @settings(max_examples=30, deadline=None)

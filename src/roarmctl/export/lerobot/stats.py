@@ -7,9 +7,9 @@ them from a 5,000-bin histogram, here they are exact: ``numpy.quantile``, linear
 dimension; images per channel over the frames lerobot samples (``sample_indices``: 100 spread evenly over an
 episode of up to about 500 frames), each shrunk as lerobot shrinks them (about 150 pixels a side), scaled to 0-1,
 shape (3, 1, 1), ``count`` the frames sampled. The
-dataset's stats aggregate the episodes' as lerobot's ``aggregate_feature_stats`` does: min of the mins,
-max of the maxes, the count-weighted mean, the pooled variance, and for each quantile the min (q <= 50)
-or the max (q > 50) over the episodes.
+dataset's stats aggregate the episodes' as lerobot's ``aggregate_feature_stats`` does (lerobot 0.4.4): min of
+the mins, max of the maxes, the count-weighted mean, the pooled variance, and for each quantile the
+count-weighted mean of the episodes' (an estimate: the quantile of all frames is not kept by episodes' stats).
 """
 
 from __future__ import annotations
@@ -89,8 +89,7 @@ def aggregate(stats: Sequence[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     out = {"min": np.stack([s["min"] for s in stats]).min(axis=0), "max": np.stack([s["max"] for s in stats]).max(axis=0),
            "mean": mean, "std": np.sqrt(variance), "count": total.astype(np.int64)}
     for key in Q_KEYS:
-        q = np.stack([s[key] for s in stats])
-        out[key] = q.min(axis=0) if int(key[1:]) <= 50 else q.max(axis=0)
+        out[key] = (np.stack([s[key] for s in stats]) * w).sum(axis=0) / total.reshape(total.shape + (1,) * (means.ndim - 1 - total.ndim))
     return out
 
 
