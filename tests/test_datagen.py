@@ -745,6 +745,7 @@ def test_a_shard_that_never_ends_is_a_device_error_naming_the_workers(monkeypatc
     assert err.value.exit_code == 4 and "workers" in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.slow  # three worlds built (the jaws' 64 meshes each) and drawn: ~2 s
 def test_a_kept_gl_context_draws_the_next_scene_as_a_fresh_one_would():
     """Datagen's episodes differ in their objects, not in the meshes MuJoCo keeps on the GL side, so the renderer
     keeps its GL context for the next scene with the same assets (``render._Context``). A second scene (the cube
