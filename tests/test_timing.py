@@ -471,6 +471,7 @@ def test_the_compiled_jerk_check_answers_as_the_numpy_check(monkeypatch):
     from roarmctl.motion.jerk_filter import FINE_DT, Profile, _derivative_table, _jerk_ok, _jerk_sampled
     from roarmctl.motion.toppra_constraints import import_toppra, joint_path, toppra_grid
 
+    assert jerk_filter._JERK_CHECK is _kernel.jerk_check  # the kernel has it (make install after a change to the C)
     ta = import_toppra()
     rng = np.random.default_rng(3940)
     tol = jerk_filter.JERK_CHECK_TOL

@@ -27,6 +27,8 @@ FINE_DT = 0.002  # s: grid on which the jerk is checked (finite differences of t
 # The compiled jerk check's answer is taken where it is certain: a ratio of jerk to limit more than this above 1
 # (fails) or every ratio more than this below 1 (passes); its rounding differs from numpy's by ~1e-12 of a limit.
 JERK_CHECK_TOL = 1e-10
+# None in a kernel built before it had the jerk check (an editable install not rebuilt since): numpy answers alone
+_JERK_CHECK = getattr(_kernel, "jerk_check", None)
 # A timed result over a limit by ratio r on its samples is slowed by r * (1 + SLOWDOWN_SLACK) (the square root
 # of it for accelerations), at most SLOWDOWN_TRIES times, before TOPP-RA runs again at the next margin.
 SLOWDOWN_TRIES, SLOWDOWN_SLACK = 3, 1e-3
@@ -213,8 +215,8 @@ def _jerk_ok(path: toppra.interpolator.AbstractGeometricPath, prof: Profile, w: 
         t = np.arange(0.0, prof.T + w + FINE_DT, FINE_DT)
         status, pair = -1, -1
         table = memo["table"]
-        if table is not None and w > 0.0 and len(prof.t) > 1:
-            status, pair = _kernel.jerk_check(prof.t, prof._starts, prof.T, prof.s_end, table[0], table[1], w, FINE_DT,
+        if table is not None and w > 0.0 and len(prof.t) > 1 and _JERK_CHECK is not None:
+            status, pair = _JERK_CHECK(prof.t, prof._starts, prof.T, prof.s_end, table[0], table[1], w, FINE_DT,
                                               len(t), np.ascontiguousarray(jmax, dtype=float), JERK_CHECK_TOL)
         if status < 0:
             pair = _jerk_sampled(path, prof, w, jmax, t)
