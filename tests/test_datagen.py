@@ -395,6 +395,7 @@ VIDEOS = ("videos/observation.images.front/chunk-000/file-000.mp4", "videos/obse
 
 
 @pytest.mark.slow  # four episodes planned, run in physics and rendered (about 20 s on an idle core)
+@pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
 def test_four_episodes_at_96_pixels(dataset4):
     import pyarrow.parquet as pq
 
@@ -407,6 +408,7 @@ def test_four_episodes_at_96_pixels(dataset4):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
 def test_actions_are_what_execute_sends_and_states_follow_the_plan(dataset4):
     """Each episode's trajectory is planned again from its try (the same draw), and the commands of the
     streamer's schedule (``build_schedule``, as execute sends them) decoded at each frame time must be its
@@ -465,6 +467,7 @@ def test_actions_are_what_execute_sends_and_states_follow_the_plan(dataset4):
 
 
 @pytest.mark.slow  # a run killed with SIGKILL after its first staged try, then resumed
+@pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
 def test_a_killed_run_resumed_on_one_worker_is_the_dataset_two_workers_wrote(dataset4, tmp_path):
     """One worker throughout (the killed run's and the resume's) against the fixture's two: the same bytes in every
     file and the same frames in every video, so neither a resume nor the sharding of the tries changes the dataset."""
@@ -511,6 +514,7 @@ def _lerobot_python() -> str | None:
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
 def test_lerobot_itself_reads_the_frames_written(dataset4):
     """Optional (skipped where lerobot is not installed; CI does not have it): ``LeRobotDataset`` of lerobot itself,
     run by ``tests/lerobot_read.py`` in lerobot's Python, reads the dataset as pyarrow and PyAV read it: the same
@@ -568,6 +572,7 @@ def test_lerobot_itself_reads_the_frames_written(dataset4):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
 def test_ray_data_reads_the_dataset(dataset4):
     """Optional: Ray Data's read_lerobot (which decodes through lerobot) where both are installed here."""
     pytest.importorskip("lerobot")
