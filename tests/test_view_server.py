@@ -169,3 +169,33 @@ def test_generated_host_headers_get_the_page_only_when_they_name_this_server(ser
         assert (status, body == PAGE) == ((200, True) if ok else (403, False)), (host, status)
 
     one()
+
+
+def test_ctrl_c_while_a_connection_thread_starts_stops_the_view(monkeypatch):
+    """Ctrl-C can land in ``Thread.start()``'s wait for a connection's thread that has already started (seen under
+    load: ``roarmctl view`` then served on, deaf to every later Ctrl-C). It must reach the caller of the server's loop,
+    and the connection's slot must be given back exactly once."""
+    srv = ViewServer(PAGE, ViewOptions(max_connections=2))
+    srv.httpd.timeout = 60  # handle_request's wait for the client below: a hang detector
+    got: list[tuple[int, bytes]] = []
+    client = threading.Thread(target=lambda: got.append(_get(srv, f"/?token={srv.token}", f"127.0.0.1:{srv.port}")),
+                              daemon=True)
+    client.start()
+    real_start = threading.Thread.start
+
+    def start_then_ctrl_c(thread: threading.Thread) -> None:
+        real_start(thread)
+        thread.join(60)  # the page is served and the slot given back before the Ctrl-C lands
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(threading.Thread, "start", start_then_ctrl_c)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            srv.httpd.handle_request()
+    finally:
+        monkeypatch.undo()
+        srv.close()
+    client.join(60)
+    assert got and got[0][0] == 200 and b"SECRET-PLAN-BYTES" in got[0][1]
+    assert srv.errors == []
+    assert [srv.slots.acquire(blocking=False) for _ in range(3)] == [True, True, False]  # both slots free, no third

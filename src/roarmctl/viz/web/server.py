@@ -128,9 +128,13 @@ class ViewServer:
                     return
                 try:
                     super().process_request(request, client_address)
-                except BaseException:
+                except Exception:  # the thread could not start (RuntimeError): its slot is still ours to give back
                     server.slots.release()
                     raise
+                # Not on a KeyboardInterrupt: Ctrl-C can land in Thread.start()'s wait for the thread it has already
+                # started, which gives the slot back itself. Releasing it here too made the bounded semaphore raise
+                # ValueError in place of the Ctrl-C, socketserver took that for the request's error, and the view
+                # served on, deaf to every later Ctrl-C (seen under load).
 
             def process_request_thread(self, request: Any, client_address: Any) -> None:
                 try:
