@@ -2,6 +2,7 @@
 
     .venv/bin/python bench/bench_datagen.py [--episodes 4] [--sizes 320x240,640x480] [--workers 1,2] [--ray]
     .venv/bin/python bench/bench_datagen.py --stages 8 [--sizes 320x240]      # the steady state, per try
+    .venv/bin/python bench/bench_datagen.py --stages 6 --sizes 320x240 --base REV --rounds 3   # that, REV against this tree
 
 Runs ``roarmctl datagen --json`` (a fresh process per run: no library or plan cached from a previous run) on
 the bundled template (plans/datagen/pick_place.yaml, seed 0) for each image size and worker count (h264), once
@@ -18,7 +19,10 @@ most 3x at 320x240); and the dataset's size per episode.
 ``--stages N`` runs N tries in this process after one try that pays the imports (OMPL, FCL, TOPP-RA, MuJoCo,
 PyAV: about 1 s of CPU, once per worker), as a worker of a long run does, and prints each stage's CPU per kept
 try (median and total) and render+encode against planning over those tries: the steady-state figure, which
-a short run's totals hide under the imports.
+a short run's totals hide under the imports. With ``--base REV`` (a git revision) it runs that in fresh processes,
+REV's package (its source unpacked and its kernel built by ``bench_api_ab.revision_tree``) and this tree's in turn,
+``--rounds`` times, and prints each side's medians over the rounds and the ratio of each stage: a before/after at
+one load.
 """
 
 from __future__ import annotations
@@ -27,12 +31,15 @@ import argparse
 import json
 import os
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/bench_api_ab.py
+STEADY = ("plan", "physics", "render", "encode")
 
 
 def main() -> int:
@@ -44,10 +51,17 @@ def main() -> int:
     ap.add_argument("--success", type=int, default=0, help="also N episodes without cameras: the success rate and its causes")
     ap.add_argument("--stages", type=int, default=0, help="only: N tries in this process after a warm-up try, CPU per stage")
     ap.add_argument("--codec", default="h264")
+    ap.add_argument("--base", help="with --stages: this git revision's package against this tree's, in turn")
+    ap.add_argument("--rounds", type=int, default=3, help="with --base: runs of each side")
+    ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # --stages: one JSON line (for --base)
     args = ap.parse_args()
+    if args.stages and args.base:
+        for size in args.sizes.split(","):
+            against(args.base, args.rounds, args.stages, size, args.codec)
+        return 0
     if args.stages:
         for size in args.sizes.split(","):
-            steady_state(args.stages, size, args.codec)
+            steady_state(args.stages, size, args.codec, args.json)
         return 0
     template = ROOT / "plans" / "datagen" / "pick_place.yaml"
     first = args.sizes.split(",")[0]
@@ -93,10 +107,8 @@ def main() -> int:
     return 0
 
 
-def steady_state(n: int, size: str, codec: str) -> None:
+def steady_state(n: int, size: str, codec: str, as_json: bool = False) -> None:
     """``--stages``: CPU seconds per stage of each kept try among tries 1..n (try 0 pays the imports)."""
-    import statistics
-
     from roarmctl.export.lerobot.datagen import run_shard
 
     w, h = (int(v) for v in size.split("x"))
@@ -108,13 +120,47 @@ def steady_state(n: int, size: str, codec: str) -> None:
         outs = [o for o in run_shard(template, tmp, list(range(1, n + 1)), 0, w, h, codec=codec) if o["kept"]]
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    names = ("plan", "physics", "render", "encode")
-    per = {k: [o["timings"].get(k, 0.0) for o in outs] for k in names}
+    per = {k: [o["timings"].get(k, 0.0) for o in outs] for k in STEADY}
     total = {k: sum(v) for k, v in per.items()}
+    if as_json:
+        print(json.dumps({"kept": len(outs), "median": {k: statistics.median(v) for k, v in per.items()}, "total": total,
+                          "load": [load0, os.getloadavg()[0]]}))
+        return
     print(f"{size} {codec}: {len(outs)} kept of {n} tries, one process, load {load0:.1f} -> {os.getloadavg()[0]:.1f}; "
           "CPU s per kept try, median (total):")
     print("  " + ", ".join(f"{k} {statistics.median(v):.3f} ({total[k]:.2f})" for k, v in per.items()))
     print(f"  (render+encode)/plan over those tries: {(total['render'] + total['encode']) / total['plan']:.2f}")
+
+
+def against(base: str, rounds: int, n: int, size: str, codec: str) -> None:
+    """``--base``: ``--stages n`` of REV's package and of this tree's in fresh processes, in turn, ``rounds`` times."""
+    from bench_api_ab import revision_tree
+
+    scratch = Path(tempfile.mkdtemp(prefix="bench_datagen_base_"))
+    try:
+        tree = revision_tree(base, scratch / "tree")
+        runs: dict[str, list[dict]] = {"base": [], "tree": []}
+        for r in range(rounds):
+            for side in ("base", "tree") if r % 2 == 0 else ("tree", "base"):
+                env = dict(os.environ, PYTHONPATH=str(tree / "src")) if side == "base" else dict(os.environ)
+                proc = subprocess.run([sys.executable, __file__, "--stages", str(n), "--sizes", size, "--codec", codec, "--json"],
+                                      capture_output=True, text=True, timeout=3600, env=env, cwd=ROOT)
+                if proc.returncode != 0:
+                    raise SystemExit(f"{side}: exit {proc.returncode}: {proc.stderr.strip().splitlines()[-1:]}")
+                runs[side].append(json.loads(proc.stdout.strip().splitlines()[-1]))
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    loads = [x for side in runs.values() for run in side for x in run["load"]]
+    print(f"{size} {codec}: {base} (base) against this tree, {rounds} rounds of {n} tries each, fresh processes in turn, "
+          f"load {min(loads):.1f}-{max(loads):.1f}; CPU s per kept try, median over the rounds of each run's median:")
+    for side, label in (("base", base), ("tree", "this tree")):
+        med = {k: statistics.median(run["median"][k] for run in runs[side]) for k in STEADY}
+        ratios = [(run["total"]["render"] + run["total"]["encode"]) / run["total"]["plan"] for run in runs[side]]
+        print(f"  {label:>10}: " + ", ".join(f"{k} {v:.3f}" for k, v in med.items())
+              + "; (render+encode)/plan per round " + ", ".join(f"{x:.2f}" for x in ratios))
+    for k in STEADY:
+        pairs = [t["median"][k] / b["median"][k] for b, t in zip(runs["base"], runs["tree"]) if b["median"][k] > 0]
+        print(f"  {k}: this tree / base per round " + ", ".join(f"{x:.2f}" for x in pairs))
 
 
 if __name__ == "__main__":
