@@ -274,6 +274,22 @@ def test_batch_equals_loop_and_explain(robot):
         assert first == expected
 
 
+def test_segment_verdict_equals_the_first_invalid_of_its_states(robot):
+    # segment_valid without refinement checks interpolate's states (coarse pass first on long segments): its
+    # verdict (FCL asked only "any hit?") must be first_invalid's (FCL marking states in order) on those states
+    checker = CollisionChecker(robot, example_scene(), singularity_margin=0.01)
+    rng = np.random.default_rng(11)
+    verdicts = []
+    for _ in range(150):
+        q0 = rng.uniform(robot.lower[:5], robot.upper[:5])
+        q1 = q0 + rng.normal(0.0, 0.4, 5)
+        states = interpolate(q0, q1, 0.02)
+        expected = checker.first_invalid(states) is None
+        assert checker.segment_valid(q0, q1, 0.02, refine=1) is expected
+        verdicts.append(expected)
+    assert 0.1 < np.mean(verdicts) < 0.9  # both answers occur
+
+
 def test_check_count_counts_states(robot):
     checker = CollisionChecker(robot, example_scene())
     checker.validity_batch(np.zeros((7, 5)))

@@ -137,6 +137,9 @@ class CollisionChecker(KernelTables):
                               "scene": np.empty((n * max(len(self._active) * m, 1), 3), dtype=np.int64),
                               "self": np.empty((n * max(len(self._pairs), 1), 2), dtype=np.int64),
                               "pose": np.empty((n, max(s, 1), _kernel.POSEF)), "idx": np.empty(n, dtype=np.int64)}
+            # each state's and shape's rotation (3, 3) and centre (3,) as views, for FCL (_narrow, _any_hit)
+            b["rot"] = b["pose"][:, :, :9].reshape(n, b["pose"].shape[1], 3, 3)
+            b["pos"] = b["pose"][:, :, 9:]
             b["views"] = tuple(b[k].data for k in ("valid", "near", "scene", "self", "pose"))
             b["seg_views"] = b["views"] + (b["idx"].data,)  # _kernel.segment's
         return b
@@ -161,17 +164,16 @@ class CollisionChecker(KernelTables):
 
     def _narrow(self, valid: np.ndarray, b: _Buffers, ns: int, npairs: int, stop_at_first: bool) -> None:
         """FCL on the kernel's candidate pairs, in state order; marks colliding states invalid in ``valid``."""
-        moving, items, pose, req = self._moving_shapes, self._item_objs, b["pose"], _FCL_REQUEST
+        moving, items, rot, pos, req = self._moving_shapes, self._item_objs, b["rot"], b["pos"], _FCL_REQUEST
         res = fcl.CollisionResult()  # one for the call: fcl.collide adds a contact to it per hit, which no one reads
         first_hit = len(valid)
         skip = -1
         for i, a, k in b["scene"][:ns].tolist():
             if i == skip:
                 continue
-            p = pose[i, a]
             obj = moving[a].obj_scene
-            obj.setRotation(p[:9].reshape(3, 3))
-            obj.setTranslation(p[9:])
+            obj.setRotation(rot[i, a])
+            obj.setTranslation(pos[i, a])
             if fcl.collide(obj, items[k], req, res):
                 valid[i] = False
                 skip = i
@@ -186,15 +188,38 @@ class CollisionChecker(KernelTables):
                 continue
             a, c = pairs[pp]
             oa, ob = moving[a].obj_self, moving[c].obj_self
-            pa, pc = pose[i, a], pose[i, c]
-            oa.setRotation(pa[:9].reshape(3, 3))
-            oa.setTranslation(pa[9:])
-            ob.setRotation(pc[:9].reshape(3, 3))
-            ob.setTranslation(pc[9:])
+            oa.setRotation(rot[i, a])
+            oa.setTranslation(pos[i, a])
+            ob.setRotation(rot[i, c])
+            ob.setTranslation(pos[i, c])
             if fcl.collide(oa, ob, req, res):
                 valid[i] = False
                 if stop_at_first:
                     break
+
+    def _any_hit(self, b: _Buffers, ns: int, npairs: int) -> bool:
+        """Whether FCL finds a collision in any of the kernel's ``ns`` scene and ``npairs`` self candidate pairs (of
+        whichever states): ``_narrow``'s verdict where only "all valid or not" is asked, without its array, and
+        without the self pairs once a scene pair collides."""
+        moving, items, rot, pos, req = self._moving_shapes, self._item_objs, b["rot"], b["pos"], _FCL_REQUEST
+        res = fcl.CollisionResult()
+        for i, a, k in b["scene"][:ns].tolist():
+            obj = moving[a].obj_scene
+            obj.setRotation(rot[i, a])
+            obj.setTranslation(pos[i, a])
+            if fcl.collide(obj, items[k], req, res):
+                return True
+        pairs = self._pairs
+        for i, pp in b["self"][:npairs].tolist():
+            a, c = pairs[pp]
+            oa, ob = moving[a].obj_self, moving[c].obj_self
+            oa.setRotation(rot[i, a])
+            oa.setTranslation(pos[i, a])
+            ob.setRotation(rot[i, c])
+            ob.setTranslation(pos[i, c])
+            if fcl.collide(oa, ob, req, res):
+                return True
+        return False
 
     def validity_batch(self, Q: np.typing.ArrayLike, gripper: float | np.typing.ArrayLike | None = None) -> np.ndarray:
         """Validity (N,) bool of arm configurations ``Q`` (N, arm_dof), rad; ``gripper`` (N,) as in ``first_invalid``."""
@@ -217,11 +242,7 @@ class CollisionChecker(KernelTables):
             ns, npairs, limit = _kernel.check(self._kfm, self._kim, q, _NO_GRIP, *b["views"], 0.0, True)
             if limit == 0:  # limits or margin
                 return False
-            if not (ns or npairs):
-                return True
-            valid = np.ones(1, dtype=bool)
-            self._narrow(valid, b, ns, npairs, True)
-            return bool(valid[0])
+            return not (ns or npairs) or not self._any_hit(b, ns, npairs)
 
     def first_invalid(self, Q: np.typing.ArrayLike, gripper: float | np.typing.ArrayLike | None = None) -> int | None:
         """Index of the first invalid row of ``Q`` (N, arm_dof), or None when all are valid; ``gripper`` (N,)
@@ -312,11 +333,7 @@ class CollisionChecker(KernelTables):
         failure (``limit`` < n), else FCL decides the ``ns`` scene and ``npairs`` self candidates it left."""
         if limit < n:  # limits or margin
             return False
-        if ns or npairs:
-            valid = np.ones(n, dtype=bool)
-            self._narrow(valid, b, ns, npairs, True)
-            return bool(valid.all())
-        return True
+        return not (ns or npairs) or not self._any_hit(b, ns, npairs)
 
     def _all_valid(self, q: np.ndarray, sweep: float = 0.0) -> bool:
         """True when every state of ``q`` (N, arm_dof) is valid; stops at the first invalid one. With ``sweep``
