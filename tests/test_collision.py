@@ -290,6 +290,22 @@ def test_segment_verdict_equals_the_first_invalid_of_its_states(robot):
     assert 0.1 < np.mean(verdicts) < 0.9  # both answers occur
 
 
+def test_segment_checks_count_the_same_work_whatever_the_buffer_sizes(robot, monkeypatch):
+    # OMPL's budget is a count of state checks: buffers the kernel outgrows (a pass handed back to numpy) or does not
+    # must give the same verdicts and the same count, or a buffer size would change the planned paths
+    from roarmctl.motion import collision
+
+    rng = np.random.default_rng(5)
+    segments = [(q0, q0 + rng.normal(0.0, 0.6, 5)) for q0 in rng.uniform(robot.lower[:5], robot.upper[:5], (120, 5))]
+    runs = []
+    for least in (1, 4096):
+        monkeypatch.setattr(collision, "BUFFER_MIN", least)
+        checker = CollisionChecker(robot, example_scene(), singularity_margin=0.01)
+        runs.append([(checker.segment_valid(q0, q1, 0.01), checker.check_count) for q0, q1 in segments])
+    assert runs[0] == runs[1]
+    assert 0 < sum(v for v, _ in runs[0]) < len(segments)
+
+
 def test_check_count_counts_states(robot):
     checker = CollisionChecker(robot, example_scene())
     checker.validity_batch(np.zeros((7, 5)))

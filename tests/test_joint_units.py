@@ -87,3 +87,16 @@ def test_peaks_csv_and_drawing_use_the_finger_units(wx_traj, tmp_path):
     assert "(m)" in by_gid["q:left_finger"].axes.get_ylabel()
     assert "(rad)" in by_gid["q:waist"].axes.get_ylabel()
     assert "(m/s)" in by_gid["v:left_finger"].axes.get_ylabel()
+
+
+@pytest.mark.parametrize("spec", ["roarm_m3_pro", WX])
+def test_joint_unit_follows_the_prismatic_mask(spec):
+    # joint_unit looks up one joint's kind; the mask (its other users) and the unit must agree on every joint
+    robot = load_robot(spec)
+    mask = robot.prismatic
+    assert mask.any() == (spec == WX)  # the WidowX's finger is prismatic, the RoArm has none
+    for i in range(robot.dof):
+        metres = bool(mask[i])
+        assert robot.joint_unit(i) == ("m" if metres else "rad")
+        assert robot.joint_unit(i, 2, deg=True) == ("m/s^2" if metres else "deg/s^2")
+        assert robot.joint_unit(i, kind="effort") == ("N" if metres else "N m")

@@ -58,6 +58,7 @@ _EPS = 1e-9  # rad: joint-limit tolerance (the kernel uses the same)
 _NO_GRIP = np.zeros(0).data  # "every state at the set_gripper value"
 _NO_IDX = np.zeros(0, dtype=np.int64)
 COARSE_STRIDE = 8  # segment_valid first checks every 8th state of long segments
+BUFFER_MIN = 256  # states the kernel's output buffers hold at least (CollisionChecker._buffers)
 
 
 #: The kernel's output buffers (``CollisionChecker._buffers``): "n" (states they hold), arrays "valid", "near", "scene",
@@ -130,6 +131,9 @@ class CollisionChecker(KernelTables):
         """Output buffers of the kernel for batches of up to ``n`` states (reused between calls)."""
         b = self._bufs
         if b.get("n", 0) < n:
+            # at least twice the last size, and BUFFER_MIN: a plan's checks ask for ever longer batches (1, 110, 177,
+            # 219, 245, 949 states on query b), and each new set of buffers cost ~30 us
+            n = max(n, 2 * b.get("n", 0), BUFFER_MIN)
             s, m = len(self._moving_shapes), len(self._items)
             near = bytearray(n)  # also seen as bytes: segment_valid asks bytearray.find whether any state is near
             self._bufs = b = {"n": n, "valid": np.empty(n, dtype=np.uint8), "near": np.frombuffer(near, dtype=np.uint8),

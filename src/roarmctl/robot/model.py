@@ -354,7 +354,8 @@ class Robot:
         """The unit of joint ``index``'s value (power 0), velocity (1), acceleration (2) or jerk (3):
         "rad", "deg/s^2", "m/s", ...; ``deg`` turns radians into degrees (never metres). ``kind``
         "effort" gives "N m" (revolute) or "N" (prismatic)."""
-        prismatic = bool(self.prismatic[index])
+        name = self.joint_names[index]  # its kind alone (``prismatic`` makes the whole mask: 24 calls a plan report)
+        prismatic = any(j.kind == "prismatic" for j in self.joints if j.name == name)
         if kind == "effort":
             return "N" if prismatic else "N m"
         base = "m" if prismatic else ("deg" if deg else "rad")
