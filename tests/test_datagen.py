@@ -219,6 +219,13 @@ def _check_dataset(root: Path, lengths: list[int], fps: int, cams: list[str]) ->
             np.testing.assert_allclose(times, np.arange(frames) / fps, atol=1e-6)
         assert feats[key]["info"]["video.codec"] in ("h264", "av1") and feats[key]["info"]["video.fps"] == fps
         assert feats[key]["info"]["video.pix_fmt"] == "yuv420p" and feats[key]["info"]["video.g"] == 2
+        assert feats[key]["info"]["video.is_depth_map"] is False  # lerobot 0.4.4's get_video_info writes it
+    # lerobot keeps an integer feature's min and max integers (as lerobot 0.4.4 writes them, read from its output)
+    schema = pq.read_schema(next((root / "meta/episodes").glob("chunk-*/file-*.parquet")))
+    for name in ("frame_index", "episode_index", "index", "task_index"):
+        for stat in ("min", "max"):
+            assert str(schema.field(f"stats/{name}/{stat}").type) == "list<element: int64>", (name, stat)
+        assert str(schema.field(f"stats/{name}/mean").type) == "list<element: double>"
 
 
 @pytest.mark.slow

@@ -147,8 +147,12 @@ def _episode_stats(spec: DatasetSpec, e: Episode, ts: np.ndarray, index: np.ndar
             s = st.image_stats(video.decode(io.BytesIO(_video_bytes(e.videos[cam])))[0])
         out[image_key(cam)] = s
     f = np.arange(e.length)
-    out |= {"timestamp": st.vector_stats(ts), "frame_index": st.vector_stats(f), "episode_index": st.vector_stats(np.full(e.length, ep)),
-            "index": st.vector_stats(index), "task_index": st.vector_stats(np.full(e.length, task))}
+    out["timestamp"] = st.vector_stats(ts)
+    for name, values in (("frame_index", f), ("episode_index", np.full(e.length, ep)), ("index", index),
+                         ("task_index", np.full(e.length, task))):
+        s = st.vector_stats(values)
+        # lerobot's min and max of an integer feature stay integers (int64 in the episodes' parquet)
+        out[name] = s | {"min": s["min"].astype(np.int64), "max": s["max"].astype(np.int64)}
     return out
 
 

@@ -194,8 +194,9 @@ def probe(path: Any) -> dict[str, Any]:
                                 "video.fps": int(s.base_rate) if s.base_rate else None, "video.channels": 3,
                                 "has_audio": bool(f.streams.audio)}
     info.update({f"video.{k}": v for k, v in CODECS.get(info["video.codec"], ("", {}))[1].items()})
+    # video.is_depth_map as lerobot 0.4.4's get_video_info writes it; the encoder's settings and is_depth_map, as
+    # later lerobot records them, beside it
     info |= {"video.video_backend": "pyav", "video.extra_options": {}, "is_depth_map": False}
-    info.pop("video.is_depth_map")
     return info
 
 
