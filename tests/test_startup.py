@@ -100,6 +100,40 @@ main()
     assert not marker.exists()
 
 
+def test_a_stop_that_python_wraps_during_the_imports_still_stops(tmp_path):
+    """A SIGINT whose KeyboardInterrupt is raised while a class is created (a descriptor's __set_name__: seen in a
+    test-fast run inside platform's uname_result, which typer's import creates) reaches the entry point as Python
+    3.11's "RuntimeError: Error calling __set_name__" caused by it: still one line, exit 130, the command never run
+    (it was a traceback and exit 1). The CLI module is replaced by one that provokes exactly that."""
+    marker = tmp_path / "the command ran"
+    code = f"""
+import importlib.abc, importlib.util, os, signal, sys
+
+class Fake(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    def find_spec(self, name, path, target=None):
+        return importlib.util.spec_from_loader(name, self) if name == "roarmctl.cli" else None
+    def create_module(self, spec):
+        return None
+    def exec_module(self, module):
+        class Named:
+            def __set_name__(self, owner, name):  # the interrupt is raised in here
+                os.kill(os.getpid(), signal.SIGINT)
+                for _ in range(100000):
+                    pass
+        class Owner:
+            attribute = Named()
+        module.main = lambda: open({str(marker)!r}, "w").close()
+
+sys.meta_path.insert(0, Fake())
+from roarmctl.launch import main
+main()
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 130, proc.stderr
+    assert proc.stderr.strip().splitlines() == ["error: interrupted (nothing was written)"]
+    assert not marker.exists()
+
+
 @pytest.mark.slow  # fresh interpreters loading the planning libraries
 def test_a_stop_while_the_planning_libraries_load_waits_until_they_have_loaded(tmp_path):
     """A stop signal that arrives while load_planning_libraries imports the native modules is delivered once

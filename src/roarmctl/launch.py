@@ -50,11 +50,32 @@ def main() -> None:
         if received:  # raised where Python discarded it
             raise KeyboardInterrupt
     except KeyboardInterrupt:
-        signum = received[0] if received else signal.SIGINT
-        what = "interrupted" if signum == signal.SIGINT else f"terminated by {signal.Signals(signum).name}"
-        sys.stderr.write(f"error: {what} (nothing was written)\n")
-        sys.stderr.flush()
-        os._exit(128 + int(signum))
+        _stopped(received)
+    except Exception as exc:
+        if not (received and _caused_by_stop(exc)):
+            raise
+        _stopped(received)
     finally:
         sys.unraisablehook = previous_hook
     cli_main()
+
+
+def _caused_by_stop(exc: BaseException) -> bool:
+    """Whether ``exc`` is, or was caused by, a KeyboardInterrupt: Python 3.11 turns one raised while a class is being
+    created (a descriptor's ``__set_name__``, such as platform's ``uname_result`` that typer's import creates) into
+    "RuntimeError: Error calling __set_name__" with the interrupt as its cause."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, KeyboardInterrupt):
+            return True
+        seen = seen.__cause__
+    return False
+
+
+def _stopped(received: list[int]) -> None:
+    """The stop while loading: the CLI's one line and 128 + N, at once (nothing has been started)."""
+    signum = received[0] if received else signal.SIGINT
+    what = "interrupted" if signum == signal.SIGINT else f"terminated by {signal.Signals(signum).name}"
+    sys.stderr.write(f"error: {what} (nothing was written)\n")
+    sys.stderr.flush()
+    os._exit(128 + int(signum))
