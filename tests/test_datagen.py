@@ -580,6 +580,44 @@ def test_lerobot_itself_reads_the_frames_written(dataset4):
 
 @pytest.mark.slow
 @pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
+def test_lerobot_itself_writes_the_same_layout(dataset4, tmp_path):
+    """Optional, as the test above: the dataset's frames written again by lerobot's own writer
+    (``tests/lerobot_write.py``: ``LeRobotDataset.create``, ``add_frame``, ``save_episode``) give the same files,
+    the episodes' and frames' parquet with the same columns of the same types, the same values in the frames'
+    columns and in the episodes' but their stats (lengths, indices, chunks and files, video timestamps), and
+    info.json with the same keys and values, but for the videos' codec, with more of roarmctl's own."""
+    import pyarrow.parquet as pq
+
+    python = _lerobot_python()
+    if python is None:
+        pytest.skip("lerobot is not installed here: set ROARMCTL_LEROBOT_PYTHON to the python of a venv that has it")
+    out, _ = dataset4
+    theirs = tmp_path / "lerobot_written"
+    r = subprocess.run([python, str(ROOT / "tests" / "lerobot_write.py"), str(out), str(theirs)], capture_output=True,
+                       text=True, timeout=1800)
+    assert r.returncode == 0, r.stderr[-3000:]
+    files = sorted(str(p.relative_to(theirs)) for p in theirs.rglob("*") if p.is_file())
+    assert files == sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+    for rel in ("data/chunk-000/file-000.parquet", "meta/episodes/chunk-000/file-000.parquet"):
+        a, b = pq.read_table(out / rel), pq.read_table(theirs / rel)
+        assert [(f.name, str(f.type)) for f in a.schema] == [(f.name, str(f.type)) for f in b.schema], rel
+        for name in a.column_names:
+            if not name.startswith("stats/"):
+                assert a[name].to_pylist() == b[name].to_pylist(), (rel, name)
+    ours_info, their_info = (json.loads((root / "meta/info.json").read_text()) for root in (out, theirs))
+    for k in set(ours_info) | set(their_info):
+        if k != "features":
+            assert ours_info.get(k) == their_info.get(k), k
+    for k, f in their_info["features"].items():
+        assert {kk: v for kk, v in ours_info["features"][k].items() if kk != "info"} == \
+            {kk: v for kk, v in f.items() if kk != "info"}, k
+        for kk, v in f.get("info", {}).items():  # every key lerobot writes, with its value, but its codec's name
+            if kk != "video.codec":
+                assert ours_info["features"][k]["info"].get(kk) == v, (k, kk)
+
+
+@pytest.mark.slow
+@pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
 def test_ray_data_reads_the_dataset(dataset4):
     """Optional: Ray Data's read_lerobot (which decodes through lerobot) where both are installed here."""
     pytest.importorskip("lerobot")
