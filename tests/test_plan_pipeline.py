@@ -373,6 +373,7 @@ def _wait_for_stop_handlers(pid: int, timeout: float = 30.0) -> None:
     raise AssertionError("roarmctl did not install its stop handlers within 30 s")
 
 
+@pytest.mark.slow  # a fresh interpreter loading the planning libraries (0.1-1.1 s of CPU, as the signal lands)
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs Linux /proc to see the handlers")
 @pytest.mark.parametrize("delay", [0.02, 0.6])
 def test_ctrl_c_while_planning_exits_130_and_writes_nothing(tmp_path, delay):
