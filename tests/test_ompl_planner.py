@@ -15,6 +15,7 @@ from roarmctl.motion.ompl_planner import (
     plan_joint_path,
     plan_joint_path_with_stats,
     simplify_path,
+    step_lengths,
 )
 from roarmctl.motion.scene import SceneItem, example_scene
 from roarmctl.robot.loader import load_robot
@@ -150,3 +151,17 @@ def test_simplify_path_shortens_and_stays_valid(robot):
     assert length(short) <= length(raw) + 1e-12
     assert_path_valid(robot, short, LEFT, RIGHT, 0.01)
     np.testing.assert_array_equal(simplify_path(checker, raw, seed=2, attempts=60), short)
+
+
+def test_step_lengths_are_numpys_norms_bit_for_bit():
+    # the shortcutting picks its points from these lengths (and their running sums): a last-bit difference from
+    # np.linalg.norm would change the paths planned with a seed
+    rng = np.random.default_rng(9)
+    for k, n in itertools.product((1, 2, 3, 7, 40), (1, 5, 6, 7, 9, 16)):
+        path = rng.normal(0.0, rng.uniform(1e-6, 3.0), (k, n))
+        expected = np.linalg.norm(np.diff(path, axis=0), axis=1)
+        got = step_lengths(path)
+        assert got.shape == expected.shape and got.tobytes() == expected.tobytes()
+        seg = got.tolist()
+        cum = list(itertools.accumulate(seg, initial=0.0))
+        assert np.array(cum).tobytes() == np.concatenate([[0.0], np.cumsum(got)]).tobytes()

@@ -25,6 +25,7 @@ OMPL is imported inside the functions (heavy import; ``roarmctl --help`` must st
 from __future__ import annotations
 
 import bisect
+import itertools
 import math
 import time
 from collections.abc import Callable
@@ -133,6 +134,14 @@ def _segment_validator(si: ompl.base.SpaceInformation, checker: CollisionChecker
     return validator
 
 
+def step_lengths(path: np.ndarray) -> np.ndarray:
+    """Euclidean lengths (K - 1,) of the steps between consecutive rows of ``path`` (K, n) float: the numbers of
+    ``np.linalg.norm(np.diff(path, axis=0), axis=1)`` (its own sum for real rows), without its wrapper's checks,
+    which cost more than the sum on a path of a few rows (~15 calls a plan)."""
+    d = path[1:] - path[:-1]
+    return np.sqrt(np.add.reduce(d * d, axis=1))
+
+
 def _drop_vertices(checker: CollisionChecker, path: np.ndarray, resolution: float) -> np.ndarray:
     """Greedy: from each kept vertex, jump to the farthest later vertex reachable in a straight line."""
     keep = [0]
@@ -171,8 +180,8 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
             break
         failures += 1
         if stale:  # as Python floats: the same numbers, cheaper to pick from (bisect for searchsorted)
-            seg_arr = np.linalg.norm(np.diff(path, axis=0), axis=1)
-            seg, cum = seg_arr.tolist(), np.concatenate([[0.0], np.cumsum(seg_arr)]).tolist()
+            seg = step_lengths(path).tolist()
+            cum = list(itertools.accumulate(seg, initial=0.0))  # np.cumsum's sums: one after the other
             rows = path.tolist()
             stale = False
         ta, tb = 0.0 + cum[-1] * draws[k], 0.0 + cum[-1] * draws[k + 1]
@@ -200,7 +209,7 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
     if changed:  # else a second pass would keep every vertex: the first one found each farther one unreachable
         path = _drop_vertices(checker, path, resolution)
     # Remove vertices that coincide (a shortcut ending on a vertex).
-    keep = np.concatenate([[True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9])
+    keep = np.concatenate([[True], step_lengths(path) > 1e-9])
     keep[-1] = True
     return path[keep]
 
@@ -261,7 +270,7 @@ def plan_joint_path_with_stats(checker: CollisionChecker, q_start: npt.ArrayLike
                           simplify_attempts, max_checks, stats)
     path = densify(path, max_step)
     path[0], path[-1] = q_start, q_goal
-    stats.length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
+    stats.length = float(np.sum(step_lengths(path)))
     stats.checks = checker.check_count - checks0
     stats.total_time = time.perf_counter() - t_total
     return path, stats

@@ -116,7 +116,7 @@ def toppra_grid(ss: np.ndarray) -> np.ndarray:
     about uniform at ``ss[-1] / clip(GRID_PER_WAYPOINT K, GRID_MIN, GRID_MAX)`` (``ss[-1] / GRID_LINE`` for two
     waypoints, a straight line), with the waypoints on the grid and at least ``GRID_PER_SEGMENT`` intervals per
     segment."""
-    h = ss[-1] / (GRID_LINE if len(ss) == 2 else int(np.clip(GRID_PER_WAYPOINT * len(ss), GRID_MIN, GRID_MAX)))
+    h = ss[-1] / (GRID_LINE if len(ss) == 2 else min(max(GRID_PER_WAYPOINT * len(ss), GRID_MIN), GRID_MAX))
     d = np.diff(ss)
     m = np.maximum(GRID_PER_SEGMENT, np.rint(d / h)).astype(int)
     seg = np.repeat(np.arange(len(d)), m)
