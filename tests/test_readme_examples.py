@@ -112,10 +112,23 @@ def test_the_readme_shows_the_main_commands():
     assert {"plan", "visualize-path", "execute", "kin", "export", "ports", "sim-device", "workspace", "robots"} <= verbs
 
 
+def _in_order(cmd: str) -> object:
+    """``cmd``, in one xdist group with the other commands that write the same ``datagen`` dataset when one of them
+    resumes it: each worker has a scratch folder of its own, and a ``--resume`` sent to another worker than the run
+    before it found no dataset there and wrote all of it again (13 s of CPU) instead of resuming a finished one."""
+    if not cmd.startswith("roarmctl datagen") or " -o " not in cmd:
+        return cmd
+    out = cmd.split(" -o ")[1].split()[0]
+    same = [c for c in COMMANDS if c.startswith("roarmctl datagen") and f" -o {out} " in f"{c} "]
+    if len(same) < 2 or not any("--resume" in c for c in same):
+        return cmd
+    return pytest.param(cmd, marks=pytest.mark.xdist_group(f"readme-datagen-{out}"))
+
+
 # execute --sim runs on a virtual clock (virtual_sim: the pty and real time have tests/device/test_execute.py);
 # datagen renders and encodes, and three commands start an interpreter of their own
 @pytest.mark.slow
-@pytest.mark.parametrize("cmd", COMMANDS)
+@pytest.mark.parametrize("cmd", [_in_order(c) for c in COMMANDS])
 def test_readme_command(cmd, workdir, virtual_sim):
     if cmd.startswith("roarmctl datagen") and "--ray local" in cmd:
         pytest.skip("run as written by tests/test_datagen.py's Ray test (Ray started once): in an empty home and "
@@ -156,6 +169,8 @@ def test_readme_command(cmd, workdir, virtual_sim):
         assert roarmctl("execute", "pick_place.traj.json", "--sim", "--yes", cwd=workdir).returncode == 0
     r = roarmctl(*cmd.split()[1:], cwd=workdir)
     assert r.returncode == 0, f"{cmd}: {r.stderr}"
+    if cmd.startswith("roarmctl datagen") and "--resume" in cmd:  # after the same run (one group): nothing left to do
+        assert "nothing to resume" in r.stdout, r.stdout
     if cmd.startswith("roarmctl kin jacobian scara_2r 0 0 --json"):  # "singular: ellipsoid radii (0.7616, 0)"
         out = json.loads(r.stdout)
         assert out["ellipsoid_radii"] == pytest.approx([0.7616, 0.0], abs=1e-4) and out["singularity"] == "elbow_stretched"
