@@ -54,7 +54,7 @@ def traj_file(tmp_path) -> Path:
 def test_sim_run_follows_the_plan_and_keeps_time(traj_file, capsys):
     rc = run_cli(["execute", str(traj_file), "--sim", "--yes", "--json"])
     out = json.loads(capsys.readouterr().out)
-    assert rc == 0 and out["outcome"] == "completed"
+    assert rc == 0 and out["outcome"] == "completed", out  # on a failure: the error and hint the CLI printed
     sim = out["simulator"]
     print(f"\nTCP tracking error (true, simulator): RMS {sim['rms_mm']:.2f} mm, max {sim['max_mm']:.2f} mm "
           f"(aligned within the measured lateness, up to {sim['lateness_max_ms']:.1f} ms: RMS {sim['rms_aligned_mm']:.2f}, "
@@ -189,7 +189,7 @@ def test_newer_firmware_build_is_accepted_and_reboot_banner_waited_out(tmp_path,
     with PtySimulator(SimConfig(firmware="m3-2026", boot=True, time_factor=0.5), process=True) as sim:
         rc = run_cli(["execute", str(p), "--port", sim.path, "--yes", "--json"])
     out = json.loads(capsys.readouterr().out)
-    assert rc == 0 and out["outcome"] == "completed"
+    assert rc == 0 and out["outcome"] == "completed", out  # on a failure: the error and hint the CLI printed
     assert json.loads((tmp_path / "s.exec.json").read_text())["firmware"] == "m3-2026"
 
 
