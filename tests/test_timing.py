@@ -546,15 +546,38 @@ def test_the_cruise_cap_is_the_step_by_step_bisection_bit_for_bit():
         return lo if lo > 0.0 else None
 
     rng = np.random.default_rng(3941)
-    found = 0
-    for _ in range(60):
+    found, flat_tops = 0, 0
+    for k in range(120):
         g = int(rng.integers(5, 900))
         grid = np.sort(np.concatenate([[0.0], rng.uniform(0.0, 2.0, g - 2), [2.0]]))
         sd = np.sqrt(np.sin(np.pi * grid / 2.0).clip(0.0)) * (1 + 0.2 * np.sin(rng.uniform(1, 20) * grid))
-        sd = np.minimum(sd, rng.uniform(0.6, 1.2)) * rng.uniform(0.5, 3.0)
+        # half of them with a flat top (equal speeds at both ends of an interval: the three cases), half without
+        # (the clipped share)
+        sd = (np.minimum(sd, rng.uniform(0.6, 1.2)) if k % 2 else sd) * rng.uniform(0.5, 3.0)
         prof = Profile(grid, sd)
-        for hold in (rng.uniform(0.001, 0.3), rng.uniform(0.0, 3.0 * prof.T)):
+        flat_tops += bool(np.any(np.diff(prof.sd**2) == 0.0))
+        holds = [rng.uniform(0.001, 0.3), rng.uniform(0.0, 3.0 * prof.T)]
+        if k % 2 == 0:  # a cruise as long as the profile spends above one of its own speeds: mids land on its values
+            holds.append(float(np.sum(np.diff(prof.s)[prof.sd[1:] > np.median(prof.sd)])) / float(np.median(prof.sd)))
+        for hold in holds:
             cap = _plateau_cap(prof, hold)
             assert cap == stepwise(prof, hold)
             found += cap is not None
-    assert found > 60
+    assert found > 120 and 30 < flat_tops < 90
+
+
+def test_the_cruise_cap_counts_a_flat_top_at_a_mid_as_cruising():
+    """A stretch of the speed profile flat at exactly a bisection mid (top / 2 here): its intervals have no span, and
+    they count whole at that mid (sdot^2 >= c^2 at both ends), as the step by step search counts them; a cruise
+    length that needs them decides the first step, so the cap is top / 2 or above."""
+    from roarmctl.motion.jerk_filter import Profile, _plateau_cap
+
+    grid = np.linspace(0.0, 1.0, 12)
+    sd = np.array([0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.5, 2.0, 1.5, 1.0, 0.0])  # top 2.0, flat at 1.0 = top / 2
+    prof = Profile(grid, sd)
+    x0, x1, ds = prof.sd[:-1] ** 2, prof.sd[1:] ** 2, np.diff(prof.s)
+    above = float(np.sum(np.where(np.minimum(x0, x1) >= 1.0, 1.0,
+                                  np.where(np.maximum(x0, x1) <= 1.0, 0.0,
+                                           (np.maximum(x0, x1) - 1.0) / np.maximum(np.abs(x1 - x0), 1e-300))) * ds))
+    cap = _plateau_cap(prof, above)  # the cruise at c = 1.0, flat stretch included: exactly enough
+    assert cap is not None and cap >= 1.0

@@ -258,6 +258,11 @@ def _plateau_cap(prof: Profile, hold: float) -> float | None:
     x0, x1, ds = sd[:-1] ** 2, sd[1:] ** 2, np.diff(s)
     x_lo, x_hi = np.minimum(x0, x1), np.maximum(x0, x1)
     span = np.maximum(x_hi - x_lo, 1e-300)
+    # Where no interval's span was floored (sdot^2 the same at both ends, a flat top), the share is
+    # min(max((x_hi - c^2) / span, 0), 1), the same numbers as the three cases below in fewer passes: rounding is
+    # monotone, so x_lo >= c^2 gives x_hi - c^2 >= span, a share >= 1, and x_hi <= c^2 a share <= 0 (never -0.0: x_hi
+    # >= +0 and c^2 > 0). A floored span (x_hi = x_lo = c^2 would give 0, not 1) keeps the cases as they are.
+    clip = not bool(np.any(x_hi - x_lo < 1e-300))
 
     # 30 bisection steps of c in [0, top] on cruise(c) = sum(frac * ds) / c >= hold, frac the share of each grid
     # interval where sdot^2 > c^2: 1 where x_lo >= c^2, 0 where x_hi <= c^2, else (x_hi - c^2) / span. The steps
@@ -275,8 +280,15 @@ def _plateau_cap(prof: Profile, hold: float) -> float | None:
             bounds += [(mid, b), (a, mid)]
         c = np.array(mids)
         c2 = (c * c)[:, None]
-        frac = np.where(x_lo >= c2, 1.0, np.where(x_hi <= c2, 0.0, (x_hi - c2) / span))
-        cruise = ((frac * ds).sum(axis=1) / c).tolist()
+        if clip:
+            frac = x_hi - c2
+            frac /= span
+            np.maximum(frac, 0.0, out=frac)
+            np.minimum(frac, 1.0, out=frac)
+        else:
+            frac = np.where(x_lo >= c2, 1.0, np.where(x_hi <= c2, 0.0, (x_hi - c2) / span))
+        frac *= ds
+        cruise = (frac.sum(axis=1) / c).tolist()
         k = 0
         for _ in range(PLATEAU_LEVELS):
             k = 2 * k + 1 if cruise[k] >= hold else 2 * k + 2
