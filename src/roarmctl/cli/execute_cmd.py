@@ -3,6 +3,7 @@
 
 import re
 import sys
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -187,7 +188,7 @@ def _run(traj: "Trajectory", traj_path: Path, robot: "Robot", cfg: "StreamConfig
             err.print(line, highlight=False, soft_wrap=True)
 
     run = run_execution(traj, robot, cfg, port=port, sim=sim, log_path=log_path, confirm=confirm,
-                        on_status=live.update if live else None, on_start=live.start if live else None,
+                        on_status=partial(_status, live.update if live else None), on_start=live.start if live else None,
                         on_note=note, on_end=live.stop if live else None, shield=signals.shielded,
                         on_log_error=log_error, on_info=info, sim_servos=sim_servos, sim_config=sim_config)
     result, port = run.result, run.port
@@ -366,6 +367,7 @@ def sim_device(
         sys.stdout.flush()
         while simulator.alive():
             simulator.join(0.5)
+            signals.check()  # a stop whose exception Python discarded (in a finalizer) still stops the simulator
         if simulator.error is not None:
             raise simulator.error
     except KeyboardInterrupt:
@@ -375,6 +377,14 @@ def sim_device(
             simulator.stop()
             if made_link and link is not None and link.is_symlink():
                 link.unlink()
+
+
+def _status(show: "Callable[[Any], None] | None", status: Any) -> None:
+    """After each tick of the motion: a stop whose exception Python discarded (raised inside a finalizer or a
+    garbage-collector callback) is raised here, so the arm holds as on any Ctrl-C; then the display, if any."""
+    signals.check()
+    if show is not None:
+        show(status)
 
 
 def _joint(option: str, name: str) -> str:

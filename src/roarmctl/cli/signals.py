@@ -6,6 +6,11 @@ signals into ``StopRequested`` (a ``KeyboardInterrupt``), so every ``except Keyb
 the execution log is written. Later signals are only recorded: a second Ctrl-C 10 ms after the first
 must not cut the hold or the log short, nor kill the process by the signal.
 
+Python discards an exception raised inside a finalizer (``__del__``), a weakref or garbage-collector callback
+("Exception ignored in ..."): a first signal whose ``StopRequested`` lands there is recorded but never reaches the
+command. ``installed()`` keeps Python from printing such a stop, and ``check()``, called by loops that wait (a
+streamed motion's ticks, ``sim-device``, ``view``), raises it again (seen: ``view`` and ``sim-device`` serving on
+after a Ctrl-C, deaf to the next ones, on a loaded machine).
 ``shielded()`` marks cleanup that must finish (closing the port, writing the log): a signal arriving
 inside is recorded and raised when the block ends, unless one was raised already.
 
@@ -16,6 +21,7 @@ Exit codes follow the shells' convention 128 + signal number: 130 (SIGINT, Ctrl-
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -75,14 +81,32 @@ def installed(keep_after_stop: bool = False) -> Iterator[Guard]:
         except (OSError, ValueError):
             pass
     outer, _GUARD = _GUARD, guard
+    previous_hook = sys.unraisablehook
+
+    def unraisable(info: sys.UnraisableHookArgs) -> None:
+        if not (guard.received and info.exc_type is not None and issubclass(info.exc_type, KeyboardInterrupt)):
+            previous_hook(info)  # anything else is reported as Python would
+
+    sys.unraisablehook = unraisable
     try:
         yield guard
     finally:
         guard.live = False
         _GUARD = outer
+        sys.unraisablehook = previous_hook
         for s, h in previous.items():
             # ignored at the OS level: the interpreter's own shutdown resets Python-level handlers
             signal.signal(s, signal.SIG_IGN if (keep_after_stop and guard.received) else h)
+
+
+def check() -> None:
+    """Raise the stop a signal asked for when it arrived while the command runs (not in a shielded block) yet the
+    command goes on: its ``StopRequested`` was raised where Python discards exceptions. For a loop that waits (for
+    the next tick, a request, the simulator's end) and is not itself cleanup after a stop: call it once a wait."""
+    guard = _GUARD
+    if guard is not None and guard.live and guard.received and not guard.shield:
+        guard.raised = True
+        raise StopRequested(guard.received[0])
 
 
 @contextmanager

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import typer
 
-from roarmctl.cli import common
+from roarmctl.cli import common, signals
 
 
 def register(app: typer.Typer) -> None:
@@ -49,7 +49,7 @@ def view(
         if open_browser:
             webbrowser.open(server.url)
         try:
-            server.serve_forever()
+            server.serve_forever(on_poll=signals.check)  # a Ctrl-C that Python discarded still stops the view
         except KeyboardInterrupt as exc:
             if (getattr(exc, "signum", None) or signal.SIGINT) != signal.SIGINT:
                 raise  # SIGTERM, SIGHUP: stopped from outside, reported as every command is

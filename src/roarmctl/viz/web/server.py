@@ -19,6 +19,7 @@ import secrets
 import socket
 import sys
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
@@ -75,6 +76,7 @@ class ViewServer:
         self.requests = self.refused = self.dropped = 0
         self.errors: list[str] = []
         self.slots = threading.BoundedSemaphore(max_connections)  # one per connection being served
+        self.on_poll: Callable[[], None] | None = None
         server, idle = self, timeout
 
         class Handler(BaseHTTPRequestHandler):
@@ -142,6 +144,11 @@ class ViewServer:
                 finally:
                     server.slots.release()
 
+            def service_actions(self) -> None:  # once a poll of the loop (serve_forever's poll_interval)
+                super().service_actions()
+                if server.on_poll is not None:
+                    server.on_poll()
+
             def handle_error(self, request: Any, client_address: Any) -> None:
                 exc = sys.exc_info()[1]
                 if not isinstance(exc, HANGUPS):
@@ -177,8 +184,10 @@ class ViewServer:
         """Whether ``given`` is the token (compared in constant time)."""
         return hmac.compare_digest(given.encode("utf-8", "replace"), self.token.encode())
 
-    def serve_forever(self) -> None:
-        """Answer requests until ``close()`` or an exception (Ctrl-C) in this thread."""
+    def serve_forever(self, on_poll: Callable[[], None] | None = None) -> None:
+        """Answer requests until ``close()`` or an exception (Ctrl-C) in this thread; ``on_poll`` is called every
+        0.2 s between requests (what it raises ends the serving: the CLI checks for a stop there)."""
+        self.on_poll = on_poll
         self.httpd.serve_forever(poll_interval=0.2)
 
     def close(self) -> None:
