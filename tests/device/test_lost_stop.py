@@ -5,7 +5,7 @@ finalizer, a weakref or garbage-collector callback Python prints such an excepti
 drops it; the signal is recorded, so the command must still stop at its next wait (``roarmctl.cli.signals.check``).
 Seen on a loaded machine: ``view`` and ``sim-device`` served on after a Ctrl-C, deaf to the next ones. Each case runs
 the real command in a fresh interpreter in which the SIGINT is sent, and its handler runs, inside a garbage-collector
-callback, once the command waits (view serving, sim-device serving, execute streaming).
+callback, once the command waits (view serving, sim-device serving, execute streaming, follow following).
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ def traj_file(tmp_path: Path) -> Path:
     return p
 
 
-@pytest.mark.parametrize("case", ["view", "sim-device", "execute"])
+@pytest.mark.parametrize("case", ["view", "sim-device", "execute", "follow"])
 def test_a_stop_python_discards_while_the_command_waits_still_stops_it(case, traj_file, tmp_path):
     target, args, code = {
         "view": (("roarmctl.viz.web.server", "ViewServer", "serve_forever"), ["view", str(traj_file)], 0),
@@ -69,6 +69,9 @@ def test_a_stop_python_discards_while_the_command_waits_still_stops_it(case, tra
         # on the first read of the arm's answers, mid-motion: the arm holds as on any Ctrl-C
         "execute": (("roarmctl.device.streamer", "Streamer", "_read_answers"),
                     ["execute", str(traj_file), "--sim", "--servos", "ideal", "--yes", "--log", str(tmp_path / "t.exec.json")], 130),
+        # as following starts (its source, stdin, is at its end): the follower holds as on any Ctrl-C
+        "follow": (("roarmctl.device.follow", "Follower", "_loop"),
+                   ["follow", "--sim", "--log", str(tmp_path / "t.exec.json")], 130),
     }[case]
     marker = tmp_path / "the callback finished"
     # a session of its own: a command deaf to the stop is ended with its simulator's process when the wait runs out
@@ -90,3 +93,6 @@ def test_a_stop_python_discards_while_the_command_waits_still_stops_it(case, tra
         assert err.strip().splitlines()[-1].startswith("error: interrupted"), err
         log = json.loads((tmp_path / "t.exec.json").read_text())
         assert log["summary"]["outcome"] == "interrupted" and log["hold"] is not None, log["summary"]
+    if case == "follow":
+        assert err.strip().splitlines()[-1] == "error: stopped by Ctrl-C; the arm holds where it was", err
+        assert json.loads((tmp_path / "t.exec.json").read_text())["summary"]["outcome"] == "interrupted"

@@ -130,7 +130,7 @@ def follow(
 
     try:
         done = follow_live(robot, checker, port=port, sim=sim, source=source, leader=spec, config=cfg, on_event=event,
-                           log_path=log, shield=signals.shielded)
+                           log_path=log, shield=signals.shielded, on_tick=signals.check)
     except Exception as exc:
         res = getattr(exc, "result", None)
         if res is not None:

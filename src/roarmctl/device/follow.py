@@ -119,17 +119,18 @@ class Follower:
     ``checker`` (the scene, padding and singularity margin). ``clock``/``sleep``/``timer`` are injectable (tests
     run on a virtual clock; ``timer`` measures the computation per target, s). ``on_event(text)`` hears every
     refusal and end (the screen). ``extra_lateness() -> s``: how late the device itself is (the simulator
-    measures its own), added to the time a poll may stay unanswered."""
+    measures its own), added to the time a poll may stay unanswered. ``on_tick()`` is called once a pass, after the
+    wait for it (what it raises ends the following and holds the arm: the CLI checks for a stop there)."""
 
     def __init__(self, link: LinkLike, robot: Robot, checker: CollisionChecker, source: Source,
                  config: FollowConfig | None = None, *, clock: Callable[[], float] = time.monotonic,
                  sleep: Callable[[float], None] = time.sleep, timer: Callable[[], float] = time.perf_counter,
                  on_event: Callable[[str], None] | None = None,
-                 extra_lateness: Callable[[], float] | None = None) -> None:
+                 extra_lateness: Callable[[], float] | None = None, on_tick: Callable[[], None] | None = None) -> None:
         self.link, self.robot, self.checker, self.source = link, robot, checker, source
         self.cfg = config or FollowConfig()
         self.clock, self.sleep, self.timer, self.on_event = clock, sleep, timer, on_event
-        self.extra_lateness = extra_lateness
+        self.extra_lateness, self.on_tick = extra_lateness, on_tick
         self.wm = WireMap(robot)
         self.dt = 1.0 / self.cfg.rate
         self.validator = FeedbackValidator(robot, firmware=link.firmware)
@@ -212,6 +213,8 @@ class Follower:
             wait = due - self.clock()
             if wait > 0:
                 self.sleep(wait)
+            if self.on_tick is not None:
+                self.on_tick()
             now = self.clock()
             if not ended and cfg.duration is not None and now - self.t0 >= cfg.duration:
                 ended = True

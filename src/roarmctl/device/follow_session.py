@@ -67,11 +67,13 @@ def _nothing() -> Iterator[None]:
 def follow_live(robot: Robot, checker: CollisionChecker, *, port: str | None = None, sim: bool = False,
                 source: Source | None = None, leader: LeaderSpec | None = None, config: FollowConfig | None = None,
                 on_event: Callable[[str], None] | None = None, log_path: str | Path | None = None,
-                shield: Callable[[], contextlib.AbstractContextManager[Any]] = _nothing) -> Followed:
+                shield: Callable[[], contextlib.AbstractContextManager[Any]] = _nothing,
+                on_tick: Callable[[], None] | None = None) -> Followed:
     """Follow ``source`` (JSON lines, see ``roarmctl.device.follow_sources``) or ``leader`` with the arm on ``port``
     or the simulator (``sim``). Raises what :meth:`Follower.run` raises (after the hold), with the result as the
     exception's ``result`` and the :class:`Followed` as its ``followed``; the log goes to ``log_path`` on every way out once the follower's port opened.
-    ``shield``: a context manager that keeps signals out of the cleanup (the CLI's)."""
+    ``shield``: a context manager that keeps signals out of the cleanup (the CLI's); ``on_tick``: called once a pass
+    of the follower's loop (``Follower``; the CLI checks for a stop there)."""
     if (port is None) == (not sim):
         raise InputError("follow: give exactly one of a port or the simulator")
     if (source is None) == (leader is None):
@@ -96,7 +98,7 @@ def follow_live(robot: Robot, checker: CollisionChecker, *, port: str | None = N
                 raise SourceLost(f"leader: {exc.message}", exc.hint) from None
         assert source is not None
         follower = Follower(link, robot, checker, source, config, on_event=on_event,
-                            extra_lateness=sims[0].recent_lateness if sim else None)
+                            extra_lateness=sims[0].recent_lateness if sim else None, on_tick=on_tick)
         result = follower.run()
         followed = Followed(result, str(port))
     except RoarmError as exc:
