@@ -5,7 +5,7 @@ finalizer, a weakref or garbage-collector callback Python prints such an excepti
 drops it; the signal is recorded, so the command must still stop at its next wait (``roarmctl.cli.signals.check``).
 Seen on a loaded machine: ``view`` and ``sim-device`` served on after a Ctrl-C, deaf to the next ones. Each case runs
 the real command in a fresh interpreter in which the SIGINT is sent, and its handler runs, inside a garbage-collector
-callback, once the command waits (view serving, sim-device serving, execute streaming, follow following).
+callback, once the command waits (view serving, sim-device serving, execute streaming, follow following, teach teaching).
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ def traj_file(tmp_path: Path) -> Path:
     return p
 
 
-@pytest.mark.parametrize("case", ["view", "sim-device", "execute", "follow"])
+@pytest.mark.parametrize("case", ["view", "sim-device", "execute", "follow", "teach"])
 def test_a_stop_python_discards_while_the_command_waits_still_stops_it(case, traj_file, tmp_path):
     target, args, code = {
         "view": (("roarmctl.viz.web.server", "ViewServer", "serve_forever"), ["view", str(traj_file)], 0),
@@ -72,11 +72,16 @@ def test_a_stop_python_discards_while_the_command_waits_still_stops_it(case, tra
         # as following starts (its source, stdin, is at its end): the follower holds as on any Ctrl-C
         "follow": (("roarmctl.device.follow", "Follower", "_loop"),
                    ["follow", "--sim", "--log", str(tmp_path / "t.exec.json")], 130),
+        # teaching on the simulated arm (keys from a terminal): the session ends as on any Ctrl-C
+        "teach": (("roarmctl.device.teach", "TeachSession", "pump"), ["teach", "--sim", "-o", str(tmp_path / "t.yaml")], 130),
     }[case]
     marker = tmp_path / "the callback finished"
     # a session of its own: a command deaf to the stop is ended with its simulator's process when the wait runs out
+    master, slave = os.openpty() if case == "teach" else (None, subprocess.DEVNULL)  # teach reads keys from a terminal
     proc = subprocess.Popen([sys.executable, "-c", SCRIPT, str(marker), *target, *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL, cwd=tmp_path, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, stdin=slave, cwd=tmp_path, start_new_session=True)
+    if master is not None:
+        os.close(slave)
     try:
         out, err = proc.communicate(timeout=120)
     finally:
@@ -84,6 +89,8 @@ def test_a_stop_python_discards_while_the_command_waits_still_stops_it(case, tra
             os.killpg(proc.pid, signal.SIGKILL)
         if proc.poll() is None:
             proc.communicate(timeout=30)
+        if master is not None:
+            os.close(master)
     assert not marker.exists()  # the interrupt did land inside the callback, where Python discards it
     assert proc.returncode == code, err
     assert "Exception ignored" not in err and "Traceback" not in err, err

@@ -147,6 +147,7 @@ def _loop(session: "TeachSession", keys: "_Keys", view: "_View", output: Path, r
             select.select(fds, [], [], 0.02)
         else:
             time.sleep(0.01)
+        signals.check()  # a Ctrl-C whose exception Python discarded (in a finalizer) still ends the session
         frame = session.pump()
         for key in keys.read():
             if key in ("\r", "\n"):
