@@ -277,7 +277,9 @@ def test_an_av1_encode_as_root_runs_and_leaves_no_real_time_policy():
     finally:
         done.set()
         watcher.join(timeout=10)
-    assert seen == {os.SCHED_OTHER}, seen
+    # real-time policies only: a worker that rendered before keeps Mesa's shader-cache thread ("disk$0"), which Mesa
+    # runs SCHED_BATCH (a normal, lower-interactivity policy; seen in a CI rehearsal)
+    assert not seen & {os.SCHED_FIFO, os.SCHED_RR}, seen
     assert pyprctl.Cap.SYS_NICE in pyprctl.CapState.get_current().effective
     child = subprocess.run([sys.executable, "-c", "import os; print(os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)"],
                            capture_output=True, text=True, timeout=60)

@@ -240,7 +240,7 @@ def test_view_prints_a_file_name_s_terminal_sequences_as_text(tmp_path, monkeypa
     written."""
     from roarmctl.viz.web import server
 
-    def stop(self):
+    def stop(self, on_poll=None):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(server.ViewServer, "serve_forever", stop)
