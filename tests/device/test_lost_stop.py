@@ -5,7 +5,8 @@ finalizer, a weakref or garbage-collector callback Python prints such an excepti
 drops it; the signal is recorded, so the command must still stop at its next wait (``roarmctl.cli.signals.check``).
 Seen on a loaded machine: ``view`` and ``sim-device`` served on after a Ctrl-C, deaf to the next ones. Each case runs
 the real command in a fresh interpreter in which the SIGINT is sent, and its handler runs, inside a garbage-collector
-callback, once the command waits (view serving, sim-device serving, execute streaming, follow following, teach teaching).
+callback, once the command waits (view serving, sim-device serving, execute streaming, follow following, teach teaching)
+or works (plan planning, simulate simulating: they stop at their next progress report and write no file).
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from pathlib import Path
 
 import pytest
 from devtraj import HOME, min_jerk
+
+ROOT = Path(__file__).resolve().parents[2]
 
 pytestmark = pytest.mark.slow  # fresh interpreters, a simulated arm in real time
 
@@ -61,8 +64,9 @@ def traj_file(tmp_path: Path) -> Path:
     return p
 
 
-@pytest.mark.parametrize("case", ["view", "sim-device", "execute", "follow", "teach"])
+@pytest.mark.parametrize("case", ["view", "sim-device", "execute", "follow", "teach", "plan", "simulate"])
 def test_a_stop_python_discards_while_the_command_waits_still_stops_it(case, traj_file, tmp_path):
+    output = tmp_path / "out.json"  # what plan and simulate would write
     target, args, code = {
         "view": (("roarmctl.viz.web.server", "ViewServer", "serve_forever"), ["view", str(traj_file)], 0),
         "sim-device": (("roarmctl.device.simulator", "PtySimulator", "join"), ["sim-device", "--servos", "ideal"], 0),
@@ -74,6 +78,12 @@ def test_a_stop_python_discards_while_the_command_waits_still_stops_it(case, tra
                    ["follow", "--sim", "--log", str(tmp_path / "t.exec.json")], 130),
         # teaching on the simulated arm (keys from a terminal): the session ends as on any Ctrl-C
         "teach": (("roarmctl.device.teach", "TeachSession", "pump"), ["teach", "--sim", "-o", str(tmp_path / "t.yaml")], 130),
+        # at the first motion's first segment check: planning stops at its next stage, no trajectory file
+        "plan": (("roarmctl.motion.collision", "CollisionChecker", "segment_valid"),
+                 ["plan", str(ROOT / "plans" / "pick_place.yaml"), "-o", str(output)], 130),
+        # at the physics' first step: the simulation stops at its next progress report, no run file
+        "simulate": (("roarmctl.physics.servo_backend", "PhysicsServos", "advance"),
+                     ["simulate", str(traj_file), "-o", str(output)], 130),
     }[case]
     marker = tmp_path / "the callback finished"
     # a session of its own: a command deaf to the stop is ended with its simulator's process when the wait runs out
@@ -100,6 +110,9 @@ def test_a_stop_python_discards_while_the_command_waits_still_stops_it(case, tra
         assert err.strip().splitlines()[-1].startswith("error: interrupted"), err
         log = json.loads((tmp_path / "t.exec.json").read_text())
         assert log["summary"]["outcome"] == "interrupted" and log["hold"] is not None, log["summary"]
+    if case in ("plan", "simulate"):
+        assert err.strip().splitlines()[-1].startswith("error: interrupted"), err
+        assert not output.exists() and sorted(tmp_path.iterdir()) == sorted([traj_file]), sorted(tmp_path.iterdir())
     if case == "follow":
         assert err.strip().splitlines()[-1] == "error: stopped by Ctrl-C; the arm holds where it was", err
         assert json.loads((tmp_path / "t.exec.json").read_text())["summary"]["outcome"] == "interrupted"

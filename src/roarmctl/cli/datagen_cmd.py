@@ -5,7 +5,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from roarmctl.cli import common
+from roarmctl.cli import common, signals
 from roarmctl.errors import InputError
 
 if TYPE_CHECKING:
@@ -50,9 +50,15 @@ def datagen(
     options = DatagenOptions(episodes=episodes, seed=seed, workers=workers, width=width, height=height, max_tries=max_tries,
                              ray=None if ray is None else ("" if ray == "local" else ray), resume=resume,
                              codec=codec, cameras=() if cameras.strip() == "none" else tuple(c.strip() for c in cameras.split(",")))
+    def check(s: "Summary") -> None:
+        """Raise a stop whose exception Python discarded, at a shard's report; the last report (``wall`` set) comes
+        once the dataset is written: the run has finished its work then."""
+        if not s.wall:
+            signals.check()
+
     err = common.console(stderr=True)
     if json_out or not err.is_terminal:
-        summary = generate(template, output, options)
+        summary = generate(template, output, options, check)
     else:
         from rich.progress import (
             BarColumn,
@@ -69,6 +75,7 @@ def datagen(
             task = bar.add_task("datagen", total=episodes, tried=0, rate="")
 
             def progress(s: "Summary") -> None:
+                check(s)
                 rate = f"{100 * s.kept / s.tried:.0f} % kept" if s.tried else ""
                 bar.update(task, completed=min(s.kept, episodes), tried=s.tried, rate=rate)
 

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from roarmctl.cli import common
+from roarmctl.cli import common, signals
 from roarmctl.errors import InputError
 
 if TYPE_CHECKING:
@@ -28,11 +28,12 @@ def run_planner(plan: Path, seed: int | None, quiet: bool,
                 current: "Callable[[Robot], np.ndarray] | None" = None) -> "PlanResult":
     """Plan with a rich progress display on stderr (none when ``quiet``); returns the PlanResult.
 
-    ``current(robot)`` measures the arm for ``start: current``."""
+    ``current(robot)`` measures the arm for ``start: current``. Each stage's report also raises a stop signal whose
+    exception Python discarded (``signals.check``): a Ctrl-C stops the planning with or without the display."""
     from roarmctl.motion.pipeline import plan_file
 
     if quiet or not sys.stderr.isatty():  # no live display in pipes and logs
-        return plan_file(plan, seed=seed, current=current)
+        return plan_file(plan, seed=seed, current=current, progress=lambda stage, done, total: signals.check())
     from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
     with Progress(SpinnerColumn(), TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} tasks"),
@@ -40,6 +41,7 @@ def run_planner(plan: Path, seed: int | None, quiet: bool,
         job = bar.add_task(f"planning {common.shown(plan.name)}", total=None)
 
         def progress(stage: str, done: int, total: int) -> None:
+            signals.check()
             bar.update(job, description=stage, completed=done, total=total)
 
         return plan_file(plan, seed=seed, progress=progress, current=current)
@@ -91,6 +93,7 @@ def register(app: typer.Typer) -> None:
         result = run_planner(plan, seed, quiet=json_out, current=arm_reader(port, sim, measured))
         result.notes[:0] = measured
         out = output or default_output(plan)
+        signals.check()  # a stop discarded after the last stage's report: no file
         result.trajectory.save(out)
         traj = result.trajectory
         summary = {

@@ -9,7 +9,8 @@ must not cut the hold or the log short, nor kill the process by the signal.
 Python discards an exception raised inside a finalizer (``__del__``), a weakref or garbage-collector callback
 ("Exception ignored in ..."): a first signal whose ``StopRequested`` lands there is recorded but never reaches the
 command. ``installed()`` keeps Python from printing such a stop, and ``check()``, called by loops that wait (a
-streamed motion's ticks, ``sim-device``, ``view``), raises it again (seen: ``view`` and ``sim-device`` serving on
+streamed motion's ticks, ``sim-device``, ``view``) and at the progress reports of commands that compute (``plan``,
+``simulate``, ``datagen``), raises it again (seen: ``view`` and ``sim-device`` serving on
 after a Ctrl-C, deaf to the next ones, on a loaded machine).
 ``shielded()`` marks cleanup that must finish (closing the port, writing the log): a signal arriving
 inside is recorded and raised when the block ends, unless one was raised already.

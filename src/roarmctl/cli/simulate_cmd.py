@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, TypeVar
 
 import typer
 
-from roarmctl.cli import common
+from roarmctl.cli import common, signals
 from roarmctl.cli.execute_cmd import SAG_HELP, STRATEGY_HELP
 from roarmctl.errors import InfeasibleError, InputError
 from roarmctl.fileio import check_output_file
@@ -121,16 +121,21 @@ def simulate(
 
 
 def _with_progress(work: "Callable[[Callable[[float, float], None] | None], _W]", total: float, quiet: bool) -> "_W":
-    """Run ``work(progress)`` with a rich progress bar on stderr (a terminal only, not with --json)."""
+    """Run ``work(progress)`` with a rich progress bar on stderr (a terminal only, not with --json). Each report also
+    raises a stop signal whose exception Python discarded (``signals.check``), with or without the bar."""
     err = common.console(stderr=True)
     if quiet or not err.is_terminal:
-        return work(None)
+        return work(lambda done, tot: signals.check())
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     with Progress(TextColumn("simulating"), BarColumn(), TextColumn("{task.completed:.1f}/{task.total:.1f} s"),
                   TimeElapsedColumn(), console=err, transient=True) as bar:
         task = bar.add_task("sim", total=total)
-        return work(lambda done, tot: bar.update(task, completed=done, total=tot))
+        def progress(done: float, tot: float) -> None:
+            signals.check()
+            bar.update(task, completed=done, total=tot)
+
+        return work(progress)
 
 
 def _render(report: dict, output: Path | None) -> None:
