@@ -138,7 +138,10 @@ MAX_WHOLE = 2 ** 63 - 1  # the largest whole-number option (a seed): what a C lo
 @dataclass(frozen=True)
 class Bound:
     """The values one option takes: a finite number in [``lo``, ``hi``] (above ``lo`` when ``strict_lo``), a whole
-    number in that range (``whole``), true or false (``flag``) or one of ``choices``; ``optional``: None too."""
+    number in that range (``whole``), true or false (``flag``), one of ``choices`` (with ``many``: a tuple of
+    distinct names of ``choices``, perhaps none), a text of at most ``checker.max_name`` characters (``text``) or an
+    instance of the options class ``instance`` (a nested options object, checked when it was made); ``optional``:
+    None too."""
 
     lo: float = -1e6
     hi: float = 1e6
@@ -146,6 +149,9 @@ class Bound:
     whole: bool = False
     flag: bool = False
     choices: tuple[str, ...] | None = None
+    many: bool = False
+    text: bool = False
+    instance: type | None = None
     optional: bool = False
 
     def check(self, value: Any, checker: Checker, where: str, field: str) -> Any:
@@ -155,6 +161,20 @@ class Bound:
         if self.flag:
             if not isinstance(value, bool):
                 checker.fail(where, field, f"expected true or false, got {checker.kind(value)}")
+            return value
+        if self.instance is not None:
+            if not isinstance(value, self.instance):
+                checker.fail(where, field, f"expected a {self.instance.__name__}, got {checker.kind(value)}")
+            return value
+        if self.text:
+            return checker.name(value, where, field, empty=True)
+        if self.choices is not None and self.many:
+            if not isinstance(value, tuple):
+                checker.fail(where, field, f"expected a tuple of names, got {checker.kind(value)}")
+            for name in value:
+                checker.name(name, where, field, choices=self.choices)
+            if len(set(value)) != len(value):
+                checker.fail(where, field, "a name is given twice")
             return value
         if self.choices is not None:
             return checker.name(value, where, field, choices=self.choices)

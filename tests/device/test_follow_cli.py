@@ -27,10 +27,10 @@ planner: {singularity_margin: 0.02, padding: 0.005}
 
 @pytest.mark.parametrize("args, words", [
     (["follow"], "exactly one of --port PORT and --sim"),
-    (["follow", "--sim", "--velocity-scale", "nan"], "velocity_scale must be a number in (0, 1]"),
-    (["follow", "--sim", "--timeout", "-1"], "timeout must be a number in (0, 60] s"),
-    (["follow", "--sim", "--max-refusals", "0"], "max_refusals must be a whole number in [1, 1000]"),
-    (["follow", "--sim", "--rate", "500"], "rate must be a number in (1, 90]"),
+    (["follow", "--sim", "--velocity-scale", "nan"], "--velocity-scale: expected a finite number, got nan"),
+    (["follow", "--sim", "--timeout", "-1"], "--timeout: -1 is too small (must be > 0)"),
+    (["follow", "--sim", "--max-refusals", "0"], "--max-refusals: expected a whole number from 1 to 1000"),
+    (["follow", "--sim", "--rate", "500"], "--rate: 500 is too large (must be <= 90)"),
     (["follow", "--port", "/dev/null"], "pass --yes"),
     (["follow", "--sim", "--leader", "/dev/ttyUSB9", "--leader-guide", "x.yaml"], "give one leader"),
 ])

@@ -28,13 +28,14 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from roarmctl.checks import Bound, check_options
 from roarmctl.device import protocol
 from roarmctl.device.feedback import FeedbackRefused, FeedbackValidator, read_valid
 from roarmctl.device.follow_guard import Guard, GuardLimits, SourceLost, Target, Verdict
 from roarmctl.device.follow_motion import Motion, Smoother
 from roarmctl.device.hold import HOLD_SPD, send_hold
 from roarmctl.device.protocol import WireMap, spd_register
-from roarmctl.errors import DeviceError, InputError, Interrupted, signal_name
+from roarmctl.errors import DeviceError, Interrupted, signal_name
 
 if TYPE_CHECKING:
     from roarmctl.device.link import LinkLike, Received
@@ -69,12 +70,26 @@ class Source(Protocol):
         """Give back what the source holds (a port, a socket)."""
 
 
+#: FollowConfig's bounds (``roarmctl.checks.check_options``): rates in 1/s, times in s.
+FOLLOW_BOUNDS = {
+    "rate": Bound(1.0, 90.0, strict_lo=True),  # T:102 lines/s: 115200 baud carries about 90
+    "feedback_rate": Bound(1.0, 90.0, strict_lo=True),
+    "first_frame": Bound(0.0, 3600.0, strict_lo=True),
+    "stale_after": Bound(0.0, 60.0, strict_lo=True),
+    "max_unconfirmed": Bound(1, 100, whole=True),
+    "behind_after": Bound(0.0, 10.0, strict_lo=True),
+    "duration": Bound(0.0, 86400.0, strict_lo=True, optional=True),
+    "guard": Bound(instance=GuardLimits),
+}
+
+
 @dataclass(frozen=True)
 class FollowConfig:
-    """The follower's options, each checked on creation. ``rate``: set-points per second; ``feedback_rate``:
-    ``T:105`` polls per second; ``first_frame``: s to wait for the source's first frame (a policy may load a
-    model first); ``stale_after``: s a poll may stay unanswered (plus the round trip) before the follower's link
-    counts as lost; ``max_unconfirmed``, ``behind_after``: the firmware's pacing (see the module docstring)."""
+    """The follower's options, each checked on creation (``FOLLOW_BOUNDS``). ``rate``: set-points per second;
+    ``feedback_rate``: ``T:105`` polls per second; ``first_frame``: s to wait for the source's first frame (a policy
+    may load a model first); ``stale_after``: s a poll may stay unanswered (plus the round trip) before the
+    follower's link counts as lost; ``max_unconfirmed``, ``behind_after``: the firmware's pacing (see the module
+    docstring); ``guard``: the checks every target passes."""
 
     rate: float = 50.0
     feedback_rate: float = 25.0
@@ -86,18 +101,7 @@ class FollowConfig:
     guard: GuardLimits = field(default_factory=GuardLimits)
 
     def __post_init__(self) -> None:
-        for name, lo, hi in (("rate", 1.0, 90.0), ("feedback_rate", 1.0, 90.0), ("first_frame", 0.0, 3600.0),
-                             ("stale_after", 0.0, 60.0), ("behind_after", 0.0, 10.0)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo < v <= hi:
-                raise InputError(f"{name} must be a number in ({lo:g}, {hi:g}], got {v!r}")
-        if isinstance(self.max_unconfirmed, bool) or not isinstance(self.max_unconfirmed, int) \
-                or not 1 <= self.max_unconfirmed <= 100:
-            raise InputError(f"max_unconfirmed must be a whole number in [1, 100], got {self.max_unconfirmed!r}")
-        d = self.duration
-        if d is not None and (isinstance(d, bool) or not isinstance(d, (int, float)) or not math.isfinite(d)
-                              or not 0 < d <= 86400):
-            raise InputError(f"duration must be a number in (0, 86400] s, got {d!r}")
+        check_options(self, FOLLOW_BOUNDS)
 
 
 @dataclass

@@ -40,7 +40,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from roarmctl.errors import DeviceError, InputError
+from roarmctl.checks import Bound, check_options
+from roarmctl.errors import DeviceError
 from roarmctl.motion.collision import interpolate
 
 if TYPE_CHECKING:
@@ -54,17 +55,24 @@ class SourceLost(DeviceError):
     """The source is lost (silent beyond the timeout) or refused too often in a row (exit 4); the arm must hold."""
 
 
-def _bounded(name: str, value: float, lo: float, hi: float, unit: str, *, zero: bool = False) -> float:
-    v = float(value)
-    if not math.isfinite(v) or not (lo <= v <= hi) or (v == lo and not zero):
-        span = f"{'[' if zero else '('}{lo:g}, {hi:g}]"
-        raise InputError(f"{name} must be a number in {span} {unit}, got {value!r}".rstrip())
-    return v
+#: GuardLimits' bounds (``roarmctl.checks.check_options``): times in s, angles in rad.
+GUARD_BOUNDS = {
+    "velocity_scale": Bound(0.0, 1.0, strict_lo=True),  # share of the joint velocity limits
+    "acceleration_scale": Bound(0.0, 1.0, strict_lo=True),
+    "step_tolerance": Bound(0.0, 0.5),
+    "start_tolerance": Bound(0.0, math.pi),
+    "timeout": Bound(0.0, 60.0, strict_lo=True),
+    "max_lag": Bound(0.0, 60.0, strict_lo=True),
+    "frozen_after": Bound(0.0, 3600.0),  # 0: never
+    "max_refusals": Bound(1, 1000, whole=True),
+    "resolution": Bound(0.0, 0.1, strict_lo=True),
+    "limit_tolerance": Bound(0.0, 0.1),
+}
 
 
 @dataclass(frozen=True)
 class GuardLimits:
-    """The guard's options, each checked on creation. Times in s, angles in rad.
+    """The guard's options, each checked on creation (``GUARD_BOUNDS``). Times in s, angles in rad.
 
     ``velocity_scale``/``acceleration_scale``: the share of the robot's joint velocity and acceleration limits
     a step may use; ``step_tolerance``: rad added to every step bound (the source's own jitter);
@@ -87,17 +95,7 @@ class GuardLimits:
     limit_tolerance: float = 0.005
 
     def __post_init__(self) -> None:
-        _bounded("velocity_scale", self.velocity_scale, 0.0, 1.0, "")
-        _bounded("acceleration_scale", self.acceleration_scale, 0.0, 1.0, "")
-        _bounded("step_tolerance", self.step_tolerance, 0.0, 0.5, "rad", zero=True)
-        _bounded("start_tolerance", self.start_tolerance, 0.0, math.pi, "rad", zero=True)
-        _bounded("timeout", self.timeout, 0.0, 60.0, "s")
-        _bounded("max_lag", self.max_lag, 0.0, 60.0, "s")
-        _bounded("frozen_after", self.frozen_after, 0.0, 3600.0, "s", zero=True)
-        _bounded("resolution", self.resolution, 0.0, 0.1, "rad")
-        _bounded("limit_tolerance", self.limit_tolerance, 0.0, 0.1, "rad", zero=True)
-        if isinstance(self.max_refusals, bool) or not isinstance(self.max_refusals, int) or not 1 <= self.max_refusals <= 1000:
-            raise InputError(f"max_refusals must be a whole number in [1, 1000], got {self.max_refusals!r}")
+        check_options(self, GUARD_BOUNDS)
 
 
 @dataclass(frozen=True)

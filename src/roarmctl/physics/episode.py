@@ -25,10 +25,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from roarmctl.checks import Bound, check_options
 from roarmctl.device.protocol import M3_FIELDS, WireMap
 from roarmctl.device.schedule import sample
-from roarmctl.errors import InfeasibleError, InputError, PlanFileError, UnreachableError
-from roarmctl.physics.render import Cameras, FrameBuffers, offscreen
+from roarmctl.errors import InfeasibleError, PlanFileError, UnreachableError
+from roarmctl.physics.render import CAMERAS, Cameras, FrameBuffers, offscreen
 from roarmctl.physics.setup import build
 from roarmctl.plan.template import Range, Template
 
@@ -43,27 +44,35 @@ CLEARANCE = 0.01  # m between the footprints of two sampled items (and a place t
 MAX_RESAMPLE = 50  # scenes drawn for one try before it counts as "crowded"
 
 
+#: The side of a camera image (pixels): what datagen's options take too.
+IMAGE_SIDE = Bound(16, 4096, whole=True)
+
+#: EpisodeOptions' bounds (``roarmctl.checks.check_options``).
+EPISODE_BOUNDS = {
+    "width": IMAGE_SIDE,
+    "height": IMAGE_SIDE,
+    "fps": Bound(1, 120, whole=True),
+    "cameras": Bound(choices=CAMERAS, many=True),
+    "settle": Bound(0.0, 10.0),  # s
+    "tolerance": Bound(1e-4, 1.0),  # m
+}
+
+
 @dataclass
 class EpisodeOptions:
     """``width`` x ``height`` pixels per camera (``cameras``; none: no images), ``fps`` frames per second of
-    simulated time, ``settle`` s simulated after the last command, ``tolerance`` m of a placement."""
+    simulated time, ``settle`` s simulated after the last command, ``tolerance`` m of a placement; checked on
+    creation (``EPISODE_BOUNDS``)."""
 
     width: int = 640
     height: int = 480
     fps: int = 30
-    cameras: tuple[str, ...] = ("front", "wrist")
+    cameras: tuple[str, ...] = CAMERAS
     settle: float = 0.5
     tolerance: float = 0.010
 
     def __post_init__(self) -> None:
-        for name, lo, hi in (("width", 16, 4096), ("height", 16, 4096), ("fps", 1, 120)):
-            n = getattr(self, name)
-            if not isinstance(n, int) or isinstance(n, bool) or not lo <= n <= hi:
-                raise InputError(f"{name}: {n!r} is out of range", f"a whole number from {lo} to {hi}")
-        for name, a, b in (("settle", 0.0, 10.0), ("tolerance", 1e-4, 1.0)):
-            x = float(getattr(self, name))
-            if not (math.isfinite(x) and a <= x <= b):
-                raise InputError(f"{name}: {x!r} is out of range", f"a number from {a:g} to {b:g}")
+        check_options(self, EPISODE_BOUNDS)
 
 
 @dataclass

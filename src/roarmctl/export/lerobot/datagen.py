@@ -33,11 +33,12 @@ from typing import Any
 
 import numpy as np
 
+from roarmctl.checks import MAX_WHOLE, Bound, check_options
 from roarmctl.errors import DeviceError, InfeasibleError, InputError, RoarmError
 from roarmctl.export.lerobot import stats, video
 from roarmctl.export.lerobot.dataset import DatasetSpec, Episode, read_info, write_dataset
 from roarmctl.fileio import atomic_write_json
-from roarmctl.physics.episode import CAUSES, EpisodeOptions, run_episode
+from roarmctl.physics.episode import CAUSES, IMAGE_SIDE, EpisodeOptions, run_episode
 from roarmctl.physics.render import CAMERAS, FrameBuffers
 from roarmctl.plan.template import check_reach, load_template
 from roarmctl.robot.loader import load_robot
@@ -54,11 +55,27 @@ CLOSE_S = 60.0  # s a worker gets to finish its shard when the run ends early
 SHARD_CEILING_S = 3600.0  # s without any shard finishing: a worker hangs (a shard takes seconds to minutes)
 
 
+#: DatagenOptions' bounds (``roarmctl.checks.check_options``).
+DATAGEN_BOUNDS = {
+    "episodes": Bound(1, 1_000_000, whole=True),
+    "seed": Bound(0, MAX_WHOLE, whole=True),
+    "workers": Bound(1, 1024, whole=True),
+    "width": IMAGE_SIDE,
+    "height": IMAGE_SIDE,
+    "max_tries": Bound(0, 100_000_000, whole=True),  # 0: 20 per episode, at least 50
+    "ray": Bound(text=True, optional=True),  # "": a local Ray; else a cluster's address
+    "resume": Bound(flag=True),
+    "cameras": Bound(choices=CAMERAS, many=True),
+    "codec": Bound(choices=tuple(video.CODECS)),
+}
+
+
 @dataclass
 class DatagenOptions:
     """``episodes`` to keep, the ``seed``, ``workers`` (processes or Ray tasks at once), image ``width`` x
     ``height``, ``max_tries`` (0: 20 per episode, at least 50) before giving up (exit 3), ``ray``: None
-    (process pool), "" (a local Ray started here) or a cluster address, ``resume`` a killed run."""
+    (process pool), "" (a local Ray started here) or a cluster address, ``resume`` a killed run; checked on creation
+    (``DATAGEN_BOUNDS``)."""
 
     episodes: int
     seed: int = 0
@@ -72,20 +89,10 @@ class DatagenOptions:
     codec: str = "h264"  # roarmctl.export.lerobot.video.CODECS
 
     def __post_init__(self) -> None:
-        for c in self.cameras:
-            if c not in CAMERAS:
-                raise InputError(f"cameras: unknown '{c}'", f"choose from {', '.join(CAMERAS)}, or none")
-        if self.width % 2 or self.height % 2:
-            raise InputError(f"size: {self.width}x{self.height} has an odd side", "the videos (yuv420p) need even widths and heights")
-        if self.codec not in video.CODECS:
-            raise InputError(f"codec: unknown '{self.codec}'", f"choose {' or '.join(video.CODECS)}")
-        if len(set(self.cameras)) != len(self.cameras):
-            raise InputError("cameras: a camera is named twice")
-        for name, lo, hi in (("episodes", 1, 1_000_000), ("workers", 1, 1024), ("width", 16, 4096), ("height", 16, 4096),
-                             ("max_tries", 0, 100_000_000), ("seed", 0, 2**63 - 1)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-                raise InputError(f"{name}: {v!r} is out of range", f"a whole number from {lo} to {hi}")
+        check_options(self, DATAGEN_BOUNDS)
+        if self.width % 2 or self.height % 2:  # between two fields: the size as the CLI takes it
+            raise InputError(f"{self.width}x{self.height} has an odd side", "the videos (yuv420p) need even widths and heights",
+                             option="size")
 
     @property
     def limit(self) -> int:

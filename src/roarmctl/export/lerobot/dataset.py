@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import io
 import json
-import math
 import re
 import shutil
 from collections.abc import Iterable, Sequence
@@ -40,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from roarmctl.checks import Bound, check_options
 from roarmctl.errors import InputError
 from roarmctl.export.lerobot import stats as st
 from roarmctl.export.lerobot import video
@@ -66,11 +66,21 @@ def image_key(camera: str) -> str:
     return f"observation.images.{camera}"
 
 
+#: Where a dataset's files roll over (``roarmctl.checks.check_options``); the other fields of a ``DatasetSpec`` come
+#: from the run (the robot, its cameras) or from a dataset's info.json (``spec_of``, which names the file when a
+#: value is refused).
+LAYOUT_BOUNDS = {
+    "chunks_size": Bound(1, 10**9, whole=True),  # files per chunk
+    "data_files_size_in_mb": Bound(0.0, 1e6, strict_lo=True),  # MiB
+    "video_files_size_in_mb": Bound(0.0, 1e6, strict_lo=True),  # MiB
+}
+
+
 @dataclass
 class DatasetSpec:
     """What every episode of a dataset shares: ``fps``, ``robot_type``, the ``joint_names`` of state and action,
     ``cameras``: name -> (height, width) pixels (none: no video features), and where files roll over (MiB,
-    files per chunk; lerobot's defaults)."""
+    files per chunk; lerobot's defaults; checked on creation against ``LAYOUT_BOUNDS``)."""
 
     fps: int
     robot_type: str
@@ -81,12 +91,7 @@ class DatasetSpec:
     video_files_size_in_mb: float = VIDEO_FILES_SIZE_IN_MB
 
     def __post_init__(self) -> None:
-        for name in ("chunks_size", "data_files_size_in_mb", "video_files_size_in_mb"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
-                raise InputError(f"{name}: {v!r} is out of range", "a positive number")
-        if int(self.chunks_size) != self.chunks_size:
-            raise InputError(f"chunks_size: {self.chunks_size!r} is not a whole number", "files per chunk, e.g. 1000")
+        check_options(self, LAYOUT_BOUNDS)
 
     def features(self, video_info: dict[str, dict[str, Any]] | None = None) -> dict[str, dict[str, Any]]:
         """``info.json``'s ``features`` (lerobot's order: the data, the cameras, then its default features)."""
