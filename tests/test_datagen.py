@@ -797,6 +797,77 @@ def test_a_shard_that_never_ends_is_a_device_error_naming_the_workers(monkeypatc
     assert err.value.exit_code == 4 and "workers" in str(err.value) and "\n" not in str(err.value)
 
 
+class _ScriptedEngine:
+    """Stands in for the process pool: each try's verdict is scripted (``kept[t]``; kept past the script), a kept
+    try staged as two frames whose state is its number, and the running tries end in the order ``rng`` draws."""
+
+    def __init__(self, kept: list[bool], workers: int, rng, dof: int) -> None:
+        self.kept, self.slots, self.rng, self.dof = kept, workers, rng, dof
+        self.started: list[int] = []
+        self.results: dict[int, list] = {}
+
+    def submit(self, template, staging, tries, *_):
+        from roarmctl.export.lerobot import datagen
+
+        out = []
+        for t in tries:
+            self.started.append(t)
+            kept = self.kept[t] if t < len(self.kept) else True
+            o = {"try": t, "kept": kept, "cause": None if kept else "no path", "detail": "", "timings": {}}
+            if kept:
+                state = np.full((2, self.dof), float(t))
+                datagen._stage(Path(staging), t, state, state, {}, {})
+                o["frames"] = 2
+            datagen._write_json(Path(staging) / f"{t:08d}.json", o)
+            out.append(o)
+        handle = len(self.results)
+        self.results[handle] = out
+        return handle
+
+    def wait(self, pending):
+        return [self.rng.choice(pending)]
+
+    def result(self, handle):
+        return self.results[handle]
+
+    def close(self):
+        pass
+
+
+@settings(max_examples=25, deadline=None)
+@given(kept=hs.lists(hs.booleans(), max_size=12), episodes=hs.integers(1, 5), workers=hs.integers(1, 4),
+       order=hs.randoms(use_true_random=False))
+def test_the_tries_started_are_the_ones_the_episodes_need_and_the_dataset_is_the_first_kept(kept, episodes, workers, order):
+    """The scheduler of ``generate`` over scripted verdicts and any order of results: the dataset is the first
+    ``episodes`` kept tries in try order, the tries started in order and none twice; when those are the first
+    tries, exactly they ran (no spare try: with two tries a shard and no look at the episodes missing, ``-n 2`` on
+    two workers ran four tries, two of them waited for and thrown away)."""
+    import tempfile
+
+    from roarmctl.export.lerobot import datagen
+    from roarmctl.export.lerobot.dataset import read_episodes
+    from roarmctl.plan.template import load_template
+    from roarmctl.robot.loader import load_robot
+
+    dof = len(load_robot(load_template(TEMPLATE).plan.robot).joint_names)
+    engine = _ScriptedEngine(kept, workers, order, dof)
+    pool = datagen._Pool
+    datagen._Pool = lambda _workers: engine  # type: ignore[assignment,misc]
+    try:
+        with tempfile.TemporaryDirectory() as d:
+            options = datagen.DatagenOptions(episodes=episodes, workers=workers, cameras=())
+            summary = datagen.generate(TEMPLATE, Path(d) / "ds", options)
+            got = [int(e.state[0, 0]) for e in read_episodes(Path(d) / "ds")]
+    finally:
+        datagen._Pool = pool  # type: ignore[misc]
+    verdicts = kept + [True] * 100
+    want = [t for t, k in enumerate(verdicts) if k][:episodes]
+    assert got == want and summary.kept == episodes and summary.tried == want[-1] + 1
+    assert sorted(engine.started) == list(range(len(engine.started)))  # in order, none twice
+    if want == list(range(episodes)):
+        assert engine.started == want
+
+
 @pytest.mark.slow  # three worlds built (the jaws' 64 meshes each) and drawn: ~2 s
 def test_a_kept_gl_context_draws_the_next_scene_as_a_fresh_one_would():
     """Datagen's episodes differ in their objects, not in the meshes MuJoCo keeps on the GL side, so the renderer

@@ -2,7 +2,8 @@
 
 Tries are numbered 0, 1, 2, ...; try ``t`` is ``roarmctl.physics.episode.run_episode(template, robot, t, seed)``,
 a pure function of its arguments. Shards of ``SHARD`` consecutive tries run on the workers (in this process
-for one worker, a process pool, or Ray tasks), each writing its tries into the staging folder
+for one worker, a process pool, or Ray tasks), no more at once than the episodes still missing need at the keep
+rate seen so far (``_wanted``: -n 2 on two workers runs two tries when both are kept), each writing its tries into the staging folder
 ``DATASET/.datagen/`` (a kept try: its state, action, videos (encoded by the worker) and image stats, in a
 folder renamed into place when whole; then, for every try, a small outcome file, the try's commit). The
 dataset is the first ``n`` kept tries in try order: the same whatever the number of workers or the engine,
@@ -46,7 +47,7 @@ from roarmctl.validation import load_json
 
 STAGING = ".datagen"
 STATE_FILE = "run.json"
-SHARD = 2  # tries per shard: small, so that few tries run past the last episode needed
+SHARD = 1  # tries per shard: one, so that a run starts no try it will not need (two ran -n 2 on 2 workers as 4 tries)
 FORMAT = "roarmctl.datagen/1"
 STAGES = ("sample", "plan", "physics", "render", "encode", "stage")
 RAY_STARTS = 3  # tries to start a local Ray (each given 30 s by Ray)
@@ -179,6 +180,18 @@ def _stage(staging: Path, t: int, state: np.ndarray, action: np.ndarray, videos:
 
 
 # ------------------------------------------------------------------------------------------- the engines
+def _wanted(episodes: int, kept: int, tried: int, running: int) -> bool:
+    """Whether one more try is worth starting: ``kept`` of ``tried`` finished tries were kept and ``running`` run.
+
+    Yes while the running tries, kept at the rate seen so far ((kept + 1) / (tried + 1): all of them before the
+    first result), would not make up the ``episodes`` still missing, and always when none runs (the run must go
+    on; a try before a kept one can still be missing after a resume). A try past the last one the dataset uses is
+    spare work (waited for, not used): started only when rejections made it likely to be needed."""
+    if running == 0:
+        return True
+    return running * (kept + 1) / (tried + 1) < episodes - kept
+
+
 def _shards(start: int, done: set[int]) -> Iterator[list[int]]:
     t = start
     while True:
@@ -453,7 +466,8 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
             pending: list[Any] = []
             last = time.monotonic()  # when a shard last finished
             while chosen is None:
-                while len(pending) < engine.slots and summary.tried + SHARD * len(pending) < options.limit:
+                while (len(pending) < engine.slots and summary.tried + SHARD * len(pending) < options.limit
+                       and _wanted(options.episodes, summary.kept, summary.tried, SHARD * len(pending))):
                     pending.append(engine.submit(str(template_path), str(staging), next(shards), options.seed,
                                                  options.width, options.height, options.cameras, options.codec))
                 if not pending:
