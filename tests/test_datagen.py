@@ -383,19 +383,42 @@ def test_appending_to_a_dataset_whose_info_is_broken_is_an_input_error(tmp_path,
 
 
 # ------------------------------------------------------------------------------------------- whole runs
+def docs_command(ray: bool) -> list[str]:
+    """The docs' ``datagen`` command at 96x96 pixels with ``--ray local`` (docs/guide.md) or without it
+    (docs/benchmarks.md's lerobot dataset), as written: its arguments after ``roarmctl``."""
+    from test_readme_examples import COMMANDS
+
+    (cmd,) = [c for c in COMMANDS if c.startswith("roarmctl datagen") and f"--size {SIZE}x{SIZE}" in c
+              and ("--ray local" in c) == ray]
+    return cmd.split()[1:]
+
+
+def _option(args: list[str], name: str) -> str:
+    return args[args.index(name) + 1]
+
+
+EPISODES = int(_option(docs_command(ray=False), "-n"))
+
+
 def _generate(out: Path, workers: int = 1, **kw):
     from roarmctl.export.lerobot.datagen import DatagenOptions, generate
 
-    return generate(TEMPLATE, out, DatagenOptions(episodes=4, seed=0, workers=workers, width=SIZE, height=SIZE, **kw))
+    return generate(TEMPLATE, out, DatagenOptions(episodes=EPISODES, seed=0, workers=workers, width=SIZE, height=SIZE, **kw))
 
 
 @pytest.fixture(scope="module")
-def dataset4(tmp_path_factory):
-    """Four episodes written by two worker processes (the tries sharded between them); the killed run's test resumes
-    on one worker to the same bytes, so the dataset is the same whatever the worker count."""
-    out = tmp_path_factory.mktemp("datagen") / "ds"
-    summary = _generate(out, workers=2)
-    return out, summary
+def dataset96(tmp_path_factory):
+    """docs/benchmarks.md's dataset, its command run as written (test_readme_examples leaves it to this fixture, so it
+    is written once): one worker, in this process. The killed run's test resumes on two workers and the Ray test
+    runs the tries as Ray tasks, both to the same bytes: the dataset is the same whatever the workers or the engine.
+    Returns the dataset's folder and the command's output."""
+    args = docs_command(ray=False)
+    assert _option(args, "--size") == f"{SIZE}x{SIZE}" and "--workers" not in args and "--seed" not in args, args
+    work = tmp_path_factory.mktemp("datagen")
+    (work / "plans").symlink_to(ROOT / "plans")  # the command's paths are the docs' (from the clone's top)
+    r = roarmctl(*args, cwd=work)
+    assert r.returncode == 0, r.stderr
+    return work / _option(args, "-o"), r.stdout
 
 
 FILES = ("data/chunk-000/file-000.parquet", "meta/episodes/chunk-000/file-000.parquet", "meta/tasks.parquet",
@@ -403,22 +426,22 @@ FILES = ("data/chunk-000/file-000.parquet", "meta/episodes/chunk-000/file-000.pa
 VIDEOS = ("videos/observation.images.front/chunk-000/file-000.mp4", "videos/observation.images.wrist/chunk-000/file-000.mp4")
 
 
-@pytest.mark.slow  # four episodes planned, run in physics and rendered (about 20 s on an idle core)
-@pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
-def test_four_episodes_at_96_pixels(dataset4):
+@pytest.mark.slow  # three episodes planned, run in physics and rendered (about 10 s on an idle core)
+@pytest.mark.xdist_group("datagen-dataset96")  # the dataset written once (module fixture)
+def test_the_docs_dataset_at_96_pixels(dataset96):
     import pyarrow.parquet as pq
 
-    out, summary = dataset4
-    assert summary.kept == 4 and summary.tried >= 4 and summary.tried == 4 + sum(summary.causes.values())
+    out, said = dataset96
     assert not (out / ".datagen").exists()
     lengths = [r["length"] for r in pq.read_table(out / "meta/episodes/chunk-000/file-000.parquet").to_pylist()]
+    assert len(lengths) == EPISODES and f"{EPISODES} episodes, {sum(lengths)} frames" in " ".join(said.split())
     _check_dataset(out, lengths, 30, ["front", "wrist"])
     assert sorted(p.name for p in out.iterdir()) == ["data", "meta", "videos"]
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
-def test_actions_are_what_execute_sends_and_states_follow_the_plan(dataset4):
+@pytest.mark.xdist_group("datagen-dataset96")  # the dataset written once (module fixture)
+def test_actions_are_what_execute_sends_and_states_follow_the_plan(dataset96):
     """Each episode's trajectory is planned again from its try (the same draw), and the commands of the
     streamer's schedule (``build_schedule``, as execute sends them) decoded at each frame time must be its
     action column; the state is measured, so it follows the plan closely but is not the command."""
@@ -431,7 +454,7 @@ def test_actions_are_what_execute_sends_and_states_follow_the_plan(dataset4):
     from roarmctl.plan.template import load_template
     from roarmctl.robot.loader import load_robot
 
-    out, _ = dataset4
+    out, _ = dataset96
     t = load_template(TEMPLATE)
     robot = load_robot(t.plan.robot)
     data = pq.read_table(out / "data/chunk-000/file-000.parquet")
@@ -441,7 +464,7 @@ def test_actions_are_what_execute_sends_and_states_follow_the_plan(dataset4):
     ts = data["frame_index"].to_numpy() / 30.0  # the instants exactly (the timestamp column is float32)
     wm = WireMap(robot)
     matched = 0
-    for k in range(12):  # the kept tries are among the first ones (the fixture kept 4)
+    for k in range(12):  # the kept tries are among the first ones (the fixture kept EPISODES)
         rng = np.random.default_rng([0, k])
         drawn = sample_plan(t, robot, rng)
         if drawn is None:
@@ -470,22 +493,23 @@ def test_actions_are_what_execute_sends_and_states_follow_the_plan(dataset4):
             assert np.max(np.abs(state[rows][:, arm] - plan[:, arm])) < 0.25  # the servos track the plan
             assert not np.allclose(state[rows], action[rows], atol=1e-4)  # measured, not commanded
             matched += 1
-            if matched == 4:
+            if matched == EPISODES:
                 break
-    assert matched == 4
+    assert matched == EPISODES
 
 
 @pytest.mark.slow  # a run killed with SIGKILL after its first staged try, then resumed
-@pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
-def test_a_killed_run_resumed_on_one_worker_is_the_dataset_two_workers_wrote(dataset4, tmp_path):
-    """One worker throughout (the killed run's and the resume's) against the fixture's two: the same bytes in every
-    file and the same frames in every video, so neither a resume nor the sharding of the tries changes the dataset."""
+@pytest.mark.xdist_group("datagen-dataset96")  # the dataset written once (module fixture)
+def test_a_killed_run_resumed_on_two_workers_is_the_dataset_one_worker_wrote(dataset96, tmp_path):
+    """One worker until killed, two process-pool workers for the resume, against the fixture's one worker: the same
+    bytes in every file and the same frames in every video, so neither a resume nor the sharding of the tries
+    changes the dataset."""
     from roarmctl.export.lerobot import video
 
-    out, _ = dataset4
+    out, _ = dataset96
     target = tmp_path / "ds"
     env = {**os.environ, "COLUMNS": "80"}
-    proc = subprocess.Popen([sys.executable, "-m", "roarmctl", "datagen", str(TEMPLATE), "-n", "4", "-o", str(target),
+    proc = subprocess.Popen([sys.executable, "-m", "roarmctl", "datagen", str(TEMPLATE), "-n", str(EPISODES), "-o", str(target),
                              "--size", f"{SIZE}x{SIZE}", "--json"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
     try:
         deadline = time.monotonic() + 300  # a ceiling only: the test waits for a staged try, not for a time
@@ -498,9 +522,9 @@ def test_a_killed_run_resumed_on_one_worker_is_the_dataset_two_workers_wrote(dat
         proc.wait(timeout=60)
     staged = target / ".datagen"
     assert staged.is_dir() and not (target / "meta").exists()  # killed before the dataset was written
-    r = roarmctl("datagen", str(TEMPLATE), "-n", "4", "-o", str(target), "--size", f"{SIZE}x{SIZE}")
+    r = roarmctl("datagen", str(TEMPLATE), "-n", str(EPISODES), "-o", str(target), "--size", f"{SIZE}x{SIZE}")
     assert r.returncode == 2 and "--resume" in r.stderr  # a non-empty folder needs --resume
-    summary = _generate(target, resume=True)
+    summary = _generate(target, workers=2, resume=True)
     assert summary.resumed >= 2
     for rel in FILES + VIDEOS:
         assert (out / rel).read_bytes() == (target / rel).read_bytes(), rel
@@ -523,8 +547,8 @@ def _lerobot_python() -> str | None:
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
-def test_lerobot_itself_reads_the_frames_written(dataset4):
+@pytest.mark.xdist_group("datagen-dataset96")  # the dataset written once (module fixture)
+def test_lerobot_itself_reads_the_frames_written(dataset96):
     """Optional (skipped where lerobot is not installed; CI does not have it): ``LeRobotDataset`` of lerobot itself,
     run by ``tests/lerobot_read.py`` in lerobot's Python, reads the dataset as pyarrow and PyAV read it: the same
     episodes and frames, indices, timestamps k / fps, tasks, ``observation.state`` and ``action`` to the bit, at
@@ -537,7 +561,7 @@ def test_lerobot_itself_reads_the_frames_written(dataset4):
     python = _lerobot_python()
     if python is None:
         pytest.skip("lerobot is not installed here: set ROARMCTL_LEROBOT_PYTHON to the python of a venv that has it")
-    out, summary = dataset4
+    out, _ = dataset96
     r = subprocess.run([python, str(ROOT / "tests" / "lerobot_read.py"), str(out), "3"], capture_output=True, text=True,
                        timeout=900)
     assert r.returncode == 0, r.stderr[-3000:]
@@ -545,7 +569,7 @@ def test_lerobot_itself_reads_the_frames_written(dataset4):
     data = pq.read_table(out / "data/chunk-000/file-000.parquet").to_pydict()
     episodes = pq.read_table(out / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
     tasks = pq.read_table(out / "meta/tasks.parquet").to_pandas()
-    assert got["num_episodes"] == summary.kept == len(episodes) and got["num_frames"] == len(data["index"])
+    assert got["num_episodes"] == EPISODES == len(episodes) and got["num_frames"] == len(data["index"])
     assert got["fps"] == 30 and got["camera_keys"] == ["observation.images.front", "observation.images.wrist"]
     rows = got["rows"]
     for key in ("index", "episode_index", "frame_index", "task_index"):
@@ -568,7 +592,7 @@ def test_lerobot_itself_reads_the_frames_written(dataset4):
         for q in ("q01", "q10", "q50", "q90", "q99"):  # lerobot's from a histogram (~0.2 % of the span here), ours exact
             assert np.all(np.abs(np.array(theirs[q]) - ours[q]) <= 0.01 * span + 1e-7), (key, q)
     decoded = {cam: video.decode(out / f"videos/{cam}/chunk-000/file-000.mp4")[0] for cam in got["camera_keys"]}
-    assert len(got["images"]) == 3 * summary.kept
+    assert len(got["images"]) == 3 * EPISODES
     for img in got["images"]:
         ep = episodes[img["episode_index"]]
         assert img["task"] == tasks.index[data["task_index"][img["index"]]]
@@ -581,8 +605,8 @@ def test_lerobot_itself_reads_the_frames_written(dataset4):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
-def test_lerobot_itself_writes_the_same_layout(dataset4, tmp_path):
+@pytest.mark.xdist_group("datagen-dataset96")  # the dataset written once (module fixture)
+def test_lerobot_itself_writes_the_same_layout(dataset96, tmp_path):
     """Optional, as the test above: the dataset's frames written again by lerobot's own writer
     (``tests/lerobot_write.py``: ``LeRobotDataset.create``, ``add_frame``, ``save_episode``) give the same files,
     the episodes' and frames' parquet with the same columns of the same types, the same values in the frames'
@@ -593,7 +617,7 @@ def test_lerobot_itself_writes_the_same_layout(dataset4, tmp_path):
     python = _lerobot_python()
     if python is None:
         pytest.skip("lerobot is not installed here: set ROARMCTL_LEROBOT_PYTHON to the python of a venv that has it")
-    out, _ = dataset4
+    out, _ = dataset96
     theirs = tmp_path / "lerobot_written"
     r = subprocess.run([python, str(ROOT / "tests" / "lerobot_write.py"), str(out), str(theirs)], capture_output=True,
                        text=True, timeout=1800)
@@ -619,16 +643,16 @@ def test_lerobot_itself_writes_the_same_layout(dataset4, tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("datagen-dataset4")  # the four episodes written once (module fixture)
-def test_ray_data_reads_the_dataset(dataset4):
+@pytest.mark.xdist_group("datagen-dataset96")  # the dataset written once (module fixture)
+def test_ray_data_reads_the_dataset(dataset96):
     """Optional: Ray Data's read_lerobot (which decodes through lerobot) where both are installed here."""
     pytest.importorskip("lerobot")
     ray = pytest.importorskip("ray")
-    out, _ = dataset4
+    out, _ = dataset96
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     ds = LeRobotDataset("local/roarmctl", root=out)
-    assert ds.num_episodes == 4
+    assert ds.num_episodes == EPISODES
     ray.init(num_cpus=1, include_dashboard=False)
     try:
         rows = ray.data.read_lerobot(str(out)).count()
@@ -664,6 +688,7 @@ def run_file(tmp_path_factory):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("datagen-run-file")  # the run planned and simulated once (module fixture)
 def test_an_executed_run_appends_as_an_episode_of_measured_state_and_sent_goals(run_file, tmp_path):
     """The episode against the log itself: at each frame the last T:1051 reading (firmware radians, by the time the
     servos were read: the log's one measured-frame time, ``frame_read_time``) and the last T:102 goals sent, both mapped to joints by the robot's wire map."""
@@ -699,6 +724,7 @@ def test_an_executed_run_appends_as_an_episode_of_measured_state_and_sent_goals(
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("datagen-run-file")  # the run planned and simulated once (module fixture)
 def test_a_run_does_not_join_a_dataset_with_cameras_or_a_trajectory(run_file, tmp_path):
     from roarmctl.export.lerobot.dataset import write_dataset
 
@@ -712,27 +738,27 @@ def test_a_run_does_not_join_a_dataset_with_cameras_or_a_trajectory(run_file, tm
     assert r.returncode == 2 and "--lerobot" in r.stderr
 
 
-def guide_ray_command() -> list[str]:
-    """The docs' ``datagen ... --ray local`` command line, as written (its arguments after ``roarmctl``)."""
-    from test_readme_examples import COMMANDS
-
-    (cmd,) = [c for c in COMMANDS if c.startswith("roarmctl datagen") and "--ray local" in c]
-    return cmd.split()[1:]
-
-
-@pytest.mark.slow  # Ray started on this machine (tens of seconds on a busy one), the episodes again in the pool
-def test_ray_tasks_write_the_same_dataset_as_the_process_pool_and_nothing_outside_it(tmp_path):
+@pytest.mark.slow  # Ray started on this machine (tens of seconds on a busy one)
+@pytest.mark.xdist_group("datagen-dataset96")  # the dataset written once (module fixture)
+def test_ray_tasks_write_the_same_dataset_as_the_process_pool_and_nothing_outside_it(dataset96, tmp_path):
     """The guide's ``--ray local`` command as written (test_readme_examples leaves it to this test, so Ray starts
     once), in a process of its own whose home and temporary folders are empty folders here: the same bytes as the
-    process pool given the same command without ``--ray``, and afterwards both folders are empty again (Ray's session
-    files and token were kept in roarmctl's own temporary folder and environment) and no process of that Ray is left."""
+    fixture's run of the same command without ``--ray`` (docs/benchmarks.md's, on one worker; the killed run's test
+    shows two pool workers write those bytes too), and afterwards both folders are empty again (Ray's session files
+    and token were kept in roarmctl's own temporary folder and environment) and no process of that Ray is left."""
     pytest.importorskip("ray")
     import tempfile
 
-    args = guide_ray_command()
+    args = docs_command(ray=True)
+    pool, _ = dataset96
     at = args.index("--ray")
-    pool_args = args[:at] + args[at + 2:]
-    out = args[args.index("-o") + 1]
+    without = args[:at] + args[at + 2:]  # --ray, and --workers (the bytes do not depend on them), left out
+    if "--workers" in without:
+        w = without.index("--workers")
+        without = without[:w] + without[w + 2:]
+    without[without.index("-o") + 1] = pool.name
+    assert without == docs_command(ray=False), "the docs' Ray command must be their 96x96 dataset's with --ray"
+    out = _option(args, "-o")
     work = tmp_path / "work"
     shutil.copytree(ROOT / "plans", work / "plans")  # the command's paths are the docs' (from the clone's top)
     home = tmp_path / "home"
@@ -754,11 +780,8 @@ def test_ray_tasks_write_the_same_dataset_as_the_process_pool_and_nothing_outsid
         assert len(r.stderr.strip().splitlines()) == 1 and "load average" in r.stderr and "--ray" in r.stderr
         pytest.skip(r.stderr.strip())
     assert r.returncode == 0, r.stderr
-    pool_args[pool_args.index("-o") + 1] = "pool"
-    p = roarmctl(*pool_args, cwd=work)
-    assert p.returncode == 0, p.stderr
     for rel in FILES + VIDEOS:
-        assert (work / "pool" / rel).read_bytes() == (work / out / rel).read_bytes(), rel
+        assert (pool / rel).read_bytes() == (work / out / rel).read_bytes(), rel
 
 
 def _cmdline(proc: Path) -> bytes:
@@ -862,7 +885,7 @@ def test_the_tries_started_are_the_ones_the_episodes_need_and_the_dataset_is_the
         datagen._Pool = pool  # type: ignore[misc]
     verdicts = kept + [True] * 100
     want = [t for t, k in enumerate(verdicts) if k][:episodes]
-    assert got == want and summary.kept == episodes and summary.tried == want[-1] + 1
+    assert got == want and summary.kept == episodes and summary.tried == want[-1] + 1 == episodes + sum(summary.causes.values())
     assert sorted(engine.started) == list(range(len(engine.started)))  # in order, none twice
     if want == list(range(episodes)):
         assert engine.started == want
