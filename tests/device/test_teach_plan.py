@@ -67,6 +67,7 @@ def test_nothing_to_save_is_refused():
         plan_text(ROBOT, [], 0.02)
 
 
+@pytest.mark.slow  # plans the saved plan in a fresh `roarmctl plan`: 1.1 s of CPU
 def test_a_grasp_at_a_plan_object_becomes_pick_and_place_that_plan(tmp_path):
     """Taught over plans/pick_place.yaml: above the cube, grasp at its centre, carry, release 30 cm over: the saved
     plan picks the cube and places it where the hand released it; `plan` plans it (the cube carried and checked)."""
