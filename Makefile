@@ -29,8 +29,10 @@ TEST_JOBS ?= $(shell echo $$(( 2 * $$(nproc 2>/dev/null || echo 1) )))
 # PYTHONDONTWRITEBYTECODE emptied: pytest keeps each test module's assertion-rewritten bytecode in __pycache__ (git
 # ignores it); with the variable set (as some shells and images do) every worker of every run rewrote all ~110
 # test modules again (collection: 7.2 s of CPU per worker, 3.1 s with the bytecode kept).
+# --no-loadscope-reorder: the workers get the tests in tests/conftest.py's order (the browser-view group, then the
+# known long tests, then the rest), not xdist's default of the largest groups first and every single test after them.
 test: $(STAMP) render
-	PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadgroup --durations=15
+	PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest -n $(TEST_JOBS) --dist loadgroup --no-loadscope-reorder --durations=15
 
 # The inner loop (under 30 s on 2 idle cores): the unit and differential tests, each under ~0.3 s of CPU on its own
 # (set-up shared with its module aside); left out, marked @pytest.mark.slow: a test over that, real-time runs on the
@@ -38,7 +40,7 @@ test: $(STAMP) render
 # per core: nothing in it waits, so a second worker per core would only import and collect everything again.
 FAST_JOBS ?= $(shell nproc 2>/dev/null || echo 1)
 test-fast: $(STAMP) render
-	PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest -n $(FAST_JOBS) --dist loadgroup -m "not slow"
+	PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest -n $(FAST_JOBS) --dist loadgroup --no-loadscope-reorder -m "not slow"
 
 # Lint and types (rules and why: pyproject.toml, docs/design.md "Lint and types"): ruff over everything that is
 # Python (the package, its tests, benches and examples); mypy over the package and the examples users copy from.

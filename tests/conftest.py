@@ -37,16 +37,46 @@ def _scheduling_policy_unchanged():
     assert after == before, f"this test changed the worker's scheduling policy/priority from {before} to {after}"
 
 
+#: Tests that take longest on their worker (wall, mostly waiting: real time on the simulated arm, Ray, CoACD), by
+#: node id prefix, longest first, from ``make test``'s --durations at load 2-5 (seconds in the comments). Handed out
+#: right after the browser-view group, they run beside the many short tests instead of after them: with
+#: ``--dist loadgroup`` the last long test to start sets the run's wall time. A name that no longer exists does
+#: nothing; a new long test belongs here (``make test`` prints its 15 slowest).
+LONG_FIRST = (
+    "tests/test_datagen.py::test_ray_tasks_write_the_same_dataset_as_the_process_pool",  # 118
+    "tests/device/test_teach_e2e.py::test_taught_by_hand_planned_and_executed_passes_every_waypoint",  # 28
+    "tests/test_readme_examples.py::test_readme_command[roarmctl datagen plans/datagen/pick_place.yaml -n 4 -o cube_left",  # 23
+    "tests/test_zone_properties.py::test_generated_plans_reach_their_targets",  # 7-17 each arm
+    "tests/test_jaw_pieces.py::test_a_fresh_decomposition_is_the_bundled_file_byte_for_byte",  # 12
+    "tests/test_view_sources.py::test_a_real_run_that_lowered_its_rate_is_drawn_on_the_plan",  # 11
+    "tests/device/test_where_the_arm_is.py::test_start_current_after_the_arm_was_moved_by_hand",  # 10
+    "tests/device/test_physical_ranges.py::test_waveshares_sdk_sequence_leaves_no_physical_range_on_sim_device",  # 9
+    "tests/device/test_execute.py::test_sim_run_follows_the_plan_and_keeps_time",  # 9
+    "tests/test_readme_examples.py::test_readme_command[roarmctl datagen\\nplans/datagen/pick_place.yaml -n 3",  # 9
+    "tests/test_scene_files.py::test_a_plan_file_with_a_mesh_and_a_cloud_plans_and_draws",  # 8
+    "tests/device/test_startup_stop.py::test_ctrl_c_while_connect_waits_for_set_up_sends_nothing_and_logs",  # 7
+)
+
+
+def _hand_out_rank(item: pytest.Item) -> int:
+    """0 for the browser-view group, 1 + the place in ``LONG_FIRST`` for a long test, after them all the rest."""
+    if any(m.args == ("browser-view",) for m in item.iter_markers("xdist_group")):
+        return 0
+    return 1 + next((k for k, prefix in enumerate(LONG_FIRST) if item.nodeid.startswith(prefix)), len(LONG_FIRST))
+
+
 @pytest.hookimpl(tryfirst=True)  # before -m "not slow" deselects
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """A test that starts the headless browser (the ``chromium`` fixture of tests/test_view.py) is slow: left out
-    of ``make test-fast``; the browser-view group goes first."""
+    of ``make test-fast``; the browser-view group goes first, then the known long tests (``LONG_FIRST``)."""
     for item in items:
         if "chromium" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.slow)
     # The browser-view tests are one xdist group (one worker, about two minutes of mostly waiting on Chromium): handed
-    # out first, they run beside the rest instead of after it (collected last, they were the suite's tail).
-    items.sort(key=lambda item: not any(m.args == ("browser-view",) for m in item.iter_markers("xdist_group")))
+    # out first, they run beside the rest instead of after it (collected last, they were the suite's tail). The order
+    # is xdist's only with --no-loadscope-reorder (the Makefile's): by default loadgroup hands out the groups with the
+    # most tests first, and every single test after all of them.
+    items.sort(key=_hand_out_rank)
 
 
 @pytest.fixture
