@@ -214,8 +214,8 @@ def test_huge_coordinates_are_one_error_line_without_numpy_warnings(tmp_path, ca
     import warnings
 
     import numpy as np
-    from clirun import roarmctl
     import trimesh
+    from clirun import roarmctl
 
     if case.startswith("cloud"):
         big = float(case.split()[1])
