@@ -501,9 +501,9 @@ def test_actions_are_what_execute_sends_and_states_follow_the_plan(dataset96):
 @pytest.mark.slow  # a run killed with SIGKILL after its first staged try, then resumed
 @pytest.mark.xdist_group("datagen-dataset96")  # the dataset written once (module fixture)
 def test_a_killed_run_resumed_on_two_workers_is_the_dataset_one_worker_wrote(dataset96, tmp_path):
-    """One worker until killed, two process-pool workers for the resume, against the fixture's one worker: the same
-    bytes in every file and the same frames in every video, so neither a resume nor the sharding of the tries
-    changes the dataset."""
+    """One worker until killed, the resume on the process pool (two workers, spawned processes; the tries left
+    are run there), against the fixture's one worker in its own process: the same bytes in every file and the same
+    frames in every video, so neither a resume nor the engine that runs the tries changes the dataset."""
     from roarmctl.export.lerobot import video
 
     out, _ = dataset96
