@@ -165,3 +165,34 @@ def test_step_lengths_are_numpys_norms_bit_for_bit():
         seg = got.tolist()
         cum = list(itertools.accumulate(seg, initial=0.0))
         assert np.array(cum).tobytes() == np.concatenate([[0.0], np.cumsum(got)]).tobytes()
+
+
+def test_simplifying_a_pruned_path_skips_the_greedy_pass_with_the_same_result(robot):
+    """simplify_path(pruned=True) leaves out the greedy vertex pass on what plan_joint_path_with_stats(
+    simplify_attempts=0) returned (that pass's result): the same path as with the pass, with fewer state checks."""
+    for seed in range(8):
+        checker = fresh_checker(robot)
+        raw, _stats = plan_joint_path_with_stats(checker, LEFT, RIGHT, seed=seed, simplify_attempts=0, max_step=None)
+        before = checker.check_count
+        full = simplify_path(checker, raw, seed=seed)
+        full_checks, before = checker.check_count - before, checker.check_count
+        np.testing.assert_array_equal(simplify_path(checker, raw, seed=seed, pruned=True), full)
+        assert checker.check_count - before < full_checks
+
+
+def test_the_greedy_pass_keeps_its_own_result():
+    """The greedy pass (with the de-duplication that follows it) run on its own result keeps every vertex: what
+    pruned=True relies on. Random polylines with repeated vertices, in the example scene with the wall."""
+    from roarmctl.motion.ompl_planner import _drop_vertices, _random_shortcuts
+
+    robot = load_robot("roarm_m3_pro")
+    checker = fresh_checker(robot)
+    rng = np.random.default_rng(4)
+    for _ in range(30):
+        k = int(rng.integers(3, 12))
+        path = LEFT + (RIGHT - LEFT) * np.linspace(0, 1, k)[:, None] + rng.normal(0, 0.25, (k, 5)) * [1, 0.3, 0.3, 0.3, 1]
+        path = np.clip(path, checker._lower, checker._upper)
+        path[0], path[-1] = LEFT, RIGHT
+        path = np.repeat(path, rng.integers(1, 3, k), axis=0)  # some vertices twice
+        once = _random_shortcuts(checker, path, 0.01, None, 0, 5.0)
+        np.testing.assert_array_equal(_drop_vertices(checker, once, 0.01), once)

@@ -156,13 +156,15 @@ def _drop_vertices(checker: CollisionChecker, path: np.ndarray, resolution: floa
 
 
 def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: float,
-                      rng: np.random.Generator | None, attempts: int, ceiling: float) -> np.ndarray:
+                      rng: np.random.Generator | None, attempts: int, ceiling: float, pruned: bool = False) -> np.ndarray:
     """Classic random shortcutting through ``checker.segment_valid`` (so every new segment gets the
     same refined check): join two random points of the path by a straight segment when it is
-    valid and shorter. A fixed number of attempts from a seeded generator (None when ``attempts`` is 0);
+    valid and shorter, after the greedy vertex pass (``_drop_vertices``; not with ``pruned``: the path is that
+    pass's result already). A fixed number of attempts from a seeded generator (None when ``attempts`` is 0);
     ``ceiling`` (s of wall time) is a safety stop that raises ``CeilingError``."""
     until = time.perf_counter() + ceiling
-    path = _drop_vertices(checker, path, resolution)
+    if not pruned:
+        path = _drop_vertices(checker, path, resolution)
     failures = 0
     changed = False
     # of the current path (recomputed only when a shortcut changes it: stale)
@@ -215,14 +217,20 @@ def _random_shortcuts(checker: CollisionChecker, path: np.ndarray, resolution: f
 
 
 def simplify_path(checker: CollisionChecker, path: npt.ArrayLike, *, seed: int = 0, resolution: float = 0.01,
-                  attempts: int = SHORTCUT_ATTEMPTS, time_budget: float = 5.0) -> np.ndarray:
+                  attempts: int = SHORTCUT_ATTEMPTS, time_budget: float = 5.0, pruned: bool = False) -> np.ndarray:
     """Shorten a valid joint path (K, arm_dof): greedy vertex removal plus ``attempts`` seeded random
     shortcuts, every new segment checked with ``checker.segment_valid`` at ``resolution`` (rad).
     The endpoints are kept exactly. E.g. plan several raw paths with ``simplify_attempts=0``, keep
     the shortest, and simplify only that one. ``time_budget`` (s) is a safety ceiling: past it,
-    ``CeilingError``; the result depends only on the path, ``seed`` and ``attempts``."""
+    ``CeilingError``; the result depends only on the path, ``seed`` and ``attempts``.
+
+    ``pruned``: ``path`` is what ``plan_joint_path_with_stats(simplify_attempts=0, max_step=None)`` returned with this
+    checker in the same state, i.e. the greedy pass's result already; the pass is not run again, which gives the same
+    path: from each kept vertex the first pass found the next kept one the farthest reachable and every later vertex
+    unreachable (those segments are checked again alike, and the next vertex is taken unchecked), and a vertex the
+    pass's de-duplication dropped only brings the one after it next (~5 failing segment checks a plan on b)."""
     path = np.array(path, dtype=float)
-    return _random_shortcuts(checker, path, resolution, np.random.default_rng(seed), attempts, time_budget)
+    return _random_shortcuts(checker, path, resolution, np.random.default_rng(seed), attempts, time_budget, pruned)
 
 
 def plan_joint_path_with_stats(checker: CollisionChecker, q_start: npt.ArrayLike, q_goal: npt.ArrayLike, *,

@@ -75,7 +75,7 @@ def free_path(ctx: PlanContext, step: TaskStep, q: np.ndarray) -> np.ndarray:
     path = best[0]
     if not best[1].direct:  # shortcut only the one we keep
         t0 = time.perf_counter()
-        path = simplify_path(ctx.checker, path, seed=seed, time_budget=cfg.simplify_budget)
+        path = simplify_path(ctx.checker, path, seed=seed, time_budget=cfg.simplify_budget, pruned=True)
         ctx.timer.add("simplify", t0)
     vertices = np.repeat(q[None, :], len(path), axis=0)
     vertices[:, ctx.arm] = path
