@@ -738,6 +738,38 @@ def test_a_run_does_not_join_a_dataset_with_cameras_or_a_trajectory(run_file, tm
     assert r.returncode == 2 and "--lerobot" in r.stderr
 
 
+RAY_ENV = """
+import json, os, sys
+import ray
+from roarmctl.export.lerobot.datagen import _Ray
+seen = []
+def init(**kwargs):  # records what a started Ray would read, then fails as a start that timed out would not
+    seen.append(os.environ.get("RAY_USAGE_STATS_ENABLED"))
+    raise Exception("no start here")
+ray.init = init
+try:
+    _Ray(sys.argv[1], 1)
+except Exception as exc:
+    pass
+print(json.dumps({"at_init": seen, "after": os.environ.get("RAY_USAGE_STATS_ENABLED")}))
+"""
+
+
+@pytest.mark.slow  # imports Ray (seconds of CPU)
+@pytest.mark.parametrize(("address", "given", "at_init"), [("", None, "0"), ("", "1", "1"), ("ray://head:10001", None, None)])
+def test_a_local_ray_collects_no_usage_stats_unless_the_user_asked(address, given, at_init):
+    """Ray collects usage stats by default (docs.ray.io, "Usage Stats Collection"); a Ray that datagen starts for one
+    run does not (``RAY_USAGE_STATS_ENABLED=0`` while it starts, the caller's environment as it was afterwards); a
+    value the user set is kept, and a cluster of the user's (an address) is left to its own settings."""
+    pytest.importorskip("ray")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")} | ({} if given is None else
+                                                                              {"RAY_USAGE_STATS_ENABLED": given})
+    r = subprocess.run([sys.executable, "-c", RAY_ENV, address], env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out == {"at_init": [at_init], "after": given}, out
+
+
 @pytest.mark.slow  # Ray started on this machine (tens of seconds on a busy one)
 @pytest.mark.xdist_group("datagen-dataset96")  # the dataset written once (module fixture)
 def test_ray_tasks_write_the_same_dataset_as_the_process_pool_and_nothing_outside_it(dataset96, tmp_path):

@@ -268,7 +268,7 @@ class _Ray:
 
     A local Ray keeps its session (sockets, logs, spilled objects) in a temporary folder of its own, removed
     by ``close``, and its token (Ray's token authentication) in this process's environment, not in
-    ``~/.ray``. Ray gives a starting raylet a fixed 30 s to register (``ray/_private/node.py``), which a
+    ``~/.ray``; it collects no usage stats (``RAY_USAGE_STATS_ENABLED=0`` unless the caller set it). Ray gives a starting raylet a fixed 30 s to register (``ray/_private/node.py``), which a
     machine at a load of a few times its cores exceeds: a start is tried ``RAY_STARTS`` times, the processes
     a failed one left are ended, and then it is a ``DeviceError`` naming the load and the ways round it."""
 
@@ -280,6 +280,10 @@ class _Ray:
         if not address and "RAY_AUTH_MODE" not in os.environ and "RAY_AUTH_TOKEN" not in os.environ and "ray" not in sys.modules:
             # before Ray is imported: its token loader reads the environment once
             self._set_env({"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": os.urandom(32).hex()})
+        if not address and "RAY_USAGE_STATS_ENABLED" not in os.environ:
+            # a Ray started for one run reports nothing to Ray's usage-stats server (its default; Ray's docs,
+            # "Usage Stats Collection": the variable is read when Ray starts)
+            self._set_env({"RAY_USAGE_STATS_ENABLED": "0"})
         try:
             import ray
         except ImportError:
