@@ -34,9 +34,12 @@ InverseDynamics = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 # time of obstacle, multi_object, pick_place and payload.yaml over seeds 1-15 (60 plans) by -0.000 % (single
 # plans -0.07 .. +0.19 %), with the same TOPP-RA runs and 21 % fewer grid points; GRID_MIN 40 changed little
 # more there (+0.02 %) but failed a built case of a short segment between long ones (tests/test_timing.py) at
-# every margin. Earlier, 80 rather than 100 points cost 0.02-0.06 % on the wall and post queries of
-# bench/bench_vs_mplib.py.
-GRID_MIN, GRID_MAX, GRID_PER_SEGMENT, GRID_PER_WAYPOINT = 80, 800, 4, 5
+# every margin, as does 50. Earlier, 80 rather than 100 points cost 0.02-0.06 % on the wall and post queries of
+# bench/bench_vs_mplib.py. 60 rather than 80 (bench/bench_knobs.py, queries a-e at seeds 100-139): the median and mean
+# durations within 0.05 %, each motion -1.4 .. +0.46 %; api.plan's CPU 0.95-0.96x on b-e; the bundled plans
+# (seeds 1-3) within -0.01 .. +0.07 %; the short-segment case still times at its margin, the slowed-a-lot case of
+# tests/test_timing.py shows its behaviour at another TCP limit.
+GRID_MIN, GRID_MAX, GRID_PER_SEGMENT, GRID_PER_WAYPOINT = 60, 800, 4, 5
 # A path of two waypoints is a straight line in joint space (q'' = 0: no curvature for the grid to follow; the joint
 # limits are the same everywhere on it, only the TCP speed and torque bounds vary, slowly): GRID_LINE intervals,
 # not GRID_MIN. Over every such timing of queries a-e (seeds 100-111) and of four bundled plans (seeds 1-4), 30
