@@ -49,7 +49,6 @@ LONG_FIRST = (
     "tests/test_readme_examples.py::test_readme_command[roarmctl datagen plans/datagen/pick_place.yaml -n 4 -o cubes",  # 23-32
     "tests/test_zone_properties.py::test_generated_plans_reach_their_targets",  # 7-17 each arm
     "tests/test_jaw_pieces.py::test_a_fresh_decomposition_is_the_bundled_file_byte_for_byte",  # 12
-    "tests/test_view_sources.py::test_a_real_run_that_lowered_its_rate_is_drawn_on_the_plan",  # 11
     "tests/device/test_where_the_arm_is.py::test_start_current_after_the_arm_was_moved_by_hand",  # 10
     "tests/device/test_physical_ranges.py::test_waveshares_sdk_sequence_leaves_no_physical_range_on_sim_device",  # 9
     "tests/device/test_execute.py::test_sim_run_follows_the_plan_and_keeps_time",  # 9

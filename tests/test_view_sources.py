@@ -45,15 +45,17 @@ def test_commands_of_a_stream_that_lowered_its_rate_land_where_the_plan_has_them
     np.testing.assert_allclose(positions, sample(traj, times), atol=1e-9)
 
 
-@pytest.mark.slow  # a real-time run on the simulated queued build with a slow loop
-def test_a_real_run_that_lowered_its_rate_is_drawn_on_the_plan(tmp_path):
-    """The queued 20260701 build with a 22 ms loop pass makes the streamer lower its rate (more than once); the page of
-    its log (without the trajectory it carries, as an older roarmctl wrote it) draws the commanded TCP where the plan
-    has it (RMS under 5 mm: the servo sag offset) and no faster than the plan's peak."""
+@pytest.mark.slow  # plans pick_place and executes it on the simulated queued build with a slow loop (~1 s of CPU)
+def test_a_run_that_lowered_its_rate_is_drawn_on_the_plan(tmp_path, virtual_sim):
+    """The queued 20260701 build with a 22 ms loop pass makes the streamer lower its rate; the page of its log
+    (without the trajectory it carries, as an older roarmctl wrote it) draws the commanded TCP where the plan has it
+    (RMS under 5 mm: the servo sag offset) and no faster than the plan's peak. The run is on the virtual clock
+    (``virtual_sim``: the same firmware and servo models, no pty; 11 s of waiting in real time); the real-time run
+    that lowers its rate is tests/device/test_execute.py's."""
     import base64
     import json
-    import subprocess
-    import sys
+
+    from clirun import roarmctl
 
     from roarmctl.viz.web.sources import load_view_source, source_document
 
@@ -66,8 +68,8 @@ def test_a_real_run_that_lowered_its_rate_is_drawn_on_the_plan(tmp_path):
     traj_file = tmp_path / "pp.traj.json"
     api.plan(ROOT / "plans" / "pick_place.yaml").trajectory.save(traj_file)
     log = tmp_path / "run.json"
-    done = subprocess.run([sys.executable, "-m", "roarmctl", "execute", str(traj_file), "--sim", "--yes", "--firmware",
-                           "m3-2026", "--loop-pass", "22", "--log", str(log)], capture_output=True, text=True, timeout=300)
+    done = roarmctl("execute", str(traj_file), "--sim", "--yes", "--firmware", "m3-2026", "--loop-pass", "22",
+                    "--log", str(log))
     assert done.returncode == 0, done.stderr
     data = json.loads(log.read_text())
     assert data["rate_changes"], "the slow loop should have lowered the rate"
