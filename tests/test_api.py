@@ -107,10 +107,15 @@ def run_script(script: Path, args: list[str], cwd: Path) -> subprocess.Completed
                                        out.getvalue(), err.getvalue())
 
 
-@pytest.mark.slow  # 03 runs on the simulated arm in real time
+@pytest.mark.slow  # the examples plan, execute, export
 @pytest.mark.parametrize("script", EXAMPLES, ids=lambda p: p.name)
-def test_example_runs(script, short_traj, tmp_path):
-    """Every example runs as `python examples/NN_x.py`, on the short trajectory where it takes one."""
+def test_example_runs(script, short_traj, tmp_path, request):
+    """Every example runs as `python examples/NN_x.py`, on the short trajectory where it takes one. 03's
+    ``rc.execute(sim=True)`` runs on the virtual clock (``virtual_sim``): in real time a loaded machine made the
+    streamer lower its rate, and the run sent 48 commands where the check asks for more than 50 (the real-time run of
+    the same library entry is tests/device/test_execute.py's)."""
+    if script.name.startswith("03"):
+        request.getfixturevalue("virtual_sim")
     args = {"01": [str(tmp_path)], "02": [str(short_traj)], "03": [str(short_traj), str(tmp_path / "run.exec.json")],
             "04": [str(short_traj), str(tmp_path)]}.get(script.name[:2], [str(tmp_path)])
     r = run_script(script, args, tmp_path)
