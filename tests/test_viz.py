@@ -46,6 +46,11 @@ def traj_file(tmp_path_factory, pick_place):
     return path
 
 
+# The tests that read ``drawn`` share one xdist worker (mark ``DRAWN``): the sheet is drawn once (0.6-0.8 s of CPU),
+# not on every worker that drew one of them.
+DRAWN = pytest.mark.xdist_group("viz-drawn")
+
+
 @pytest.fixture(scope="module")
 def drawn(pick_place):
     data = path_data(pick_place, robot_for(pick_place))
@@ -71,6 +76,7 @@ def test_fixture_reaches_its_targets_with_the_gripper_down(pick_place):
 
 # ----------------------------------------------------------------------------- plotted data
 @pytest.mark.slow
+@DRAWN
 def test_3d_path_is_fk_of_every_sample(pick_place, drawn):
     _data, fig = drawn
     robot = load_robot("roarm_m3_pro")
@@ -83,6 +89,7 @@ def test_3d_path_is_fk_of_every_sample(pick_place, drawn):
 
 
 @pytest.mark.slow
+@DRAWN
 def test_cartesian_segments_are_drawn_thicker_and_straight(pick_place, drawn):
     data, fig = drawn
     (path,) = artists(fig, "tcp_path")
@@ -102,6 +109,7 @@ def test_cartesian_segments_are_drawn_thicker_and_straight(pick_place, drawn):
 
 
 @pytest.mark.slow
+@DRAWN
 def test_tcp_speed_agrees_with_finite_differences(drawn):
     data, _ = drawn
     fd = np.linalg.norm(np.gradient(data.tcp, data.times, axis=0), axis=1)
@@ -110,6 +118,7 @@ def test_tcp_speed_agrees_with_finite_differences(drawn):
 
 
 @pytest.mark.slow
+@DRAWN
 def test_limit_lines_sit_at_scale_times_limit(drawn):
     _data, fig = drawn
     robot = load_robot("roarm_m3_pro")
@@ -124,6 +133,7 @@ def test_limit_lines_sit_at_scale_times_limit(drawn):
 
 
 @pytest.mark.slow
+@DRAWN
 def test_event_markers_at_event_times_in_every_time_plot(pick_place, drawn):
     _, fig = drawn
     for e in pick_place.events:
@@ -134,6 +144,7 @@ def test_event_markers_at_event_times_in_every_time_plot(pick_place, drawn):
         assert np.allclose(np.ravel(target._offsets3d), e.position)
 
 
+@DRAWN
 def test_arm_drawn_at_start_each_event_and_end(pick_place, drawn):
     _data, fig = drawn
     robot = load_robot("roarm_m3_pro")
@@ -150,6 +161,7 @@ def test_arm_drawn_at_start_each_event_and_end(pick_place, drawn):
 
 
 @pytest.mark.slow
+@DRAWN
 def test_placed_object_ghost_follows_the_grasp_offset(drawn):
     data, _ = drawn
     (ghost,) = data.placed_items
