@@ -37,19 +37,29 @@ PIXELS = 3.0  # how far the drawn TCP may lie from its FK projection
 
 
 # ------------------------------------------------------------------------------------------- fixtures
+class _Planned(dict):
+    """A bundled plan planned the first time a test reads it (name -> (trajectory file, Trajectory)), then kept:
+    ``make test-fast``'s few tests here read pick_place only (planning all six took 1.2 s of CPU for them)."""
+
+    def __init__(self, folder: Path) -> None:
+        super().__init__()
+        self.folder = folder
+
+    def __missing__(self, name: str) -> tuple[Path, object]:
+        from roarmctl.motion.pipeline import plan_file
+
+        (plan,) = [p for p in PLANS if p.stem == name]
+        traj = plan_file(plan, seed=None).trajectory
+        f = self.folder / f"{name}.traj.json"
+        traj.save(f)
+        self[name] = (f, traj)
+        return self[name]
+
+
 @pytest.fixture(scope="module")
 def planned(tmp_path_factory):
-    """Every bundled plan planned once: name -> (trajectory file, Trajectory)."""
-    from roarmctl.motion.pipeline import plan_file
-
-    d = tmp_path_factory.mktemp("view_plans")
-    out = {}
-    for p in PLANS:
-        traj = plan_file(p, seed=None).trajectory
-        f = d / f"{p.stem}.traj.json"
-        traj.save(f)
-        out[p.stem] = (f, traj)
-    return out
+    """Each bundled plan planned once, when first read (``_Planned``): name -> (trajectory file, Trajectory)."""
+    return _Planned(tmp_path_factory.mktemp("view_plans"))
 
 
 @pytest.fixture(scope="module")
