@@ -50,10 +50,17 @@ LONG_FIRST = (
     "tests/test_zone_properties.py::test_generated_plans_reach_their_targets",  # 7-17 each arm
     "tests/test_jaw_pieces.py::test_a_fresh_decomposition_is_the_bundled_file_byte_for_byte",  # 12
     "tests/device/test_where_the_arm_is.py::test_start_current_after_the_arm_was_moved_by_hand",  # 10
+    "tests/device/test_physics_execute.py::test_a_lagging_arm_is_not_a_fault",  # 10 (load 2-10)
+    "tests/device/test_physics_execute.py::test_the_default_strategy_follows_the_plan_on_the_physics_arm",  # 10
+    "tests/device/test_streamer.py::test_a_host_stall_in_a_detour_makes_the_run_late_never_cut_across_the_obstacle",  # 10
     "tests/device/test_physical_ranges.py::test_waveshares_sdk_sequence_leaves_no_physical_range_on_sim_device",  # 9
     "tests/device/test_execute.py::test_sim_run_follows_the_plan_and_keeps_time",  # 9
     "tests/test_scene_files.py::test_a_plan_file_with_a_mesh_and_a_cloud_plans_and_draws",  # 8
+    "tests/test_trust_xacro.py::test_every_allowed_function_with_hostile_arguments",  # 9 (load 2-10)
+    "tests/test_yaml_reader.py::test_generated_documents_read_as_pyyaml_reads_them",  # 8
+    "tests/test_physics.py::test_the_0_2_kg_weight_holds_its_sag",  # 8
     "tests/device/test_startup_stop.py::test_ctrl_c_while_connect_waits_for_set_up_sends_nothing_and_logs",  # 7
+    "tests/test_doc_python_blocks.py::test_the_block_runs_as_written[docs/guide.md",  # 1-10 each (those that plan)
 )
 
 
