@@ -1,5 +1,5 @@
-"""Every Python block of the README and docs/*.md runs here as written, in a fresh interpreter in a scratch folder
-with the bundled plans, and does what the text beside it says. A block that needs inputs the text leaves to the
+"""Every Python block of the README and docs/*.md runs here as written, as a script in a scratch folder with the
+bundled plans, and does what the text beside it says. A block that needs inputs the text leaves to the
 reader (a recorded array of targets, a dataset's joint states) gets them from a preamble here, and nothing else is
 changed, except that the real-time ``rc.execute`` line is left out (tests/device runs execute on the simulated arm).
 A new block fails here until it is given its entry in ``BLOCKS``. (The README's own block also runs from the folder
@@ -7,12 +7,13 @@ that holds a clone: tests/test_readme_examples.py.)"""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
-import os
 import re
 import shutil
 import subprocess
-import sys
+import traceback
 from pathlib import Path
 
 import pytest
@@ -59,12 +60,26 @@ def test_every_block_has_its_entry():
 
 
 def _run(where: str, code: str, tmp_path: Path) -> subprocess.CompletedProcess[str]:
+    """The block (its preamble before, its checks after) run as a script (``__main__``, a namespace of its own) in this
+    process, in ``tmp_path`` with the bundled plans: exit code 1 and the traceback on stderr when it raises. A fresh
+    interpreter per block cost about a second of imports each; the block imports what it uses all the same (a name
+    it forgets is a NameError here too), and the README's block also runs in a fresh interpreter from the folder that
+    holds a clone (tests/test_readme_examples.py)."""
     pre, checks, _ = entry(code) or ("", "", False)
     body = "\n".join(line for line in code.splitlines() if "rc.execute(" not in line)
     shutil.copytree(ROOT / "plans", tmp_path / "plans")
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"} | {"MPLBACKEND": "Agg"}
     script = "from pathlib import Path\n" + pre + body + "\n" + checks
-    return subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
+    out, err = io.StringIO(), io.StringIO()
+    returncode = 0
+    with contextlib.chdir(tmp_path), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            exec(compile(script, where, "exec"), {"__name__": "__main__"})  # noqa: S102 - the docs' own blocks
+        except SystemExit as exc:
+            returncode = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+        except Exception:  # noqa: BLE001 - any failure of the block is the test's failure, with its traceback
+            traceback.print_exc()
+            returncode = 1
+    return subprocess.CompletedProcess(["<block>", where], returncode, out.getvalue(), err.getvalue())
 
 
 def _params(slow: bool) -> list:
