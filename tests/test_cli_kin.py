@@ -168,3 +168,30 @@ def test_joint_values_typed_as_a_list_are_the_same_values():
         assert out["q"] == apart["q"] and out["position"] == apart["position"], typed
     proc = run("kin", "fk", "roarm_m3_pro", "[0, x, 1, -0.2, 0]")
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "'x' is not a number" in proc.stderr
+
+
+@pytest.mark.parametrize("args", [
+    ("fk", "roarm_m3_pro", "0", "0", "nan", "0", "0"),                 # was exit 0 with a NaN pose
+    ("fk", "roarm_m3_pro", "0", "0", "inf", "0", "0"),
+    ("jacobian", "ur10", "0", "0", "0", "0", "-inf", "0"),
+    ("dynamics", "planar_2r", "--q", "0 0", "--qd", "nan 0"),
+    ("ik", "roarm_m3_pro", "--xyz", "0.25", "0", "0.05", "--pitch", "inf"),  # was exit 1, a bug report
+    ("ik", "roarm_m3_pro", "--xyz", "0.25", "0", "0.05", "--pitch", "1.5", "--roll", "nan"),
+    ("ik", "ur10", "--xyz", "0.5", "0.2", "0.5", "--pitch", "nan"),
+    ("ik", "roarm_m3_pro", "--xyz", "0.25", "0", "0.05", "--ref", "0 0 nan 0 0"),
+])
+def test_non_finite_numbers_exit_2_one_line(args):
+    proc = run("kin", *args)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2, proc.stderr
+    assert len(lines) == 1 and "finite" in lines[0] and "Traceback" not in proc.stderr
+
+
+def test_library_ik_refuses_non_finite_angles():
+    from roarmctl.errors import InputError
+    from roarmctl.robot.ik import solve_ik
+
+    robot = load_robot("roarm_m3_pro")
+    for kw in ({"pitch": float("inf")}, {"pitch": 1.0, "roll": float("nan")}):
+        with pytest.raises(InputError, match="finite"):
+            solve_ik(robot, [0.25, 0, 0.05], **kw)

@@ -140,4 +140,7 @@ def parse_numbers(values: list[str], what: str, deg: bool = False) -> np.ndarray
     import numpy as np
 
     arr = np.array(out)
+    if not np.all(np.isfinite(arr)):  # float() reads 'nan' and 'inf': a NaN joint gave a NaN pose and exit 0
+        bad = next(v for v in out if not math.isfinite(v))
+        raise InputError(f"{what}: expected finite numbers, got {bad:g}", "give ordinary numbers: 0 -1.57 1.57")
     return np.radians(arr) if deg else arr

@@ -48,7 +48,7 @@ def _angles_out(values: "npt.ArrayLike", deg: bool) -> "np.ndarray":
 
 def _looks_like_degrees(what: str, values: "Iterable[float | None]", deg: bool) -> None:
     """Warn when angles given without --deg are larger than a turn (2 pi rad): probably degrees."""
-    big = [v for v in values if v is not None and abs(float(v)) > 2 * math.pi]
+    big = [v for v in values if v is not None and math.isfinite(float(v)) and abs(float(v)) > 2 * math.pi]
     if big and not deg:
         common.warn(f"{what} {', '.join(f'{float(v):g}' for v in big)} look like degrees (more than 2 pi rad): read as "
                     f"radians; pass --deg if they are degrees")

@@ -79,6 +79,9 @@ def solve_ik(
         InputError: malformed arguments (wrong lengths, pitch and rpy together, ...).
     """
     p = vec3(position, "position")
+    for name, angle in (("pitch", pitch), ("roll", roll)):
+        if angle is not None and not math.isfinite(float(angle)):  # inf reached the closed form's cos: a bug report
+            raise InputError(f"{name}: expected a finite angle (rad), got {float(angle):g}")
     if rpy is not None and (pitch is not None or roll is not None):
         raise InputError("give either rpy or pitch/roll, not both")
     rot = None if rpy is None else transform(rpy=vec3(rpy, "rpy"))[:3, :3]
