@@ -447,7 +447,11 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
         return Summary(kept=int(info["total_episodes"]), frames=int(info["total_frames"]), complete=True,
                        bytes=sum(p.stat().st_size for p in out.rglob("*") if p.is_file()), wall=time.perf_counter() - t_start)
     staging = out / STAGING
-    staging.mkdir(parents=True, exist_ok=True)
+    try:
+        staging.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # under a file, in /proc, no permission: the user's path, not a bug
+        raise InputError(f"cannot make {out}: {exc.strerror or exc}", "give a folder you can write to",
+                         option="output") from None
     _write_json(staging / STATE_FILE, state)
     summary = Summary(resumed=len(outcomes), causes=dict.fromkeys(CAUSES, 0), stages=dict.fromkeys(STAGES, 0.0))
 
