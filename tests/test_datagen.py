@@ -67,6 +67,24 @@ def test_bad_options_exit_2(tmp_path):
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
 
 
+def test_an_output_folder_that_cannot_be_made_exits_2_with_one_line(tmp_path):
+    """-o under a file (any user, root too, cannot make a folder there): was an internal error (exit 1)."""
+    (tmp_path / "a_file").write_text("x")
+    r = roarmctl("datagen", str(TEMPLATE), "-n", "1", "--size", "32x32", "-o", str(tmp_path / "a_file" / "ds"))
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "a_file" in lines[0] and "Traceback" not in r.stderr, r.stderr
+    assert (tmp_path / "a_file").read_text() == "x"
+
+
+@pytest.mark.parametrize("fps", ["0", "-1", "121"])
+def test_export_lerobot_fps_out_of_range_exits_2_before_reading_the_run(tmp_path, fps):
+    """--fps 0 was taken as 'not given' and a 30 fps dataset was written with exit 0."""
+    r = roarmctl("export", str(tmp_path / "run.exec.json"), "--lerobot", str(tmp_path / "ds"), "--fps", fps)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "--fps" in lines[0] and "1 to 120" in lines[0], r.stderr
+    assert not (tmp_path / "ds").exists()
+
+
 def test_a_sampled_scene_stays_within_the_regions_and_is_the_same_for_the_same_try():
     from roarmctl.physics.episode import sample_plan
     from roarmctl.plan.template import load_template

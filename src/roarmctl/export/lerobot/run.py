@@ -54,6 +54,8 @@ def episode_of(log_streams: Any, fps: int, task: str) -> Episode:
 def export_run(source: str | os.PathLike, dataset: str | os.PathLike, *, task: str | None = None,
                fps: int | None = None) -> dict[str, Any]:
     """Append the run ``source`` to the dataset at ``dataset`` (made if missing); returns a summary."""
+    if fps is not None and not 1 <= fps <= 120:  # before the run is read; 0 is a value, not "left out"
+        raise InputError(f"{fps} is out of range", "1 to 120 frames per second", option="fps")
     kind, _ = load_source(source)
     if kind != "log":
         raise InputError(f"{source}: a LeRobot episode is made of an execution log (.exec.json or a simulate run file), "
@@ -76,7 +78,7 @@ def export_run(source: str | os.PathLike, dataset: str | os.PathLike, *, task: s
             tasks = pq.read_table(root / TASKS_PATH)["task"].to_pylist()
             task = str(tasks[0]) if tasks else DEFAULT_TASK
     else:
-        spec = DatasetSpec(fps or DEFAULT_FPS, streams.robot.name, list(streams.joint_names))
+        spec = DatasetSpec(DEFAULT_FPS if fps is None else fps, streams.robot.name, list(streams.joint_names))
     task = DEFAULT_TASK if task is None else task
     if not task.strip() or "\n" in task or len(task) > 500:
         raise InputError("expected one line of text (1 to 500 characters)", option="task")
