@@ -211,3 +211,29 @@ def test_json_failure_after_a_json_success_in_the_same_process(traj, tmp_path, c
     assert call(["export", str(traj), "-o", str(tmp_path / "a.txt"), "--json"]) == 2
     out = json.loads(capsys.readouterr().out)
     assert out["ok"] is False and out["exit_code"] == 2
+
+
+@pytest.mark.parametrize("args", [("execute", "{traj}", "--sim", "--servos", "ideal", "--yes", "--log", "{bad}"),
+                                  ("simulate", "{traj}", "-o", "{bad}")])
+def test_an_output_that_cannot_be_written_is_refused_before_the_run(traj, tmp_path, virtual_sim, args):
+    """A log or run file under a file (any user, root too, cannot write there) is exit 2 before the arm moves: execute
+    ran the whole motion, then warned that its log was lost, exit 0; simulate ran the physics, then exit 2."""
+    (tmp_path / "a_file").write_text("x")
+    bad = tmp_path / "a_file" / "run.json"
+    r = roarmctl(*(a.format(traj=traj, bad=bad) for a in args))
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "cannot write" in lines[0] and "a_file" in lines[0], r.stderr
+    assert virtual_sim == [] and sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]
+
+
+def test_check_writable_probes_the_folder_and_leaves_nothing(tmp_path):
+    from roarmctl.errors import InputError
+    from roarmctl.fileio import check_writable
+
+    assert check_writable(tmp_path / "new" / "deeper" / "out.json") == tmp_path / "new" / "deeper" / "out.json"
+    assert list(tmp_path.iterdir()) == []  # no folder made, no probe left
+    (tmp_path / "f").write_text("x")
+    for bad in (tmp_path / "f" / "out.json", tmp_path / "f" / "sub" / "out.json", tmp_path):
+        with pytest.raises(InputError, match="cannot write"):
+            check_writable(bad)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f"]

@@ -140,6 +140,26 @@ def check_output_file(path: str | os.PathLike) -> Path:
     return target
 
 
+def check_writable(path: str | os.PathLike) -> Path:
+    """``check_output_file``, and a probe that a file can be made where ``path`` will be written: in its folder, or
+    in the nearest folder above it that exists (the missing ones are made at the write). Nothing is left behind.
+    For an output written only after minutes of work or after the arm has moved (an execution log), so that a
+    path that cannot be written is ``InputError`` (exit 2) before the work, not a lost result after it."""
+    import tempfile
+
+    target = check_output_file(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    while not os.path.lexists(folder) and folder != folder.parent:
+        folder = folder.parent
+    try:
+        fd, probe = tempfile.mkstemp(prefix=temporary_prefix(target), suffix=".tmp", dir=folder)
+    except OSError as exc:
+        raise InputError(f"cannot write {_short(path)}: {_reason(exc)}", "choose a folder you can write to") from None
+    os.close(fd)
+    os.unlink(probe)
+    return target
+
+
 def _mode_for(target: Path) -> int:
     """The existing file's mode, or 0666 less the process umask for a new file."""
     try:

@@ -10,7 +10,7 @@ import typer
 
 from roarmctl.cli import common, signals
 from roarmctl.errors import InputError, Interrupted
-from roarmctl.fileio import check_output_file
+from roarmctl.fileio import check_writable
 from roarmctl.motion.options import PlannerConfig
 
 if TYPE_CHECKING:
@@ -96,7 +96,7 @@ def follow(
                        guard=GuardLimits(velocity_scale=velocity_scale, acceleration_scale=acceleration_scale,
                                          timeout=timeout, frozen_after=frozen_after, max_refusals=max_refusals))
     if log is not None:
-        check_output_file(log)
+        check_writable(log)
     if record is not None:
         _check_record(record, robot, record_fps)
     if port is not None and not yes:

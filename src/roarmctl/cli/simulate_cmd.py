@@ -9,7 +9,7 @@ import typer
 from roarmctl.cli import common, signals
 from roarmctl.cli.execute_cmd import SAG_HELP, STRATEGY_HELP
 from roarmctl.errors import InfeasibleError, InputError
-from roarmctl.fileio import check_output_file
+from roarmctl.fileio import check_writable
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -58,7 +58,7 @@ def simulate(
     if not 0.1 <= tolerance <= 1000.0:  # the flag's mm; the options object's bound is in m (and NaN fails here too)
         raise InputError(f"--tolerance: {tolerance:g} mm is out of range", "use 0.1 to 1000 mm")
     if output is not None:
-        check_output_file(output)  # before the run: a path that cannot be written fails at once
+        check_writable(output)  # before the run: a path that cannot be written fails at once
     traj = validate_trajectory(traj_path)
     robot = load_robot(robot_desc) if robot_desc is not None else robot_of(traj, str(traj_path))
     if robot_desc is not None:

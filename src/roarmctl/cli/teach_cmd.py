@@ -20,7 +20,7 @@ except ImportError:  # pragma: no cover - Windows
 
 from roarmctl.cli import common, signals
 from roarmctl.errors import DeviceError, InputError, Interrupted, signal_name
-from roarmctl.fileio import check_output_file
+from roarmctl.fileio import check_writable
 from roarmctl.motion.options import PlannerConfig
 
 if TYPE_CHECKING:
@@ -80,9 +80,9 @@ def teach(
     judge = Judge(robot, cfg.singularity_margin, items, cfg.padding)
     if port is not None and not yes and not sys.stdin.isatty():
         raise InputError("refusing to ask for confirmation: stdin is not a terminal", "pass --yes to teach without asking")
-    check_output_file(output)
+    check_writable(output)
     if raw is not None:
-        check_output_file(raw)
+        check_writable(raw)
 
     err = common.console(stderr=True)
     simulator = None

@@ -118,12 +118,15 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
     the stream result of a failed run is the exception's ``result`` attribute when it has one.
     """
     from roarmctl.device.execlog import write_log
+    from roarmctl.fileio import check_writable
     from roarmctl.device.link import Link
     from roarmctl.device.protocol import WireMap
     from roarmctl.device.streamer import Streamer
 
     if (port is None) == (not sim):
         raise InputError("execute: give exactly one of a port or the simulator")
+    if log_path is not None:  # a log that cannot be written is found before the arm moves, not after
+        check_writable(log_path)
     model = WireMap(robot).model
     arm: SimulatedArm | None = None
     if sim:
