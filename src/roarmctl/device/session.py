@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from roarmctl.errors import InputError, Interrupted, RoarmError, signal_name
+from roarmctl.fileio import check_writable
 
 if TYPE_CHECKING:
     import numpy as np
@@ -118,7 +119,6 @@ def run_execution(traj: Trajectory, robot: Robot, cfg: StreamConfig, *, port: st
     the stream result of a failed run is the exception's ``result`` attribute when it has one.
     """
     from roarmctl.device.execlog import write_log
-    from roarmctl.fileio import check_writable
     from roarmctl.device.link import Link
     from roarmctl.device.protocol import WireMap
     from roarmctl.device.streamer import Streamer
