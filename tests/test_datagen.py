@@ -76,6 +76,25 @@ def test_an_output_folder_that_cannot_be_made_exits_2_with_one_line(tmp_path):
     assert (tmp_path / "a_file").read_text() == "x"
 
 
+def test_a_stopped_run_says_what_it_kept_and_how_to_go_on(tmp_path, monkeypatch):
+    """Ctrl-C once the run's folder is made: it said "nothing was written" and left DATASET/.datagen behind."""
+    from roarmctl.export.lerobot import datagen
+
+    def stop(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(datagen, "_first_kept", stop)
+    out = tmp_path / "ds"
+    r = roarmctl("datagen", str(TEMPLATE), "-n", "1", "--size", "32x32", "-o", str(out))
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 130 and len(lines) == 1, r.stderr
+    assert "nothing was written" not in lines[0] and "--resume" in lines[0] and str(out) in lines[0], r.stderr
+    assert (out / datagen.STAGING / datagen.STATE_FILE).is_file()  # what --resume goes on from
+    from roarmctl.fileio import interrupted_write_state
+
+    assert interrupted_write_state() is None  # said once: a later command's stop is not this run's
+
+
 @pytest.mark.parametrize("fps", ["0", "-1", "121"])
 def test_export_lerobot_fps_out_of_range_exits_2_before_reading_the_run(tmp_path, fps):
     """--fps 0 was taken as 'not given' and a 30 fps dataset was written with exit 0."""

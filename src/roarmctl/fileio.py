@@ -369,13 +369,23 @@ MARKER = ".roarmctl-output"
 MAX_NAME_BYTES = 200  # of a file or folder name roarmctl writes (the OS allows 255; temporaries add a suffix)
 
 _PENDING: list[list] = []  # [target, token in the new MARKER, an old folder was there, where the old one waits]
+_KEPT: list[str] = []  # what a stopped run keeps on purpose (note_kept_on_stop), said instead of "nothing was written"
+
+
+def note_kept_on_stop(text: str | None) -> None:
+    """Say what a stop from now on leaves on disk on purpose (a resumable run's finished work), or None when
+    it has gone (the run ended); ``interrupted_write_state`` returns it while no folder replacement is under way."""
+    _KEPT[:] = [] if text is None else [text]
 
 
 def interrupted_write_state(clear: bool = True) -> str | None:
     """What is on disk after a signal stopped a folder replacement (``replace_folder``), read from the
     disk itself (the new folder's ``MARKER`` carries a token): None when no replacement was under way."""
     if not _PENDING:
-        return None
+        kept = _KEPT[-1] if _KEPT else None
+        if clear:
+            _KEPT.clear()
+        return kept
     target, token, existed, old_at = _PENDING[-1]
     if clear:
         _PENDING.clear()

@@ -38,7 +38,7 @@ from roarmctl.checks import MAX_WHOLE, Bound, check_options
 from roarmctl.errors import DeviceError, InfeasibleError, InputError, RoarmError
 from roarmctl.export.lerobot import stats, video
 from roarmctl.export.lerobot.dataset import DatasetSpec, Episode, read_info, write_dataset
-from roarmctl.fileio import atomic_write_json
+from roarmctl.fileio import atomic_write_json, note_kept_on_stop
 from roarmctl.physics.episode import CAUSES, IMAGE_SIDE, EpisodeOptions, run_episode
 from roarmctl.physics.render import CAMERAS, FrameBuffers
 from roarmctl.plan.template import check_reach, load_template
@@ -453,6 +453,7 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
         raise InputError(f"cannot make {out}: {exc.strerror or exc}", "give a folder you can write to",
                          option="output") from None
     _write_json(staging / STATE_FILE, state)
+    note_kept_on_stop(f"{out}: finished tries are kept in {staging}; the same command with --resume goes on")
     summary = Summary(resumed=len(outcomes), causes=dict.fromkeys(CAUSES, 0), stages=dict.fromkeys(STAGES, 0.0))
 
     def count(o: dict[str, Any]) -> None:
@@ -532,6 +533,7 @@ def generate(template_path: str | Path, out: str | Path, options: DatagenOptions
             os.replace(written / part, out / part)
     summary.stages["write"] = time.process_time() - t0
     shutil.rmtree(staging)
+    note_kept_on_stop(None)
     summary.kept = len(chosen)
     summary.frames = frames[0]
     summary.bytes = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
