@@ -60,6 +60,8 @@ def test_unknown_picture_format_is_exit_2_and_writes_nothing(traj, tmp_path, arg
     args = [str(traj) if a == "TRAJ" else a for a in args]
     r = roarmctl(*args, "-o", str(tmp_path / name))
     assert r.returncode == 2 and "png, .svg or .pdf" in r.stderr
+    # visualize-path also writes the 3D page: its hint names .html too (it did not), workspace's does not
+    assert (".html" in r.stderr) == (args[0] == "visualize-path"), r.stderr
     assert list(tmp_path.iterdir()) == []
 
 

@@ -76,7 +76,11 @@ def visualize_path(
     _check_dpi(dpi)
     figsize = parse_size(size, dpi)
 
-    picture_format(out)  # before any work: the extension decides png / svg / pdf
+    try:
+        picture_format(out)  # before any work: the extension decides png / svg / pdf
+    except InputError as exc:
+        exc.hint = f"{exc.hint}, or in .html for the 3D page"
+        raise
     from roarmctl.viz.path_figure import visualize_trajectory
     from roarmctl.viz.web.sources import trajectory_or_plan
 
