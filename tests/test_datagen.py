@@ -65,6 +65,9 @@ def test_bad_options_exit_2(tmp_path):
                  ["-n", "1", "--codec", "vp9"], ["-n", "1", "--cameras", "top"]):
         r = roarmctl("datagen", str(TEMPLATE), *args, "-o", str(tmp_path / "ds"))
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    for size in ("0x96", "96x8000"):  # named as typed: it said --width / --height, options datagen does not have
+        r = roarmctl("datagen", str(TEMPLATE), "-n", "1", "--size", size, "-o", str(tmp_path / "ds"))
+        assert r.returncode == 2 and r.stderr.startswith("error: --size: "), r.stderr
 
 
 def test_an_output_folder_that_cannot_be_made_exits_2_with_one_line(tmp_path):

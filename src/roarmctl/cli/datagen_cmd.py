@@ -47,9 +47,14 @@ def datagen(
     from roarmctl.export.lerobot.datagen import DatagenOptions, generate
 
     width, height = _size(size)
-    options = DatagenOptions(episodes=episodes, seed=seed, workers=workers, width=width, height=height, max_tries=max_tries,
-                             ray=None if ray is None else ("" if ray == "local" else ray), resume=resume,
-                             codec=codec, cameras=() if cameras.strip() == "none" else tuple(c.strip() for c in cameras.split(",")))
+    try:
+        options = DatagenOptions(episodes=episodes, seed=seed, workers=workers, width=width, height=height, max_tries=max_tries,
+                                 ray=None if ray is None else ("" if ray == "local" else ray), resume=resume,
+                                 codec=codec, cameras=() if cameras.strip() == "none" else tuple(c.strip() for c in cameras.split(",")))
+    except InputError as exc:
+        if exc.option in ("width", "height"):  # typed as --size WIDTHxHEIGHT: there is no --width
+            raise InputError(f"{exc.option}: {exc.problem}", exc.hint, option="size") from None
+        raise
     def check(s: "Summary") -> None:
         """Raise a stop whose exception Python discarded, at a shard's report; the last report (``wall`` set) comes
         once the dataset is written: the run has finished its work then."""
