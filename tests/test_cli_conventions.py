@@ -239,3 +239,21 @@ def test_check_writable_probes_the_folder_and_leaves_nothing(tmp_path):
         with pytest.raises(InputError, match="cannot write"):
             check_writable(bad)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f"]
+
+
+@pytest.mark.parametrize("args", [("plan", "{plan}", "-o", "{plan}"), ("plan", "{plan}", "-o", "{plan_link}"),
+                                  ("simulate", "{traj}", "-o", "{traj}"),
+                                  ("execute", "{traj}", "--output", "{traj}"),
+                                  ("execute", "{traj}", "--sim", "--servos", "ideal", "--yes", "--log", "{traj}")])
+def test_an_output_that_is_the_input_file_is_refused_and_the_input_kept(traj, tmp_path, virtual_sim, args):
+    """Each of these replaced the user's plan or trajectory with its result (a trajectory, a run, commands), exit 0."""
+    plan = tmp_path / "pp.yaml"
+    plan.write_text((ROOT / "plans" / "pick_place.yaml").read_text())
+    (tmp_path / "link.yaml").symlink_to(plan)
+    mine = tmp_path / "pp.traj.json"
+    mine.write_bytes(traj.read_bytes())
+    before = {p: p.read_bytes() for p in (plan, mine)}
+    r = roarmctl(*(a.format(plan=plan, plan_link=tmp_path / "link.yaml", traj=mine) for a in args))
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "is the input file" in lines[0], r.stderr
+    assert {p: p.read_bytes() for p in before} == before and virtual_sim == []

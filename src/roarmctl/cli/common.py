@@ -60,6 +60,20 @@ def print_json(obj: Any) -> None:
     STATE.json_printed = True
 
 
+def not_the_input(output: Any, source: Any, flag: str) -> None:
+    """``InputError`` (exit 2) when the file ``output`` is the file ``source`` the command reads: the atomic rename
+    would replace the user's input (a plan, a trajectory) with the result."""
+    import os
+
+    try:
+        same = output is not None and os.path.samefile(output, source)
+    except (OSError, ValueError):  # an output that does not exist yet is not the input
+        return
+    if same:
+        raise InputError(f"{flag} {output} is the input file {source}; writing it would replace the input",
+                         "give the output another name")
+
+
 def cli_words(exc: RoarmError) -> str:
     """The message of a library error as the CLI prints it: the option at fault (``speed_scale``, ``from_current``:
     the library's neutral words) named by its flag (``--speed-scale``); any other error as it is."""

@@ -99,6 +99,8 @@ def execute(
         raise InputError(f"{given[0]}: only with --sim (a real arm has its own firmware)")
     servos = servos or "physics"
     check_servos(servos, sim=sim)
+    common.not_the_input(output, traj_path, "--output")
+    common.not_the_input(log or default_log_path(traj_path), traj_path, "--log")
     traj = validate_trajectory(traj_path)  # limits, speeds and steps: nothing unchecked reaches the port
     robot = robot_of(traj, str(traj_path))
     factory, sag = sim_servos(robot, traj, servos, sim=sim, sag=sag)

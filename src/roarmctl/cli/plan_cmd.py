@@ -89,10 +89,11 @@ def register(app: typer.Typer) -> None:
         """
         from roarmctl.motion.planning.targets import summary as target_summary
 
+        out = output or default_output(plan)
+        common.not_the_input(out, plan, "-o")
         measured: list[str] = []
         result = run_planner(plan, seed, quiet=json_out, current=arm_reader(port, sim, measured))
         result.notes[:0] = measured
-        out = output or default_output(plan)
         signals.check()  # a stop discarded after the last stage's report: no file
         result.trajectory.save(out)
         traj = result.trajectory

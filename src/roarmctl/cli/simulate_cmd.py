@@ -59,6 +59,7 @@ def simulate(
         raise InputError(f"--tolerance: {tolerance:g} mm is out of range", "use 0.1 to 1000 mm")
     if output is not None:
         check_writable(output)  # before the run: a path that cannot be written fails at once
+        common.not_the_input(output, traj_path, "-o")
     traj = validate_trajectory(traj_path)
     robot = load_robot(robot_desc) if robot_desc is not None else robot_of(traj, str(traj_path))
     if robot_desc is not None:
