@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import sys
 from dataclasses import dataclass
@@ -63,8 +64,6 @@ def print_json(obj: Any) -> None:
 def not_the_input(output: Any, source: Any, flag: str) -> None:
     """``InputError`` (exit 2) when the file ``output`` is the file ``source`` the command reads: the atomic rename
     would replace the user's input (a plan, a trajectory) with the result."""
-    import os
-
     try:
         same = output is not None and os.path.samefile(output, source)
     except (OSError, ValueError):  # an output that does not exist yet is not the input
