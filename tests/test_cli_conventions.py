@@ -257,3 +257,17 @@ def test_an_output_that_is_the_input_file_is_refused_and_the_input_kept(traj, tm
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and "is the input file" in lines[0], r.stderr
     assert {p: p.read_bytes() for p in before} == before and virtual_sim == []
+
+
+def test_sim_device_link_never_replaces_what_it_did_not_make(tmp_path):
+    """--link over a symlink to elsewhere replaced it, and removed it at the end: the user's link was gone."""
+    import os
+
+    (tmp_path / "mine.txt").write_text("keep")
+    os.symlink(tmp_path / "mine.txt", tmp_path / "users_link")
+    for name in ("users_link", "mine.txt"):
+        r = roarmctl("sim-device", "--servos", "ideal", "--link", str(tmp_path / name))
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: --link: "), r.stderr
+    assert os.readlink(tmp_path / "users_link") == str(tmp_path / "mine.txt")
+    assert (tmp_path / "mine.txt").read_text() == "keep"

@@ -332,6 +332,8 @@ def sim_device(
     servos = servos or ("ideal" if guide is not None else "physics")
     if servos not in ("physics", "ideal"):
         raise InputError(f"--servos: '{servos}' is not physics or ideal")
+    if link is not None:
+        _check_link(link)
     factory: Callable[[], ServoModel] | None = None
     if guide is not None:
         from roarmctl.device.guide import guided_servos, load_guide
@@ -379,6 +381,22 @@ def sim_device(
             simulator.stop()
             if made_link and link is not None and link.is_symlink():
                 link.unlink()
+
+
+def _check_link(link: Path) -> None:
+    """A ``--link`` path may be replaced only when it is free or a symlink to a pseudo-terminal (what sim-device makes,
+    left by a run killed outright); anything else is the user's (a file, a link elsewhere), and it was removed."""
+    if not link.is_symlink():
+        if link.exists():
+            raise InputError(f"--link: {link} exists and is not a symlink sim-device made", "give another name")
+        return
+    try:
+        target = str(link.readlink())
+    except OSError as exc:
+        raise InputError(f"--link: cannot read {link} ({exc.strerror})") from None
+    if not target.startswith("/dev/pts/"):
+        raise InputError(f"--link: {link} is a symlink to {target}, not to a pseudo-terminal sim-device made",
+                         "give another name, or remove the link yourself")
 
 
 def _status(show: "Callable[[Any], None] | None", status: Any) -> None:
