@@ -271,3 +271,14 @@ def test_sim_device_link_never_replaces_what_it_did_not_make(tmp_path):
         assert r.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: --link: "), r.stderr
     assert os.readlink(tmp_path / "users_link") == str(tmp_path / "mine.txt")
     assert (tmp_path / "mine.txt").read_text() == "keep"
+
+
+def test_port_holders_are_one_warning_line(traj, tmp_path, monkeypatch):
+    """A port open in many processes (/dev/null given as the port: every shell) gave one warning line per process."""
+    from roarmctl.cli import execute_cmd
+
+    monkeypatch.setattr(execute_cmd, "port_holders", lambda port: [(100 + i, f"proc{i}") for i in range(20)])
+    r = roarmctl("execute", str(traj), "--port", str(tmp_path / "ttyNONE"), "--yes")
+    warn = [line for line in r.stderr.splitlines() if line.startswith("warning:")]
+    assert r.returncode == 4 and len(warn) == 1, r.stderr
+    assert "processes 100 (proc0), 101 (proc1), 102 (proc2) and 17 more" in warn[0]

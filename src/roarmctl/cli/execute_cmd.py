@@ -174,9 +174,11 @@ def _run(traj: "Trajectory", traj_path: Path, robot: "Robot", cfg: "StreamConfig
 
     if not sim:
         assert port is not None  # one of --port, --sim, --output (checked by the command; --output does not stream)
-        for pid, name in port_holders(port):
-            common.warn(f"{port} is also open in process {pid} ({name}); it may swallow the arm's replies "
-                        "(stop it, e.g. 'sudo systemctl stop ModemManager')")
+        holders = [f"{pid} ({name})" for pid, name in port_holders(port)]
+        if holders:  # one line, however many (a shell's /dev/null given as the port is open in every shell)
+            more = f" and {len(holders) - 3} more" if len(holders) > 3 else ""
+            common.warn(f"{port} is also open in process{'es' if len(holders) > 1 else ''} {', '.join(holders[:3])}{more}; "
+                        "it may swallow the arm's replies (stop it, e.g. 'sudo systemctl stop ModemManager')")
 
     def note(sentence: str) -> None:
         if not json_out:
