@@ -282,3 +282,15 @@ def test_port_holders_are_one_warning_line(traj, tmp_path, monkeypatch):
     warn = [line for line in r.stderr.splitlines() if line.startswith("warning:")]
     assert r.returncode == 4 and len(warn) == 1, r.stderr
     assert "processes 100 (proc0), 101 (proc1), 102 (proc2) and 17 more" in warn[0]
+
+
+@pytest.mark.parametrize("port", ["{tmp}", "/dev/null"])
+def test_a_port_that_is_not_a_serial_port_says_so(traj, tmp_path, port, monkeypatch):
+    """A folder or /dev/null as --port: 'cannot open serial port /tmp: [Errno 21] could not open port /tmp: [Errno 21]
+    Is a directory: ...', the errno twice and no way forward."""
+    from roarmctl.cli import execute_cmd
+
+    monkeypatch.setattr(execute_cmd, "port_holders", lambda port: [])  # /dev/null is open in every shell
+    r = roarmctl("execute", str(traj), "--port", port.format(tmp=tmp_path), "--yes")
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 4 and len(lines) == 1 and "is not a serial port" in lines[0] and "roarmctl ports" in lines[0], r.stderr

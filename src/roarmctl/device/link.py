@@ -232,6 +232,10 @@ class Link:
         if code in (errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK) or "lock" in text.lower() or "busy" in text.lower():
             return DeviceError(f"serial port {self.port} is busy (another program has it open)",
                                "close other roarmctl runs, serial monitors, or the ROS driver, then retry")
+        if code in (errno.EISDIR, errno.ENOTTY) or "Is a directory" in text or "Inappropriate ioctl" in text:
+            what = "a folder" if code == errno.EISDIR or "Is a directory" in text else "not a terminal device"
+            return DeviceError(f"{self.port} is not a serial port ({what})",
+                               "give the arm's port, e.g. /dev/ttyUSB0; 'roarmctl ports' lists them")
         if "Invalid URL" in text or "expected" in text:
             return DeviceError(f"cannot open {self.port}: {text}", "give a device path like /dev/ttyUSB0 or a pyserial URL")
         return DeviceError(f"cannot open serial port {self.port}: {text}")
