@@ -37,3 +37,19 @@ def test_written_file_has_no_negative_zero_and_reads_back_equal(tmp_path):
     assert np.array_equal(back.velocities, np.round(src.velocities, 9))
     assert np.array_equal(back.accelerations, np.round(src.accelerations, 9))
     assert "-0.25" in text and "-2.0" in text  # other negative numbers keep their sign
+
+
+def test_a_file_that_is_no_trajectory_says_which_file_to_give(tmp_path):
+    """'format: expected roarmctl.trajectory/1, got null' named the cause but no fix (an execution log, any JSON)."""
+    import json
+
+    import pytest
+
+    from roarmctl.errors import TrajectoryFileError
+
+    for doc in ({"a": 1}, {"format": "roarmctl.execlog/1"}):
+        p = tmp_path / "x.json"
+        p.write_text(json.dumps(doc))
+        with pytest.raises(TrajectoryFileError, match="format") as info:
+            load_trajectory(p)
+        assert info.value.hint and "roarmctl plan" in info.value.hint

@@ -66,7 +66,8 @@ def parse_document(data: Any, where: str = "trajectory") -> Trajectory:
     if not isinstance(data, dict):
         raise TrajectoryFileError(f"{where}: expected a JSON object, got {CHECK.kind(data)}")
     if data.get("format") != FORMAT:
-        CHECK.fail(where, "format", f"expected '{FORMAT}', got {CHECK.kind(data.get('format'))}")
+        raise TrajectoryFileError(f"{where}: format: expected '{FORMAT}', got {CHECK.kind(data.get('format'))}",
+                                  "give a trajectory file written by 'roarmctl plan' (NAME.traj.json)")
     for key in ("robot", "joint_names", "points"):
         if key not in data:
             raise TrajectoryFileError(f"{where}: '{key}' is missing")
