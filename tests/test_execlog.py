@@ -68,3 +68,12 @@ def test_the_reader_names_the_field_it_refuses(change, field: str) -> None:
     with pytest.raises(TrajectoryFileError) as err:
         parse_log(doc, "run.exec.json")
     assert f"run.exec.json: {field}" in str(err.value)
+
+
+def test_a_cut_short_log_is_not_told_to_be_planned_again(tmp_path: Path) -> None:
+    """A truncated execution log said "the file is damaged; plan it again": a log comes from a run, not a plan."""
+    p = tmp_path / "run.exec.json"
+    p.write_text('{"format": "roarmctl.execlog/1", "sent": [')
+    with pytest.raises(TrajectoryFileError) as info:
+        read_log(p)
+    assert info.value.hint is not None and "execute" in info.value.hint and "damaged" in info.value.hint

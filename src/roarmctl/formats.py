@@ -29,4 +29,5 @@ MAX_FILE_BYTES = 256 * 1024 * 1024  # a trajectory file or execution log (a one-
 
 def read_document(path: str | Path) -> Any:
     """The JSON of a trajectory file or execution log, read within ``MAX_FILE_BYTES`` (``roarmctl.validation``)."""
-    return load_json(path, TrajectoryFileError, limit=MAX_FILE_BYTES, hint="the file is damaged; plan it again")
+    return load_json(path, TrajectoryFileError, limit=MAX_FILE_BYTES,
+                     hint="the file is damaged or cut short; make it again (plan a trajectory; execute or simulate for a log)")
