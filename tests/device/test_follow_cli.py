@@ -71,3 +71,22 @@ def test_a_policy_piped_into_follow_ends_0_when_clean_and_4_when_it_leans_into_a
     log = json.loads((tmp_path / "lean.json").read_text())
     assert log["hold"]["copies"] == 2 and log["summary"]["outcome"] == "aborted"
     assert any("hits obstacle 'bench'" in r["reason"] for r in log["summary"]["targets"]["refusals"])
+
+
+def test_a_refusal_is_printed_as_it_is_written(monkeypatch):
+    """The refusal of a malformed line printed 'expected {"t": s, "joints": , ...}': rich took '[rad, ...]' for markup."""
+    from roarmctl.device import follow_session, follow_sources
+    from roarmctl.errors import DeviceError
+
+    said = 'refused: line 2: expected {"t": s, "joints": [rad, ...], "gripper": rad} [bold]x[/]'
+
+    def follow_live(*args, on_event, **kwargs):
+        on_event(said)
+        raise DeviceError("stop here")
+
+    monkeypatch.setattr(follow_session, "follow_live", follow_live)
+    monkeypatch.setattr(follow_sources, "StreamSource", lambda robot, fd: None)
+    with open("/dev/null") as null:  # the policy's stdin: pytest's own has no file descriptor
+        monkeypatch.setattr(sys, "stdin", null)
+        res = roarmctl("follow", "--sim", "--yes")
+    assert res.returncode == 4 and said in res.stderr, res.stderr

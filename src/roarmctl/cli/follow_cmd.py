@@ -126,7 +126,9 @@ def follow(
 
     def event(text: str) -> None:
         style = "yellow" if text.startswith("refused") else ""
-        err.print(f"[{style}]{text}[/]" if style else text, highlight=False, markup=bool(style), soft_wrap=True)
+        # the text quotes the source's lines ('[rad, ...]', a key it sent): rich markup only around it
+        err.print(f"[{style}]{common.shown(text)}[/]" if style else common.one_line(text), highlight=False,
+                  markup=bool(style), soft_wrap=True)
 
     try:
         done = follow_live(robot, checker, port=port, sim=sim, source=source, leader=spec, config=cfg, on_event=event,
