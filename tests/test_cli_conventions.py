@@ -294,3 +294,34 @@ def test_a_port_that_is_not_a_serial_port_says_so(traj, tmp_path, port, monkeypa
     r = roarmctl("execute", str(traj), "--port", port.format(tmp=tmp_path), "--yes")
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 4 and len(lines) == 1 and "is not a serial port" in lines[0] and "roarmctl ports" in lines[0], r.stderr
+
+
+def test_names_with_brackets_are_printed_as_they_are(tmp_path, virtual_sim):
+    """An object named 'cu[/]be' in the plan, or an output named 'o[/]x.jsonl': rich read '[/]' as markup, and
+    simulate and execute ended as internal errors (MarkupError, exit 1) after their work."""
+    plan = tmp_path / "mk.yaml"
+    plan.write_text((ROOT / "plans" / "pick_place.yaml").read_text().replace("cube", '"cu[/]be"'))
+    traj = tmp_path / "mk.traj.json"
+    assert roarmctl("plan", str(plan), "-o", str(traj)).returncode == 0
+    r = roarmctl("simulate", str(traj))
+    assert r.returncode == 0 and "object cu[/]be (" in r.stdout, r.stdout + r.stderr
+    out = tmp_path / "o[/]x.jsonl"
+    r = roarmctl("execute", str(traj), "--output", str(out))
+    assert r.returncode == 0 and str(out) in r.stderr.replace("\n", ""), r.stderr
+    log = tmp_path / "l[/]og.json"
+    r = roarmctl("execute", str(traj), "--sim", "--servos", "ideal", "--yes", "--log", str(log))
+    assert r.returncode == 0 and f"log: {log}" in r.stdout.replace("\n", ""), r.stdout + r.stderr
+
+
+@pytest.mark.parametrize("args", [("plan", str(ROOT / "plans" / "pick_place.yaml"), "-o", "{d}/p[/]x.json"),
+                                  ("visualize-path", "{traj}", "-o", "{d}/v[/]x.png"),
+                                  ("workspace", "planar_2r", "--samples", "10", "-o", "{d}/w[/]x.png"),
+                                  ("export", "{traj}", "-o", "{d}/e[/]x.csv"),
+                                  ("export", "{traj}", "-o", "{d}/e[/]x.mcap")])
+def test_an_output_name_with_brackets_is_written_and_named(traj, tmp_path, args):
+    """Every 'wrote NAME' line was rich markup: '[/]' in the name was an internal error (exit 1) after the file was written."""
+    args = [a.format(d=tmp_path, traj=traj) for a in args]
+    r = roarmctl(*args)
+    assert r.returncode == 0 and Path(args[-1]).is_file(), r.stdout + r.stderr
+    if args[0] != "plan":  # plan's table may shorten a long path
+        assert "[/]x." in (r.stdout + r.stderr).replace("\n", ""), r.stdout + r.stderr

@@ -100,7 +100,7 @@ def _render(s: "Summary", output: Path, json_out: bool) -> None:
         out.print(f"{output} is complete ({s.kept} episodes, {s.frames} frames): nothing to resume")
         return
     rejected = ", ".join(f"{k} {v}" for k, v in s.causes.items() if v) or "none"
-    out.print(f"wrote {output}: {s.kept} episodes, {s.frames} frames, {s.bytes / 1e6:.1f} MB "
+    out.print(f"wrote {common.shown(output)}: {s.kept} episodes, {s.frames} frames, {s.bytes / 1e6:.1f} MB "
               f"({s.tried} tries; rejected: {rejected})" + (f"; {s.resumed} tries resumed" if s.resumed else ""))
     total = sum(s.stages.values())
     if total > 0:

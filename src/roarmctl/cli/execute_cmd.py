@@ -120,7 +120,7 @@ def execute(
             common.print_json(info)
         else:
             extra = f" + {gripper} gripper commands" if gripper else ""
-            common.console(stderr=True).print(f"wrote {info['commands']} motion commands{extra} ({schedule[-1].t:.2f} s at {rate:g} Hz) to {output}")
+            common.console(stderr=True).print(f"wrote {info['commands']} motion commands{extra} ({schedule[-1].t:.2f} s at {rate:g} Hz) to {common.shown(output)}")
         return
     if port is not None and not yes and not sys.stdin.isatty():
         raise InputError("refusing to ask for confirmation: stdin is not a terminal", "pass --yes to execute without asking")
@@ -182,7 +182,7 @@ def _run(traj: "Trajectory", traj_path: Path, robot: "Robot", cfg: "StreamConfig
 
     def note(sentence: str) -> None:
         if not json_out:
-            err.print(f"note: {sentence}")
+            err.print(f"note: {common.shown(sentence)}")
 
     def log_error(path: Path, exc: Exception) -> None:
         common.warn(f"could not write the execution log {path} ({getattr(exc, 'strerror', None) or exc}); pass --log FILE")
@@ -205,7 +205,7 @@ def _run(traj: "Trajectory", traj_path: Path, robot: "Robot", cfg: "StreamConfig
         return
     out = common.console()
     trk, lat = summary["tracking_mm"], summary["lateness_ms"]
-    out.print(f"[bold green]done[/]: {summary['commands']} motion commands in {run.traj.duration / cfg.speed_scale:.2f} s on {port}")
+    out.print(f"[bold green]done[/]: {summary['commands']} motion commands in {run.traj.duration / cfg.speed_scale:.2f} s on {common.shown(port)}")
     out.print(f"schedule lateness p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms, max {lat['max']:.2f} ms")
     if trk["rms"] is not None:
         out.print(f"TCP tracking error (feedback): RMS {trk['rms']:.1f} mm, max {trk['max']:.1f} mm over {trk['samples']} samples")
@@ -215,7 +215,7 @@ def _run(traj: "Trajectory", traj_path: Path, robot: "Robot", cfg: "StreamConfig
     if summary["final_pose"]:
         out.print("arm at: " + ", ".join(f"{k.rsplit('_', 1)[0]} ({', '.join(f'{v:.4g}' for v in xyz)}) {k.rsplit('_', 1)[1]}"
                                          for k, xyz in summary["final_pose"].items()))
-    out.print(f"log: {log_path}")
+    out.print(f"log: {common.shown(log_path)}")
 
 
 class _Display:

@@ -40,7 +40,7 @@ def register(app: typer.Typer) -> None:
                 common.print_json({"ok": True, **done})
             else:
                 common.console().print(f"appended episode {done['episode_index']} ({done['frames']} frames at {done['fps']} fps) "
-                                       f"to {done['output']}")
+                                       f"to {common.shown(done['output'])}")
             return
         if task is not None or fps is not None:
             raise InputError("--task and --fps go with --lerobot")
@@ -50,8 +50,8 @@ def register(app: typer.Typer) -> None:
             common.print_json({"ok": True, **summary})
             return
         if "rows" in summary:
-            common.console().print(f"wrote {summary['output']} (CSV, {summary['rows']} rows)")
+            common.console().print(f"wrote {common.shown(summary['output'])} (CSV, {summary['rows']} rows)")
             return
         what = "MCAP file" if summary["format"] == "mcap" else "ROS 2 bag folder"
         topics = ", ".join(f"{t} {n}" for t, n in summary["topics"].items())
-        common.console().print(f"wrote {summary['output']} ({what}; messages: {topics})")
+        common.console().print(f"wrote {common.shown(summary['output'])} ({what}; messages: {topics})")

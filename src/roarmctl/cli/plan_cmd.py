@@ -127,7 +127,7 @@ def register(app: typer.Typer) -> None:
         table = Table(title=f"Planned {common.shown(plan.name)}", show_header=False)
         table.add_column("what", style="bold")
         table.add_column("value")
-        table.add_row("output", str(out))
+        table.add_row("output", common.shown(out))
         table.add_row("motion duration", f"{traj.duration:.2f} s ({len(traj.times)} points at {traj.sample_rate:g} Hz)")
         table.add_row("segments", str(result.segments))
         table.add_row("events", ", ".join(f"{e.kind} @ {e.time:.2f} s" for e in traj.events) or "none")
@@ -154,7 +154,7 @@ def _peaks_table(peaks: dict) -> "Table":
     torque = peaks["torque"] or [None] * len(peaks["joints"])
     units = peaks["units"]  # rad/s^3 and N m, or m/s^3 and N for a prismatic joint
     for i, name in enumerate(peaks["joints"]):
-        table.add_row(name, f"{peaks['jerk'][i]:.{3 if units['jerk'][i].startswith('m') else 1}f} {units['jerk'][i]}",
+        table.add_row(common.shown(name), f"{peaks['jerk'][i]:.{3 if units['jerk'][i].startswith('m') else 1}f} {units['jerk'][i]}",
                       pct(peaks["jerk_fraction"][i]),
                       "-" if torque[i] is None else f"{torque[i]:.3f} {units['torque'][i]}", pct(peaks["torque_fraction"][i]))
     return table

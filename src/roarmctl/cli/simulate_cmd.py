@@ -151,7 +151,7 @@ def _render(report: dict, output: Path | None) -> None:
         need = "-"
         if "needed_nm" in j:
             need = f"{j['needed_nm']:.2f} N m" + (" [bold red](over stall)[/]" if j["over_stall"] else "")
-        t.add_row(j["name"], f"{j['rms']:.2f} {unit}", f"{j['max']:.2f} {unit}",
+        t.add_row(common.shown(j["name"]), f"{j['rms']:.2f} {unit}", f"{j['max']:.2f} {unit}",
                   f"{j['peak_torque_nm']:.2f} N m" if "peak_torque_nm" in j else "-",
                   f"{j['stall_nm']:.2f} N m" if "stall_nm" in j else "-",
                   f"{100 * j['peak_share_of_stall']:.0f} %" if "peak_share_of_stall" in j else "-",
@@ -162,22 +162,22 @@ def _render(report: dict, output: Path | None) -> None:
               f"late: RMS {tcp['rms_after_lag_mm']:.1f} mm); final {tcp['final_mm']:.1f} mm"
               + (f"; sag at rest up to {tcp['sag_mm']:.1f} mm" if tcp["sag_mm"] is not None else ""))
     for r in tcp["rests"]:
-        out.print(f"  at rest {r['start_s']:.2f}-{r['end_s']:.2f} s ({r['label']}): {r['error_mm']:.1f} mm off, "
+        out.print(f"  at rest {r['start_s']:.2f}-{r['end_s']:.2f} s ({common.shown(r['label'])}): {r['error_mm']:.1f} mm off, "
                   f"{r['below_mm']:.1f} mm below" + (f" (goals raised {r['compensated_mm']:.1f} mm against the sag)"
                                                      if "compensated_mm" in r else ""))
     for o in report["objects"]:
         verdict = "[green]placed[/]" if o["placed"] else ("[red]not lifted[/]" if not o["lifted"] else "[red]not placed[/]")
-        out.print(f"object {o['name']} ({o['mass_kg'] * 1e3:.0f} g): {verdict}, {o['error_mm']:.1f} mm and {o['error_deg']:.1f} deg "
+        out.print(f"object {common.shown(o['name'])} ({o['mass_kg'] * 1e3:.0f} g): {verdict}, {o['error_mm']:.1f} mm and {o['error_deg']:.1f} deg "
                   f"from its place pose (lifted {o['lift_mm']:.0f} mm)")
     if report["contacts"]:
         out.print(f"[red]{len(report['contacts'])} unintended contact(s)[/]:")
         for c in report["contacts"]:
             who = c.get("link") or c.get("item")
-            out.print(f"  {who} with {c['with']} from {c['start_s']:.2f} to {c['end_s']:.2f} s, {c['depth_mm']:.2f} mm deep")
+            out.print(f"  {common.shown(who)} with {common.shown(c['with'])} from {c['start_s']:.2f} to {c['end_s']:.2f} s, {c['depth_mm']:.2f} mm deep")
     else:
         out.print("no unintended contact")
     for note in report["model"]["notes"]:
-        out.print(f"note: {note}")
+        out.print(f"note: {common.shown(note)}")
     run = report["run"]
     out.print(f"simulated {run['simulated_s']:.2f} s in {run['wall_s']:.2f} s (x{run['real_time_factor']})"
-              + (f"; run file {output}" if output is not None else ""))
+              + (f"; run file {common.shown(output)}" if output is not None else ""))

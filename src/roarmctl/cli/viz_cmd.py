@@ -101,7 +101,7 @@ def visualize_path(
         raise
     written = visualize_trajectory(traj, out, view=view, dpi=dpi, size=figsize, name=source.name)
     w, h = round(figsize[0] * dpi), round(figsize[1] * dpi)
-    common.console().print(f"wrote {written} ({w} x {h} px)")
+    common.console().print(f"wrote {common.shown(written)} ({w} x {h} px)")
 
 
 def _is_log(source: Path) -> bool:
@@ -128,7 +128,7 @@ def _write_html(source: Path, out: Path, trajectory: Path | None = None) -> None
         exc = src.error
         exc.hint = (f"{exc.hint}; " if exc.hint else "") + f"drawn up to the failure in {written}"
         raise exc
-    common.console().print(f"wrote {written} ({written.stat().st_size / 1e6:.2f} MB; open it in a web browser)", soft_wrap=True)
+    common.console().print(f"wrote {common.shown(written)} ({written.stat().st_size / 1e6:.2f} MB; open it in a web browser)", soft_wrap=True)
 
 
 def workspace(
@@ -156,4 +156,4 @@ def workspace(
     from roarmctl.viz.workspace_figure import visualize_workspace
 
     written = visualize_workspace(r, out, samples=samples, seed=seed, measure=measure, height=height, dpi=dpi, size=figsize)
-    common.console().print(f"wrote {written} ({round(figsize[0] * dpi)} x {round(figsize[1] * dpi)} px)")
+    common.console().print(f"wrote {common.shown(written)} ({round(figsize[0] * dpi)} x {round(figsize[1] * dpi)} px)")
