@@ -195,3 +195,19 @@ def test_library_ik_refuses_non_finite_angles():
     for kw in ({"pitch": float("inf")}, {"pitch": 1.0, "roll": float("nan")}):
         with pytest.raises(InputError, match="finite"):
             solve_ik(robot, [0.25, 0, 0.05], **kw)
+
+
+def test_names_with_brackets_in_a_description_are_printed_as_they_are(tmp_path):
+    """A joint or robot named with '[/]' (any text a description may hold) was read as rich markup: robots show,
+    kin jacobian and kin dynamics ended as internal errors (MarkupError, exit 1)."""
+    from pathlib import Path
+
+    src = Path(__file__).resolve().parents[1] / "src" / "roarmctl" / "robots" / "planar_2r.yaml"
+    text = src.read_text().replace("name: joint1,", 'name: "jo[/]int1",').replace("name: planar_2r", 'name: "pl[/]anar"')
+    assert "jo[/]int1" in text and "pl[/]anar" in text
+    desc = tmp_path / "p2r.yaml"
+    desc.write_text(text)
+    for args in (("robots", "show", str(desc)), ("kin", "jacobian", str(desc), "0.1", "0.2"),
+                 ("kin", "dynamics", str(desc), "0", "0"), ("kin", "fk", str(desc), "0", "0")):
+        proc = run(*args)
+        assert proc.returncode == 0 and "[/]" in proc.stdout, proc.stderr

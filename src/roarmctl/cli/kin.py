@@ -121,7 +121,7 @@ def _num(v: float, digits: int) -> str:
 
 
 def _joint_caption(r: "Robot") -> str:
-    return ", ".join(f"q{i + 1} = {name}" for i, name in enumerate(r.joint_names))
+    return ", ".join(f"q{i + 1} = {common.shown(name)}" for i, name in enumerate(r.joint_names))
 
 
 def _fmt(a: "npt.ArrayLike", digits: int = 6) -> str:

@@ -35,7 +35,7 @@ def robots(ctx: typer.Context, json_out: bool = typer.Option(False, "--json", he
     for col in ("name", "dof", "joints", "source"):
         table.add_column(col)
     for row in rows:
-        table.add_row(row["name"], str(row["dof"]), ", ".join(row["joints"]), row["source"])
+        table.add_row(common.shown(row["name"]), str(row["dof"]), common.shown(", ".join(row["joints"])), common.shown(row["source"]))
     common.console().print(table)
 
 
@@ -56,12 +56,12 @@ def show(
     from rich.table import Table
 
     out = common.console()
-    table = Table(title=f"{info['name']} ({info['sidecar'] or info['spec']})")
+    table = Table(title=f"{common.shown(info['name'])} ({common.shown(info['sidecar'] or info['spec'])})")
     for col in ("joint", "type", "range", "velocity", "acceleration", "effort"):
         table.add_column(col)
     for j in info["joints"]:
         effort = "-" if j["effort"] is None else f"{j['effort']:.4g} {j['effort_unit']}"
-        table.add_row(j["name"], j["type"], f"{j['lower']:.4g} .. {j['upper']:.4g} {j['unit']}\n[{j['position_source']}]",
+        table.add_row(common.shown(j["name"]), j["type"], f"{j['lower']:.4g} .. {j['upper']:.4g} {j['unit']}\n[{j['position_source']}]",
                       f"{j['velocity']:.4g} {j['velocity_unit']}\n[{j['velocity_source']}]",
                       f"{j['acceleration']:.4g} {j['acceleration_unit']}\n[{j['acceleration_source']}]",
                       f"{effort}\n[{j['effort_source']}]")
