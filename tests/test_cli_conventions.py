@@ -325,3 +325,29 @@ def test_an_output_name_with_brackets_is_written_and_named(traj, tmp_path, args)
     assert r.returncode == 0 and Path(args[-1]).is_file(), r.stdout + r.stderr
     if args[0] != "plan":  # plan's table may shorten a long path
         assert "[/]x." in (r.stdout + r.stderr).replace("\n", ""), r.stdout + r.stderr
+
+
+@pytest.mark.slow  # a fresh interpreter and the simulated arm in real time until the signal
+def test_teach_stopped_by_a_signal_says_what_it_wrote(tmp_path):
+    """teach --raw LOG stopped by SIGTERM wrote the log and said '(nothing was written)'; and a raw log's name with
+    '[/]' was rich markup (the 'feedback stream:' line was lost)."""
+    import os
+    import signal
+    import time
+
+    raw = tmp_path / "r[x]aw.json"
+    proc = subprocess.Popen([sys.executable, "-m", "roarmctl", "teach", "--sim", "--raw", str(raw), "-o",
+                             str(tmp_path / "t.yaml")], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env=dict(os.environ, COLUMNS="200"))
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and "torque off" not in (proc.stdout.readline() or "torque off"):
+            pass
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+        proc.wait(10)
+    assert proc.returncode == 143, out
+    assert f"feedback stream: {raw}" in out and f"terminated by SIGTERM (the feedback stream is in {raw})" in out, out
+    assert raw.is_file() and not (tmp_path / "t.yaml").exists()

@@ -20,7 +20,7 @@ except ImportError:  # pragma: no cover - Windows
 
 from roarmctl.cli import common, signals
 from roarmctl.errors import DeviceError, InputError, Interrupted, signal_name
-from roarmctl.fileio import check_writable
+from roarmctl.fileio import check_writable, note_kept_on_stop
 from roarmctl.motion.options import PlannerConfig
 
 if TYPE_CHECKING:
@@ -172,7 +172,7 @@ def _safely(action: "Callable[[], object]", view: "_View") -> None:
     try:
         action()
     except DeviceError as exc:  # no recent frame to record: said, teaching goes on
-        view.line(f"[yellow]not recorded[/]: {exc.message}")
+        view.line(f"[yellow]not recorded[/]: {common.shown(exc.message)}")
 
 
 def _finish(session: "TeachSession", output: Path, raw: Path | None, robot: "Robot", judge: "Judge",
@@ -182,10 +182,12 @@ def _finish(session: "TeachSession", output: Path, raw: Path | None, robot: "Rob
     from roarmctl.device.teach_plan import save_plan
 
     view.flush(session)
+    written = []  # what a stop signal's line says instead of "nothing was written"
     if session.waypoints:
         try:
             save_plan(output, robot, session.waypoints, judge.margin, source)
-            view.line(f"saved {len(session.waypoints)} waypoint(s) to {output} (plan it: roarmctl plan {output} --port PORT)")
+            written.append(f"the recording is in {output}")
+            view.line(f"saved {len(session.waypoints)} waypoint(s) to {common.shown(output)} (plan it: roarmctl plan {common.shown(output)} --port PORT)")
         except (OSError, InputError) as exc:
             common.warn(f"could not save {output}: {exc}")
     else:
@@ -193,9 +195,11 @@ def _finish(session: "TeachSession", output: Path, raw: Path | None, robot: "Rob
     if raw is not None:
         try:
             write_log(raw, session.raw_log(outcome, message))
-            view.line(f"feedback stream: {raw}")
+            written.append(f"the feedback stream is in {raw}")
+            view.line(f"feedback stream: {common.shown(raw)}")
         except (OSError, InputError) as exc:
             common.warn(f"could not write {raw}: {exc}")
+    note_kept_on_stop("; ".join(written) or None)
 
 
 class _Keys:
@@ -276,7 +280,7 @@ class _View:
         """Events not yet printed (plain mode)."""
         if self.live is None:
             for t, text in session.events[self.shown:]:
-                self.line(f"[{t:7.2f} s] {text}")
+                self.line(f"[{t:7.2f} s] {common.shown(text)}")
             self.shown = len(session.events)
 
     def show(self, session: "TeachSession", frame: "Frame | None") -> None:
