@@ -282,7 +282,7 @@ def test_dict_plans_name_the_task_and_field_and_find_a_relative_robot(tmp_path, 
     monkeypatch.chdir(tmp_path)
     with pytest.raises(rc.PlanFileError) as err:
         rc.plan(plan)
-    assert err.value.message.startswith("<plan dict>: robot: unknown robot 'so100/robot.yaml'")
+    assert err.value.message.startswith("<plan dict>: robot: no such description file 'so100/robot.yaml'")  # a path: not 'unknown robot'
     assert "base_dir" in err.value.hint
     for bad, needle in (({"move": {"xyz": [2.2, 0, 0.1]}}, "task 1 (move): target"),
                         ({"pick": {"object": "nope"}}, "task 1: pick.object: no object named 'nope'")):

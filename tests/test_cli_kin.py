@@ -211,3 +211,14 @@ def test_names_with_brackets_in_a_description_are_printed_as_they_are(tmp_path):
                  ("kin", "dynamics", str(desc), "0", "0"), ("kin", "fk", str(desc), "0", "0")):
         proc = run(*args)
         assert proc.returncode == 0 and "[/]" in proc.stdout, proc.stderr
+
+
+@pytest.mark.parametrize("spec", ["missing.yaml", "arms/missing.urdf", "sub/dir/robot"])
+def test_a_missing_description_path_is_named_as_a_missing_file(spec):
+    """A path that is not there said "unknown robot 'missing.yaml' (...; or give a path to a .yaml or .urdf file)":
+    the fix it offered is what the user had done."""
+    proc = run("kin", "fk", spec, "0", "0")
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and f"no such description file '{spec}'" in lines[0], proc.stderr
+    assert "unknown robot" not in lines[0]
+    assert "unknown robot 'roarm_m9'" in run("kin", "fk", "roarm_m9", "0", "0").stderr  # a name stays a name

@@ -90,6 +90,10 @@ def _load(spec: str, trust_sidecar: bool, confine: bool) -> Robot:
             raise InputError(f"robot '{spec[:80]}' is a folder, not a description file",
                              f"give one of its files: {', '.join(found[:5])}" if found
                              else "give the path of its .yaml sidecar or its .urdf/.xacro file")
+        if not _is_file(path) and ("/" in spec or os.sep in spec or path.suffix.lower() in (".yaml", ".yml", ".urdf", ".xacro")):
+            # a path, not a bundled name: 'unknown robot ... or give a path' told the user to do what they did
+            raise InputError(f"no such description file '{spec[:80]}'", "check the path (relative to the plan's "
+                             f"folder in a plan); bundled robots by name: {', '.join(bundled_robots())}")
         if not _is_file(path):
             raise InputError(
                 f"unknown robot '{spec[:80]}'",
