@@ -318,6 +318,17 @@ def test_workspace_section_only_uses_samples_at_that_height():
     assert side.count == 5000
 
 
+@pytest.mark.parametrize("height", [float("nan"), float("inf"), -1.0, 5.0])
+def test_workspace_section_out_of_reach_or_not_finite_is_an_input_error(height):
+    """--height nan, inf or out of reach drew an empty top map with exit 0."""
+    from roarmctl.errors import InputError
+
+    data = workspace_data(load_robot("roarm_m3_pro"), 2000, seed=0)
+    with pytest.raises(InputError) as info:
+        workspace_maps(data, height=height)
+    assert info.value.option == "height"
+
+
 @pytest.mark.slow
 def test_workspace_cli(tmp_path):
     out = tmp_path / "ws.png"

@@ -16,6 +16,7 @@ from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from roarmctl.errors import InputError
 from roarmctl.viz.data import WorkspaceData, workspace_data
 
 if TYPE_CHECKING:
@@ -62,8 +63,13 @@ def workspace_maps(data: WorkspaceData, measure: str = "sigma", height: float | 
     cell = span / cells
     side = bin_max(r, p[:, 2], value, cell)
     sel = np.ones(len(p), dtype=bool)
-    if height is not None:
+    if height is not None:  # NaN, inf or a height out of reach drew an empty top map, exit 0
+        if not np.isfinite(height):
+            raise InputError(f"expected a finite height (m), got {height:g}", "e.g. 0.05", option="height")
         sel = np.abs(p[:, 2] - height) <= (band if band is not None else cell)
+        if not sel.any():
+            raise InputError(f"no reachable sample at z = {height:g} m (the samples span z {p[:, 2].min():.3f} to "
+                             f"{p[:, 2].max():.3f} m)", "give a height within that span", option="height")
     # A thin section holds few samples: coarser cells keep it from looking like noise.
     top = bin_max(p[sel, 0], p[sel, 1], value[sel], cell if height is None else 2 * cell)
     return side, top, cell
