@@ -318,6 +318,12 @@ def test_workspace_section_only_uses_samples_at_that_height():
     assert side.count == 5000
 
 
+def test_workspace_negative_seed_is_an_input_error():
+    """--seed -1 reached numpy's default_rng: an internal error (exit 1)."""
+    r = roarmctl("workspace", "planar_2r", "--samples", "10", "--seed", "-1", "-o", "/nonexistent/ws.png")
+    assert r.returncode == 2 and r.stderr.startswith("error: --seed: ") and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
 @pytest.mark.parametrize("height", [float("nan"), float("inf"), -1.0, 5.0])
 def test_workspace_section_out_of_reach_or_not_finite_is_an_input_error(height):
     """--height nan, inf or out of reach drew an empty top map with exit 0."""

@@ -282,6 +282,8 @@ def workspace_data(robot: Robot, samples: int = 80000, seed: int = 0) -> Workspa
     """
     if samples < 1:
         raise OptionError("samples", f"must be at least 1, got {samples}")
+    if not 0 <= seed < 2**63:  # numpy's generator refuses a negative seed with a ValueError: a bug report
+        raise OptionError("seed", f"expected a whole number >= 0, got {seed}")
     rng = np.random.default_rng(seed)
     lo = np.asarray(robot.lower, dtype=float)[robot.arm_indices]
     hi = np.asarray(robot.upper, dtype=float)[robot.arm_indices]
