@@ -33,6 +33,9 @@ planner: {singularity_margin: 0.02, padding: 0.005}
     (["follow", "--sim", "--rate", "500"], "--rate: 500 is too large (must be <= 90)"),
     (["follow", "--port", "/dev/null"], "pass --yes"),
     (["follow", "--sim", "--leader", "/dev/ttyUSB9", "--leader-guide", "x.yaml"], "give one leader"),
+    (["follow", "--sim", "--episode", "3"], "--episode goes with --dataset"),  # these three were ignored, exit 0
+    (["follow", "--sim", "--record-fps", "-1"], "go with --record"),
+    (["follow", "--sim", "--task", "pick"], "go with --record"),
 ])
 def test_bad_options_are_one_line_and_exit_2(args, words):
     res = roarmctl(*args)

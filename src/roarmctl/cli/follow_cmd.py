@@ -85,6 +85,11 @@ def follow(
     is_leader = leader is not None or leader_guide is not None
     if sum((is_leader, socket_path is not None, dataset is not None)) > 1:
         raise InputError("give one source: a leader arm, --socket or --dataset")
+    # options of another option, given without it, were ignored: a follow of stdin ran with exit 0
+    if dataset is None and episode != 0:
+        raise InputError("--episode goes with --dataset", "give --dataset DIR, or leave --episode out")
+    if record is None and (record_fps != 30 or task != "follow"):
+        raise InputError("--record-fps and --task go with --record", "give --record DIR, or leave them out")
     source_plan, robot = (load_plan_and_robot(scene, load=common.load_robot) if scene is not None
                           else (None, load_robot("roarm_m3_pro")))
     WireMap(robot)  # a robot without a RoArm wire map cannot be driven: say so before opening anything
