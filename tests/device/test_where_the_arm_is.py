@@ -131,6 +131,16 @@ def test_start_current_after_the_arm_was_moved_by_hand(tmp_path, capsys):
         assert about_the_start(json.loads(capsys.readouterr().out)["notes"]) == []
 
 
+def test_a_port_given_to_a_plan_that_does_not_start_at_current_is_named_unused(tmp_path, capsys):
+    """``plan --sim`` (or ``--port``) with a plan that starts at a named pose: the arm is not read, and the command
+    says so in its warnings (it planned from the plan's own start, which the trajectory shows)."""
+    out = tmp_path / "p.traj.json"
+    assert run_cli(["plan", str(ROOT / "plans" / "pick_place.yaml"), "--sim", "-o", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert [w for w in summary["warnings"] if w.startswith("--sim was not used")], summary["warnings"]
+    assert not [n for n in summary["notes"] if "measured pose" in n]
+
+
 def test_the_demo_trajectory_runs_twice_in_a_row(tmp_path, capsys):
     out = tmp_path / "pp.traj.json"
     assert run_cli(["plan", str(ROOT / "plans" / "pick_place.yaml"), "-o", str(out), "--json"]) == 0

@@ -94,6 +94,9 @@ def register(app: typer.Typer) -> None:
         measured: list[str] = []
         result = run_planner(plan, seed, quiet=json_out, current=arm_reader(port, sim, measured))
         result.notes[:0] = measured
+        if (port is not None or sim) and not measured:  # given, yet nothing asked for the arm: say so, not silently
+            result.warnings.append(f"{'--port' if port is not None else '--sim'} was not used: the plan does not start at "
+                                   "'current', so the arm was not read (give 'start: current' to plan from where it is)")
         signals.check()  # a stop discarded after the last stage's report: no file
         result.trajectory.save(out)
         traj = result.trajectory
