@@ -51,6 +51,18 @@ def traj_file(tmp_path) -> Path:
     return p
 
 
+def test_the_same_run_on_the_virtual_clock_tracks_the_plan_closely(traj_file, capsys, virtual_sim):
+    """The motion of the real-time test below, streamed to the same firmware and servo models on a virtual clock: no
+    host or simulator waits for a core, so the tracking is the plan's and the streamer's alone and the same on any
+    machine (1.69 mm RMS, 4.60 mm at worst when written)."""
+    rc = run_cli(["execute", str(traj_file), "--sim", "--yes", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["outcome"] == "completed", out
+    sim = out["simulator"]
+    assert sim["rms_mm"] < 2.5 and sim["max_mm"] < 7.0 and sim["torque_always_on"], sim
+    assert len(virtual_sim) == 1 and sim["lateness_max_ms"] == 0.0  # the run was the virtual one
+
+
 def test_sim_run_follows_the_plan_and_keeps_time(traj_file, capsys):
     rc = run_cli(["execute", str(traj_file), "--sim", "--yes", "--json"])
     out = json.loads(capsys.readouterr().out)
@@ -61,8 +73,10 @@ def test_sim_run_follows_the_plan_and_keeps_time(traj_file, capsys):
           f"max {sim['max_aligned_mm']:.2f} mm); lateness p50 {out['lateness_ms']['p50']:.2f} ms p99 {out['lateness_ms']['p99']:.2f} ms")
     # the tolerance widens only by what was measured late (host sends and the simulated firmware's wake-ups). Idle:
     # 1.6 mm RMS; beside a loaded suite (a clean-clone CI run with other jobs, load 10-20) 5.5 mm: the simulator is a
-    # process of its own and what its servos lag while it waits for a core is not all measured as lateness
-    assert sim["rms_aligned_mm"] < 8.0 and sim["max_aligned_mm"] < 20.0
+    # process of its own and what its servos lag while it waits for a core is not all measured as lateness. Its worst
+    # sample is set by the longest such wait (21 mm beside two CPU hogs, RMS 3.4): the tight bounds of this motion's
+    # tracking are its virtual-clock twin's below; here real time's own promises (the schedule, every tick) are asserted
+    assert sim["rms_aligned_mm"] < 8.0
     assert sim["torque_always_on"]
     log = json.loads(Path(out["log"]).read_text())
     ticks = [s for s in log["sent"] if "tick" in s]
